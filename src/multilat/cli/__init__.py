@@ -4,7 +4,8 @@ Each command area lives in its own module and registers its commands on :data:`a
 
 - ``air_cmd``       ``multilat air``
 - ``budget_cmd``    ``multilat budget``
-- ``network_cmd``   ``multilat adjust``, ``multilat simulate``
+- ``network_cmd``   ``multilat adjust``
+- ``simulate_cmd``  ``multilat simulate``
 - ``lbb_cmd``       ``multilat lbb trilaterate|simulate``
 - ``campaign_cmd``  ``multilat correct``, ``multilat two-face``
 - ``propagate_cmd`` ``multilat propagate``
@@ -23,6 +24,7 @@ from multilat.cli import (  # noqa: F401  (registration side effects)
     air_cmd,
     budget_cmd,
     network_cmd,
+    simulate_cmd,
     lbb_cmd,
     campaign_cmd,
     propagate_cmd,
