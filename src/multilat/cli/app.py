@@ -56,7 +56,7 @@ def progress(*, transient: bool = True, disable: bool = False):
 
 
 def _showwarning(message, category, filename, lineno, file=None, line=None):
-    err_console.print(f"warning: {message}", markup=False)
+    err_console.print(f"warning: {message}", markup=False, soft_wrap=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -72,7 +72,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         rv = app(args=args, standalone_mode=False, prog_name="multilat")
         return int(rv) if isinstance(rv, int) else 0
     except MultilatError as exc:
-        err_console.print(f"error: {exc}", markup=False)
+        err_console.print(f"error: {exc}", markup=False, soft_wrap=True)
         return 2
     except typer.Exit as exc:
         return int(getattr(exc, "exit_code", 0) or 0)
@@ -83,7 +83,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if type(exc).__name__ == "NoArgsIsHelpError":
             err_console.print(exc.format_message(), markup=False)
             return 0
-        err_console.print(f"error: {exc.format_message()}", markup=False)
+        err_console.print(f"error: {exc.format_message()}", markup=False, soft_wrap=True)
         return int(getattr(exc, "exit_code", 2) or 2)
     finally:
         warnings.showwarning = old
