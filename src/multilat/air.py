@@ -396,6 +396,8 @@ def sensitivities(temperature_c=20.0, pressure_pa=101325.0, *, humidity_pct=None
       20 °C): a thermometer reading 1 °C too high gives distances 0.95 µm/m too long.
     - equivalently: if the air changes by +1 unit of X and the index is not updated, the reported
       distance changes by ``s_X`` m/m (the air warms by 1 °C: distances read 0.95 µm/m shorter).
+    - a Monte Carlo drawing a sensor error ``e_X = X_sensor - X_true`` adds ``-s_X e_X`` to the
+      relative distance error.
 
     Derivatives are partial, holding the other inputs *as given* fixed: with ``humidity_pct`` the
     temperature derivative keeps RH fixed (the water-vapour pressure follows ``p_sv(t)``; this is
