@@ -1,0 +1,154 @@
+"""Numba kernel of :mod:`multilat.network.batched` (frozen method). Imported only when numba exists.
+
+Same arithmetic as ``BatchedNetwork._step(method="frozen")``: exact gradient of each trial, frozen
+Schur-reduced normal matrix of the nominal solution; one pass over the observations per iteration,
+trials in parallel (``prange``). The tests compare it with the numpy path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pragma: no cover - jit
+    n, m = d.shape
+    s = h.shape[1]
+    t = tg.shape[1]
+    iters = np.full(n, max_iter, np.int64)
+    last = np.full(n, np.inf)
+    vtpv = np.empty(n)
+    for r in prange(n):
+        gh = np.empty((s, 4))
+        gt = np.empty((t, 3))
+        yt = np.empty((t, 3))
+        dxp = np.empty((s, 4))
+        for it in range(max_iter):
+            gh[:] = 0.0
+            gt[:] = 0.0
+            for k in range(m):
+                i = si[k]
+                j = ti[k]
+                dx = h[r, i, 0] - tg[r, j, 0]
+                dy = h[r, i, 1] - tg[r, j, 1]
+                dz = h[r, i, 2] - tg[r, j, 2]
+                rho = np.sqrt(dx * dx + dy * dy + dz * dz)
+                e = w[k] * (d[r, k] - rho - o[r, i]) / rho
+                gh[i, 0] += e * dx
+                gh[i, 1] += e * dy
+                gh[i, 2] += e * dz
+                gh[i, 3] += e * rho
+                gt[j, 0] -= e * dx
+                gt[j, 1] -= e * dy
+                gt[j, 2] -= e * dz
+            for j in range(t):
+                for a in range(3):
+                    yt[j, a] = ninv0[j, a, 0] * gt[j, 0] + ninv0[j, a, 1] * gt[j, 1] + ninv0[j, a, 2] * gt[j, 2]
+            for k in range(m):
+                i = si[k]
+                j = ti[k]
+                sk = w[k] * (u0[k, 0] * yt[j, 0] + u0[k, 1] * yt[j, 1] + u0[k, 2] * yt[j, 2])
+                gh[i, 0] += sk * u0[k, 0]
+                gh[i, 1] += sk * u0[k, 1]
+                gh[i, 2] += sk * u0[k, 2]
+                gh[i, 3] += sk
+            step = 0.0
+            for a in range(4 * s):
+                acc = 0.0
+                for b in range(4 * s):
+                    acc += s0inv[a, b] * gh[b // 4, b % 4]
+                dxp[a // 4, a % 4] = acc
+            for i in range(s):
+                for a in range(3):
+                    h[r, i, a] += dxp[i, a]
+                    step = max(step, abs(dxp[i, a]))
+                o[r, i] += dxp[i, 3]
+                step = max(step, abs(dxp[i, 3]))
+            for k in range(m):
+                i = si[k]
+                j = ti[k]
+                q = w[k] * (u0[k, 0] * dxp[i, 0] + u0[k, 1] * dxp[i, 1] + u0[k, 2] * dxp[i, 2] + dxp[i, 3])
+                gt[j, 0] += q * u0[k, 0]
+                gt[j, 1] += q * u0[k, 1]
+                gt[j, 2] += q * u0[k, 2]
+            for j in range(t):
+                for a in range(3):
+                    v = ninv0[j, a, 0] * gt[j, 0] + ninv0[j, a, 1] * gt[j, 1] + ninv0[j, a, 2] * gt[j, 2]
+                    tg[r, j, a] += v
+                    step = max(step, abs(v))
+            if not np.isfinite(step):
+                step = np.inf
+            last[r] = step
+            if step < tol:
+                iters[r] = it + 1
+                break
+        acc = 0.0
+        for k in range(m):
+            i = si[k]
+            j = ti[k]
+            dx = h[r, i, 0] - tg[r, j, 0]
+            dy = h[r, i, 1] - tg[r, j, 1]
+            dz = h[r, i, 2] - tg[r, j, 2]
+            res = d[r, k] - np.sqrt(dx * dx + dy * dy + dz * dz) - o[r, i]
+            acc += w[k] * res * res
+        vtpv[r] = acc
+    return iters, last, vtpv
+
+
+@njit(parallel=True, cache=True)
+def apply_inner(pts, idx, x0c, proj, c0):  # pragma: no cover - jit
+    """Rigid least-squares fit of ``pts[:, idx]`` onto ``x0c + c0`` per trial, in place.
+
+    pts (n, P, 3); idx (q,) datum point indices; x0c (q, 3) nominal datum points minus centroid c0;
+    proj (q, 3, 6) = G (G^T G)^-1 of the Helmert basis about the centroid. Same iteration as the
+    numpy path of :meth:`Datum.apply` (linearised fit, exact Rodrigues rotation, repeated).
+    """
+    n, npts, _ = pts.shape
+    q = idx.shape[0]
+    for r in prange(n):
+        for p in range(npts):
+            for a in range(3):
+                pts[r, p, a] -= c0[a]
+        for it in range(4):
+            xi = np.zeros(6)
+            for b in range(q):
+                pb = idx[b]
+                for a in range(3):
+                    dev = pts[r, pb, a] - x0c[b, a]
+                    for c in range(6):
+                        xi[c] -= proj[b, a, c] * dev
+            wx, wy, wz = xi[3], xi[4], xi[5]
+            th2 = wx * wx + wy * wy + wz * wz
+            th = np.sqrt(th2)
+            if th < 1e-8:
+                ca = 1.0 - th2 / 6.0
+                cb = 0.5 - th2 / 24.0
+            else:
+                ca = np.sin(th) / th
+                cb = (1.0 - np.cos(th)) / th2
+            # R = I + ca K + cb K^2, K = [w]x
+            r00 = 1.0 - cb * (wy * wy + wz * wz)
+            r11 = 1.0 - cb * (wx * wx + wz * wz)
+            r22 = 1.0 - cb * (wx * wx + wy * wy)
+            r01 = -ca * wz + cb * wx * wy
+            r10 = ca * wz + cb * wx * wy
+            r02 = ca * wy + cb * wx * wz
+            r20 = -ca * wy + cb * wx * wz
+            r12 = -ca * wx + cb * wy * wz
+            r21 = ca * wx + cb * wy * wz
+            for p in range(npts):
+                x = pts[r, p, 0]
+                y = pts[r, p, 1]
+                z = pts[r, p, 2]
+                pts[r, p, 0] = r00 * x + r01 * y + r02 * z + xi[0]
+                pts[r, p, 1] = r10 * x + r11 * y + r12 * z + xi[1]
+                pts[r, p, 2] = r20 * x + r21 * y + r22 * z + xi[2]
+            mx = 0.0
+            for c in range(6):
+                mx = max(mx, abs(xi[c]))
+            if mx < 1e-15:
+                break
+        for p in range(npts):
+            for a in range(3):
+                pts[r, p, a] += c0[a]
