@@ -12,8 +12,8 @@ Example
 >>> crosstalk = Arcsine.from_amplitude(2.7e-6)          # cyclic error, amplitude 2.7 um
 >>> round(crosstalk.std * 1e6, 2)                       # a / sqrt(2)
 1.91
->>> Uniform.from_std(0.2e-6).high                       # half-width sqrt(3) u
-3.4641016151377544e-07
+>>> round(Uniform.from_std(0.2e-6).high * 1e6, 4)       # half-width sqrt(3) u, in um
+0.3464
 >>> x = Normal(mean=0.0, std=0.8e-6).sample(np.random.default_rng(1), 1000)
 >>> x.shape
 (1000,)
@@ -21,8 +21,9 @@ Example
 Sampling conventions: ``sample(rng, size)`` takes a :class:`numpy.random.Generator` (an int seed or
 None is resolved with :func:`numpy.random.default_rng`) and returns float64 samples of shape
 ``size``. The draws use the generator's fast primitives (normal, uniform, triangular, standard t,
-standard Cauchy); the arcsine law is drawn as ``c + w sin(U)`` with ``U`` uniform on [-pi, pi),
-which is exact and faster than an inverse-cdf transform.
+standard Cauchy); the arcsine law is drawn as ``c + w sin(U)`` with ``U`` uniform on [-pi, pi)
+(computed through the half-angle tangent, which numpy vectorises), exact and faster than an
+inverse-cdf transform.
 
 Cauchy (and Student t with ``df <= 1``) has no expectation: its :attr:`mean` is ``nan`` and
 :attr:`std` is ``inf``; :attr:`centre` (the median) is defined for every distribution and is what
@@ -221,11 +222,18 @@ class Arcsine(Distribution):
         return 0.5 * (self.high - self.low) / math.sqrt(2.0)
 
     def sample(self, rng, size) -> np.ndarray:
-        x = _rng(rng).uniform(-math.pi, math.pi, size)
-        np.sin(x, out=x)
-        x *= 0.5 * (self.high - self.low)
-        x += self.mean
-        return x
+        # sin(phi), phi ~ U(-pi, pi), computed as 2t / (1 + t^2) with t = tan(phi / 2): numpy's
+        # float64 tan is SIMD-vectorised, its sin is not (about twice as fast overall, same law).
+        t = _rng(rng).random(size)
+        t -= 0.5
+        t *= math.pi
+        np.tan(t, out=t)
+        d = t * t
+        d += 1.0
+        t *= self.high - self.low  # 2 * half-width
+        t /= d
+        t += self.mean
+        return t
 
     def to_scipy(self):
         from scipy import stats
