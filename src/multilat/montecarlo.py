@@ -32,7 +32,8 @@ Conventions
   its own generator seeded by ``SeedSequence(entropy, spawn_key=root.spawn_key + (b,))`` (the
   ``b``-th ``spawn`` child of the root). Chunks (the unit of work handed to ``map``) are whole
   blocks, so the numbers depend only on the seed and the number of trials, never on ``chunk_size``
-  or on how many processes ran the chunks.
+  or on how many processes ran the chunks (bit for bit; for more than 16 outputs the covariance
+  uses BLAS, whose last bits may depend on its thread count).
 * Memory is bounded whatever the number of trials. Mean, variance (and covariance for k <= 512
   outputs) are streamed (per-block two-pass moments merged with Chan's formula). Coverage intervals
   are computed *exactly* from the sorted samples (JCGM 101 §7.7) when ``trials * k`` does not exceed
@@ -372,8 +373,14 @@ def _moments(y2: np.ndarray):
     mean = y2.mean(axis=0)
     d = y2 - mean
     k = y2.shape[1]
+    # sums without BLAS for k <= 16 (numpy's own loops give the same bits whatever the BLAS thread
+    # count of the process, so a Dask worker reproduces the driver exactly); BLAS above that
     if k == 1:
-        m2 = np.array([[float(d[:, 0] @ d[:, 0])]])
+        col = d[:, 0]
+        col *= col
+        m2 = np.array([[float(col.sum())]])
+    elif k <= 16:
+        m2 = np.einsum("ij,ik->jk", d, d, optimize=False)
     elif k <= COV_LIMIT:
         m2 = d.T @ d
     else:

@@ -1,0 +1,90 @@
+"""Parallel maps give the same numbers as the in-process run, bit for bit."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from multilat.distributions import Arcsine, Normal, Uniform
+from multilat.errors import MultilatError
+from multilat.montecarlo import BLOCK, run_mc
+from multilat.parallel import dask_map, map_from_options, process_map
+
+
+def eq3_error_m(rf, crosstalk, ampm, noise):
+    return 20.0 * rf + crosstalk + ampm + noise
+
+
+INPUTS = dict(
+    rf=Normal(0.0, 1.5e-9),
+    crosstalk=Arcsine.from_amplitude(2.7e-6),
+    ampm=Uniform.from_std(0.2e-6),
+    noise=Normal(0.0, 0.8e-6),
+)
+TRIALS = 6 * BLOCK + 321
+
+
+def _same(a, b):
+    assert a.estimate == b.estimate and a.std == b.std and a.trials == b.trials
+    assert np.array_equal(a.interval_symmetric, b.interval_symmetric)
+    assert np.array_equal(a.interval_shortest, b.interval_shortest)
+
+
+def test_dask_local_cluster_two_workers_identical():
+    pytest.importorskip("distributed")
+    ref_exact = run_mc(eq3_error_m, INPUTS, trials=TRIALS, rng=2024)
+    ref_hist = run_mc(eq3_error_m, INPUTS, trials=TRIALS, rng=2024, quantiles="histogram")
+    seen = []
+    with dask_map(workers=2) as m:
+        assert m.n_workers == 2
+        r_exact = run_mc(eq3_error_m, INPUTS, trials=TRIALS, rng=2024, chunk_size=BLOCK, map=m,
+                         progress=lambda d, t: seen.append(d))
+        r_hist = run_mc(eq3_error_m, INPUTS, trials=TRIALS, rng=2024, chunk_size=2 * BLOCK, map=m,
+                        quantiles="histogram")
+        r_lambda = run_mc(lambda rf, crosstalk, ampm, noise: rf + crosstalk + ampm + noise, INPUTS,
+                          trials=2 * BLOCK, rng=1, map=m)  # closures travel with cloudpickle
+    _same(r_exact, ref_exact)
+    assert np.array_equal(r_exact.samples, ref_exact.samples)
+    _same(r_hist, ref_hist)
+    assert np.array_equal(r_hist._hist_counts, ref_hist._hist_counts)
+    assert seen[-1] == TRIALS and seen == sorted(seen)
+    assert r_lambda.trials == 2 * BLOCK
+
+
+def test_process_pool_identical():
+    ref = run_mc(eq3_error_m, INPUTS, trials=3 * BLOCK, rng=5)
+    with process_map(2) as m:
+        r = run_mc(eq3_error_m, INPUTS, trials=3 * BLOCK, rng=5, chunk_size=BLOCK, map=m)
+    _same(r, ref)
+
+
+def test_default_map_does_not_import_dask():
+    code = (
+        "import sys\n"
+        "from multilat.parallel import map_from_options\n"
+        "from multilat.montecarlo import run_mc\n"
+        "from multilat.distributions import Normal\n"
+        "with map_from_options() as m:\n"
+        "    assert m is None\n"
+        "    run_mc(lambda a: a, {'a': Normal()}, trials=1000, rng=1, map=m)\n"
+        "assert 'distributed' not in sys.modules and 'dask' not in sys.modules\n"
+    )
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_option_errors():
+    with pytest.raises(MultilatError, match="exactly one"):
+        with dask_map():
+            pass
+    with pytest.raises(MultilatError, match="workers"):
+        with dask_map(workers=0):
+            pass
+    with pytest.raises(MultilatError, match="mutually exclusive"):
+        with map_from_options(workers=2, scheduler="tcp://localhost:1"):
+            pass
+    with pytest.raises(MultilatError, match="workers"):
+        with process_map(0):
+            pass
