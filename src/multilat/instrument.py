@@ -1,0 +1,373 @@
+"""Instrument description: a validated TOML config of an RF-phase multilateration system.
+
+An instrument is what the distance budget (:mod:`multilat.budget`) needs to know: the absolute
+distance meter's physical parameters (Table I of the seed), the misalignment parameters of each
+measurement head (Table III) and of the target (Table IV), the environmental sensors, the angle
+ranges over which sightings are spread, and the Monte Carlo set-up of section 3.4.
+
+The seed paper's instrument ships as the preset ``seed2020`` (``src/multilat/presets/seed2020.toml``,
+commented key by key). A user writes their own file with the same keys; every key is checked
+(``extra="forbid"``: a mistyped key is an error, not a silently ignored line) and every value must be
+finite and, where physical, non-negative. Errors are one-line :class:`~multilat.errors.MultilatError`
+messages naming the file and the key path, e.g. ``my.toml: heads.A.toh_std_m: must be >= 0``.
+
+Units: SI unless a key's suffix says otherwise (``_deg``, ``_db``, ``_hpa``, ``_pct``, ``_ppm``,
+``_nm``); angles are converted to radians by the properties that consume them.
+
+Example
+-------
+>>> from multilat.instrument import load_instrument
+>>> inst = load_instrument("seed2020")
+>>> sorted(inst.heads)
+['A', 'B', 'C', 'D']
+>>> inst.adm.modulation_frequency_hz
+4895000000.0
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Literal
+
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
+
+from multilat.errors import MultilatError
+
+__all__ = ["ADMConfig", "Environment", "HeadCommon", "HeadConfig", "TargetConfig", "BudgetConfig",
+           "Instrument", "load_instrument", "parse_instrument", "presets"]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+def _interval(v, name="interval"):
+    lo, hi = v
+    if not hi >= lo:
+        raise ValueError(f"must be [low, high] with low <= high, got {list(v)}")
+    return v
+
+
+class ADMConfig(_Model):
+    """Absolute distance meter (Table I).
+
+    Attributes
+    ----------
+    modulation_frequency_hz : float
+        RF modulation frequency f_RF (> 0).
+    wavelength_nm : float
+        Vacuum wavelength of the optical carrier (> 0), for the air group index.
+    signal_to_crosstalk_db : float
+        Worst accepted signal-to-crosstalk ratio (dB, > 0).
+    phase_noise_rad : float
+        Standard deviation of a phase measurement (rad, >= 0).
+    am_pm_m_per_db : float
+        Amplitude-to-phase coupling: distance change per dB of received power (m/dB, any sign).
+    power_variation_db : float
+        Peak-to-peak received-power variation, uniformly distributed (dB, >= 0).
+    clock_ageing_per_year : float
+        Relative ageing rate of the reference clock (1/year, >= 0).
+    calibration_interval_years : float
+        Time between clock calibrations (years, >= 0).
+    """
+
+    modulation_frequency_hz: float
+    wavelength_nm: float = 1550.0
+    signal_to_crosstalk_db: float
+    phase_noise_rad: float
+    am_pm_m_per_db: float = 0.0
+    power_variation_db: float = 0.0
+    clock_ageing_per_year: float = 0.0
+    calibration_interval_years: float = 1.0
+
+    @field_validator("modulation_frequency_hz", "wavelength_nm", "signal_to_crosstalk_db")
+    @classmethod
+    def _pos(cls, v):
+        if not v > 0:
+            raise ValueError(f"must be > 0, got {v}")
+        return v
+
+    @field_validator("phase_noise_rad", "power_variation_db", "clock_ageing_per_year",
+                     "calibration_interval_years")
+    @classmethod
+    def _nonneg(cls, v):
+        if not v >= 0:
+            raise ValueError(f"must be >= 0, got {v}")
+        return v
+
+
+class Environment(_Model):
+    """Nominal air and the standard uncertainties of the environmental sensors."""
+
+    temperature_c: float = 20.0
+    pressure_hpa: float = 1013.25
+    humidity_pct: float = 50.0
+    co2_ppm: float = 450.0
+    u_temperature_c: float = 0.0
+    u_pressure_hpa: float = 0.0
+    u_humidity_pct: float = 0.0
+    u_co2_ppm: float = 0.0
+
+    @field_validator("pressure_hpa")
+    @classmethod
+    def _p(cls, v):
+        if not v > 0:
+            raise ValueError(f"must be > 0, got {v}")
+        return v
+
+    @field_validator("humidity_pct")
+    @classmethod
+    def _rh(cls, v):
+        if not 0 <= v <= 100:
+            raise ValueError(f"must lie in [0, 100], got {v}")
+        return v
+
+    @field_validator("co2_ppm", "u_temperature_c", "u_pressure_hpa", "u_humidity_pct", "u_co2_ppm")
+    @classmethod
+    def _nonneg(cls, v):
+        if not v >= 0:
+            raise ValueError(f"must be >= 0, got {v}")
+        return v
+
+
+class HeadCommon(_Model):
+    """What all heads share: the common beam-offset law and the elevation range of sightings.
+
+    ``beam_offset_m`` is the uniform interval of the beam offsets a and c of every head (the seed:
+    +-320 um); ``elevation_deg`` the uniform range of the head elevation angle phi, measured from the
+    horizontal (the convention that makes eq. 2's ``cos(phi)`` right, see :mod:`multilat.gimbal`).
+    """
+
+    beam_offset_m: tuple[float, float] = (-320e-6, 320e-6)
+    elevation_deg: tuple[float, float] = (-90.0, 90.0)
+
+    _iv = field_validator("beam_offset_m", "elevation_deg")(classmethod(lambda cls, v: _interval(v)))
+
+    @field_validator("elevation_deg")
+    @classmethod
+    def _el(cls, v):
+        if not (-180 <= v[0] and v[1] <= 180):
+            raise ValueError(f"must lie within [-180, 180] degrees, got {list(v)}")
+        return v
+
+
+class HeadConfig(_Model):
+    """One measurement head (Table III).
+
+    Attributes
+    ----------
+    a_limit_m, c_limit_m : float
+        Observed bounds of |a| and |c| for this head (m, >= 0); used when the budget's
+        ``beam_offset_model`` is ``"per_head"``.
+    alpha_deg, gamma_deg : (float, float)
+        Beam-tilt intervals (degrees), uniform.
+    toh_m, toh_std_m : float
+        Transit-offset estimate and its standard uncertainty (m; eq. 2/4 convention: positive
+        lengthens the measured distance at horizontal sight).
+    """
+
+    a_limit_m: float
+    c_limit_m: float
+    alpha_deg: tuple[float, float]
+    gamma_deg: tuple[float, float]
+    toh_m: float
+    toh_std_m: float
+
+    _iv = field_validator("alpha_deg", "gamma_deg")(classmethod(lambda cls, v: _interval(v)))
+
+    @field_validator("a_limit_m", "c_limit_m", "toh_std_m")
+    @classmethod
+    def _nonneg(cls, v):
+        if not v >= 0:
+            raise ValueError(f"must be >= 0, got {v}")
+        return v
+
+    @field_validator("alpha_deg", "gamma_deg")
+    @classmethod
+    def _small(cls, v):
+        if not (abs(v[0]) < 90 and abs(v[1]) < 90):
+            raise ValueError(f"beam tilts must lie within (-90, 90) degrees, got {list(v)}")
+        return v
+
+
+class TargetConfig(_Model):
+    """The target (Table IV) and the angles at which it is used.
+
+    Offsets follow eq. (5)'s convention: a', b', c' in the corner-cube frame (b' along the cube
+    axis, positive towards the head), ``tot_m`` positive when the transit axis is displaced
+    towards the head. ``misalignment_half_angle_deg`` bounds the angle between the cube axis and
+    the line of sight (default: half of the 30 deg aperture); ``misalignment_shape`` = ``"cone"``
+    draws that direction uniformly over the cone's solid angle, ``"square"`` draws theta'' and
+    phi'' as independent uniforms on [-h, h]. ``transit_correction`` says how the estimated Tot is
+    corrected: ``"model"`` (eq. 5's Tot term at the sighting's angles phi', theta'', phi''),
+    ``"line_of_sight"`` (eq. 2 form with the elevation of the line of sight seen from the target)
+    or ``"target_axis"`` (eq. 2 form with the target's own elevation phi').
+    ``constant_calibrated``: b' at perfect alignment is a constant of the target, calibrated with
+    the ADM zero and removed from the error.
+    """
+
+    a_m: float
+    b_m: float
+    c_m: float
+    offset_std_m: float
+    tot_m: float
+    tot_std_m: float
+    aperture_deg: float = 30.0
+    elevation_deg: tuple[float, float] = (-90.0, 90.0)
+    misalignment_half_angle_deg: float = 15.0
+    misalignment_shape: Literal["cone", "square"] = "cone"
+    transit_correction: Literal["model", "line_of_sight", "target_axis"] = "model"
+    constant_calibrated: bool = True
+
+    _iv = field_validator("elevation_deg")(classmethod(lambda cls, v: _interval(v)))
+
+    @field_validator("offset_std_m", "tot_std_m", "misalignment_half_angle_deg")
+    @classmethod
+    def _nonneg(cls, v):
+        if not v >= 0:
+            raise ValueError(f"must be >= 0, got {v}")
+        return v
+
+    @field_validator("aperture_deg")
+    @classmethod
+    def _ap(cls, v):
+        if not 0 < v < 180:
+            raise ValueError(f"must lie in (0, 180) degrees, got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _inside(self):
+        if self.misalignment_half_angle_deg >= 90:
+            raise ValueError("misalignment_half_angle_deg must be < 90")
+        return self
+
+
+class BudgetConfig(_Model):
+    """Monte Carlo set-up of the distance budget (section 3.4)."""
+
+    distance_start_m: float = 0.2
+    distance_stop_m: float = 20.2
+    distance_step_m: float = 0.8
+    trials_per_distance: int = 200_000
+    include_air: bool = False
+    beam_offset_model: Literal["common", "per_head"] = "common"
+
+    @field_validator("distance_start_m", "distance_step_m")
+    @classmethod
+    def _pos(cls, v):
+        if not v > 0:
+            raise ValueError(f"must be > 0, got {v}")
+        return v
+
+    @field_validator("trials_per_distance")
+    @classmethod
+    def _trials(cls, v):
+        if v < 2:
+            raise ValueError(f"must be >= 2, got {v}")
+        return v
+
+    @model_validator(mode="after")
+    def _order(self):
+        if not self.distance_stop_m >= self.distance_start_m:
+            raise ValueError("distance_stop_m must be >= distance_start_m")
+        return self
+
+    @property
+    def distances_m(self):
+        """The budget's distance grid, ndarray (m,) in metres (stop included)."""
+        import numpy as np
+
+        n = int(math.floor((self.distance_stop_m - self.distance_start_m) / self.distance_step_m + 1e-9)) + 1
+        return self.distance_start_m + self.distance_step_m * np.arange(n)
+
+
+class Instrument(_Model):
+    """A whole instrument: ADM, environment, heads, target, budget set-up."""
+
+    name: str = "custom"
+    description: str = ""
+    adm: ADMConfig
+    environment: Environment = Environment()
+    head_common: HeadCommon = HeadCommon()
+    heads: dict[str, HeadConfig]
+    target: TargetConfig
+    budget: BudgetConfig = BudgetConfig()
+
+    @field_validator("heads")
+    @classmethod
+    def _some(cls, v):
+        if not v:
+            raise ValueError("at least one head is required")
+        return v
+
+    def head(self, name: str) -> HeadConfig:
+        """The head called ``name``; :class:`MultilatError` listing the heads if unknown."""
+        try:
+            return self.heads[name]
+        except KeyError:
+            raise MultilatError(f"unknown head {name!r} in instrument {self.name!r}; "
+                                f"heads: {', '.join(sorted(self.heads))}") from None
+
+
+def presets() -> list[str]:
+    """Names of the shipped instrument presets."""
+    files = resources.files("multilat").joinpath("presets")
+    return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".toml"))
+
+
+def _one_line(err: ValidationError, source: str) -> str:
+    e = err.errors()[0]
+    loc = ".".join(str(x) for x in e.get("loc", ())) or "(top level)"
+    msg = e.get("msg", "invalid").replace("Value error, ", "")
+    if e.get("type") == "extra_forbidden":
+        msg = "unknown key (mistyped?)"
+    elif e.get("type") == "missing":
+        msg = "missing required key"
+    inp = e.get("input")
+    extra = f" (got {inp!r})" if e.get("type") not in ("extra_forbidden", "missing") and \
+        not isinstance(inp, dict) and "got" not in msg else ""
+    more = f" (+{len(err.errors()) - 1} more)" if len(err.errors()) > 1 else ""
+    return f"{source}: {loc}: {msg}{extra}{more}".replace("\n", " ")
+
+
+def parse_instrument(data: dict, *, source: str = "<dict>") -> Instrument:
+    """Validate a decoded config mapping; :class:`MultilatError` names the key and the source."""
+    try:
+        return Instrument.model_validate(data)
+    except ValidationError as err:
+        raise MultilatError(_one_line(err, source)) from None
+
+
+def load_instrument(name_or_path: str | Path = "seed2020") -> Instrument:
+    """Load a preset by name (e.g. ``"seed2020"``) or a TOML file by path.
+
+    Raises
+    ------
+    MultilatError
+        Unknown preset (the message lists the presets), unreadable file, malformed TOML (with the
+        line), or an invalid/mistyped key (named with its path in the file).
+    """
+    s = str(name_or_path)
+    path = Path(s)
+    if path.suffix == ".toml" or path.exists() or "/" in s or "\\" in s:
+        if not path.is_file():
+            raise MultilatError(f"instrument file not found: {s}")
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise MultilatError(f"cannot read instrument file {s}: {exc}") from None
+        source = s
+    else:
+        if s not in presets():
+            raise MultilatError(f"unknown instrument preset {s!r}; presets: {', '.join(presets())} "
+                                f"(or give a path to a .toml file)")
+        text = resources.files("multilat").joinpath("presets", f"{s}.toml").read_text(encoding="utf-8")
+        source = f"preset {s}"
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise MultilatError(f"{source}: malformed TOML: {exc}".replace("\n", " ")) from None
+    return parse_instrument(data, source=source)
