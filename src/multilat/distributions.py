@@ -135,8 +135,10 @@ class Normal(Distribution):
 
     def sample(self, rng, size) -> np.ndarray:
         x = _rng(rng).standard_normal(size)
-        x *= self.std
-        x += self.mean
+        if self.std != 1.0:
+            x *= self.std
+        if self.mean != 0.0:
+            x += self.mean
         return x
 
     def to_scipy(self):

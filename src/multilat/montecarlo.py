@@ -415,10 +415,15 @@ def _histogram_counts(y2, lo, hi, bins):
     """Counts per output of ``y2`` (n, k) on [lo, hi) in ``bins`` bins plus under/overflow."""
     n, k = y2.shape
     scale = bins / (hi - lo)
-    idx = np.floor((y2 - lo) * scale)
-    np.clip(idx, -1, bins, out=idx)
-    idx = idx.astype(np.int64) + 1
-    idx += np.arange(k, dtype=np.int64) * (bins + 2)
+    # slot = floor((y - lo) * scale) + 1, clipped to [0, bins + 1] (0: underflow, bins + 1: overflow);
+    # truncation equals floor once the value is clipped to be non-negative
+    t = y2 - lo
+    t *= scale
+    t += 1.0
+    np.clip(t, 0.0, bins + 1.0, out=t)
+    idx = t.astype(np.intp)
+    if k > 1:
+        idx += np.arange(k, dtype=np.intp) * (bins + 2)
     return np.bincount(idx.ravel(), minlength=k * (bins + 2)).reshape(k, bins + 2)
 
 
