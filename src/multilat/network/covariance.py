@@ -1,0 +1,168 @@
+"""Covariance of a network adjustment without forming the full matrix.
+
+The inverse of the normal matrix is kept in its Schur form (the station/offset/scale block
+``Q_gg``, the target blocks ``M_j = N_jj^-1`` and the per-observation coupling), so products
+``C V``, per-point 3x3 blocks and any small joint block cost O(m) each. The covariance is then
+expressed in the chosen datum: rotated into the final frame (``R``) and S-transformed::
+
+    C_datum = S C S^T,   S = I - G (E^T G)^-1 E^T
+
+with ``G`` the infinitesimal rigid motions (6 columns) and ``E`` the datum's constraint matrix
+(``G`` on the datum points for inner constraints; unit vectors on the 6 fixed coordinates for 3-2-1).
+
+Parameter layout: :mod:`multilat.network.model` (5 per station, then 3 per target).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.network.model import Q, target_slots
+
+__all__ = ["NetworkCovariance"]
+
+
+class NetworkCovariance:
+    """Labelled covariance of all parameters (m², m·1, 1 for scales) in the final datum.
+
+    Parameters
+    ----------
+    Qgg : ndarray (5s, 5s)   inverse of the reduced normal matrix (zeros for fixed parameters)
+    Minv : ndarray (t, 3, 3) inverses of the target blocks (zeros for fixed targets)
+    Js_w, Jt_w : ndarray (m, 5), (m, 3) whitened Jacobian blocks at the solution (fixed columns zero)
+    station_index, target_index : ndarray of int (m,)
+    factor : float   multiplies everything (sigma0**2 for an unweighted cost, else 1)
+    R : ndarray (3, 3)   rotation from the solving frame to the final frame
+    G, E : ndarray (n, 6) or None   S-transformation (None: no datum transformation)
+    """
+
+    def __init__(self, Qgg, Minv, Js_w, Jt_w, station_index, target_index, *, factor=1.0,
+                 R=None, G=None, E=None):
+        self.Qgg = Qgg
+        self.Minv = Minv
+        self.Js_w = Js_w
+        self.Jt_w = Jt_w
+        self.si = station_index
+        self.ti = target_index
+        self.s = Qgg.shape[0] // Q
+        self.t = Minv.shape[0]
+        self.n = Q * self.s + 3 * self.t
+        self.factor = float(factor)
+        self.R = np.eye(3) if R is None else np.asarray(R)
+        # per-observation P_k = M_j b_k  (3,)
+        self.P = np.einsum("mij,mj->mi", Minv[target_index], Jt_w)
+        self.G = G
+        if G is not None:
+            H = np.linalg.solve(E.T @ G, E.T)            # (6, n)
+            self.H = H
+            self.CHt = self._rot_times(H.T)               # (n, 6)  C_rot H^T
+            self.HCHt = H @ self.CHt
+        self._point_rows = None
+
+    # ------------------------------------------------------------ internal (solving frame)
+    def _times(self, V):
+        """Internal covariance times V (n, c) -> (n, c)."""
+        s, Qn = self.s, Q
+        V = np.asarray(V, float)
+        Vg = V[:Qn * s].reshape(s, Qn, -1)
+        VT = V[Qn * s:].reshape(self.t, 3, -1)
+        # Vg - K^T VT : per obs a_k (p_k . VT_j)
+        pv = np.einsum("mi,mic->mc", self.P, VT[self.ti])
+        acc = Vg.copy()
+        np.add.at(acc, self.si, -self.Js_w[:, :, None] * pv[:, None, :])
+        u = (self.Qgg @ acc.reshape(Qn * s, -1))          # (5s, c)
+        # M VT - K u : per obs p_k (a_k . u_station)
+        au = np.einsum("mq,mqc->mc", self.Js_w, u.reshape(s, Qn, -1)[self.si])
+        outT = np.einsum("tij,tjc->tic", self.Minv, VT)
+        np.add.at(outT, self.ti, -self.P[:, :, None] * au[:, None, :])
+        return np.concatenate([u, outT.reshape(3 * self.t, -1)], axis=0) * self.factor
+
+    def _rotate_rows(self, V, R):
+        """Apply the 3x3 ``R`` to every coordinate triple of V's rows (n, c)."""
+        s = self.s
+        out = V.copy()
+        g = out[:Q * s].reshape(s, Q, -1)
+        g[:, :3] = np.einsum("ij,sjc->sic", R, g[:, :3])
+        T = out[Q * s:].reshape(self.t, 3, -1)
+        out[Q * s:] = np.einsum("ij,tjc->tic", R, T).reshape(3 * self.t, -1)
+        return out
+
+    def _rot_times(self, V):
+        """Rotated covariance (final frame, before S) times V."""
+        return self._rotate_rows(self._times(self._rotate_rows(np.asarray(V, float), self.R.T)), self.R)
+
+    # ------------------------------------------------------------ public
+    def times(self, V):
+        """Final-datum covariance times V (n, c)."""
+        V = np.asarray(V, float)
+        if self.G is None:
+            return self._rot_times(V)
+        # S C S^T V with S = I - G H
+        W = V - self.H.T @ (self.G.T @ V)
+        Y = self._rot_times(W)
+        return Y - self.G @ (self.H @ Y)
+
+    def block(self, idx):
+        """Dense covariance of the parameters ``idx`` (k,) -> (k, k)."""
+        idx = np.asarray(idx, dtype=np.intp)
+        E = np.zeros((self.n, idx.size))
+        E[idx, np.arange(idx.size)] = 1.0
+        return self.times(E)[idx]
+
+    def full(self):
+        """The whole (n, n) matrix (small networks only)."""
+        return self.times(np.eye(self.n))
+
+    def global_block(self):
+        """Covariance of the station parameters (5s, 5s): x, y, z, offset, scale per station."""
+        return self.block(np.arange(Q * self.s))
+
+    def target_blocks(self, chunk_targets: int = 20000):
+        """3x3 covariance of every target (t, 3, 3) in the final datum, O(t s^2)."""
+        s, t = self.s, self.t
+        slots = target_slots(self.si, self.ti, s, t)
+        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        out = np.empty((t, 3, 3))
+        for lo in range(0, t, chunk_targets):
+            sl = slots[lo:lo + chunk_targets]
+            seen = sl >= 0
+            ix = np.where(seen, sl, 0)
+            A = self.Js_w[ix] * seen[..., None]           # (c, s, Q)
+            P = self.P[ix] * seen[..., None]              # (c, s, 3)
+            S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)
+            out[lo:lo + chunk_targets] = (self.Minv[lo:lo + chunk_targets]
+                                          + np.einsum("cai,cab,cbj->cij", P, S, P, optimize=True))
+        out *= self.factor
+        out = np.einsum("ij,tjk,lk->til", self.R, out, self.R)
+        if self.G is not None:
+            rows = Q * s + np.arange(3 * t)
+            Gp = self.G[rows].reshape(t, 3, 6)
+            Cp = self.CHt[rows].reshape(t, 3, 6)
+            out = (out - np.einsum("tia,tja->tij", Gp, Cp) - np.einsum("tia,tja->tij", Cp, Gp)
+                   + np.einsum("tia,ab,tjb->tij", Gp, self.HCHt, Gp))
+        return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+    def hat_diagonal(self, chunk_targets: int = 20000):
+        """Diagonal of the whitened hat matrix ``A C A^T`` per observation (m,) (datum-free).
+
+        ``1 - hat`` are the redundancy numbers.
+        """
+        s, t = self.s, self.t
+        slots = target_slots(self.si, self.ti, s, t)
+        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        h = np.empty(self.si.shape[0])
+        for lo in range(0, t, chunk_targets):
+            sl = slots[lo:lo + chunk_targets]
+            seen = sl >= 0
+            ix = np.where(seen, sl, 0)
+            A = self.Js_w[ix] * seen[..., None]
+            B = self.Jt_w[ix] * seen[..., None]
+            P = self.P[ix] * seen[..., None]
+            S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)      # a Q a
+            BP = np.einsum("cai,cbi->cab", B, P)                             # b_a . p_b
+            diagS = np.einsum("cbb->cb", S)
+            term2 = np.einsum("cba,cab->cb", BP, S)
+            term3 = np.einsum("cbb->cb", BP) + np.einsum("cba,cae,cbe->cb", BP, S, BP, optimize=True)
+            hh = diagS - 2.0 * term2 + term3
+            h[sl[seen]] = hh[seen]
+        return h

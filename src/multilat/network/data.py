@@ -1,0 +1,275 @@
+"""The data of a self-calibrating multilateration network: distance observations, reference
+lengths and point coordinates, validated once at construction (the solver trusts them).
+
+Conventions
+-----------
+* One observation is one distance measured by station (measurement head) ``i`` to target position
+  ``j``, in metres, *as reported by the instrument*: it includes the station's additive instrument
+  offset, ``distance_m = |H_i - T_j| + offset_i`` (seed 000 §4.3).
+* Ids are strings; ``station_ids``/``target_ids`` keep first-appearance order, and
+  ``station_index[k]``/``target_index[k]`` point into them.
+* Each (station, target) pair appears at most once: repeated measurements must be averaged before
+  (their mean is one observation with the standard uncertainty of the mean).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from multilat.errors import MultilatError
+
+__all__ = ["Observations", "ReferenceLengths", "Points"]
+
+
+def _ids(name: str, values) -> tuple[str, ...]:
+    out = tuple(str(v) for v in values)
+    for v in out:
+        if v.strip() == "" or v != v.strip():
+            raise MultilatError(f"{name}: ids must be non-empty without surrounding blanks, got {v!r}")
+    return out
+
+
+def _index_of(ids: Sequence[str]) -> dict[str, int]:
+    return {s: i for i, s in enumerate(ids)}
+
+
+@dataclass(frozen=True, eq=False)
+class Observations:
+    """Distances measured by stations to targets.
+
+    Attributes
+    ----------
+    station_ids, target_ids : tuple of str
+        Unique ids, in order of first appearance (``s`` stations, ``t`` targets).
+    station_index, target_index : ndarray of int, shape (m,)
+        Station and target of each observation.
+    distance_m : ndarray, shape (m,)
+        Measured distances (including the station offset), metres, > 0.
+    sigma_m : ndarray, shape (m,)
+        A-priori standard uncertainty of each distance, metres, > 0.
+    azimuth_rad, elevation_rad : ndarray, shape (m,), or None
+        Pointing angles of the head for each observation when known (NaN where unknown).
+
+    Build with :meth:`from_labels` (ids per row); the constructor checks shapes, finiteness,
+    positivity, index ranges and duplicate (station, target) pairs.
+    """
+
+    station_ids: tuple[str, ...]
+    target_ids: tuple[str, ...]
+    station_index: np.ndarray
+    target_index: np.ndarray
+    distance_m: np.ndarray
+    sigma_m: np.ndarray
+    azimuth_rad: np.ndarray | None = None
+    elevation_rad: np.ndarray | None = None
+
+    def __post_init__(self):
+        set_ = object.__setattr__
+        set_(self, "station_ids", _ids("station_ids", self.station_ids))
+        set_(self, "target_ids", _ids("target_ids", self.target_ids))
+        if len(set(self.station_ids)) != len(self.station_ids):
+            raise MultilatError("station_ids: duplicate station id")
+        if len(set(self.target_ids)) != len(self.target_ids):
+            raise MultilatError("target_ids: duplicate target id")
+        if set(self.station_ids) & set(self.target_ids):
+            both = sorted(set(self.station_ids) & set(self.target_ids))[0]
+            raise MultilatError(f"id {both!r} is used both as a station and as a target")
+        si = np.asarray(self.station_index)
+        ti = np.asarray(self.target_index)
+        if si.ndim != 1 or ti.shape != si.shape or not (np.issubdtype(si.dtype, np.integer)
+                                                        and np.issubdtype(ti.dtype, np.integer)):
+            raise MultilatError("station_index/target_index: expected integer arrays of equal shape (m,)")
+        m = si.shape[0]
+        if m == 0:
+            raise MultilatError("no observations")
+        if si.min() < 0 or si.max() >= len(self.station_ids):
+            raise MultilatError("station_index out of range")
+        if ti.min() < 0 or ti.max() >= len(self.target_ids):
+            raise MultilatError("target_index out of range")
+        set_(self, "station_index", si.astype(np.intp, copy=True))
+        set_(self, "target_index", ti.astype(np.intp, copy=True))
+        for name in ("distance_m", "sigma_m"):
+            a = np.array(getattr(self, name), dtype=float)
+            if a.shape != (m,):
+                raise MultilatError(f"{name}: expected shape ({m},), got {a.shape}")
+            bad = np.flatnonzero(~(np.isfinite(a) & (a > 0)))
+            if bad.size:
+                k = int(bad[0])
+                raise MultilatError(f"{name} of observation {self.label(k)} must be finite and > 0, "
+                                    f"got {a[k]!r}")
+            set_(self, name, a)
+        for name in ("azimuth_rad", "elevation_rad"):
+            v = getattr(self, name)
+            if v is not None:
+                a = np.array(v, dtype=float)
+                if a.shape != (m,):
+                    raise MultilatError(f"{name}: expected shape ({m},), got {a.shape}")
+                if np.any(np.isinf(a)):
+                    raise MultilatError(f"{name}: infinite angle")
+                set_(self, name, a)
+        key = self.station_index.astype(np.int64) * len(self.target_ids) + self.target_index
+        uniq, first, counts = np.unique(key, return_index=True, return_counts=True)
+        if np.any(counts > 1):
+            k = int(np.flatnonzero(key == uniq[np.argmax(counts > 1)])[1])
+            raise MultilatError(f"duplicate observation {self.label(k)} (average repeated "
+                                "measurements into one row)")
+        for a in (self.station_index, self.target_index, self.distance_m, self.sigma_m):
+            a.flags.writeable = False
+
+    # ---------------------------------------------------------------- construction
+    @classmethod
+    def from_labels(cls, station: Sequence[str], target: Sequence[str], distance_m, sigma_m, *,
+                    azimuth_rad=None, elevation_rad=None) -> "Observations":
+        """Build from one station id and one target id per observation.
+
+        Parameters
+        ----------
+        station, target : sequence of str, length m
+        distance_m : array_like, shape (m,), metres
+        sigma_m : float or array_like, shape (m,), metres
+        azimuth_rad, elevation_rad : array_like, shape (m,), optional
+        """
+        station = _ids("station", station)
+        target = _ids("target", target)
+        if len(station) != len(target):
+            raise MultilatError("station and target lists differ in length")
+        sids = tuple(dict.fromkeys(station))
+        tids = tuple(dict.fromkeys(target))
+        sx, tx = _index_of(sids), _index_of(tids)
+        m = len(station)
+        sig = np.broadcast_to(np.asarray(sigma_m, dtype=float), (m,)).copy() if m else np.zeros(0)
+        return cls(sids, tids, np.array([sx[s] for s in station], dtype=np.intp),
+                   np.array([tx[t] for t in target], dtype=np.intp), np.asarray(distance_m, float),
+                   sig, azimuth_rad=azimuth_rad, elevation_rad=elevation_rad)
+
+    # ---------------------------------------------------------------- views
+    @property
+    def n_obs(self) -> int:
+        return int(self.distance_m.shape[0])
+
+    @property
+    def n_stations(self) -> int:
+        return len(self.station_ids)
+
+    @property
+    def n_targets(self) -> int:
+        return len(self.target_ids)
+
+    def label(self, k: int) -> str:
+        """``'station->target'`` of observation ``k`` (for messages)."""
+        return f"{self.station_ids[self.station_index[k]]}->{self.target_ids[self.target_index[k]]}"
+
+    def subset(self, keep) -> "Observations":
+        """The observations selected by the boolean mask or index array ``keep``; ids keep their
+        order, ids that lose all their observations are dropped."""
+        keep = np.asarray(keep)
+        if keep.dtype == bool:
+            keep = np.flatnonzero(keep)
+        si, ti = self.station_index[keep], self.target_index[keep]
+        s_present = np.flatnonzero(np.bincount(si, minlength=self.n_stations) > 0)
+        t_present = np.flatnonzero(np.bincount(ti, minlength=self.n_targets) > 0)
+        s_new = np.full(self.n_stations, -1, dtype=np.intp)
+        t_new = np.full(self.n_targets, -1, dtype=np.intp)
+        s_new[s_present] = np.arange(s_present.size)
+        t_new[t_present] = np.arange(t_present.size)
+        az = None if self.azimuth_rad is None else self.azimuth_rad[keep]
+        el = None if self.elevation_rad is None else self.elevation_rad[keep]
+        return Observations(tuple(self.station_ids[i] for i in s_present),
+                            tuple(self.target_ids[j] for j in t_present), s_new[si], t_new[ti],
+                            self.distance_m[keep], self.sigma_m[keep], az, el)
+
+    def with_sigma(self, sigma_m) -> "Observations":
+        """A copy with other a-priori uncertainties (scalar or shape (m,))."""
+        sig = np.broadcast_to(np.asarray(sigma_m, dtype=float), (self.n_obs,)).copy()
+        return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
+                            self.distance_m, sig, self.azimuth_rad, self.elevation_rad)
+
+    def with_distances(self, distance_m) -> "Observations":
+        """A copy with other distances (same pattern), e.g. a simulated draw."""
+        return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
+                            distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad)
+
+
+@dataclass(frozen=True, eq=False)
+class ReferenceLengths:
+    """Independently measured distances between two target positions (Tables V-VI of seed 000).
+
+    Attributes
+    ----------
+    target_a, target_b : tuple of str, length r
+    length_m : ndarray, shape (r,), metres, > 0
+    u_m : ndarray, shape (r,), standard uncertainty, metres (NaN when not given)
+    """
+
+    target_a: tuple[str, ...]
+    target_b: tuple[str, ...]
+    length_m: np.ndarray
+    u_m: np.ndarray
+
+    def __post_init__(self):
+        a, b = _ids("target_a", self.target_a), _ids("target_b", self.target_b)
+        r = len(a)
+        if len(b) != r:
+            raise MultilatError("target_a and target_b differ in length")
+        L = np.array(self.length_m, dtype=float)
+        u = np.broadcast_to(np.asarray(self.u_m, dtype=float), (r,)).copy()
+        if L.shape != (r,):
+            raise MultilatError(f"length_m: expected shape ({r},), got {L.shape}")
+        if not np.all(np.isfinite(L) & (L > 0)):
+            raise MultilatError("length_m must be finite and > 0")
+        if np.any(u[~np.isnan(u)] < 0) or np.any(np.isinf(u)):
+            raise MultilatError("u_m must be finite and >= 0")
+        for x, y in zip(a, b):
+            if x == y:
+                raise MultilatError(f"reference length from {x!r} to itself")
+        object.__setattr__(self, "target_a", a)
+        object.__setattr__(self, "target_b", b)
+        object.__setattr__(self, "length_m", L)
+        object.__setattr__(self, "u_m", u)
+
+    def __len__(self) -> int:
+        return len(self.target_a)
+
+    def check_ids(self, known: Sequence[str], *, what: str = "reference lengths") -> None:
+        """Raise :class:`MultilatError` naming the first id not in ``known``."""
+        ks = set(known)
+        for k, (x, y) in enumerate(zip(self.target_a, self.target_b)):
+            for v in (x, y):
+                if v not in ks:
+                    raise MultilatError(f"{what}: row {k + 1}: unknown point id {v!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class Points:
+    """Coordinates of named points (stations or targets): approximate values or control.
+
+    Attributes
+    ----------
+    ids : tuple of str, length p (unique)
+    xyz_m : ndarray, shape (p, 3), metres
+    """
+
+    ids: tuple[str, ...]
+    xyz_m: np.ndarray
+
+    def __post_init__(self):
+        ids = _ids("point", self.ids)
+        if len(set(ids)) != len(ids):
+            raise MultilatError("points: duplicate point id")
+        x = np.array(self.xyz_m, dtype=float).reshape(len(ids), 3)
+        if not np.all(np.isfinite(x)):
+            raise MultilatError("points: coordinates must be finite")
+        object.__setattr__(self, "ids", ids)
+        object.__setattr__(self, "xyz_m", x)
+
+    def get(self, ident: str) -> np.ndarray | None:
+        try:
+            return self.xyz_m[self.ids.index(ident)]
+        except ValueError:
+            return None
+
+    def as_dict(self) -> dict[str, np.ndarray]:
+        return {i: self.xyz_m[k] for k, i in enumerate(self.ids)}

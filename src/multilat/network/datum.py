@@ -1,0 +1,155 @@
+"""The datum of a distance-only network: which rigid motion (3 translations, 3 rotations) is chosen.
+
+Distances fix the shape and size of the network but not where it sits: 6 degrees of freedom are
+undetermined. :func:`~multilat.network.adjust.adjust` always solves with a minimal constraint
+(3-2-1 on three stations, in their own frame) and then moves the solution and its covariance to
+the requested datum:
+
+``Datum.free(points=None)``  *free network, inner constraints* (default). The solution is moved
+    rigidly so that the datum points (all stations and targets, or the chosen ones) fit their
+    reference coordinates (the initial values, or ``--points``) best in least squares (Kabsch
+    fit); the covariance is S-transformed with the inner-constraint matrix ``E = G`` restricted to
+    the datum points, which gives the minimum-trace covariance over those points (the pseudo-inverse
+    of the normal matrix when all points are datum points).
+
+``Datum.three_two_one(a, b, c)``  the paper's small-volume frame: point ``a`` at the origin, ``b``
+    on the +x axis, ``c`` in the xy-plane (y > 0). The covariance is S-transformed so that those
+    6 coordinates have zero variance.
+
+``Datum.control(points=None)``  fixed control points: the given coordinates (``--points``) of the
+    chosen points (default: every point given) are held fixed in the adjustment (hard constraints).
+    With more than a minimal set (3 non-collinear points = 9 > 6 coordinates) this also constrains
+    the shape; the results equal the other datums' only when the control coordinates are consistent
+    with the measured distances.
+
+Distances between points, their uncertainties, offsets, scales and sigma0 do not depend on the
+datum choice among ``free`` and ``three_two_one`` (tested to 1 nm).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from multilat.errors import MultilatError
+
+__all__ = ["Datum", "parse_datum", "helmert_basis", "rigid_fit", "frame_321", "apply_rigid"]
+
+KINDS = ("free", "321", "control")
+
+
+@dataclass(frozen=True)
+class Datum:
+    """Datum definition. ``kind`` is ``"free"``, ``"321"`` or ``"control"``; ``points`` the ids it
+    uses (None: all points for free, every given point for control; exactly 3 for 321)."""
+
+    kind: str = "free"
+    points: tuple[str, ...] | None = None
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise MultilatError(f"datum kind must be one of {', '.join(KINDS)}, got {self.kind!r}")
+        if self.points is not None:
+            pts = tuple(str(p) for p in self.points)
+            if len(set(pts)) != len(pts):
+                raise MultilatError(f"datum {self.kind}: repeated point id")
+            object.__setattr__(self, "points", pts)
+        if self.kind == "321" and (self.points is None or len(self.points) != 3):
+            raise MultilatError("datum 321 needs exactly three point ids (origin, x-axis, xy-plane), "
+                                "e.g. 321:B,D,C")
+
+    @classmethod
+    def free(cls, points=None) -> "Datum":
+        return cls("free", None if points is None else tuple(points))
+
+    @classmethod
+    def three_two_one(cls, a: str, b: str, c: str) -> "Datum":
+        return cls("321", (a, b, c))
+
+    @classmethod
+    def control(cls, points=None) -> "Datum":
+        return cls("control", None if points is None else tuple(points))
+
+    def describe(self) -> str:
+        if self.kind == "free":
+            return "free network, inner constraints over " + (
+                "all points" if self.points is None else ", ".join(self.points))
+        if self.kind == "321":
+            a, b, c = self.points
+            return f"3-2-1: {a} at origin, {b} on +x, {c} in the xy-plane"
+        return "fixed control points " + ("(all given)" if self.points is None else ", ".join(self.points))
+
+
+def parse_datum(text: str | Datum | None) -> Datum:
+    """Parse ``free``, ``free:P1,P2,...``, ``321:A,B,C``, ``control`` or ``control:P1,P2,...``."""
+    if text is None:
+        return Datum()
+    if isinstance(text, Datum):
+        return text
+    kind, _, rest = str(text).strip().partition(":")
+    kind = kind.strip().lower()
+    pts = tuple(p.strip() for p in rest.split(",")) if rest.strip() else None
+    if pts is not None and any(p == "" for p in pts):
+        raise MultilatError(f"datum {text!r}: empty point id")
+    if kind not in KINDS:
+        raise MultilatError(f"datum must be free[:P,..], 321:A,B,C or control[:P,..], got {text!r}")
+    return Datum(kind, pts)
+
+
+def helmert_basis(xyz_m) -> np.ndarray:
+    """Infinitesimal rigid motions of points, shape (3p, 6): columns are x, y, z translations and
+    rotations about x, y, z (about the centroid of ``xyz_m`` (p, 3)); rows ordered point-major."""
+    x = np.asarray(xyz_m, dtype=float)
+    c = x - x.mean(axis=0)
+    p = x.shape[0]
+    G = np.zeros((p, 3, 6))
+    G[:, 0, 0] = G[:, 1, 1] = G[:, 2, 2] = 1.0
+    # d(point) = w x c  for rotation vector w
+    G[:, 1, 3], G[:, 2, 3] = -c[:, 2], c[:, 1]
+    G[:, 0, 4], G[:, 2, 4] = c[:, 2], -c[:, 0]
+    G[:, 0, 5], G[:, 1, 5] = -c[:, 1], c[:, 0]
+    return G.reshape(3 * p, 6)
+
+
+def rigid_fit(src_xyz_m, dst_xyz_m):
+    """Rotation ``R`` (3, 3) and translation ``t`` (3,) minimising ``sum |R src + t - dst|**2``
+    (Kabsch, proper rotation). Needs >= 3 non-collinear points."""
+    a = np.asarray(src_xyz_m, float)
+    b = np.asarray(dst_xyz_m, float)
+    if a.shape != b.shape or a.ndim != 2 or a.shape[1] != 3:
+        raise MultilatError("rigid_fit: expected two (p, 3) arrays")
+    if a.shape[0] < 3:
+        raise MultilatError(f"datum: need at least 3 points to fix the frame, got {a.shape[0]}")
+    ca, cb = a.mean(axis=0), b.mean(axis=0)
+    sv = np.linalg.svd(a - ca, compute_uv=False)
+    if sv[1] <= 1e-9 * max(sv[0], 1e-300):
+        raise MultilatError("datum: the datum points are collinear and cannot fix the rotation")
+    H = (a - ca).T @ (b - cb)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
+    return R, cb - R @ ca
+
+
+def frame_321(p_origin, p_x, p_xy):
+    """Rotation and translation taking coordinates into the 3-2-1 frame of three points: the first
+    at the origin, the second on +x, the third in the xy-plane with y > 0."""
+    o = np.asarray(p_origin, float)
+    ex = np.asarray(p_x, float) - o
+    v = np.asarray(p_xy, float) - o
+    nx = np.linalg.norm(ex)
+    ez = np.cross(ex, v)
+    nz = np.linalg.norm(ez)
+    if nx == 0 or nz <= 1e-9 * nx * max(np.linalg.norm(v), 1e-300):
+        raise MultilatError("datum 321: the three points are (nearly) collinear")
+    ex = ex / nx
+    ez = ez / nz
+    ey = np.cross(ez, ex)
+    R = np.vstack([ex, ey, ez])
+    return R, -R @ o
+
+
+def apply_rigid(R, t, xyz_m):
+    """``R x + t`` for points (..., 3)."""
+    return np.asarray(xyz_m) @ np.asarray(R).T + t

@@ -1,0 +1,156 @@
+"""Can this network be solved? Checks before solving, and a diagnosis when geometry is degenerate.
+
+Rules (documented in ``docs/network.md``):
+
+* at least 3 stations; every station needs more observations than its own unknowns
+  (3 coordinates + offset if estimated + scale if estimated), i.e. >= 4 targets with offsets;
+* every target needs >= 3 observations (its 3 coordinates). With exactly 3 it is determined but
+  has zero redundancy, contributes nothing to the stations/offsets and its observations are
+  uncontrolled (a blunder cannot be seen): allowed, with a warning;
+* the station-target graph must be connected (otherwise the parts float against each other);
+* counting: ``m >= 3 s + 3 t + n_offsets + n_scales - 6 - (fixed)``. For 4 stations with offsets
+  and every target seen by all 4: ``4 n >= 3 n + 10``, so ``n >= 10`` targets determine the
+  network (zero redundancy) and ``n >= 11`` give redundancy (the paper's "nine" counts 9 system
+  unknowns, as if the datum took 7 parameters, i.e. the scale too, which distances do determine);
+* geometry: the reduced normal matrix (after the datum), scaled to unit diagonal, must be well
+  conditioned; otherwise the cause is named (coplanar stations, collinear/coplanar targets, or the
+  parameters of the weakest direction).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network.data import Observations
+
+__all__ = ["check_structure", "count_unknowns", "diagnose_degeneracy", "CONDITION_LIMIT"]
+
+#: largest acceptable condition number of the unit-diagonal reduced normal matrix
+CONDITION_LIMIT = 1e10
+
+
+def count_unknowns(n_stations: int, n_targets: int, n_offsets: int, n_scales: int, *,
+                   datum_defect: int = 6) -> int:
+    """Number of unknowns after the datum: ``3 s + 3 t + offsets + scales - datum_defect``."""
+    return 3 * n_stations + 3 * n_targets + n_offsets + n_scales - datum_defect
+
+
+def _components(obs: Observations) -> int:
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    s, t = obs.n_stations, obs.n_targets
+    g = coo_matrix((np.ones(obs.n_obs), (obs.station_index, s + obs.target_index)), shape=(s + t, s + t))
+    n, lab = connected_components(g, directed=False)
+    return n, lab
+
+
+def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets=None,
+                    fixed_station_coords: int = 0, datum_defect: int = 6, warn: bool = True) -> int:
+    """Raise :class:`MultilatError` if the observation pattern cannot determine the unknowns.
+
+    Parameters
+    ----------
+    obs : Observations
+    offset_free, scale_free : ndarray of bool (s,)  which offsets / scales are estimated
+    fixed_targets : ndarray of bool (t,), optional   targets held fixed (control)
+    fixed_station_coords : int   station coordinates held fixed (control)
+    datum_defect : int   6 for a free network, 0 when control points fix the frame
+
+    Returns
+    -------
+    dof : int  the redundancy ``m - unknowns`` (>= 0)
+    """
+    s, t, m = obs.n_stations, obs.n_targets, obs.n_obs
+    if s < 3:
+        raise MultilatError(f"a self-calibrating network needs at least 3 stations, got {s} "
+                            f"({', '.join(obs.station_ids)})")
+    fixed_targets = np.zeros(t, bool) if fixed_targets is None else np.asarray(fixed_targets, bool)
+    per_station = np.bincount(obs.station_index, minlength=s)
+    per_target = np.bincount(obs.target_index, minlength=t)
+    need_s = 3 + np.asarray(offset_free, int) + np.asarray(scale_free, int)
+    for i in range(s):
+        if per_station[i] < need_s[i] + 1:
+            raise MultilatError(
+                f"station {obs.station_ids[i]!r} has {per_station[i]} observation(s); it needs at least "
+                f"{need_s[i] + 1} (its {need_s[i]} unknowns + 1 for redundancy)")
+    for j in range(t):
+        if fixed_targets[j]:
+            continue
+        if per_target[j] < 3:
+            raise MultilatError(f"target {obs.target_ids[j]!r} has {per_target[j]} observation(s); "
+                                "it needs at least 3 (4 for redundancy)")
+    ncomp, _ = _components(obs)
+    if ncomp > 1:
+        _, lab = _components(obs)
+        parts = []
+        for c in range(min(ncomp, 2)):
+            ids = [obs.station_ids[i] for i in range(s) if lab[i] == c]
+            ids += [obs.target_ids[j] for j in range(t) if lab[s + j] == c]
+            parts.append(",".join(ids[:4]) + ("..." if len(ids) > 4 else ""))
+        raise MultilatError(f"the network is disconnected into {ncomp} parts ({' | '.join(parts)}); "
+                            "each part must be adjusted separately or linked by common targets")
+    n_unknown = (3 * s - fixed_station_coords + 3 * int((~fixed_targets).sum())
+                 + int(np.sum(offset_free)) + int(np.sum(scale_free)) - datum_defect)
+    dof = m - n_unknown
+    if dof < 0:
+        n_off = int(np.sum(offset_free))
+        hint = ""
+        if datum_defect == 6 and not np.any(scale_free):
+            per_t = s - 3   # net equations per target seen by all stations
+            if per_t > 0:
+                need = -(-(3 * s + n_off - 6) // per_t)
+                hint = (f"; with every target seen by all {s} stations at least {need} targets are "
+                        f"needed ({need + 1} for redundancy)")
+        raise MultilatError(f"too few observations: {m} distances for {n_unknown} unknowns "
+                            f"({s} stations, {t} targets, {n_off} offsets, datum {datum_defect}){hint}")
+    if warn:
+        low = [obs.target_ids[j] for j in range(t) if not fixed_targets[j] and per_target[j] == 3]
+        if low:
+            warnings.warn(f"target(s) {', '.join(low[:5])}{'...' if len(low) > 5 else ''} seen by only "
+                          "3 stations: zero redundancy, their observations are uncontrolled",
+                          UserWarning, stacklevel=3)
+        if dof == 0:
+            warnings.warn("zero redundancy: the adjustment is exactly determined, no statistics",
+                          UserWarning, stacklevel=3)
+    return dof
+
+
+def _flatness(xyz) -> tuple[float, float, float]:
+    """Singular values of centred points (descending, length 3, zeros padded)."""
+    x = np.asarray(xyz, float)
+    if x.shape[0] < 2:
+        return 0.0, 0.0, 0.0
+    sv = np.linalg.svd(x - x.mean(axis=0), compute_uv=False)
+    sv = np.concatenate([sv, np.zeros(3 - sv.size)])
+    return tuple(float(v) for v in sv[:3])
+
+
+def diagnose_degeneracy(station_xyz_m, target_xyz_m, station_ids, target_ids, null_vector=None,
+                        param_names=None, *, condition: float) -> str:
+    """A one-line explanation of a near-singular reduced normal matrix.
+
+    Checks, in order: all stations (nearly) in one plane; all targets on a line; all targets in one
+    plane; otherwise names the parameters dominating the weakest direction ``null_vector``.
+    """
+    sv_s = _flatness(station_xyz_m)
+    sv_t = _flatness(target_xyz_m)
+    rel = 1e-4
+    causes = []
+    if sv_s[2] <= rel * sv_s[0]:
+        causes.append(f"the {len(station_ids)} stations are (nearly) coplanar "
+                      f"(out-of-plane spread {sv_s[2] / np.sqrt(len(station_ids)):.2g} m); "
+                      "self-calibration needs them off one plane")
+    if sv_t[1] <= rel * sv_t[0]:
+        causes.append("the targets are (nearly) collinear")
+    elif sv_t[2] <= rel * sv_t[0]:
+        causes.append("the targets are (nearly) coplanar")
+    if not causes and null_vector is not None and param_names is not None:
+        v = np.abs(np.asarray(null_vector))
+        top = np.argsort(v)[::-1][:3]
+        causes.append("weakest direction involves " + ", ".join(param_names[k] for k in top))
+    return (f"near-degenerate geometry (condition number {condition:.2g}): " + "; ".join(causes or
+            ["cause not identified"]))

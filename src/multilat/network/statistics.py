@@ -1,0 +1,96 @@
+"""Adjustment statistics as pure functions: variance factor, global test, Baarda's w-test and
+minimal detectable biases, confidence ellipsoids.
+
+Conventions: residuals are *observed minus computed* (metres); ``sigma_m`` is the a-priori standard
+uncertainty; redundancy numbers ``r_k = 1 - h_k`` with ``h_k`` the diagonal of the hat matrix
+``A (A^T P A)^- A^T P`` (whitened), ``sum r_k = dof``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+__all__ = ["GlobalTest", "global_test", "w_statistics", "w_critical", "noncentrality",
+           "minimal_detectable_bias_m", "confidence_ellipsoid"]
+
+
+@dataclass(frozen=True)
+class GlobalTest:
+    """Global (χ²) test of the a-posteriori variance factor against 1.
+
+    ``statistic = sum (v_k / sigma_k)**2`` ~ χ²(dof) under the model; one-sided upper test at
+    ``alpha``: ``passed = statistic <= critical``; ``critical_low`` is the lower ``alpha`` quantile
+    (a statistic below it hints at pessimistic a-priori uncertainties; not a failure).
+    None for a statistic that does not apply (``dof == 0`` or unweighted cost).
+    """
+
+    statistic: float | None
+    critical: float | None
+    critical_low: float | None
+    passed: bool | None
+    alpha: float
+    dof: int
+
+
+def global_test(weighted_sum_sq: float, dof: int, *, alpha: float = 0.05) -> GlobalTest:
+    """χ² test of ``weighted_sum_sq`` (= vᵀPv) with ``dof`` degrees of freedom."""
+    if dof <= 0 or not np.isfinite(weighted_sum_sq):
+        return GlobalTest(None, None, None, None, alpha, dof)
+    crit = float(stats.chi2.ppf(1.0 - alpha, dof))
+    low = float(stats.chi2.ppf(alpha, dof))
+    return GlobalTest(float(weighted_sum_sq), crit, low, bool(weighted_sum_sq <= crit), alpha, dof)
+
+
+def w_critical(alpha: float) -> float:
+    """Two-sided critical value of the w-test (standard normal) for significance ``alpha``."""
+    return float(stats.norm.ppf(1.0 - alpha / 2.0))
+
+
+def noncentrality(alpha: float, power: float = 0.80) -> float:
+    """Baarda's non-centrality ``lambda0 = (z_{1-alpha/2} + z_{power})**2`` of a 1-D test."""
+    return float((stats.norm.ppf(1.0 - alpha / 2.0) + stats.norm.ppf(power)) ** 2)
+
+
+def w_statistics(residual_m, sigma_m, redundancy):
+    """Baarda's normalised residuals ``w_k = v_k / (sigma_k sqrt(r_k))`` (a-priori variance factor).
+
+    Observations with ``r_k <= 1e-9`` (uncontrolled: a fault in them does not show in the residuals)
+    get ``w = 0``.
+    """
+    r = np.asarray(redundancy, float)
+    ok = r > 1e-9
+    out = np.zeros_like(r)
+    out[ok] = np.asarray(residual_m)[ok] / (np.asarray(sigma_m)[ok] * np.sqrt(r[ok]))
+    return out
+
+
+def minimal_detectable_bias_m(sigma_m, redundancy, *, alpha: float, power: float = 0.80):
+    """Minimal detectable bias of each observation ``sigma_k sqrt(lambda0 / r_k)`` (inf where
+    ``r_k`` is 0), metres."""
+    r = np.asarray(redundancy, float)
+    lam = noncentrality(alpha, power)
+    out = np.full_like(r, np.inf)
+    ok = r > 1e-9
+    out[ok] = np.asarray(sigma_m)[ok] * np.sqrt(lam / r[ok])
+    return out
+
+
+def confidence_ellipsoid(cov_m2, *, level: float = 0.95):
+    """Semi-axes and axes of the ``level`` confidence ellipsoid of 3-D points.
+
+    Parameters
+    ----------
+    cov_m2 : ndarray (..., 3, 3)
+    level : float
+
+    Returns
+    -------
+    semi_axes_m : ndarray (..., 3)  ascending, ``sqrt(chi2_3(level) * eigenvalue)``
+    axes : ndarray (..., 3, 3)      unit eigenvectors as columns
+    """
+    w, V = np.linalg.eigh(np.asarray(cov_m2, float))
+    k = stats.chi2.ppf(level, 3)
+    return np.sqrt(np.clip(w, 0.0, None) * k), V
