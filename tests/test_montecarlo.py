@@ -385,6 +385,15 @@ def test_bad_inputs_and_models():
         coverage_interval([1.0, 2.0, 3.0], 0.5, kind="median")
 
 
+def test_as_dict_is_plain_json():
+    import json
+
+    r = run_mc(eq3_error_m, EQ3_INPUTS, trials=2000, rng=1)
+    d = json.loads(json.dumps(r.as_dict()))
+    assert d["trials"] == 2000 and len(d["interval_symmetric"]) == 2 and "samples" not in d
+    assert d["std"] == r.std
+
+
 def test_partial_model_is_accepted():
     r = run_mc(partial(eq3_error_m, distance_m=0.0), EQ3_INPUTS, trials=1000, rng=1)
     assert r.trials == 1000

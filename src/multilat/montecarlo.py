@@ -286,6 +286,31 @@ class MCResult:
         iv = np.asarray(self.interval_symmetric)
         return 0.5 * (iv[..., 1] - iv[..., 0])
 
+    def as_dict(self) -> dict:
+        """Plain-JSON summary (no samples, no fine histogram): for ``--json`` output and reports."""
+
+        def conv(v):
+            if v is None or isinstance(v, (bool, int, float, str)):
+                return v
+            a = np.asarray(v)
+            return a.tolist() if a.ndim else a.item()
+
+        return {
+            "estimate": conv(self.estimate),
+            "std": conv(self.std),
+            "interval_symmetric": conv(self.interval_symmetric),
+            "interval_shortest": conv(self.interval_shortest),
+            "coverage": self.coverage,
+            "trials": self.trials,
+            "cov": conv(self.cov),
+            "shortest_ambiguous": conv(self.shortest_ambiguous),
+            "quantile_method": self.quantile_method,
+            "converged": self.converged,
+            "tolerance": conv(self.tolerance),
+            "seed_entropy": self.seed_entropy,
+            "n_rejected": self.n_rejected,
+        }
+
     def histogram(self, bins: int = 100, component: int | None = None):
         """Histogram of the output distribution.
 
