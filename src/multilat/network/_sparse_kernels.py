@@ -1,0 +1,353 @@
+"""Kernels of :mod:`multilat.network.sparse` (one pass over targets; observations grouped by target).
+
+Compiled with numba when it is installed; otherwise the same functions run as plain Python (slow,
+but identical arithmetic — the tests run a tiny network both ways).
+
+Notation: observation ``k`` of target ``j`` (``tptr[j] <= k < tptr[j+1]``) from station ``i = si[k]``;
+``u_k`` unit vector target -> station; station/offset row ``a_k = [u_k, 1]``; weight ``w_k``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+try:  # pragma: no cover - depends on the environment
+    from numba import get_num_threads, njit, prange
+    HAVE_NUMBA = True
+except Exception:  # pragma: no cover
+    HAVE_NUMBA = False
+
+    def njit(*args, **kwargs):
+        if args and callable(args[0]):
+            return args[0]
+        return lambda f: f
+
+    prange = range
+
+    def get_num_threads():
+        return 1
+
+
+@njit(cache=True)
+def _inv3(a00, a01, a02, a11, a12, a22, out):
+    c00 = a11 * a22 - a12 * a12
+    c01 = a02 * a12 - a01 * a22
+    c02 = a01 * a12 - a02 * a11
+    c11 = a00 * a22 - a02 * a02
+    c12 = a01 * a02 - a00 * a12
+    c22 = a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    inv = 1.0 / det
+    out[0, 0] = c00 * inv
+    out[0, 1] = c01 * inv
+    out[1, 0] = c01 * inv
+    out[0, 2] = c02 * inv
+    out[2, 0] = c02 * inv
+    out[1, 1] = c11 * inv
+    out[1, 2] = c12 * inv
+    out[2, 1] = c12 * inv
+    out[2, 2] = c22 * inv
+    return det
+
+
+@njit(parallel=True, cache=True)
+def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk):
+    """Full Gauss-Newton assembly at the current point.
+
+    Writes ``u`` (m, 3), ``ninv`` (t, 3, 3), ``gt`` (t, 3) = ``-sum w r u`` per target; returns the
+    reduced system ``S`` (4s, 4s) (no datum), the reduced gradient ``gp`` (4s,), ``vtpv``, and the
+    smallest target-block determinant relative to its trace cubed (conditioning check).
+    """
+    s = h.shape[0]
+    t = tg.shape[0]
+    p = 4 * s
+    sc = np.zeros((nchunks, p, p))
+    gc = np.zeros((nchunks, p))
+    vc = np.zeros(nchunks)
+    dc = np.full(nchunks, np.inf)
+    step = (t + nchunks - 1) // nchunks
+    for c in prange(nchunks):
+        v = np.empty((maxk, 3))
+        av = np.empty(4)
+        bv = np.empty(4)
+        for j in range(c * step, min(t, (c + 1) * step)):
+            k0 = tptr[j]
+            k1 = tptr[j + 1]
+            n00 = n01 = n02 = n11 = n12 = n22 = 0.0
+            g0 = g1 = g2 = 0.0
+            for k in range(k0, k1):
+                i = si[k]
+                dx = h[i, 0] - tg[j, 0]
+                dy = h[i, 1] - tg[j, 1]
+                dz = h[i, 2] - tg[j, 2]
+                rho = np.sqrt(dx * dx + dy * dy + dz * dz)
+                ux = dx / rho
+                uy = dy / rho
+                uz = dz / rho
+                u[k, 0] = ux
+                u[k, 1] = uy
+                u[k, 2] = uz
+                r = d[k] - rho - o[i]
+                wk = w[k]
+                e = wk * r
+                vc[c] += e * r
+                n00 += wk * ux * ux
+                n01 += wk * ux * uy
+                n02 += wk * ux * uz
+                n11 += wk * uy * uy
+                n12 += wk * uy * uz
+                n22 += wk * uz * uz
+                g0 -= e * ux
+                g1 -= e * uy
+                g2 -= e * uz
+                av[0] = ux
+                av[1] = uy
+                av[2] = uz
+                av[3] = 1.0
+                b = 4 * i
+                for a in range(4):
+                    gc[c, b + a] += e * av[a]
+                    for q in range(4):
+                        sc[c, b + a, b + q] += wk * av[a] * av[q]
+            nj = ninv[j]
+            det = _inv3(n00, n01, n02, n11, n12, n22, nj)
+            tr = n00 + n11 + n22
+            rel = det / (tr * tr * tr)
+            if rel < dc[c]:
+                dc[c] = rel
+            gt[j, 0] = g0
+            gt[j, 1] = g1
+            gt[j, 2] = g2
+            y0 = nj[0, 0] * g0 + nj[0, 1] * g1 + nj[0, 2] * g2
+            y1 = nj[1, 0] * g0 + nj[1, 1] * g1 + nj[1, 2] * g2
+            y2 = nj[2, 0] * g0 + nj[2, 1] * g1 + nj[2, 2] * g2
+            for k in range(k0, k1):
+                kk = k - k0
+                for a in range(3):
+                    v[kk, a] = w[k] * (nj[a, 0] * u[k, 0] + nj[a, 1] * u[k, 1] + nj[a, 2] * u[k, 2])
+            for k in range(k0, k1):
+                i = si[k]
+                b = 4 * i
+                wk = w[k]
+                sk = wk * (u[k, 0] * y0 + u[k, 1] * y1 + u[k, 2] * y2)
+                av[0] = u[k, 0]
+                av[1] = u[k, 1]
+                av[2] = u[k, 2]
+                av[3] = 1.0
+                for a in range(4):
+                    gc[c, b + a] += sk * av[a]
+                for l in range(k, k1):
+                    il = si[l]
+                    ll = l - k0
+                    cc = wk * (u[k, 0] * v[ll, 0] + u[k, 1] * v[ll, 1] + u[k, 2] * v[ll, 2])
+                    bv[0] = u[l, 0]
+                    bv[1] = u[l, 1]
+                    bv[2] = u[l, 2]
+                    bv[3] = 1.0
+                    # accumulate into the upper block triangle only (symmetrised by the caller)
+                    if i <= il:
+                        bl = 4 * il
+                        for a in range(4):
+                            ca = cc * av[a]
+                            for q in range(4):
+                                sc[c, b + a, bl + q] -= ca * bv[q]
+                    else:
+                        bl = 4 * il
+                        for a in range(4):
+                            ca = cc * bv[a]
+                            for q in range(4):
+                                sc[c, bl + a, b + q] -= ca * av[q]
+    sm = np.zeros((p, p))
+    gp = np.zeros(p)
+    vt = 0.0
+    dmin = np.inf
+    for c in range(nchunks):
+        sm += sc[c]
+        gp += gc[c]
+        vt += vc[c]
+        dmin = min(dmin, dc[c])
+    # upper block triangle -> full symmetric matrix (diagonal blocks are complete and symmetric)
+    full = sm + sm.T
+    for i in range(s):
+        for a in range(4):
+            for q in range(4):
+                full[4 * i + a, 4 * i + q] = 0.5 * (sm[4 * i + a, 4 * i + q] + sm[4 * i + q, 4 * i + a])
+    return full, gp, vt, dmin
+
+
+@njit(parallel=True, cache=True)
+def gradient_frozen(h, o, tg, d, w, si, tptr, u0, ninv0, gt, nchunks):
+    """Exact gradient at the current point, reduced with the frozen Schur blocks of ``u0, ninv0``.
+
+    Writes ``gt`` (t, 3); returns the reduced gradient ``gp`` (4s,) and ``vtpv``.
+    """
+    s = h.shape[0]
+    t = tg.shape[0]
+    p = 4 * s
+    gc = np.zeros((nchunks, p))
+    vc = np.zeros(nchunks)
+    step = (t + nchunks - 1) // nchunks
+    for c in prange(nchunks):
+        for j in range(c * step, min(t, (c + 1) * step)):
+            k0 = tptr[j]
+            k1 = tptr[j + 1]
+            g0 = g1 = g2 = 0.0
+            for k in range(k0, k1):
+                i = si[k]
+                dx = h[i, 0] - tg[j, 0]
+                dy = h[i, 1] - tg[j, 1]
+                dz = h[i, 2] - tg[j, 2]
+                rho = np.sqrt(dx * dx + dy * dy + dz * dz)
+                r = d[k] - rho - o[i]
+                e = w[k] * r
+                vc[c] += e * r
+                e = e / rho
+                g0 -= e * dx
+                g1 -= e * dy
+                g2 -= e * dz
+                b = 4 * i
+                gc[c, b] += e * dx
+                gc[c, b + 1] += e * dy
+                gc[c, b + 2] += e * dz
+                gc[c, b + 3] += e * rho
+            nj = ninv0[j]
+            gt[j, 0] = g0
+            gt[j, 1] = g1
+            gt[j, 2] = g2
+            y0 = nj[0, 0] * g0 + nj[0, 1] * g1 + nj[0, 2] * g2
+            y1 = nj[1, 0] * g0 + nj[1, 1] * g1 + nj[1, 2] * g2
+            y2 = nj[2, 0] * g0 + nj[2, 1] * g1 + nj[2, 2] * g2
+            for k in range(k0, k1):
+                b = 4 * si[k]
+                sk = w[k] * (u0[k, 0] * y0 + u0[k, 1] * y1 + u0[k, 2] * y2)
+                gc[c, b] += sk * u0[k, 0]
+                gc[c, b + 1] += sk * u0[k, 1]
+                gc[c, b + 2] += sk * u0[k, 2]
+                gc[c, b + 3] += sk
+    gp = np.zeros(p)
+    vt = 0.0
+    for c in range(nchunks):
+        gp += gc[c]
+        vt += vc[c]
+    return gp, vt
+
+
+@njit(parallel=True, cache=True)
+def back_substitute(dxp, gt, ninv, u, w, si, tptr, dt):
+    """Target steps ``dt_j = Ninv_j (gt_j + sum_k w_k u_k (a_k . dxp_i))`` into ``dt`` (t, 3)."""
+    t = gt.shape[0]
+    for j in prange(t):
+        r0 = gt[j, 0]
+        r1 = gt[j, 1]
+        r2 = gt[j, 2]
+        for k in range(tptr[j], tptr[j + 1]):
+            b = 4 * si[k]
+            q = w[k] * (u[k, 0] * dxp[b] + u[k, 1] * dxp[b + 1] + u[k, 2] * dxp[b + 2] + dxp[b + 3])
+            r0 += q * u[k, 0]
+            r1 += q * u[k, 1]
+            r2 += q * u[k, 2]
+        nj = ninv[j]
+        for a in range(3):
+            dt[j, a] = nj[a, 0] * r0 + nj[a, 1] * r1 + nj[a, 2] * r2
+
+
+@njit(parallel=True, cache=True)
+def target_covariance(ninv, u, w, si, tptr, tg, qa, kq, kck, out):
+    """Per-target 3x3 covariance in the datum, into ``out`` (t, 3, 3).
+
+    ``qa`` (4s, 4s): station/offset block of ``(N + E E^T)^-1``; ``kq = K qa`` (6, 4s) and
+    ``kck = K qa K^T`` (6, 6) with ``K = (E^T G)^-1 E^T`` (station part). The target block of
+    ``(N + E E^T)^-1`` is ``Ninv + Ninv F Ninv`` with ``F = N_jp qa N_pj``; the S-transformation
+    onto the datum adds ``- G_j M - M^T G_j^T + G_j kck G_j^T`` with ``M = K cov(p, T_j)`` and
+    ``G_j = [I, -[T_j]x]`` (Helmert basis of the target).
+    """
+    t = tg.shape[0]
+    for j in prange(t):
+        k0 = tptr[j]
+        k1 = tptr[j + 1]
+        f = np.zeros((3, 3))
+        mk = np.zeros((6, 3))   # sum_k w_k (kq[:, i_k] a_k) u_k^T
+        for k in range(k0, k1):
+            bk = 4 * si[k]
+            uk0 = u[k, 0]
+            uk1 = u[k, 1]
+            uk2 = u[k, 2]
+            for l in range(k, k1):
+                bl = 4 * si[l]
+                ul0 = u[l, 0]
+                ul1 = u[l, 1]
+                ul2 = u[l, 2]
+                acc = 0.0
+                for a in range(4):
+                    row = qa[bk + a, bl] * ul0 + qa[bk + a, bl + 1] * ul1 + qa[bk + a, bl + 2] * ul2 \
+                        + qa[bk + a, bl + 3]
+                    if a == 0:
+                        acc += uk0 * row
+                    elif a == 1:
+                        acc += uk1 * row
+                    elif a == 2:
+                        acc += uk2 * row
+                    else:
+                        acc += row
+                cc = w[k] * w[l] * acc
+                if l == k:
+                    f[0, 0] += cc * uk0 * uk0
+                    f[0, 1] += cc * uk0 * uk1
+                    f[0, 2] += cc * uk0 * uk2
+                    f[1, 1] += cc * uk1 * uk1
+                    f[1, 2] += cc * uk1 * uk2
+                    f[2, 2] += cc * uk2 * uk2
+                else:   # the (k, l) and (l, k) terms together
+                    f[0, 0] += 2.0 * cc * uk0 * ul0
+                    f[0, 1] += cc * (uk0 * ul1 + ul0 * uk1)
+                    f[0, 2] += cc * (uk0 * ul2 + ul0 * uk2)
+                    f[1, 1] += 2.0 * cc * uk1 * ul1
+                    f[1, 2] += cc * (uk1 * ul2 + ul1 * uk2)
+                    f[2, 2] += 2.0 * cc * uk2 * ul2
+            for r in range(6):
+                acc = kq[r, bk] * uk0 + kq[r, bk + 1] * uk1 + kq[r, bk + 2] * uk2 + kq[r, bk + 3]
+                acc *= w[k]
+                mk[r, 0] += acc * uk0
+                mk[r, 1] += acc * uk1
+                mk[r, 2] += acc * uk2
+        f[1, 0] = f[0, 1]
+        f[2, 0] = f[0, 2]
+        f[2, 1] = f[1, 2]
+        nj = ninv[j]
+        gj = np.zeros((3, 6))
+        gj[0, 0] = 1.0
+        gj[1, 1] = 1.0
+        gj[2, 2] = 1.0
+        gj[1, 3] = -tg[j, 2]
+        gj[2, 3] = tg[j, 1]
+        gj[0, 4] = tg[j, 2]
+        gj[2, 4] = -tg[j, 0]
+        gj[0, 5] = -tg[j, 1]
+        gj[1, 5] = tg[j, 0]
+        # nf = Ninv F ; ctt = Ninv + nf Ninv ; m6 = mk Ninv ; gm = G m6 ; gkg = G kck G^T
+        nf = np.zeros((3, 3))
+        for a in range(3):
+            for b in range(3):
+                nf[a, b] = nj[a, 0] * f[0, b] + nj[a, 1] * f[1, b] + nj[a, 2] * f[2, b]
+        m6 = np.zeros((6, 3))
+        for r in range(6):
+            for b in range(3):
+                m6[r, b] = mk[r, 0] * nj[0, b] + mk[r, 1] * nj[1, b] + mk[r, 2] * nj[2, b]
+        gk = np.zeros((3, 6))
+        for a in range(3):
+            for r in range(6):
+                acc = 0.0
+                for q in range(6):
+                    acc += gj[a, q] * kck[q, r]
+                gk[a, r] = acc
+        for a in range(3):
+            for b in range(3):
+                ctt = nj[a, b] + nf[a, 0] * nj[0, b] + nf[a, 1] * nj[1, b] + nf[a, 2] * nj[2, b]
+                gm_ab = 0.0
+                gm_ba = 0.0
+                gkg = 0.0
+                for r in range(6):
+                    gm_ab += gj[a, r] * m6[r, b]
+                    gm_ba += gj[b, r] * m6[r, a]
+                    gkg += gk[a, r] * gj[b, r]
+                out[j, a, b] = ctt - gm_ab - gm_ba + gkg
