@@ -14,8 +14,9 @@ Columns
 ``phase_rad, frequency_hz[, k]``
     Eq. (1) of seed 000: ``Φ`` in ``[0, 2π)``, the modulation frequency ``f > 0`` and the integer
     number of synthetic half-wavelengths ``k >= 0``. An empty/missing ``k`` is resolved from
-    ``approx_distance_m`` (a coarse distance in air, good to better than a quarter of the
-    synthetic half-wavelength ``c/(2 n f)``, 7.6 mm at 4895 MHz); without it the row is an error.
+    ``approx_distance_m`` (a coarse distance in air, good to better than half the ambiguity
+    ``c/(2 n f)``, i.e. 15 mm at 4895 MHz; :func:`multilat.adm.resolve_integer` with a nominal group
+    index 1.00027); without it the row is an error.
     Every row needs either ``optical_path_m`` or ``phase_rad``/``frequency_hz`` (not both).
 ``time`` (optional)
     ISO 8601 (``2020-03-10T09:00:00``, ``...+01:00``, ``...Z``); a time without zone is UTC.
@@ -40,13 +41,17 @@ from pathlib import Path
 
 import numpy as np
 
+from multilat import adm
 from multilat.errors import MultilatError
 from multilat.io import CsvTable, read_csv_table
 
 __all__ = ["RawObservations", "read_raw", "is_raw_file", "parse_time", "format_time",
            "ENV_COLUMNS", "RAW_COLUMNS", "SPEED_OF_LIGHT_M_S"]
 
-SPEED_OF_LIGHT_M_S = 299_792_458.0
+SPEED_OF_LIGHT_M_S = adm.C_M_PER_S
+#: Air group index assumed when resolving ``k`` from a coarse distance in air (typical lab air at
+#: 1550 nm; a 3e-5 departure moves a 100 m coarse distance by 3 mm, well inside half an ambiguity).
+NOMINAL_GROUP_INDEX = 1.00027
 ENV_COLUMNS = ("temperature_c", "pressure_hpa", "humidity_pct", "co2_ppm")
 RAW_COLUMNS = ("station", "target", "time", "optical_path_m", "phase_rad", "frequency_hz", "k",
                "approx_distance_m", "elevation_rad", "target_elevation_rad", "azimuth_rad",
@@ -196,20 +201,18 @@ def read_raw(path: str | os.PathLike) -> RawObservations:
             raise MultilatError(f"{where(i)}: column 'phase_rad': must be in [0, 2π), got {phase[i]!r}")
         if np.isnan(freq[i]) or not freq[i] > 0:
             raise MultilatError(f"{where(i)}: column 'frequency_hz': must be > 0, got {freq[i]!r}")
-        half_wl = SPEED_OF_LIGHT_M_S / (2.0 * freq[i])   # vacuum synthetic half-wavelength
         if np.isnan(kk[i]):
             if np.isnan(approx[i]):
                 raise MultilatError(f"{where(i)}: k missing and no approx_distance_m to resolve it")
             if not approx[i] > 0:
                 raise MultilatError(f"{where(i)}: column 'approx_distance_m': must be > 0")
-            # the coarse distance is in air; n - 1 ~ 3e-4 changes k only beyond ~100 m, and the
-            # rounding needs |error| < half_wl/2: documented limit (approx to better than ~7 mm)
-            kk[i] = round(approx[i] / half_wl - phase[i] / (2 * math.pi))
-            if kk[i] < 0:
-                raise MultilatError(f"{where(i)}: approx_distance_m gives a negative k")
+            try:
+                kk[i] = float(adm.resolve_integer(phase[i], approx[i], freq[i], NOMINAL_GROUP_INDEX))
+            except MultilatError as exc:
+                raise MultilatError(f"{where(i)}: {exc}") from None
         elif kk[i] < 0 or kk[i] != round(kk[i]):
             raise MultilatError(f"{where(i)}: column 'k': must be an integer >= 0, got {kk[i]!r}")
-        opt[i] = (phase[i] / (2 * math.pi) + kk[i]) * half_wl
+        opt[i] = float(adm.distance_from_phase(phase[i], int(kk[i]), freq[i], 1.0))
         if not opt[i] > 0:
             raise MultilatError(f"{where(i)}: phase and k give a zero distance")
 
