@@ -101,3 +101,33 @@ def test_cli_two_face(tmp_path, capsys):
     assert main(["two-face", str(p)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "faces.csv:2: column 'face'" in err[0]
+
+
+def test_against_3d_gimbal_geometry():
+    # Face I at elevation phi, face II through the zenith (phi -> pi - phi) with the explicit 3D head
+    # of multilat.gimbal (beam offsets and tilts of Table III size): the face difference gives Toh,
+    # and the beam-offset/tilt term is the same in both faces, lumped into the constant C.
+    from multilat import gimbal
+
+    kw = dict(a_m=190e-6, c_m=-230e-6, alpha_rad=np.radians(0.12), gamma_rad=np.radians(-0.09))
+    toh = -3e-6
+    tg, fc, d, el, ref = [], [], [], [], []
+    for j, (R, phi) in enumerate(TARGETS):
+        for f, ang in ((1, phi), (-1, np.pi - phi)):
+            tg.append(f"T{j}")
+            fc.append(f)
+            el.append(phi)
+            ref.append(R)
+            d.append(float(gimbal.head_measured_distance_3d(R, toh_m=toh, elevation_rad=ang, **kw)))
+    data = TwoFaceData("B", tuple(tg), np.array(fc), np.array(d), np.array(el), np.full(len(d), 1e-6),
+                       np.array(ref))
+    r = estimate_two_face(data)
+    # beam term with no transit offset, same in both faces (to 1e-12 m)
+    b1 = gimbal.head_measured_distance_3d(5.0, toh_m=0.0, elevation_rad=0.3, **kw) - 5.0
+    b2 = gimbal.head_measured_distance_3d(5.0, toh_m=0.0, elevation_rad=np.pi - 0.3, **kw) - 5.0
+    assert abs(b1 - b2) < 1e-12
+    # Toh recovered to second order (Toh x tilt ~ 1e-11 m); C = a sin(alpha) + c sin(gamma) - ...
+    assert r.transit_offset_m == pytest.approx(toh, abs=1e-10)
+    first_order = kw["a_m"] * np.sin(kw["alpha_rad"]) + kw["c_m"] * np.sin(kw["gamma_rad"])
+    assert r.constant_m == pytest.approx(float(b1), abs=2e-8)      # 1/R term: (a²+c²)/2R < 2e-8 m
+    assert r.constant_m == pytest.approx(first_order, abs=2e-8)
