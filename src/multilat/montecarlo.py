@@ -369,6 +369,7 @@ class _ChunkSpec:
     hist_hi: np.ndarray | None
     hist_bins: int
     nonfinite: str
+    out: np.ndarray | None = None  # in-process only: write samples straight into the run's store
 
 
 @dataclass
@@ -477,14 +478,17 @@ def _run_chunk(spec: _ChunkSpec) -> _Partial:
         else:
             n_tot, mean, m2 = _merge_moments(n_tot, mean, m2, y2.shape[0], mb, cb)
         if spec.keep_samples:
-            samples.append(y2)
+            if spec.out is not None:  # no rejection possible here (nonfinite="raise")
+                spec.out[b * BLOCK : b * BLOCK + y.shape[0]] = y
+            else:
+                samples.append(y2)
         if spec.hist_lo is not None:
             c = _histogram_counts(y2, spec.hist_lo, spec.hist_hi, spec.hist_bins)
             counts = c if counts is None else counts + c
     if mean is None:
         raise MultilatError(f"model returned no finite value in blocks {spec.block_start}..{spec.block_stop - 1}")
     s = None
-    if spec.keep_samples:
+    if spec.keep_samples and spec.out is None:
         s = samples[0] if len(samples) == 1 else np.concatenate(samples, axis=0)
     return _Partial(n_tot, mean, m2, s, counts, rejected, spec.block_start * BLOCK, out_ndim, blocks)
 
@@ -758,13 +762,15 @@ def run_mc(
             raise MultilatError("model returned no finite value in block 0")
         lo, hi, edges = _hist_range(p2, hist_bins)
 
+    store = np.empty((trials,) if probe.ndim == 1 else (trials, k)) if exact else None
+    # in-process, the chunks write their samples straight into the store (one copy, one allocation)
+    direct = exact and map is None and nonfinite == "raise"
     specs = (
         _ChunkSpec(**common, block_start=s, block_stop=min(s + blocks_per_chunk, n_blocks), trials=trials,
-                   keep_samples=exact, hist_lo=lo, hist_hi=hi)
+                   keep_samples=exact, hist_lo=lo, hist_hi=hi, out=store if direct else None)
         for s in range(0, n_blocks, blocks_per_chunk)
     )
     n, mean, m2, rejected, counts, out_ndim = 0, None, None, 0, None, 1
-    store = None
     filled = 0
     done = 0
     for part in mapper(_run_chunk, specs):
@@ -772,9 +778,9 @@ def run_mc(
         n, mean, m2 = _merge_blocks(n, mean, m2, part.blocks)
         rejected += part.n_rejected
         if exact:
-            if store is None:
-                store = np.empty((trials, part.samples.shape[1]))
-            store[filled : filled + part.n] = part.samples
+            if not direct:
+                dest = store[filled : filled + part.n]
+                dest[...] = part.samples.reshape(dest.shape)
             filled += part.n
         else:
             counts = part.counts if counts is None else counts + part.counts
