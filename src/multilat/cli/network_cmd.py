@@ -1,3 +1,183 @@
-"""Commands registered on multilat.cli.app.app (filled in by its owner)."""
+"""``multilat adjust``: self-calibrating multilateration adjustment of a distance file."""
 
-from multilat.cli.app import app  # noqa: F401
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from multilat.cli.app import app, console, emit_json
+from multilat.errors import MultilatError
+
+
+def result_to_json(res, refs=None) -> dict:
+    """The ``--json`` document of an adjustment (also used by tests and the demo)."""
+    stations = {}
+    for i, sid in enumerate(res.station_ids):
+        stations[sid] = {"xyz_m": res.station_xyz_m[i], "offset_m": res.offset_m[i],
+                         "offset_u_m": res.offset_std_m[i], "offset_estimated": bool(res.offset_estimated[i]),
+                         "cov_m2": res.station_cov_m2[i]}
+        if res.scale_estimated[i]:
+            stations[sid]["scale"] = res.scale[i]
+            stations[sid]["scale_u"] = res.scale_std[i]
+    targets = {tid: {"xyz_m": res.target_xyz_m[j], "cov_m2": res.target_cov_m2[j]}
+               for j, tid in enumerate(res.target_ids)}
+    gt = res.global_test
+    doc = {
+        "datum": res.datum.describe(),
+        "cost": res.cost,
+        "n_obs": res.obs.n_obs,
+        "n_used": int(res.used.sum()),
+        "stations": stations,
+        "targets": targets,
+        "sigma0": res.sigma0,
+        "dof": res.dof,
+        "global_test": {"statistic": gt.statistic, "critical": gt.critical, "passed": gt.passed,
+                        "alpha": gt.alpha},
+        "alpha": res.alpha,
+        "outliers": [{"station": o.station, "target": o.target, "w": o.w, "residual_m": o.residual_m}
+                     for o in res.outliers],
+        "reference_lengths": [],
+        "iterations": res.iterations,
+        "condition": res.condition,
+    }
+    if refs is not None:
+        doc["reference_lengths"] = [
+            {"target_a": c.target_a, "target_b": c.target_b, "length_m": c.length_m, "u_m": c.u_m,
+             "reference_m": c.reference_m, "reference_u_m": c.reference_u_m,
+             "difference_m": c.difference_m} for c in res.compare_references(refs)]
+    return doc
+
+
+@contextlib.contextmanager
+def _staging(out: Path):
+    """A temporary directory beside ``out``; on success its files are moved into ``out`` one by one
+    (each an atomic rename), on failure it is removed and ``out`` is untouched."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    try:
+        yield tmp
+        out.mkdir(parents=True, exist_ok=True)
+        for f in sorted(tmp.iterdir()):
+            os.replace(f, out / f.name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
+@app.command("adjust")
+def adjust_command(
+    observations: Path = typer.Argument(..., help="Observations CSV: station,target,distance_m"
+                                                  "[,sigma_m][,azimuth_rad,elevation_rad]."),
+    references: Optional[Path] = typer.Option(None, "--references",
+                                              help="Reference lengths CSV: target_a,target_b,length_m[,u_m]."),
+    points: Optional[Path] = typer.Option(None, "--points",
+                                          help="Points CSV: point,x_m,y_m,z_m (approximate or control)."),
+    datum: str = typer.Option("free", "--datum",
+                              help="free[:P1,P2,..] (inner constraints, default), 321:A,B,C "
+                                   "(A origin, B on +x, C in xy-plane) or control[:P1,..] (--points fixed)."),
+    sigma_um: Optional[float] = typer.Option(None, "--sigma-um",
+                                             help="A-priori standard uncertainty of every distance, µm "
+                                                  "(when the file has no sigma_m column)."),
+    instrument: Optional[str] = typer.Option(None, "--instrument",
+                                             help="Instrument preset or TOML for the distance model's "
+                                                  "uncertainties (default seed2020) when no sigma is given."),
+    alpha: float = typer.Option(0.001, "--alpha", help="Significance of the w-test (data snooping)."),
+    alpha_global: float = typer.Option(0.05, "--alpha-global", help="Significance of the global χ² test."),
+    cost: str = typer.Option("distance", "--cost",
+                             help="distance (weighted, default) or squared (the paper's eq. 6, unweighted)."),
+    fix_offsets_um: Optional[float] = typer.Option(None, "--fix-offsets-um",
+                                                   help="Hold every station offset at this value, µm "
+                                                        "(default: estimate them)."),
+    scales: bool = typer.Option(False, "--scales", help="Also estimate a scale per station."),
+    snooping: bool = typer.Option(True, "--snooping/--no-snooping",
+                                  help="Iteratively reject the worst w-test failure."),
+    seed: int = typer.Option(0, "--seed", help="Seed for the initial-value search (if used)."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a summary."),
+    out: Optional[Path] = typer.Option(None, "--out",
+                                       help="Directory for result CSVs and figures (written atomically)."),
+) -> None:
+    """Adjust a self-calibrating multilateration network: station and target coordinates and the
+    stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
+    ellipsoids and reference-length comparisons."""
+    from multilat.network.adjust import adjust
+    from multilat.network.files import (read_observations, read_points, read_reference_lengths,
+                                        write_result_csvs)
+
+    if sigma_um is not None and not (np.isfinite(sigma_um) and sigma_um > 0):
+        raise MultilatError(f"--sigma-um must be finite and > 0, got {sigma_um!r}")
+    obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
+                            instrument=instrument)
+    refs = read_reference_lengths(references) if references is not None else None
+    if refs is not None:
+        refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))
+    pts = read_points(points) if points is not None else None
+    offsets = None if fix_offsets_um is None else fix_offsets_um * 1e-6
+    res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
+                 alpha_global=alpha_global, snooping=snooping, rng=seed)
+    doc = result_to_json(res, refs)
+    if out is not None:
+        from multilat.report.network_figures import save_figures
+
+        with _staging(out) as tmp:
+            write_result_csvs(res, tmp, references=refs)
+            save_figures(res, tmp)
+            from multilat.io import write_json_atomic
+
+            write_json_atomic(tmp / "result.json", doc)
+    if as_json:
+        emit_json(doc)
+        return
+    _print_summary(res, doc, out)
+
+
+def _print_summary(res, doc, out):
+    gt = res.global_test
+    console.print(f"adjusted {res.obs.n_stations} stations, {res.obs.n_targets} targets from "
+                  f"{int(res.used.sum())}/{res.obs.n_obs} distances ({res.cost} cost; {res.datum.describe()})")
+    if gt.statistic is not None:
+        console.print(f"  σ0 = {res.sigma0:.3f}, dof = {res.dof}; global χ² test: {gt.statistic:.2f} "
+                      f"{'<=' if gt.passed else '>'} {gt.critical:.2f} (α = {gt.alpha:g}): "
+                      f"{'passed' if gt.passed else 'FAILED'}")
+    else:
+        console.print(f"  σ0 = {res.sigma0:.4g}, dof = {res.dof} (no global test for this cost)")
+    if res.outliers:
+        console.print(f"  rejected by data snooping (α = {res.alpha:g}):")
+        for o in res.outliers:
+            console.print(f"    {o.station}->{o.target}: w = {o.w:+.1f}, residual {o.residual_m * 1e6:+.1f} µm")
+    else:
+        console.print(f"  no observation rejected by data snooping (α = {res.alpha:g})")
+    t = Table(title="stations", title_justify="left")
+    for c in ("station", "x (m)", "y (m)", "z (m)", "offset (µm)", "u(offset) (µm)", "95 % max (µm)"):
+        t.add_column(c, justify="right")
+    (sa, _), (ta, _) = res.ellipsoids()
+    for i, sid in enumerate(res.station_ids):
+        x = res.station_xyz_m[i]
+        fixed = "" if res.offset_estimated[i] else " (fixed)"
+        t.add_row(sid, f"{x[0]:.6f}", f"{x[1]:.6f}", f"{x[2]:.6f}", f"{res.offset_m[i] * 1e6:+.1f}{fixed}",
+                  f"{res.offset_std_m[i] * 1e6:.1f}", f"{sa[i, 2] * 1e6:.1f}")
+    console.print(t)
+    order = np.argsort(-ta[:, 2])[:5]
+    t = Table(title="worst targets (largest 95 % semi-axis)", title_justify="left")
+    for c in ("target", "x (m)", "y (m)", "z (m)", "95 % max (µm)"):
+        t.add_column(c, justify="right")
+    for j in order:
+        x = res.target_xyz_m[j]
+        t.add_row(res.target_ids[j], f"{x[0]:.6f}", f"{x[1]:.6f}", f"{x[2]:.6f}", f"{ta[j, 2] * 1e6:.1f}")
+    console.print(t)
+    if doc["reference_lengths"]:
+        t = Table(title="interpoint distances vs reference lengths", title_justify="left")
+        for c in ("points", "adjusted (m)", "u (µm)", "reference (m)", "difference (µm)"):
+            t.add_column(c, justify="right")
+        for c in doc["reference_lengths"]:
+            t.add_row(f"{c['target_a']}-{c['target_b']}", f"{c['length_m']:.6f}", f"{c['u_m'] * 1e6:.1f}",
+                      f"{c['reference_m']:.6f}", f"{c['difference_m'] * 1e6:+.1f}")
+        console.print(t)
+    if out is not None:
+        console.print(f"results and figures written to {out}")

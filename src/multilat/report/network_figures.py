@@ -1,0 +1,143 @@
+"""Figures of a network adjustment: residuals per target and head (seed 000 Fig. 13), top and 3-D
+views of heads, targets and their 95 % confidence ellipsoids (Figs. 11-12).
+
+Plot functions take ``ax=None`` and return the axes; :func:`save_figures` writes PNGs atomically.
+Ellipsoids are magnified (``magnify``) to be visible beside metre-sized layouts; the factor is in the
+title.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["plot_residuals", "plot_top_view", "plot_3d", "save_figures", "auto_magnify"]
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_residuals(result, ax=None):
+    """Residuals (µm) of every observation against the target position, one marker per head;
+    rejected observations as crosses."""
+    plt = _plt()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7, 3.5))
+    o = result.obs
+    markers = "os^vD<>ph*"
+    for i, sid in enumerate(o.station_ids):
+        m = (o.station_index == i) & result.used
+        ax.plot(o.target_index[m] + 1, result.residuals_m[m] * 1e6, markers[i % len(markers)],
+                ms=4, label=f"head {sid}", alpha=0.85)
+    bad = ~result.used
+    if bad.any():
+        ax.plot(o.target_index[bad] + 1, result.residuals_m[bad] * 1e6, "kx", ms=7, label="rejected")
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    ax.set_xlabel("target position")
+    ax.set_ylabel("residual (measured - adjusted), µm")
+    t = o.n_targets
+    if t <= 30:
+        ax.set_xticks(np.arange(1, t + 1))
+        ax.set_xticklabels(o.target_ids, rotation=90 if t > 14 else 0, fontsize=8)
+    ax.set_title(f"residuals per target and head (σ0 = {result.sigma0:.3g}, dof {result.dof})")
+    ax.legend(fontsize=7, ncol=min(o.n_stations + 1, 6), loc="best")
+    return ax
+
+
+def auto_magnify(result) -> float:
+    """A power-of-ten magnification making the largest 95 % ellipsoid about 6 % of the layout."""
+    (sa, _), (ta, _) = result.ellipsoids()
+    big = max(float(np.nanmax(sa, initial=0.0)), float(np.nanmax(ta, initial=0.0)))
+    pts = np.vstack([result.station_xyz_m, result.target_xyz_m])
+    span = float(np.ptp(pts, axis=0).max()) or 1.0
+    if big <= 0:
+        return 1.0
+    return float(10 ** np.floor(np.log10(0.06 * span / big)))
+
+
+def plot_top_view(result, ax=None, *, magnify: float | None = None):
+    """Top view (x, y) of heads and targets with their 95 % ellipsoids projected on xy, magnified."""
+    plt = _plt()
+    from matplotlib.patches import Ellipse
+    from scipy import stats
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 6))
+    mag = auto_magnify(result) if magnify is None else magnify
+    k = np.sqrt(stats.chi2.ppf(0.95, 3))
+    for xyz, cov, ids, style, col in ((result.station_xyz_m, result.station_cov_m2, result.station_ids,
+                                       "^", "C3"),
+                                      (result.target_xyz_m, result.target_cov_m2, result.target_ids,
+                                       "o", "C0")):
+        ax.plot(xyz[:, 0], xyz[:, 1], style, color=col, ms=6 if style == "^" else 4)
+        for p, c, name in zip(xyz, cov, ids):
+            w, V = np.linalg.eigh(c[:2, :2])
+            w = np.clip(w, 0, None)
+            ang = np.degrees(np.arctan2(V[1, 1], V[0, 1]))
+            ax.add_patch(Ellipse(p[:2], 2 * k * mag * np.sqrt(w[1]), 2 * k * mag * np.sqrt(w[0]),
+                                 angle=ang, fill=False, color=col, lw=0.8))
+            if len(ids) <= 40:
+                ax.annotate(name, p[:2], fontsize=7, xytext=(3, 3), textcoords="offset points")
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(f"top view: heads (▲), targets (●), 95 % ellipses ×{mag:g}")
+    return ax
+
+
+def plot_3d(result, ax=None, *, magnify: float | None = None):
+    """3-D view of heads and targets with their 95 % confidence ellipsoids (wireframes), magnified."""
+    plt = _plt()
+    from scipy import stats
+
+    if ax is None:
+        fig = plt.figure(figsize=(6.5, 6))
+        ax = fig.add_subplot(projection="3d")
+    mag = auto_magnify(result) if magnify is None else magnify
+    k = np.sqrt(stats.chi2.ppf(0.95, 3))
+    u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 13), np.linspace(0, np.pi, 7))
+    sphere = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)], axis=-1)
+    for xyz, cov, style, col in ((result.station_xyz_m, result.station_cov_m2, "^", "C3"),
+                                 (result.target_xyz_m, result.target_cov_m2, "o", "C0")):
+        ax.scatter(xyz[:, 0], xyz[:, 1], xyz[:, 2], marker=style, color=col, s=18)
+        if len(xyz) > 300:
+            continue
+        for p, c in zip(xyz, cov):
+            w, V = np.linalg.eigh(c)
+            A = V * (k * mag * np.sqrt(np.clip(w, 0, None)))
+            e = sphere @ A.T + p
+            ax.plot_wireframe(e[..., 0], e[..., 1], e[..., 2], color=col, lw=0.3, alpha=0.6)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m)")
+    ax.set_title(f"heads (▲) and targets (●), 95 % ellipsoids ×{mag:g}")
+    return ax
+
+
+def save_figures(result, out_dir: str | os.PathLike) -> list[Path]:
+    """Write ``residuals.png``, ``top_view.png`` and ``view_3d.png`` into ``out_dir`` atomically."""
+    plt = _plt()
+    from multilat.io import atomic_path
+
+    out = Path(out_dir)
+    written = []
+    for name, fn in (("residuals.png", plot_residuals), ("top_view.png", plot_top_view),
+                     ("view_3d.png", plot_3d)):
+        ax = fn(result)
+        fig = ax.figure
+        p = out / name
+        try:
+            with atomic_path(p) as tmp:
+                fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+        finally:
+            plt.close(fig)
+        written.append(p)
+    return written
