@@ -38,23 +38,6 @@ def tube_section(outer_diameter_m, wall_m, youngs_modulus_pa, density_kg_m3, gra
     return float(youngs_modulus_pa) * inertia, float(density_kg_m3) * area * float(gravity_m_s2)
 
 
-def _moment(x, breaks, w, length):
-    """Bending moment of the distributed load at ``x`` (sagging positive). Shapes: x (..., q),
-    breaks (..., k+1), w (..., k), length (...)."""
-    b0 = breaks[..., :-1]
-    b1 = breaks[..., 1:]
-    # left reaction: sum_i w_i * integral_{b0}^{b1} (L - s) ds / L
-    seg_moment_about_b = w * ((length[..., None] - b0) ** 2 - (length[..., None] - b1) ** 2) / 2.0
-    r_a = np.sum(seg_moment_about_b, axis=-1) / length
-    xe = x[..., :, None]
-    lo = b0[..., None, :]
-    hi = np.minimum(np.maximum(xe, lo), b1[..., None, :])
-    # load on [lo, hi] to the left of x: moment w * ((x-lo)^2 - (x-hi)^2) / 2
-    loads = w[..., None, :] * (np.clip(xe - lo, 0.0, None) ** 2 - (xe - hi) ** 2) / 2.0
-    loads = np.where(xe > lo, loads, 0.0)
-    return r_a[..., None] * x - np.sum(loads, axis=-1)
-
-
 def stepped_beam(breaks_m, ei_n_m2, w_n_per_m, at_m):
     """Deflection and slope of a simply supported stepped beam under piecewise-uniform load.
 
@@ -74,6 +57,14 @@ def stepped_beam(breaks_m, ei_n_m2, w_n_per_m, at_m):
     -------
     v_m, slope_rad : ndarray, shape (..., p)
         Deflection (positive downwards) and slope ``dv/dx``.
+
+    Notes
+    -----
+    The integration nodes are the segment ends and the stations, sorted: on each sub-interval
+    the load, the stiffness and every dummy moment are polynomials (degree <= 3 in the product),
+    so 3-point Gauss-Legendre is exact. The real moment is ``M(x) = R_A x - (W_j x - S_j) -
+    w_j (x - b_j)² / 2`` in segment ``j``, with ``W_j``, ``S_j`` the load and first moment of
+    the segments left of ``j``.
     """
     breaks = np.asarray(breaks_m, dtype=float)
     ei = np.asarray(ei_n_m2, dtype=float)
@@ -86,23 +77,30 @@ def stepped_beam(breaks_m, ei_n_m2, w_n_per_m, at_m):
     w = np.broadcast_to(w, lead + (k,))
     a = np.broadcast_to(a, lead + (a.shape[-1],))
     length = breaks[..., -1]
-    # sub-intervals per (station, segment): [b0, c] and [c, b1] with c = clip(a, b0, b1)
-    b0 = breaks[..., None, :-1]                      # (..., 1, k)
-    b1 = breaks[..., None, 1:]
-    c = np.clip(a[..., :, None], b0, b1)             # (..., p, k)
-    v = np.zeros(a.shape)
-    th = np.zeros(a.shape)
-    L = length[..., None, None]
-    aa = a[..., :, None, None]
-    for lo, hi in ((b0, c), (c, b1)):
-        half = (hi - lo) / 2.0                       # (..., p, k)
-        mid = (hi + lo) / 2.0
-        xq = mid[..., None] + half[..., None] * _GL_X    # (..., p, k, 3)
-        m_real = _moment(xq.reshape(lead + (-1,)), breaks, w, length).reshape(xq.shape)
-        left = xq <= aa
-        m_load = np.where(left, (1.0 - aa / L) * xq, aa * (1.0 - xq / L))
-        m_couple = np.where(left, -xq / L, 1.0 - xq / L)
-        wts = half[..., None] * _GL_W / ei[..., None, :, None]
-        v += np.sum(m_real * m_load * wts, axis=(-2, -1))
-        th += np.sum(m_real * m_couple * wts, axis=(-2, -1))
-    return v, th
+    b0, b1 = breaks[..., :-1], breaks[..., 1:]
+    seg_load = w * (b1 - b0)                                  # (..., k)
+    seg_first = seg_load * (b0 + b1) / 2.0                    # load x centroid
+    r_a = np.sum(seg_load * length[..., None], axis=-1) / length - np.sum(seg_first, axis=-1) / length
+    cum_w = np.cumsum(seg_load, axis=-1) - seg_load           # load left of segment j
+    cum_s = np.cumsum(seg_first, axis=-1) - seg_first
+    nodes = np.sort(np.concatenate([breaks, a], axis=-1), axis=-1)
+    lo, hi = nodes[..., :-1], nodes[..., 1:]                  # (..., s)
+    half = (hi - lo) / 2.0
+    mid = (hi + lo) / 2.0
+    seg = np.sum(mid[..., :, None] > b1[..., None, :-1], axis=-1)   # segment index, (..., s)
+
+    def take(v):
+        return np.take_along_axis(v, seg, axis=-1)[..., None]
+
+    xq = mid[..., None] + half[..., None] * _GL_X              # (..., s, 3)
+    m_real = (r_a[..., None, None] * xq - (take(cum_w) * xq - take(cum_s))
+              - take(w) * (xq - take(b0)) ** 2 / 2.0)
+    wts = m_real * half[..., None] * _GL_W / take(ei)          # (..., s, 3)
+    xx = xq[..., None, :, :]                                   # (..., 1, s, 3)
+    aa = a[..., :, None, None]                                 # (..., p, 1, 1)
+    L = length[..., None, None, None]
+    left = xx <= aa
+    m_load = np.where(left, (1.0 - aa / L) * xx, aa * (1.0 - xx / L))
+    m_couple = np.where(left, 0.0, 1.0) - xx / L
+    ww = wts[..., None, :, :]
+    return np.sum(ww * m_load, axis=(-2, -1)), np.sum(ww * m_couple, axis=(-2, -1))
