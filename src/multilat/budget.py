@@ -317,14 +317,14 @@ def distance_budget(inst: Instrument | str = "seed2020", *, head: str = "A", dis
             progress((i + 1) * n, d.size * n)
     means = {g: float(out[:, j].mean()) for j, g in enumerate(GROUPS)}
     stds = {g: float(out[:, j].std(ddof=1)) for j, g in enumerate(GROUPS)}
-    comps = {g: math.sqrt(stds[g] ** 2 + means[g] ** 2) for g in GROUPS}
+    comps = {g: float(np.sqrt(np.mean(out[:, j] ** 2))) for j, g in enumerate(GROUPS)}
     cols = [0, 1, 2, 3] if air else [0, 1, 2]
     total = out[:, cols].sum(axis=1)
     summ = summarize(total, coverage=coverage)
     return DistanceBudget(
         instrument=inst.name, head=head, distances_m=d.copy(), trials_per_distance=n, trials=int(total.size),
         components=comps, means=means, stds=stds, include_air=air,
-        combined_std_m=math.sqrt(float(summ.std) ** 2 + float(summ.estimate) ** 2),
+        combined_std_m=float(np.sqrt(np.mean(total ** 2))),
         combined_mean_m=float(summ.estimate), combined_sd_m=float(summ.std),
         coverage_95_m=tuple(float(x) for x in summ.interval_symmetric),
         coverage_shortest_m=tuple(float(x) for x in summ.interval_shortest),

@@ -319,7 +319,8 @@ def presets() -> list[str]:
 
 
 def _one_line(err: ValidationError, source: str) -> str:
-    e = err.errors()[0]
+    errs = sorted(err.errors(), key=lambda x: x.get("type") != "extra_forbidden")  # a mistyped key first
+    e = errs[0]
     loc = ".".join(str(x) for x in e.get("loc", ())) or "(top level)"
     msg = e.get("msg", "invalid").replace("Value error, ", "")
     if e.get("type") == "extra_forbidden":

@@ -1,3 +1,93 @@
-"""Commands registered on multilat.cli.app.app (filled in by its owner)."""
+"""``multilat budget``: Monte Carlo uncertainty of one measured distance (seed 000, section 3.4)."""
 
-from multilat.cli.app import app  # noqa: F401
+from __future__ import annotations
+
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from multilat.cli.app import app, console, emit_json, progress
+from multilat.errors import MultilatError
+
+PAPER_UM = {"telemetric": 2.1, "head": 1.4, "target": 3.9, "combined": 4.7}
+
+
+@app.command("budget")
+def budget_command(
+    instrument: str = typer.Option("seed2020", "--instrument", "-i",
+                                   help="Preset name (seed2020) or path to an instrument TOML file."),
+    head: str = typer.Option("A", "--head", help="Measurement head (A-D for seed2020)."),
+    trials: Optional[int] = typer.Option(None, "--trials", "-n",
+                                         help="Trials per distance (default from the instrument: 200000)."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Random seed (default: fresh entropy)."),
+    air: Optional[bool] = typer.Option(None, "--air/--no-air",
+                                       help="Include the air-index group in the combined error "
+                                            "(default from the instrument; the seed excludes it)."),
+    as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
+    plot: Optional[str] = typer.Option(None, "--plot", help="Write the error histograms (Figs. 9-10) to this PNG."),
+) -> None:
+    """Uncertainty of one distance measurement by Monte Carlo: telemetric, head and target groups
+    (and optionally air), pooled over 0.2 m to 20.2 m (seed paper section 3.4)."""
+    from multilat import budget as bmod
+    from multilat.instrument import load_instrument
+
+    inst = load_instrument(instrument)
+    inst.head(head)
+    if trials is not None and trials < 2:
+        raise MultilatError(f"--trials must be >= 2, got {trials}")
+    n = inst.budget.trials_per_distance if trials is None else trials
+    total = n * inst.budget.distances_m.size
+    with progress(disable=total < 500_000) as bar:
+        task = bar.add_task("Monte Carlo", total=total)
+        res = bmod.distance_budget(inst, head=head, trials=n, rng=seed, include_air=air,
+                                   keep_samples=plot is not None,
+                                   progress=lambda done, tot: bar.update(task, completed=done))
+    if plot is not None:
+        from multilat.io import atomic_path
+        from multilat.report.distance_figures import plot_budget
+
+        fig = plot_budget(res, paper_um=PAPER_UM if inst.name == "seed2020" else None)
+        import matplotlib.pyplot as plt
+
+        with atomic_path(plot) as tmp:
+            fig.savefig(tmp, format="png", dpi=110)
+        plt.close(fig)
+    if as_json:
+        d = res.to_dict()
+        d["seed"] = seed
+        d["plot"] = plot
+        d["unit"] = "m"
+        d["definition"] = ("standard uncertainty = sqrt(mean^2 + variance) of the error (uncorrected "
+                           "biases count, seed section 3.4); coverage_95_m: probabilistically symmetric "
+                           "interval of the combined error")
+        emit_json(d)
+        return
+    t = Table(title=f"distance budget: {res.instrument}, head {res.head}, {res.trials:,} trials "
+                    f"({res.distances_m.size} distances {res.distances_m[0]:g}-{res.distances_m[-1]:g} m), k = 1",
+              title_justify="left")
+    t.add_column("group")
+    t.add_column("u (µm)", justify="right")
+    t.add_column("mean (µm)", justify="right")
+    t.add_column("std (µm)", justify="right")
+    paper = inst.name == "seed2020"
+    if paper:
+        t.add_column("paper (µm)", justify="right")
+    for g in ("telemetric", "head", "target", "air"):
+        if g == "air" and not res.include_air and not inst.environment.u_temperature_c:
+            continue
+        label = g + ("" if g != "air" or res.include_air else " (not in total)")
+        row = [label, f"{res.components[g] * 1e6:.2f}", f"{res.means[g] * 1e6:+.2f}", f"{res.stds[g] * 1e6:.2f}"]
+        if paper:
+            row.append(f"{PAPER_UM[g]:.1f}" if g in PAPER_UM else "-")
+        t.add_row(*row)
+    row = ["combined", f"{res.combined_std_m * 1e6:.2f}", f"{res.combined_mean_m * 1e6:+.2f}",
+           f"{res.combined_sd_m * 1e6:.2f}"]
+    if paper:
+        row.append(f"{PAPER_UM['combined']:.1f}")
+    t.add_row(*row)
+    console.print(t)
+    lo, hi = res.coverage_95_m
+    console.print(f"95 % coverage interval of the combined error: [{lo * 1e6:.2f}, {hi * 1e6:.2f}] µm")
+    if plot is not None:
+        console.print(f"figure written to {plot}")
