@@ -167,16 +167,15 @@ class Datum:
         order this is the inner-constraint (free-network, minimum-trace over the datum points) datum
         of the adjustment: the linearised conditions ``G^T (x - x_nominal) = 0`` of the inner
         constraints are exactly the stationarity conditions of the rigid fit.
-    ``Datum.three_two_one(origin, axis, plane)`` (station indices)
-        Station ``origin`` keeps its nominal position, the direction ``origin -> axis`` its nominal
-        direction, and the plane (origin, axis, plane) its nominal orientation: the paper's small-
-        volume datum (B at the origin, D on the x axis, C fixing the rotation about it) when the
-        nominal coordinates are expressed in that frame.
+    ``Datum.three_two_one(origin, axis, plane)`` (station indices or ``(kind, index)``)
+        Point ``origin`` keeps its nominal position, the direction ``origin -> axis`` its nominal
+        direction, and the plane (origin, axis, plane) its nominal orientation. With nominal
+        coordinates from ``adjust(..., datum="321:A,B,C")`` (A at the origin, B on +x, C in the
+        xy-plane) this is exactly that datum in every trial.
     """
 
     kind: str
     points: object = "all"
-    stations: tuple[int, int, int] | None = None
 
     @classmethod
     def inner(cls, points="all") -> "Datum":
@@ -193,11 +192,26 @@ class Datum:
         return cls("inner", pts)
 
     @classmethod
-    def three_two_one(cls, origin: int, axis: int, plane: int) -> "Datum":
-        st = (int(origin), int(axis), int(plane))
-        if len(set(st)) != 3:
-            raise MultilatError(f"3-2-1 datum needs three different stations, got {st}")
-        return cls("321", "stations", st)
+    def three_two_one(cls, origin, axis, plane) -> "Datum":
+        """Each point: a station index (int) or ``("station"|"target", index)``."""
+        pts = tuple(("station", int(p)) if isinstance(p, (int, np.integer)) else (str(p[0]), int(p[1]))
+                    for p in (origin, axis, plane))
+        for k, _ in pts:
+            if k not in ("station", "target"):
+                raise MultilatError(f"datum point kind must be 'station' or 'target', got {k!r}")
+        if len(set(pts)) != 3:
+            raise MultilatError(f"3-2-1 datum needs three different points, got {pts}")
+        return cls("321", pts)
+
+    def _stacked(self, s: int, t: int) -> list[int]:
+        """Indices of the 3-2-1 points in the stacked [stations; targets] array."""
+        out = []
+        for k, i in self.points:
+            lim = s if k == "station" else t
+            if not 0 <= i < lim:
+                raise MultilatError(f"datum {k} index {i} out of range (0..{lim - 1})")
+            out.append(i if k == "station" else s + i)
+        return out
 
     # -- internals ------------------------------------------------------------------------
     def _mask(self, s: int, t: int) -> np.ndarray:
@@ -231,15 +245,14 @@ class Datum:
             e[: 3 * s] = gh.reshape(3 * s, 6)
             e[4 * s:] = gt.reshape(3 * t, 6)
             return e
-        a, b, c = self.stations
-        for i in (a, b, c):
-            if not 0 <= i < s:
-                raise MultilatError(f"datum station index {i} out of range (0..{s - 1})")
-        ex, ey, ez = _frame(h0[a], h0[b], h0[c])
-        e[3 * a: 3 * a + 3, 0:3] = np.eye(3)
-        e[3 * b: 3 * b + 3, 3] = ey
-        e[3 * b: 3 * b + 3, 4] = ez
-        e[3 * c: 3 * c + 3, 5] = ez
+        a, b, c = self._stacked(s, t)
+        x0 = np.concatenate([h0, t0])
+        ex, ey, ez = _frame(x0[a], x0[b], x0[c])
+        rows = [3 * q if q < s else 4 * s + 3 * (q - s) for q in (a, b, c)]
+        e[rows[0]: rows[0] + 3, 0:3] = np.eye(3)
+        e[rows[1]: rows[1] + 3, 3] = ey
+        e[rows[1]: rows[1] + 3, 4] = ez
+        e[rows[2]: rows[2] + 3, 5] = ez
         return e
 
     def apply(self, station_xyz_m, target_xyz_m, nominal_station_xyz_m, nominal_target_xyz_m, *,
@@ -263,11 +276,13 @@ class Datum:
         t0 = np.asarray(nominal_target_xyz_m, float)
         s, t = h0.shape[0], t0.shape[0]
         if self.kind == "321":
-            a, b, c = self.stations
-            f0 = np.stack(_frame(h0[a], h0[b], h0[c]), axis=0)          # rows ex, ey, ez (3, 3)
-            f = np.stack(_frame(h[:, a], h[:, b], h[:, c]), axis=-2)   # (n, 3, 3) rows
+            a, b, c = self._stacked(s, t)
+            x0 = np.concatenate([h0, t0])
+            x = np.concatenate([h, tg], axis=1)
+            f0 = np.stack(_frame(x0[a], x0[b], x0[c]), axis=0)          # rows ex, ey, ez (3, 3)
+            f = np.stack(_frame(x[:, a], x[:, b], x[:, c]), axis=-2)   # (n, 3, 3) rows
             rot = np.einsum("ji,njk->nik", f0, f)                        # R = F0^T F
-            org, org0 = h[:, a], h0[a]
+            org, org0 = x[:, a], x0[a]
             hn = np.einsum("nij,nsj->nsi", rot, h - org[:, None]) + org0
             tn = np.einsum("nij,ntj->nti", rot, tg - org[:, None]) + org0
             return hn, tn

@@ -1,0 +1,657 @@
+"""End-to-end Monte Carlo through the self-calibrating adjustment (JCGM 101 / JCGM 102).
+
+Each trial draws every distance of the network from the distance model (non-gaussian telemetric,
+head and target errors, :func:`multilat.budget.sample_distance_errors`) — or from a gaussian of the
+observations' ``sigma_m`` — re-solves the whole network with the batched solver
+(:mod:`multilat.network.batched`, same datum in every trial, each trial started from the nominal
+solution) and records station coordinates, offsets, target coordinates and interpoint distances.
+
+The nominal network (the centre of the input distributions) is
+
+* for a built-in configuration (``small_volume()``, ``large_volume()``): the configuration's truth;
+  the nominal distances are the exact ``|H - T| + offset``, so the Monte Carlo distributions are
+  those of the *errors* of the self-calibrated result;
+* for measured observations: the adjustment of the measured distances (:func:`adjust`); the
+  nominal distances are the measured ones (JCGM 101: the input PDFs are centred on the measured
+  values), and the trials show how the adjusted result scatters for the modelled errors.
+
+Outputs (all from the same trials): per parameter the MC estimate, standard uncertainty, 95 %
+probabilistically symmetric and shortest coverage intervals; per point the MC covariance, its 95 %
+coverage ellipsoid (JCGM 102 §7.7: ``(x - mean)^T C^-1 (x - mean) <= chi2_3(0.95)``) and the fraction
+of trials inside it, and inside the linear ellipsoid; per interpoint distance the same scalar
+summaries; and a validation table beside the linear (first-order) covariance of the adjustment,
+with the Monte Carlo standard error of each standard deviation.
+
+Chunks of ``chunk_size`` trials are seeded by ``SeedSequence(seed).spawn``: the numbers do not depend
+on the number of workers or on how the chunks were distributed (``map=`` from
+:mod:`multilat.parallel`). Trials that fail to converge are dropped and counted (``n_failed``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network import batched as bt
+
+__all__ = ["Problem", "problem_from_observations", "problem_from_truth", "problem_from_config",
+           "propagate", "PropagationResult", "chi2_3_95"]
+
+#: chi-square quantile with 3 degrees of freedom at 0.95 (JCGM 102 ellipsoid scale), exact to 1e-12
+chi2_3_95 = 7.814727903251178
+
+
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Problem:
+    """The nominal network to propagate through.
+
+    Attributes
+    ----------
+    station_ids, target_ids : tuple of str
+    network : BatchedNetwork
+        Structure, weights, nominal solution and datum.
+    distance_m : ndarray, shape (m,)
+        Nominal distances (centres of the input distributions).
+    heads : tuple of str, length s
+        Instrument head used for each station's distance errors (``noise="model"``).
+    pairs : tuple of (str, str)
+        Interpoint distances to report (target or station ids).
+    reference_m : ndarray, shape (len(pairs),)
+        Reference lengths for the pairs (NaN when none).
+    source : str
+        Description (configuration name or file).
+    """
+
+    station_ids: tuple
+    target_ids: tuple
+    network: bt.BatchedNetwork
+    distance_m: np.ndarray
+    heads: tuple
+    pairs: tuple = ()
+    reference_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    source: str = ""
+
+    def point_xyz(self, ident: str) -> np.ndarray:
+        k, i = self.point_index(ident)
+        return (self.network.station_xyz_m if k == "station" else self.network.target_xyz_m)[i]
+
+    def point_index(self, ident: str) -> tuple[str, int]:
+        if ident in self.station_ids:
+            return "station", self.station_ids.index(ident)
+        if ident in self.target_ids:
+            return "target", self.target_ids.index(ident)
+        raise MultilatError(f"unknown point id {ident!r}")
+
+    def param_rows(self, ident: str) -> np.ndarray:
+        """Rows of a point's xyz in the :func:`batched.flatten` layout."""
+        k, i = self.point_index(ident)
+        s = len(self.station_ids)
+        return 3 * i + np.arange(3) if k == "station" else 4 * s + 3 * i + np.arange(3)
+
+
+def _convert_datum(datum, station_ids, target_ids) -> bt.Datum:
+    """The network helper's :class:`multilat.network.datum.Datum` (or its text) as a batched datum."""
+    from multilat.network.datum import parse_datum
+
+    d = parse_datum(datum)
+
+    def ref(p):
+        if p in station_ids:
+            return ("station", station_ids.index(p))
+        if p in target_ids:
+            return ("target", target_ids.index(p))
+        raise MultilatError(f"datum point {p!r} is neither a station nor a target")
+
+    if d.kind == "free":
+        return bt.Datum.inner("all" if d.points is None else [ref(p) for p in d.points])
+    if d.kind == "321":
+        return bt.Datum.three_two_one(*[ref(p) for p in d.points])
+    raise MultilatError("propagation supports the free and 321 datums (a control datum fixes points "
+                        "that the Monte Carlo would have to perturb too)")
+
+
+def _heads_for(station_ids, instrument, head: str | None):
+    """Each station's instrument head: the station id when it names a head, else ``head`` ("A")."""
+    names = set(getattr(instrument, "heads", {}) or {}) if instrument is not None else set()
+    return tuple(s if s in names else (head or "A") for s in station_ids)
+
+
+def _default_pairs(target_ids, limit=20):
+    """All target pairs for small networks, consecutive pairs otherwise."""
+    if len(target_ids) <= limit:
+        return tuple((a, b) for i, a in enumerate(target_ids) for b in target_ids[i + 1:])
+    return tuple(zip(target_ids[:-1], target_ids[1:]))
+
+
+def problem_from_truth(station_ids, target_ids, station_index, target_index, sigma_m, station_xyz_m,
+                       offset_m, target_xyz_m, *, datum="free", pairs=None, references=None,
+                       instrument=None, head: str | None = None, source: str = "") -> Problem:
+    """A problem whose nominal distances are the exact distances of a known truth.
+
+    ``references``: optional mapping ``(a, b) -> length_m`` (or :class:`ReferenceLengths`); when
+    ``pairs`` is None, the reference pairs are reported if given, else all target pairs (up to 20
+    targets) or consecutive ones.
+    """
+    station_ids = tuple(str(s) for s in station_ids)
+    target_ids = tuple(str(t) for t in target_ids)
+    dt = _convert_datum(datum, station_ids, target_ids)
+    net = bt.BatchedNetwork(station_index, target_index, sigma_m, station_xyz_m, offset_m, target_xyz_m,
+                            datum=dt)
+    pairs_, ref = _pairs_and_refs(pairs, references, target_ids, station_ids)
+    return Problem(station_ids, target_ids, net, net.nominal_distance_m(),
+                   _heads_for(station_ids, instrument, head), pairs_, ref, source)
+
+
+def _pairs_and_refs(pairs, references, target_ids, station_ids):
+    refmap = {}
+    if references is not None:
+        if hasattr(references, "target_a"):
+            refmap = {(a, b): float(L) for a, b, L in zip(references.target_a, references.target_b,
+                                                          references.length_m)}
+        else:
+            refmap = {tuple(k): float(v) for k, v in dict(references).items()}
+    if pairs is None:
+        pairs = tuple(refmap) if refmap else _default_pairs(target_ids)
+    pairs = tuple((str(a), str(b)) for a, b in pairs)
+    known = set(target_ids) | set(station_ids)
+    for a, b in pairs:
+        for p in (a, b):
+            if p not in known:
+                raise MultilatError(f"interpoint distance: unknown point id {p!r}")
+        if a == b:
+            raise MultilatError(f"interpoint distance from {a!r} to itself")
+    ref = np.array([refmap.get((a, b), refmap.get((b, a), np.nan)) for a, b in pairs], float)
+    return pairs, ref
+
+
+def problem_from_observations(obs, *, datum="free", pairs=None, references=None, instrument=None,
+                              head: str | None = None, source: str = "", adjustment=None) -> Problem:
+    """A problem centred on the adjustment of measured observations.
+
+    ``obs`` is :class:`multilat.network.data.Observations`; the nominal solution is
+    ``adjust(obs, datum=datum, snooping=False)`` (or ``adjustment`` if already computed), the weights
+    are ``obs.sigma_m`` and the nominal distances the measured ones.
+    """
+    if adjustment is None:
+        from multilat.network.adjust import adjust
+
+        adjustment = adjust(obs, datum=datum, snooping=False)
+    res = adjustment
+    if np.any(res.scale_estimated):
+        raise MultilatError("propagation does not model per-station scales; adjust without scales")
+    station_ids = tuple(obs.station_ids)
+    target_ids = tuple(obs.target_ids)
+    dt = _convert_datum(datum, station_ids, target_ids)
+    net = bt.BatchedNetwork(obs.station_index, obs.target_index, obs.sigma_m, res.station_xyz_m,
+                            res.offset_m, res.target_xyz_m, datum=dt)
+    pairs_, ref = _pairs_and_refs(pairs, references, target_ids, station_ids)
+    return Problem(station_ids, target_ids, net, np.asarray(obs.distance_m, float),
+                   _heads_for(station_ids, instrument, head), pairs_, ref, source)
+
+
+def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pairs=None,
+                        source: str = "") -> Problem:
+    """A problem from a built-in configuration (``network.configs.small_volume()`` etc.).
+
+    Every station observes every target. ``sigma_m``: weights' standard uncertainty (scalar or (m,));
+    default: the distance model's :func:`multilat.budget.distance_std_m` per distance (or 4.7 um
+    without an instrument).
+    """
+    sid = tuple(cfg.station_ids)
+    tid = tuple(cfg.target_ids)
+    h = np.asarray(cfg.station_xyz_m, float)
+    tg = np.asarray(cfg.target_xyz_m, float)
+    off = np.asarray(cfg.offset_m, float)
+    si, ti = np.meshgrid(np.arange(len(sid)), np.arange(len(tid)), indexing="ij")
+    si, ti = si.ravel(), ti.ravel()
+    heads = _heads_for(sid, instrument, None)
+    if sigma_m is None:
+        d = np.linalg.norm(h[si] - tg[ti], axis=1)
+        if instrument is not None:
+            from multilat import budget
+
+            sig = np.empty(len(si))
+            for i, hd in enumerate(heads):
+                sel = si == i
+                sig[sel] = budget.distance_std_m(instrument, d[sel], head=hd)
+        else:
+            sig = np.full(len(si), 4.7e-6)
+    else:
+        sig = np.broadcast_to(np.asarray(sigma_m, float), (len(si),)).copy()
+    refs = getattr(cfg, "reference_lengths", None)
+    return problem_from_truth(sid, tid, si, ti, sig, h, off, tg, datum=datum, pairs=pairs,
+                              references=refs, instrument=instrument,
+                              source=source or getattr(cfg, "name", ""))
+
+
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _ChunkSpec:
+    network: bt.BatchedNetwork
+    distance_m: np.ndarray
+    heads: tuple
+    pair_index: np.ndarray          # (q, 2) indices into the stacked [stations; targets] points
+    noise: str
+    instrument: object
+    noise_sigma_m: np.ndarray
+
+
+def _draw_errors(spec: _ChunkSpec, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Distance errors of n trials, shape (n, m)."""
+    m = len(spec.distance_m)
+    if spec.noise == "gaussian":
+        return rng.standard_normal((n, m)) * spec.noise_sigma_m
+    from multilat import budget
+
+    e = np.empty((n, m))
+    si = spec.network.station_index
+    for i, hd in enumerate(spec.heads):      # fixed order: reproducible
+        sel = np.nonzero(si == i)[0]
+        if len(sel):
+            e[:, sel] = budget.sample_distance_errors(spec.instrument, spec.distance_m[sel], rng=rng,
+                                                      head=hd, trials=n)
+    return e
+
+
+def _run_chunk(args):
+    """One chunk: draw, solve, summarise. Module-level so process pools and Dask can pickle it."""
+    spec, seed, n = args
+    rng = np.random.default_rng(seed)
+    d = spec.distance_m + _draw_errors(spec, n, rng)
+    net = spec.network
+    sol = net.solve(d)
+    ok = sol.converged
+    x = bt.flatten(sol.station_xyz_m[ok], sol.offset_m[ok], sol.target_xyz_m[ok])
+    x0 = bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m)
+    pts = np.concatenate([sol.station_xyz_m[ok], sol.target_xyz_m[ok]], axis=1)
+    p0 = np.concatenate([net.station_xyz_m, net.target_xyz_m])
+    if len(spec.pair_index):
+        a, b = spec.pair_index[:, 0], spec.pair_index[:, 1]
+        dist = np.linalg.norm(pts[:, a] - pts[:, b], axis=2)
+        dist0 = np.linalg.norm(p0[a] - p0[b], axis=1)
+        ddev = dist - dist0
+    else:
+        ddev = np.zeros((int(ok.sum()), 0))
+    dev = np.concatenate([x - x0, ddev], axis=1)
+    return dict(dev=dev.astype(np.float32) if dev.size else dev, n=n, n_failed=int((~ok).sum()),
+                sigma0=sol.sigma0[ok])
+
+
+# ---------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class PropagationResult:
+    """Result of :func:`propagate`. Deviations are relative to the nominal values; metres.
+
+    Attributes
+    ----------
+    problem : Problem
+    labels : tuple of str
+        Parameter labels in the :func:`batched.flatten` layout (``"A.x"``, ``"A.offset"``, ``"T1.z"``),
+        then the interpoint distances ``"T1-T2"``.
+    nominal : ndarray (k,)
+        Nominal values of those quantities.
+    mc_mean, mc_std : ndarray (k,)
+        Monte Carlo estimate and standard uncertainty.
+    mc_std_se : ndarray (k,)
+        Monte Carlo standard error of ``mc_std``: ``mc_std * sqrt((kurtosis - 1) / (4 n))``
+        (``sqrt(1 / (2(n-1)))`` relative for a gaussian output).
+    lin_std : ndarray (k,)
+        First-order standard uncertainty from the adjustment's covariance (sandwich with the actual
+        standard deviation of the input errors).
+    interval_symmetric, interval_shortest : ndarray (k, 2)
+        95 % (``coverage``) coverage intervals.
+    point_ids : tuple of str
+    point_cov_mc, point_cov_lin : ndarray (P, 3, 3)
+        Monte Carlo and linear covariances of each point (datum-dependent).
+    ellipsoid_coverage_mc : ndarray (P,)
+        Fraction of trials inside the 95 % ellipsoid built from the MC covariance (JCGM 102).
+    ellipsoid_coverage_lin : ndarray (P,)
+        Fraction of trials inside the 95 % ellipsoid of the linear covariance.
+    trials : int
+        Trials kept (converged).
+    n_failed : int
+        Trials dropped because the solver did not converge.
+    sigma0_mean : float
+        Mean a-posteriori sigma0 over the trials.
+    noise : str
+    seed_entropy : int
+    adaptive : dict or None
+        ``{"converged": bool, "tolerance_m": ..., "rounds": int}`` for adaptive runs.
+    elapsed_s : float
+    samples : ndarray (trials, k) float32 or None
+        Deviations from nominal (kept for figures).
+    """
+
+    problem: Problem
+    labels: tuple
+    nominal: np.ndarray
+    mc_mean: np.ndarray
+    mc_std: np.ndarray
+    mc_std_se: np.ndarray
+    lin_std: np.ndarray
+    interval_symmetric: np.ndarray
+    interval_shortest: np.ndarray
+    point_ids: tuple
+    point_cov_mc: np.ndarray
+    point_cov_lin: np.ndarray
+    ellipsoid_coverage_mc: np.ndarray
+    ellipsoid_coverage_lin: np.ndarray
+    trials: int
+    n_failed: int
+    sigma0_mean: float
+    noise: str
+    seed_entropy: int
+    adaptive: dict | None
+    elapsed_s: float
+    samples: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def std_ratio(self) -> np.ndarray:
+        """MC standard deviation over linear standard deviation."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.mc_std / self.lin_std
+
+    @property
+    def agrees(self) -> np.ndarray:
+        """|mc_std - lin_std| within 3 MC standard errors (bool per quantity; True where both ~0)."""
+        tiny = (self.lin_std < 1e-15) & (self.mc_std < 1e-12)
+        return tiny | (np.abs(self.mc_std - self.lin_std) <= 3.0 * self.mc_std_se)
+
+    def rows(self, kind: str | None = None):
+        """Validation rows: dicts with label, nominal, mean/std/intervals (MC), lin std, ratio, agrees."""
+        out = []
+        for k, lab in enumerate(self.labels):
+            if kind == "distance" and "-" not in lab or kind == "parameter" and "-" in lab:
+                continue
+            out.append({
+                "label": lab,
+                "nominal_m": float(self.nominal[k]),
+                "mc_mean_m": float(self.mc_mean[k]),
+                "mc_std_m": float(self.mc_std[k]),
+                "mc_std_se_m": float(self.mc_std_se[k]),
+                "lin_std_m": float(self.lin_std[k]),
+                "ratio": float(self.std_ratio[k]) if self.lin_std[k] > 0 else None,
+                "agrees": bool(self.agrees[k]),
+                "interval_symmetric_m": [float(v) for v in self.interval_symmetric[k]],
+                "interval_shortest_m": [float(v) for v in self.interval_shortest[k]],
+            })
+        return out
+
+    def to_dict(self) -> dict:
+        """Plain-JSON summary (no samples)."""
+        n_par = self.problem.network.n_params
+        dist_rows = []
+        for k, (a, b) in enumerate(self.problem.pairs):
+            r = self.rows()[n_par + k]
+            ref = self.problem.reference_m[k]
+            r.update(a=a, b=b, reference_m=None if np.isnan(ref) else float(ref))
+            dist_rows.append(r)
+        pts = []
+        for q, pid in enumerate(self.point_ids):
+            pts.append({"id": pid, "cov_mc_m2": self.point_cov_mc[q].tolist(),
+                        "cov_lin_m2": self.point_cov_lin[q].tolist(),
+                        "semi_axes_95_m": _semi_axes(self.point_cov_mc[q]).tolist(),
+                        "ellipsoid_coverage_mc": float(self.ellipsoid_coverage_mc[q]),
+                        "ellipsoid_coverage_lin": float(self.ellipsoid_coverage_lin[q])})
+        return {
+            "source": self.problem.source,
+            "trials": self.trials,
+            "n_failed": self.n_failed,
+            "noise": self.noise,
+            "seed_entropy": self.seed_entropy,
+            "coverage": 0.95,
+            "sigma0_mean": self.sigma0_mean,
+            "elapsed_s": self.elapsed_s,
+            "adaptive": self.adaptive,
+            "parameters": self.rows()[:n_par],
+            "distances": dist_rows,
+            "points": pts,
+            "summary": self.summary(),
+        }
+
+    def summary(self) -> dict:
+        """Headline numbers: worst std ratio, how many quantities agree with the linear covariance."""
+        r = self.std_ratio[self.lin_std > 0]
+        return {"n_quantities": len(self.labels), "n_agree": int(self.agrees.sum()),
+                "std_ratio_min": float(r.min()) if r.size else None,
+                "std_ratio_max": float(r.max()) if r.size else None,
+                "ellipsoid_coverage_mc_min": float(self.ellipsoid_coverage_mc.min()),
+                "ellipsoid_coverage_lin_min": float(self.ellipsoid_coverage_lin.min()),
+                "ellipsoid_coverage_lin_max": float(self.ellipsoid_coverage_lin.max())}
+
+
+def _semi_axes(cov):
+    """95 % ellipsoid semi-axes (sqrt(chi2_3 * eigenvalues)), descending, metres."""
+    ev = np.clip(np.linalg.eigvalsh(cov), 0, None)[::-1]
+    return np.sqrt(chi2_3_95 * ev)
+
+
+def _labels(problem: Problem):
+    lab = [f"{s}.{c}" for s in problem.station_ids for c in "xyz"]
+    lab += [f"{s}.offset" for s in problem.station_ids]
+    lab += [f"{t}.{c}" for t in problem.target_ids for c in "xyz"]
+    lab += [f"{a}-{b}" for a, b in problem.pairs]
+    return tuple(lab)
+
+
+def _noise_std(problem: Problem, noise: str, instrument) -> np.ndarray:
+    """Standard deviation of the input errors per distance (for the linear sandwich)."""
+    if noise == "gaussian":
+        return problem.network.sigma_m
+    from multilat import budget
+
+    si = problem.network.station_index
+    out = np.empty(len(si))
+    for i, hd in enumerate(problem.heads):
+        sel = si == i
+        if sel.any():
+            out[sel] = budget.distance_std_m(instrument, problem.distance_m[sel], head=hd)
+    return out
+
+
+def _linear(problem: Problem, noise_std):
+    """Linear std of every reported quantity and the 3x3 covariance of each point."""
+    net = problem.network
+    q = net.linear_covariance(sigma_m=noise_std)
+    std = list(np.sqrt(np.clip(np.diag(q), 0, None)))
+    for a, b in problem.pairs:
+        ra, rb = problem.param_rows(a), problem.param_rows(b)
+        dv = problem.point_xyz(a) - problem.point_xyz(b)
+        g = dv / np.linalg.norm(dv)
+        rows = np.concatenate([ra, rb])
+        c = q[np.ix_(rows, rows)]
+        gg = np.concatenate([g, -g])
+        std.append(math.sqrt(max(gg @ c @ gg, 0.0)))
+    pids = problem.station_ids + problem.target_ids
+    pc = np.array([q[np.ix_(problem.param_rows(p), problem.param_rows(p))] for p in pids])
+    return np.array(std), pc
+
+
+def _ellipsoid_fraction(dev3, center, cov):
+    """Fraction of rows of dev3 (n, 3) inside the chi2_3(0.95) ellipsoid of (center, cov)."""
+    try:
+        ci = np.linalg.inv(cov)
+    except np.linalg.LinAlgError:
+        return float("nan")
+    if not np.all(np.isfinite(ci)) or np.linalg.eigvalsh(cov).min() <= 0:
+        return float("nan")
+    z = dev3 - center
+    d2 = np.einsum("ni,ij,nj->n", z, ci, z)
+    return float(np.mean(d2 <= chi2_3_95))
+
+
+def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str = "model",
+              instrument="seed2020", adaptive: bool = False, ndigits: int = 2,
+              max_trials: int = 2_000_000, chunk_size: int = 10_000, map=None,
+              progress: Callable[[int], None] | None = None, keep_samples: bool = True,
+              max_memory_bytes: int = 1_500_000_000) -> PropagationResult:
+    """Monte Carlo propagation of the distance errors through the adjustment.
+
+    Parameters
+    ----------
+    problem : Problem
+    trials : int
+        Number of trials (fixed-size run); rounded up to whole chunks is *not* done: the last chunk
+        is shorter.
+    rng : int, SeedSequence, Generator or None
+        Root seed; chunk ``c`` uses ``SeedSequence(seed).spawn(...)[c]``.
+    noise : {"model", "gaussian"}
+        Distance errors from the distance model (non-gaussian) or gaussian with ``sigma_m``.
+    instrument : Instrument or preset name
+        For ``noise="model"``.
+    adaptive : bool
+        JCGM 101 §7.9 adaptive procedure: chunks (``chunk_size`` >= 10^4 trials each) are added
+        until twice the standard deviation of the chunk-wise estimates, standard uncertainties and
+        interval ends (divided by sqrt(h)) is below the numerical tolerance of every quantity's
+        standard uncertainty (``ndigits`` significant digits), or ``max_trials`` is reached.
+    chunk_size : int
+        Trials per chunk (the unit of seeding and of parallel work).
+    map : callable or object with ``.map``, optional
+        Ordered map for the chunks (:func:`multilat.parallel.map_from_options`); default in-process.
+    progress : callable(int), optional
+        Called with the number of trials finished after each chunk.
+    keep_samples : bool
+        Keep the float32 deviation samples in the result (for figures).
+
+    Returns
+    -------
+    PropagationResult
+    """
+    from multilat.montecarlo import numerical_tolerance, resolve_seed
+
+    t0 = time.perf_counter()
+    if noise not in ("model", "gaussian"):
+        raise MultilatError(f"noise must be 'model' or 'gaussian', got {noise!r}")
+    for name, v, lo in (("trials", trials, 2), ("chunk_size", chunk_size, 2), ("max_trials", max_trials, 2)):
+        if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
+            raise MultilatError(f"{name} must be an integer >= {lo}, got {v!r}")
+    inst = None
+    if noise == "model":
+        from multilat import instrument as _instrument
+
+        inst = _instrument.load_instrument(instrument) if isinstance(instrument, str) else instrument
+    ss = resolve_seed(rng)
+    net = problem.network
+    s = len(problem.station_ids)
+    pidx = []
+    for a, b in problem.pairs:
+        ka, ia = problem.point_index(a)
+        kb, ib = problem.point_index(b)
+        pidx.append((ia if ka == "station" else s + ia, ib if kb == "station" else s + ib))
+    pidx = np.array(pidx, np.int64).reshape(-1, 2)
+    noise_std = _noise_std(problem, noise, inst)
+    spec = _ChunkSpec(net, problem.distance_m, problem.heads, pidx, noise, inst, net.sigma_m)
+    k = net.n_params + len(problem.pairs)
+    limit = max_trials if adaptive else trials
+    if limit * k * 4 > max_memory_bytes:
+        raise MultilatError(f"{limit} trials x {k} outputs would need {limit * k * 4 / 2**30:.1f} GiB of "
+                            "samples; use fewer trials")
+    mapper = map if map is not None else None
+
+    def run(chunk_ids, sizes):
+        children = [np.random.SeedSequence(ss.entropy, spawn_key=ss.spawn_key + (c,)) for c in chunk_ids]
+        items = [(spec, ch, n) for ch, n in zip(children, sizes)]
+        if mapper is None:
+            it = (_run_chunk(x) for x in items)
+        elif hasattr(mapper, "map"):
+            it = mapper.map(_run_chunk, items)
+        else:
+            it = mapper(_run_chunk, items)
+        for r in it:
+            yield r
+
+    parts = []
+    done = 0
+    adaptive_info = None
+    if not adaptive:
+        n_chunks = -(-trials // chunk_size)
+        sizes = [chunk_size] * (n_chunks - 1) + [trials - chunk_size * (n_chunks - 1)]
+        for r in run(range(n_chunks), sizes):
+            parts.append(r)
+            done += r["n"]
+            if progress:
+                progress(done)
+    else:
+        if chunk_size < 10_000:
+            raise MultilatError("adaptive runs need chunk_size >= 10000 (JCGM 101 7.9.4: M >= 10^4)")
+        next_chunk = 0
+        rounds = 0
+        converged = False
+        batch = 10
+        tol = None
+        while True:
+            ids = list(range(next_chunk, next_chunk + batch))
+            next_chunk += batch
+            for r in run(ids, [chunk_size] * batch):
+                r["stats"] = _chunk_stats(r["dev"])
+                parts.append(r)
+                done += r["n"]
+                if progress:
+                    progress(done)
+            rounds += 1
+            stats = np.array([p["stats"] for p in parts])                     # (h, 4, k)
+            h = len(parts)
+            sd = stats.std(axis=0, ddof=1) / math.sqrt(h)                      # (4, k)
+            u_all = np.sqrt(np.mean(stats[:, 1] ** 2, axis=0))
+            tol = np.array([numerical_tolerance(u, ndigits) if u > 0 else np.inf for u in u_all])
+            if np.all(2 * sd <= tol):
+                converged = True
+                break
+            if done + batch * chunk_size > max_trials:
+                break
+        adaptive_info = {"converged": converged, "rounds": rounds, "chunks": len(parts),
+                         "tolerance_m_min": float(np.min(tol))}
+    dev = np.concatenate([p["dev"] for p in parts]).astype(np.float64) if parts else np.zeros((0, k))
+    n_failed = int(sum(p["n_failed"] for p in parts))
+    n = dev.shape[0]
+    if n < 2:
+        raise MultilatError(f"only {n} of {done} trials converged: the network is too weak for a "
+                            "Monte Carlo from its nominal solution")
+    sig0 = float(np.mean(np.concatenate([p["sigma0"] for p in parts])))
+    from multilat.montecarlo import coverage_interval
+
+    x0 = np.concatenate([bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m),
+                         [np.linalg.norm(problem.point_xyz(a) - problem.point_xyz(b)) for a, b in problem.pairs]])
+    mean_dev = dev.mean(axis=0)
+    std = dev.std(axis=0, ddof=1)
+    c = dev - mean_dev
+    m4 = np.mean(c**4, axis=0)
+    m2 = np.mean(c**2, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        kurt = np.where(m2 > 0, m4 / m2**2, 3.0)
+    se = std * np.sqrt(np.maximum(kurt - 1.0, 0.0) / (4.0 * n))
+    iv_sym = coverage_interval(dev, 0.95, "symmetric") + x0[:, None]
+    iv_short = coverage_interval(dev, 0.95, "shortest") + x0[:, None]
+    lin_std, pc_lin = _linear(problem, noise_std)
+    pids = problem.station_ids + problem.target_ids
+    pc_mc = np.empty((len(pids), 3, 3))
+    cov_mc_frac = np.empty(len(pids))
+    cov_lin_frac = np.empty(len(pids))
+    for q, pid in enumerate(pids):
+        rows = problem.param_rows(pid)
+        d3 = dev[:, rows]
+        mu = mean_dev[rows]
+        cmc = np.cov(d3, rowvar=False)
+        pc_mc[q] = cmc
+        cov_mc_frac[q] = _ellipsoid_fraction(d3, mu, cmc)
+        cov_lin_frac[q] = _ellipsoid_fraction(d3, np.zeros(3), pc_lin[q])
+    return PropagationResult(
+        problem=problem, labels=_labels(problem), nominal=x0, mc_mean=x0 + mean_dev, mc_std=std,
+        mc_std_se=se, lin_std=lin_std, interval_symmetric=iv_sym, interval_shortest=iv_short,
+        point_ids=pids, point_cov_mc=pc_mc, point_cov_lin=pc_lin, ellipsoid_coverage_mc=cov_mc_frac,
+        ellipsoid_coverage_lin=cov_lin_frac, trials=n, n_failed=n_failed, sigma0_mean=sig0, noise=noise,
+        seed_entropy=int(ss.entropy), adaptive=adaptive_info, elapsed_s=time.perf_counter() - t0,
+        samples=dev.astype(np.float32) if keep_samples else None)
+
+
+def _chunk_stats(dev) -> np.ndarray:
+    """Per-chunk mean, std and 2.5 / 97.5 % quantiles of each column, shape (4, k) (JCGM 101 7.9)."""
+    d = np.asarray(dev, float)
+    q = np.quantile(d, [0.025, 0.975], axis=0)
+    return np.stack([d.mean(axis=0), d.std(axis=0, ddof=1), q[0], q[1]])
