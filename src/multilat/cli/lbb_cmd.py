@@ -1,3 +1,145 @@
-"""Commands registered on multilat.cli.app.app (filled in by its owner)."""
+"""``multilat lbb``: laser ball bar trilateration and its Monte Carlo uncertainty (seed 003)."""
 
-from multilat.cli.app import app  # noqa: F401
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from multilat.cli.app import app, console, emit_json, progress
+from multilat.errors import MultilatError
+
+lbb = typer.Typer(help="Laser ball bar: trilateration from six edges, HTM error model, Monte Carlo "
+                       "uncertainty over the work volume (Canning et al. 2007).",
+                  no_args_is_help=True)
+app.add_typer(lbb, name="lbb")
+
+
+@lbb.command()
+def trilaterate(
+    edges: Path = typer.Argument(..., help="CSV: point,l12_m,l13_m,l23_m,l1_m,l2_m,l3_m (metres)."),
+    json_out: bool = typer.Option(False, "--json", help="Print JSON: points [{point, xyz_m}]."),
+) -> None:
+    """Tool-socket coordinates in the base frame (socket 1 origin, 2 on +x, 3 in xy with y > 0, z > 0)."""
+    from multilat.lbb.files import read_edges
+    from multilat.lbb.trilateration import trilaterate as tri
+
+    t = read_edges(edges)
+    res = tri(*t.edges_m.T, on_singular="raise", labels=t.line_labels, validate=False)
+    pts = [{"point": p, "xyz_m": res.xyz_m[i]} for i, p in enumerate(t.points)]
+    if json_out:
+        emit_json({"frame": "base: socket 1 origin, socket 2 on +x, socket 3 in xy (y > 0), z > 0",
+                   "points": pts})
+        return
+    table = Table(title=f"{edges}: tool socket in the base frame")
+    for c in ("point", "x (mm)", "y (mm)", "z (mm)"):
+        table.add_column(c, justify="right")
+    for p in pts:
+        table.add_row(p["point"], *(f"{v * 1e3:.6f}" for v in p["xyz_m"]))
+    console.print(table)
+
+
+def _points(cfg, where: str, grid: int | None):
+    from multilat.lbb.simulate import volume_points
+
+    if where == "volume":
+        if grid is not None and grid < 2:
+            raise MultilatError(f"--grid must be >= 2, got {grid}")
+        return volume_points(cfg, grid)
+    if where == "comparison":
+        return cfg.comparison.points()
+    raise MultilatError(f"--where must be 'volume' or 'comparison', got {where!r}")
+
+
+@lbb.command()
+def simulate(
+    config: Path = typer.Option(None, "--config", help="TOML config (default: the 2007 paper's set-up)."),
+    grid: int = typer.Option(None, "--grid", help="Lattice points per horizontal axis of the work volume "
+                             "(default: the config's nx, ny)."),
+    trials: int = typer.Option(None, "--trials", help="Points per cloud: step-7 draws (procedure) or trials "
+                               "(direct); default from the config."),
+    seed: int = typer.Option(20070101, "--seed", help="Seed of the Monte Carlo."),
+    method: str = typer.Option("procedure", "--method", help="procedure (the paper's steps 1-8) or direct."),
+    where: str = typer.Option("volume", "--where", help="volume (Fig. 8 lattice) or comparison (75 points)."),
+    json_out: bool = typer.Option(False, "--json", help="Print JSON (points, max_std_m, trials, ...)."),
+    out: Path = typer.Option(None, "--out", help="Directory for points.csv, sides.csv, summary.json, "
+                             "fig8_*.png, fig9_cdf.png."),
+) -> None:
+    """Monte Carlo coordinate uncertainty of LBB trilateration over the work volume."""
+    from multilat.lbb.config import load_config
+    from multilat.lbb.outputs import summary, write_simulation
+    from multilat.lbb.simulate import simulate as run
+
+    cfg = load_config(config)
+    if trials is not None and trials < 2:
+        raise MultilatError(f"--trials must be >= 2, got {trials}")
+    pts = _points(cfg, where, grid)
+    with progress() as p:
+        task = p.add_task(f"LBB {method}", total=len(pts))
+        sim = run(cfg, pts, method=method, rng=seed, trials=trials,
+                  progress=lambda done, total: p.update(task, completed=done))
+    if out is not None:
+        marks = cfg.comparison.points() if where == "volume" else None
+        write_simulation(out, sim, cfg, marks_m=marks)
+    if json_out:
+        emit_json(summary(sim))
+        return
+    table = Table(title=f"LBB {method}: {len(pts)} points, {sim.trials} per cloud (µm)")
+    for c in ("x (mm)", "y (mm)", "z (mm)", "mean err x", "mean err y", "mean err z", "std x", "std y", "std z"):
+        table.add_column(c, justify="right")
+    show = np.argsort(-np.max(sim.std_m, axis=1))[:15]
+    for i in show:
+        table.add_row(*(f"{v * 1e3:.1f}" for v in sim.nominal_m[i]),
+                      *(f"{v * 1e6:.3f}" for v in sim.mean_error_m[i]),
+                      *(f"{v * 1e6:.3f}" for v in sim.std_m[i]))
+    console.print(table)
+    console.print(f"largest std {sim.max_std_m * 1e6:.3f} µm; largest |mean error| "
+                  f"{np.max(sim.error_magnitude_m) * 1e6:.3f} µm (15 points with the largest std shown)")
+    if out is not None:
+        console.print(f"wrote {out}/")
+
+
+@lbb.command()
+def compare(
+    edges: Path = typer.Argument(..., help="CSV of measured edges: point,l12_m,...,l3_m."),
+    reference: Path = typer.Argument(..., help="CSV of reference coordinates in the base frame: "
+                                     "point,x_m,y_m,z_m."),
+    config: Path = typer.Option(None, "--config", help="TOML config (default: the 2007 paper's set-up)."),
+    trials: int = typer.Option(None, "--trials", help="Points per simulated cloud."),
+    seed: int = typer.Option(20070101, "--seed", help="Seed of the Monte Carlo."),
+    method: str = typer.Option("procedure", "--method", help="procedure or direct."),
+    json_out: bool = typer.Option(False, "--json", help="Print JSON."),
+    out: Path = typer.Option(None, "--out", help="Directory for comparison.csv and fig7_comparison.png."),
+) -> None:
+    """LBB coordinates vs reference coordinates with simulated 2σ bars (the paper's Fig. 7)."""
+    from multilat.lbb.config import load_config
+    from multilat.lbb.files import read_edges, read_reference
+    from multilat.lbb.outputs import compare_reference, write_comparison
+
+    cfg = load_config(config)
+    e = read_edges(edges)
+    r = read_reference(reference)
+    with progress() as p:
+        task = p.add_task("LBB comparison", total=len(r.points))
+        comp = compare_reference(cfg, e, r, method=method, rng=seed, trials=trials,
+                                 progress=lambda d, t: p.update(task, completed=d))
+    if out is not None:
+        write_comparison(out, comp)
+    frac = float(np.mean(comp.inside_2sigma))
+    if json_out:
+        emit_json({"points": [{"point": pt, "difference_m": comp.difference_m[i],
+                               "sim_mean_error_m": comp.simulation.mean_error_m[i],
+                               "sim_std_m": comp.simulation.std_m[i], "inside_2sigma": comp.inside_2sigma[i]}
+                              for i, pt in enumerate(comp.points)],
+                   "fraction_inside_2sigma": frac, "trials": comp.simulation.trials})
+        return
+    table = Table(title="LBB - reference (µm) and simulated 2σ")
+    for c in ("point", "dx", "dy", "dz", "2σ x", "2σ y", "2σ z"):
+        table.add_column(c, justify="right")
+    for i, pt in enumerate(comp.points):
+        table.add_row(pt, *(f"{v * 1e6:.2f}" for v in comp.difference_m[i]),
+                      *(f"{2 * v * 1e6:.2f}" for v in comp.simulation.std_m[i]))
+    console.print(table)
+    console.print(f"{frac:.0%} of the coordinate differences lie within the simulated mean ± 2σ")

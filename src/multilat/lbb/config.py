@@ -210,6 +210,7 @@ class Volume(_Model):
     nx: int
     ny: int
     z_levels_m: tuple[float, ...]
+    inside_base_only: bool
 
     @field_validator("nx", "ny")
     @classmethod

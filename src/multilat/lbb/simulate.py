@@ -43,7 +43,8 @@ from multilat.lbb.model import (MECH_SOURCES, READ_SOURCES, BarModel, initializa
 from multilat.lbb.trilateration import base_sockets_xyz, edges_from_points, trilaterate
 from multilat.montecarlo import resolve_seed, run_mc, summarize
 
-__all__ = ["LBBSimulation", "PerSide", "base_xyz", "nominal_geometry", "reachable", "direct_inputs",
+__all__ = ["LBBSimulation", "PerSide", "base_xyz", "nominal_geometry", "reachable", "inside_base",
+           "volume_points", "direct_inputs",
            "direct_model", "l0_distribution", "run_procedure", "run_direct", "simulate"]
 
 
@@ -147,6 +148,29 @@ def reachable(cfg: LBBConfig, points_m) -> np.ndarray:
     edges, _ = nominal_geometry(cfg, pts)
     lo, hi = cfg.bar.min_length_m, cfg.bar.max_length_m
     return np.all((edges[:, 3:] >= lo) & (edges[:, 3:] <= hi), axis=1) & (pts[:, 2] > 0)
+
+
+def inside_base(cfg: LBBConfig, points_m) -> np.ndarray:
+    """True where the point's projection on the base plane lies inside the base triangle; (p,)."""
+    pts = np.atleast_2d(np.asarray(points_m, dtype=float))
+    b = base_xyz(cfg)[:, :2]
+    sign = []
+    for i in range(3):
+        a, c = b[i], b[(i + 1) % 3]
+        sign.append((c[0] - a[0]) * (pts[:, 1] - a[1]) - (c[1] - a[1]) * (pts[:, 0] - a[0]))
+    s = np.stack(sign)
+    return np.all(s >= -1e-12, axis=0) | np.all(s <= 1e-12, axis=0)
+
+
+def volume_points(cfg: LBBConfig, n: int | None = None) -> np.ndarray:
+    """The work-volume lattice of the config (``n`` overrides nx, ny), reachable points only, (p, 3)."""
+    pts = cfg.volume.points(n)
+    keep = reachable(cfg, pts)
+    if cfg.volume.inside_base_only:
+        keep &= inside_base(cfg, pts)
+    if not np.any(keep):
+        raise MultilatError("the work volume holds no reachable point; check [volume] and [bar]")
+    return pts[keep]
 
 
 def _check_points(cfg, points_m) -> np.ndarray:

@@ -69,7 +69,8 @@ def check_edges(l12_m, l13_m, l23_m, l1_m, l2_m, l3_m, *, labels=None) -> None:
     ----------
     l12_m, l13_m, l23_m, l1_m, l2_m, l3_m : array_like, broadcastable, metres
     labels : sequence of str, optional
-        One label per point (flattened order) used in the message instead of ``point i``.
+        One label per point (flattened order) used in the message instead of ``point i``
+        (e.g. ``"edges.csv:4: point P3"``).
 
     Raises
     ------
@@ -79,7 +80,7 @@ def check_edges(l12_m, l13_m, l23_m, l1_m, l2_m, l3_m, *, labels=None) -> None:
     arrs = [a.ravel() for a in _arrays(l12_m, l13_m, l23_m, l1_m, l2_m, l3_m)]
 
     def name(i):
-        return f"point {labels[i]!s}" if labels is not None else f"point {i}"
+        return str(labels[i]) if labels is not None else f"point {i}"
 
     for nm, a in zip(EDGE_NAMES, arrs):
         bad = np.flatnonzero(~np.isfinite(a))
@@ -164,7 +165,7 @@ def trilaterate(l12_m, l13_m, l23_m, l1_m, l2_m, l3_m, *, on_singular: str = "ma
     y3sq = l13**2 - x3**2
     if np.any(~(y3sq > 0)):
         i = int(np.flatnonzero(~(y3sq > 0).ravel())[0])
-        name = f"point {labels[i]}" if labels is not None else f"point {i}"
+        name = str(labels[i]) if labels is not None else f"point {i}"
         raise MultilatError(f"{name}: the base sockets are collinear (degenerate base triangle)")
     y3 = np.sqrt(y3sq)
     x = (l12**2 + l1**2 - l2**2) / (2 * l12)
@@ -174,7 +175,7 @@ def trilaterate(l12_m, l13_m, l23_m, l1_m, l2_m, l3_m, *, on_singular: str = "ma
     valid = z2 > (min_height_ratio * scale) ** 2
     if on_singular == "raise" and not np.all(valid):
         i = int(np.flatnonzero(~valid.ravel())[0])
-        name = f"point {labels[i]}" if labels is not None else f"point {i}"
+        name = str(labels[i]) if labels is not None else f"point {i}"
         why = ("the edges do not close a tetrahedron" if z2.ravel()[i] < 0
                else "the tool socket is at the base plane (trilateration singularity)")
         raise MultilatError(f"{name}: {why} (z^2 = {z2.ravel()[i]:.3g} m^2)")
