@@ -225,3 +225,13 @@ def test_cli_bad_files(capsys, tmp_path):
 def test_cli_bad_head_and_trials(capsys):
     _one_line_error(capsys, ["budget", "--head", "Z", "--trials", "10"], "unknown head")
     _one_line_error(capsys, ["budget", "--trials", "1"], "trials")
+
+
+def test_demo_section_quick():
+    from multilat.report.distance_demo import section
+    from multilat.report.html import render
+
+    sec = section(seed=1, quick=True)
+    html = render("t", [sec])
+    assert "Table I" in html and "Table II" in html and "61.24 mm" in html and "<img" in html
+    assert html.count("<table>") == 4
