@@ -362,3 +362,141 @@ def write_heights_csv(path: str | os.PathLike, heights: dict) -> None:
     from multilat.io import write_csv_atomic
 
     write_csv_atomic(path, ["id", "height_m"], [[k, float(v)] for k, v in heights.items()])
+
+
+# ------------------------------------------------------------------------------------------------
+# The gradient study: what ignoring the vertical gradient costs (seed 000 §4.2)
+# ------------------------------------------------------------------------------------------------
+
+#: The corrections compared, in order: name -> how the sensor log is used.
+STUDY_METHODS = ("true air", "fitted gradient (4 sensors)", "lower sensors averaged (paper)",
+                 "all sensors averaged")
+
+
+@dataclass(frozen=True)
+class GradientStudy:
+    """Distances and coordinates of one simulated campaign corrected in several ways.
+
+    Attributes
+    ----------
+    campaign : SimulatedCampaign
+    methods : tuple of str
+        :data:`STUDY_METHODS`.
+    corrected : dict name -> CorrectedObservations
+    distance_error_m : dict name -> ndarray (m,)
+        Corrected minus true distance (offset included).
+    beam_temperature_error_c : dict name -> ndarray (m,)
+        Beam temperature used minus the true beam-averaged temperature.
+    longest : int
+        Index of the longest reading.
+    sensitivity_per_c : float
+        ``(1/n) ∂n/∂T`` at the campaign's mean air (m/m per °C, negative).
+    paper_check_m : float
+        ``|sensitivity| x 0.5 °C x longest distance`` (the paper's 5.4 µm).
+    coordinate_rms_m : dict name -> float
+        RMS 3D error of the adjusted targets after a best-fit rigid motion onto the truth
+        (NaN when the adjustment was not run).
+    interpoint_error_m : dict name -> ndarray (t*(t-1)/2,)
+        Adjusted minus true target-to-target distances (datum-free).
+    offset_error_m : dict name -> ndarray (s,)
+        Adjusted minus true head offsets.
+    """
+
+    campaign: SimulatedCampaign
+    methods: tuple
+    corrected: dict
+    distance_error_m: dict
+    beam_temperature_error_c: dict
+    longest: int
+    sensitivity_per_c: float
+    paper_check_m: float
+    coordinate_rms_m: dict
+    interpoint_error_m: dict
+    offset_error_m: dict
+
+
+def _rigid_rms(est, true):
+    """RMS distance between ``est`` (n, 3) and ``true`` after the best rigid motion (Kabsch)."""
+    ce, ct = est.mean(0), true.mean(0)
+    h = (est - ce).T @ (true - ct)
+    u, _, vt = np.linalg.svd(h)
+    dmat = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])
+    rot = vt.T @ dmat @ u.T
+    moved = (est - ce) @ rot.T + ct
+    return float(np.sqrt(np.mean(np.sum((moved - true) ** 2, axis=1))))
+
+
+def gradient_study(station_ids, station_xyz_m, target_ids, target_xyz_m, *, offset_m=None,
+                   conditions: CampaignConditions = PAPER_CONDITIONS, instrument="seed2020",
+                   formula: str = "ciddor", adjust: bool = True, rng=None, sensor_errors: bool = False,
+                   model_errors: bool = False, floor_offset_m: float = 1.0) -> GradientStudy:
+    """Simulate a campaign (path-integrated truth) and correct it with each of :data:`STUDY_METHODS`.
+
+    With ``adjust=True`` each set of corrected distances goes through the self-calibrating network
+    adjustment (:func:`multilat.network.adjust.adjust`, free datum, truth as initial values, no data
+    snooping) and the coordinates are compared with the truth.
+    """
+    from multilat import air
+    from multilat.campaign.correct import _load_instrument, correct_raw
+
+    inst = _load_instrument(instrument)
+    camp = simulate_campaign(station_ids, station_xyz_m, target_ids, target_xyz_m, offset_m=offset_m,
+                             conditions=conditions, instrument=inst, formula=formula, rng=rng,
+                             sensor_errors=sensor_errors, model_errors=model_errors, exact_path=False,
+                             floor_offset_m=floor_offset_m)
+    logs = {STUDY_METHODS[0]: None, STUDY_METHODS[1]: camp.log,
+            STUDY_METHODS[2]: ignore_gradient(camp.log, below_m=2.0), STUDY_METHODS[3]: ignore_gradient(camp.log)}
+    corrected, derr, terr = {}, {}, {}
+    for name, log in logs.items():
+        if name == STUDY_METHODS[0]:
+            res = _correct_with_true_air(camp, inst, formula)
+        else:
+            res = correct_raw(camp.raw, environment=log, instrument=inst, formula=formula)
+        corrected[name] = res
+        derr[name] = res.distance_m - camp.observed_true_m
+        terr[name] = res.environment["temperature_c"] - camp.true_environment["temperature_c"]
+    longest = int(np.argmax(camp.true_distance_m))
+    env = camp.true_environment
+    s_t = float(np.mean(air.sensitivities(np.mean(env["temperature_c"]), np.mean(env["pressure_hpa"]) * 100,
+                                          humidity_pct=conditions.humidity_pct, co2_ppm=conditions.co2_ppm,
+                                          formula=formula)["temperature_c"]))
+    rms, ipe, offe = {}, {}, {}
+    iu = np.triu_indices(len(camp.target_ids), 1)
+    true_ip = np.linalg.norm(camp.target_xyz_m[:, None] - camp.target_xyz_m[None], axis=-1)[iu]
+    true_off = np.zeros(len(camp.station_ids)) if offset_m is None else np.asarray(offset_m, float)
+    for name, res in corrected.items():
+        if not adjust:
+            rms[name], ipe[name], offe[name] = float("nan"), np.full(true_ip.shape, np.nan), \
+                np.full(true_off.shape, np.nan)
+            continue
+        from multilat.network.adjust import adjust as _adjust
+
+        obs = res.to_observations()
+        init = _Initial(camp.station_xyz_m, camp.target_xyz_m, true_off)
+        out = _adjust(obs, datum="free", initial=init, snooping=False)
+        sidx = [obs.station_ids.index(s) for s in camp.station_ids]
+        tidx = [obs.target_ids.index(t) for t in camp.target_ids]
+        txyz = out.target_xyz_m[tidx]
+        rms[name] = _rigid_rms(np.vstack([out.station_xyz_m[sidx], txyz]),
+                               np.vstack([camp.station_xyz_m, camp.target_xyz_m]))
+        ipe[name] = np.linalg.norm(txyz[:, None] - txyz[None], axis=-1)[iu] - true_ip
+        offe[name] = out.offset_m[sidx] - true_off
+    return GradientStudy(campaign=camp, methods=STUDY_METHODS, corrected=corrected, distance_error_m=derr,
+                         beam_temperature_error_c=terr, longest=longest, sensitivity_per_c=s_t,
+                         paper_check_m=abs(s_t) * 0.5 * float(camp.true_distance_m[longest]),
+                         coordinate_rms_m=rms, interpoint_error_m=ipe, offset_error_m=offe)
+
+
+@dataclass(frozen=True)
+class _Initial:
+    station_xyz_m: np.ndarray
+    target_xyz_m: np.ndarray
+    offset_m: np.ndarray
+
+
+def _correct_with_true_air(camp: SimulatedCampaign, inst, formula):
+    """The oracle: the raw file corrected with the true beam-averaged air (per-row environment)."""
+    from multilat.campaign.correct import correct_raw
+
+    env = {q: np.asarray(camp.true_environment[q], float) for q in QUANTITIES}
+    return correct_raw(replace(camp.raw, environment=env), instrument=inst, formula=formula)
