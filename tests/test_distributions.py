@@ -18,6 +18,7 @@ from multilat.distributions import (
     Cauchy,
     Constant,
     CurvilinearTrapezoidal,
+    MultivariateNormal,
     Normal,
     StudentT,
     Trapezoidal,
@@ -163,3 +164,24 @@ def test_frozen():
     d = Normal(0.0, 1.0)
     with pytest.raises(Exception):
         d.std = 2.0  # type: ignore[misc]
+
+
+def test_multivariate_normal_covariance_and_errors():
+    cov = np.array([[4.0, 1.2, 0.0], [1.2, 1.0, -0.3], [0.0, -0.3, 0.25]])
+    d = MultivariateNormal(mean=[1.0, 2.0, 3.0], cov=cov)
+    assert np.allclose(d.std, [2.0, 1.0, 0.5])
+    x = d.sample(np.random.default_rng(3), 100_000)
+    assert x.shape == (100_000, 3)
+    # SE of a sample covariance element: sqrt((s_ii s_jj + s_ij^2) / n)
+    se = np.sqrt((np.outer(np.diag(cov), np.diag(cov)) + cov**2) / x.shape[0])
+    assert np.all(np.abs(np.cov(x.T) - cov) <= 5 * se)
+    assert np.all(np.abs(x.mean(axis=0) - d.mean) <= 5 * d.std / math.sqrt(x.shape[0]))
+    singular = MultivariateNormal(mean=[0.0, 0.0], cov=[[1.0, 1.0], [1.0, 1.0]])
+    y = singular.sample(np.random.default_rng(1), 1000)
+    assert np.allclose(y[:, 0], y[:, 1])
+    with pytest.raises(MultilatError, match="shape"):
+        MultivariateNormal(mean=[0.0, 0.0], cov=np.eye(3))
+    with pytest.raises(MultilatError, match="semi-definite"):
+        MultivariateNormal(mean=[0.0, 0.0], cov=[[1.0, 2.0], [2.0, 1.0]])
+    with pytest.raises(MultilatError, match="symmetric"):
+        MultivariateNormal(mean=[0.0, 0.0], cov=[[1.0, 0.5], [0.0, 1.0]])

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from scipy import optimize, stats
 
-from multilat.distributions import Arcsine, Cauchy, Constant, Normal, Uniform
+from multilat.distributions import Arcsine, Cauchy, Constant, MultivariateNormal, Normal, Uniform
 from multilat.errors import MultilatError
 from multilat.montecarlo import (
     BLOCK,
@@ -392,6 +392,25 @@ def test_as_dict_is_plain_json():
     d = json.loads(json.dumps(r.as_dict()))
     assert d["trials"] == 2000 and len(d["interval_symmetric"]) == 2 and "samples" not in d
     assert d["std"] == r.std
+
+
+def test_correlated_vector_input():
+    cov = [[4.0, 1.2], [1.2, 1.0]]
+    inputs = {"p": MultivariateNormal([1.0, 2.0], cov), "e": Normal(0.0, 0.5)}
+
+    def model(p, e):
+        return p[:, 0] + p[:, 1] + e
+
+    r = run_mc(model, inputs, trials=200_000, rng=12)
+    var = 4.0 + 1.0 + 2 * 1.2 + 0.25
+    assert abs(r.estimate - 3.0) <= 5 * math.sqrt(var / 200_000)
+    assert abs(r.std - math.sqrt(var)) <= 5 * math.sqrt(var) * math.sqrt(2 / (4 * 200_000))
+    bud = budget(model, inputs, trials=50_000, rng=1)
+    by = {c.name: c for c in bud.components}
+    assert by["p"].u_linear is None and abs(by["p"].std - math.sqrt(7.4)) <= 5 * math.sqrt(7.4 / (2 * 50_000))
+    assert by["e"].u_linear == pytest.approx(0.5)
+    with pytest.raises(MultilatError, match="scalar inputs"):
+        gum_linear(model, inputs)
 
 
 def test_partial_model_is_accepted():

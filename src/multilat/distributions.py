@@ -52,6 +52,7 @@ __all__ = [
     "StudentT",
     "Cauchy",
     "Constant",
+    "MultivariateNormal",
 ]
 
 
@@ -501,3 +502,67 @@ class Constant(Distribution):
 
     def sample(self, rng, size) -> np.ndarray:
         return np.full(size, self.value, dtype=float)
+
+
+@dataclass(frozen=True, eq=False)
+class MultivariateNormal(Distribution):
+    """Correlated Gaussian vector N(mean, cov) (JCGM 101 §6.4.8); ``sample`` returns ``(n, d)``.
+
+    Parameters
+    ----------
+    mean : array_like, shape (d,)
+    cov : array_like, shape (d, d)
+        Symmetric positive semi-definite covariance matrix (checked; a tiny negative eigenvalue
+        from rounding, above ``-1e-12 * max eigenvalue``, is accepted).
+
+    ``mean`` and ``std`` are arrays of shape (d,). In :func:`multilat.montecarlo.run_mc` the model
+    receives the ``(n, d)`` draws under this input's name.
+    """
+
+    mean: np.ndarray = None  # type: ignore[assignment]
+    cov: np.ndarray = None  # type: ignore[assignment]
+
+    def __post_init__(self):
+        try:
+            m = np.array(self.mean, dtype=float).reshape(-1)
+            c = np.array(self.cov, dtype=float)
+        except (TypeError, ValueError):
+            raise MultilatError("mean and cov must be numeric arrays") from None
+        d = m.size
+        if d == 0 or c.shape != (d, d):
+            raise MultilatError(f"cov must have shape ({d}, {d}) for a mean of length {d}, got {c.shape}")
+        if not (np.all(np.isfinite(m)) and np.all(np.isfinite(c))):
+            raise MultilatError("mean and cov must be finite")
+        if not np.allclose(c, c.T, rtol=1e-12, atol=0.0):
+            raise MultilatError("cov must be symmetric")
+        w, v = np.linalg.eigh(c)
+        if w.min() < -1e-12 * max(w.max(), 0.0):
+            raise MultilatError(f"cov must be positive semi-definite (smallest eigenvalue {w.min():.3g})")
+        # factor L with L L^T = cov that also works for singular covariances
+        factor = v * np.sqrt(np.clip(w, 0.0, None))
+        m.setflags(write=False)
+        c.setflags(write=False)
+        factor.setflags(write=False)
+        object.__setattr__(self, "mean", m)
+        object.__setattr__(self, "cov", c)
+        object.__setattr__(self, "_factor", factor)
+
+    @property
+    def std(self) -> np.ndarray:
+        return np.sqrt(np.diag(self.cov))
+
+    @property
+    def centre(self) -> np.ndarray:
+        return self.mean
+
+    def sample(self, rng, size) -> np.ndarray:
+        n = int(size) if np.ndim(size) == 0 else int(np.prod(size))
+        z = _rng(rng).standard_normal((n, self.mean.size))
+        x = z @ self._factor.T
+        x += self.mean
+        return x if np.ndim(size) == 0 else x.reshape(tuple(size) + (self.mean.size,))
+
+    def to_scipy(self):
+        from scipy import stats
+
+        return stats.multivariate_normal(mean=self.mean, cov=self.cov, allow_singular=True)

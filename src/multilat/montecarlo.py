@@ -62,7 +62,6 @@ from typing import Any
 
 import numpy as np
 
-from multilat.distributions import Constant
 from multilat.errors import MultilatError
 
 __all__ = [
@@ -905,6 +904,8 @@ def gum_linear(model, inputs: Mapping[str, Any], *, coverage: float = 0.95, rel_
     u = np.empty(len(inp))
     for i, (nm, d) in enumerate(inp):
         m, s = getattr(d, "mean", None), getattr(d, "std", None)
+        if m is not None and np.ndim(m) != 0:
+            raise MultilatError(f"input {nm!r} is a vector: gum_linear supports scalar inputs only")
         if m is None or s is None or not (math.isfinite(m) and math.isfinite(s)):
             raise MultilatError(f"input {nm!r} has no finite mean and std: the GUM framework does not apply")
         mu[i], u[i] = m, s
@@ -974,6 +975,38 @@ def validate_gum(mc: MCResult, gum: GUMResult, ndigits: int = 2, *, interval: st
 
 
 # ============================================================================ budget
+@dataclass(frozen=True, eq=False)
+class _Held:
+    """An input held at a fixed (scalar or vector) value: ``sample`` broadcasts it to ``(n, ...)``."""
+
+    value: Any
+
+    @property
+    def mean(self):
+        return self.value
+
+    @property
+    def std(self):
+        return 0.0 * np.asarray(self.value, dtype=float) if np.ndim(self.value) else 0.0
+
+    def sample(self, rng, size):
+        v = np.asarray(self.value, dtype=float)
+        return np.array(np.broadcast_to(v, (int(size),) + v.shape))
+
+
+def _centre_of(name, d):
+    c = getattr(d, "centre", getattr(d, "mean", None))
+    if c is None or not np.all(np.isfinite(np.asarray(c, dtype=float))):
+        raise MultilatError(f"input {name!r} has no finite centre to hold it at")
+    return float(c) if np.ndim(c) == 0 else np.asarray(c, dtype=float)
+
+
+def _gum_ok(d) -> bool:
+    m, s = getattr(d, "mean", None), getattr(d, "std", None)
+    return (m is not None and s is not None and np.ndim(m) == 0 and np.ndim(s) == 0
+            and math.isfinite(m) and math.isfinite(s))
+
+
 @dataclass(frozen=True)
 class BudgetComponent:
     """One source's contribution.
@@ -1039,31 +1072,27 @@ def budget(
     combined = run_mc(model, dict(inp), trials=trials, rng=child(0), coverage=coverage, chunk_size=chunk_size, map=map)
     if np.ndim(combined.estimate) != 0:
         raise MultilatError("budget needs a scalar model output (shape (n,))")
-    lin = {}
+    centres = {nm: _centre_of(nm, d) for nm, d in inp}
+    # first-order sensitivities where the GUM applies (scalar inputs with finite mean and std);
+    # the others are held at their centre for the derivative
+    lin_inputs = {nm: d for nm, d in inp if _gum_ok(d)}
+    fixed = {nm: centres[nm] for nm, d in inp if not _gum_ok(d)}
+
+    def model_lin(**kw):
+        n = next(iter(kw.values())).shape[0]
+        extra = {nm: _Held(v).sample(None, n) for nm, v in fixed.items()}
+        return model(**kw, **extra)
+
     try:
-        g = gum_linear(model, {nm: d for nm, d in inp if math.isfinite(getattr(d, "std", math.nan))
-                               and math.isfinite(getattr(d, "mean", math.nan))}
-                       | {nm: Constant(float(getattr(d, "centre", d.mean))) for nm, d in inp
-                          if not (math.isfinite(getattr(d, "std", math.nan))
-                                  and math.isfinite(getattr(d, "mean", math.nan)))})
-        lin = g.sensitivities
-    except (MultilatError, AttributeError):
+        lin = gum_linear(model_lin, lin_inputs).sensitivities if lin_inputs else {}
+    except MultilatError:
         lin = {}
     comps = []
     for i, (nm, d) in enumerate(inp, start=1):
-        held = {}
-        for other, od in inp:
-            if other == nm:
-                held[other] = od
-            else:
-                c = getattr(od, "centre", getattr(od, "mean", None))
-                if c is None or not math.isfinite(c):
-                    raise MultilatError(f"input {other!r} has no finite centre to hold it at")
-                held[other] = Constant(float(c))
+        held = {other: (od if other == nm else _Held(centres[other])) for other, od in inp}
         r = run_mc(model, held, trials=trials, rng=child(i), coverage=coverage, chunk_size=chunk_size, map=map)
-        s = lin.get(nm)
-        ud = getattr(d, "std", math.nan)
-        ul = abs(s) * ud if (s is not None and math.isfinite(ud)) else None
+        s = lin.get(nm) if _gum_ok(d) else None
+        ul = abs(s) * float(d.std) if s is not None else None
         comps.append(BudgetComponent(nm, float(r.std), r.interval_symmetric, s, ul,
                                      float(r.std**2 / combined.std**2) if combined.std > 0 else 0.0))
     comps.sort(key=lambda c: -c.std)
