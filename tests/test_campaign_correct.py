@@ -166,6 +166,9 @@ def test_cli_correct_writes_observation_file(tmp_path, capsys):
     np.testing.assert_allclose(t.floats("distance_m"), camp.observed_true_m, atol=1e-9)
     np.testing.assert_allclose(t.floats("sigma_m"), js["sigma_m"], rtol=1e-12)
     assert not is_raw_file(out)
+    from multilat.network.files import read_observations   # the file `multilat adjust` reads
+    obs = read_observations(out)
+    np.testing.assert_allclose(obs.sigma_m, js["sigma_m"], rtol=1e-12)
     assert main(["correct", str(raw), "-e", str(env), "--formula", "edlen"]) == 0
     assert "corrected distances" in capsys.readouterr().out
 
