@@ -257,6 +257,7 @@ def test_numerical_tolerance_examples():
     assert numerical_tolerance(0.028, 2) == pytest.approx(0.0005)
     assert numerical_tolerance(2.0, 2) == pytest.approx(0.05)
     assert numerical_tolerance(1.5e-6, 1) == pytest.approx(0.5e-6)
+    assert numerical_tolerance(0.0996, 2) == pytest.approx(0.005)  # u = 0.10 to 2 digits
 
 
 # ------------------------------------------------------------------ intervals and summaries

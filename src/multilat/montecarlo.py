@@ -96,13 +96,14 @@ _PROBE_KEY = 0xFFFFFFFF
 def resolve_seed(rng) -> np.random.SeedSequence:
     """The root :class:`numpy.random.SeedSequence` for ``rng`` (int, None, SeedSequence or Generator).
 
-    A Generator is consumed (four 63-bit words are drawn from it), so successive calls with the same
-    generator give independent runs, as with any other use of a generator.
+    A Generator is consumed (a 128-bit root entropy is drawn from it), so successive calls with the
+    same generator give independent runs, as with any other use of a generator; the drawn entropy is
+    reported in ``MCResult.seed_entropy`` and reproduces the run when passed back as ``rng``.
     """
     if isinstance(rng, np.random.SeedSequence):
         return rng
     if isinstance(rng, np.random.Generator):
-        return np.random.SeedSequence([int(v) for v in rng.integers(0, 2**63, size=4)])
+        return np.random.SeedSequence(int.from_bytes(rng.bytes(16), "little"))
     if rng is None:
         return np.random.SeedSequence()
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
@@ -644,6 +645,8 @@ def numerical_tolerance(u: float, ndigits: int = 2) -> float:
     if not (math.isfinite(u) and u > 0):
         raise MultilatError(f"u must be finite and > 0 for a numerical tolerance, got {u!r}")
     l_exp = math.floor(math.log10(u)) - ndigits + 1
+    if round(u / 10.0**l_exp) >= 10**ndigits:  # rounding to ndigits carried into a new decade (0.0996 -> 0.10)
+        l_exp += 1
     return 0.5 * 10.0**l_exp
 
 
