@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat.network.model import Q, target_slots
+from multilat.network.model import Q, segment_sum, target_slots
 
 __all__ = ["NetworkCovariance"]
 
@@ -68,13 +68,12 @@ class NetworkCovariance:
         VT = V[Qn * s:].reshape(self.t, 3, -1)
         # Vg - K^T VT : per obs a_k (p_k . VT_j)
         pv = np.einsum("mi,mic->mc", self.P, VT[self.ti])
-        acc = Vg.copy()
-        np.add.at(acc, self.si, -self.Js_w[:, :, None] * pv[:, None, :])
+        acc = Vg - segment_sum(self.si, self.Js_w[:, :, None] * pv[:, None, :], s)
         u = (self.Qgg @ acc.reshape(Qn * s, -1))          # (5s, c)
         # M VT - K u : per obs p_k (a_k . u_station)
         au = np.einsum("mq,mqc->mc", self.Js_w, u.reshape(s, Qn, -1)[self.si])
-        outT = np.einsum("tij,tjc->tic", self.Minv, VT)
-        np.add.at(outT, self.ti, -self.P[:, :, None] * au[:, None, :])
+        outT = (np.einsum("tij,tjc->tic", self.Minv, VT)
+                - segment_sum(self.ti, self.P[:, :, None] * au[:, None, :], self.t))
         return np.concatenate([u, outT.reshape(3 * self.t, -1)], axis=0) * self.factor
 
     def _rotate_rows(self, V, R):

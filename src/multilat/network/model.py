@@ -35,9 +35,28 @@ import numpy as np
 Q = 5  # global parameters per station: x, y, z, offset, scale
 COSTS = ("distance", "squared")
 
-__all__ = ["Q", "COSTS", "geometric_distance_m", "predicted_distance_m", "residuals_and_jacobian",
+__all__ = ["Q", "COSTS", "segment_sum", "geometric_distance_m", "predicted_distance_m", "residuals_and_jacobian",
            "dense_jacobian", "target_slots", "ReducedSystem", "reduced_normal_equations",
            "back_substitute", "inv3"]
+
+
+def segment_sum(index, values, n):
+    """``out[i] = sum of values[k] over k with index[k] == i``; values (m, ...) -> (n, ...).
+
+    (A fast ``np.add.at``: bincount per column for few columns, a sparse product otherwise.)
+    """
+    values = np.asarray(values, dtype=float)
+    m = values.shape[0]
+    flat = values.reshape(m, -1)
+    if flat.shape[1] <= 8:
+        out = np.stack([np.bincount(index, weights=flat[:, c], minlength=n) for c in range(flat.shape[1])],
+                       axis=1)
+    else:
+        from scipy.sparse import csr_matrix
+
+        S = csr_matrix((np.ones(m), (index, np.arange(m))), shape=(n, m))
+        out = np.asarray(S @ flat)
+    return out.reshape((n,) + values.shape[1:])
 
 
 def geometric_distance_m(station_xyz_m, target_xyz_m, station_index, target_index):
@@ -203,27 +222,23 @@ def reduced_normal_equations(r_w, Js_w, Jt_w, station_index, target_index, n_sta
         target_free = np.ones(t, dtype=bool)
     Jt_w = Jt_w * target_free[target_index][:, None]
     # target blocks and rhs
-    Ntt = np.zeros((t, 3, 3))
-    np.add.at(Ntt, target_index, Jt_w[:, :, None] * Jt_w[:, None, :])
-    bt = np.zeros((t, 3))
-    np.add.at(bt, target_index, Jt_w * r_w[:, None])
+    Ntt = segment_sum(target_index, Jt_w[:, :, None] * Jt_w[:, None, :], t)
+    bt = segment_sum(target_index, Jt_w * r_w[:, None], t)
     if damping:
         idx = np.arange(3)
         Ntt[:, idx, idx] *= 1.0 + damping
     Minv = np.zeros_like(Ntt)
     Minv[target_free] = inv3(Ntt[target_free])
     # station blocks (block diagonal in stations) and rhs
-    Ngg = np.zeros((s, Q, Q))
-    np.add.at(Ngg, station_index, Js_w[:, :, None] * Js_w[:, None, :])
+    Ngg = segment_sum(station_index, Js_w[:, :, None] * Js_w[:, None, :], s)
     if damping:
         idx = np.arange(Q)
         Ngg[:, idx, idx] *= 1.0 + damping
-    bg = np.zeros((s, Q))
-    np.add.at(bg, station_index, Js_w * r_w[:, None])
+    bg = segment_sum(station_index, Js_w * r_w[:, None], s)
     # rhs reduction: b_g - sum_j N_gj M_j b_j
     y = np.einsum("tij,tj->ti", Minv, bt)                      # (t, 3)
     e = np.einsum("mi,mi->m", Jt_w, y[target_index])           # (m,)
-    np.add.at(bg, station_index, -Js_w * e[:, None])
+    bg -= segment_sum(station_index, Js_w * e[:, None], s)
     # coupling: sum_j N_gj M_j N_jg in station-slot form
     slots = target_slots(station_index, target_index, s, t)
     R = np.zeros((s, Q, s, Q))
@@ -246,6 +261,5 @@ def back_substitute(system: ReducedSystem, dg, Js_w, Jt_w, station_index, target
     """Target steps ``dt_j = M_j (b_j - N_jg dg)`` from the global step ``dg`` (5s,) -> (t, 3)."""
     n_t = system.bt.shape[0]
     s_k = np.einsum("mq,mq->m", Js_w, dg.reshape(-1, Q)[station_index])
-    ng = np.zeros((n_t, 3))
-    np.add.at(ng, target_index, Jt_w * s_k[:, None])
+    ng = segment_sum(target_index, Jt_w * s_k[:, None], n_t)
     return np.einsum("tij,tj->ti", system.Ntt_inv, system.bt - ng)

@@ -133,8 +133,10 @@ def diagnose_degeneracy(station_xyz_m, target_xyz_m, station_ids, target_ids, nu
                         param_names=None, *, condition: float) -> str:
     """A one-line explanation of a near-singular reduced normal matrix.
 
-    Checks, in order: all stations (nearly) in one plane; all targets on a line; all targets in one
-    plane; otherwise names the parameters dominating the weakest direction ``null_vector``.
+    Checks: all stations (nearly) in one plane (2 extra defects); all targets on a line (3 extra
+    defects: each station may turn about the line). Coplanar targets are *not* a defect with
+    distances and offsets (checked by the rank of the Jacobian in the tests). Otherwise names the
+    parameters dominating the weakest direction ``null_vector``.
     """
     sv_s = _flatness(station_xyz_m)
     sv_t = _flatness(target_xyz_m)
@@ -146,8 +148,6 @@ def diagnose_degeneracy(station_xyz_m, target_xyz_m, station_ids, target_ids, nu
                       "self-calibration needs them off one plane")
     if sv_t[1] <= rel * sv_t[0]:
         causes.append("the targets are (nearly) collinear")
-    elif sv_t[2] <= rel * sv_t[0]:
-        causes.append("the targets are (nearly) coplanar")
     if not causes and null_vector is not None and param_names is not None:
         v = np.abs(np.asarray(null_vector))
         top = np.argsort(v)[::-1][:3]
