@@ -1,0 +1,654 @@
+"""Initial values for self-calibrating multilateration: from the heads' angles, or from distances alone.
+
+The adjustment (:func:`multilat.network.adjust.adjust`) is a local method: it converges from
+approximate coordinates good to about 10 mm (seed 000 §4.3). This module finds them.
+
+Two routes
+----------
+**Angles** (seed 000 eq. 7). When one head reports its pointing angles for the targets it sees, the
+targets follow in that head's frame (origin at the head, azimuth from +x towards +y, elevation above
+the xy-plane)::
+
+    T_j = H_h + (d_hj - o_h) [cos(el) cos(az), cos(el) sin(az), sin(el)]
+
+with ``o_h = 0`` at first. (The paper writes ``sin(phi) cos(theta)``, ..., ``cos(phi)``: its
+``phi`` is a *zenith* angle, ``phi = pi/2 - el``.) The other heads follow by classical
+multilateration (linearised least squares in the algebraic form of Norrdine, ref. [27], extended
+by the offset), then the remaining targets likewise, then a least-squares refinement.
+
+**Distances alone** (no angles, no approximate coordinates). With ``o_i = 0`` the squared
+distances of a complete block of ``p >= 4`` stations and ``q >= 10`` targets obey
+``D2_ij = |H_i|^2 - 2 H_i.T_j + |T_j|^2``; double centring gives the rank-3 matrix
+``M = -2 (H_i - H_mean).(T_j - T_mean)``. Its SVD yields both point sets up to an unknown
+affine map ``A``; the column means ``mean_i D2_ij = c + 2 b.v_j + v_j^T G v_j`` are *linear* in the
+symmetric ``G = A^-T A^-1``, ``b`` and ``c`` (10 unknowns, hence ``q >= 10``), which fixes ``A``
+up to a rotation and a reflection (the TOA self-calibration idea of Kuang, Burgess, Torstensson
+and Åström, ICASSP 2013). Stations and targets outside the block are added by multilateration;
+then a least-squares refinement over every coordinate and offset. When no such block exists, or
+the algebra fails (``G`` not positive definite), random restarts of the refinement are used and
+the lowest cost is kept.
+
+Frame and mirror
+----------------
+Distances cannot tell a network from its mirror image: both are exact solutions. From distances
+alone the result is given in a 3-2-1 frame on three *frame stations* (the first three stations in
+id order whose triangle is well shaped): the first at the origin, the second on +x, the third in the
+xy-plane with y > 0, and the mirror chosen so that the first other station (in id order) off that
+plane has z > 0 (if all stations are coplanar: the target farthest from the plane has z > 0). From
+angles, the result is in the angle-giving head's frame (the angles fix the mirror).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from multilat.errors import MultilatError
+
+__all__ = ["InitialValues", "initial_values", "rigid_fit", "multilaterate"]
+
+
+@dataclass(frozen=True, eq=False)
+class InitialValues:
+    """Approximate coordinates and offsets of a network.
+
+    Attributes
+    ----------
+    station_xyz_m : ndarray, shape (s, 3), metres, in ``obs.station_ids`` order
+    target_xyz_m : ndarray, shape (t, 3), metres, in ``obs.target_ids`` order
+    offset_m : ndarray, shape (s,), metres (``distance = |H - T| + offset``)
+    method : str
+        ``"angles"``, ``"algebraic"`` (closed form from distances) or ``"restarts"``.
+    rms_residual_m : float
+        RMS of the distance residuals after the refinement (a converged network shows the noise level).
+    """
+
+    station_xyz_m: np.ndarray
+    target_xyz_m: np.ndarray
+    offset_m: np.ndarray
+    method: str
+    rms_residual_m: float
+
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def rigid_fit(src, dst, *, allow_reflection: bool = False):
+    """Least-squares rigid map ``dst ~ src @ R.T + t`` (Kabsch).
+
+    Parameters
+    ----------
+    src, dst : ndarray, shape (n, 3)
+    allow_reflection : bool
+        Allow ``det R = -1`` (a mirror), for comparing networks known only from distances.
+
+    Returns
+    -------
+    R : ndarray (3, 3), t : ndarray (3,)
+    """
+    src = np.asarray(src, float)
+    dst = np.asarray(dst, float)
+    cs, cd = src.mean(0), dst.mean(0)
+    u, _, vt = np.linalg.svd((src - cs).T @ (dst - cd))
+    d = np.ones(3)
+    if not allow_reflection and np.linalg.det(u @ vt) < 0:
+        d[2] = -1.0
+    R = (u * d) @ vt
+    R = R.T
+    return R, cd - cs @ R.T
+
+
+def multilaterate(anchor_xyz_m, distance_m, *, with_offset: bool = False):
+    """Position of one point from distances to known anchors, linearised (Norrdine's algebraic form).
+
+    Solves ``d_k = |p - a_k| + o`` from ``d_k^2 - |a_k|^2 = (|p|^2 - o^2) - 2 a_k.p + 2 d_k o``,
+    linear in ``(|p|^2 - o^2, p, o)`` (``o = 0`` and dropped unless ``with_offset``), by least
+    squares in coordinates centred on the anchors, followed by three Gauss-Newton steps.
+
+    Parameters
+    ----------
+    anchor_xyz_m : ndarray, shape (n, 3); n >= 4 (>= 5 with the offset)
+    distance_m : ndarray, shape (n,)
+
+    Returns
+    -------
+    xyz_m : ndarray (3,), offset_m : float
+    """
+    a = np.asarray(anchor_xyz_m, float)
+    d = np.asarray(distance_m, float)
+    c = a.mean(0)
+    a0 = a - c
+    cols = [np.ones(len(d)), -2 * a0[:, 0], -2 * a0[:, 1], -2 * a0[:, 2]]
+    if with_offset:
+        cols.append(2 * d)
+    A = np.column_stack(cols)
+    y = d ** 2 - np.einsum("ij,ij->i", a0, a0)
+    sol, *_ = np.linalg.lstsq(A, y, rcond=None)
+    p = sol[1:4]
+    o = float(sol[4]) if with_offset else 0.0
+    for _ in range(3):  # Gauss-Newton on the distances themselves
+        diff = p - a0
+        rho = np.linalg.norm(diff, axis=1)
+        rho = np.where(rho > 0, rho, 1e-12)
+        J = diff / rho[:, None]
+        if with_offset:
+            J = np.column_stack([J, np.ones(len(d))])
+        r = d - rho - o
+        step, *_ = np.linalg.lstsq(J, r, rcond=None)
+        p = p + step[:3]
+        if with_offset:
+            o += float(step[3])
+    return p + c, o
+
+
+def _distance_matrix(obs):
+    s, t = len(obs.station_ids), len(obs.target_ids)
+    D = np.full((s, t), np.nan)
+    W = np.zeros((s, t))
+    D[obs.station_index, obs.target_index] = obs.distance_m
+    W[obs.station_index, obs.target_index] = 1.0 / np.asarray(obs.sigma_m, float) ** 2
+    return D, W
+
+
+def _scale_of(points):
+    p = points[np.all(np.isfinite(points), axis=1)]
+    return float(np.sqrt(((p - p.mean(0)) ** 2).sum(1).mean())) if len(p) else 1.0
+
+
+# ----------------------------------------------------------------------------- algebraic block
+
+
+def _algebraic_block(D2):
+    """Stations (p, 3) and targets (q, 3) from a complete block of squared distances (p, q).
+
+    Returns None when the algebra fails (G not positive definite, rank < 3).
+    """
+    p, q = D2.shape
+    rm = D2.mean(1, keepdims=True)
+    cm = D2.mean(0, keepdims=True)
+    M = D2 - rm - cm + D2.mean()
+    U, S, Vt = np.linalg.svd(M, full_matrices=False)
+    if len(S) < 3 or S[2] <= 1e-9 * S[0]:
+        return None
+    sq = np.sqrt(S[:3])
+    Ut = U[:, :3] * sq                 # h_i = A^T ut_i
+    Vv = -0.5 * Vt[:3].T * sq          # T_j - T_mean = A^-1 vv_j ; M = -2 Ut Vv^T
+    # mean over stations of D2_ij = c + 2 b.v_j + v_j^T G v_j, linear in (c, b, G)
+    v = Vv
+    rows = np.column_stack([np.ones(q), 2 * v[:, 0], 2 * v[:, 1], 2 * v[:, 2],
+                            v[:, 0] ** 2, v[:, 1] ** 2, v[:, 2] ** 2,
+                            2 * v[:, 0] * v[:, 1], 2 * v[:, 0] * v[:, 2], 2 * v[:, 1] * v[:, 2]])
+    sol, *_ = np.linalg.lstsq(rows, cm.ravel(), rcond=None)
+    b = sol[1:4]
+    G = np.array([[sol[4], sol[7], sol[8]], [sol[7], sol[5], sol[9]], [sol[8], sol[9], sol[6]]])
+    lam, W = np.linalg.eigh(G)
+    if lam[0] <= 1e-12 * max(lam[-1], 1e-300):
+        return None
+    Ainv = np.sqrt(lam)[:, None] * W.T         # A^-1 = L^1/2 W^T, so A^-T A^-1 = G
+    At = W.T / np.sqrt(lam)[:, None]           # A^T = L^-1/2 W^T ... (A = W L^-1/2)
+    # note A^T = (W L^-1/2)^T = L^-1/2 W^T
+    delta = At @ b                              # T_mean - H_mean, with H_mean = 0
+    H = Ut @ At.T
+    T = delta + Vv @ Ainv.T
+    return H, T
+
+
+def _affine_fit(D, Ut, Vv, A, delta, o):
+    """Refine the affine unknowns (A (3, 3), delta (3,)) and offsets o (p,) of a factorised block:
+    ``H_i = A^T ut_i``, ``T_j = delta + A^-1 vv_j``, residual ``D_ij - |H_i - T_j| - o_i``.
+    Returns (H, T, o, rms) or None."""
+    p, q = D.shape
+
+    def fun(x):
+        Ax = x[:9].reshape(3, 3)
+        try:
+            Ai = np.linalg.inv(Ax)
+        except np.linalg.LinAlgError:
+            return np.full(p * q, 1e3)
+        H = Ut @ Ax
+        T = x[9:12] + Vv @ Ai.T
+        rho = np.linalg.norm(H[:, None, :] - T[None, :, :], axis=2)
+        return (D - rho - x[12:, None]).ravel()
+
+    def jac(x):
+        Ax = x[:9].reshape(3, 3)
+        try:
+            Ai = np.linalg.inv(Ax)
+        except np.linalg.LinAlgError:
+            return np.zeros((p * q, len(x)))
+        H = Ut @ Ax
+        Wt = Vv @ Ai.T                                   # T_j - delta
+        diff = H[:, None, :] - (x[9:12] + Wt)[None, :, :]
+        rho = np.linalg.norm(diff, axis=2)
+        U = diff / np.where(rho > 0, rho, 1e-12)[..., None]          # (p, q, 3)
+        # d r_ij / d A_lk = -(u_ij,k ut_il + (u_ij . Ai[:, l]) w_jk)
+        t1 = U[:, :, None, :] * Ut[:, None, :, None]
+        t2 = (U @ Ai)[:, :, :, None] * Wt[None, :, None, :]
+        J = np.empty((p, q, len(x)))
+        J[:, :, :9] = -(t1 + t2).reshape(p, q, 9)
+        J[:, :, 9:12] = U
+        J[:, :, 12:] = 0.0
+        J[np.arange(p), :, 12 + np.arange(p)] = -1.0
+        return J.reshape(p * q, len(x))
+
+    x0 = np.concatenate([A.ravel(), delta, o])
+    try:
+        res = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14,
+                            max_nfev=100 * len(x0))
+    except (ValueError, np.linalg.LinAlgError):
+        return None
+    x = res.x
+    Ax = x[:9].reshape(3, 3)
+    if not np.all(np.isfinite(x)) or abs(np.linalg.det(Ax)) < 1e-300:
+        return None
+    return Ut @ Ax, x[9:12] + Vv @ np.linalg.inv(Ax).T, x[12:], float(np.sqrt(np.mean(res.fun ** 2)))
+
+
+def _factorise(D2):
+    """Double-centred rank-3 factors (ut (p, 3), vv (q, 3)) of squared distances, or None."""
+    M = D2 - D2.mean(1, keepdims=True) - D2.mean(0, keepdims=True) + D2.mean()
+    U, S, Vt = np.linalg.svd(M, full_matrices=False)
+    if len(S) < 3 or S[2] <= 1e-9 * S[0]:
+        return None
+    sq = np.sqrt(S[:3])
+    return U[:, :3] * sq, -0.5 * Vt[:3].T * sq
+
+
+def _block_solve(D, *, rng, starts=8):
+    """Stations (p, 3), targets (q, 3), offsets (p,) of a complete block of distances (p, q),
+    p >= 4: closed form (q >= 10) or random affine starts, refined by :func:`_affine_fit`; then the
+    factorisation is redone with the offsets removed until they settle. Returns None on failure."""
+    p, q = D.shape
+    f = _factorise(D ** 2)
+    if f is None:
+        return None
+    Ut, Vv = f
+    cands = []
+    if q >= 10:
+        lin = _algebraic_block(D ** 2)
+        if lin is not None:
+            Hl, Tl = lin
+            A, *_ = np.linalg.lstsq(Ut, Hl - Hl.mean(0), rcond=None)
+            cands.append((A, Tl.mean(0) - Hl.mean(0)))
+    if not cands:
+        scale = float(np.median(D))
+        sv = np.linalg.norm(Ut, axis=0)
+        for _k in range(starts):
+            Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+            A = Q * (scale / np.sqrt(p) / np.maximum(sv, 1e-300))[:, None]
+            cands.append((A, rng.normal(scale=0.5 * scale, size=3)))
+    best = None
+    for A, delta in cands:
+        fit = _affine_fit(D, Ut, Vv, A, delta, np.zeros(p))
+        if fit is not None and (best is None or fit[3] < best[3]):
+            best = fit
+    if best is None:
+        return None
+    for _ in range(3):  # redo the factorisation without the offsets
+        H, T, o, _rms = best
+        f = _factorise((D - o[:, None]) ** 2)
+        if f is None:
+            break
+        Ut, Vv = f
+        A, *_ = np.linalg.lstsq(Ut, H - H.mean(0), rcond=None)
+        fit = _affine_fit(D, Ut, Vv, A, T.mean(0) - H.mean(0), o)
+        if fit is None:
+            break
+        done = np.max(np.abs(fit[2] - o)) < 1e-7 * float(np.median(D))
+        if fit[3] <= best[3]:
+            best = fit
+        if done:
+            break
+    return best
+
+
+def _blocks(mask, *, min_targets=10, limit=6):
+    """Complete blocks ``(station indices, target indices)``, best first: for the 4-station sets
+    sharing the most targets (at least 6), greedily more stations while at least ``min_targets``
+    and 3/4 of the common targets remain. At most ``limit`` blocks."""
+    s, t = mask.shape
+    cand = range(s)
+    if s > 14:  # keep the search small: the 14 best-observed stations
+        cand = sorted(np.argsort(-mask.sum(1), kind="stable")[:14].tolist())
+    scored = []
+    for c in itertools.combinations(cand, 4):
+        n = int(np.all(mask[list(c)], axis=0).sum())
+        if n >= 6:
+            scored.append((-n, c))
+    scored.sort()
+    out = []
+    for _, c in scored[:limit]:
+        st = list(c)
+        common = np.all(mask[st], axis=0)
+        for i in np.argsort(-mask.sum(1), kind="stable"):
+            if i in st:
+                continue
+            c2 = common & mask[i]
+            if c2.sum() >= max(min(min_targets, common.sum()), int(0.75 * common.sum())):
+                st.append(int(i))
+                common = c2
+        out.append((sorted(st), np.flatnonzero(common)))
+    return out
+
+
+# ----------------------------------------------------------------------------- growing
+
+
+def _grow(D, W, H, T, o, placedH, placedT):
+    """Multilaterate unplaced targets from placed stations and unplaced stations from placed
+    targets, refining the placed sub-network after each round, until nothing changes.
+    Arrays are modified in place."""
+    obs = np.isfinite(D)
+    changed = True
+    while changed:
+        changed = False
+        for j in np.flatnonzero(~placedT):
+            sts = np.flatnonzero(obs[:, j] & placedH)
+            if len(sts) >= 4:
+                T[j], _ = multilaterate(H[sts], D[sts, j] - o[sts])
+                placedT[j] = True
+                changed = True
+        for i in np.flatnonzero(~placedH):
+            tg = np.flatnonzero(obs[i] & placedT)
+            if len(tg) >= 4:
+                H[i], o[i] = multilaterate(T[tg], D[i, tg], with_offset=len(tg) >= 7)
+                placedH[i] = True
+                changed = True
+        if changed:
+            si, ti = np.flatnonzero(placedH), np.flatnonzero(placedT)
+            Dsub = np.where(obs[np.ix_(si, ti)], D[np.ix_(si, ti)], np.nan)
+            if placedH.sum() >= 3:
+                frame = _choose_frame(H[si])
+                Hs, Ts = _to_frame(H[si], T[ti], frame)
+                Hs, Ts, os_, _, _ = _refine(Dsub, W[np.ix_(si, ti)], Hs, Ts, o[si], frame, robust=False)
+                H[si], T[ti], o[si] = Hs, Ts, os_
+
+
+# ----------------------------------------------------------------------------- refinement
+
+
+def _refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
+    """Weighted least squares over all coordinates and offsets in the 3-2-1 frame ``frame``
+    (station indices a, b, c: a fixed, b's y, z fixed, c's z fixed). Returns H, T, o, rms."""
+    s, t = D.shape
+    si, tj = np.nonzero(np.isfinite(D))
+    d = D[si, tj]
+    w = np.sqrt(W[si, tj])
+    fa, fb, fc = frame
+    free_h = np.ones((s, 3), bool)
+    free_h[fa] = False
+    free_h[fb, 1:] = False
+    free_h[fc, 2] = False
+    nh = int(free_h.sum())
+
+    def unpack(x):
+        Hx = H.copy()
+        Hx[free_h] = x[:nh]
+        Tx = x[nh:nh + 3 * t].reshape(t, 3)
+        ox = x[nh + 3 * t:]
+        return Hx, Tx, ox
+
+    def fun(x):
+        Hx, Tx, ox = unpack(x)
+        diff = Hx[si] - Tx[tj]
+        rho = np.sqrt((diff ** 2).sum(1))
+        return w * (d - rho - ox[si])
+
+    hcols = -np.ones((s, 3), int)
+    hcols[free_h] = np.arange(nh)
+
+    def jac(x):
+        Hx, Tx, ox = unpack(x)
+        diff = Hx[si] - Tx[tj]
+        rho = np.sqrt((diff ** 2).sum(1))
+        u = diff / np.where(rho > 0, rho, 1e-12)[:, None]
+        J = np.zeros((len(d), nh + 3 * t + s))
+        rows = np.arange(len(d))
+        for c in range(3):
+            hc = hcols[si, c]
+            ok = hc >= 0
+            J[rows[ok], hc[ok]] = -w[ok] * u[ok, c]
+            J[rows, nh + 3 * tj + c] = w * u[:, c]
+        J[rows, nh + 3 * t + si] = -w
+        return J
+
+    x = _levenberg_marquardt(fun, jac, np.concatenate([H[free_h], T.ravel(), o]),
+                             max_iter=max_nfev)
+    if robust:
+        r = fun(x)
+        scale = max(1.4826 * np.median(np.abs(r)), 1.0)
+        if np.max(np.abs(r)) > 10 * scale:   # gross errors: Huber weights, a few reweightings
+            for _ in range(5):
+                k = 3 * scale
+                hw = np.sqrt(np.minimum(1.0, k / np.maximum(np.abs(fun(x)), 1e-300)))
+                x = _levenberg_marquardt(lambda z: hw * fun(z), lambda z: hw[:, None] * jac(z), x,
+                                         max_iter=max_nfev)
+    Hx, Tx, ox = unpack(x)
+    diff = Hx[si] - Tx[tj]
+    r = d - np.sqrt((diff ** 2).sum(1)) - ox[si]
+    return Hx, Tx, ox, float(np.sqrt(np.mean(r ** 2))), float(1.4826 * np.median(np.abs(r)))
+
+
+def _levenberg_marquardt(fun, jac, x, *, max_iter=200, tol=1e-10):
+    """Minimise ``|fun(x)|^2`` by Levenberg-Marquardt with Marquardt scaling (dense normal
+    equations: the problems here have at most a few hundred unknowns)."""
+    r = fun(x)
+    cost = r @ r
+    lam = 1e-3
+    for _ in range(max_iter):
+        J = jac(x)
+        A = J.T @ J
+        g = J.T @ r
+        dg = np.maximum(np.diag(A), 1e-30)
+        while True:
+            try:
+                step = np.linalg.solve(A + lam * np.diag(dg), g)
+            except np.linalg.LinAlgError:
+                step = None
+            if step is not None:
+                # r = w (d - f): J above is d r / d x, so the Gauss-Newton step is -solve(...)
+                xn = x - step
+                rn = fun(xn)
+                cn = rn @ rn
+                if np.isfinite(cn) and cn <= cost:
+                    break
+            lam *= 10.0
+            if lam > 1e12:
+                return x
+        small = np.all(np.abs(step) <= tol * (np.abs(x) + 1e-3))
+        x, r, done = xn, rn, (cost - cn) <= 1e-14 * cost or small
+        cost = cn
+        lam = max(lam / 10.0, 1e-12)
+        if done:
+            break
+    return x
+
+
+def _to_frame(H, T, frame):
+    """Rotate/translate so that frame stations (a, b, c) are at origin, +x, xy-plane y > 0."""
+    a, b, c = frame
+    e1 = H[b] - H[a]
+    e1 /= np.linalg.norm(e1)
+    v = H[c] - H[a]
+    e2 = v - e1 * (v @ e1)
+    e2 /= np.linalg.norm(e2)
+    e3 = np.cross(e1, e2)
+    R = np.vstack([e1, e2, e3])
+    return (H - H[a]) @ R.T, (T - H[a]) @ R.T
+
+
+def _choose_frame(H):
+    """First station triple (in id order) with a well-shaped triangle (smallest height >= 20 %
+    of its longest side); else the best-shaped triple."""
+    s = len(H)
+    best, bq = None, -1.0
+    for tri in itertools.combinations(range(s), 3):
+        P = H[list(tri)]
+        sides = [np.linalg.norm(P[1] - P[0]), np.linalg.norm(P[2] - P[1]), np.linalg.norm(P[0] - P[2])]
+        area2 = np.linalg.norm(np.cross(P[1] - P[0], P[2] - P[0]))
+        q = area2 / max(max(sides) ** 2, 1e-300)  # height / longest side
+        if q >= 0.2:
+            return tri
+        if q > bq:
+            best, bq = tri, q
+    return best
+
+
+def _fix_mirror(H, T, frame):
+    """Reflect z if needed: first non-frame station off the plane (by id) has z > 0."""
+    scale = _scale_of(np.vstack([H, T]))
+    for i in range(len(H)):
+        if i in frame:
+            continue
+        if abs(H[i, 2]) > 0.01 * scale:
+            flip = H[i, 2] < 0
+            break
+    else:
+        k = int(np.argmax(np.abs(T[:, 2])))
+        flip = T[k, 2] < 0
+    if flip:
+        H = H * [1, 1, -1]
+        T = T * [1, 1, -1]
+    return H, T
+
+
+# ----------------------------------------------------------------------------- public
+
+
+def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) -> InitialValues:
+    """Approximate station and target coordinates and station offsets of a network.
+
+    Parameters
+    ----------
+    obs : multilat.network.data.Observations
+        ``distance_m = |H_i - T_j| + offset_i``; ``azimuth_rad``/``elevation_rad`` used when given
+        (per observation, NaN where unknown; azimuth from +x towards +y, elevation above the
+        xy-plane of the head).
+    rng : numpy.random.Generator, int or None
+        Only used by the fallback (random restarts) when no complete block of >= 4 stations and
+        >= 10 targets exists or the closed form fails.
+    refine : bool
+        Finish with a least-squares refinement of every coordinate and offset (default).
+    restarts : int
+        Number of random starts of the fallback.
+
+    Returns
+    -------
+    InitialValues
+
+    Raises
+    ------
+    MultilatError
+        Fewer than 4 stations, a target seen by fewer than 4 stations, or a network the growing
+        cannot place (disconnected).
+    """
+    s, t = len(obs.station_ids), len(obs.target_ids)
+    if s < 4:
+        raise MultilatError(f"initial values need at least 4 stations, got {s}")
+    D, W = _distance_matrix(obs)
+    seen = np.isfinite(D)
+    for j in range(t):
+        if seen[:, j].sum() < 4:
+            raise MultilatError(f"target {obs.target_ids[j]!r} is seen by {int(seen[:, j].sum())} "
+                                "station(s); at least 4 are needed")
+    for i in range(s):
+        if seen[i].sum() < 4:
+            raise MultilatError(f"station {obs.station_ids[i]!r} sees {int(seen[i].sum())} "
+                                "target(s); at least 4 are needed")
+
+    H = np.full((s, 3), np.nan)
+    T = np.full((t, 3), np.nan)
+    o = np.zeros(s)
+    method = None
+    angle_frame = None
+
+    az, el = getattr(obs, "azimuth_rad", None), getattr(obs, "elevation_rad", None)
+    if az is not None and el is not None:
+        ok = np.isfinite(az) & np.isfinite(el)
+        if ok.any():
+            counts = np.bincount(obs.station_index[ok], minlength=s)
+            h = int(np.argmax(counts))
+            if counts[h] >= 4:
+                k = np.flatnonzero(ok & (obs.station_index == h))
+                j = obs.target_index[k]
+                dd = obs.distance_m[k]
+                u = np.column_stack([np.cos(el[k]) * np.cos(az[k]), np.cos(el[k]) * np.sin(az[k]),
+                                     np.sin(el[k])])
+                H[h] = 0.0
+                T[j] = dd[:, None] * u
+                placedH = np.zeros(s, bool)
+                placedH[h] = True
+                placedT = np.zeros(t, bool)
+                placedT[j] = True
+                _grow(D, W, H, T, o, placedH, placedT)
+                if placedH.all() and placedT.all():
+                    method = "angles"
+                    angle_frame = (H.copy(), T.copy())
+
+    if method is not None:
+        frame = _choose_frame(H)
+        H, T = _to_frame(H, T, frame)
+        rms = float("nan")
+        if refine:
+            H, T, o, rms, _ = _refine(D, W, H, T, o, frame)
+        Hs, Ts = angle_frame
+        R, tr = rigid_fit(np.vstack([H, T]), np.vstack([Hs, Ts]))
+        return InitialValues(H @ R.T + tr, T @ R.T + tr, o, method, rms)
+
+    # distances alone: complete blocks, best first, until the fit reaches the noise level
+    gen = np.random.default_rng(rng)
+    sig = np.sqrt(1.0 / W[seen])
+    good = 10.0 * float(np.median(sig))   # robust residual scale of a converged network
+    best = None
+    for st, tg in _blocks(seen):
+        out = _block_solve(D[np.ix_(st, tg)], rng=gen)
+        if out is None:
+            continue
+        H = np.full((s, 3), np.nan)
+        T = np.full((t, 3), np.nan)
+        o = np.zeros(s)
+        H[st], T[tg], o[st], _ = out
+        placedH = np.zeros(s, bool)
+        placedH[st] = True
+        placedT = np.zeros(t, bool)
+        placedT[tg] = True
+        _grow(D, W, H, T, o, placedH, placedT)
+        if not (placedH.all() and placedT.all()):
+            continue
+        frame = _choose_frame(H)
+        H, T = _to_frame(H, T, frame)
+        H, T, o, rms, rob = _refine(D, W, H, T, o, frame)
+        if best is None or rob < best[5]:
+            best = (H, T, o, frame, rms, rob, "algebraic")
+        if rob <= good:
+            break
+    if best is None or best[5] > good:
+        alt = _restarts(D, W, rng=gen, restarts=restarts)
+        if alt is not None and (best is None or alt[5] < best[5]):
+            best = alt + ("restarts",)
+    if best is None:
+        raise MultilatError("initial values: the network could not be built up from its distances "
+                            "(disconnected or too few common targets)")
+    H, T, o, frame, rms, _, method = best
+    H, T = _fix_mirror(H, T, frame)
+    return InitialValues(H, T, o, method, rms)
+
+
+def _restarts(D, W, *, rng, restarts):
+    """Fallback: refinement from random starts; the lowest robust residual scale as
+    (H, T, o, frame, rms, robust scale)."""
+    s, t = D.shape
+    L = float(np.nanmax(D))
+    best = None
+    for _ in range(restarts):
+        H = rng.uniform(-0.5 * L, 0.5 * L, (s, 3))
+        T = rng.uniform(-0.5 * L, 0.5 * L, (t, 3))
+        frame = _choose_frame(H)
+        H, T = _to_frame(H, T, frame)
+        Hr, Tr, orr, rms, rob = _refine(D, W, H, T, np.zeros(s), frame, max_nfev=100)
+        if np.isfinite(rob) and (best is None or rob < best[-1]):
+            best = (Hr, Tr, orr, frame, rms, rob)
+    return best
