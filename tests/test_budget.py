@@ -235,3 +235,18 @@ def test_demo_section_quick():
     html = render("t", [sec])
     assert "Table I" in html and "Table II" in html and "61.24 mm" in html and "<img" in html
     assert html.count("<table>") == 4
+
+
+def test_streamed_mode_matches_stratified(inst, res, monkeypatch):
+    # beyond STRATIFIED_LIMIT the engine streams (distance drawn from the grid, histogram quantiles):
+    # same budget within Monte Carlo noise (two independent runs: sqrt(2) x 3 standard errors)
+    monkeypatch.setattr(budget, "STRATIFIED_LIMIT", 1000)
+    s = budget.distance_budget(inst, head="A", trials=TRIALS, rng=99)
+    assert s.samples is None and s.trials == res.trials
+    for j, g in enumerate(("telemetric", "head", "target")):
+        tol = math.sqrt(2) * 3 * _rms_se(res.samples[:, j])
+        assert s.components[g] == pytest.approx(res.components[g], abs=tol)
+    assert s.combined_std_m == pytest.approx(res.combined_std_m, abs=math.sqrt(2) * 3 * _rms_se(
+        res.samples[:, :3].sum(axis=1)))
+    with pytest.raises(MultilatError, match="keep_samples"):
+        budget.distance_budget(inst, trials=100, keep_samples=True)

@@ -41,7 +41,7 @@ from multilat.errors import MultilatError, require_finite
 from multilat.instrument import Instrument, load_instrument
 from multilat.montecarlo import resolve_seed, run_mc, summarize
 
-__all__ = ["GROUPS", "DistanceBudget", "distance_budget", "sample_distance_errors", "distance_std_m",
+__all__ = ["GROUPS", "STRATIFIED_LIMIT", "DistanceBudget", "distance_budget", "sample_distance_errors", "distance_std_m",
            "group_inputs", "group_errors"]
 
 #: Output columns of the error model, in order.
@@ -286,6 +286,13 @@ def distance_budget(inst: Instrument | str = "seed2020", *, head: str = "A", dis
         Add the air group to the combined error (default from the instrument; the seed: no).
     keep_samples : bool
         Keep the pooled per-group samples (trials x 4 floats).
+
+    Notes
+    -----
+    Up to :data:`STRATIFIED_LIMIT` pooled trials, each distance gets exactly ``trials`` trials (the
+    seed's design) and the samples are pooled in memory. Beyond, one engine run draws the distance
+    uniformly from the grid and streams moments and histogram quantiles (memory bounded whatever the
+    number of trials; ``keep_samples`` is then refused).
     coverage : float
         Coverage probability of the intervals.
     progress : callable(done, total), optional
@@ -307,18 +314,24 @@ def distance_budget(inst: Instrument | str = "seed2020", *, head: str = "A", dis
     n = int(n)
     air = inst.budget.include_air if include_air is None else bool(include_air)
     inputs = group_inputs(inst, head)
+    cols = [0, 1, 2, 3] if air else [0, 1, 2]
+    total_trials = d.size * n
+    if total_trials > STRATIFIED_LIMIT:
+        if keep_samples:
+            raise MultilatError(f"keep_samples needs at most {STRATIFIED_LIMIT:,} pooled trials, "
+                                f"got {total_trials:,}")
+        return _streamed_budget(inst, head, p, d, n, inputs, cols, air, rng, coverage, progress)
     children = resolve_seed(rng).spawn(d.size)
-    out = np.empty((d.size * n, 4))
+    out = np.empty((total_trials, 4))
     for i, (L, child) in enumerate(zip(d, children)):
         res = run_mc(functools.partial(_model, p, float(L)), inputs, trials=n, rng=child, quantiles="exact",
                      exact_limit=max(4 * n, 20_000_000))
         out[i * n:(i + 1) * n] = res.samples
         if progress is not None:
-            progress((i + 1) * n, d.size * n)
+            progress((i + 1) * n, total_trials)
     means = {g: float(out[:, j].mean()) for j, g in enumerate(GROUPS)}
     stds = {g: float(out[:, j].std(ddof=1)) for j, g in enumerate(GROUPS)}
     comps = {g: float(np.sqrt(np.mean(out[:, j] ** 2))) for j, g in enumerate(GROUPS)}
-    cols = [0, 1, 2, 3] if air else [0, 1, 2]
     total = out[:, cols].sum(axis=1)
     summ = summarize(total, coverage=coverage)
     return DistanceBudget(
@@ -329,6 +342,45 @@ def distance_budget(inst: Instrument | str = "seed2020", *, head: str = "A", dis
         coverage_95_m=tuple(float(x) for x in summ.interval_symmetric),
         coverage_shortest_m=tuple(float(x) for x in summ.interval_shortest),
         samples=out if keep_samples else None,
+    )
+
+
+#: Above this many pooled trials the budget streams through the engine (memory bounded) instead of
+#: keeping every sample: the distance becomes a random input, uniform over the grid.
+STRATIFIED_LIMIT = 20_000_000
+
+
+@dataclass(frozen=True)
+class _GridDistance:
+    """A distance drawn uniformly from a fixed grid (an engine input with ``sample(rng, size)``)."""
+
+    grid: tuple
+
+    def sample(self, rng, size):
+        g = np.asarray(self.grid, dtype=float)
+        return g[rng.integers(0, g.size, size)]
+
+
+def _model_streamed(p: _Params, cols: tuple, distance, **draws):
+    e = group_errors(p, distance, **draws)
+    return np.concatenate([e, e[:, list(cols)].sum(axis=1, keepdims=True)], axis=1)
+
+
+def _streamed_budget(inst, head, p, d, n, inputs, cols, air, rng, coverage, progress):
+    inputs = dict(inputs, distance=_GridDistance(tuple(float(x) for x in d)))
+    res = run_mc(functools.partial(_model_streamed, p, tuple(cols)), inputs, trials=d.size * n, rng=rng,
+                 coverage=coverage, quantiles="histogram", progress=progress)
+    est, sd = np.asarray(res.estimate, dtype=float), np.asarray(res.std, dtype=float)
+    means = {g: float(est[j]) for j, g in enumerate(GROUPS)}
+    stds = {g: float(sd[j]) for j, g in enumerate(GROUPS)}
+    comps = {g: float(math.hypot(est[j], sd[j])) for j, g in enumerate(GROUPS)}
+    return DistanceBudget(
+        instrument=inst.name, head=head, distances_m=d.copy(), trials_per_distance=n, trials=int(res.trials),
+        components=comps, means=means, stds=stds, include_air=air,
+        combined_std_m=float(math.hypot(est[4], sd[4])), combined_mean_m=float(est[4]), combined_sd_m=float(sd[4]),
+        coverage_95_m=tuple(float(x) for x in np.asarray(res.interval_symmetric)[4]),
+        coverage_shortest_m=tuple(float(x) for x in np.asarray(res.interval_shortest)[4]),
+        samples=None,
     )
 
 
