@@ -37,7 +37,8 @@ from multilat.campaign.raw import RawObservations, format_time
 from multilat.errors import MultilatError
 
 __all__ = ["CampaignConditions", "PAPER_CONDITIONS", "SimulatedCampaign", "simulate_campaign",
-           "large_volume_geometry", "write_raw_csv", "write_environment_csv", "ignore_gradient",
+           "large_volume_geometry", "write_raw_csv", "write_environment_csv", "write_heights_csv",
+           "ignore_gradient", "gradient_study", "GradientStudy", "STUDY_METHODS",
            "START_TIME"]
 
 START_TIME = _dt.datetime(2020, 3, 10, 9, 0, tzinfo=_dt.timezone.utc).timestamp()

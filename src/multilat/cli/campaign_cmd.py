@@ -56,15 +56,16 @@ def correct_cmd(
     from rich.table import Table
 
     tab = Table(title=f"corrected distances ({res.formula} group index)")
-    for h in ("station", "target", "T beam/°C", "n_g-1 /ppm", "index corr/µm", "transit corr/µm",
-              "distance/m", "σ air/µm", "σ/µm"):
-        tab.add_column(h, justify="right")
+    for h in ("head", "target", "T/°C", "air/µm", "transit/µm", "distance/m", "σ air/µm", "σ/µm"):
+        tab.add_column(h, justify="right", no_wrap=True)
     for i in range(res.distance_m.size):
         tab.add_row(res.station_ids[i], res.target_ids[i], f"{res.environment['temperature_c'][i]:.3f}",
-                    f"{(res.group_index[i] - 1) * 1e6:.3f}", f"{res.index_correction_m[i] * 1e6:.1f}",
+                    f"{res.index_correction_m[i] * 1e6:.1f}",
                     f"{(res.head_transit_correction_m[i] + res.target_transit_correction_m[i]) * 1e6:.2f}",
                     f"{res.distance_m[i]:.7f}", f"{res.sigma_air_m[i] * 1e6:.2f}", f"{res.sigma_m[i] * 1e6:.2f}")
     console.print(tab)
+    console.print("T: beam temperature; air: D - L (index correction); transit: eq. (2) head + target; "
+                  "σ air: sensor part (correlated, see --cov/--json)", markup=False)
     for n in res.notes:
         console.print(f"note: {n}", markup=False)
     if out is not None:
