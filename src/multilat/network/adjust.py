@@ -357,18 +357,21 @@ def _gauss_newton(pb: _Problem, sx, tx, off, sc, *, max_iter, tol_m, chunk_targe
             new_cost = _cost(pb, nsx, ntx, noff, nsc)
             step = max(float(np.max(np.abs(dgs[:, :4]))), float(np.max(np.abs(dt), initial=0.0)),
                        float(np.max(np.abs(dgs[:, 4]))) * scale_len)
-            if np.isfinite(new_cost) and new_cost <= cost * (1 + 1e-12) + 1e-300:
+            # at the minimum the cost changes only by rounding and the step is rounding noise
+            # amplified by the condition number: stop there instead of chasing it
+            flat = (abs(cost - new_cost) <= 1e-12 * max(cost, 1e-300) and step < 1e-7 * scale_len)
+            if step < tol_m or flat:
+                if new_cost <= cost:
+                    sx, tx, off, sc = nsx, ntx, noff, nsc
+                return sx, tx, off, sc, it
+            if np.isfinite(new_cost) and new_cost <= cost:
                 lam = 0.0 if lam < 1e-6 else lam / 10.0
-                break
-            if step < tol_m:       # no decrease but negligible step: at the minimum
                 break
             lam = 1e-4 if lam == 0 else lam * 10.0
             if lam > 1e8:
                 raise MultilatError("the adjustment did not converge (no decrease of the cost); "
                                     "check initial values and the observations")
         sx, tx, off, sc, cost = nsx, ntx, noff, nsc, new_cost
-        if step < tol_m:
-            return sx, tx, off, sc, it
     raise MultilatError(f"the adjustment did not converge in {max_iter} iterations "
                         f"(last step {step:.3g} m); check initial values and the geometry")
 
@@ -417,7 +420,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
            points: Points | None = None, cost: str = "distance", offsets=None, scales=False,
            alpha: float = 0.001, power: float = 0.80, alpha_global: float = 0.05,
            snooping: bool = True, max_rejections: int | None = None, max_iter: int = 100,
-           tol_m: float = 1e-11, chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
+           tol_m: float = 1e-10, chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
     """Adjust a self-calibrating multilateration network.
 
     Unknowns: station coordinates, target coordinates, one additive offset per station (estimated
@@ -577,6 +580,11 @@ def _adjust_once(sub, datum, start, obs, used, points, cost, off_free_all, off_v
     all_ids = sub.station_ids + sub.target_ids
     if datum.kind == "control":
         ctrl = _control_ids(sub, datum, points)
+        # bring the initial values into the control frame first (rigid fit on the control points)
+        cur = dict(zip(all_ids, np.vstack([sx0, tx0])))
+        cids = sorted(ctrl)
+        Rc, tc = rigid_fit(np.array([cur[i] for i in cids]), np.array([points.get(i) for i in cids]))
+        sx0, tx0 = apply_rigid(Rc, tc, sx0), apply_rigid(Rc, tc, tx0)
         for i, sid in enumerate(sub.station_ids):
             if sid in ctrl:
                 sx0[i] = points.get(sid)
