@@ -1,3 +1,150 @@
-"""Commands registered on multilat.cli.app.app (filled in by its owner)."""
+"""``multilat propagate``: full Monte Carlo of a network's uncertainty through the adjustment."""
 
-from multilat.cli.app import app  # noqa: F401
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from multilat.cli.app import app, console, emit_json, progress
+from multilat.errors import MultilatError
+
+BUILTIN = ("small-volume", "large-volume")
+
+
+def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_um: float | None,
+                 references: Path | None):
+    """The propagation problem for ``source`` (a built-in configuration name or an observations CSV)."""
+    from multilat import instrument as _inst
+    from multilat.network import propagate as pr
+
+    inst = _inst.load_instrument(instrument)
+    if source in BUILTIN:
+        try:
+            from multilat.network import configs
+        except ImportError:
+            raise MultilatError("built-in configurations are not available (multilat.network.configs)") from None
+        cfg = configs.small_volume() if source == "small-volume" else configs.large_volume()
+        sigma = None if noise == "model" else (sigma_um * 1e-6 if sigma_um else 4.7e-6)
+        return pr.problem_from_config(cfg, sigma_m=sigma, instrument=inst if noise == "model" else None,
+                                      datum=datum, source=source)
+    from multilat.network.files import read_observations, read_reference_lengths
+
+    obs = read_observations(source, sigma_m=None if sigma_um is None else sigma_um * 1e-6, instrument=inst)
+    refs = read_reference_lengths(references) if references is not None else None
+    return pr.problem_from_observations(obs, datum=datum, references=refs, instrument=inst,
+                                        source=str(source))
+
+
+@app.command("propagate")
+def propagate_cmd(
+    source: str = typer.Argument(..., help="Observations CSV, or small-volume / large-volume."),
+    trials: int = typer.Option(100_000, "--trials", help="Monte Carlo trials (fixed-size run)."),
+    adaptive: bool = typer.Option(False, "--adaptive", help="JCGM 101 7.9 adaptive number of trials."),
+    seed: int = typer.Option(1, "--seed", help="Root seed (chunks get SeedSequence spawn children)."),
+    instrument: str = typer.Option("seed2020", "--instrument", help="Instrument preset or TOML file."),
+    noise: str = typer.Option("model", "--noise", help="model (distance model, non-gaussian) or gaussian."),
+    sigma_um: Optional[float] = typer.Option(None, "--sigma-um",
+                                             help="Gaussian sigma / weights in um (default: file or 4.7)."),
+    datum: str = typer.Option("free", "--datum", help="free[:P,..] or 321:A,B,C (same in every trial)."),
+    references: Optional[Path] = typer.Option(None, "--references", help="Reference lengths CSV."),
+    chunk_size: int = typer.Option(10_000, "--chunk-size", help="Trials per chunk (unit of seeding)."),
+    workers: Optional[int] = typer.Option(None, "--workers", help="Start a local Dask cluster of N workers."),
+    scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of an existing Dask scheduler."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+    out: Optional[Path] = typer.Option(None, "--out", help="Directory for CSVs, JSON and the figure."),
+) -> None:
+    """Monte Carlo (JCGM 101/102) of stations, offsets, targets and interpoint distances."""
+    from multilat.network.propagate import propagate
+    from multilat.parallel import map_from_options
+
+    if noise not in ("model", "gaussian"):
+        raise MultilatError(f"--noise must be model or gaussian, got {noise!r}")
+    if sigma_um is not None and not (np.isfinite(sigma_um) and sigma_um > 0):
+        raise MultilatError(f"--sigma-um must be > 0, got {sigma_um!r}")
+    problem = load_problem(source, datum=datum, noise=noise, instrument=instrument, sigma_um=sigma_um,
+                           references=references)
+    total = None if adaptive else trials
+    with map_from_options(workers=workers, scheduler=scheduler) as m, progress(disable=as_json) as bar:
+        task = bar.add_task("Monte Carlo", total=total)
+        res = propagate(problem, trials=trials, rng=seed, noise=noise, instrument=instrument,
+                        adaptive=adaptive, chunk_size=chunk_size, map=m,
+                        progress=lambda n: bar.update(task, completed=n), keep_samples=out is not None)
+    doc = res.to_dict()
+    if out is not None:
+        write_outputs(res, doc, out)
+    if as_json:
+        emit_json(doc)
+        return
+    _print(res, doc, out)
+
+
+def write_outputs(res, doc, out: Path) -> None:
+    """``summary.json``, ``parameters.csv``, ``distances.csv``, ``points.csv``, ``clouds.png``, each
+    written atomically (an interruption leaves every file whole or absent)."""
+    from multilat.io import atomic_path, write_csv_atomic, write_json_atomic
+    from multilat.report.propagate_figures import clouds_figure
+
+    out = Path(out)
+    hdr = ["label", "nominal_m", "mc_mean_m", "mc_std_m", "mc_std_se_m", "lin_std_m", "ratio", "agrees",
+           "low_m", "high_m", "short_low_m", "short_high_m"]
+
+    def rows(items):
+        for r in items:
+            yield [r["label"], r["nominal_m"], r["mc_mean_m"], r["mc_std_m"], r["mc_std_se_m"], r["lin_std_m"],
+                   r["ratio"] if r["ratio"] is not None else "", r["agrees"], *r["interval_symmetric_m"],
+                   *r["interval_shortest_m"]]
+
+    write_csv_atomic(out / "parameters.csv", hdr, rows(doc["parameters"]))
+    write_csv_atomic(out / "distances.csv", hdr, rows(doc["distances"]))
+    write_csv_atomic(out / "points.csv",
+                     ["id", "a1_95_m", "a2_95_m", "a3_95_m", "coverage_mc_ellipsoid", "coverage_lin_ellipsoid"],
+                     ([p["id"], *p["semi_axes_95_m"], p["ellipsoid_coverage_mc"], p["ellipsoid_coverage_lin"]]
+                      for p in doc["points"]))
+    fig = clouds_figure(res)
+    with atomic_path(out / "clouds.png") as tmp:
+        fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    write_json_atomic(out / "summary.json", doc)
+
+
+def _um(v):
+    return f"{v * 1e6:.2f}"
+
+
+def _print(res, doc, out) -> None:
+    s = doc["summary"]
+    console.print(f"[bold]Monte Carlo through the adjustment[/bold] ({doc['source']}): {doc['trials']} trials "
+                  f"kept, {doc['n_failed']} failed to converge, noise={doc['noise']}, "
+                  f"mean sigma0={doc['sigma0_mean']:.3f}, {doc['elapsed_s']:.1f} s")
+    if doc["adaptive"]:
+        a = doc["adaptive"]
+        console.print(f"adaptive (JCGM 101 7.9): converged={a['converged']} after {a['chunks']} chunks")
+    t = Table(title="Points: standard uncertainties (um), MC vs linear; 95 % ellipsoid coverage")
+    for c in ("point", "u_x MC", "u_y MC", "u_z MC", "u_x lin", "u_y lin", "u_z lin", "cov MC ell.",
+              "MC in lin ell."):
+        t.add_column(c, justify="right")
+    labels = res.labels
+    for q, pid in enumerate(res.point_ids):
+        idx = [labels.index(f"{pid}.{c}") for c in "xyz"]
+        t.add_row(pid, *[_um(res.mc_std[i]) for i in idx], *[_um(res.lin_std[i]) for i in idx],
+                  f"{res.ellipsoid_coverage_mc[q]:.3f}", f"{res.ellipsoid_coverage_lin[q]:.3f}")
+    console.print(t)
+    t = Table(title="Offsets and interpoint distances (um)")
+    for c in ("quantity", "MC std", "+-MC se", "lin std", "ratio", "95 % interval (dev. from nominal)", "agrees"):
+        t.add_column(c, justify="right")
+    for r in [r for r in doc["parameters"] if r["label"].endswith(".offset")] + doc["distances"]:
+        lo, hi = r["interval_symmetric_m"]
+        t.add_row(r["label"], _um(r["mc_std_m"]), _um(r["mc_std_se_m"]), _um(r["lin_std_m"]),
+                  f"{r['ratio']:.3f}" if r["ratio"] else "-",
+                  f"[{_um(lo - r['nominal_m'])}, {_um(hi - r['nominal_m'])}]", "yes" if r["agrees"] else "NO")
+    console.print(t)
+    console.print(f"{s['n_agree']}/{s['n_quantities']} standard deviations agree with the linear covariance "
+                  f"within 3 MC standard errors (ratio {s['std_ratio_min']:.3f}..{s['std_ratio_max']:.3f})")
+    if out is not None:
+        console.print(f"results and figure written to {out}")

@@ -263,7 +263,8 @@ def _run_chunk(args):
     """One chunk: draw, solve, summarise. Module-level so process pools and Dask can pickle it."""
     spec, seed, n = args
     rng = np.random.default_rng(seed)
-    d = spec.distance_m + _draw_errors(spec, n, rng)
+    e = _draw_errors(spec, n, rng)
+    d = spec.distance_m + e
     net = spec.network
     sol = net.solve(d)
     ok = sol.converged
@@ -280,7 +281,7 @@ def _run_chunk(args):
         ddev = np.zeros((int(ok.sum()), 0))
     dev = np.concatenate([x - x0, ddev], axis=1)
     return dict(dev=dev.astype(np.float32) if dev.size else dev, n=n, n_failed=int((~ok).sum()),
-                sigma0=sol.sigma0[ok])
+                sigma0=sol.sigma0[ok], e_sum=e.sum(axis=0), e2_sum=(e * e).sum(axis=0))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -324,6 +325,12 @@ class PropagationResult:
     adaptive : dict or None
         ``{"converged": bool, "tolerance_m": ..., "rounds": int}`` for adaptive runs.
     elapsed_s : float
+    input_std_m : ndarray (m,)
+        Standard deviation of each distance's input error used by the linear propagation: the
+        gaussian ``sigma_m``, or for ``noise="model"`` the empirical std of all errors drawn.
+    input_std_ratio : float
+        Mean of (empirical input std / the distance model's :func:`budget.distance_std_m`) — how well
+        the distance model's stated standard uncertainty matches its own samples (1 for gaussian).
     samples : ndarray (trials, k) float32 or None
         Deviations from nominal (kept for figures).
     """
@@ -349,6 +356,8 @@ class PropagationResult:
     seed_entropy: int
     adaptive: dict | None
     elapsed_s: float
+    input_std_m: np.ndarray = field(default=None, repr=False)
+    input_std_ratio: float = 1.0
     samples: np.ndarray | None = field(default=None, repr=False)
 
     @property
@@ -407,6 +416,7 @@ class PropagationResult:
             "seed_entropy": self.seed_entropy,
             "coverage": 0.95,
             "sigma0_mean": self.sigma0_mean,
+            "input_std_ratio": self.input_std_ratio,
             "elapsed_s": self.elapsed_s,
             "adaptive": self.adaptive,
             "parameters": self.rows()[:n_par],
@@ -628,6 +638,17 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
     se = std * np.sqrt(np.maximum(kurt - 1.0, 0.0) / (4.0 * n))
     iv_sym = coverage_interval(dev, 0.95, "symmetric") + x0[:, None]
     iv_short = coverage_interval(dev, 0.95, "shortest") + x0[:, None]
+    if noise == "model":
+        # the linear sandwich uses the input errors' empirical std over all trials drawn, so that the
+        # comparison tests the propagation, not the distance model's own (MC-estimated) std
+        n_all = sum(p["n"] for p in parts)
+        es = sum(p["e_sum"] for p in parts)
+        e2 = sum(p["e2_sum"] for p in parts)
+        emp_std = np.sqrt(np.maximum(e2 / n_all - (es / n_all) ** 2, 0.0) * n_all / (n_all - 1))
+        input_std_ratio = float(np.mean(emp_std / noise_std))
+        noise_std = emp_std
+    else:
+        input_std_ratio = 1.0
     lin_std, pc_lin = _linear(problem, noise_std)
     pids = problem.station_ids + problem.target_ids
     pc_mc = np.empty((len(pids), 3, 3))
@@ -647,6 +668,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         point_ids=pids, point_cov_mc=pc_mc, point_cov_lin=pc_lin, ellipsoid_coverage_mc=cov_mc_frac,
         ellipsoid_coverage_lin=cov_lin_frac, trials=n, n_failed=n_failed, sigma0_mean=sig0, noise=noise,
         seed_entropy=int(ss.entropy), adaptive=adaptive_info, elapsed_s=time.perf_counter() - t0,
+        input_std_m=noise_std, input_std_ratio=input_std_ratio,
         samples=dev.astype(np.float32) if keep_samples else None)
 
 
