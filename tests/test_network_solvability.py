@@ -1,0 +1,126 @@
+"""Solvability: the minimum number of targets (checked against the rank of the Jacobian, an
+independent count), disconnected networks, too few observations, degenerate geometry."""
+
+import warnings
+
+import numpy as np
+import pytest
+
+from multilat.errors import MultilatError
+from multilat.network.adjust import Start, adjust
+from multilat.network.data import Observations
+from multilat.network.model import Q, dense_jacobian, residuals_and_jacobian
+
+H4 = np.array([[0, 0, 0], [3, 0, 0.2], [1.5, 2.5, -0.3], [1.2, 1, 2.2]], float)
+OFF4 = np.array([1e-3, -2e-3, 5e-4, 0.0])
+
+
+def _obs(H, T, off, pairs=None, sigma=5e-6):
+    s, t = len(H), len(T)
+    if pairs is None:
+        si, ti = np.repeat(np.arange(s), t), np.tile(np.arange(t), s)
+    else:
+        si, ti = np.array(pairs).T
+    d = np.linalg.norm(H[si] - T[ti], axis=1) + off[si]
+    return Observations([f"S{i}" for i in range(s)], [f"T{j}" for j in range(t)], si, ti, d,
+                        np.full(si.size, sigma))
+
+
+def _rank_defect(H, T, off):
+    """Rank defect of the Jacobian (stations, offsets, targets) beyond the 6 of the datum."""
+    o = _obs(H, T, off)
+    _, Js, Jt = residuals_and_jacobian(o.distance_m, H, T, off, np.zeros(len(H)), o.station_index,
+                                       o.target_index)
+    J = dense_jacobian(Js, Jt, o.station_index, o.target_index, len(H), len(T))
+    keep = np.ones(J.shape[1], bool)
+    keep[4:Q * len(H):Q] = False
+    sv = np.linalg.svd(J[:, keep], compute_uv=False)
+    n_unknown = keep.sum() - 6
+    return n_unknown - int(np.sum(sv > 1e-9 * sv[0])), o.n_obs, n_unknown
+
+
+@pytest.mark.parametrize("n", [9, 10, 11])
+def test_minimum_targets_for_four_stations_with_offsets(n):
+    T = np.random.default_rng(n).uniform(0.3, 1.8, (n, 3))
+    defect, m, n_unknown = _rank_defect(H4, T, OFF4)
+    assert n_unknown == 3 * n + 10                 # 12 + 3n + 4 offsets - 6 datum
+    start = Start(H4, T, np.zeros(4))
+    if n == 9:
+        # 36 observations < 37 unknowns: refused before solving, with the count
+        with pytest.raises(MultilatError, match=r"36 distances for 37 unknowns.*at least 10 targets"):
+            adjust(_obs(H4, T, OFF4), initial=start)
+    else:
+        assert defect == 0 and m - n_unknown == n - 10      # full rank from 10 targets on
+        with warnings.catch_warnings(record=True) as rec:
+            warnings.simplefilter("always")
+            res = adjust(_obs(H4, T, OFF4), initial=start)
+        assert res.dof == n - 10
+        assert any("zero redundancy" in str(w.message) for w in rec) == (n == 10)
+        np.testing.assert_allclose(res.offset_m, OFF4, atol=1e-9)
+
+
+def test_degenerate_geometries_are_named():
+    rng = np.random.default_rng(5)
+    T = rng.uniform(0.3, 1.8, (20, 3))
+    Hc = H4.copy()
+    Hc[:, 2] = 0.0
+    assert _rank_defect(Hc, T, OFF4)[0] == 2           # coplanar stations: 2 extra defects
+    with pytest.raises(MultilatError, match="stations are \\(nearly\\) coplanar"):
+        adjust(_obs(Hc, T, OFF4), initial=Start(Hc, T, np.zeros(4)))
+    Hn = H4 * [1, 1, 1e-7]                              # 0.2 um out of plane: near-degenerate
+    with pytest.raises(MultilatError, match="near-degenerate geometry .*coplanar"):
+        adjust(_obs(Hn, T, OFF4), initial=Start(Hn, T, np.zeros(4)))
+    Tl = np.outer(np.linspace(0, 1, 20), [1, 0.5, 0.3]) + 0.2
+    assert _rank_defect(H4, Tl, OFF4)[0] == 3           # collinear targets: 3 extra defects
+    with pytest.raises(MultilatError, match="targets are \\(nearly\\) collinear"):
+        adjust(_obs(H4, Tl, OFF4), initial=Start(H4, Tl, np.zeros(4)))
+    # coplanar targets are NOT degenerate with distances and offsets (rank says so; solve works)
+    Tp = T.copy()
+    Tp[:, 2] = 0.7
+    assert _rank_defect(H4, Tp, OFF4)[0] == 0
+    res = adjust(_obs(H4, Tp, OFF4), initial=Start(H4, Tp, np.zeros(4)))
+    np.testing.assert_allclose(res.offset_m, OFF4, atol=1e-8)
+
+
+def test_structure_errors():
+    T = np.random.default_rng(1).uniform(0.3, 1.8, (14, 3))
+    full = [(i, j) for j in range(14) for i in range(4)]
+    start = Start(H4, T, np.zeros(4))
+    # a target seen by 2 stations
+    pairs = [p for p in full if not (p[1] == 3 and p[0] >= 2)]
+    with pytest.raises(MultilatError, match="target 'T3' has 2 observation"):
+        adjust(_obs(H4, T, OFF4, pairs), initial=start)
+    # a target seen by 3: allowed with a warning (zero redundancy)
+    pairs = [p for p in full if p != (3, 5)]
+    with pytest.warns(UserWarning, match="T5 seen by only 3 stations"):
+        adjust(_obs(H4, T, OFF4, pairs), initial=start)
+    # a station with 4 observations (3 coordinates + offset + 1 needed)
+    pairs = [p for p in full if not (p[0] == 1 and p[1] >= 4)]
+    with pytest.raises(MultilatError, match="station 'S1' has 4 observation"):
+        adjust(_obs(H4, T, OFF4, pairs), initial=start)
+    # two stations only
+    with pytest.raises(MultilatError, match="at least 3 stations"):
+        adjust(_obs(H4[:2], T, OFF4[:2]), initial=Start(H4[:2], T, np.zeros(2)))
+
+
+def test_disconnected_network():
+    rng = np.random.default_rng(2)
+    H = np.vstack([H4, H4 + [10, 0, 0]])
+    T = np.vstack([rng.uniform(0.3, 1.8, (12, 3)), rng.uniform(0.3, 1.8, (12, 3)) + [10, 0, 0]])
+    pairs = [(i, j) for j in range(12) for i in range(4)] + [(i, j) for j in range(12, 24) for i in range(4, 8)]
+    off = np.zeros(8)
+    with pytest.raises(MultilatError, match="disconnected into 2 parts"):
+        adjust(_obs(H, T, off, pairs), initial=Start(H, T, off))
+
+
+def test_stations_collinear_with_a_target():
+    # three stations only see target T0, and they lie on one line through it: T0 undetermined
+    rng = np.random.default_rng(3)
+    H = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 2, 1], [0.5, 1, 2]], float)
+    T = rng.uniform(0.3, 1.8, (14, 3))
+    T[0] = [5.0, 0, 0]
+    pairs = [(i, j) for j in range(1, 14) for i in range(5)] + [(0, 0), (1, 0), (2, 0)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(MultilatError, match="target 'T0' is not determined"):
+            adjust(_obs(H, T, np.zeros(5), pairs), initial=Start(H, T, np.zeros(5)))
