@@ -246,6 +246,9 @@ def test_adaptive_meets_its_tolerance_and_matches_fixed_run():
     # adaptive batches are ordinary blocks: the same numbers as a fixed run of that many trials
     f = run_mc(additive, inputs, trials=r.trials, rng=21)
     assert f.std == r.std and np.array_equal(f.interval_symmetric, r.interval_symmetric)
+    with ThreadPoolExecutor(2) as pool:  # rounds of 3 batches through a map: same stopping point
+        rp = run_mc(additive, inputs, adaptive=True, ndigits=2, rng=21, map=pool, batches_per_round=3)
+    assert rp.trials == r.trials and rp.std == r.std
     r1 = run_mc(additive, inputs, adaptive=True, ndigits=1, rng=21)
     assert r1.trials <= r.trials
     r3 = run_mc(additive, inputs, adaptive=True, ndigits=3, rng=21, max_trials=4 * BLOCK)

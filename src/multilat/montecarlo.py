@@ -667,6 +667,7 @@ def run_mc(
     hist_bins: int = 1 << 14,
     max_trials: int = 100_000_000,
     nonfinite: str = "raise",
+    batches_per_round: int | None = None,
 ) -> MCResult:
     """Propagate the input distributions through ``model`` by Monte Carlo (JCGM 101).
 
@@ -708,6 +709,10 @@ def run_mc(
         Bins of the fine histogram per output (histogram mode).
     max_trials : int
         Adaptive runs stop here with ``converged=False``.
+    batches_per_round : int, optional
+        Adaptive runs: batches submitted to ``map`` together (default 1 in-process, 4 with a
+        ``map``); they are examined in order and any computed past the stopping batch are
+        discarded, so the result is the same for every value.
     nonfinite : {"raise", "drop"}
         A non-finite model output raises :class:`MultilatError`, or the trial is dropped and counted
         in ``MCResult.n_rejected``.
@@ -742,7 +747,11 @@ def run_mc(
     entropy = root.entropy if isinstance(root.entropy, int) else None
     if adaptive:
         max_trials = _check_int("max_trials", max_trials, 2)
-        return _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact_limit, quantiles, entropy)
+        if batches_per_round is None:
+            batches_per_round = 1 if map is None else 4
+        batches_per_round = _check_int("batches_per_round", batches_per_round, 1)
+        return _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact_limit, quantiles, entropy,
+                             batches_per_round)
     trials = 1_000_000 if trials is None else _check_int("trials", trials, 2)
     n_blocks = -(-trials // BLOCK)
 
@@ -794,8 +803,14 @@ def run_mc(
                    seed_entropy=entropy, n_rejected=rejected)
 
 
-def _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact_limit, quantiles, entropy):
-    """JCGM 101 §7.9 adaptive procedure (see :func:`run_mc`)."""
+def _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact_limit, quantiles, entropy,
+                  batches_per_round):
+    """JCGM 101 §7.9 adaptive procedure (see :func:`run_mc`).
+
+    Batches are submitted ``batches_per_round`` at a time but examined one by one in order; batches
+    computed beyond the one where the rule stops are discarded, so the result does not depend on
+    the round size.
+    """
     batch = max(BLOCK, int(math.ceil(100.0 / (1.0 - coverage))), 10_000)
     bpb = -(-batch // BLOCK)
     batch = bpb * BLOCK
@@ -808,11 +823,16 @@ def _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact
     converged = False
     delta = None
     out_ndim = 1
+    max_batches = max(2, max_trials // batch)
+    round_iter = iter(())
     while True:
-        total = (h + 1) * batch
-        spec = _ChunkSpec(**common, block_start=h * bpb, block_stop=(h + 1) * bpb, trials=total,
-                          keep_samples=True, hist_lo=None, hist_hi=None)
-        part = next(iter(mapper(_run_chunk, [spec])))
+        part = next(round_iter, None)
+        if part is None:  # submit the next round of batches (in parallel when the map allows)
+            stop = min(h + batches_per_round, max_batches)
+            specs = [_ChunkSpec(**common, block_start=i * bpb, block_stop=(i + 1) * bpb, trials=(i + 1) * batch,
+                                keep_samples=True, hist_lo=None, hist_hi=None) for i in range(h, stop)]
+            round_iter = iter(mapper(_run_chunk, specs))
+            part = next(round_iter)
         out_ndim = part.out_ndim
         y2 = part.samples
         k = y2.shape[1]
@@ -849,7 +869,7 @@ def _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact
             if np.all(2.0 * s <= delta[:, None]):
                 converged = True
                 break
-        if (h + 1) * batch > max_trials:
+        if h >= max_batches:
             break
     samples = np.concatenate(kept, axis=0) if exact else None
     tol = None if delta is None else (float(delta[0]) if out_ndim == 1 else delta)
