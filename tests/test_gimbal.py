@@ -151,6 +151,16 @@ def test_broadcasting_shapes():
     assert out5.shape == (5, 3)
 
 
+def test_forward_bad_input():
+    with pytest.raises(MultilatError, match="true_distance_m"):
+        gimbal.head_measured_distance(-1.0, a_m=0, c_m=0, alpha_rad=0, gamma_rad=0, toh_m=0, elevation_rad=0)
+    with pytest.raises(MultilatError, match="true_distance_m"):
+        gimbal.target_measured_distance(float("nan"), a_m=0, b_m=0, c_m=0, tot_m=0, elevation_rad=0, theta_rad=0,
+                                        phi_rad=0)
+    with pytest.raises(MultilatError, match="measured_m"):
+        gimbal.head_true_distance(0.0, a_m=0, c_m=0, alpha_rad=0, gamma_rad=0, toh_m=0, elevation_rad=0)
+
+
 def test_correction_bad_input():
     with pytest.raises(MultilatError, match="measured_m"):
         gimbal.transit_offset_correction(-1.0, 1e-6, 0.0)

@@ -104,6 +104,7 @@ def head_measured_distance(true_distance_m, *, a_m, c_m, alpha_rad, gamma_rad, t
     ndarray
         ``Rm = sqrt(Toh^2 + Ri^2 + 2 Toh Ri cos(alpha) cos(phi - gamma))``, broadcast shape.
     """
+    _check_distance("true_distance_m", true_distance_m)
     ri = head_intermediate_from_true(true_distance_m, a_m=a_m, c_m=c_m, alpha_rad=alpha_rad, gamma_rad=gamma_rad)
     t, al, ga, ph = _a(toh_m), _a(alpha_rad), _a(gamma_rad), _a(elevation_rad)
     return np.sqrt(t * t + ri * ri + 2 * t * ri * np.cos(al) * np.cos(ph - ga))
@@ -111,7 +112,7 @@ def head_measured_distance(true_distance_m, *, a_m, c_m, alpha_rad, gamma_rad, t
 
 def head_true_distance(measured_m, *, a_m, c_m, alpha_rad, gamma_rad, toh_m, elevation_rad):
     """Eq. (4) inverse: the true distance (m) from the measured one, all head parameters known."""
-    rm = _a(measured_m)
+    rm = _check_distance("measured_m", measured_m)
     t, al, ga, ph = _a(toh_m), _a(alpha_rad), _a(gamma_rad), _a(elevation_rad)
     k = np.cos(al) * np.cos(ph - ga)
     ri = -t * k + np.sqrt(rm * rm - t * t * (1 - k * k))
@@ -121,7 +122,8 @@ def head_true_distance(measured_m, *, a_m, c_m, alpha_rad, gamma_rad, toh_m, ele
 # ------------------------------------------------------------------ eq. (2), head convention
 def transit_offset_effect(true_distance_m, offset_m, elevation_rad):
     """Eq. (2) forward: ``Rm = sqrt(Rt^2 + T^2 + 2 T Rt cos(phi))`` (m), phi from the horizontal."""
-    rt, t, ph = _a(true_distance_m), _a(offset_m), _a(elevation_rad)
+    rt = _check_distance("true_distance_m", true_distance_m)
+    t, ph = _a(offset_m), _a(elevation_rad)
     return np.sqrt(rt * rt + t * t + 2 * t * rt * np.cos(ph))
 
 
@@ -179,7 +181,8 @@ def target_measured_distance(true_distance_m, *, a_m, b_m, c_m, tot_m, elevation
             Rm^2 = Rt^2 + Tot^2 + a'^2 + b'^2 + c'^2 + 2 a' Rt sin(th'') + 2 b' [Tot cos(ph') - Rt cos(th'') cos(ph'')]
                    + 2 c' [Rt sin(ph'') - Tot sin(ph')] - 2 Tot Rt [cos(ph') cos(th'') cos(ph'') + sin(ph') sin(ph'')]
     """
-    rt, a, b, c, t = _a(true_distance_m), _a(a_m), _a(b_m), _a(c_m), _a(tot_m)
+    rt = _check_distance("true_distance_m", true_distance_m)
+    a, b, c, t = _a(a_m), _a(b_m), _a(c_m), _a(tot_m)
     e, th, ph = _a(elevation_rad), _a(theta_rad), _a(phi_rad)
     ce, se, ct, st, cp, sp = np.cos(e), np.sin(e), np.cos(th), np.sin(th), np.cos(ph), np.sin(ph)
     rm2 = (rt * rt + t * t + a * a + b * b + c * c + 2 * a * rt * st + 2 * b * (t * ce - rt * ct * cp)

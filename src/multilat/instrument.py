@@ -281,7 +281,7 @@ class BudgetConfig(_Model):
         import numpy as np
 
         n = int(math.floor((self.distance_stop_m - self.distance_start_m) / self.distance_step_m + 1e-9)) + 1
-        return self.distance_start_m + self.distance_step_m * np.arange(n)
+        return np.round(self.distance_start_m + self.distance_step_m * np.arange(n), 12)
 
 
 class Instrument(_Model):
