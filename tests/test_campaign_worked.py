@@ -74,3 +74,12 @@ def test_adjusted_coordinates_with_true_air_are_exact():
     for name in s.methods[1:]:
         assert s.coordinate_rms_m[name] > 5 * s.coordinate_rms_m[s.methods[0]]
 
+
+
+def test_demo_section_quick():
+    from multilat.report import campaign_demo
+    from multilat.report.html import render
+
+    sec = campaign_demo.section(seed=1, quick=True)
+    html = render("t", [sec])
+    assert "5.4" in html and "<img" in html and "Toh of head A" in html

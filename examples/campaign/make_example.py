@@ -4,7 +4,7 @@
                        conditions), with times and elevation angles, sensor and instrument errors drawn
                        with seed 2020;
 - ``environment.csv``  the sensor log (4 sensors at 0.3/0.7/1.4/2.4 m, one reading every 5 min);
-- ``heights.csv``      heights of the heads and targets in the sensors' frame (network z + 1 m);
+- ``heights.csv``      heights of the heads and targets in the sensors' frame (network z + 1.10 m);
 - ``truth.csv``        the true distances (with the heads' offsets), for comparison;
 - ``two_face.csv``     a two-face session of head A (explicit 3D gimbal, Table III-size offsets/tilts).
 """
@@ -25,9 +25,9 @@ HERE = Path(__file__).resolve().parent
 
 def main(seed: int = 2020) -> None:
     inst = instrument.load_instrument("seed2020")
-    sids, sxyz, tids, txyz, off = large_volume_geometry()
+    sids, sxyz, tids, txyz, off, floor = large_volume_geometry()
     camp = simulate_campaign(sids, sxyz, tids, txyz, offset_m=off, instrument=inst, rng=seed,
-                             sensor_errors=True, model_errors=True, exact_path=False)
+                             sensor_errors=True, model_errors=True, exact_path=False, floor_offset_m=floor)
     write_raw_csv(HERE / "raw.csv", camp)
     write_environment_csv(HERE / "environment.csv", camp.log)
     write_heights_csv(HERE / "heights.csv", camp.heights)

@@ -20,8 +20,9 @@ Truth model (documented in ``docs/campaign.md``)
   pipeline's own model, so a correction with exactly known air must return the truth; with
   ``exact_path=False`` the index is integrated along the beam (Gauss-Legendre, 16 nodes), which
   differs by the index's curvature in temperature (nanometres).
-- Heights: the network frame's ``z`` plus ``floor_offset_m`` (head A's transit axis 1 m above the
-  floor by default: an assumption, the paper gives no heights above the floor).
+- Heights: the network frame's ``z`` plus ``floor_offset_m`` (1 m by default; the large-volume
+  configuration puts head A 1.10 m above the floor, an assumption of the network helpers, as the
+  paper gives no heights above the floor).
 """
 
 from __future__ import annotations
@@ -163,13 +164,16 @@ class SimulatedCampaign:
 def large_volume_geometry():
     """The large-volume configuration of the network helpers (seed 000 §4.2).
 
-    Returns ``(station_ids, station_xyz_m (4, 3), target_ids, target_xyz_m (14, 3), offset_m (4,))``.
+    Returns ``(station_ids, station_xyz_m (4, 3), target_ids, target_xyz_m (14, 3), offset_m (4,),
+    floor_offset_m)``; heights above the floor are ``z + floor_offset_m`` (the network helpers'
+    assumption: head A 1.10 m above the floor).
     """
     from multilat.network import configs
 
     cfg = configs.large_volume()
     return (tuple(cfg.station_ids), np.asarray(cfg.station_xyz_m, float), tuple(cfg.target_ids),
-            np.asarray(cfg.target_xyz_m, float), np.asarray(cfg.offset_m, float))
+            np.asarray(cfg.target_xyz_m, float), np.asarray(cfg.offset_m, float),
+            -float(configs.LARGE_FLOOR_Z_M))
 
 
 def _group_index(env, formula, wavelength_m):
