@@ -522,7 +522,8 @@ class BatchedNetwork:
         etg = e.T @ g
         if abs(np.linalg.det(etg)) < 1e-14 * np.linalg.norm(etg) ** 6:
             raise MultilatError("the datum does not fix translation and rotation (degenerate points)")
-        q = np.linalg.inv(n + e @ e.T)
+        c_pen = np.trace(n) / self.n_params / max(np.trace(e.T @ e) / 6, 1e-300)
+        q = np.linalg.inv(n + c_pen * (e @ e.T))     # a generalised inverse of N, well conditioned
         if sigma_m is not None:
             c = np.asarray(sigma_m, float) ** 2
             jw = j.T * w

@@ -226,7 +226,8 @@ def _covariances(sm, h, tg, u, ninv, w, si, tptr):
     s = len(h)
     c = h.mean(axis=0)
     e = _penalty_basis(h)                           # E (4s, 6): inner constraints over the stations
-    qa = np.linalg.inv(sm + e @ e.T)               # station block of (N + E E^T)^-1
+    c_pen = np.trace(sm) / (4 * s) / (np.trace(e.T @ e) / 6)   # scale E E^T like S: well conditioned
+    qa = np.linalg.inv(sm + c_pen * (e @ e.T))     # station block of (N + c E E^T)^-1 (a g-inverse)
     qa = 0.5 * (qa + qa.T)
     kmat = np.linalg.solve(e.T @ e, e.T)           # (E^T G)^-1 E^T with G_p = E (G_t elsewhere)
     sp = np.eye(4 * s) - e @ kmat
