@@ -44,6 +44,8 @@ def result_to_json(res, refs=None) -> dict:
         "alpha": res.alpha,
         "outliers": [{"station": o.station, "target": o.target, "w": o.w, "residual_m": o.residual_m}
                      for o in res.outliers],
+        "unlocated": [{"station": o.station, "target": o.target, "w": o.w, "residual_m": o.residual_m}
+                      for o in res.unlocated],
         "reference_lengths": [],
         "iterations": res.iterations,
         "condition": res.condition,
@@ -153,6 +155,10 @@ def _print_summary(res, doc, out):
             console.print(f"    {o.station}->{o.target}: w = {o.w:+.1f}, residual {o.residual_m * 1e6:+.1f} µm")
     else:
         console.print(f"  no observation rejected by data snooping (α = {res.alpha:g})")
+    if res.unlocated:
+        ids = ", ".join(f"{o.station}->{o.target}" for o in res.unlocated)
+        console.print(f"  [bold]w-test failure that cannot be located[/bold] (perfectly correlated "
+                      f"tests, |w| = {abs(res.unlocated[0].w):.1f}): one of {ids}; none rejected")
     t = Table(title="stations", title_justify="left")
     for c in ("station", "x (m)", "y (m)", "z (m)", "offset (µm)", "u(offset) (µm)", "95 % max (µm)"):
         t.add_column(c, justify="right")

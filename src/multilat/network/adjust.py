@@ -87,6 +87,9 @@ class AdjustmentResult:
     dof : int
     global_test : statistics.GlobalTest
     outliers : tuple of Outlier  rejected by data snooping, in order of rejection
+    unlocated : tuple of Outlier  a w-test failure that cannot be located: these observations'
+        w-tests are perfectly correlated (e.g. the 4 distances to a target seen by only 4
+        stations), so none was rejected; empty when snooping ended normally
     alpha, power : float  w-test significance and power used for the MDBs
     iterations : int ; condition : float (unit-diagonal reduced normal matrix)
     covariance : NetworkCovariance  any block of the full covariance in the datum
@@ -115,6 +118,7 @@ class AdjustmentResult:
     dof: int
     global_test: st.GlobalTest
     outliers: tuple
+    unlocated: tuple
     alpha: float
     power: float
     iterations: int
@@ -488,6 +492,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     sc_free = _scale_flags(scales, obs)
     if datum.kind == "control" and points is None:
         raise MultilatError("datum control needs control coordinates (points)")
+    _structure(obs, datum, points, off_free, sc_free, warn=False)   # before any initial values
     start = _initial(obs, initial, points, rng)
     start = Start(start.station_xyz_m, start.target_xyz_m,
                   np.where(off_free, start.offset_m, off_val))
@@ -497,6 +502,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     limit = obs.n_obs if max_rejections is None else int(max_rejections)
     crit = st.w_critical(alpha)
     warn = True
+    unlocated: tuple = ()
     while True:
         sub = obs if used.all() else obs.subset(used)
         core = _adjust_once(sub, datum, start, obs, used, points, cost, off_free, off_val, sc_free,
@@ -510,6 +516,17 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         if not abs(w_sub[k_sub]) > crit:
             break
         k = int(np.flatnonzero(used)[k_sub])
+        # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
+        # correlated with this one would show the same |w|: the data cannot tell which is wrong
+        red_sub = core["redundancy"]
+        hrow = core["cov"].hat_row(k_sub)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rho = -hrow / np.sqrt(red_sub[k_sub] * red_sub)
+        rho[k_sub] = 0.0
+        twins = np.flatnonzero(np.abs(np.nan_to_num(rho)) > 1.0 - 1e-6)
+        if twins.size:
+            unlocated = tuple(int(np.flatnonzero(used)[q]) for q in np.concatenate([[k_sub], twins]))
+            break
         trial = used.copy()
         trial[k] = False
         try:
@@ -519,7 +536,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             break      # rejecting it would make the network unsolvable: keep it (still flagged by w)
         rejected.append((k, float(w_sub[k_sub])))
         used = trial
-    return _build_result(obs, used, rejected, core, datum, cost, alpha, power, alpha_global)
+    return _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global)
 
 
 def _station_map(obs, used):
@@ -681,7 +698,7 @@ def _datum_matrices(datum, sub, sx, tx):
     return G, E
 
 
-def _build_result(obs, used, rejected, core, datum, cost, alpha, power, alpha_global):
+def _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global):
     s, t, m = obs.n_stations, obs.n_targets, obs.n_obs
     smap, tmap = core["smap"], core["tmap"]
     sx = np.full((s, 3), np.nan)
@@ -717,6 +734,9 @@ def _build_result(obs, used, rejected, core, datum, cost, alpha, power, alpha_gl
     outliers = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
                              wk, float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"))
                      for k, wk in rejected)
+    unloc = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
+                          float(w[k]), float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"))
+                  for k in unlocated)
     cov = core["cov"]
     gd = np.diag(gcov).reshape(s, Q)
     return AdjustmentResult(
@@ -725,4 +745,5 @@ def _build_result(obs, used, rejected, core, datum, cost, alpha, power, alpha_gl
         target_cov_m2=tcov, global_cov=gcov, offset_std_m=np.sqrt(np.clip(gd[:, 3], 0, None)),
         scale_std=np.sqrt(np.clip(gd[:, 4], 0, None)), residuals_m=r_all, redundancy=red, w=w,
         mdb_m=mdb, sigma0=core["sigma0"], dof=core["dof"], global_test=gt, outliers=outliers,
+        unlocated=unloc,
         alpha=alpha, power=power, iterations=core["iterations"], condition=core["cond"], covariance=cov)

@@ -141,6 +141,19 @@ class NetworkCovariance:
                    + np.einsum("tia,ab,tjb->tij", Gp, self.HCHt, Gp))
         return 0.5 * (out + np.swapaxes(out, 1, 2))
 
+    def hat_row(self, k: int):
+        """Row ``k`` of the whitened hat matrix ``A C A^T`` (m,) (datum-free; for the correlation
+        of w-tests: ``rho_kl = -hat_kl / sqrt(r_k r_l)``)."""
+        a = np.zeros(self.n)
+        i, j = self.si[k], self.ti[k]
+        a[Q * i:Q * i + Q] = self.Js_w[k]
+        a[Q * self.s + 3 * j:Q * self.s + 3 * j + 3] = self.Jt_w[k]
+        v = self._times(a[:, None])[:, 0] / self.factor
+        vg = v[:Q * self.s].reshape(self.s, Q)
+        vt = v[Q * self.s:].reshape(self.t, 3)
+        return (np.einsum("mq,mq->m", self.Js_w, vg[self.si])
+                + np.einsum("mi,mi->m", self.Jt_w, vt[self.ti]))
+
     def hat_diagonal(self, chunk_targets: int = 20000):
         """Diagonal of the whitened hat matrix ``A C A^T`` per observation (m,) (datum-free).
 

@@ -1,0 +1,152 @@
+"""``multilat adjust`` through main(): summary, --json keys, --out files, and bad input giving one
+line on stderr, exit 2 and no file written."""
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from multilat.cli import main
+from multilat.errors import MultilatError
+from multilat.network.files import read_observations, read_points, read_reference_lengths
+
+EX = Path(__file__).resolve().parents[1] / "examples" / "network"
+OBS = EX / "small_volume_obs.csv"
+REF = EX / "small_volume_refs.csv"
+PTS = EX / "small_volume_points.csv"
+TRUTH = EX / "small_volume_truth.csv"
+
+
+def _run(capsys, args):
+    rc = main(args)
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+def test_json_has_the_contract_keys(capsys):
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(PTS), "--references", str(REF),
+                                 "--datum", "321:B,D,C", "--json"])
+    assert rc == 0, err
+    doc = json.loads(out)
+    for k in ("stations", "targets", "sigma0", "dof", "global_test", "outliers", "reference_lengths"):
+        assert k in doc
+    assert set(doc["stations"]) == {"A", "B", "C", "D"} and len(doc["targets"]) == 14
+    for v in doc["stations"].values():
+        assert set(v) >= {"xyz_m", "offset_m", "cov_m2"} and np.shape(v["cov_m2"]) == (3, 3)
+    assert set(doc["global_test"]) >= {"statistic", "critical", "passed"}
+    assert doc["dof"] == 56 - (3 * 4 + 3 * 14 + 4 - 6)
+    assert len(doc["reference_lengths"]) == 9
+    for c in doc["reference_lengths"]:
+        assert set(c) >= {"target_a", "target_b", "length_m", "u_m", "reference_m", "difference_m"}
+        # synthetic network: the triplet lengths are true to the noise (k = 4 on the reported u)
+        assert abs(c["difference_m"]) < 4 * c["u_m"]
+    # 3-2-1 frame of the paper: B at origin, D on x, C in the xy-plane
+    assert np.allclose(doc["stations"]["B"]["xyz_m"], 0, atol=1e-12)
+    # the offsets of the synthetic truth (A 1.234, B -0.871, C 2.105, D 0.412 mm) within 4 u
+    truth = {"A": 1.234e-3, "B": -0.871e-3, "C": 2.105e-3, "D": 0.412e-3}
+    for sid, o in truth.items():
+        st = doc["stations"][sid]
+        assert abs(st["offset_m"] - o) < 4 * st["offset_u_m"]
+
+
+def test_summary_and_out_files(capsys, tmp_path):
+    out_dir = tmp_path / "res"
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(PTS), "--references", str(REF),
+                                 "--out", str(out_dir)])
+    assert rc == 0, err
+    assert "σ0 =" in out and "global χ² test" in out and "offset" in out
+    names = sorted(p.name for p in out_dir.iterdir())
+    assert names == ["reference_lengths.csv", "residuals.csv", "residuals.png", "result.json",
+                     "stations.csv", "targets.csv", "top_view.png", "view_3d.png"]
+    assert not any(p.name.endswith(".part") for p in tmp_path.iterdir())
+    assert (out_dir / "residuals.csv").read_text().count("\n") == 57
+
+
+def test_blunder_with_four_heads_is_detected_but_not_located(capsys, tmp_path):
+    """With 4 heads every target has 4 distances and 3 unknowns: the 4 w-tests of a target are
+    perfectly correlated, so a 20σ fault is detected but cannot be located. Snooping must say so
+    and reject nothing (rather than drop a good observation 3 times out of 4)."""
+    lines = OBS.read_text().splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.startswith("C,9,"))
+    st, tg, d, s = lines[i].split(",")
+    lines[i] = f"{st},{tg},{float(d) + 20 * 4.7e-6:.7f},{s}"
+    p = tmp_path / "obs.csv"
+    p.write_text("\n".join(lines) + "\n")
+    rc, out, err = _run(capsys, ["adjust", str(p), "--points", str(PTS), "--json"])
+    assert rc == 0, err
+    doc = json.loads(out)
+    assert doc["outliers"] == []
+    assert sorted((o["station"], o["target"]) for o in doc["unlocated"]) == [
+        ("A", "9"), ("B", "9"), ("C", "9"), ("D", "9")]
+    assert abs(doc["unlocated"][0]["w"]) > 3.29
+    rc, out, err = _run(capsys, ["adjust", str(p), "--points", str(PTS)])
+    assert "cannot be located" in out
+
+
+@pytest.mark.parametrize("content, msg", [
+    ("station,target,distance_m,sigma_m\nA,1,nan,4e-6\n", "column 'distance_m': must be finite"),
+    ("station,target,distance_m,sigma_m\nA,1,-1.0,4e-6\n", "must be > 0"),
+    ("station,target,distance_m,sigma_m\nA,1,0,4e-6\n", "must be > 0"),
+    ("station,target,distance_m,sigma_m\nA,1,1.0,4e-6\nA,1,1.1,4e-6\n", "duplicate observation A->1"),
+    ("", "empty file"),
+    ("station,target,dist\nA,1,1.0\n", "header lacks column"),
+    ("station,target,distance_m,sigma_m\nA,1,1.0,4e-6\nA,2,1.1,4e-6\nA,3,1.2,4e-6\nA,4,1.0,4e-6\nA,5,1.3,4e-6\n",
+     "at least 3 stations"),
+    ("station,target,distance_m,sigma_m\nA,1,1.0\n", "expected 4 cells"),
+    ("station,target,distance_m,sigma_m\nA,A,1.0,4e-6\n", "both as a station and as a target"),
+    ("station,target,distance_m,sigma_m\nA,1,1.0,0\n", "column 'sigma_m': must be > 0"),
+])
+def test_bad_observation_files(capsys, tmp_path, content, msg):
+    p = tmp_path / "bad.csv"
+    p.write_text(content)
+    out_dir = tmp_path / "out"
+    rc, out, err = _run(capsys, ["adjust", str(p), "--out", str(out_dir)])
+    assert rc == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and msg in lines[0], err
+    assert not out_dir.exists()
+    assert [x.name for x in tmp_path.iterdir()] == ["bad.csv"]
+
+
+def test_bad_reference_and_points_files(capsys, tmp_path):
+    ref = tmp_path / "ref.csv"
+    ref.write_text("target_a,target_b,length_m\n1,99,0.15\n")
+    rc, _, err = _run(capsys, ["adjust", str(OBS), "--references", str(ref), "--out", str(tmp_path / "o")])
+    assert rc == 2 and "unknown point id '99'" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+    ref.write_text("target_a,target_b,length_m\n1,2,0.15\n2,1,0.15\n")
+    with pytest.raises(MultilatError, match="duplicate reference length"):
+        read_reference_lengths(ref)
+    pts = tmp_path / "p.csv"
+    pts.write_text("point,x_m,y_m,z_m\nA,0,0,0\nA,1,0,0\n")
+    with pytest.raises(MultilatError, match="p.csv:3: duplicate point 'A'"):
+        read_points(pts)
+    rc, _, err = _run(capsys, ["adjust", str(OBS), "--datum", "321:A,B"])
+    assert rc == 2 and "exactly three" in err
+
+
+def test_unknown_column_warns_and_sigma_sources(tmp_path, capsys):
+    p = tmp_path / "o.csv"
+    p.write_text("station,target,distance_m,comment\nA,1,1.0,x\nB,1,1.2,y\n")
+    with pytest.warns(UserWarning, match="unknown column"):
+        obs = read_observations(p, sigma_m=5e-6)
+    assert np.all(obs.sigma_m == 5e-6)
+    # no sigma at all: the distance model of the seed instrument (about 4-5 um for these lengths)
+    p.write_text("station,target,distance_m\nA,1,1.0\nB,1,1.2\n")
+    obs = read_observations(p)
+    assert np.all((obs.sigma_m > 2e-6) & (obs.sigma_m < 1e-5))
+
+
+def test_interrupted_out_leaves_no_half_files(tmp_path, monkeypatch, capsys):
+    import multilat.report.network_figures as nf
+
+    def boom(res, out_dir):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(nf, "save_figures", boom)
+    out_dir = tmp_path / "res"
+    rc = main(["adjust", str(OBS), "--points", str(PTS), "--out", str(out_dir)])
+    assert rc == 130
+    assert not out_dir.exists() and list(tmp_path.iterdir()) == []
