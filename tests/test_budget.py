@@ -222,9 +222,19 @@ def test_cli_bad_files(capsys, tmp_path):
         _one_line_error(capsys, ["budget", "--instrument", str(p), "--trials", "10"], word)
 
 
-def test_cli_bad_head_and_trials(capsys):
+def test_cli_bad_head_trials_seed_plot(capsys):
     _one_line_error(capsys, ["budget", "--head", "Z", "--trials", "10"], "unknown head")
     _one_line_error(capsys, ["budget", "--trials", "1"], "trials")
+    _one_line_error(capsys, ["budget", "--trials", "10", "--seed", "-3"], "seed")
+    _one_line_error(capsys, ["budget", "--trials", "10", "--plot", "/proc/no/such/dir/x.png"], "--plot")
+
+
+def test_cli_air_is_labelled(capsys):
+    assert main(["budget", "--trials", "500", "--seed", "2", "--air", "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert d["include_air"] is True and d["components"]["air"] > 0
+    # air adds in quadrature (independent group): combined^2 ~ sum of squares + mean cross terms
+    assert d["combined_std_m"] > 4.7e-6
 
 
 def test_demo_section_quick():

@@ -50,9 +50,13 @@ def budget_command(
         fig = plot_budget(res, paper_um=PAPER_UM if inst.name == "seed2020" else None)
         import matplotlib.pyplot as plt
 
-        with atomic_path(plot) as tmp:
-            fig.savefig(tmp, format="png", dpi=110)
-        plt.close(fig)
+        try:
+            with atomic_path(plot) as tmp:
+                fig.savefig(tmp, format="png", dpi=110)
+        except OSError as exc:
+            raise MultilatError(f"cannot write --plot {plot}: {exc.strerror or exc}") from None
+        finally:
+            plt.close(fig)
     if as_json:
         d = res.to_dict()
         d["seed"] = seed
@@ -81,10 +85,10 @@ def budget_command(
         if paper:
             row.append(f"{PAPER_UM[g]:.1f}" if g in PAPER_UM else "-")
         t.add_row(*row)
-    row = ["combined", f"{res.combined_std_m * 1e6:.2f}", f"{res.combined_mean_m * 1e6:+.2f}",
-           f"{res.combined_sd_m * 1e6:.2f}"]
+    row = ["combined" + (" (incl. air)" if res.include_air else ""), f"{res.combined_std_m * 1e6:.2f}",
+           f"{res.combined_mean_m * 1e6:+.2f}", f"{res.combined_sd_m * 1e6:.2f}"]
     if paper:
-        row.append(f"{PAPER_UM['combined']:.1f}")
+        row.append("- (excl. air: 4.7)" if res.include_air else f"{PAPER_UM['combined']:.1f}")
     t.add_row(*row)
     console.print(t)
     lo, hi = res.coverage_95_m

@@ -70,7 +70,9 @@ def plot_budget(budget, *, fig=None, paper_um: dict | None = None):
     axes = fig.subplots(2, ncol).ravel()
     for ax, (name, x, u) in zip(axes, panels):
         title = _TITLES[name] + (f" {budget.head}" if name == "head" else "")
-        _panel(ax, x, title, u, paper_um.get(name))
+        if name == "combined" and budget.include_air:
+            title = "combined incl. air"  # the paper's 4.7 um excludes the air
+        _panel(ax, x, title, u, None if name == "combined" and budget.include_air else paper_um.get(name))
     for ax in axes[len(panels):]:
         ax.axis("off")
     fig.suptitle(f"Distance errors, instrument {budget.instrument}, head {budget.head}: "
