@@ -38,11 +38,12 @@ Conventions
   outputs) are streamed (per-block two-pass moments merged with Chan's formula). Coverage intervals
   are computed *exactly* from the sorted samples (JCGM 101 §7.7) when ``trials * k`` does not exceed
   ``exact_limit`` (default 2e7 values, 160 MB); beyond that from a fixed fine histogram per output
-  (``hist_bins`` bins, default 16384, over the range of block 0 widened by half its span on each
-  side, plus under/overflow counts) with linear interpolation of the cumulative distribution
-  inside a bin. The histogram quantile error is below one bin width (for a normal output, about
-  1e-3 standard deviations, ten times below the Monte Carlo standard error of a 95 % endpoint at
-  10^6 trials and comparable to it at 10^8); ``MCResult.quantile_method`` says which was used.
+  (``hist_bins`` bins, default 16384, plus under/overflow counts) over the range between block 0's
+  0.1 % and 99.9 % quantiles widened by half their distance on each side, with linear
+  interpolation of the cumulative distribution inside a bin. The histogram quantile error is below
+  one bin width, ``MCResult.quantile_resolution`` (for a normal output about 7.5e-4 standard
+  deviations: a seventh of the Monte Carlo standard error of a 95 % end point at 10^6 trials,
+  comparable to it at 10^8); ``MCResult.quantile_method`` says which was used.
 * Shortest coverage interval, tie rule: among the candidate intervals ``[y_(r), y_(r+q)]`` whose
   length is within ``1e-9`` (relative) of the minimum, the one with the lowest lower end is
   reported. When the output distribution is symmetric and bimodal (an arcsine-dominated error such as
@@ -286,6 +287,14 @@ class MCResult:
         iv = np.asarray(self.interval_symmetric)
         return 0.5 * (iv[..., 1] - iv[..., 0])
 
+    @property
+    def quantile_resolution(self):
+        """Histogram bin width (per output) bounding the interval error in histogram mode; 0 if exact."""
+        if self._hist_edges is None:
+            return 0.0 if np.ndim(self.estimate) == 0 else np.zeros(np.size(self.estimate))
+        w = self._hist_edges[:, 1] - self._hist_edges[:, 0]
+        return float(w[0]) if np.ndim(self.estimate) == 0 else w
+
     def as_dict(self) -> dict:
         """Plain-JSON summary (no samples, no fine histogram): for ``--json`` output and reports."""
 
@@ -305,6 +314,7 @@ class MCResult:
             "cov": conv(self.cov),
             "shortest_ambiguous": conv(self.shortest_ambiguous),
             "quantile_method": self.quantile_method,
+            "quantile_resolution": conv(self.quantile_resolution),
             "converged": self.converged,
             "tolerance": conv(self.tolerance),
             "seed_entropy": self.seed_entropy,
@@ -506,11 +516,21 @@ def _get_map(map):
     raise MultilatError(f"map must be callable or have a .map method, got {type(map).__name__}")
 
 
-def _hist_range(y2, bins):
-    """Histogram range per output: [min, max] of ``y2`` (n, k) widened by half the span each side."""
-    pmin, pmax = y2.min(axis=0), y2.max(axis=0)
-    span = np.where(pmax > pmin, pmax - pmin, np.maximum(np.abs(pmax), 1.0) * 1e-12)
-    lo, hi = pmin - 0.5 * span, pmax + 0.5 * span
+def _hist_range(y2, bins, coverage):
+    """Histogram range per output from a pilot ``y2`` (n, k).
+
+    The pilot's quantiles at ``a`` and ``1 - a`` (``a = min(1e-3, (1 - p)/20)``, at least 20 pilot
+    values deep) widened by half their distance on each side: robust to heavy tails (the range is not
+    set by a pilot's extreme values), and wide enough that the ``p`` coverage ends and the shortest
+    interval search stay inside for all but extremely heavy tails (which then raise). Values outside
+    go to the under/overflow counts and still enter the mean and standard deviation.
+    """
+    n = y2.shape[0]
+    a = max(min(1e-3, (1.0 - coverage) / 20.0), min(20.0 / n, 0.25))
+    qlo, qhi = np.quantile(y2, [a, 1.0 - a], axis=0)
+    span = qhi - qlo
+    span = np.where(span > 0, span, np.maximum(np.abs(qhi), 1.0) * 1e-12)
+    lo, hi = qlo - 0.5 * span, qhi + 0.5 * span
     edges = lo[:, None] + (hi - lo)[:, None] * np.linspace(0.0, 1.0, bins + 1)[None, :]
     return lo, hi, edges
 
@@ -771,7 +791,7 @@ def run_mc(
         p2 = p2[np.isfinite(p2).all(axis=1)]
         if p2.shape[0] == 0:
             raise MultilatError("model returned no finite value in block 0")
-        lo, hi, edges = _hist_range(p2, hist_bins)
+        lo, hi, edges = _hist_range(p2, hist_bins, coverage)
 
     store = np.empty((trials,) if probe.ndim == 1 else (trials, k)) if exact else None
     # in-process, the chunks write their samples straight into the store (one copy, one allocation)
@@ -845,7 +865,7 @@ def _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact
         n, mean, m2 = _merge_blocks(n, mean, m2, part.blocks)
         rejected += part.n_rejected
         if lo is None:  # histogram range from batch 0 (deterministic)
-            lo, hi, edges_all = _hist_range(y2, bins)
+            lo, hi, edges_all = _hist_range(y2, bins, coverage)
         if exact:
             kept.append(y2)
             if n * k > exact_limit:  # switch to the histogram for the rest of the run
