@@ -81,6 +81,9 @@ def test_environment_log_errors(tmp_path):
     e = _write(tmp_path / "env.csv", ENV + "2020-03-10T11:00:00,S2,2.0,20.8,1016.1,42\n")
     with pytest.raises(MultilatError, match=r"env.csv:6: sensor 'S2' changes height"):
         read_environment(e)
+    e = _write(tmp_path / "env.csv", ENV.replace(",S2,2.4,", ",S2,,"))
+    with pytest.raises(MultilatError, match=r"env.csv:4: sensor 'S2' has no height_m; with several sensors"):
+        read_environment(e)
     e = _write(tmp_path / "env.csv", ENV.replace("2020-03-10T10:00:00,S1", "10h,S1"))
     with pytest.raises(MultilatError, match=r"env.csv:3: column 'time'"):
         read_environment(e)

@@ -80,8 +80,9 @@ class EnvironmentLog:
 def read_environment(path: str | os.PathLike) -> EnvironmentLog:
     """Read an environment log ``time,sensor,height_m,temperature_c,pressure_hpa,humidity_pct[,co2_ppm]``.
 
-    Rows may come in any order; each sensor must keep one height, and no sensor may have two
-    readings at the same time. Errors name ``FILE:LINE``.
+    Rows may come in any order; each sensor must keep one height (which may be empty only when
+    there is a single sensor), and no sensor may have two readings at the same time. Errors name
+    ``FILE:LINE``.
     """
     t = read_csv_table(path, required=("time", "sensor", "height_m", "temperature_c", "pressure_hpa",
                                        "humidity_pct"), optional=("co2_ppm",))
@@ -122,6 +123,9 @@ def read_environment(path: str | os.PathLike) -> EnvironmentLog:
         rd = {c: vals[c][order] for c in vals}
         if "co2_ppm" not in rd:
             rd["co2_ppm"] = np.full(order.size, DEFAULT_CO2_PPM)
+        if len(ids) > 1 and np.isnan(hs[0]):
+            raise MultilatError(f"{where(int(rows[0]))}: sensor {s!r} has no height_m; with several sensors "
+                                f"every sensor needs its height (equal heights to average them)")
         h_out.append(hs[0])
         t_out.append(ts)
         r_out.append(rd)
