@@ -236,6 +236,17 @@ def test_histogram_mode_agrees_with_exact_on_the_same_samples():
     assert counts.sum() == trials and counts.size == 40
 
 
+def test_histogram_mode_heavy_tails_cauchy():
+    # the histogram range comes from pilot quantiles, not extremes: Cauchy bins stay fine
+    ex = run_mc(lambda a: a, {"a": Cauchy(0.0, 1.0)}, trials=4 * BLOCK, rng=3, quantiles="exact")
+    hi = run_mc(lambda a: a, {"a": Cauchy(0.0, 1.0)}, trials=4 * BLOCK, rng=3, quantiles="histogram")
+    assert ex.quantile_resolution == 0.0 and 0 < hi.quantile_resolution < 0.1
+    tol = 2 * hi.quantile_resolution + 2 * _quantile_se(ex.samples, 0.975) / 5
+    assert hi.interval_symmetric == pytest.approx(ex.interval_symmetric, abs=tol)
+    # exact 97.5 % point of the standard Cauchy: tan(0.475 pi) = 12.706
+    assert abs(hi.interval_symmetric[1] - math.tan(0.475 * math.pi)) <= 5 * _quantile_se(ex.samples, 0.975) + tol
+
+
 # ------------------------------------------------------------------ adaptive (JCGM 101 §7.9)
 def test_adaptive_meets_its_tolerance_and_matches_fixed_run():
     inputs = {f"x{i}": Normal(0.0, 1.0) for i in range(1, 5)}
