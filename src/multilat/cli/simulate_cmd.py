@@ -1,3 +1,91 @@
-"""Commands registered on multilat.cli.app.app (filled in by its owner)."""
+"""``multilat simulate``: the algorithm's own uncertainty by simulation (seed 000 §4.4)."""
 
-from multilat.cli.app import app  # noqa: F401
+from __future__ import annotations
+
+from typing import Optional
+
+import numpy as np
+import typer
+from rich.table import Table
+
+from multilat.cli.app import app, console, emit_json, progress
+from multilat.errors import MultilatError
+
+
+@app.command("simulate")
+def simulate_cmd(
+    source: str = typer.Argument(..., help="small-volume, large-volume, or a configuration file "
+                                 "(.toml or .csv of stations and targets; see docs/network-simulation.md)."),
+    trials: int = typer.Option(50, "--trials", help="Number of simulations (the paper: 50)."),
+    noise: str = typer.Option("gaussian", "--noise", help="gaussian (sigma, as the paper) or model "
+                              "(each error drawn from the distance model, non-gaussian)."),
+    sigma_um: float = typer.Option(4.7, "--sigma-um", help="Gaussian standard deviation in um."),
+    instrument: str = typer.Option("seed2020", "--instrument", help="Instrument preset or TOML (--noise model)."),
+    cost: str = typer.Option("distance", "--cost", help="distance (weighted) or squared (the paper's eq. 6)."),
+    start: str = typer.Option("distances", "--start", help="distances (initial values from the distances "
+                              "alone) or truth."),
+    seed: int = typer.Option(2020, "--seed", help="Root seed (each simulation gets a SeedSequence child)."),
+    as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+) -> None:
+    """Simulate distances of a configuration (truth + offsets + noise), adjust them, and report the
+    standard deviation of the interpoint-distance errors per simulation: min/mean/max beside the paper."""
+    from multilat.network.simulate import NOISES, load_config, simulate
+
+    if noise not in NOISES:
+        raise MultilatError(f"--noise must be one of {', '.join(NOISES)}, got {noise!r}")
+    if not (np.isfinite(sigma_um) and sigma_um > 0):
+        raise MultilatError(f"--sigma-um must be > 0, got {sigma_um!r}")
+    if trials < 1:
+        raise MultilatError(f"--trials must be >= 1, got {trials}")
+    if cost not in ("distance", "squared"):
+        raise MultilatError(f"--cost must be distance or squared, got {cost!r}")
+    if start not in ("distances", "truth"):
+        raise MultilatError(f"--start must be distances or truth, got {start!r}")
+    cfg = load_config(source)
+    with progress(disable=as_json) as bar:
+        task = bar.add_task(f"simulate {cfg.name}", total=trials)
+        res = simulate(cfg, trials=trials, noise=noise, sigma_m=sigma_um * 1e-6, instrument=instrument,
+                       rng=seed, cost=cost, initial=start, callback=lambda n: bar.advance(task, n))
+    s = res.summary()
+    paper = res.paper
+    doc = {
+        "config": res.config, "trials": res.trials, "converged": int(len(res.interpoint_std_m)),
+        "n_failed": res.n_failed, "noise": res.noise,
+        "sigma_m": None if noise == "model" else res.sigma_m, "cost": cost, "start": start, "seed": seed,
+        "pairs": [list(p) for p in res.pairs],
+        "interpoint_std_m": {k: s[k] for k in ("min", "mean", "max")},
+        "interpoint_std_sem_m": s["sem"], "interpoint_std_rms_m": s["rms"],
+        "predicted_rms_std_m": res.predicted_rms_std_m,
+        "paper_m": None if paper is None else {"min": paper.min_m, "mean": paper.mean_m,
+                                               "max": paper.max_m, "trials": paper.trials},
+        "pair_rms_error_m": {f"{a}-{b}": float(v) for (a, b), v in
+                             zip(res.pairs, np.sqrt(np.mean(res.errors_m ** 2, axis=0)))},
+        "offset_rms_error_m": dict(zip(_station_ids(source, res), np.sqrt(np.mean(res.offset_error_m ** 2,
+                                                                                  axis=0)).tolist())),
+        "sigma0_mean": float(np.mean(res.sigma0)),
+        "per_simulation_std_m": res.interpoint_std_m,
+    }
+    if as_json:
+        emit_json(doc)
+        return
+    console.print(f"[bold]Simulation of the self-calibrating adjustment[/bold] ({res.config}): "
+                  f"{doc['converged']} of {res.trials} simulations converged, noise={noise}"
+                  + (f" {sigma_um:g} um" if noise == "gaussian" else " (distance model)")
+                  + f", cost={cost}, {len(res.pairs)} interpoint pairs, mean sigma0={doc['sigma0_mean']:.2f}")
+    t = Table(title="Std of the interpoint-distance errors per simulation (um)")
+    for c in ("", "min", "mean", "max", "+-se(mean)"):
+        t.add_column(c, justify="right")
+    t.add_row("multilat", f"{s['min'] * 1e6:.1f}", f"{s['mean'] * 1e6:.1f}", f"{s['max'] * 1e6:.1f}",
+              f"{s['sem'] * 1e6:.2f}")
+    if paper is not None:
+        t.add_row(f"paper ({paper.trials} sims)", f"{paper.min_m * 1e6:.1f}", f"{paper.mean_m * 1e6:.1f}",
+                  f"{paper.max_m * 1e6:.1f}", "")
+    console.print(t)
+    console.print(f"first-order prediction of the rms per-simulation std: {res.predicted_rms_std_m * 1e6:.2f} um "
+                  f"(Monte Carlo rms: {s['rms'] * 1e6:.2f} um)")
+
+
+def _station_ids(source, res):
+    from multilat.network.simulate import load_config
+
+    return list(load_config(source).station_ids)
