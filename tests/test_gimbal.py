@@ -170,3 +170,20 @@ def test_correction_bad_input():
         gimbal.transit_offset_correction(1.0, float("nan"), 0.0)
     with pytest.raises(MultilatError, match="shorter"):
         gimbal.transit_offset_correction(1e-6, 1e-3, 1.0)
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=200, deadline=None)
+@given(rt=st.floats(0.05, 500.0), a=st.floats(-1e-3, 1e-3), c=st.floats(-1e-3, 1e-3),
+       al=st.floats(-0.02, 0.02), ga=st.floats(-0.02, 0.02), toh=st.floats(-1e-4, 1e-4),
+       el=st.floats(-math.pi, math.pi))
+def test_head_round_trip_property(rt, a, c, al, ga, toh, el):
+    kw = dict(a_m=a, c_m=c, alpha_rad=al, gamma_rad=ga, toh_m=toh, elevation_rad=el)
+    rm = gimbal.head_measured_distance(rt, **kw)
+    assert float(gimbal.head_true_distance(rm, **kw)) == pytest.approx(rt, rel=1e-13, abs=1e-13)
+    # first order: Rm - Rt = Toh cos(alpha) cos(phi - gamma) + a sin(alpha) + c sin(gamma), up to O(offset^2 / R)
+    lin = toh * math.cos(al) * math.cos(el - ga) + a * math.sin(al) + c * math.sin(ga)
+    assert float(rm) - rt == pytest.approx(lin, abs=2 * (a * a + c * c + toh * toh) / rt + 1e-12)
