@@ -1,0 +1,191 @@
+"""End-to-end Monte Carlo through the adjustment (network.propagate) and ``multilat propagate``."""
+
+from __future__ import annotations
+
+import json
+from concurrent.futures import ThreadPoolExecutor
+
+import numpy as np
+import pytest
+
+from multilat.cli import main
+from multilat.errors import MultilatError
+from multilat.network import batched as bt
+from multilat.network.configs import small_volume
+from multilat.network.propagate import chi2_3_95, problem_from_config, problem_from_truth, propagate
+
+
+@pytest.fixture(scope="module")
+def small_problem():
+    return problem_from_config(small_volume(), sigma_m=4.7e-6, source="small-volume")
+
+
+@pytest.fixture(scope="module")
+def gaussian_run(small_problem):
+    return propagate(small_problem, trials=20_000, rng=7, noise="gaussian")
+
+
+def test_chi2_constant():
+    from scipy.stats import chi2
+
+    assert abs(chi2.ppf(0.95, 3) - chi2_3_95) < 1e-12
+
+
+def test_gaussian_mc_std_agrees_with_linear_covariance(gaussian_run):
+    """Near-linear model, gaussian inputs: MC std of every coordinate, offset and triplet distance equals
+    the linear std within 4 MC standard errors of a std, sigma * sqrt(1 / (2 (n - 1)))."""
+    r = gaussian_run
+    assert r.n_failed == 0 and r.trials == 20_000
+    se = r.lin_std * np.sqrt(1.0 / (2 * (r.trials - 1)))
+    fixed = r.lin_std < 1e-15          # none in the free datum
+    assert not fixed.any()
+    assert np.all(np.abs(r.mc_std - r.lin_std) <= 4 * se), np.max(np.abs(r.mc_std - r.lin_std) / se)
+    # means: unbiased to first order; the bias must be small against the std (4 standard errors of a mean)
+    assert np.all(np.abs(r.mc_mean - r.nominal) <= 4 * r.lin_std / np.sqrt(r.trials))
+
+
+def test_jcgm102_ellipsoids_cover_95_percent(gaussian_run):
+    """The MC-covariance ellipsoid with the chi2_3 quantile covers 95 % of the trials (gaussian output):
+    binomial standard error sqrt(0.95 * 0.05 / n), 4 sigma."""
+    r = gaussian_run
+    tol = 4 * np.sqrt(0.95 * 0.05 / r.trials)
+    assert np.all(np.abs(r.ellipsoid_coverage_mc - 0.95) < tol)
+    assert np.all(np.abs(r.ellipsoid_coverage_lin - 0.95) < tol + 0.005)   # + lin-vs-MC std differences
+
+
+def test_coverage_intervals_bracket_the_estimate(gaussian_run):
+    r = gaussian_run
+    assert np.all(r.interval_symmetric[:, 0] < r.mc_mean) and np.all(r.mc_mean < r.interval_symmetric[:, 1])
+    # gaussian output: half-width ~ 1.96 std (tolerance: quantile MC noise, a few %)
+    half = 0.5 * (r.interval_symmetric[:, 1] - r.interval_symmetric[:, 0])
+    np.testing.assert_allclose(half / r.mc_std, 1.96, rtol=0.04)
+
+
+def test_model_noise_is_propagated(small_problem):
+    """Distance-model (non-gaussian) errors: MC std vs the linear sandwich with the inputs' empirical std,
+    within 4 MC standard errors (kurtosis-aware)."""
+    r = propagate(small_problem, trials=6000, rng=3, noise="model", chunk_size=3000)
+    assert r.trials + r.n_failed == 6000
+    assert np.all(np.abs(r.mc_std - r.lin_std) <= 4 * r.mc_std_se + 1e-3 * r.lin_std)
+    assert 0.95 < r.input_std_ratio < 1.05
+
+
+def test_identical_whatever_the_map(small_problem):
+    """Chunks are seeded by SeedSequence spawn keys: a thread pool that runs them out of order gives the
+    same numbers as the in-process run."""
+    a = propagate(small_problem, trials=4000, rng=11, noise="gaussian", chunk_size=1000)
+    with ThreadPoolExecutor(2) as ex:
+        b = propagate(small_problem, trials=4000, rng=11, noise="gaussian", chunk_size=1000, map=ex.map)
+    np.testing.assert_array_equal(a.samples, b.samples)
+    np.testing.assert_array_equal(a.mc_std, b.mc_std)
+    c = propagate(small_problem, trials=4000, rng=12, noise="gaussian", chunk_size=1000)
+    assert not np.array_equal(a.samples, c.samples)
+
+
+@pytest.mark.slow
+def test_identical_on_a_dask_local_cluster(small_problem):
+    from multilat.parallel import dask_map
+
+    a = propagate(small_problem, trials=4000, rng=5, noise="model", chunk_size=1000)
+    with dask_map(workers=2) as m:
+        b = propagate(small_problem, trials=4000, rng=5, noise="model", chunk_size=1000, map=m)
+    np.testing.assert_array_equal(a.samples, b.samples)
+
+
+def test_failed_trials_are_counted_and_dropped(small_problem, monkeypatch):
+    orig = bt.BatchedNetwork.solve
+
+    def flaky(self, d, **kw):
+        sol = orig(self, d, **kw)
+        conv = sol.converged.copy()
+        conv[::10] = False
+        return bt.BatchSolution(sol.station_xyz_m, sol.offset_m, sol.target_xyz_m, conv, sol.iterations,
+                                sol.last_step_m, sol.sigma0)
+
+    monkeypatch.setattr(bt.BatchedNetwork, "solve", flaky)
+    r = propagate(small_problem, trials=2000, rng=1, noise="gaussian", chunk_size=1000)
+    assert r.n_failed == 200 and r.trials == 1800
+    assert r.samples.shape[0] == 1800
+
+
+def test_adaptive_stops_when_stable():
+    rng = np.random.default_rng(4)
+    h = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, 0.9, 0], [0.5, 0.3, 0.8]])
+    tg = rng.uniform(0.1, 0.8, (14, 3))
+    si, ti = (a.ravel() for a in np.meshgrid(np.arange(4), np.arange(14), indexing="ij"))
+    pb = problem_from_truth("ABCD", [f"P{j}" for j in range(14)], si, ti, np.full(56, 5e-6), h,
+                            np.zeros(4), tg, pairs=[("P0", "P1")])
+    r = propagate(pb, rng=2, noise="gaussian", adaptive=True, ndigits=1, chunk_size=10_000,
+                  max_trials=400_000, keep_samples=False)
+    assert r.adaptive["converged"]
+    assert r.trials % 10_000 == 0 and r.trials >= 100_000
+    with pytest.raises(MultilatError):
+        propagate(pb, adaptive=True, chunk_size=1000)
+
+
+def test_bad_arguments(small_problem):
+    with pytest.raises(MultilatError):
+        propagate(small_problem, trials=1)
+    with pytest.raises(MultilatError):
+        propagate(small_problem, noise="uniform")
+    with pytest.raises(MultilatError):
+        problem_from_config(small_volume(), datum="control")
+    with pytest.raises(MultilatError):
+        problem_from_config(small_volume(), pairs=[("1", "nope")])
+
+
+# --------------------------------------------------------------------------- CLI
+def test_cli_json(capsys):
+    rc = main(["propagate", "small-volume", "--trials", "3000", "--noise", "gaussian", "--seed", "3", "--json"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    doc = json.loads(out)
+    assert doc["trials"] + doc["n_failed"] == 3000
+    assert {"parameters", "distances", "points", "summary", "noise"} <= set(doc)
+    labels = [r["label"] for r in doc["distances"]]
+    assert "1-2" in labels and len(doc["points"]) == 4 + 14
+    d12 = doc["distances"][labels.index("1-2")]
+    assert abs(d12["reference_m"] - 0.150022) < 1e-9
+    assert d12["mc_std_m"] > 0 and d12["lin_std_m"] > 0
+
+
+def test_cli_human_and_out(tmp_path, capsys):
+    rc = main(["propagate", "small-volume", "--trials", "2000", "--noise", "gaussian", "--out", str(tmp_path / "o")])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert "Monte Carlo" in out and "ellipsoid" in out
+    names = sorted(p.name for p in (tmp_path / "o").iterdir())
+    assert names == ["clouds.png", "distances.csv", "parameters.csv", "points.csv", "summary.json"]
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["trials"] == 2000
+
+
+def test_cli_errors(tmp_path, capsys):
+    assert main(["propagate", "small-volume", "--noise", "uniform"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:")
+    assert main(["propagate", str(tmp_path / "missing.csv"), "--trials", "100"]) == 2
+    bad = tmp_path / "bad.csv"
+    bad.write_text("station,target,distance_m\nA,T1,-1\n")
+    assert main(["propagate", str(bad), "--trials", "100"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert all(line.startswith("error:") for line in err)
+
+
+def test_cli_interrupt_leaves_no_half_written_file(tmp_path, monkeypatch, capsys):
+    """Ctrl-C while the figure is being written: exit 130, no partial file, no summary."""
+    import matplotlib.figure
+
+    def boom(self, fname, *a, **k):
+        with open(fname, "wb") as f:
+            f.write(b"\x89PNG half")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig", boom)
+    out = tmp_path / "o"
+    rc = main(["propagate", "small-volume", "--trials", "1000", "--noise", "gaussian", "--out", str(out)])
+    assert rc == 130
+    names = sorted(p.name for p in out.iterdir()) if out.exists() else []
+    assert "clouds.png" not in names and "summary.json" not in names
+    assert not any(n.endswith(".part") for n in names)
+    for n in names:                      # whatever was written before the interrupt is whole
+        assert n.endswith(".csv") and (out / n).read_text().count("\n") >= 2
