@@ -171,6 +171,13 @@ def test_cli_correct_writes_observation_file(tmp_path, capsys):
     np.testing.assert_allclose(obs.sigma_m, js["sigma_m"], rtol=1e-12)
     assert main(["correct", str(raw), "-e", str(env), "--formula", "edlen"]) == 0
     assert "corrected distances" in capsys.readouterr().out
+    cov = tmp_path / "cov.csv"
+    assert main(["correct", str(raw), "-e", str(env), "--cov", str(cov), "--json"]) == 0
+    js = json.loads(capsys.readouterr().out)
+    ct = read_csv_table(cov, required=("row",), warn_unknown=False)
+    got = np.array([ct.floats(c) for c in ct.columns[1:]]).T
+    np.testing.assert_allclose(got, js["covariance_m2"], rtol=1e-15)
+    np.testing.assert_allclose(np.sqrt(np.diag(got)), js["sigma_m"], rtol=1e-12)
 
 
 def _expect_error(capsys, argv, match, out):
@@ -250,12 +257,25 @@ def test_per_row_environment_and_unknown_head(tmp_path, capsys):
     n = air.group_index([20, 20.5], [101325.0, 101300.0], humidity_pct=50, co2_ppm=450)
     d_air = np.array([3.0008, 4.0011]) / n
     expect = gimbal.transit_offset_correction(d_air, [INST.heads["A"].toh_m, INST.heads["B"].toh_m], [0.1, 0.0])
+    expect = gimbal.target_transit_offset_correction(expect, INST.target.tot_m, [-0.1, 0.0])
     np.testing.assert_allclose(res.distance_m, expect, atol=1e-12)
-    assert any("target transit offset not corrected" in s for s in res.notes)
+    # Tot = 11 µm is corrected with the line of sight when the target's angle is not recorded
+    np.testing.assert_allclose(res.target_transit_correction_m, INST.target.tot_m * np.cos([0.1, 0.0]), rtol=1e-6)
+    assert any("corrected with the line of sight" in s for s in res.notes)
     # one sensor for all rows: its errors are common, the air part almost fully correlated (not
     # exactly: the four quantities' sensitivities differ slightly between the two states' air)
     c_air = res.covariance_m2 - np.diag(res.sigma_model_m ** 2)
     assert c_air[0, 1] / np.sqrt(c_air[0, 0] * c_air[1, 1]) == pytest.approx(1.0, abs=1e-4)
+    # azimuth and elevation are passed through to the observation file (for initial values, eq. 7)
+    q = tmp_path / "rawaz.csv"
+    q.write_text(p.read_text().replace("elevation_rad,", "elevation_rad,azimuth_rad,").replace(",0.1,", ",0.1,1.5,")
+                 .replace(",0.0,", ",0.0,-0.5,"))
+    out = tmp_path / "obs_az.csv"
+    assert main(["correct", str(q), "--out", str(out)]) == 0
+    from multilat.network.files import read_observations
+    obs = read_observations(out)
+    np.testing.assert_allclose(obs.azimuth_rad, [1.5, -0.5])
+    np.testing.assert_allclose(obs.elevation_rad, [0.1, 0.0])
     p.write_text(p.read_text().replace("B,P1", "X,P1"))
     out = tmp_path / "o.csv"
     _expect_error(capsys, ["correct", str(p), "--out", str(out)], "raw.csv:3: station 'X' is not a head", out)

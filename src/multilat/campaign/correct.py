@@ -12,7 +12,8 @@ For each raw reading ``i`` (seed 000 §2, §3.2, §3.3):
    (:func:`multilat.gimbal.transit_offset_correction`), then the target's ``Tot`` with
    ``target_elevation_rad`` (:func:`multilat.gimbal.target_transit_offset_correction`, eq. 5's sign
    convention of Table IV's ``Tot``), with the Tables III-IV values of the instrument config. Both
-   angles are from the horizontal. A missing angle column skips that correction (noted);
+   angles are from the horizontal. Without ``target_elevation_rad`` the line of sight
+   (``-elevation_rad``) is used; without any angle the corrections are skipped (noted);
 5. the uncertainty: ``cov = J Σ_e Jᵀ + diag(u_model²)`` where ``J = ∂D/∂e`` is the exact sensitivity
    of every distance to every sensor's calibration error ``e`` (``Σ_e`` diagonal from the
    instrument's sensor uncertainties) and ``u_model`` the distance model's standard uncertainty at
@@ -291,13 +292,20 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
         d = d_h
     else:
         notes.append("no elevation_rad column: head transit offsets not corrected")
-    if raw.target_elevation_rad is not None:
-        d_t = np.asarray(gimbal.target_transit_offset_correction(d, np.full(m, _target_tot_m(inst)),
-                                                                 raw.target_elevation_rad), dtype=float)
+    tel = raw.target_elevation_rad
+    if tel is None and raw.elevation_rad is not None:
+        # the straight line of sight seen from the target has elevation -phi (seed2020's
+        # correction_elevation = "line_of_sight"); eq. (2)'s cosine makes the sign irrelevant
+        tel = -raw.elevation_rad
+        notes.append("no target_elevation_rad column: target transit offset corrected with the line of "
+                     "sight (-elevation_rad)")
+    if tel is not None:
+        d_t = np.asarray(gimbal.target_transit_offset_correction(d, np.full(m, _target_tot_m(inst)), tel),
+                         dtype=float)
         tgt_corr = d_t - d
         d = d_t
     else:
-        notes.append("no target_elevation_rad column: target transit offset not corrected")
+        notes.append("no elevation columns: target transit offset not corrected")
     if extrap.any():
         notes.append(f"{int(extrap.sum())} observation(s) with extrapolated environment")
 
