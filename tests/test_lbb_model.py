@@ -162,3 +162,14 @@ def test_config_errors_are_one_line_and_name_the_key(tmp_path):
         load_config(p)
     with pytest.raises(MultilatError, match="not found"):
         load_config(tmp_path / "nope.toml")
+
+
+def test_distribution_options_follow_the_documented_sigmas():
+    d = pose_distributions(CFG)
+    assert d["ez2"].std == pytest.approx(123e-6 / 2) and d["sy3"].std == pytest.approx(2.5e-6 / 2)
+    assert d["dmi_m"].std == pytest.approx(0.125e-6)
+    u = pose_distributions(CFG.replace(errors__thermal_model="uniform", errors__axis_distribution="uniform"))
+    assert u["thermal_m"].std == pytest.approx(0.0196 * 15e-6 / np.sqrt(3))       # 0.170 um
+    assert u["ez2"].low == -123e-6 and u["ez2"].high == 123e-6
+    z = pose_distributions(CFG.replace(errors__inner_angle_bound_rad=0.0))
+    assert z["ey3"].std == 0.0
