@@ -8,8 +8,6 @@ import pytest
 
 from multilat import air, gimbal, instrument
 from multilat.campaign.correct import correct_file, correct_raw, is_raw_file, observations_from_raw
-from multilat.campaign.environment import read_environment
-from multilat.campaign.raw import read_raw
 from multilat.campaign.worked import (CampaignConditions, simulate_campaign, write_environment_csv,
                                       write_heights_csv, write_raw_csv)
 from multilat.cli import main
