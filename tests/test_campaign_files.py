@@ -143,3 +143,15 @@ def test_single_height_needs_no_heights(tmp_path):
     be = beam_environment(log, np.array([parse_time("2020-03-10T09:05:00")]))
     assert be.values["temperature_c"][0] == pytest.approx(20.5, abs=1e-12)
     assert be.values["co2_ppm"][0] == pytest.approx(410.0, abs=1e-12)
+
+
+def test_readings_reproduced_at_their_own_times(tmp_path):
+    # at a log time the interpolation must return the reading itself (no off-by-one at the ends)
+    log = read_environment(_write(tmp_path / "env.csv", ENV))
+    t = np.array([parse_time("2020-03-10T09:00:00"), parse_time("2020-03-10T10:00:00")])
+    be = beam_environment(log, t, mid_height_m=np.array([0.3, 2.4]))
+    np.testing.assert_allclose(be.sensor_values["temperature_c"], [[19.0, 20.0], [19.6, 20.8]], atol=0)
+    np.testing.assert_allclose(be.sensor_values["humidity_pct"], [[40, 40], [42, 42]], atol=0)
+    # beams at the sensor heights: each sensor's own temperature (two sensors: the line through them)
+    np.testing.assert_allclose(be.values["temperature_c"], [19.0, 20.8], atol=1e-12)
+    assert not be.extrapolated.any()
