@@ -97,6 +97,14 @@ def test_cli_two_face(tmp_path, capsys):
     assert out["head"] == "A"
     assert main(["two-face", str(p)]) == 0
     assert "transit offset" in capsys.readouterr().out.lower()
+    # --sigma-um overrides the file's sigma_m: the estimate is unchanged (uniform weights) and its
+    # uncertainty scales linearly with sigma
+    assert main(["two-face", str(p), "--sigma-um", "2", "--json"]) == 0
+    out2 = json.loads(capsys.readouterr().out)
+    assert out2["transit_offset_m"] == pytest.approx(out["transit_offset_m"], rel=1e-9)
+    assert out2["transit_offset_std_m"] == pytest.approx(2 * out["transit_offset_std_m"], rel=1e-9)
+    assert main(["two-face", str(p), "--sigma-um", "-1"]) == 2
+    assert "--sigma-um" in capsys.readouterr().err
     p.write_text(rows[0] + "\n" + rows[1].replace(",I,", ",III,") + "\n")
     assert main(["two-face", str(p)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
