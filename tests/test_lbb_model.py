@@ -173,3 +173,11 @@ def test_distribution_options_follow_the_documented_sigmas():
     assert u["ez2"].low == -123e-6 and u["ez2"].high == 123e-6
     z = pose_distributions(CFG.replace(errors__inner_angle_bound_rad=0.0))
     assert z["ey3"].std == 0.0
+
+
+def test_example_configs_load():
+    from pathlib import Path
+
+    ex = Path(__file__).resolve().parents[1] / "examples" / "lbb" / "controlled_room.toml"
+    c = load_config(ex)
+    assert c.base.thermal_bound_c == 0.01 and c.model_dump(exclude={"base"}) == CFG.model_dump(exclude={"base"})

@@ -97,3 +97,18 @@ def test_bad_edges_name_the_row():
     rows[0, 4] = np.nan
     with pytest.raises(MultilatError, match="l2_m must be finite"):
         trilaterate(*rows.T)
+
+
+from hypothesis import given, settings, strategies as st  # noqa: E402
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.floats(0.2, 2.0), st.floats(-0.5, 1.5), st.floats(0.1, 2.0),
+       st.floats(-2.0, 2.0), st.floats(-2.0, 2.0), st.floats(0.01, 2.0))
+def test_round_trip_property(l12, x3_frac, y3, x, y, z):
+    base = np.array([[0, 0, 0], [l12, 0, 0], [x3_frac * l12, y3, 0]], dtype=float)
+    tool = np.array([x, y, z])
+    res = trilaterate(*edges_from_points(base, tool))
+    assert res.valid
+    # conditioning: dz/dl ~ l/z, so the float64 round-off of l^2 (1e-16 l^2) shows as ~1e-16 l^2 / z
+    assert np.max(np.abs(res.xyz_m - tool)) < 1e-9
