@@ -71,13 +71,16 @@ def numpy_oneshot(n: int, seed: int):
 
 
 def _median_time(fn, repeats):
+    """Median wall time and median CPU time (``process_time``: less sensitive to a shared machine)."""
     fn()  # warm-up (imports, page faults)
-    ts = []
+    ts, cs = [], []
     for _ in range(repeats):
+        c = time.process_time()
         t = time.perf_counter()
         fn()
         ts.append(time.perf_counter() - t)
-    return statistics.median(ts), ts
+        cs.append(time.process_time() - c)
+    return statistics.median(ts), statistics.median(cs)
 
 
 _MEMORY_SCRIPT = r"""
@@ -124,15 +127,16 @@ def run(quick: bool = False) -> list[dict]:
     rows = []
 
     load = os.getloadavg()[0]
-    t_eng, _ = _median_time(lambda: run_mc(eq3_error_m, inputs, trials=n, rng=SEED), repeats)
-    t_np, _ = _median_time(lambda: numpy_oneshot(n, SEED), repeats)
+    t_eng, c_eng = _median_time(lambda: run_mc(eq3_error_m, inputs, trials=n, rng=SEED), repeats)
+    t_np, c_np = _median_time(lambda: numpy_oneshot(n, SEED), repeats)
     res = run_mc(eq3_error_m, inputs, trials=n, rng=SEED)
     _, std_np, sym_np, _ = numpy_oneshot(n, SEED)
     rows.append(dict(
         name="eq3_5.2M_engine", median_s=t_eng, baseline="numpy_oneshot", baseline_median_s=t_np,
         ratio=t_np / t_eng,
         extra=dict(trials=n, mtrials_per_s=n / t_eng / 1e6, baseline_mtrials_per_s=n / t_np / 1e6,
-                   overhead_pct=100 * (t_eng / t_np - 1), std_um=res.std * 1e6, baseline_std_um=std_np * 1e6,
+                   overhead_pct=100 * (t_eng / t_np - 1), cpu_s=c_eng, baseline_cpu_s=c_np,
+                   mtrials_per_cpu_s=n / c_eng / 1e6, std_um=res.std * 1e6, baseline_std_um=std_np * 1e6,
                    u95_um=float(res.expanded_uncertainty) * 1e6, repeats=repeats, load_avg_1min_before=load),
     ))
 
