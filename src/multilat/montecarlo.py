@@ -227,7 +227,7 @@ def _check_coverage(coverage):
 
 
 # ============================================================================ result
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class MCResult:
     """Summary of a Monte Carlo propagation (or of user-drawn samples).
 
@@ -365,7 +365,7 @@ class MCResult:
 
 
 # ============================================================================ chunk worker
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class _ChunkSpec:
     model: Callable
     inputs: tuple
@@ -899,7 +899,7 @@ def _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact
 
 
 # ============================================================================ GUM (first order)
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class GUMResult:
     """First-order (GUM, JCGM 100 §5.1) propagation.
 
@@ -981,7 +981,7 @@ def gum_linear(model, inputs: Mapping[str, Any], *, coverage: float = 0.95, rel_
                      {nm: contrib[:, i].copy() for i, nm in enumerate(names)}, float(coverage), kp, interval, cov)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class GUMValidation:
     """JCGM 101 §8.2: d_low, d_high against the numerical tolerance delta; ``valid`` if both <= delta."""
 
@@ -1050,7 +1050,7 @@ def _gum_ok(d) -> bool:
             and math.isfinite(m) and math.isfinite(s))
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class BudgetComponent:
     """One source's contribution.
 
@@ -1078,7 +1078,7 @@ class BudgetComponent:
     variance_fraction: float
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class UncertaintyBudget:
     """Ranked contributions (largest first) and the combined Monte Carlo result."""
 
