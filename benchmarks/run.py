@@ -108,6 +108,7 @@ def main(argv=None) -> int:
     from multilat.io import write_json_atomic
 
     names = discover(args.only)
+    machine = machine_info()  # load average before anything runs
     out = Path(args.out)
     previous = {}
     if args.only and out.exists():
@@ -136,7 +137,7 @@ def main(argv=None) -> int:
         areas[name] = {"date": date, "quick": args.quick, "wall_s": time.perf_counter() - t0, "results": results}
         table.extend((name, r) for r in results)
     print_table(table)
-    write_json_atomic(out, {"date": date, "machine": machine_info(), "areas": areas})
+    write_json_atomic(out, {"date": date, "machine": machine, "areas": areas})
     print(f"wrote {out}", file=sys.stderr)
     if failed:
         print(f"error: benchmark(s) failed: {', '.join(failed)}", file=sys.stderr)
