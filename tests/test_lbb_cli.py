@@ -80,10 +80,9 @@ def test_simulate_json_and_out(tmp_path, capsys):
     assert main(["lbb", "simulate", "--grid", "3", "--trials", "40", "--seed", "3", "--json"]) == 0
     again = json.loads(capsys.readouterr().out)
     assert again["points"][0]["mean_error_m"] == p0["mean_error_m"]
-    assert main(["lbb", "simulate", "--where", "comparison", "--method", "direct", "--trials", "20",
-                 "--json"]) == 0
+    assert main(["lbb", "simulate", "--grid", "2", "--method", "direct", "--trials", "20", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
-    assert d["method"] == "direct" and d["n_points"] == 75
+    assert d["method"] == "direct" and d["trials"] == 20
 
 
 def test_simulate_bad_config_and_options(tmp_path, capsys):
@@ -103,6 +102,8 @@ def test_simulate_bad_config_and_options(tmp_path, capsys):
     assert "method" in _one_error_line(capsys)
     assert main(["lbb", "simulate", "--trials", "1"]) == 2
     assert "--trials" in _one_error_line(capsys)
+    assert main(["lbb", "simulate", "--where", "moon"]) == 2
+    assert "--where" in _one_error_line(capsys)
 
 
 def test_compare_reference(tmp_path, capsys):

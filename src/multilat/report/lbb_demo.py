@@ -43,22 +43,25 @@ def section(*, seed: int, quick: bool) -> Section:
 
     grid = 4 if quick else None
     pts = volume_points(cfg, grid)
+    if quick:
+        cfg = cfg.replace(monte_carlo__init_draws=500)
     proc = run_procedure(cfg, pts, rng=seed)
     # true bias: many direct trials at the points with the largest procedure std
     worst = np.argsort(-np.max(proc.std_m, axis=1))[: (2 if quick else 4)]
-    direct = run_direct(cfg, pts[worst], trials=1000 if quick else 20000, rng=seed + 1)
+    direct = run_direct(cfg, pts[worst], trials=500 if quick else 20000, rng=seed + 1)
     # std against height at the base centroid (the singularity) with the paper's draw sizes
     z = np.array([0.03, 0.05, 0.08, 0.12, 0.2, 0.3])
     cx, cy = base_xyz(cfg)[:, :2].mean(axis=0)
-    prof_cfg = cfg.replace(monte_carlo__side_draws=300 if quick else 2000,
-                           monte_carlo__point_draws=300 if quick else 4000)
+    prof_cfg = cfg.replace(monte_carlo__init_draws=500 if quick else 2000,
+                           monte_carlo__side_draws=100 if quick else 2000,
+                           monte_carlo__point_draws=200 if quick else 4000)
     prof = run_procedure(prof_cfg, np.c_[np.full(len(z), cx), np.full(len(z), cy), z], rng=seed + 2)
     zs = prof.std_m[:, 2]
     slope = float(np.polyfit(np.log(z[:3]), np.log(zs[:3]), 1)[0])
     z38 = float(np.interp(np.log(PAPER_MAX_STD_UM * 1e-6), np.log(zs[::-1]), z[::-1]))
     l0 = l0_distribution(cfg, rng=seed + 3)
     th = pose_distributions(cfg)["thermal_m"].std
-    no_base = run_procedure(cfg.replace(base__thermal_bound_c=0.0), pts, rng=seed)
+    no_base = run_procedure(cfg.replace(base__thermal_bound_c=0.0), pts[worst] if quick else pts, rng=seed)
 
     sec.table(
         ["quantity", "paper", "multilat", "note"],
