@@ -44,7 +44,6 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from multilat.errors import MultilatError
 
@@ -235,16 +234,12 @@ def _affine_fit(D, Ut, Vv, A, delta, o):
         return J.reshape(p * q, len(x))
 
     x0 = np.concatenate([A.ravel(), delta, o])
-    try:
-        res = least_squares(fun, x0, jac=jac, method="lm", xtol=1e-14, ftol=1e-14,
-                            max_nfev=100 * len(x0))
-    except (ValueError, np.linalg.LinAlgError):
-        return None
-    x = res.x
+    x = _levenberg_marquardt(fun, jac, x0, max_iter=200)
     Ax = x[:9].reshape(3, 3)
     if not np.all(np.isfinite(x)) or abs(np.linalg.det(Ax)) < 1e-300:
         return None
-    return Ut @ Ax, x[9:12] + Vv @ np.linalg.inv(Ax).T, x[12:], float(np.sqrt(np.mean(res.fun ** 2)))
+    r = fun(x)
+    return Ut @ Ax, x[9:12] + Vv @ np.linalg.inv(Ax).T, x[12:], float(np.sqrt(np.mean(r ** 2)))
 
 
 def _factorise(D2):
@@ -357,7 +352,7 @@ def _grow(D, W, H, T, o, placedH, placedT):
                 H[i], o[i] = multilaterate(T[tg], D[i, tg], with_offset=len(tg) >= 7)
                 placedH[i] = True
                 changed = True
-        if changed:
+        if changed and not (placedH.all() and placedT.all()):   # the caller refines the whole
             si, ti = np.flatnonzero(placedH), np.flatnonzero(placedT)
             Dsub = np.where(obs[np.ix_(si, ti)], D[np.ix_(si, ti)], np.nan)
             if placedH.sum() >= 3:
@@ -459,7 +454,7 @@ def _levenberg_marquardt(fun, jac, x, *, max_iter=200, tol=1e-10):
             if lam > 1e12:
                 return x
         small = np.all(np.abs(step) <= tol * (np.abs(x) + 1e-3))
-        x, r, done = xn, rn, (cost - cn) <= 1e-14 * cost or small
+        x, r, done = xn, rn, (cost - cn) <= 1e-10 * cost or small
         cost = cn
         lam = max(lam / 10.0, 1e-12)
         if done:
