@@ -250,10 +250,7 @@ def direct_model(cfg: LBBConfig, bar: BarModel, edges_m, elevations_rad, nominal
     ndarray (n, 3)
         ``simulated - commanded`` coordinates (m).
     """
-    cos = {"cos_theta": draws["cos_theta"], "cos_phi": draws["cos_phi"]}
-    l0 = initialization_length(cfg, bar, draws, **cos)
-    sides = true_side_lengths(cfg, bar, l0, edges_m, elevations_rad, draws, base_dt_c=draws["base_dt"], **cos)
-    return _trilaterate_errors(cfg, sides, nominal_xyz_m, label)
+    return _direct_with_sides(cfg, bar, edges_m, elevations_rad, nominal_xyz_m, label, **draws)[..., :3]
 
 
 # ----------------------------------------------------------------------------- the §5 procedure
