@@ -42,3 +42,15 @@ def test_csv_roundtrip_and_row_errors(tmp_path):
 def test_to_jsonable_handles_numpy():
     out = json.loads(json.dumps(to_jsonable({"a": np.arange(3.0), "b": np.float32(1.5), "c": np.nan})))
     assert out == {"a": [0.0, 1.0, 2.0], "b": 1.5, "c": None}
+
+
+def test_atomic_file_gets_umask_permissions(tmp_path):
+    import os
+
+    p = tmp_path / "x.txt"
+    from multilat.io import write_text_atomic
+
+    write_text_atomic(p, "ok")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert (p.stat().st_mode & 0o777) == (0o666 & ~umask)
