@@ -130,3 +130,29 @@ def test_bad_input():
         solve_large(net.station_index, net.target_index, net.distance_m, -net.sigma_m, *init)
     with pytest.raises(MultilatError):
         synthetic_network(5, 10, 2)
+
+
+def test_fast_reader_matches_the_strict_reader(tmp_path):
+    from multilat.network.fastio import read_observations_fast
+    from multilat.network.files import read_observations
+
+    p = tmp_path / "obs.csv"
+    p.write_text("# comment\nstation,target,distance_m,sigma_m\nA,P10,1.25,5e-6\nB,P10,2.5,4e-6\n"
+                 "A,P2,0.75,5e-6\nC,P2,1.0e0,5e-6\n")
+    fast = read_observations_fast(p)
+    ref = read_observations(p)
+    assert fast.station_ids == tuple(ref.station_ids) and fast.target_ids == tuple(ref.target_ids)
+    np.testing.assert_array_equal(fast.station_index, ref.station_index)
+    np.testing.assert_array_equal(fast.target_index, ref.target_index)
+    np.testing.assert_array_equal(fast.distance_m, ref.distance_m)
+    np.testing.assert_array_equal(fast.sigma_m, ref.sigma_m)
+    bad = tmp_path / "bad.csv"
+    bad.write_text("station,target,distance_m,sigma_m\nA,P1,1.0,5e-6\nA,P2,x1,5e-6\n")
+    with pytest.raises(MultilatError, match=r"bad.csv:3: column 'distance_m'"):
+        read_observations_fast(bad)
+    bad.write_text("station,target,distance_m,sigma_m\nA,P1,1.0,5e-6\nA,P2,1.0\n")
+    with pytest.raises(MultilatError, match=r"bad.csv:3: expected 4 cells"):
+        read_observations_fast(bad)
+    bad.write_text("station,target,distance_m,sigma_m\nA,P1,-1.0,5e-6\n")
+    with pytest.raises(MultilatError, match=r"bad.csv:2: .*> 0"):
+        read_observations_fast(bad)
