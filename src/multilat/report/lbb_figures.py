@@ -176,6 +176,14 @@ def std_vs_height(z_m, std_m, *, slope=None, ax=None):
     ax.loglog(zz, ref, "k:", lw=0.8, label="∝ 1/z")
     ax.set_xlabel("height above the base plane z (mm)")
     ax.set_ylabel("standard deviation (µm)")
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
+
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(FormatStrFormatter("%g"))
+        axis.set_minor_formatter(NullFormatter())
+    ax.set_xticks([t for t in (10, 20, 30, 50, 100, 200, 300, 500) if zz.min() <= t <= zz.max()])
+    sv = np.asarray(std_m) * UM
+    ax.set_yticks([t for t in (0.1, 0.2, 0.5, 1, 2, 3, 5, 10, 20, 50, 100) if sv.min() * 0.9 <= t <= sv.max() * 1.1])
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     return ax
