@@ -596,7 +596,7 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
     # distances alone: complete blocks, best first, until the fit reaches the noise level
     gen = np.random.default_rng(rng)
     sig = np.sqrt(1.0 / W[seen])
-    good = 10.0 * float(np.median(sig))   # robust residual scale of a converged network
+    good = 10.0 * float(np.sqrt(np.mean(sig ** 2)))   # RMS residual of a converged network
     best = None
     for st, tg in _blocks(seen):
         out = _block_solve(D[np.ix_(st, tg)], rng=gen)
@@ -616,13 +616,13 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
         frame = _choose_frame(H)
         H, T = _to_frame(H, T, frame)
         H, T, o, rms, rob = _refine(D, W, H, T, o, frame)
-        if best is None or rob < best[5]:
+        if best is None or rms < best[4]:
             best = (H, T, o, frame, rms, rob, "algebraic")
-        if rob <= good:
+        if rms <= good:
             break
-    if best is None or best[5] > good:
+    if best is None or best[4] > good:
         alt = _restarts(D, W, rng=gen, restarts=restarts)
-        if alt is not None and (best is None or alt[5] < best[5]):
+        if alt is not None and (best is None or alt[4] < best[4]):
             best = alt + ("restarts",)
     if best is None:
         raise MultilatError("initial values: the network could not be built up from its distances "
@@ -644,6 +644,6 @@ def _restarts(D, W, *, rng, restarts):
         frame = _choose_frame(H)
         H, T = _to_frame(H, T, frame)
         Hr, Tr, orr, rms, rob = _refine(D, W, H, T, np.zeros(s), frame, max_nfev=100)
-        if np.isfinite(rob) and (best is None or rob < best[-1]):
+        if np.isfinite(rms) and (best is None or rms < best[4]):
             best = (Hr, Tr, orr, frame, rms, rob)
     return best
