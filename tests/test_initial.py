@@ -233,4 +233,5 @@ def test_gross_error_does_not_derail_the_initial_values():
     iv = initial_values(bad, rng=0)
     r1 = adjust(bad, initial=iv, snooping=False)
     r0 = adjust(bad, initial=_truth(cfg), snooping=False)
-    assert _datum_free_gap(r1, r0) < 1e-9
+    # 10 nm: the adjustment's own stopping tolerance on this stretched problem (a wrong minimum is >= um)
+    assert _datum_free_gap(r1, r0) < 1e-8
