@@ -181,3 +181,14 @@ def test_example_configs_load():
     ex = Path(__file__).resolve().parents[1] / "examples" / "lbb" / "controlled_room.toml"
     c = load_config(ex)
     assert c.base.thermal_bound_c == 0.01 and c.model_dump(exclude={"base"}) == CFG.model_dump(exclude={"base"})
+
+
+def test_sag_fast_path_at_segment_ends_equals_explicit_stations():
+    rng = np.random.default_rng(2)
+    br = np.cumsum(np.c_[np.zeros(50), rng.uniform(0.05, 0.3, (50, 3))], axis=1)
+    ei = rng.uniform(300, 5000, (50, 3))
+    w = rng.uniform(5, 60, (50, 3))
+    v1, t1 = stepped_beam(br, ei, w)
+    v2, t2 = stepped_beam(br, ei, w, br)
+    np.testing.assert_allclose(v1, v2, rtol=1e-12, atol=1e-20)
+    np.testing.assert_allclose(t1, t2, rtol=1e-12, atol=1e-20)

@@ -162,9 +162,8 @@ def sag_offsets(bar: BarModel, lb_m, lc_m, elevation_rad):
     length = x2 + lc
     breaks = np.stack([np.zeros_like(lb), np.full_like(lb, bar.la_m), x2, length], axis=-1)
     w = bar.weight_n_per_m * np.cos(el)[..., None]
-    at = np.stack([np.zeros_like(lb), x2, length], axis=-1)
-    v, th = stepped_beam(breaks, bar.ei_n_m2, w, at)
-    th0, v2, th2, thl = th[..., 0], v[..., 1], th[..., 1], th[..., 2]
+    v, th = stepped_beam(breaks, bar.ei_n_m2, w)          # at the segment ends 0, La, x2, L
+    th0, v2, th2, thl = th[..., 0], v[..., 2], th[..., 2], th[..., 3]
     return -v2 + th0 * x2, th0 - th2, v2 + th2 * lc, th2 - thl
 
 

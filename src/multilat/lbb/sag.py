@@ -38,7 +38,7 @@ def tube_section(outer_diameter_m, wall_m, youngs_modulus_pa, density_kg_m3, gra
     return float(youngs_modulus_pa) * inertia, float(density_kg_m3) * area * float(gravity_m_s2)
 
 
-def stepped_beam(breaks_m, ei_n_m2, w_n_per_m, at_m):
+def stepped_beam(breaks_m, ei_n_m2, w_n_per_m, at_m=None):
     """Deflection and slope of a simply supported stepped beam under piecewise-uniform load.
 
     Parameters
@@ -50,8 +50,9 @@ def stepped_beam(breaks_m, ei_n_m2, w_n_per_m, at_m):
         Bending stiffness of each segment (N·m²), > 0.
     w_n_per_m : array_like, shape (..., k)
         Transverse load per length of each segment (N/m), positive along gravity.
-    at_m : array_like, shape (..., p)
-        Stations where deflection and slope are wanted (0 <= a <= L).
+    at_m : array_like, shape (..., p), optional
+        Stations where deflection and slope are wanted (0 <= a <= L). Default: the segment ends
+        themselves (p = k + 1; the fast path of the LBB model, no extra integration nodes).
 
     Returns
     -------
@@ -69,7 +70,7 @@ def stepped_beam(breaks_m, ei_n_m2, w_n_per_m, at_m):
     breaks = np.asarray(breaks_m, dtype=float)
     ei = np.asarray(ei_n_m2, dtype=float)
     w = np.asarray(w_n_per_m, dtype=float)
-    a = np.asarray(at_m, dtype=float)
+    a = breaks if at_m is None else np.asarray(at_m, dtype=float)
     lead = np.broadcast_shapes(breaks.shape[:-1], ei.shape[:-1], w.shape[:-1], a.shape[:-1])
     k = breaks.shape[-1] - 1
     breaks = np.broadcast_to(breaks, lead + (k + 1,))
@@ -83,7 +84,7 @@ def stepped_beam(breaks_m, ei_n_m2, w_n_per_m, at_m):
     r_a = np.sum(seg_load * length[..., None], axis=-1) / length - np.sum(seg_first, axis=-1) / length
     cum_w = np.cumsum(seg_load, axis=-1) - seg_load           # load left of segment j
     cum_s = np.cumsum(seg_first, axis=-1) - seg_first
-    nodes = np.sort(np.concatenate([breaks, a], axis=-1), axis=-1)
+    nodes = breaks if at_m is None else np.sort(np.concatenate([breaks, a], axis=-1), axis=-1)
     lo, hi = nodes[..., :-1], nodes[..., 1:]                  # (..., s)
     half = (hi - lo) / 2.0
     mid = (hi + lo) / 2.0
