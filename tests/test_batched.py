@@ -154,12 +154,16 @@ def test_interpoint_distances_do_not_depend_on_the_datum():
 def test_nonconverged_trials_are_flagged():
     net = small_network()
     d = noisy(net, 50)
-    d[7] += 0.05                       # a 5 cm blunder on every distance of one trial: far from nominal
-    sol = net.solve(d, max_iter=3)
-    assert not sol.converged[7]
-    assert sol.n_failed >= 1
+    d[7] += np.random.default_rng(5).normal(0, 0.02, net.n_obs)   # 2 cm noise: far from the nominal
+    d[3, 0] = np.nan                                                # a broken trial
+    sol = net.solve(d, max_iter=10, fallback=False)
+    assert not sol.converged[7] and not sol.converged[3]
+    assert sol.n_failed == 2
+    sol = net.solve(d, max_iter=10)                 # frozen, then full Gauss-Newton for the stragglers
+    assert sol.retried[7] and sol.retried[3] and sol.retried.sum() == 2
+    assert not sol.converged[3] and not sol.converged[7]    # NaN / 2 cm noise: still flagged
     good = net.solve(noisy(net, 50), max_iter=10)
-    assert good.n_failed == 0
+    assert good.n_failed == 0 and not good.retried.any()
 
 
 def test_bad_input():

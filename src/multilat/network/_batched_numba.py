@@ -54,6 +54,7 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
                 gh[i, 2] += sk * u0[k, 2]
                 gh[i, 3] += sk
             step = 0.0
+            nan = False
             for a in range(4 * s):
                 acc = 0.0
                 for b in range(4 * s):
@@ -63,8 +64,10 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
                 for a in range(3):
                     h[r, i, a] += dxp[i, a]
                     step = max(step, abs(dxp[i, a]))
+                    nan = nan or not np.isfinite(dxp[i, a])
                 o[r, i] += dxp[i, 3]
                 step = max(step, abs(dxp[i, 3]))
+                nan = nan or not np.isfinite(dxp[i, 3])
             for k in range(m):
                 i = si[k]
                 j = ti[k]
@@ -77,7 +80,8 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
                     v = ninv0[j, a, 0] * gt[j, 0] + ninv0[j, a, 1] * gt[j, 1] + ninv0[j, a, 2] * gt[j, 2]
                     tg[r, j, a] += v
                     step = max(step, abs(v))
-            if not np.isfinite(step):
+                    nan = nan or not np.isfinite(v)
+            if nan or not np.isfinite(step):
                 step = np.inf
             last[r] = step
             if step < tol:

@@ -148,9 +148,11 @@ def flatten(station_xyz_m, offset_m, target_xyz_m) -> np.ndarray:
     ndarray, shape (..., 4s + 3t)
     """
     h = np.asarray(station_xyz_m, float)
+    o = np.asarray(offset_m, float)
+    tg = np.asarray(target_xyz_m, float)
     lead = h.shape[:-2]
-    return np.concatenate([h.reshape(lead + (-1,)), np.asarray(offset_m, float).reshape(lead + (-1,)),
-                           np.asarray(target_xyz_m, float).reshape(lead + (-1,))], axis=-1)
+    return np.concatenate([h.reshape(lead + (3 * h.shape[-2],)), o.reshape(lead + (o.shape[-1],)),
+                           tg.reshape(lead + (3 * tg.shape[-2],))], axis=-1)
 
 
 # ----------------------------------------------------------------------------------------------
@@ -344,6 +346,8 @@ class BatchSolution:
         Largest absolute coordinate/offset change of the last iteration, metres.
     sigma0 : ndarray, shape (n,)
         A-posteriori standard deviation of unit weight of each trial.
+    retried : ndarray of bool, shape (n,), or None
+        Trials re-solved by full Gauss-Newton after the frozen method did not converge.
     """
 
     station_xyz_m: np.ndarray
@@ -353,6 +357,7 @@ class BatchSolution:
     iterations: np.ndarray
     last_step_m: np.ndarray
     sigma0: np.ndarray
+    retried: np.ndarray | None = None
 
     @property
     def n_failed(self) -> int:
@@ -533,7 +538,7 @@ class BatchedNetwork:
 
     # -- batched solving -------------------------------------------------------------------
     def solve(self, distance_m: np.ndarray, *, method: str = "frozen", engine: str = "auto",
-              tol_m: float = 1e-10, max_iter: int = 10) -> BatchSolution:
+              tol_m: float = 1e-10, max_iter: int = 10, fallback: bool = True) -> BatchSolution:
         """Solve ``n`` trials with distances ``distance_m`` (shape (n, m)), all from the nominal solution.
 
         Parameters
@@ -548,6 +553,11 @@ class BatchedNetwork:
             A trial has converged when its largest parameter step is below this, metres.
         max_iter : int
             Iteration limit; trials still moving after it are flagged, not kept.
+        fallback : bool
+            With the frozen method, trials that have not converged after ``max_iter`` iterations
+            (far from the nominal solution, where the frozen matrix contracts slowly) are solved again
+            from the nominal solution by full Gauss-Newton (at least 20 iterations); only those that
+            still fail are flagged.
 
         Returns
         -------
@@ -566,6 +576,28 @@ class BatchedNetwork:
             engine = "numba" if (method == "frozen" and numba_available()) else "numpy"
         if engine == "numba" and method != "frozen":
             raise MultilatError("the numba engine implements the frozen method only")
+        h, o, tg, iters, last, vtpv = self._iterate(d, method, engine, tol_m, max_iter)
+        retried = np.zeros(len(d), bool)
+        if method == "frozen" and fallback:
+            bad = np.nonzero(~(last < tol_m))[0]
+            if len(bad):   # far from the nominal solution: full Gauss-Newton for those trials
+                h2, o2, t2, it2, l2, v2 = self._iterate(d[bad], "gauss-newton", "numpy", tol_m,
+                                                        max(max_iter, 20))
+                h[bad], o[bad], tg[bad], last[bad], vtpv[bad] = h2, o2, t2, l2, v2
+                iters[bad] = iters[bad] + it2
+                retried[bad] = True
+        n = len(d)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            sigma0 = np.sqrt(vtpv / self.dof) if self.dof > 0 else np.full(n, np.nan)
+            hd, td = self.datum.apply(h, tg, self.station_xyz_m, self.target_xyz_m,
+                                      engine="numba" if engine == "numba" else "numpy")
+        finite = (np.isfinite(hd).all(axis=(1, 2)) & np.isfinite(td).all(axis=(1, 2))
+                  & np.isfinite(o).all(axis=1))
+        converged = (last < tol_m) & finite
+        return BatchSolution(hd, o, td, converged, iters, last, sigma0, retried)
+
+    def _iterate(self, d, method, engine, tol_m, max_iter):
+        """Iterate all trials from the nominal solution; raw (not datum-moved) parameters."""
         n = d.shape[0]
         s, t = self.n_stations, self.n_targets
         h = np.broadcast_to(self.station_xyz_m, (n, s, 3)).copy()
@@ -576,9 +608,10 @@ class BatchedNetwork:
             p = self._pre
             iters, last, vtpv = nb.solve_frozen(d, h, o, tg, self.station_index, self.target_index,
                                                 p["w"], p["u0"], p["ninv0"], p["s0inv"], tol_m, max_iter)
-        else:
-            iters = np.full(n, max_iter, np.int64)
-            last = np.full(n, np.inf)
+            return h, o, tg, iters, last, vtpv
+        iters = np.full(n, max_iter, np.int64)
+        last = np.full(n, np.inf)
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             for it in range(max_iter):
                 dh, do, dt = self._step(d, h, o, tg, method)
                 h += dh
@@ -592,15 +625,9 @@ class BatchedNetwork:
                 last = step
                 if np.all(step < tol_m):
                     break
-        if engine == "numpy":   # residuals at the solution (the numba kernel returns them)
             r = d - self._model(h, o, tg)
             vtpv = np.einsum("nm,m->n", r * r, self._pre["w"])
-        sigma0 = np.sqrt(vtpv / self.dof) if self.dof > 0 else np.full(n, np.nan)
-        hd, td = self.datum.apply(h, tg, self.station_xyz_m, self.target_xyz_m, engine=engine)
-        finite = (np.isfinite(hd).all(axis=(1, 2)) & np.isfinite(td).all(axis=(1, 2))
-                  & np.isfinite(o).all(axis=1))
-        converged = (last < tol_m) & finite
-        return BatchSolution(hd, o, td, converged, iters, last, sigma0)
+        return h, o, tg, iters, last, vtpv
 
     def _model(self, h, o, tg):
         diff = h[:, self.station_index] - tg[:, self.target_index]

@@ -281,6 +281,7 @@ def _run_chunk(args):
         ddev = np.zeros((int(ok.sum()), 0))
     dev = np.concatenate([x - x0, ddev], axis=1)
     return dict(dev=dev.astype(np.float32) if dev.size else dev, n=n, n_failed=int((~ok).sum()),
+                n_retried=int(sol.retried.sum()) if sol.retried is not None else 0,
                 sigma0=sol.sigma0[ok], e_sum=e.sum(axis=0), e2_sum=(e * e).sum(axis=0))
 
 
@@ -331,6 +332,8 @@ class PropagationResult:
     input_std_ratio : float
         Mean of (empirical input std / the distance model's :func:`budget.distance_std_m`) — how well
         the distance model's stated standard uncertainty matches its own samples (1 for gaussian).
+    n_retried : int
+        Trials the frozen-matrix iteration did not converge and full Gauss-Newton re-solved.
     samples : ndarray (trials, k) float32 or None
         Deviations from nominal (kept for figures).
     """
@@ -358,6 +361,7 @@ class PropagationResult:
     elapsed_s: float
     input_std_m: np.ndarray = field(default=None, repr=False)
     input_std_ratio: float = 1.0
+    n_retried: int = 0
     samples: np.ndarray | None = field(default=None, repr=False)
 
     @property
@@ -412,6 +416,7 @@ class PropagationResult:
             "source": self.problem.source,
             "trials": self.trials,
             "n_failed": self.n_failed,
+            "n_retried": self.n_retried,
             "noise": self.noise,
             "seed_entropy": self.seed_entropy,
             "coverage": 0.95,
@@ -619,6 +624,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
                          "tolerance_m_min": float(np.min(tol))}
     dev = np.concatenate([p["dev"] for p in parts]).astype(np.float64) if parts else np.zeros((0, k))
     n_failed = int(sum(p["n_failed"] for p in parts))
+    n_retried = int(sum(p["n_retried"] for p in parts))
     n = dev.shape[0]
     if n < 2:
         raise MultilatError(f"only {n} of {done} trials converged: the network is too weak for a "
@@ -668,7 +674,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         point_ids=pids, point_cov_mc=pc_mc, point_cov_lin=pc_lin, ellipsoid_coverage_mc=cov_mc_frac,
         ellipsoid_coverage_lin=cov_lin_frac, trials=n, n_failed=n_failed, sigma0_mean=sig0, noise=noise,
         seed_entropy=int(ss.entropy), adaptive=adaptive_info, elapsed_s=time.perf_counter() - t0,
-        input_std_m=noise_std, input_std_ratio=input_std_ratio,
+        input_std_m=noise_std, input_std_ratio=input_std_ratio, n_retried=n_retried,
         samples=dev.astype(np.float32) if keep_samples else None)
 
 
