@@ -180,3 +180,13 @@ def test_cli_errors_are_one_line(capsys, args, msg):
     assert main(args) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and msg in err[0]
+
+
+def test_demo_section_quick():
+    from multilat.report.html import render
+    from multilat.report.network_demo import section
+
+    sec = section(seed=1, quick=True)
+    html = render("t", [sec])
+    assert "Table V" in html and "Table VI" in html and "6.6" in html and "5.4" in html
+    assert html.count("<img") == 2
