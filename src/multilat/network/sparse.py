@@ -261,7 +261,8 @@ def synthetic_network(n_stations: int = 20, n_targets: int = 200_000, per_target
 
     Stations on a ring of radius ``0.6 size_m`` at alternating heights (0 and ``0.3 size_m``),
     offsets uniform in +-5 mm; targets uniform in a ``size_m x size_m x 0.25 size_m`` box; each target
-    observed by ``per_target`` distinct stations chosen at random; gaussian noise ``sigma_m``.
+    observed by ``per_target`` distinct stations chosen at random, half on each ring (a target seen only
+    by the low ring at floor height would have coplanar lines of sight); gaussian noise ``sigma_m``.
     Observations are listed target by target.
     """
     rng = np.random.default_rng(rng)
@@ -274,9 +275,18 @@ def synthetic_network(n_stations: int = 20, n_targets: int = 200_000, per_target
     off = rng.uniform(-5e-3, 5e-3, n_stations)
     tg = rng.uniform([-size_m / 2, -size_m / 2, 0.0], [size_m / 2, size_m / 2, 0.25 * size_m],
                      (n_targets, 3))
-    # per_target distinct stations per target: argsort of random keys
-    keys = rng.random((n_targets, n_stations))
-    st = np.argpartition(keys, per_target - 1, axis=1)[:, :per_target]
+    # per_target distinct stations per target, half from the low ring and half from the high one
+    # (all-low stations would leave a target at floor height with coplanar lines of sight)
+    low = np.arange(0, n_stations, 2)
+    high = np.arange(1, n_stations, 2)
+    n_low = min(len(low), per_target // 2)
+    n_high = per_target - n_low
+    if n_high > len(high):
+        n_high = len(high)
+        n_low = per_target - n_high
+    pick_l = np.argpartition(rng.random((n_targets, len(low))), n_low - 1, axis=1)[:, :n_low]
+    pick_h = np.argpartition(rng.random((n_targets, len(high))), n_high - 1, axis=1)[:, :n_high]
+    st = np.concatenate([low[pick_l], high[pick_h]], axis=1)
     st.sort(axis=1)
     si = st.ravel().astype(np.int64)
     ti = np.repeat(np.arange(n_targets, dtype=np.int64), per_target)
