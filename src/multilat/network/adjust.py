@@ -502,11 +502,16 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     limit = obs.n_obs if max_rejections is None else int(max_rejections)
     crit = st.w_critical(alpha)
     warn = True
+    guess = start
     unlocated: tuple = ()
     while True:
         sub = obs if used.all() else obs.subset(used)
-        core = _adjust_once(sub, datum, start, obs, used, points, cost, off_free, off_val, sc_free,
-                            max_iter, tol_m, chunk_targets, warn=warn)
+        core = _adjust_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
+                            sc_free, max_iter, tol_m, chunk_targets, warn=warn)
+        # the next adjustment (after a rejection) starts from this solution
+        gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
+        gs[core["smap"]], gt_[core["tmap"]], go[core["smap"]] = core["sx"], core["tx"], core["off"]
+        guess = Start(gs, gt_, go)
         warn = False
         if not do_snoop or len(rejected) >= limit:
             break
@@ -578,9 +583,10 @@ def _control_ids(sub, datum, points):
     return set(ids)
 
 
-def _adjust_once(sub, datum, start, obs, used, points, cost, off_free_all, off_val_all, sc_free_all,
-                 max_iter, tol_m, chunk_targets, *, warn):
-    """One adjustment of the observations ``sub`` (a subset of ``obs``); returns a dict of arrays in
+def _adjust_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
+                 sc_free_all, max_iter, tol_m, chunk_targets, *, warn):
+    """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
+    ``ref_start`` gives the reference coordinates of the free datum. Returns a dict of arrays in
     ``sub``'s order plus the maps back."""
     smap, tmap = _station_map(obs, used), _target_map(obs, used)
     off_free, off_val, sc_free = off_free_all[smap], off_val_all[smap], sc_free_all[smap]
@@ -649,8 +655,8 @@ def _adjust_once(sub, datum, start, obs, used, points, cost, off_free_all, off_v
             for p in ids:
                 if p not in all_ids:
                     raise MultilatError(f"datum free: unknown point id {p!r}")
-            ref = {i: p for i, p in zip(all_ids, np.vstack([start.station_xyz_m[smap],
-                                                             start.target_xyz_m[tmap]]))}
+            ref = {i: p for i, p in zip(all_ids, np.vstack([ref_start.station_xyz_m[smap],
+                                                             ref_start.target_xyz_m[tmap]]))}
             if points is not None:
                 ref.update({i: points.get(i) for i in ids if points.get(i) is not None})
             cur = {i: p for i, p in zip(all_ids, np.vstack([sx, tx]))}
@@ -659,13 +665,10 @@ def _adjust_once(sub, datum, start, obs, used, points, cost, off_free_all, off_v
         G, E = _datum_matrices(datum, sub, sx, tx)
     cov = NetworkCovariance(Qgg, sys_.Ntt_inv, Js_w, Jt_w, sub.station_index, sub.target_index,
                             factor=factor, R=R, G=G, E=E)
-    gcov = cov.global_block()
-    scov = np.stack([gcov[Q * i:Q * i + 3, Q * i:Q * i + 3] for i in range(s)])
-    tcov = cov.target_blocks(chunk_targets)
     h = cov.hat_diagonal(chunk_targets)
     red = np.clip(1.0 - h, 0.0, 1.0)
     return dict(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free,
-                scov=scov, tcov=tcov, gcov=gcov, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
+                chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
                 vtpv=vtpv, iterations=iters, cond=cond, cov=cov)
 
 
@@ -678,11 +681,10 @@ def _datum_matrices(datum, sub, sx, tx):
     Gp = helmert_basis(np.vstack([sx, tx]))
     G = np.zeros((n, 6))
     G[rows] = Gp
-    all_ids = sub.station_ids + sub.target_ids
+    pos = {pid: k for k, pid in enumerate(sub.station_ids + sub.target_ids)}
 
     def prow(pid, c):
-        k = all_ids.index(pid)
-        return rows[3 * k + c]
+        return rows[3 * pos[pid] + c]
 
     E = np.zeros((n, 6))
     if datum.kind == "321":
@@ -690,11 +692,13 @@ def _datum_matrices(datum, sub, sx, tx):
         for col, (pid, comp) in enumerate([(a, 0), (a, 1), (a, 2), (b, 1), (b, 2), (c, 2)]):
             E[prow(pid, comp), col] = 1.0
     else:
-        ids = all_ids if datum.points is None else datum.points
-        for pid in ids:
-            for comp in range(3):
-                r = prow(pid, comp)
-                E[r] = G[r]
+        if datum.points is None:
+            E[rows] = G[rows]
+        else:
+            for pid in datum.points:
+                for comp in range(3):
+                    r = prow(pid, comp)
+                    E[r] = G[r]
     return G, E
 
 
@@ -710,9 +714,10 @@ def _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, powe
         lost = [obs.station_ids[i] for i in range(s) if i not in smap] + \
                [obs.target_ids[j] for j in range(t) if j not in tmap]
         raise MultilatError(f"data snooping removed every observation of {', '.join(lost)}")
-    scov = core["scov"]
-    tcov = core["tcov"]
-    gcov = core["gcov"]
+    cov = core["cov"]
+    gcov = cov.global_block()
+    scov = np.stack([gcov[Q * i:Q * i + 3, Q * i:Q * i + 3] for i in range(s)])
+    tcov = cov.target_blocks(core["chunk_targets"])
     off_est = np.zeros(s, bool)
     sc_est = np.zeros(s, bool)
     off_est[smap], sc_est[smap] = core["off_free"], core["sc_free"]

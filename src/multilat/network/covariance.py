@@ -114,7 +114,16 @@ class NetworkCovariance:
 
     def global_block(self):
         """Covariance of the station parameters (5s, 5s): x, y, z, offset, scale per station."""
-        return self.block(np.arange(Q * self.s))
+        s = self.s
+        Rb = np.eye(Q * s)
+        for i in range(s):
+            Rb[Q * i:Q * i + 3, Q * i:Q * i + 3] = self.R
+        out = Rb @ (self.Qgg * self.factor) @ Rb.T
+        if self.G is not None:
+            g = slice(0, Q * s)
+            Gg, Cg = self.G[g], self.CHt[g]
+            out = out - Gg @ Cg.T - Cg @ Gg.T + Gg @ self.HCHt @ Gg.T
+        return 0.5 * (out + out.T)
 
     def target_blocks(self, chunk_targets: int = 20000):
         """3x3 covariance of every target (t, 3, 3) in the final datum, O(t s^2)."""
