@@ -189,3 +189,31 @@ def test_cli_interrupt_leaves_no_half_written_file(tmp_path, monkeypatch, capsys
     assert not any(n.endswith(".part") for n in names)
     for n in names:                      # whatever was written before the interrupt is whole
         assert n.endswith(".csv") and (out / n).read_text().count("\n") >= 2
+
+
+def test_321_datum_fixes_six_coordinates():
+    pb = problem_from_config(small_volume(), sigma_m=4.7e-6, datum="321:B,D,C")
+    r = propagate(pb, trials=3000, rng=2, noise="gaussian", chunk_size=1500)
+    lab = list(r.labels)
+    fixed = [lab.index(x) for x in ("B.x", "B.y", "B.z", "D.y", "D.z", "C.z")]
+    assert sorted(np.flatnonzero(r.fixed)) == sorted(fixed)
+    assert np.all(r.mc_std[fixed] < 1e-12)
+    assert np.isnan(r.ellipsoid_coverage_mc[list(r.point_ids).index("B")])
+    # C moves in a plane: its 2-dof region still covers 95 % (binomial s.e. 0.004, 4 sigma)
+    assert abs(r.ellipsoid_coverage_mc[list(r.point_ids).index("C")] - 0.95) < 0.016
+    assert r.agrees.all()
+    # datum-free quantities are the same as in the free datum, trial by trial
+    f = propagate(problem_from_config(small_volume(), sigma_m=4.7e-6), trials=3000, rng=2, noise="gaussian",
+                  chunk_size=1500)
+    n_par = pb.network.n_params
+    np.testing.assert_allclose(r.samples[:, n_par:], f.samples[:, n_par:], atol=2e-12)
+    np.testing.assert_allclose(r.samples[:, 12:16], f.samples[:, 12:16], atol=2e-12)
+
+
+def test_demo_section_quick():
+    from multilat.report.propagate_demo import section
+
+    sec = section(seed=3, quick=True)
+    html = "".join(sec.blocks)
+    assert html.count("<table>") == 2 and "<img" in html
+    assert "6.6" in html                      # the paper's mean beside ours

@@ -134,6 +134,9 @@ def problem_from_truth(station_ids, target_ids, station_index, target_index, sig
                        instrument=None, head: str | None = None, source: str = "") -> Problem:
     """A problem whose nominal distances are the exact distances of a known truth.
 
+    With a ``321:A,B,C`` datum the truth is first expressed in that frame (A at the origin, B on +x,
+    C in the xy-plane with y > 0), so the fixed coordinates are A.xyz, B.y, B.z and C.z.
+
     ``references``: optional mapping ``(a, b) -> length_m`` (or :class:`ReferenceLengths`); when
     ``pairs`` is None, the reference pairs are reported if given, else all target pairs (up to 20
     targets) or consecutive ones.
@@ -141,8 +144,16 @@ def problem_from_truth(station_ids, target_ids, station_index, target_index, sig
     station_ids = tuple(str(s) for s in station_ids)
     target_ids = tuple(str(t) for t in target_ids)
     dt = _convert_datum(datum, station_ids, target_ids)
-    net = bt.BatchedNetwork(station_index, target_index, sigma_m, station_xyz_m, offset_m, target_xyz_m,
-                            datum=dt)
+    h = np.asarray(station_xyz_m, float)
+    tg = np.asarray(target_xyz_m, float)
+    if dt.kind == "321":   # express the truth in the 3-2-1 frame (as network.adjust does)
+        from multilat.network.datum import apply_rigid, frame_321
+
+        x = np.concatenate([h, tg])
+        a, b, c = dt._stacked(len(h), len(tg))
+        rot, shift = frame_321(x[a], x[b], x[c])
+        h, tg = apply_rigid(rot, shift, h), apply_rigid(rot, shift, tg)
+    net = bt.BatchedNetwork(station_index, target_index, sigma_m, h, offset_m, tg, datum=dt)
     pairs_, ref = _pairs_and_refs(pairs, references, target_ids, station_ids)
     return Problem(station_ids, target_ids, net, net.nominal_distance_m(),
                    _heads_for(station_ids, instrument, head), pairs_, ref, source)
@@ -312,7 +323,9 @@ class PropagationResult:
     point_cov_mc, point_cov_lin : ndarray (P, 3, 3)
         Monte Carlo and linear covariances of each point (datum-dependent).
     ellipsoid_coverage_mc : ndarray (P,)
-        Fraction of trials inside the 95 % ellipsoid built from the MC covariance (JCGM 102).
+        Fraction of trials inside the 95 % ellipsoid built from the MC covariance (JCGM 102); for a
+        point with datum-fixed coordinates, the ellipsoid in the free coordinates (chi2 with their
+        number of degrees of freedom); NaN for a fixed point.
     ellipsoid_coverage_lin : ndarray (P,)
         Fraction of trials inside the 95 % ellipsoid of the linear covariance.
     trials : int
@@ -365,15 +378,20 @@ class PropagationResult:
     samples: np.ndarray | None = field(default=None, repr=False)
 
     @property
+    def fixed(self) -> np.ndarray:
+        """Quantities held by the datum (linear std below 1e-9 of the largest): no ratio for them."""
+        return self.lin_std <= 1e-9 * np.max(self.lin_std)
+
+    @property
     def std_ratio(self) -> np.ndarray:
-        """MC standard deviation over linear standard deviation."""
+        """MC standard deviation over linear standard deviation (NaN for datum-fixed quantities)."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            return self.mc_std / self.lin_std
+            return np.where(self.fixed, np.nan, self.mc_std / self.lin_std)
 
     @property
     def agrees(self) -> np.ndarray:
         """|mc_std - lin_std| within 3 MC standard errors (bool per quantity; True where both ~0)."""
-        tiny = (self.lin_std < 1e-15) & (self.mc_std < 1e-12)
+        tiny = self.fixed & (self.mc_std <= 1e-9 * np.max(self.mc_std))
         return tiny | (np.abs(self.mc_std - self.lin_std) <= 3.0 * self.mc_std_se)
 
     def rows(self, kind: str | None = None):
@@ -389,7 +407,7 @@ class PropagationResult:
                 "mc_std_m": float(self.mc_std[k]),
                 "mc_std_se_m": float(self.mc_std_se[k]),
                 "lin_std_m": float(self.lin_std[k]),
-                "ratio": float(self.std_ratio[k]) if self.lin_std[k] > 0 else None,
+                "ratio": None if self.fixed[k] else float(self.std_ratio[k]),
                 "agrees": bool(self.agrees[k]),
                 "interval_symmetric_m": [float(v) for v in self.interval_symmetric[k]],
                 "interval_shortest_m": [float(v) for v in self.interval_shortest[k]],
@@ -432,13 +450,17 @@ class PropagationResult:
 
     def summary(self) -> dict:
         """Headline numbers: worst std ratio, how many quantities agree with the linear covariance."""
-        r = self.std_ratio[self.lin_std > 0]
-        return {"n_quantities": len(self.labels), "n_agree": int(self.agrees.sum()),
+        r = self.std_ratio[~self.fixed]
+        cm = self.ellipsoid_coverage_mc[np.isfinite(self.ellipsoid_coverage_mc)]
+        cl = self.ellipsoid_coverage_lin[np.isfinite(self.ellipsoid_coverage_lin)]
+        return {"n_quantities": len(self.labels), "n_fixed_by_datum": int(self.fixed.sum()),
+                "n_agree": int(self.agrees.sum()),
                 "std_ratio_min": float(r.min()) if r.size else None,
                 "std_ratio_max": float(r.max()) if r.size else None,
-                "ellipsoid_coverage_mc_min": float(self.ellipsoid_coverage_mc.min()),
-                "ellipsoid_coverage_lin_min": float(self.ellipsoid_coverage_lin.min()),
-                "ellipsoid_coverage_lin_max": float(self.ellipsoid_coverage_lin.max())}
+                "ellipsoid_coverage_mc_min": float(cm.min()) if cm.size else None,
+                "ellipsoid_coverage_mc_max": float(cm.max()) if cm.size else None,
+                "ellipsoid_coverage_lin_min": float(cl.min()) if cl.size else None,
+                "ellipsoid_coverage_lin_max": float(cl.max()) if cl.size else None}
 
 
 def _semi_axes(cov):
@@ -489,16 +511,23 @@ def _linear(problem: Problem, noise_std):
 
 
 def _ellipsoid_fraction(dev3, center, cov):
-    """Fraction of rows of dev3 (n, 3) inside the chi2_3(0.95) ellipsoid of (center, cov)."""
-    try:
-        ci = np.linalg.inv(cov)
-    except np.linalg.LinAlgError:
+    """Fraction of rows of dev3 (n, 3) inside the 95 % ellipsoid of (center, cov).
+
+    Full rank: ``chi2_3(0.95)``. A datum-fixed coordinate (3-2-1) leaves a rank-r covariance: the
+    region is the r-dimensional ellipsoid in its range with the ``chi2_r(0.95)`` quantile; NaN for
+    a fixed point (r = 0).
+    """
+    from scipy.stats import chi2
+
+    ev, vec = np.linalg.eigh(np.asarray(cov, float))
+    if not np.all(np.isfinite(ev)) or ev.max() <= 0:
         return float("nan")
-    if not np.all(np.isfinite(ci)) or np.linalg.eigvalsh(cov).min() <= 0:
-        return float("nan")
-    z = dev3 - center
-    d2 = np.einsum("ni,ij,nj->n", z, ci, z)
-    return float(np.mean(d2 <= chi2_3_95))
+    keep = ev > 1e-9 * ev.max()
+    r = int(keep.sum())
+    z = (dev3 - center) @ vec[:, keep]
+    d2 = np.sum(z * z / ev[keep], axis=1)
+    q = chi2_3_95 if r == 3 else float(chi2.ppf(0.95, r))
+    return float(np.mean(d2 <= q))
 
 
 def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str = "model",
