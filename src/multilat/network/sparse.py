@@ -13,8 +13,8 @@ and memory are linear in the number of targets.
 
 Iterations: the first is a full Gauss-Newton step; later ones keep the normal matrix frozen and use
 the exact gradient (a chord method with the same fixed point, the exact normal equations), which
-costs a fifth of a full assembly. ``S`` is re-assembled only if the steps shrink slowly (ratio of
-successive steps above 0.05) while still above ``refresh_m`` (1 um). Convergence: largest parameter step below ``tol_m``.
+costs a fifth of a full assembly. ``S`` is re-assembled while the step exceeds ``refresh_m`` (1 cm)
+or when the steps shrink by less than a factor 10 (slow contraction). Convergence: largest parameter step below ``tol_m``.
 
 Datum: free network with inner constraints over the stations — the solution is moved rigidly to
 fit (least squares) the initial station coordinates, and the covariances are S-transformed onto
@@ -96,7 +96,7 @@ def _penalty_basis(h):
 
 def solve_large(station_index, target_index, distance_m, sigma_m, station_xyz_m, offset_m,
                 target_xyz_m, *, covariance: bool = True, tol_m: float = 1e-10, max_iter: int = 30,
-                refresh_m: float = 1e-6) -> LargeSolution:
+                refresh_m: float = 1e-2) -> LargeSolution:
     """Solve a large network from initial values.
 
     Parameters
@@ -114,8 +114,8 @@ def solve_large(station_index, target_index, distance_m, sigma_m, station_xyz_m,
     covariance : bool
         Also compute the station/offset covariance and per-target covariances.
     tol_m, max_iter, refresh_m
-        Convergence threshold on the largest step; iteration limit; steps above ``refresh_m``
-        trigger a re-assembly of the Schur complement at the next iteration.
+        Convergence threshold on the largest step; iteration limit; steps above ``refresh_m`` (1 cm)
+        or shrinking by less than a factor 10 trigger a re-assembly of the Schur complement.
 
     Returns
     -------
@@ -191,8 +191,9 @@ def solve_large(station_index, target_index, distance_m, sigma_m, station_xyz_m,
             break
         if step < tol_m:
             break
-        # re-assemble only while far from the solution and the frozen matrix contracts slowly
-        full = step > refresh_m and (prev_step == np.inf or step > 0.05 * prev_step)
+        # re-assemble while far from the solution (step > refresh_m) or when the frozen matrix
+        # contracts slowly (step ratio > 0.1); otherwise keep the matrix and iterate on the gradient
+        full = step > refresh_m or (prev_step < np.inf and step > 0.1 * prev_step)
         prev_step = step
     converged = bool(np.isfinite(step) and step < tol_m)
     # datum: rigid fit of the stations onto their initial coordinates
