@@ -461,7 +461,7 @@ def _load_csv(p: Path) -> NetworkConfig:
 
 #: thresholds of a "well-conditioned" random network (see :func:`random_network`)
 WELL_CONDITIONED = {"station_flatness": 0.25, "target_flatness": 0.25, "min_stations_per_target": 4,
-                    "min_redundancy": 4, "min_clearance": 0.1}
+                    "min_targets_per_station": 5, "min_redundancy": 4, "min_clearance": 0.1}
 
 
 @dataclass(frozen=True, eq=False)
@@ -496,7 +496,8 @@ def random_network(rng=None, *, n_stations=(4, 8), n_targets=(10, 30), size_m: f
 
     * stations not near-coplanar: smallest / largest singular value of the centred station
       coordinates >= 0.25 (for targets likewise: spread in 3D);
-    * every target seen by >= 4 stations (and every station sees >= 4 targets);
+    * every target seen by >= 4 stations, every station sees >= 5 targets (its 4 unknowns + 1, as
+      the adjustment's solvability check requires);
     * redundancy ``m - (4 s + 3 t - 6)`` >= 4 (the paper's 4 x 14 networks have exactly 4);
     * no target closer than ``0.1 size_m`` to a station.
 
@@ -517,7 +518,7 @@ def random_network(rng=None, *, n_stations=(4, 8), n_targets=(10, 30), size_m: f
         if np.linalg.norm(H[:, None] - T[None], axis=2).min() < c["min_clearance"] * size_m:
             continue
         seen = np.ones((s, t), bool) if s == 4 else g.random((s, t)) >= drop
-        if seen.sum(0).min() < c["min_stations_per_target"] or seen.sum(1).min() < 4:
+        if seen.sum(0).min() < c["min_stations_per_target"] or seen.sum(1).min() < c["min_targets_per_station"]:
             continue
         si, ti = np.nonzero(seen)
         if si.size - (4 * s + 3 * t - 6) < c["min_redundancy"]:
