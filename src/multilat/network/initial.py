@@ -23,10 +23,14 @@ distances of a complete block of ``p >= 4`` stations and ``q >= 10`` targets obe
 affine map ``A``; the column means ``mean_i D2_ij = c + 2 b.v_j + v_j^T G v_j`` are *linear* in the
 symmetric ``G = A^-T A^-1``, ``b`` and ``c`` (10 unknowns, hence ``q >= 10``), which fixes ``A``
 up to a rotation and a reflection (the TOA self-calibration idea of Kuang, Burgess, Torstensson
-and Åström, ICASSP 2013). Stations and targets outside the block are added by multilateration;
-then a least-squares refinement over every coordinate and offset. When no such block exists, or
-the algebra fails (``G`` not positive definite), random restarts of the refinement are used and
-the lowest cost is kept.
+and Åström, ICASSP 2013). The 12 affine unknowns and the block's offsets are then fitted to the
+distances themselves (Levenberg-Marquardt), and the factorisation is redone with the offsets
+removed until they settle (blocks of 6-9 common targets start this fit from random affine maps).
+Stations and targets outside the block are added by multilateration, re-fitting after each round;
+then a least-squares refinement over every coordinate and offset. A block is accepted when the RMS
+residual is within 10 x RMS(sigma); otherwise the next blocks, then random restarts of the
+refinement, are tried and the lowest RMS kept. docs/network-simulation.md gives the measured
+convergence rates.
 
 Frame and mirror
 ----------------
@@ -523,10 +527,12 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
         (per observation, NaN where unknown; azimuth from +x towards +y, elevation above the
         xy-plane of the head).
     rng : numpy.random.Generator, int or None
-        Only used by the fallback (random restarts) when no complete block of >= 4 stations and
-        >= 10 targets exists or the closed form fails.
+        Used by the random affine starts of blocks with fewer than 10 common targets and by the
+        fallback (random restarts).
     refine : bool
-        Finish with a least-squares refinement of every coordinate and offset (default).
+        Angles route only: finish with a least-squares refinement of every coordinate and offset
+        (default); ``False`` returns the plain eq. 7 + multilateration values. Distances alone
+        always refine (the refinement decides between candidate blocks).
     restarts : int
         Number of random starts of the fallback.
 
@@ -537,8 +543,8 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
     Raises
     ------
     MultilatError
-        Fewer than 4 stations, a target seen by fewer than 4 stations, or a network the growing
-        cannot place (disconnected).
+        Fewer than 4 stations, a target seen by fewer than 4 stations, a station seeing fewer than
+        4 targets, or a network nothing could place.
     """
     s, t = len(obs.station_ids), len(obs.target_ids)
     if s < 4:
