@@ -190,3 +190,12 @@ def test_demo_section_quick():
     html = render("t", [sec])
     assert "Table V" in html and "Table VI" in html and "6.6" in html and "5.4" in html
     assert html.count("<img") == 2
+
+
+def test_cli_model_noise_json(capsys):
+    assert main(["simulate", "large-volume", "--trials", "2", "--noise", "model", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["noise"] == "model" and doc["sigma_m"] is None
+    assert set(doc["offset_rms_error_m"]) == {"A", "B", "C", "D"}
+    assert main(["simulate", "large-volume", "--trials", "1", "--noise", "model", "--instrument", "nope"]) == 2
+    assert "unknown instrument preset" in capsys.readouterr().err

@@ -60,8 +60,8 @@ def simulate_cmd(
                                                "max": paper.max_m, "trials": paper.trials},
         "pair_rms_error_m": {f"{a}-{b}": float(v) for (a, b), v in
                              zip(res.pairs, np.sqrt(np.mean(res.errors_m ** 2, axis=0)))},
-        "offset_rms_error_m": dict(zip(_station_ids(source, res), np.sqrt(np.mean(res.offset_error_m ** 2,
-                                                                                  axis=0)).tolist())),
+        "offset_rms_error_m": dict(zip(res.station_ids,
+                                       np.sqrt(np.mean(res.offset_error_m ** 2, axis=0)).tolist())),
         "sigma0_mean": float(np.mean(res.sigma0)),
         "per_simulation_std_m": res.interpoint_std_m,
     }
@@ -84,8 +84,3 @@ def simulate_cmd(
     console.print(f"first-order prediction of the rms per-simulation std: {res.predicted_rms_std_m * 1e6:.2f} um "
                   f"(Monte Carlo rms: {s['rms'] * 1e6:.2f} um)")
 
-
-def _station_ids(source, res):
-    from multilat.network.simulate import load_config
-
-    return list(load_config(source).station_ids)

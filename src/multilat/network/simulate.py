@@ -64,6 +64,7 @@ class SimulationResult:
     Attributes
     ----------
     config : str  configuration name
+    station_ids : tuple of str
     trials : int  simulations run (converged ones are in the arrays)
     n_failed : int  simulations whose adjustment raised (dropped)
     noise : str  "gaussian" or "model"
@@ -79,6 +80,7 @@ class SimulationResult:
     """
 
     config: str
+    station_ids: tuple
     trials: int
     n_failed: int
     noise: str
@@ -304,7 +306,7 @@ def simulate(cfg: NetworkConfig, *, trials: int = 50, noise: str = "gaussian", s
     except MultilatError:
         pred = float("nan")
     return SimulationResult(
-        config=cfg.name, trials=trials, n_failed=failed, noise=noise,
+        config=cfg.name, station_ids=tuple(cfg.station_ids), trials=trials, n_failed=failed, noise=noise,
         sigma_m=float(sigma_m) if noise == "gaussian" else float("nan"), pairs=pairs,
         true_length_m=true_len, errors_m=errors, interpoint_std_m=interpoint_error_std(errors),
         offset_error_m=np.array(offs), sigma0=np.array(s0), predicted_rms_std_m=pred,
