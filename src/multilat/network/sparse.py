@@ -197,7 +197,8 @@ def solve_large(station_index, target_index, distance_m, sigma_m, station_xyz_m,
         prev_step = step
     converged = bool(np.isfinite(step) and step < tol_m)
     # datum: rigid fit of the stations onto their initial coordinates
-    hd, td = Datum.inner("stations").apply(h[None], tg[None], h0, tg)
+    hd, td = Datum.inner("stations").apply(h[None], tg[None], h0, tg,
+                                           engine="numba" if K.HAVE_NUMBA else "numpy")
     h, tg = hd[0], td[0]
     dof = m - (4 * s + 3 * t) + 6
     t_solve = time.perf_counter() - t_start
