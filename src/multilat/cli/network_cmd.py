@@ -20,10 +20,12 @@ from multilat.errors import MultilatError
 def result_to_json(res, refs=None) -> dict:
     """The ``--json`` document of an adjustment (also used by tests and the demo)."""
     stations = {}
+    corr = res.offset_correlations()
     for i, sid in enumerate(res.station_ids):
         stations[sid] = {"xyz_m": res.station_xyz_m[i], "offset_m": res.offset_m[i],
                          "offset_u_m": res.offset_std_m[i], "offset_estimated": bool(res.offset_estimated[i]),
-                         "cov_m2": res.station_cov_m2[i]}
+                         "cov_m2": res.station_cov_m2[i],
+                         "offset_corr_xyz": corr[i, :3]}
         if res.scale_estimated[i]:
             stations[sid]["scale"] = res.scale[i]
             stations[sid]["scale_u"] = res.scale_std[i]

@@ -53,18 +53,22 @@ def plot_residuals(result, ax=None):
 
 
 def auto_magnify(result) -> float:
-    """A power-of-ten magnification making the largest 95 % ellipsoid about 6 % of the layout."""
+    """A 1-2-5 magnification making the largest 95 % ellipsoid about 8 % of the layout."""
     (sa, _), (ta, _) = result.ellipsoids()
     big = max(float(np.nanmax(sa, initial=0.0)), float(np.nanmax(ta, initial=0.0)))
     pts = np.vstack([result.station_xyz_m, result.target_xyz_m])
     span = float(np.ptp(pts, axis=0).max()) or 1.0
     if big <= 0:
         return 1.0
-    return float(10 ** np.floor(np.log10(0.06 * span / big)))
+    want = 0.08 * span / big
+    dec = 10 ** np.floor(np.log10(want))
+    return float(max(m for m in (1, 2, 5) if m * dec <= want) * dec)
 
 
 def plot_top_view(result, ax=None, *, magnify: float | None = None):
-    """Top view (x, y) of heads and targets with their 95 % ellipsoids projected on xy, magnified."""
+    """Top view (x, y) of heads and targets with the shadows of their 95 % ellipsoids on the
+    xy-plane (the projection of ``{x: x^T C^-1 x <= chi2_3(0.95)}`` is the ellipse of the 2x2
+    marginal with the same bound), magnified."""
     plt = _plt()
     from matplotlib.patches import Ellipse
     from scipy import stats
@@ -79,6 +83,8 @@ def plot_top_view(result, ax=None, *, magnify: float | None = None):
                                        "o", "C0")):
         ax.plot(xyz[:, 0], xyz[:, 1], style, color=col, ms=6 if style == "^" else 4)
         for p, c, name in zip(xyz, cov, ids):
+            if len(xyz) > 2000:      # too many to draw one by one
+                break
             w, V = np.linalg.eigh(c[:2, :2])
             w = np.clip(w, 0, None)
             ang = np.degrees(np.arctan2(V[1, 1], V[0, 1]))
