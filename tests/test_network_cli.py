@@ -2,7 +2,6 @@
 line on stderr, exit 2 and no file written."""
 
 import json
-import shutil
 from pathlib import Path
 
 import numpy as np

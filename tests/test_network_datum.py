@@ -9,7 +9,7 @@ import pytest
 from multilat.errors import MultilatError
 from multilat.network.adjust import adjust
 from multilat.network.data import Points
-from multilat.network.datum import Datum, frame_321, helmert_basis, parse_datum, rigid_fit
+from multilat.network.datum import Datum, frame_321, helmert_basis, parse_datum
 
 from network_truth import perturbed_start, random_network
 

@@ -9,12 +9,10 @@ statistics: :mod:`multilat.network.statistics`; solvability: :mod:`multilat.netw
 from __future__ import annotations
 
 import itertools
-import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg
 
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
@@ -87,9 +85,10 @@ class AdjustmentResult:
     dof : int
     global_test : statistics.GlobalTest
     outliers : tuple of Outlier  rejected by data snooping, in order of rejection
-    unlocated : tuple of Outlier  a w-test failure that cannot be located: these observations'
-        w-tests are perfectly correlated (e.g. the 4 distances to a target seen by only 4
-        stations), so none was rejected; empty when snooping ended normally
+    unlocated : tuple of Outlier  a w-test failure that was not rejected: either it cannot be
+        located (these observations' w-tests are perfectly correlated, e.g. the 4 distances to a
+        target seen by only 4 stations) or rejecting it would leave the network unsolvable;
+        empty when snooping ended normally
     alpha, power : float  w-test significance and power used for the MDBs
     iterations : int ; condition : float (unit-diagonal reduced normal matrix)
     covariance : NetworkCovariance  any block of the full covariance in the datum
@@ -538,7 +537,9 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             _structure(obs.subset(trial), datum, points, off_free[_station_map(obs, trial)],
                        sc_free[_station_map(obs, trial)], warn=False)
         except MultilatError:
-            break      # rejecting it would make the network unsolvable: keep it (still flagged by w)
+            # rejecting it would make the network unsolvable: keep it, report it as not rejected
+            unlocated = (k,)
+            break
         rejected.append((k, float(w_sub[k_sub])))
         used = trial
     return _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global)
