@@ -153,3 +153,22 @@ def test_bad_options_raise():
         adjust(tr.obs, initial=st, offsets={"nope": 0.0})
     with pytest.raises(MultilatError, match="initial values"):
         adjust(tr.obs, initial=Start(np.zeros((3, 3)), np.zeros((14, 3)), np.zeros(4)))
+
+
+def test_fault_at_a_minimally_observed_station_is_reported_not_misplaced():
+    # station S0 sees exactly 5 targets (its minimum: 3 coordinates + offset + 1 for redundancy):
+    # its 5 w-tests are perfectly correlated, so a 200-sigma fault on S0->T2 is detected but cannot
+    # be located; nothing is rejected and the group is reported, and the global test fails
+    tr = random_network(31, n_stations=6, n_targets=25, noise=True)
+    keep = (tr.obs.station_index != 0) | (tr.obs.target_index < 5)
+    obs = tr.obs.subset(keep)
+    k = int(np.flatnonzero((obs.station_index == 0) & (obs.target_index == 2))[0])
+    d = obs.distance_m.copy()
+    d[k] += 200 * obs.sigma_m[k]
+    res = adjust(obs.with_distances(d), initial=perturbed_start(tr, 32))
+    assert res.outliers == ()
+    assert sorted(o.target for o in res.unlocated) == ["T0", "T1", "T2", "T3", "T4"]
+    assert {o.station for o in res.unlocated} == {"S0"}
+    assert len({round(abs(o.w), 6) for o in res.unlocated}) == 1 and abs(res.unlocated[0].w) > 3.29
+    assert not res.global_test.passed
+    assert res.used.all()

@@ -149,3 +149,33 @@ def test_interrupted_out_leaves_no_half_files(tmp_path, monkeypatch, capsys):
     rc = main(["adjust", str(OBS), "--points", str(PTS), "--out", str(out_dir)])
     assert rc == 130
     assert not out_dir.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_angles_read_and_figures_take_axes(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from multilat.network.adjust import adjust
+    from multilat.report.network_figures import plot_3d, plot_residuals, plot_top_view
+
+    p = tmp_path / "o.csv"
+    p.write_text("station,target,distance_m,sigma_m,azimuth_rad,elevation_rad\nA,1,1.0,5e-6,0.1,\n"
+                 "B,1,1.2,5e-6,0.2,0.3\n")
+    obs = read_observations(p)
+    assert obs.azimuth_rad[0] == 0.1 and np.isnan(obs.elevation_rad[0])
+    p.write_text("station,target,distance_m,azimuth_rad\nA,1,1.0,0.1\n")
+    with pytest.raises(MultilatError, match="both azimuth_rad and elevation_rad"):
+        read_observations(p, sigma_m=5e-6)
+    res = adjust(read_observations(OBS), points=read_points(PTS))
+    fig = plt.figure()
+    ax1 = fig.add_subplot(1, 3, 1)
+    ax2 = fig.add_subplot(1, 3, 2)
+    ax3 = fig.add_subplot(1, 3, 3, projection="3d")
+    assert plot_residuals(res, ax=ax1) is ax1
+    assert plot_top_view(res, ax=ax2, magnify=100) is ax2
+    assert plot_3d(res, ax=ax3, magnify=100) is ax3
+    # one residual marker per used observation, per head
+    assert sum(len(line.get_xdata()) for line in ax1.get_lines()[:4]) == 56
+    plt.close(fig)

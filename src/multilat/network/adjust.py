@@ -376,7 +376,7 @@ def _gauss_newton(pb: _Problem, sx, tx, off, sc, *, max_iter, tol_m, chunk_targe
                                     "check initial values and the observations")
         sx, tx, off, sc, cost = nsx, ntx, noff, nsc, new_cost
     raise MultilatError(f"the adjustment did not converge in {max_iter} iterations "
-                        f"(last step {step:.3g} m); check initial values and the geometry")
+                        f"(last step {step:.3g} m); check initial values, the geometry and the distances for gross errors")
 
 
 def _fixed_offsets(offsets, obs: Observations):
