@@ -179,3 +179,19 @@ def test_angles_read_and_figures_take_axes(tmp_path):
     # one residual marker per used observation, per head
     assert sum(len(line.get_xdata()) for line in ax1.get_lines()[:4]) == 56
     plt.close(fig)
+
+
+def test_control_datum_from_the_command_line(capsys):
+    # hold heads B, C, D at their true coordinates: they appear unchanged in the output and the
+    # triplet lengths agree with the free datum's to the noise level of an over-constraint
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(TRUTH), "--datum", "control:B,C,D",
+                                 "--references", str(REF), "--json"])
+    assert rc == 0, err
+    doc = json.loads(out)
+    truth = read_points(TRUTH)
+    for sid in "BCD":
+        np.testing.assert_allclose(doc["stations"][sid]["xyz_m"], truth.get(sid), atol=1e-12)
+        assert np.all(np.asarray(doc["stations"][sid]["cov_m2"]) == 0)
+    assert doc["dof"] == 4 + 3          # 9 fixed coordinates instead of a 6-parameter datum
+    for c in doc["reference_lengths"]:
+        assert abs(c["difference_m"]) < 4 * c["u_m"]
