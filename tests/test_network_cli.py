@@ -195,3 +195,15 @@ def test_control_datum_from_the_command_line(capsys):
     assert doc["dof"] == 4 + 3          # 9 fixed coordinates instead of a 6-parameter datum
     for c in doc["reference_lengths"]:
         assert abs(c["difference_m"]) < 4 * c["u_m"]
+
+
+def test_from_distances_alone_same_invariants_as_from_points():
+    from multilat.network.adjust import adjust
+
+    obs = read_observations(OBS)
+    a = adjust(obs, rng=1)                              # initial values from the distances alone
+    b = adjust(obs, points=read_points(PTS))            # initial values from approximate points
+    np.testing.assert_allclose(a.offset_m, b.offset_m, atol=1e-9)
+    for x, y in [("1", "14"), ("A", "7"), ("B", "D")]:
+        assert a.interpoint_distance(x, y).length_m == pytest.approx(b.interpoint_distance(x, y).length_m,
+                                                                     abs=1e-9)
