@@ -593,7 +593,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
     spec = _ChunkSpec(net, problem.distance_m, problem.heads, pidx, noise, inst, net.sigma_m)
     k = net.n_params + len(problem.pairs)
     limit = max_trials if adaptive else trials
-    if limit * k * 4 > max_memory_bytes:
+    if limit * k * 4 > max_memory_bytes:   # float32 samples (statistics are computed per column block)
         raise MultilatError(f"{limit} trials x {k} outputs would need {limit * k * 4 / 2**30:.1f} GiB of "
                             "samples; use fewer trials")
     mapper = map if map is not None else None
@@ -651,7 +651,10 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
                 break
         adaptive_info = {"converged": converged, "rounds": rounds, "chunks": len(parts),
                          "tolerance_m_min": float(np.min(tol))}
-    dev = np.concatenate([p["dev"] for p in parts]).astype(np.float64) if parts else np.zeros((0, k))
+    # float32 deviations kept once; statistics column block by column block in float64 (bounded memory)
+    dev = np.concatenate([p["dev"] for p in parts]) if parts else np.zeros((0, k), np.float32)
+    for p in parts:
+        p["dev"] = None
     n_failed = int(sum(p["n_failed"] for p in parts))
     n_retried = int(sum(p["n_retried"] for p in parts))
     n = dev.shape[0]
@@ -663,16 +666,23 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
 
     x0 = np.concatenate([bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m),
                          [np.linalg.norm(problem.point_xyz(a) - problem.point_xyz(b)) for a, b in problem.pairs]])
-    mean_dev = dev.mean(axis=0)
-    std = dev.std(axis=0, ddof=1)
-    c = dev - mean_dev
-    m4 = np.mean(c**4, axis=0)
-    m2 = np.mean(c**2, axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        kurt = np.where(m2 > 0, m4 / m2**2, 3.0)
+    mean_dev, std, kurt = np.empty(k), np.empty(k), np.empty(k)
+    iv_sym, iv_short = np.empty((k, 2)), np.empty((k, 2))
+    for c0 in range(0, k, 8):
+        blk = dev[:, c0:c0 + 8].astype(np.float64)
+        mu = blk.mean(axis=0)
+        cc = blk - mu
+        m2 = np.mean(cc**2, axis=0)
+        m4 = np.mean(cc**4, axis=0)
+        mean_dev[c0:c0 + 8] = mu
+        std[c0:c0 + 8] = np.sqrt(m2 * n / (n - 1))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            kurt[c0:c0 + 8] = np.where(m2 > 0, m4 / np.where(m2 > 0, m2, 1.0) ** 2, 3.0)
+        iv_sym[c0:c0 + 8] = coverage_interval(blk, 0.95, "symmetric")
+        iv_short[c0:c0 + 8] = coverage_interval(blk, 0.95, "shortest")
+    iv_sym += x0[:, None]
+    iv_short += x0[:, None]
     se = std * np.sqrt(np.maximum(kurt - 1.0, 0.0) / (4.0 * n))
-    iv_sym = coverage_interval(dev, 0.95, "symmetric") + x0[:, None]
-    iv_short = coverage_interval(dev, 0.95, "shortest") + x0[:, None]
     if noise == "model":
         # the linear sandwich uses the input errors' empirical std over all trials drawn, so that the
         # comparison tests the propagation, not the distance model's own (MC-estimated) std
@@ -691,7 +701,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
     cov_lin_frac = np.empty(len(pids))
     for q, pid in enumerate(pids):
         rows = problem.param_rows(pid)
-        d3 = dev[:, rows]
+        d3 = dev[:, rows].astype(np.float64)
         mu = mean_dev[rows]
         cmc = np.cov(d3, rowvar=False)
         pc_mc[q] = cmc
@@ -704,7 +714,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         ellipsoid_coverage_lin=cov_lin_frac, trials=n, n_failed=n_failed, sigma0_mean=sig0, noise=noise,
         seed_entropy=int(ss.entropy), adaptive=adaptive_info, elapsed_s=time.perf_counter() - t0,
         input_std_m=noise_std, input_std_ratio=input_std_ratio, n_retried=n_retried,
-        samples=dev.astype(np.float32) if keep_samples else None)
+        samples=dev if keep_samples else None)
 
 
 def _chunk_stats(dev) -> np.ndarray:
