@@ -67,6 +67,8 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk):
     dc = np.full(nchunks, np.inf)
     step = (t + nchunks - 1) // nchunks
     for c in prange(nchunks):
+        scc = sc[c]
+        gcc = gc[c]
         v = np.empty((maxk, 3))
         av = np.empty(4)
         bv = np.empty(4)
@@ -106,9 +108,9 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk):
                 av[3] = 1.0
                 b = 4 * i
                 for a in range(4):
-                    gc[c, b + a] += e * av[a]
+                    gcc[b + a] += e * av[a]
                     for q in range(4):
-                        sc[c, b + a, b + q] += wk * av[a] * av[q]
+                        scc[b + a, b + q] += wk * av[a] * av[q]
             nj = ninv[j]
             det = _inv3(n00, n01, n02, n11, n12, n22, nj)
             tr = n00 + n11 + n22
@@ -135,7 +137,7 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk):
                 av[2] = u[k, 2]
                 av[3] = 1.0
                 for a in range(4):
-                    gc[c, b + a] += sk * av[a]
+                    gcc[b + a] += sk * av[a]
                 for l in range(k, k1):
                     il = si[l]
                     ll = l - k0
@@ -150,13 +152,13 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk):
                         for a in range(4):
                             ca = cc * av[a]
                             for q in range(4):
-                                sc[c, b + a, bl + q] -= ca * bv[q]
+                                scc[b + a, bl + q] -= ca * bv[q]
                     else:
                         bl = 4 * il
                         for a in range(4):
                             ca = cc * bv[a]
                             for q in range(4):
-                                sc[c, bl + a, b + q] -= ca * av[q]
+                                scc[bl + a, b + q] -= ca * av[q]
     sm = np.zeros((p, p))
     gp = np.zeros(p)
     vt = 0.0
