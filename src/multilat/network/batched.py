@@ -425,6 +425,9 @@ class BatchedNetwork:
             raise MultilatError("observation indices out of range")
         if not np.all(np.isfinite(sig)) or np.any(sig <= 0):
             raise MultilatError("sigma_m must be finite and > 0")
+        if m * (s + t) > 50_000_000:
+            raise MultilatError(f"network too large for the batched Monte Carlo solver ({m} observations, "
+                                f"{t} targets); it is meant for networks of up to a few thousand observations")
         for name, v in (("station_xyz_m", h0), ("offset_m", o0), ("target_xyz_m", t0)):
             if not np.all(np.isfinite(v)):
                 raise MultilatError(f"{name} must be finite")
