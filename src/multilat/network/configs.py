@@ -21,9 +21,9 @@ P1-P3 = 8932.508 mm, 1 µm short of the published 8932.509 mm, which exceeds the
 two so no three points can match all three); 4, 8, 9, 13, 14 isolated; head-target distances
 0.340 m to 11.540 m (paper: 0.34 m to 11.54 m); bounding box 5.60 m x 10.30 m x 2.60 m (paper:
 5.6 m x 10.3 m x 2.6 m); the floor is assumed 1.10 m below head A, and 13 of the 14 targets are
-less than 1.5 m above it ("most of the targets have a height less than 1.5 m"). Targets 8, 9, 12,
-14 (and 13, 2.75 m high) lie outside the heads' convex hull ("largely outside the volume bounded by
-the measurement heads").
+less than 1.5 m above it ("most of the targets have a height less than 1.5 m"). The heads'
+tetrahedron is flat (z 0-1.4 m), so 13 targets lie outside it; 8, 9, 12 and 14 lie 0.6-3.9 m beyond
+head D in y ("largely outside the volume bounded by the measurement heads").
 
 Instrument offsets (both): A +2.0 mm, B -1.5 mm, C +3.1 mm, D +0.7 mm (the paper gives none;
 "a few mm", convention ``measured = |H - T| + offset``).
