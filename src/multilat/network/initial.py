@@ -191,8 +191,7 @@ def _algebraic_block(D2):
     if lam[0] <= 1e-12 * max(lam[-1], 1e-300):
         return None
     Ainv = np.sqrt(lam)[:, None] * W.T         # A^-1 = L^1/2 W^T, so A^-T A^-1 = G
-    At = W.T / np.sqrt(lam)[:, None]           # A^T = L^-1/2 W^T ... (A = W L^-1/2)
-    # note A^T = (W L^-1/2)^T = L^-1/2 W^T
+    At = W.T / np.sqrt(lam)[:, None]           # A = W L^-1/2, so A^T = L^-1/2 W^T
     delta = At @ b                              # T_mean - H_mean, with H_mean = 0
     H = Ut @ At.T
     T = delta + Vv @ Ainv.T
