@@ -11,7 +11,11 @@
   traced numpy/python allocations of a second, 2e7-trial run (``tracemalloc``). Goal: < 1 GiB.
 * ``eq3_1e8_dask2``: 10^8 trials on a local Dask cluster of 2 worker processes against the
   in-process run, interleaved (median of 2 each) so both see the same machine load. Goal: >= 1.8x.
-  The machine is shared: each row records the 1-minute load average before it ran.
+  The machine is shared: each row records the 1-minute load average before it ran, and the Dask row
+  the CPU time its workers actually got as a fraction of two full cores (``worker_cpu_share``; 1.0
+  means two idle cores, 0.5 means the workers shared one core's worth with other users) and
+  ``cpu_normalised_speedup`` (in-process CPU time over half the workers' CPU time: the speed-up had
+  each worker had a core to itself; it ignores the driver's own small share).
 
 Quick mode: 3 repeats instead of 7, and 2e7 trials instead of 1e8 for the last two.
 """
@@ -68,6 +72,28 @@ def numpy_oneshot(n: int, seed: int):
     lengths = e[q:] - e[: n - q]
     r = int(np.argmin(lengths))
     return mean, std, (e[rs], e[rs + q]), (e[r], e[r + q])
+
+
+def _timed_chunk(spec):
+    """Run one engine chunk and report its wall and CPU time (to see whether workers got a core)."""
+    from multilat.montecarlo import _run_chunk
+
+    t, c = time.perf_counter(), time.process_time()
+    part = _run_chunk(spec)
+    return part, time.perf_counter() - t, time.process_time() - c
+
+
+class _RecordingMap:
+    """Wraps a map, recording each chunk's (wall, cpu) seconds in the process that ran it."""
+
+    def __init__(self, inner):
+        self.inner = inner
+        self.times = []
+
+    def map(self, func, iterable):
+        for part, wall, cpu in self.inner(_timed_chunk, iterable):
+            self.times.append((wall, cpu))
+            yield part
 
 
 def _median_time(fn, repeats):
@@ -165,22 +191,30 @@ def run(quick: bool = False) -> list[dict]:
     big_reps = 2
     with dask_map(workers=2) as m:
         run_mc(eq3_error_m, inputs, trials=4 * 65536, rng=1, map=m, chunk_size=65536)  # warm the workers
-        t_in, t_dk = [], []
+        t_in, t_dk, cpu_share, norm = [], [], [], []
         load = os.getloadavg()[0]
         for _ in range(big_reps):  # interleaved, so both see the same machine load
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             r1 = run_mc(eq3_error_m, inputs, trials=big, rng=SEED, chunk_size=1 << 20, quantiles="histogram")
             t_in.append(time.perf_counter() - t)
+            c_in = time.process_time() - c
+            rec = _RecordingMap(m.map)
             t = time.perf_counter()
-            r2 = run_mc(eq3_error_m, inputs, trials=big, rng=SEED, chunk_size=1 << 20, map=m, quantiles="histogram")
+            r2 = run_mc(eq3_error_m, inputs, trials=big, rng=SEED, chunk_size=1 << 20, map=rec, quantiles="histogram")
             t_dk.append(time.perf_counter() - t)
+            # CPU the workers actually got, as a fraction of two full cores over the run
+            c_workers = sum(c for _, c in rec.times)
+            cpu_share.append(c_workers / (2 * t_dk[-1]))
+            # speed-up had each worker had a core to itself: in-process CPU over half the workers' CPU
+            norm.append(c_in / (c_workers / 2))
     t_in, t_dask = statistics.median(t_in), statistics.median(t_dk)
     rows.append(dict(
         name=f"eq3_{big:.0e}_dask2".replace("+0", ""), median_s=t_dask, baseline="in_process",
         baseline_median_s=t_in, ratio=t_in / t_dask,
         extra=dict(trials=big, workers=2, mtrials_per_s=big / t_dask / 1e6, repeats=big_reps,
                    identical_to_in_process=bool(r2.std == r1.std and np.array_equal(r2._hist_counts, r1._hist_counts)),
-                   load_avg_1min_before=load),
+                   load_avg_1min_before=load, worker_cpu_share=statistics.median(cpu_share),
+                   cpu_normalised_speedup=statistics.median(norm)),
     ))
     return rows
 
