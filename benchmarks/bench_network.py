@@ -17,7 +17,8 @@
   ``network.files.read_observations`` (the strict general reader) on its first 100 000 rows,
   scaled x16 (stated in extra). Goal <= 2 s.
 
-The machine is shared: each row records the 1-minute load average before it ran.
+The machine is shared: each row records the 1-minute load average before it ran. Each section runs in
+a fresh process with ``OPENBLAS_NUM_THREADS=1`` (see :func:`run`).
 Quick mode: fewer repeats, 20k trials, sparse 2k/20k only, CSV 200k rows.
 """
 
@@ -280,18 +281,32 @@ def bench_csv(quick):
             "extra": {"rows": len(body), "baseline_rows_timed": nb, "values_ok": ok, "load_avg_1min": load}}
 
 
-def run_sparse_only(quick: bool = False) -> list[dict]:
-    return bench_sparse(quick)
+_SECTIONS = {"batched": lambda q: [bench_batched(q)], "propagate": lambda q: [bench_propagate(q)],
+             "sparse": bench_sparse, "csv": lambda q: [bench_csv(q)]}
 
 
-def run(quick: bool = False) -> list[dict]:
-    rows = [bench_batched(quick), bench_propagate(quick)]
-    rows += bench_sparse(quick)
-    rows.append(bench_csv(quick))
+def run(quick: bool = False, sections=("batched", "propagate", "sparse", "csv")) -> list[dict]:
+    """Each section in a fresh process with ``OPENBLAS_NUM_THREADS=1``: OpenBLAS worker threads left
+    spinning by a BLAS-heavy baseline (scipy LM) otherwise steal the second core from the numba
+    kernels measured next (seen: 10x slower sparse solves after the LM baseline in one process)."""
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    rows = []
+    for name in sections:
+        cmd = [sys.executable, str(Path(__file__).resolve()), "--section", name] + (["--quick"] if quick else [])
+        p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
+        if p.returncode != 0:
+            raise RuntimeError(f"bench_network section {name} failed: {p.stderr.strip()[-500:]}")
+        rows += [json.loads(line) for line in p.stdout.splitlines() if line.startswith("{")]
     return rows
 
 
 if __name__ == "__main__":
     quick = "--quick" in sys.argv
-    for r in (run_sparse_only(quick) if "--sparse" in sys.argv else run(quick)):
+    if "--section" in sys.argv:
+        out = _SECTIONS[sys.argv[sys.argv.index("--section") + 1]](quick)
+    elif "--sparse" in sys.argv:
+        out = run(quick, sections=("sparse",))
+    else:
+        out = run(quick)
+    for r in out:
         print(json.dumps(r, default=float))
