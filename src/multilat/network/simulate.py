@@ -10,8 +10,9 @@ large one), and **their sample standard deviation** (``ddof=1``: this reproduces
 and 12.8 µm from the differences printed in Tables V and VI). Over simulations: min, mean, max,
 beside the paper's 2.0 / 6.6 / 10.7 µm (small) and 2.2 / 5.4 / 9.2 µm (large) over 50 simulations.
 
-With only 6-9 pairs the per-simulation standard deviation is itself noisy (relative standard
-deviation about ``1/sqrt(2(k-1))``, 25-32 %), so min and max over 50 simulations scatter widely;
+With only 6-9 correlated pairs the per-simulation standard deviation is itself noisy (relative
+standard deviation 32 % small, 43 % large; ``1/sqrt(2(k-1))`` = 25-32 % if they were independent),
+so min and max over 50 simulations scatter widely;
 the mean is compared with its standard error, and with the first-order prediction
 ``E[s^2] = tr(C Sigma_L) / (k - 1)`` (``C`` the centring matrix, ``Sigma_L`` the linear covariance of
 the k lengths from the adjustment's covariance), a second method independent of the Monte Carlo.
