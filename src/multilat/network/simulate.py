@@ -36,7 +36,7 @@ from multilat.network.data import Observations, ReferenceLengths
 
 __all__ = ["PaperStudy", "PAPER_STUDY", "SimulationResult", "simulate", "interpoint_error_std",
            "linear_prediction", "load_config", "load_config_file", "NOISES", "RandomNetwork",
-           "random_network", "WELL_CONDITIONED"]
+           "random_network", "WELL_CONDITIONED", "perturbed_config"]
 
 NOISES = ("gaussian", "model")
 
@@ -532,3 +532,39 @@ def random_network(rng=None, *, n_stations=(4, 8), n_targets=(10, 30), size_m: f
                            si, ti, d, np.full(si.size, sigma_m))
         return RandomNetwork(H, T, o, obs)
     raise MultilatError("random_network: no well-conditioned network drawn (loosen the ranges)")
+
+
+# ------------------------------------------------------------------------------------ layout sensitivity
+
+
+def perturbed_config(cfg: NetworkConfig, amplitude_m: float, rng=None, *, fixed=()) -> NetworkConfig:
+    """The configuration with its targets moved: each rigid group (a connected component of the
+    reference-pair graph: a triplet, a couple, a line of pillars; or an isolated target) is shifted
+    by one translation uniform in ``±amplitude_m`` per axis, except the groups containing a target of
+    ``fixed``. Reference lengths are unchanged (groups move rigidly). Used to ask how much the §4.4
+    result depends on the reconstructed layout.
+    """
+    g = np.random.default_rng(rng)
+    t = cfg.n_targets
+    parent = list(range(t))
+
+    def find(i):
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for a, b in cfg.reference_pairs():
+        parent[find(a)] = find(b)
+    fixed_roots = {find(cfg.target_ids.index(str(f))) for f in fixed}
+    T = cfg.target_xyz_m.copy()
+    roots = sorted({find(i) for i in range(t)})
+    for r in roots:
+        if r in fixed_roots:
+            continue
+        members = [i for i in range(t) if find(i) == r]
+        T[members] += g.uniform(-amplitude_m, amplitude_m, 3)
+    return NetworkConfig(name=cfg.name + "-perturbed", station_ids=cfg.station_ids,
+                         station_xyz_m=cfg.station_xyz_m, target_ids=cfg.target_ids, target_xyz_m=T,
+                         offset_m=cfg.offset_m, reference_lengths=cfg.reference_lengths,
+                         vertical_axis=cfg.vertical_axis, description=cfg.description + " (perturbed)")
