@@ -120,7 +120,8 @@ def _um(v):
 def _print(res, doc, out) -> None:
     s = doc["summary"]
     console.print(f"[bold]Monte Carlo through the adjustment[/bold] ({doc['source']}): {doc['trials']} trials "
-                  f"kept, {doc['n_failed']} failed to converge, noise={doc['noise']}, "
+                  f"kept, {doc['n_failed']} failed to converge ({doc['n_retried']} re-solved by full "
+                  f"Gauss-Newton), noise={doc['noise']}, "
                   f"mean sigma0={doc['sigma0_mean']:.3f}, {doc['elapsed_s']:.1f} s")
     if doc["adaptive"]:
         a = doc["adaptive"]
