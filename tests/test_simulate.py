@@ -223,3 +223,17 @@ def test_large_volume_layout_sensitivity():
     vals = [linear_prediction(perturbed_config(large_volume(), 0.5, rng=k, fixed=("3",)), 4.7e-6)
             for k in range(100)]
     assert np.percentile(vals, 5) > 6.0e-6
+
+
+def test_cli_degenerate_network_is_one_line(capsys, tmp_path):
+    """Four coplanar stations: every adjustment is refused; the command says why, exit 2."""
+    lines = ["[stations]", "A = [0.0, 0.0, 0.0]", "B = [1.0, 0.0, 0.0]", "C = [0.0, 1.0, 0.0]",
+             "D = [1.0, 1.0, 0.0]", "[targets]"]
+    rng = np.random.default_rng(0)
+    lines += [f'"{k}" = [{x!r}, {y!r}, {z!r}]' for k, (x, y, z) in
+              enumerate(rng.uniform([0, 0, 0.3], [1, 1, 1.2], (12, 3)).tolist(), start=1)]
+    p = tmp_path / "flat.toml"
+    p.write_text("\n".join(lines) + "\n")
+    assert main(["simulate", str(p), "--trials", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no simulation converged (2 failed; first:" in err[0]

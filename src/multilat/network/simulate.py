@@ -277,6 +277,7 @@ def simulate(cfg: NetworkConfig, *, trials: int = 50, noise: str = "gaussian", s
     start = _truth_start(cfg) if initial == "truth" else None
     errs, offs, s0 = [], [], []
     failed = 0
+    first_error = None
     for child in children:
         g = np.random.default_rng(child)
         if noise == "gaussian":
@@ -290,8 +291,9 @@ def simulate(cfg: NetworkConfig, *, trials: int = 50, noise: str = "gaussian", s
         try:
             iv = start if start is not None else initial_values(obs, rng=g)
             res = adjust(obs, initial=iv, snooping=False, cost=cost)
-        except MultilatError:
+        except MultilatError as exc:
             failed += 1
+            first_error = first_error or str(exc)
         else:
             T = res.target_xyz_m
             errs.append(np.linalg.norm(T[ia] - T[ib], axis=1) - true_len)
@@ -300,7 +302,7 @@ def simulate(cfg: NetworkConfig, *, trials: int = 50, noise: str = "gaussian", s
         if callback is not None:
             callback(1)
     if not errs:
-        raise MultilatError(f"{cfg.name}: no simulation converged ({failed} failed)")
+        raise MultilatError(f"{cfg.name}: no simulation converged ({failed} failed; first: {first_error})")
     errors = np.array(errs)
     try:
         pred = linear_prediction(cfg, sig, pairs=pairs)
