@@ -301,3 +301,14 @@ def test_gross_error_does_not_derail_the_initial_values():
     r0 = adjust(bad, initial=_truth(cfg), snooping=False)
     # 10 nm: the adjustment's own stopping tolerance on this stretched problem (a wrong minimum is >= um)
     assert _datum_free_gap(r1, r0) < 1e-8
+
+
+def test_larger_gappy_networks():
+    """8-12 stations x 50-200 targets with 30 % of the distances missing (the adjustment tests'
+    range): the same minimum as from the truth."""
+    for k in range(4):
+        net = random_network(np.random.default_rng(1000 + k), n_stations=(8, 12), n_targets=(50, 200), drop=0.3)
+        iv = initial_values(net.obs, rng=k)
+        r1 = adjust(net.obs, initial=iv, snooping=False)
+        r0 = adjust(net.obs, initial=_truth(net), snooping=False)
+        assert _datum_free_gap(r1, r0) < 1e-8
