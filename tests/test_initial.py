@@ -113,10 +113,13 @@ def test_affine_fit_jacobian_against_finite_differences():
     assert np.abs(J - Jn).max() < 1e-6 * np.abs(J).max()
 
 
-def test_refinement_jacobian_against_finite_differences():
+@pytest.mark.parametrize("n_targets", [12, 60])   # dense and sparse (> 150 unknowns) Jacobians
+def test_refinement_jacobian_against_finite_differences(n_targets):
+    import scipy.sparse
+
     from multilat.network import initial as ini
 
-    net = random_network(np.random.default_rng(3), n_stations=(5, 5), n_targets=(12, 12))
+    net = random_network(np.random.default_rng(3), n_stations=(5, 5), n_targets=(n_targets, n_targets), drop=0.0)
     D, W = ini._distance_matrix(net.obs)
     captured = {}
 
@@ -133,6 +136,8 @@ def test_refinement_jacobian_against_finite_differences():
         ini._levenberg_marquardt = orig
     f, x = captured["fun"], captured["x"] + 1e-3
     J = captured["jac"](x)
+    assert scipy.sparse.issparse(J) == (len(x) > ini._SPARSE_FROM)
+    J = J.toarray() if scipy.sparse.issparse(J) else J
     h = 1e-7
     Jn = np.column_stack([(f(x + h * e) - f(x - h * e)) / (2 * h) for e in np.eye(len(x))])
     assert np.abs(J - Jn).max() < 1e-6 * np.abs(J).max()

@@ -48,6 +48,8 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
 
 from multilat.errors import MultilatError
 
@@ -400,19 +402,30 @@ def _refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
     hcols = -np.ones((s, 3), int)
     hcols[free_h] = np.arange(nh)
 
+    n = nh + 3 * t + s
+    rows = np.arange(len(d))
+    sparse = n > _SPARSE_FROM
+
     def jac(x):
         Hx, Tx, ox = unpack(x)
         diff = Hx[si] - Tx[tj]
         rho = np.sqrt((diff ** 2).sum(1))
         u = diff / np.where(rho > 0, rho, 1e-12)[:, None]
-        J = np.zeros((len(d), nh + 3 * t + s))
-        rows = np.arange(len(d))
+        rr, cc, vv = [], [], []
         for c in range(3):
             hc = hcols[si, c]
             ok = hc >= 0
-            J[rows[ok], hc[ok]] = -w[ok] * u[ok, c]
-            J[rows, nh + 3 * tj + c] = w * u[:, c]
-        J[rows, nh + 3 * t + si] = -w
+            rr += [rows[ok], rows]
+            cc += [hc[ok], nh + 3 * tj + c]
+            vv += [-w[ok] * u[ok, c], w * u[:, c]]
+        rr.append(rows)
+        cc.append(nh + 3 * t + si)
+        vv.append(-w)
+        rr, cc, vv = np.concatenate(rr), np.concatenate(cc), np.concatenate(vv)
+        if sparse:
+            return scipy.sparse.csr_matrix((vv, (rr, cc)), shape=(len(d), n))
+        J = np.zeros((len(d), n))
+        J[rr, cc] = vv
         return J
 
     x = _levenberg_marquardt(fun, jac, np.concatenate([H[free_h], T.ravel(), o]),
@@ -424,7 +437,7 @@ def _refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
             for _ in range(5):
                 k = 3 * scale
                 hw = np.sqrt(np.minimum(1.0, k / np.maximum(np.abs(fun(x)), 1e-300)))
-                x = _levenberg_marquardt(lambda z: hw * fun(z), lambda z: hw[:, None] * jac(z), x,
+                x = _levenberg_marquardt(lambda z: hw * fun(z), lambda z: _row_scale(jac(z), hw), x,
                                          max_iter=max_nfev)
     Hx, Tx, ox = unpack(x)
     diff = Hx[si] - Tx[tj]
@@ -432,21 +445,37 @@ def _refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
     return Hx, Tx, ox, float(np.sqrt(np.mean(r ** 2))), float(1.4826 * np.median(np.abs(r)))
 
 
+#: unknowns from which the refinement uses sparse normal equations (SuperLU) instead of dense ones
+_SPARSE_FROM = 150
+
+
+def _row_scale(J, w):
+    if scipy.sparse.issparse(J):
+        return scipy.sparse.diags(w) @ J
+    return w[:, None] * J
+
+
 def _levenberg_marquardt(fun, jac, x, *, max_iter=200, tol=1e-10):
-    """Minimise ``|fun(x)|^2`` by Levenberg-Marquardt with Marquardt scaling (dense normal
-    equations: the problems here have at most a few hundred unknowns)."""
+    """Minimise ``|fun(x)|^2`` by Levenberg-Marquardt with Marquardt scaling; ``jac`` may return a
+    dense array or a scipy sparse matrix (then the normal equations are solved by SuperLU)."""
     r = fun(x)
     cost = r @ r
     lam = 1e-3
     for _ in range(max_iter):
         J = jac(x)
-        A = J.T @ J
+        sp = scipy.sparse.issparse(J)
+        A = (J.T @ J).tocsc() if sp else J.T @ J
         g = J.T @ r
-        dg = np.maximum(np.diag(A), 1e-30)
+        dg = np.maximum(A.diagonal(), 1e-30)
         while True:
             try:
-                step = np.linalg.solve(A + lam * np.diag(dg), g)
-            except np.linalg.LinAlgError:
+                if sp:
+                    step = scipy.sparse.linalg.spsolve(A + scipy.sparse.diags(lam * dg, format="csc"), g)
+                    if not np.all(np.isfinite(step)):
+                        raise np.linalg.LinAlgError
+                else:
+                    step = np.linalg.solve(A + lam * np.diag(dg), g)
+            except (np.linalg.LinAlgError, RuntimeError):
                 step = None
             if step is not None:
                 # r = w (d - f): J above is d r / d x, so the Gauss-Newton step is -solve(...)
