@@ -197,6 +197,16 @@ def test_identical_whatever_the_chunk_size(chunk_size):
     assert np.array_equal(r.samples, ref.samples)
 
 
+def test_in_process_tail_candidates_give_the_exact_intervals():
+    # in-process runs collect tail candidates block by block; the intervals must equal a full scan
+    r = run_mc(eq3_error_m, EQ3_INPUTS, trials=5 * BLOCK, rng=77)
+    assert np.array_equal(r.interval_symmetric, coverage_interval(r.samples, 0.95, "symmetric"))
+    assert np.array_equal(r.interval_shortest, coverage_interval(r.samples, 0.95, "shortest"))
+    with ThreadPoolExecutor(1) as pool:  # a map: no candidates, the samples are scanned
+        p = run_mc(eq3_error_m, EQ3_INPUTS, trials=5 * BLOCK, rng=77, map=pool)
+    assert np.array_equal(p.interval_shortest, r.interval_shortest)
+
+
 def test_identical_through_a_pool_map_and_histogram_mode():
     trials = 4 * BLOCK
     ref = run_mc(eq3_error_m, EQ3_INPUTS, trials=trials, rng=7, quantiles="histogram")

@@ -146,15 +146,9 @@ def _tails(y: np.ndarray, n_cand: int, q: int):
     """
     m = y.size
     if m >= 200_000 and q > n_cand:
-        sub = np.array(y[:: m // 65536])
-        s = sub.size
-        f = n_cand / m
-        margin = 6.0 * math.sqrt(f * (1.0 - f) / s) + 4.0 / s
-        if f + margin < 0.5:
-            i_lo = min(int(math.ceil((f + margin) * s)), s - 1)
-            i_hi = max(int(math.floor((1.0 - f - margin) * s)), 0)
-            sub.partition([i_hi, i_lo] if i_hi < i_lo else [i_lo, i_hi])
-            t_lo, t_hi = sub[i_lo], sub[i_hi]
+        sub = y[:: m // 65536]
+        t_lo, t_hi = _tail_thresholds(sub, 1.0 - n_cand / m, sub.size)
+        if math.isfinite(t_lo):
             low = y[y <= t_lo]
             high = y[y >= t_hi]
             if low.size >= n_cand and high.size >= m - q:
@@ -168,17 +162,27 @@ def _tails(y: np.ndarray, n_cand: int, q: int):
     return ys[:n_cand], ys[q:]
 
 
-def _exact_intervals(y: np.ndarray, coverage: float):
+def _exact_intervals(y: np.ndarray, coverage: float, candidates=None):
     """Symmetric and shortest intervals of 1-D samples ``y`` (JCGM 101 §7.7), ambiguity flag.
 
-    Uses a partition: only the lower and upper (1 - p) tails are sorted.
+    Only the lower and upper (1 - p) tails are sorted. ``candidates`` (low, high): values of ``y``
+    at or below / at or above thresholds picked while the samples were produced; used when they
+    hold enough values (then they contain the tails exactly), else ``y`` is scanned.
     """
     m = y.size
     if m < 2:
         raise MultilatError(f"need at least 2 samples for a coverage interval, got {m}")
     q = _q_index(m, coverage)
     n_cand = m - q  # candidates r = 0 .. m - q - 1 ; interval [y(r), y(r+q)]
-    lower, upper = _tails(y, n_cand, q)
+    lower = upper = None
+    if candidates is not None and q > n_cand:
+        low, high = candidates
+        if low.size >= n_cand and high.size >= m - q:
+            low = np.sort(low)
+            high = np.sort(high)
+            lower, upper = low[:n_cand], high[high.size - (m - q):]
+    if lower is None:
+        lower, upper = _tails(y, n_cand, q)
     lengths = upper - lower
     # probabilistically symmetric (JCGM 101 §7.7.2, 1-based): r = (M - q)/2 if integer, else the integer
     # part of (M - q + 1)/2; 0-based index r - 1
@@ -379,7 +383,54 @@ class _ChunkSpec:
     hist_hi: np.ndarray | None
     hist_bins: int
     nonfinite: str
-    out: np.ndarray | None = None  # in-process only: write samples straight into the run's store
+    out: Any = None  # in-process only: a _Store the samples are written straight into
+
+
+class _Store:
+    """In-process sample store: chunks write their blocks straight into ``data`` and, for a scalar
+    output, also pick out tail candidates while each block is still in cache (thresholds from block
+    0, which the in-process map evaluates first), so the final intervals need not scan ``data``."""
+
+    def __init__(self, data: np.ndarray, coverage: float, tails: bool):
+        self.data = data
+        self.coverage = coverage
+        self.tails = tails and data.ndim == 1
+        self.t_lo = self.t_hi = None
+        self.low: list = []
+        self.high: list = []
+
+    def put(self, b: int, y: np.ndarray) -> None:
+        self.data[b * BLOCK : b * BLOCK + y.shape[0]] = y
+        if not self.tails:
+            return
+        if self.t_lo is None:
+            if b != 0:  # blocks out of order: no candidates, the final step scans the data
+                self.tails = False
+                return
+            self.t_lo, self.t_hi = _tail_thresholds(y, self.coverage, y.size)
+        self.low.append(y[y <= self.t_lo])
+        self.high.append(y[y >= self.t_hi])
+
+    def candidates(self):
+        if not self.tails or not self.low:
+            return None
+        return np.concatenate(self.low), np.concatenate(self.high)
+
+
+def _tail_thresholds(sub: np.ndarray, coverage: float, s: int):
+    """Thresholds beyond the (1 - p) tails, from a sample ``sub`` of size ``s`` (6-sigma margin).
+
+    Returns (t_lo, t_hi) with, with overwhelming probability, at least a fraction (1 - p) of the
+    population below t_lo and above t_hi; (-inf, inf) when the margin would reach the median.
+    """
+    f = 1.0 - coverage
+    margin = 6.0 * math.sqrt(f * (1.0 - f) / s) + 4.0 / s
+    if f + margin >= 0.5:
+        return -math.inf, math.inf
+    i_lo = min(int(math.ceil((f + margin) * s)), s - 1)
+    i_hi = max(int(math.floor((1.0 - f - margin) * s)), 0)
+    part = np.partition(sub, [i_lo, i_hi])
+    return part[i_lo], part[i_hi]
 
 
 @dataclass
@@ -489,7 +540,7 @@ def _run_chunk(spec: _ChunkSpec) -> _Partial:
             n_tot, mean, m2 = _merge_moments(n_tot, mean, m2, y2.shape[0], mb, cb)
         if spec.keep_samples:
             if spec.out is not None:  # no rejection possible here (nonfinite="raise")
-                spec.out[b * BLOCK : b * BLOCK + y.shape[0]] = y
+                spec.out.put(b, y)
             else:
                 samples.append(y2)
         if spec.hist_lo is not None:
@@ -572,7 +623,7 @@ def _hist_intervals(counts, edges, coverage, m):
     return sym, short, amb
 
 
-def _finish(n, mean, m2, coverage, *, samples, counts, edges, out_ndim, **extra) -> MCResult:
+def _finish(n, mean, m2, coverage, *, samples, counts, edges, out_ndim, tail_candidates=None, **extra) -> MCResult:
     k = mean.size
     if n < 2:
         raise MultilatError(f"need at least 2 trials, got {n}")
@@ -585,7 +636,8 @@ def _finish(n, mean, m2, coverage, *, samples, counts, edges, out_ndim, **extra)
         amb = np.zeros(k, dtype=bool)
         for j in range(k):
             col = samples[:, j] if samples.ndim == 2 else samples
-            sym[j], short[j], amb[j] = _exact_intervals(np.ascontiguousarray(col), coverage)
+            sym[j], short[j], amb[j] = _exact_intervals(np.ascontiguousarray(col), coverage,
+                                                        candidates=tail_candidates if k == 1 else None)
         method = "exact"
     else:
         sym, short, amb = _hist_intervals(counts, edges, coverage, n)
@@ -796,9 +848,10 @@ def run_mc(
     store = np.empty((trials,) if probe.ndim == 1 else (trials, k)) if exact else None
     # in-process, the chunks write their samples straight into the store (one copy, one allocation)
     direct = exact and map is None and nonfinite == "raise"
+    sink = _Store(store, coverage, tails=True) if direct else None
     specs = (
         _ChunkSpec(**common, block_start=s, block_stop=min(s + blocks_per_chunk, n_blocks), trials=trials,
-                   keep_samples=exact, hist_lo=lo, hist_hi=hi, out=store if direct else None)
+                   keep_samples=exact, hist_lo=lo, hist_hi=hi, out=sink)
         for s in range(0, n_blocks, blocks_per_chunk)
     )
     n, mean, m2, rejected, counts, out_ndim = 0, None, None, 0, None, 1
@@ -820,6 +873,7 @@ def run_mc(
             progress(done, trials)
     samples = store[:filled] if exact else None
     return _finish(n, mean, m2, coverage, samples=samples, counts=counts, edges=edges, out_ndim=out_ndim,
+                   tail_candidates=sink.candidates() if sink is not None else None,
                    seed_entropy=entropy, n_rejected=rejected)
 
 
