@@ -183,7 +183,10 @@ class Uniform(Distribution):
         return (self.high - self.low) / math.sqrt(12.0)
 
     def sample(self, rng, size) -> np.ndarray:
-        return _rng(rng).uniform(self.low, self.high, size)
+        x = _rng(rng).random(size)  # low + (high - low) U, in place: faster than Generator.uniform
+        x *= self.high - self.low
+        x += self.low
+        return x
 
     def to_scipy(self):
         from scipy import stats
