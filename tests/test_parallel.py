@@ -54,11 +54,20 @@ def test_dask_local_cluster_two_workers_identical():
     assert r_lambda.trials == 2 * BLOCK
 
 
+def three_outputs(rf, crosstalk, ampm, noise):
+    return np.stack([crosstalk + ampm, noise - rf, crosstalk * 1e3 + noise], axis=1)
+
+
 def test_process_pool_identical():
     ref = run_mc(eq3_error_m, INPUTS, trials=3 * BLOCK, rng=5)
+    ref3 = run_mc(three_outputs, INPUTS, trials=3 * BLOCK + 7, rng=6)
     with process_map(2) as m:
         r = run_mc(eq3_error_m, INPUTS, trials=3 * BLOCK, rng=5, chunk_size=BLOCK, map=m)
+        r3 = run_mc(three_outputs, INPUTS, trials=3 * BLOCK + 7, rng=6, chunk_size=BLOCK, map=m)
     _same(r, ref)
+    # vector output: means, covariance and intervals bit for bit too
+    assert np.array_equal(r3.estimate, ref3.estimate) and np.array_equal(r3.cov, ref3.cov)
+    assert np.array_equal(r3.interval_shortest, ref3.interval_shortest)
 
 
 def test_default_map_does_not_import_dask():

@@ -32,7 +32,7 @@ Conventions
   its own generator seeded by ``SeedSequence(entropy, spawn_key=root.spawn_key + (b,))`` (the
   ``b``-th ``spawn`` child of the root). Chunks (the unit of work handed to ``map``) are whole
   blocks, so the numbers depend only on the seed and the number of trials, never on ``chunk_size``
-  or on how many processes ran the chunks (bit for bit; for more than 16 outputs the covariance
+  or on how many processes ran the chunks (bit for bit; for more than 8 outputs the covariance
   uses BLAS, whose last bits may depend on its thread count).
 * Memory is bounded whatever the number of trials. Mean, variance (and covariance for k <= 512
   outputs) are streamed (per-block two-pass moments merged with Chan's formula). Coverage intervals
@@ -457,22 +457,37 @@ def _eval_block(spec: _ChunkSpec, b: int) -> np.ndarray:
 
 
 def _moments(y2: np.ndarray):
+    """Mean (k,) and co-moment matrix (k, k) (or sums of squared deviations (k,) for k > 512) of
+    one block ``y2`` (n, k), two-pass.
+
+    Sums use numpy's pairwise reductions over contiguous rows for k <= 8, so the bits do not depend
+    on the BLAS thread count of the process (a Dask worker reproduces the driver exactly); BLAS
+    (``d.T @ d``) above that.
+    """
+    n, k = y2.shape
+    if k == 1:
+        col = y2[:, 0]
+        mean = col.mean()
+        d = col - mean
+        d *= d
+        return np.array([mean]), np.array([[float(d.sum())]])
+    if k <= 8:
+        dt = np.array(y2.T, order="C")  # (k, n) copy: contiguous rows (axis-0 reductions are slow)
+        mean = dt.mean(axis=1)
+        dt -= mean[:, None]
+        m2 = np.zeros((k, k))
+        for s in range(0, n, 16384):  # sub-blocks keep the products in cache
+            blk = dt[:, s : s + 16384]
+            for j in range(k):
+                m2[j, j:] += (blk[j:] * blk[j]).sum(axis=1)
+        lower = np.tril_indices(k, -1)
+        m2[lower] = m2.T[lower]
+        return mean, m2
     mean = y2.mean(axis=0)
     d = y2 - mean
-    k = y2.shape[1]
-    # sums without BLAS for k <= 16 (numpy's own loops give the same bits whatever the BLAS thread
-    # count of the process, so a Dask worker reproduces the driver exactly); BLAS above that
-    if k == 1:
-        col = d[:, 0]
-        col *= col
-        m2 = np.array([[float(col.sum())]])
-    elif k <= 16:
-        m2 = np.einsum("ij,ik->jk", d, d, optimize=False)
-    elif k <= COV_LIMIT:
-        m2 = d.T @ d
-    else:
-        m2 = np.einsum("ij,ij->j", d, d)
-    return mean, m2
+    if k <= COV_LIMIT:
+        return mean, d.T @ d
+    return mean, np.einsum("ij,ij->j", d, d)
 
 
 def _merge_moments(na, ma, ca, nb, mb, cb):
