@@ -167,7 +167,8 @@ def run(quick: bool = False) -> list[dict]:
     ))
 
     with process_map(2) as m:
-        run_mc(eq3_error_m, inputs, trials=2 * 65536, rng=1, map=m)  # start the workers
+        # start the workers and let each pass the numba switch-over (multilat.distributions.NUMBA_AFTER)
+        run_mc(eq3_error_m, inputs, trials=1 << 23, rng=1, map=m, chunk_size=1 << 19)
         t_2p, _ = _median_time(lambda: run_mc(eq3_error_m, inputs, trials=n, rng=SEED, chunk_size=1 << 19, map=m),
                                repeats)
     rows.append(dict(
@@ -190,7 +191,8 @@ def run(quick: bool = False) -> list[dict]:
     cloudpickle.register_pickle_by_value(sys.modules[__name__])  # workers need not import this file
     big_reps = 2
     with dask_map(workers=2) as m:
-        run_mc(eq3_error_m, inputs, trials=4 * 65536, rng=1, map=m, chunk_size=65536)  # warm the workers
+        # warm the workers, past the numba switch-over of the normal sampler in each of them
+        run_mc(eq3_error_m, inputs, trials=1 << 23, rng=1, map=m, chunk_size=1 << 19, quantiles="histogram")
         t_in, t_dk, cpu_share, norm = [], [], [], []
         load = os.getloadavg()[0]
         for _ in range(big_reps):  # interleaved, so both see the same machine load

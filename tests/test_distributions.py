@@ -185,3 +185,16 @@ def test_multivariate_normal_covariance_and_errors():
         MultivariateNormal(mean=[0.0, 0.0], cov=[[1.0, 2.0], [2.0, 1.0]])
     with pytest.raises(MultilatError, match="symmetric"):
         MultivariateNormal(mean=[0.0, 0.0], cov=[[1.0, 0.5], [0.0, 1.0]])
+
+
+def test_numba_normals_identical_to_numpy(monkeypatch):
+    pytest.importorskip("numba")
+    import multilat.distributions as dist
+
+    monkeypatch.setattr(dist, "NUMBA_AFTER", 0)
+    for bit_generator in (np.random.SFC64, np.random.PCG64):
+        g1, g2 = np.random.Generator(bit_generator(11)), np.random.Generator(bit_generator(11))
+        fast = dist._fast_std_normal(g1, (5000, 3))
+        assert dist._NUMBA_NORMAL not in (None, False)  # the numba path really ran
+        assert np.array_equal(fast, g2.standard_normal((5000, 3)))
+        assert np.array_equal(g1.random(4), g2.random(4))  # and left the same generator state
