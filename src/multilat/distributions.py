@@ -21,7 +21,8 @@ Example
 Sampling conventions: ``sample(rng, size)`` takes a :class:`numpy.random.Generator` (an int seed or
 None is resolved with :func:`numpy.random.default_rng`) and returns float64 samples of shape
 ``size``. The draws use the generator's fast primitives (normal, uniform, triangular, standard t,
-standard Cauchy); the arcsine law is drawn as ``c + w sin(U)`` with ``U`` uniform on [-pi, pi)
+standard Cauchy; large normal draws go through numba's bit-identical implementation of
+``Generator.standard_normal`` when numba is installed, see ``_fast_std_normal``); the arcsine law is drawn as ``c + w sin(U)`` with ``U`` uniform on [-pi, pi)
 (computed through the half-angle tangent, which numpy vectorises), exact and faster than an
 inverse-cdf transform.
 
