@@ -189,7 +189,12 @@ def test_multivariate_normal_covariance_and_errors():
 
 def test_numba_normals_identical_to_numpy(monkeypatch):
     pytest.importorskip("numba")
+    import os
+
     import multilat.distributions as dist
+
+    if os.environ.get("MULTILAT_NO_NUMBA"):
+        pytest.skip("numba path disabled by MULTILAT_NO_NUMBA")
 
     monkeypatch.setattr(dist, "NUMBA_AFTER", 0)
     for bit_generator in (np.random.SFC64, np.random.PCG64):
