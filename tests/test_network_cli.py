@@ -207,3 +207,36 @@ def test_from_distances_alone_same_invariants_as_from_points():
     for x, y in [("1", "14"), ("A", "7"), ("B", "D")]:
         assert a.interpoint_distance(x, y).length_m == pytest.approx(b.interpoint_distance(x, y).length_m,
                                                                      abs=1e-9)
+
+
+CAMPAIGN = Path(__file__).resolve().parents[1] / "examples" / "campaign"
+
+
+def test_adjust_reads_raw_readings_like_correct_then_adjust(capsys, tmp_path):
+    """``adjust RAW --environment ENV`` is ``correct RAW --out OBS`` followed by ``adjust OBS``: same
+    σ0, offsets and coordinates (to float round trip of the written CSV: 1e-9 m on 17 digits)."""
+    env = ["--environment", str(CAMPAIGN / "environment.csv"), "--heights", str(CAMPAIGN / "heights.csv")]
+    rc, out, err = _run(capsys, ["adjust", str(CAMPAIGN / "raw.csv"), *env, "--json"])
+    assert rc == 0, err
+    direct = json.loads(out)
+    obs = tmp_path / "obs.csv"
+    rc, _, err = _run(capsys, ["correct", str(CAMPAIGN / "raw.csv"), *env, "--out", str(obs)])
+    assert rc == 0, err
+    rc, out, err = _run(capsys, ["adjust", str(obs), "--json"])
+    assert rc == 0, err
+    twostep = json.loads(out)
+    assert direct["dof"] == twostep["dof"] == 4
+    assert direct["sigma0"] == pytest.approx(twostep["sigma0"], rel=1e-6)
+    for sid, st in direct["stations"].items():
+        assert st["offset_m"] == pytest.approx(twostep["stations"][sid]["offset_m"], abs=1e-9)
+        np.testing.assert_allclose(st["xyz_m"], twostep["stations"][sid]["xyz_m"], atol=1e-9)
+
+
+def test_adjust_raw_options_are_checked(capsys, tmp_path):
+    rc, _, err = _run(capsys, ["adjust", str(CAMPAIGN / "raw.csv")])
+    assert rc == 2 and "no environment" in err and "Traceback" not in err
+    rc, _, err = _run(capsys, ["adjust", str(CAMPAIGN / "raw.csv"), "--environment",
+                               str(CAMPAIGN / "environment.csv"), "--sigma-um", "5"])
+    assert rc == 2 and "--sigma-um" in err
+    rc, _, err = _run(capsys, ["adjust", str(OBS), "--environment", str(CAMPAIGN / "environment.csv")])
+    assert rc == 2 and "raw readings" in err

@@ -33,13 +33,7 @@ def demo(
     with progress() as p:
         task = p.add_task("demo", total=len(DEMO_SECTIONS))
         for name in DEMO_SECTIONS:
-            try:
-                mod = importlib.import_module(name)
-            except ModuleNotFoundError as exc:
-                if exc.name != name:
-                    raise
-                p.advance(task)
-                continue
+            mod = importlib.import_module(name)
             sections.append(mod.section(seed=seed, quick=quick))
             p.advance(task)
     target = out / "report.html"

@@ -78,7 +78,9 @@ def _staging(out: Path):
 @app.command("adjust")
 def adjust_command(
     observations: Path = typer.Argument(..., help="Observations CSV: station,target,distance_m"
-                                                  "[,sigma_m][,azimuth_rad,elevation_rad]."),
+                                                  "[,sigma_m][,azimuth_rad,elevation_rad]; or a raw "
+                                                  "readings file (optical_path_m or phase_rad, "
+                                                  "frequency_hz), corrected first as by `multilat correct`."),
     references: Optional[Path] = typer.Option(None, "--references",
                                               help="Reference lengths CSV: target_a,target_b,length_m[,u_m]."),
     points: Optional[Path] = typer.Option(None, "--points",
@@ -106,6 +108,17 @@ def adjust_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a summary."),
     out: Optional[Path] = typer.Option(None, "--out",
                                        help="Directory for result CSVs and figures (written atomically)."),
+    environment: Optional[Path] = typer.Option(None, "--environment", "-e",
+                                               help="Raw readings only: environment log CSV "
+                                                    "(as `multilat correct --environment`)."),
+    heights: Optional[Path] = typer.Option(None, "--heights",
+                                           help="Raw readings only: station/target heights "
+                                                "(as `multilat correct --heights`)."),
+    formula: str = typer.Option("ciddor", "--formula",
+                                help="Raw readings only: group index formula, ciddor or edlen."),
+    extrapolate: bool = typer.Option(False, "--extrapolate",
+                                     help="Raw readings only: extrapolate the environment outside "
+                                          "the log's time span (warned) instead of refusing."),
 ) -> None:
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
@@ -116,8 +129,26 @@ def adjust_command(
 
     if sigma_um is not None and not (np.isfinite(sigma_um) and sigma_um > 0):
         raise MultilatError(f"--sigma-um must be finite and > 0, got {sigma_um!r}")
-    obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
-                            instrument=instrument)
+    from multilat.campaign.raw import is_raw_file
+
+    if is_raw_file(observations):
+        if sigma_um is not None:
+            raise MultilatError("--sigma-um does not apply to raw readings: each corrected distance "
+                                "gets its sigma_m from the distance model and the sensors")
+        if formula not in ("ciddor", "edlen"):
+            raise MultilatError(f"--formula must be ciddor or edlen, got {formula!r}")
+        from multilat.campaign.correct import observations_from_raw
+
+        obs = observations_from_raw(observations, environment=environment,
+                                    instrument=instrument or "seed2020", formula=formula,
+                                    heights=heights, extrapolate=extrapolate)
+    else:
+        if environment is not None or heights is not None or extrapolate:
+            raise MultilatError(f"{observations}: --environment/--heights/--extrapolate apply to raw "
+                                "readings (optical_path_m or phase_rad), but this is an observation "
+                                "file with distance_m")
+        obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
+                                instrument=instrument)
     refs = read_reference_lengths(references) if references is not None else None
     if refs is not None:
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))
