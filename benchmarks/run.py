@@ -20,6 +20,12 @@ import time
 import traceback
 from pathlib import Path
 
+# Our dense systems are small (<= 240 x 120): OpenBLAS threads only cost time on a 2-core machine and
+# leave spinning threads that steal the second core from numba kernels (BENCHMARKS.md, Notes). Set
+# before numpy is imported by any benchmark module; an explicit setting by the user is kept.
+for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 REQUIRED = ("name", "median_s", "baseline", "baseline_median_s", "ratio", "extra")
