@@ -32,3 +32,24 @@ def require_finite(name: str, value, *, positive: bool = False, nonnegative: boo
         raise MultilatError(f"{name} must be > 0, got {value!r}")
     if nonnegative and not np.all(arr >= 0):
         raise MultilatError(f"{name} must be >= 0, got {value!r}")
+
+
+def validation_error_line(err, source: str) -> str:
+    """One line from a pydantic ``ValidationError``: ``"SOURCE: key.path: why (got value)"``.
+
+    A mistyped (unknown) key is reported first, as the likeliest cause; further errors are counted,
+    not listed, so the message stays one line.
+    """
+    errs = sorted(err.errors(), key=lambda x: x.get("type") != "extra_forbidden")  # a mistyped key first
+    e = errs[0]
+    loc = ".".join(str(x) for x in e.get("loc", ())) or "(top level)"
+    msg = e.get("msg", "invalid").replace("Value error, ", "")
+    if e.get("type") == "extra_forbidden":
+        msg = "unknown key (mistyped?)"
+    elif e.get("type") == "missing":
+        msg = "missing required key"
+    inp = e.get("input")
+    extra = f" (got {inp!r})" if e.get("type") not in ("extra_forbidden", "missing") and \
+        not isinstance(inp, dict) and "got" not in msg else ""
+    more = f" (+{len(err.errors()) - 1} more)" if len(err.errors()) > 1 else ""
+    return f"{source}: {loc}: {msg}{extra}{more}".replace("\n", " ")

@@ -34,7 +34,7 @@ from typing import Literal
 
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
-from multilat.errors import MultilatError
+from multilat.errors import MultilatError, validation_error_line
 
 __all__ = ["ADMConfig", "Environment", "HeadCommon", "HeadConfig", "TargetConfig", "BudgetConfig",
            "Instrument", "load_instrument", "parse_instrument", "presets"]
@@ -318,28 +318,12 @@ def presets() -> list[str]:
     return sorted(p.name[:-5] for p in files.iterdir() if p.name.endswith(".toml"))
 
 
-def _one_line(err: ValidationError, source: str) -> str:
-    errs = sorted(err.errors(), key=lambda x: x.get("type") != "extra_forbidden")  # a mistyped key first
-    e = errs[0]
-    loc = ".".join(str(x) for x in e.get("loc", ())) or "(top level)"
-    msg = e.get("msg", "invalid").replace("Value error, ", "")
-    if e.get("type") == "extra_forbidden":
-        msg = "unknown key (mistyped?)"
-    elif e.get("type") == "missing":
-        msg = "missing required key"
-    inp = e.get("input")
-    extra = f" (got {inp!r})" if e.get("type") not in ("extra_forbidden", "missing") and \
-        not isinstance(inp, dict) and "got" not in msg else ""
-    more = f" (+{len(err.errors()) - 1} more)" if len(err.errors()) > 1 else ""
-    return f"{source}: {loc}: {msg}{extra}{more}".replace("\n", " ")
-
-
 def parse_instrument(data: dict, *, source: str = "<dict>") -> Instrument:
     """Validate a decoded config mapping; :class:`MultilatError` names the key and the source."""
     try:
         return Instrument.model_validate(data)
     except ValidationError as err:
-        raise MultilatError(_one_line(err, source)) from None
+        raise MultilatError(validation_error_line(err, source)) from None
 
 
 def load_instrument(name_or_path: str | Path = "seed2020") -> Instrument:

@@ -17,7 +17,7 @@ from typing import Literal
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
 
-from multilat.errors import MultilatError
+from multilat.errors import MultilatError, validation_error_line
 
 __all__ = ["DEFAULT_CONFIG", "LBBConfig", "load_config", "parse_config"]
 
@@ -271,27 +271,12 @@ class LBBConfig(_Model):
         return parse_config(data, source="<replace>")
 
 
-def _one_line(err: ValidationError, source: str) -> str:
-    e = err.errors()[0]
-    loc = ".".join(str(x) for x in e.get("loc", ())) or "(top level)"
-    msg = e.get("msg", "invalid").replace("Value error, ", "")
-    if e.get("type") == "extra_forbidden":
-        msg = "unknown key (mistyped?)"
-    elif e.get("type") == "missing":
-        msg = "missing required key"
-    inp = e.get("input")
-    got = (f" (got {inp!r})" if e.get("type") not in ("extra_forbidden", "missing")
-           and not isinstance(inp, dict) and "got" not in msg else "")
-    more = f" (+{len(err.errors()) - 1} more)" if len(err.errors()) > 1 else ""
-    return f"{source}: {loc}: {msg}{got}{more}".replace("\n", " ")
-
-
 def parse_config(data: dict, *, source: str = "<dict>") -> LBBConfig:
     """Validate a decoded mapping; :class:`MultilatError` names the source and the key path."""
     try:
         return LBBConfig.model_validate(data)
     except ValidationError as err:
-        raise MultilatError(_one_line(err, source)) from None
+        raise MultilatError(validation_error_line(err, source)) from None
 
 
 def load_config(path: str | Path | None = None) -> LBBConfig:
