@@ -47,6 +47,28 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
+@contextlib.contextmanager
+def staging_dir(out: str | os.PathLike) -> Iterator[Path]:
+    """Write a set of output files into ``out`` all or nothing.
+
+    Yields a temporary directory beside ``out`` (same file system); when the block ends normally its
+    files are moved into ``out`` (created if missing), each by an atomic rename; when it raises (an
+    error, or Ctrl-C) the temporary directory is removed and ``out`` is left as it was.
+    """
+    import shutil
+
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    try:
+        yield tmp
+        out.mkdir(parents=True, exist_ok=True)
+        for f in sorted(tmp.iterdir()):
+            os.replace(f, out / f.name)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+
+
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     """Write ``text`` to ``path`` whole or not at all."""
     with atomic_path(path) as tmp:

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Optional
 
@@ -15,6 +11,7 @@ from rich.table import Table
 
 from multilat.cli.app import app, console, emit_json
 from multilat.errors import MultilatError
+from multilat.io import staging_dir
 
 
 def result_to_json(res, refs=None) -> dict:
@@ -58,21 +55,6 @@ def result_to_json(res, refs=None) -> dict:
              "reference_m": c.reference_m, "reference_u_m": c.reference_u_m,
              "difference_m": c.difference_m} for c in res.compare_references(refs)]
     return doc
-
-
-@contextlib.contextmanager
-def _staging(out: Path):
-    """A temporary directory beside ``out``; on success its files are moved into ``out`` one by one
-    (each an atomic rename), on failure it is removed and ``out`` is untouched."""
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
-    try:
-        yield tmp
-        out.mkdir(parents=True, exist_ok=True)
-        for f in sorted(tmp.iterdir()):
-            os.replace(f, out / f.name)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
 
 
 @app.command("adjust")
@@ -160,7 +142,7 @@ def adjust_command(
     if out is not None:
         from multilat.report.network_figures import save_figures
 
-        with _staging(out) as tmp:
+        with staging_dir(out) as tmp:
             write_result_csvs(res, tmp, references=refs)
             save_figures(res, tmp)
             from multilat.io import write_json_atomic
