@@ -82,6 +82,17 @@ def test_identical_whatever_the_map(small_problem):
     assert not np.array_equal(a.samples, c.samples)
 
 
+def test_identical_on_a_small_dask_local_cluster(small_problem):
+    """A real LocalCluster (2 worker processes), 2 chunks: bit-identical to the in-process run."""
+    from multilat.parallel import dask_map
+
+    a = propagate(small_problem, trials=2000, rng=5, noise="model", chunk_size=1000)
+    with dask_map(workers=2) as m:
+        b = propagate(small_problem, trials=2000, rng=5, noise="model", chunk_size=1000, map=m)
+    np.testing.assert_array_equal(a.samples, b.samples)
+    np.testing.assert_array_equal(a.mc_std, b.mc_std)
+
+
 @pytest.mark.slow
 def test_identical_on_a_dask_local_cluster(small_problem):
     from multilat.parallel import dask_map
@@ -171,8 +182,9 @@ def test_cli_errors(tmp_path, capsys):
     assert all(line.startswith("error:") for line in err)
 
 
-def test_cli_interrupt_leaves_no_half_written_file(tmp_path, monkeypatch, capsys):
-    """Ctrl-C while the figure is being written: exit 130, no partial file, no summary."""
+def test_cli_interrupt_leaves_out_untouched(tmp_path, monkeypatch, capsys):
+    """Ctrl-C while the figure is being written (after the CSVs): exit 130, OUT not created, no staging
+    directory or partial file left beside it; an existing OUT keeps its old contents and gets no new file."""
     import matplotlib.figure
 
     def boom(self, fname, *a, **k):
@@ -184,11 +196,67 @@ def test_cli_interrupt_leaves_no_half_written_file(tmp_path, monkeypatch, capsys
     out = tmp_path / "o"
     rc = main(["propagate", "small-volume", "--trials", "1000", "--noise", "gaussian", "--out", str(out)])
     assert rc == 130
-    names = sorted(p.name for p in out.iterdir()) if out.exists() else []
-    assert "clouds.png" not in names and "summary.json" not in names
-    assert not any(n.endswith(".part") for n in names)
-    for n in names:                      # whatever was written before the interrupt is whole
-        assert n.endswith(".csv") and (out / n).read_text().count("\n") >= 2
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == []          # no .o.*.part staging directory
+    out.mkdir()
+    (out / "summary.json").write_text("old")
+    rc = main(["propagate", "small-volume", "--trials", "1000", "--noise", "gaussian", "--out", str(out)])
+    assert rc == 130
+    assert sorted(p.name for p in out.iterdir()) == ["summary.json"]
+    assert (out / "summary.json").read_text() == "old"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o"]
+
+
+def _example_obs():
+    from pathlib import Path
+
+    return Path(__file__).resolve().parent.parent / "examples" / "network" / "small_volume_obs.csv"
+
+
+def test_cli_unknown_reference_id_names_file_and_line(tmp_path, capsys):
+    refs = tmp_path / "refs.csv"
+    refs.write_text("target_a,target_b,length_m\n1,2,0.15\n1,99,0.2\n")
+    assert main(["propagate", str(_example_obs()), "--trials", "100", "--references", str(refs)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("error:")
+    assert str(refs) in err[0] and "'99'" in err[0]
+    # the row with the unknown id (file line 3, data row 2) is named
+    assert f"{refs}:3" in err[0] or "row 2" in err[0], err[0]
+
+
+def test_measured_observations_sigma0_carries_the_nominal_residuals():
+    """Trials centred on measured distances: each trial's residuals are the nominal residuals plus those
+    of the drawn errors (residuals are linear in the distances, and the nominal residuals are orthogonal
+    to the column space), so E[sigma0^2] = sigma0_nominal^2 + 1 for gaussian errors with the weights'
+    sigma. sigma0^2 dof ~ noncentral chi2(dof, dof sigma0_nominal^2): the mean of n trials has standard
+    error sqrt(2 dof + 4 dof sigma0_nom^2) / dof / sqrt(n); 4 of them."""
+    from multilat.network.adjust import adjust
+    from multilat.network.files import read_observations
+    from multilat.network.propagate import problem_from_observations
+
+    obs = read_observations(_example_obs())
+    adj = adjust(obs, snooping=False)
+    pb = problem_from_observations(obs, adjustment=adj)
+    assert pb.sigma0_nominal == pytest.approx(adj.sigma0, rel=1e-12)
+    n = 4000
+    r = propagate(pb, trials=n, rng=5, noise="gaussian", chunk_size=2000, keep_samples=False)
+    dof, s0 = adj.dof, adj.sigma0
+    se = np.sqrt(2 * dof + 4 * dof * s0**2) / dof / np.sqrt(n)
+    assert abs(r.sigma0_rms**2 - (s0**2 + 1.0)) < 4 * se
+    assert r.sigma0_mean > s0 and r.sigma0_nominal == pytest.approx(s0)
+    # a known truth has sigma0_nominal 0: the trials' sigma0^2 averages 1
+    t = propagate(problem_from_config(small_volume(), sigma_m=4.7e-6), trials=n, rng=5, noise="gaussian",
+                  chunk_size=2000, keep_samples=False)
+    dof_t = 4 * 14 - (4 * 4 + 3 * 14 - 6)
+    assert t.sigma0_nominal == 0.0
+    assert abs(t.sigma0_rms**2 - 1.0) < 4 * np.sqrt(2 / dof_t / n)
+
+
+def test_cli_prints_nominal_sigma0(capsys):
+    assert main(["propagate", str(_example_obs()), "--trials", "2000", "--noise", "gaussian"]) == 0
+    out = " ".join(capsys.readouterr().out.split())        # undo rich's line wrapping
+    assert "sigma0: nominal 1.199, trials' mean" in out
+    assert "centred on the measured distances" in out
 
 
 def test_321_datum_fixes_six_coordinates():

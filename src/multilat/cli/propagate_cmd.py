@@ -35,6 +35,8 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
 
     obs = read_observations(source, sigma_m=None if sigma_um is None else sigma_um * 1e-6, instrument=inst)
     refs = read_reference_lengths(references) if references is not None else None
+    if refs is not None:      # unknown ids named with the reference file (and its line)
+        refs.check_ids(tuple(obs.station_ids) + tuple(obs.target_ids), what=str(references))
     return pr.problem_from_observations(obs, datum=datum, references=refs, instrument=inst,
                                         source=str(source))
 
@@ -75,7 +77,11 @@ def propagate_cmd(
                         progress=lambda n: bar.update(task, completed=n), keep_samples=out is not None)
     doc = res.to_dict()
     if out is not None:
-        write_outputs(res, doc, out)
+        from multilat.io import staging_dir
+
+        # all or nothing: files go to a temporary directory beside OUT, moved in only on success
+        with staging_dir(out) as tmp:
+            write_outputs(res, doc, tmp)
     if as_json:
         emit_json(doc)
         return
@@ -83,8 +89,9 @@ def propagate_cmd(
 
 
 def write_outputs(res, doc, out: Path) -> None:
-    """``summary.json``, ``parameters.csv``, ``distances.csv``, ``points.csv``, ``clouds.png``, each
-    written atomically (an interruption leaves every file whole or absent)."""
+    """Write ``summary.json``, ``parameters.csv``, ``distances.csv``, ``points.csv``, ``clouds.png``
+    into ``out`` (the command passes a :func:`multilat.io.staging_dir`, so the set appears in
+    ``--out`` whole or not at all)."""
     from multilat.io import atomic_path, write_csv_atomic, write_json_atomic
     from multilat.report.propagate_figures import clouds_figure
 
@@ -121,8 +128,12 @@ def _print(res, doc, out) -> None:
     s = doc["summary"]
     console.print(f"[bold]Monte Carlo through the adjustment[/bold] ({doc['source']}): {doc['trials']} trials "
                   f"kept, {doc['n_failed']} failed to converge ({doc['n_retried']} re-solved by full "
-                  f"Gauss-Newton), noise={doc['noise']}, "
-                  f"mean sigma0={doc['sigma0_mean']:.3f}, {doc['elapsed_s']:.1f} s")
+                  f"Gauss-Newton), noise={doc['noise']}, {doc['elapsed_s']:.1f} s")
+    console.print(f"sigma0: nominal {doc['sigma0_nominal']:.3f}, trials' mean {doc['sigma0_mean']:.3f} "
+                  f"(rms {doc['sigma0_rms']:.3f}; drawn errors alone {doc['sigma0_noise_only']:.3f})")
+    if doc["sigma0_nominal"] > 0:
+        console.print("  trials are centred on the measured distances, so each carries the nominal residuals "
+                      "as well: sigma0_trial^2 ~ sigma0_nominal^2 + (errors alone)^2")
     if doc["adaptive"]:
         a = doc["adaptive"]
         console.print(f"adaptive (JCGM 101 7.9): converged={a['converged']} after {a['chunks']} chunks")

@@ -66,6 +66,9 @@ class Problem:
         Reference lengths for the pairs (NaN when none).
     source : str
         Description (configuration name or file).
+    sigma0_nominal : float
+        A-posteriori sigma0 of the nominal solution: 0 for a known truth (exact nominal distances),
+        the adjustment's sigma0 for measured observations (their residuals are in every trial).
     """
 
     station_ids: tuple
@@ -76,6 +79,7 @@ class Problem:
     pairs: tuple = ()
     reference_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     source: str = ""
+    sigma0_nominal: float = 0.0
 
     def point_xyz(self, ident: str) -> np.ndarray:
         k, i = self.point_index(ident)
@@ -203,7 +207,8 @@ def problem_from_observations(obs, *, datum="free", pairs=None, references=None,
                             res.offset_m, res.target_xyz_m, datum=dt)
     pairs_, ref = _pairs_and_refs(pairs, references, target_ids, station_ids)
     return Problem(station_ids, target_ids, net, np.asarray(obs.distance_m, float),
-                   _heads_for(station_ids, instrument, head), pairs_, ref, source)
+                   _heads_for(station_ids, instrument, head), pairs_, ref, source,
+                   sigma0_nominal=float(res.sigma0))
 
 
 def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pairs=None,
@@ -334,6 +339,12 @@ class PropagationResult:
         Trials dropped because the solver did not converge.
     sigma0_mean : float
         Mean a-posteriori sigma0 over the trials.
+    sigma0_rms : float
+        Root mean square of the trials' sigma0. The trials' distances are the nominal ones plus the
+        drawn errors, and the residuals are linear in the distances, so each trial's residuals are
+        the nominal residuals plus those of the errors: ``E[sigma0^2] = sigma0_nominal^2 + s_e^2``
+        with ``s_e^2`` the errors' own contribution (1 for gaussian errors with the weights' sigma).
+        For measured observations the trials' sigma0 is therefore larger than the nominal one.
     noise : str
     seed_entropy : int
     adaptive : dict or None
@@ -376,6 +387,19 @@ class PropagationResult:
     input_std_ratio: float = 1.0
     n_retried: int = 0
     samples: np.ndarray | None = field(default=None, repr=False)
+    sigma0_rms: float = float("nan")
+
+    @property
+    def sigma0_nominal(self) -> float:
+        """sigma0 of the nominal solution (``problem.sigma0_nominal``)."""
+        return float(self.problem.sigma0_nominal)
+
+    @property
+    def sigma0_noise_only(self) -> float:
+        """``sqrt(sigma0_rms^2 - sigma0_nominal^2)``: the drawn errors' own contribution to sigma0
+        (about 1 for gaussian errors drawn with the weights' sigma; NaN if negative)."""
+        v = self.sigma0_rms**2 - self.sigma0_nominal**2
+        return float(np.sqrt(v)) if v >= 0 else float("nan")
 
     @property
     def fixed(self) -> np.ndarray:
@@ -439,6 +463,9 @@ class PropagationResult:
             "seed_entropy": self.seed_entropy,
             "coverage": 0.95,
             "sigma0_mean": self.sigma0_mean,
+            "sigma0_rms": self.sigma0_rms,
+            "sigma0_nominal": self.sigma0_nominal,
+            "sigma0_noise_only": self.sigma0_noise_only,
             "input_std_ratio": self.input_std_ratio,
             "elapsed_s": self.elapsed_s,
             "adaptive": self.adaptive,
@@ -661,7 +688,9 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
     if n < 2:
         raise MultilatError(f"only {n} of {done} trials converged: the network is too weak for a "
                             "Monte Carlo from its nominal solution")
-    sig0 = float(np.mean(np.concatenate([p["sigma0"] for p in parts])))
+    sig0_all = np.concatenate([p["sigma0"] for p in parts])
+    sig0 = float(np.mean(sig0_all))
+    sig0_rms = float(np.sqrt(np.mean(sig0_all**2)))
     from multilat.montecarlo import coverage_interval
 
     x0 = np.concatenate([bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m),
@@ -714,7 +743,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         ellipsoid_coverage_lin=cov_lin_frac, trials=n, n_failed=n_failed, sigma0_mean=sig0, noise=noise,
         seed_entropy=int(ss.entropy), adaptive=adaptive_info, elapsed_s=time.perf_counter() - t0,
         input_std_m=noise_std, input_std_ratio=input_std_ratio, n_retried=n_retried,
-        samples=dev if keep_samples else None)
+        samples=dev if keep_samples else None, sigma0_rms=sig0_rms)
 
 
 def _chunk_stats(dev) -> np.ndarray:
