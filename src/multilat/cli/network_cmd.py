@@ -37,14 +37,17 @@ def result_to_json(res, refs=None) -> dict:
         "stations": stations,
         "targets": targets,
         "sigma0": res.sigma0,
+        "sigma0_unit": res.sigma0_unit,
         "dof": res.dof,
         "global_test": {"statistic": gt.statistic, "critical": gt.critical, "passed": gt.passed,
                         "alpha": gt.alpha},
         "alpha": res.alpha,
+        "snooping": res.snooping,
         "outliers": [{"station": o.station, "target": o.target, "w": o.w, "residual_m": o.residual_m}
                      for o in res.outliers],
         "unlocated": [{"station": o.station, "target": o.target, "w": o.w, "residual_m": o.residual_m}
                       for o in res.unlocated],
+        "unlocated_reason": res.unlocated_reason,
         "reference_lengths": [],
         "iterations": res.iterations,
         "condition": res.condition,
@@ -55,6 +58,42 @@ def result_to_json(res, refs=None) -> dict:
              "reference_m": c.reference_m, "reference_u_m": c.reference_u_m,
              "difference_m": c.difference_m} for c in res.compare_references(refs)]
     return doc
+
+
+def parse_fixed_offsets(text: str, station_ids) -> float | dict:
+    """``--fix-offsets-um``: ``"X"`` (every station, µm) -> metres; ``"A=1234,B=-871"`` -> {id: metres}.
+
+    Raises :class:`MultilatError` (one line) on a malformed value or an unknown station id.
+    """
+    text = text.strip()
+    if "=" not in text:
+        try:
+            v = float(text)
+        except ValueError:
+            raise MultilatError(f"--fix-offsets-um: expected a number of µm or STATION=µm,..., "
+                                f"got {text!r}") from None
+        if not np.isfinite(v):
+            raise MultilatError(f"--fix-offsets-um must be finite, got {text!r}")
+        return v * 1e-6
+    out = {}
+    for item in text.split(","):
+        key, sep, val = item.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise MultilatError(f"--fix-offsets-um: expected STATION=µm, got {item.strip()!r}")
+        if key not in station_ids:
+            raise MultilatError(f"--fix-offsets-um: unknown station id {key!r} "
+                                f"(stations: {', '.join(station_ids)})")
+        if key in out:
+            raise MultilatError(f"--fix-offsets-um: station {key!r} given twice")
+        try:
+            v = float(val)
+        except ValueError:
+            raise MultilatError(f"--fix-offsets-um: {key}: not a number of µm: {val.strip()!r}") from None
+        if not np.isfinite(v):
+            raise MultilatError(f"--fix-offsets-um: {key}: must be finite, got {val.strip()!r}")
+        out[key] = v * 1e-6
+    return out
 
 
 @app.command("adjust")
@@ -80,9 +119,11 @@ def adjust_command(
     alpha_global: float = typer.Option(0.05, "--alpha-global", help="Significance of the global χ² test."),
     cost: str = typer.Option("distance", "--cost",
                              help="distance (weighted, default) or squared (the paper's eq. 6, unweighted)."),
-    fix_offsets_um: Optional[float] = typer.Option(None, "--fix-offsets-um",
-                                                   help="Hold every station offset at this value, µm "
-                                                        "(default: estimate them)."),
+    fix_offsets_um: Optional[str] = typer.Option(None, "--fix-offsets-um",
+                                                 help="Hold station offsets fixed, µm: one value for "
+                                                      "every station (e.g. 0), or per station "
+                                                      "A=1234,B=-871 (the others stay estimated). "
+                                                      "Default: estimate them all."),
     scales: bool = typer.Option(False, "--scales", help="Also estimate a scale per station."),
     snooping: bool = typer.Option(True, "--snooping/--no-snooping",
                                   help="Iteratively reject the worst w-test failure."),
@@ -135,7 +176,7 @@ def adjust_command(
     if refs is not None:
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))
     pts = read_points(points) if points is not None else None
-    offsets = None if fix_offsets_um is None else fix_offsets_um * 1e-6
+    offsets = None if fix_offsets_um is None else parse_fixed_offsets(fix_offsets_um, obs.station_ids)
     res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
                  alpha_global=alpha_global, snooping=snooping, rng=seed)
     doc = result_to_json(res, refs)
@@ -158,13 +199,20 @@ def _print_summary(res, doc, out):
     gt = res.global_test
     console.print(f"adjusted {res.obs.n_stations} stations, {res.obs.n_targets} targets from "
                   f"{int(res.used.sum())}/{res.obs.n_obs} distances ({res.cost} cost; {res.datum.describe()})")
-    if gt.statistic is not None:
-        console.print(f"  σ0 = {res.sigma0:.3f}, dof = {res.dof}; global χ² test: {gt.statistic:.2f} "
+    if res.cost == "squared":
+        console.print(f"  σ0 = {res.sigma0:.4g} m² (unweighted squared-distance residuals, eq. 6), "
+                      f"dof = {res.dof}; no global test for this cost")
+    elif gt.statistic is not None:
+        console.print(f"  σ0 = {res.sigma0:.3f} (ratio to the a-priori uncertainties), dof = {res.dof}; "
+                      f"global χ² test: {gt.statistic:.2f} "
                       f"{'<=' if gt.passed else '>'} {gt.critical:.2f} (α = {gt.alpha:g}): "
                       f"{'passed' if gt.passed else 'FAILED'}")
     else:
-        console.print(f"  σ0 = {res.sigma0:.4g}, dof = {res.dof} (no global test for this cost)")
-    if res.outliers:
+        console.print(f"  σ0 = {res.sigma0:.4g}, dof = {res.dof} (no global test without redundancy)")
+    if not res.snooping:
+        console.print("  data snooping not done for this cost" if res.cost == "squared"
+                      else "  data snooping not requested (--no-snooping)")
+    elif res.outliers:
         console.print(f"  rejected by data snooping (α = {res.alpha:g}):")
         for o in res.outliers:
             console.print(f"    {o.station}->{o.target}: w = {o.w:+.1f}, residual {o.residual_m * 1e6:+.1f} µm")
@@ -172,8 +220,12 @@ def _print_summary(res, doc, out):
         console.print(f"  no observation rejected by data snooping (α = {res.alpha:g})")
     if res.unlocated:
         ids = ", ".join(f"{o.station}->{o.target}" for o in res.unlocated)
-        console.print(f"  [bold]w-test failure that cannot be located[/bold] (perfectly correlated "
-                      f"tests, |w| = {abs(res.unlocated[0].w):.1f}): one of {ids}; none rejected")
+        if len(res.unlocated) > 1:
+            console.print(f"  [bold]w-test failure that cannot be located[/bold] (perfectly correlated "
+                          f"tests, |w| = {abs(res.unlocated[0].w):.1f}): one of {ids}; none rejected")
+        else:
+            console.print(f"  [bold]w-test failure not rejected[/bold]: {ids} (|w| = "
+                          f"{abs(res.unlocated[0].w):.1f}): {res.unlocated_reason}")
     t = Table(title="stations", title_justify="left")
     for c in ("station", "x (m)", "y (m)", "z (m)", "offset (µm)", "u(offset) (µm)", "95 % max (µm)"):
         t.add_column(c, justify="right")

@@ -9,6 +9,7 @@ statistics: :mod:`multilat.network.statistics`; solvability: :mod:`multilat.netw
 from __future__ import annotations
 
 import itertools
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -18,10 +19,12 @@ from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.covariance import NetworkCovariance
 from multilat.network.data import Observations, Points, ReferenceLengths
-from multilat.network.datum import Datum, apply_rigid, frame_321, helmert_basis, parse_datum, rigid_fit
+from multilat.network.datum import (Datum, apply_rigid, frame_321, helmert_basis, parse_datum,
+                                    rigid_fit)
 from multilat.network.model import (COSTS, Q, back_substitute, reduced_normal_equations,
                                     residuals_and_jacobian)
-from multilat.network.solvability import CONDITION_LIMIT, check_structure, diagnose_degeneracy
+from multilat.network.solvability import (CONDITION_LIMIT, check_structure, diagnose_degeneracy,
+                                          flat_geometry)
 
 __all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
 
@@ -87,8 +90,10 @@ class AdjustmentResult:
     outliers : tuple of Outlier  rejected by data snooping, in order of rejection
     unlocated : tuple of Outlier  a w-test failure that was not rejected: either it cannot be
         located (these observations' w-tests are perfectly correlated, e.g. the 4 distances to a
-        target seen by only 4 stations) or rejecting it would leave the network unsolvable;
-        empty when snooping ended normally
+        target seen by only 4 stations) or rejecting it would leave the network unsolvable or a
+        point without redundancy; empty when snooping ended normally
+    unlocated_reason : str  why ``unlocated`` was not rejected (one phrase; "" when empty)
+    snooping : bool  whether data snooping was run (not for the ``"squared"`` cost, nor when off)
     alpha, power : float  w-test significance and power used for the MDBs
     iterations : int ; condition : float (unit-diagonal reduced normal matrix)
     covariance : NetworkCovariance  any block of the full covariance in the datum
@@ -123,6 +128,14 @@ class AdjustmentResult:
     iterations: int
     condition: float
     covariance: NetworkCovariance = field(repr=False)
+    unlocated_reason: str = ""
+    snooping: bool = True
+
+    @property
+    def sigma0_unit(self) -> str:
+        """Unit of ``sigma0``: ``"1"`` for the weighted distance cost (a ratio to the a-priori
+        uncertainties), ``"m^2"`` for the unweighted squared-distance cost (eq. 6)."""
+        return "1" if self.cost == "distance" else "m^2"
 
     # ------------------------------------------------------------ derived quantities
     @property
@@ -317,7 +330,9 @@ def _solve_reduced(N, b, free, obs, sx, tx):
         nv = np.zeros(free.size)
         nv[free] = V[:, 0] / d
         raise MultilatError(diagnose_degeneracy(sx, tx, obs.station_ids, obs.target_ids, nv,
-                                                _param_names(obs), condition=cond))
+                                                _param_names(obs), condition=cond,
+                                                sigma_m=float(np.median(obs.sigma_m)),
+                                                n_obs=obs.n_obs))
     # solve in the scaled form via the eigen-decomposition (well conditioned here)
     Qs = (V / ev) @ V.T
     Qf = Qs / np.outer(d, d)
@@ -372,11 +387,21 @@ def _gauss_newton(pb: _Problem, sx, tx, off, sc, *, max_iter, tol_m, chunk_targe
                 break
             lam = 1e-4 if lam == 0 else lam * 10.0
             if lam > 1e8:
+                _raise_if_flat(o, sx, tx, "no convergence")
                 raise MultilatError("the adjustment did not converge (no decrease of the cost); "
                                     "check initial values and the observations")
         sx, tx, off, sc, cost = nsx, ntx, noff, nsc, new_cost
+    _raise_if_flat(o, sx, tx, f"no convergence in {max_iter} iterations")
     raise MultilatError(f"the adjustment did not converge in {max_iter} iterations "
                         f"(last step {step:.3g} m); check initial values, the geometry and the distances for gross errors")
+
+
+def _raise_if_flat(obs, sx, tx, when: str) -> None:
+    """Raise the one-line 'near-degenerate geometry (when): cause' if the points are (nearly)
+    coplanar stations or collinear targets by :func:`solvability.flat_geometry`."""
+    cause = flat_geometry(sx, tx, sigma_m=float(np.median(obs.sigma_m)), n_obs=obs.n_obs)
+    if cause:
+        raise MultilatError(f"near-degenerate geometry ({when}): {cause}")
 
 
 def _fixed_offsets(offsets, obs: Observations):
@@ -491,8 +516,17 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     sc_free = _scale_flags(scales, obs)
     if datum.kind == "control" and points is None:
         raise MultilatError("datum control needs control coordinates (points)")
+    if points is not None:
+        known = set(obs.station_ids) | set(obs.target_ids)
+        stray = [i for i in points.ids if i not in known]
+        if stray:
+            warnings.warn(f"points: {len(stray)} id(s) not in the observations, ignored: "
+                          f"{', '.join(stray[:8])}{'...' if len(stray) > 8 else ''}",
+                          UserWarning, stacklevel=2)
     _structure(obs, datum, points, off_free, sc_free, warn=False)   # before any initial values
     start = _initial(obs, initial, points, rng)
+    # coplanar stations / collinear targets make the problem singular: say so before solving
+    _raise_if_flat(obs, start.station_xyz_m, start.target_xyz_m, "initial coordinates")
     start = Start(start.station_xyz_m, start.target_xyz_m,
                   np.where(off_free, start.offset_m, off_val))
     do_snoop = snooping and cost == "distance"
@@ -503,10 +537,18 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     warn = True
     guess = start
     unlocated: tuple = ()
+    reason = ""
+    first = True
     while True:
         sub = obs if used.all() else obs.subset(used)
         core = _adjust_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
                             sc_free, max_iter, tol_m, chunk_targets, warn=warn)
+        if first and datum.kind == "control" and cost == "distance":
+            # a failed global test under control may be the control coordinates, not the distances:
+            # test them (against the free network) before data snooping blames the distances
+            _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global,
+                           max_iter, tol_m, chunk_targets, datum)
+        first = False
         # the next adjustment (after a rejection) starts from this solution
         gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
         gs[core["smap"]], gt_[core["tmap"]], go[core["smap"]] = core["sx"], core["tx"], core["off"]
@@ -530,19 +572,86 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         twins = np.flatnonzero(np.abs(np.nan_to_num(rho)) > 1.0 - 1e-6)
         if twins.size:
             unlocated = tuple(int(np.flatnonzero(used)[q]) for q in np.concatenate([[k_sub], twins]))
+            reason = "perfectly correlated w-tests: the data cannot tell which observation is wrong"
             break
         trial = used.copy()
         trial[k] = False
+        why = _last_redundancy(obs, used, trial, k, datum, points)
+        if why:
+            unlocated, reason = (k,), why
+            break
         try:
             _structure(obs.subset(trial), datum, points, off_free[_station_map(obs, trial)],
                        sc_free[_station_map(obs, trial)], warn=False)
-        except MultilatError:
+        except MultilatError as exc:
             # rejecting it would make the network unsolvable: keep it, report it as not rejected
-            unlocated = (k,)
+            unlocated, reason = (k,), f"rejecting it would leave the network unsolvable ({exc})"
             break
         rejected.append((k, float(w_sub[k_sub])))
         used = trial
-    return _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global)
+    return _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global,
+                         reason=reason, snooped=do_snoop)
+
+
+def _last_redundancy(obs, used, trial, k, datum, points) -> str:
+    """Why rejecting observation ``k`` must not happen (it takes a point's last redundancy), or ""."""
+    j = int(obs.target_index[k])
+    tid = obs.target_ids[j]
+    before = int(np.sum(obs.target_index[used] == j))
+    after = int(np.sum(obs.target_index[trial] == j))
+    fixed = datum.kind == "control" and tid in _control_ids(obs.subset(used), datum, points)
+    need = 1 if fixed else 4          # a control target: any distance checks it; a free one: 3 + 1
+    if before >= need > after:
+        what = "control point" if fixed else "target"
+        return (f"rejecting it would leave {what} {tid!r} with {after} observation(s), without "
+                "redundancy")
+    return ""
+
+
+def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global, max_iter,
+                   tol_m, chunk_targets, datum) -> None:
+    """Raise if the control coordinates are inconsistent with the distances.
+
+    The adjustment with the control held fixed has ``Omega_c = v^T P v`` on ``dof_c``; the free
+    network of the same distances ``Omega_f`` on ``dof_f``. With a-priori weights, consistent
+    control gives ``Omega_c - Omega_f ~ chi2(dof_c - dof_f)`` independent of the distances' own
+    misfit (a blunder inflates both). Only run when the global test under control fails.
+    """
+    gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global)
+    if gt.passed is None or gt.passed:
+        return
+    used = np.ones(obs.n_obs, bool)
+    ctrl = sorted(_control_ids(obs, datum, points))
+    guess = Start(core["sx"], core["tx"], core["off"])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            free = _adjust_once(obs, parse_datum("free"), guess, guess, obs, used, None, "distance",
+                                off_free, off_val, sc_free, max_iter, tol_m, chunk_targets, warn=False)
+    except MultilatError:
+        return            # not solvable without the control: nothing to compare; snooping goes on
+    k = core["dof"] - free["dof"]
+    if k <= 0:
+        return
+    stat = core["vtpv"] - free["vtpv"]
+    from scipy import stats
+
+    crit = float(stats.chi2.ppf(1.0 - alpha_global, k))
+    if not stat > crit:
+        return
+    ids = obs.station_ids + obs.target_ids
+    xyz = dict(zip(ids, np.vstack([free["sx"], free["tx"]])))
+    src = np.array([xyz[i] for i in ctrl])
+    dst = np.array([points.get(i) for i in ctrl])
+    R, t = rigid_fit(src, dst)
+    mis = np.linalg.norm(apply_rigid(R, t, src) - dst, axis=1)
+    w = int(np.argmax(mis))
+    raise MultilatError(
+        f"control coordinates inconsistent with the distances (σ0 = {core['sigma0']:.3g} with the "
+        f"control held fixed, {free['sigma0']:.3g} free; global test {gt.statistic:.1f} > "
+        f"{gt.critical:.1f}; control test χ² = {stat:.1f} > {crit:.1f} on {k} dof; largest misfit "
+        f"{ctrl[w]!r} {mis[w] * 1e3:.2f} mm after a rigid fit): check the control points or use "
+        "--datum free")
 
 
 def _station_map(obs, used):
@@ -703,7 +812,8 @@ def _datum_matrices(datum, sub, sx, tx):
     return G, E
 
 
-def _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global):
+def _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global, *,
+                  reason="", snooped=True):
     s, t, m = obs.n_stations, obs.n_targets, obs.n_obs
     smap, tmap = core["smap"], core["tmap"]
     sx = np.full((s, 3), np.nan)
@@ -751,5 +861,5 @@ def _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, powe
         target_cov_m2=tcov, global_cov=gcov, offset_std_m=np.sqrt(np.clip(gd[:, 3], 0, None)),
         scale_std=np.sqrt(np.clip(gd[:, 4], 0, None)), residuals_m=r_all, redundancy=red, w=w,
         mdb_m=mdb, sigma0=core["sigma0"], dof=core["dof"], global_test=gt, outliers=outliers,
-        unlocated=unloc,
+        unlocated=unloc, unlocated_reason=reason if unloc else "", snooping=bool(snooped),
         alpha=alpha, power=power, iterations=core["iterations"], condition=core["cond"], covariance=cov)

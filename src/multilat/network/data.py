@@ -202,12 +202,16 @@ class ReferenceLengths:
     target_a, target_b : tuple of str, length r
     length_m : ndarray, shape (r,), metres, > 0
     u_m : ndarray, shape (r,), standard uncertainty, metres (NaN when not given)
+    path : str, optional  the file they were read from (for ``FILE:LINE:`` errors)
+    line_numbers : tuple of int, length r, optional  the file line of each row
     """
 
     target_a: tuple[str, ...]
     target_b: tuple[str, ...]
     length_m: np.ndarray
     u_m: np.ndarray
+    path: str | None = None
+    line_numbers: tuple[int, ...] | None = None
 
     def __post_init__(self):
         a, b = _ids("target_a", self.target_a), _ids("target_b", self.target_b)
@@ -229,16 +233,24 @@ class ReferenceLengths:
         object.__setattr__(self, "target_b", b)
         object.__setattr__(self, "length_m", L)
         object.__setattr__(self, "u_m", u)
+        if self.line_numbers is not None:
+            ln = tuple(int(v) for v in self.line_numbers)
+            if len(ln) != r:
+                raise MultilatError(f"line_numbers: expected {r} entries, got {len(ln)}")
+            object.__setattr__(self, "line_numbers", ln)
 
     def __len__(self) -> int:
         return len(self.target_a)
 
     def check_ids(self, known: Sequence[str], *, what: str = "reference lengths") -> None:
-        """Raise :class:`MultilatError` naming the first id not in ``known``."""
+        """Raise :class:`MultilatError` naming the first id not in ``known``: ``FILE:LINE:`` when
+        read from a file (``path``, ``line_numbers``), else ``what: row K:`` (1-based)."""
         ks = set(known)
         for k, (x, y) in enumerate(zip(self.target_a, self.target_b)):
             for v in (x, y):
                 if v not in ks:
+                    if self.path is not None and self.line_numbers is not None:
+                        raise MultilatError(f"{self.path}:{self.line_numbers[k]}: unknown point id {v!r}")
                     raise MultilatError(f"{what}: row {k + 1}: unknown point id {v!r}")
 
 

@@ -129,7 +129,7 @@ def read_reference_lengths(path: str | os.PathLike) -> ReferenceLengths:
             raise tab.error(k, f"duplicate reference length {x}-{y} (first at line "
                                f"{tab.line_numbers[seen[key]]})")
         seen[key] = k
-    return ReferenceLengths(tuple(a), tuple(b), L, u)
+    return ReferenceLengths(tuple(a), tuple(b), L, u, path=str(tab.path), line_numbers=tab.line_numbers)
 
 
 def read_points(path: str | os.PathLike) -> Points:

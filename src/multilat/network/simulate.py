@@ -437,7 +437,14 @@ def _load_toml(p: Path) -> NetworkConfig:
 def _load_csv(p: Path) -> NetworkConfig:
     from multilat.io import read_csv_table
 
-    tab = read_csv_table(p, required=["point", "kind", "x_m", "y_m", "z_m"], optional=["offset_m"])
+    tab = read_csv_table(p, required=["point", "x_m", "y_m", "z_m"], optional=["kind", "offset_m"])
+    if not tab.has("kind"):
+        hdr = next(n + 1 for n, ln in enumerate(p.read_text(encoding="utf-8-sig").splitlines())
+                   if ln.strip() and not ln.lstrip().startswith("#"))
+        raise MultilatError(f"{p}:{hdr}: header lacks "
+                            "column kind: a configuration CSV is point,kind,x_m,y_m,z_m[,offset_m] "
+                            "with kind 'station' or 'target' (a points file has no kind; see "
+                            "examples/network/small_volume_config.csv)")
     x, y, z = tab.floats("x_m"), tab.floats("y_m"), tab.floats("z_m")
     off = tab.floats("offset_m", required=False) if tab.has("offset_m") else np.full(len(x), np.nan)
     sid, sx, so, tid, tx = [], [], [], [], []

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["plot_residuals", "plot_top_view", "plot_3d", "save_figures", "auto_magnify"]
+__all__ = ["plot_residuals", "plot_top_view", "plot_3d", "save_figures", "auto_magnify",
+           "place_labels"]
 
 
 def _plt():
@@ -82,7 +83,7 @@ def plot_top_view(result, ax=None, *, magnify: float | None = None):
                                       (result.target_xyz_m, result.target_cov_m2, result.target_ids,
                                        "o", "C0")):
         ax.plot(xyz[:, 0], xyz[:, 1], style, color=col, ms=6 if style == "^" else 4)
-        for p, c, name in zip(xyz, cov, ids):
+        for p, c in zip(xyz, cov):
             if len(xyz) > 2000:      # too many to draw one by one
                 break
             w, V = np.linalg.eigh(c[:2, :2])
@@ -90,13 +91,68 @@ def plot_top_view(result, ax=None, *, magnify: float | None = None):
             ang = np.degrees(np.arctan2(V[1, 1], V[0, 1]))
             ax.add_patch(Ellipse(p[:2], 2 * k * mag * np.sqrt(w[1]), 2 * k * mag * np.sqrt(w[0]),
                                  angle=ang, fill=False, color=col, lw=0.8))
-            if len(ids) <= 40:
-                ax.annotate(name, p[:2], fontsize=7, xytext=(3, 3), textcoords="offset points")
     ax.set_aspect("equal", adjustable="datalim")
+    names = list(result.station_ids) + list(result.target_ids)
+    if len(names) <= 60:
+        place_labels(ax, np.vstack([result.station_xyz_m, result.target_xyz_m])[:, :2], names,
+                     colors=["darkred"] * len(result.station_ids) + ["k"] * len(result.target_ids))
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title(f"top view: heads (▲), targets (●), 95 % ellipses ×{mag:g}")
     return ax
+
+
+#: label offsets tried in turn (points from the marker): upper right first, then around it
+_LABEL_OFFSETS_PT = [(3, 3), (3, -10), (-9, 3), (-9, -10), (5, -3), (-12, -3), (-3, 6), (-3, -13),
+                     (9, 9), (9, -16), (-16, 9), (-16, -16)]
+
+
+def place_labels(ax, xy, names, *, fontsize: float = 7, colors=None) -> list:
+    """Annotate the points ``xy`` (p, 2), data units, with ``names`` so that no two labels overlap
+    and no label covers another point's marker, where possible.
+
+    Greedy: each label (in order) takes the first offset of ``_LABEL_OFFSETS_PT`` whose box (text
+    size estimated from the font size) clears the boxes already placed and the other markers; if
+    none does, the offset with the least overlap. Call after the axes limits and aspect are final.
+
+    Returns
+    -------
+    list of matplotlib ``Annotation``
+    """
+    ax.apply_aspect()
+    fig = ax.figure
+    px = fig.dpi / 72.0                                  # pixels per point
+    disp = ax.transData.transform(np.asarray(xy, float))
+    h = fontsize * px
+    marker_r = 3.5 * px
+    placed: list[tuple[float, float, float, float]] = []
+    out = []
+
+    def overlap(a, b):
+        return max(0.0, min(a[2], b[2]) - max(a[0], b[0])) * max(0.0, min(a[3], b[3]) - max(a[1], b[1]))
+
+    for i, name in enumerate(names):
+        w = 0.62 * fontsize * px * max(len(str(name)), 1)
+        best, best_cost = _LABEL_OFFSETS_PT[0], np.inf
+        for dx, dy in _LABEL_OFFSETS_PT:
+            x0, y0 = disp[i, 0] + dx * px, disp[i, 1] + dy * px
+            box = (x0, y0, x0 + w, y0 + h)
+            cost = sum(overlap(box, b) for b in placed)
+            for j in range(len(disp)):
+                if j != i:
+                    mk = (disp[j, 0] - marker_r, disp[j, 1] - marker_r, disp[j, 0] + marker_r,
+                          disp[j, 1] + marker_r)
+                    cost += overlap(box, mk)
+            if cost < best_cost:
+                best, best_cost = (dx, dy), cost
+            if cost == 0.0:
+                break
+        x0, y0 = disp[i, 0] + best[0] * px, disp[i, 1] + best[1] * px
+        placed.append((x0, y0, x0 + w, y0 + h))
+        out.append(ax.annotate(str(name), np.asarray(xy, float)[i], fontsize=fontsize, xytext=best,
+                               textcoords="offset points", ha="left", va="bottom",
+                               color=None if colors is None else colors[i]))
+    return out
 
 
 def plot_3d(result, ax=None, *, magnify: float | None = None):
