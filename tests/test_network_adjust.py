@@ -172,3 +172,62 @@ def test_fault_at_a_minimally_observed_station_is_reported_not_misplaced():
     assert len({round(abs(o.w), 6) for o in res.unlocated}) == 1 and abs(res.unlocated[0].w) > 3.29
     assert not res.global_test.passed
     assert res.used.all()
+
+
+def test_snooping_keeps_a_targets_last_redundancy():
+    """A 30-sigma fault on a target seen by only 4 of 6 stations: rejecting any of its 4 distances
+    would leave it with 3 (determined, no redundancy). Its 4 w-tests are perfectly correlated even
+    with 6 stations (the target's 3 coordinates absorb 3 of the 4 residual directions), so the
+    fault is reported as not locatable and nothing is removed (the rule 'keep >= 4 distances per
+    free target' in adjust._last_redundancy is the safety net behind this)."""
+    tr = random_network(41, n_stations=6, n_targets=20)
+    keep = (tr.obs.target_index != 0) | (tr.obs.station_index < 4)
+    obs = tr.obs.subset(keep)
+    k = int(np.flatnonzero((obs.station_index == 1) & (obs.target_index == 0))[0])
+    d = obs.distance_m.copy()
+    d[k] += 30 * obs.sigma_m[k]
+    res = adjust(obs.with_distances(d), initial=perturbed_start(tr, 42))
+    assert res.outliers == () and res.used.all()
+    assert {o.target for o in res.unlocated} == {"T0"}
+    assert len(res.unlocated) == 4 and "perfectly correlated" in res.unlocated_reason
+
+
+def test_control_blunder_is_snooped_and_bad_control_is_named():
+    """Under a control datum (true coordinates of 6 targets) a 20-sigma distance blunder is still
+    found by snooping (the control test separates the two: Omega_c - Omega_f ~ chi2); a control
+    point moved by 2 mm is refused as inconsistent, naming it."""
+    from multilat.network.data import Points
+
+    tr = random_network(51, n_stations=6, n_targets=25)
+    ctrl = [f"T{j}" for j in range(6)]
+    pts = Points(tuple(ctrl), tr.target_xyz_m[:6])
+    st = perturbed_start(tr, 52)
+    per_target = np.bincount(tr.obs.target_index)
+    k = int(np.flatnonzero((tr.obs.target_index == 10) & (per_target[tr.obs.target_index] >= 5))[0])
+    d = tr.obs.distance_m.copy()
+    d[k] += 20 * tr.obs.sigma_m[k]
+    res = adjust(tr.obs.with_distances(d), initial=st, points=pts, datum="control", alpha=1e-5)
+    assert [(o.station, o.target) for o in res.outliers] == [(tr.obs.label(k).split("->")[0], "T10")]
+    moved = tr.target_xyz_m[:6].copy()
+    moved[3] += [2e-3, 0.0, 0.0]
+    with pytest.raises(MultilatError, match=r"control coordinates inconsistent .*largest misfit 'T3'"):
+        adjust(tr.obs, initial=st, points=Points(tuple(ctrl), moved), datum="control")
+
+
+def test_control_point_keeps_its_last_observation():
+    """A control target seen by a single station with a fault on that distance: snooping flags it
+    but does not remove the control point's only observation (it used to, then failed with
+    'data snooping removed every observation of ...')."""
+    from multilat.network.data import Points
+
+    tr = random_network(61, n_stations=6, n_targets=25)
+    keep = (tr.obs.target_index != 0) | (tr.obs.station_index == 2)
+    obs = tr.obs.subset(keep)
+    k = int(np.flatnonzero(obs.target_index == 0)[0])
+    d = obs.distance_m.copy()
+    d[k] += 50 * obs.sigma_m[k]
+    pts = Points(tuple(f"T{j}" for j in range(5)), tr.target_xyz_m[:5])
+    res = adjust(obs.with_distances(d), initial=perturbed_start(tr, 62), points=pts, datum="control")
+    assert res.outliers == () and res.used.all()
+    assert [(o.station, o.target) for o in res.unlocated] == [("S2", "T0")]
+    assert "control point 'T0'" in res.unlocated_reason

@@ -240,3 +240,98 @@ def test_adjust_raw_options_are_checked(capsys, tmp_path):
     assert rc == 2 and "--sigma-um" in err
     rc, _, err = _run(capsys, ["adjust", str(OBS), "--environment", str(CAMPAIGN / "environment.csv")])
     assert rc == 2 and "raw readings" in err
+
+
+def _write_obs(path, H, T, off, sigma=5e-6, seed=0):
+    rng = np.random.default_rng(seed)
+    rows = ["station,target,distance_m,sigma_m"]
+    for i, h in enumerate(H):
+        for j, t in enumerate(T):
+            d = np.linalg.norm(h - t) + off[i] + rng.normal(0, sigma)
+            rows.append(f"S{i},T{j},{d:.9f},{sigma}")
+    path.write_text("\n".join(rows) + "\n")
+
+
+@pytest.mark.parametrize("case", ["coplanar", "collinear"])
+def test_degenerate_network_from_distances_alone_is_named(capsys, tmp_path, case):
+    """No --points: the initial values come from the distances; the cause is still named."""
+    rng = np.random.default_rng(7)
+    off = rng.normal(0, 1.5e-3, 5)
+    if case == "coplanar":
+        ang = np.linspace(0, 2 * np.pi, 5, endpoint=False)
+        H = np.c_[1.3 * np.cos(ang), 1.1 * np.sin(ang), np.zeros(5)]
+        T = rng.uniform(-0.6, 0.6, (15, 3)) + [0, 0, 0.8]
+    else:
+        H = np.array([[0, 0, 0], [2.5, 0, 0.2], [1.2, 2.1, -0.3], [1.1, 0.9, 1.9], [1.8, 1.2, -1.1]])
+        u = np.array([1.0, 0.6, 0.3]) / np.linalg.norm([1.0, 0.6, 0.3])
+        T = np.outer(np.linspace(-0.8, 0.8, 15), u) + [1.3, 0.9, 0.3]
+    p = tmp_path / f"{case}.csv"
+    _write_obs(p, H, T, off)
+    rc, out, err = _run(capsys, ["adjust", str(p), "--out", str(tmp_path / "o")])
+    assert rc == 2
+    lines = err.strip().splitlines()
+    want = "5 stations are (nearly) coplanar" if case == "coplanar" else "15 targets are (nearly) collinear"
+    assert len(lines) == 1 and want in lines[0] and "near-degenerate geometry" in lines[0], err
+    assert not (tmp_path / "o").exists()
+
+
+def test_control_datum_with_approximate_points_is_refused_as_inconsistent(capsys):
+    """The example points are approximate (truth + ~5 mm): held fixed as control they contradict
+    the distances. The error says so (it used to blame the distances through data snooping)."""
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(PTS), "--datum", "control"])
+    assert rc == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "control coordinates inconsistent with the distances" in lines[0], err
+    assert "σ0 =" in lines[0] and "global test" in lines[0] and "snooping" not in lines[0]
+    # the true coordinates are consistent: accepted, global test passed
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(TRUTH), "--datum", "control",
+                                 "--json"])
+    assert rc == 0, err
+    assert json.loads(out)["global_test"]["passed"]
+
+
+def test_squared_cost_reports_unit_and_no_snooping(capsys):
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(PTS), "--cost", "squared", "--json"])
+    assert rc == 0, err
+    doc = json.loads(out)
+    assert doc["sigma0_unit"] == "m^2" and doc["snooping"] is False and doc["outliers"] == []
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(PTS), "--cost", "squared"])
+    assert "m²" in out and "data snooping not done for this cost" in out
+    assert "no observation rejected" not in out
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(PTS), "--json"])
+    doc = json.loads(out)
+    assert doc["sigma0_unit"] == "1" and doc["snooping"] is True
+
+
+def test_fix_offsets_per_station(capsys):
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(PTS), "--json",
+                                 "--fix-offsets-um", "A=1234, B=-871"])
+    assert rc == 0, err
+    doc = json.loads(out)
+    st = doc["stations"]
+    assert st["A"]["offset_m"] == pytest.approx(1.234e-3, abs=1e-15) and not st["A"]["offset_estimated"]
+    assert st["B"]["offset_m"] == pytest.approx(-0.871e-3, abs=1e-15) and not st["B"]["offset_estimated"]
+    assert st["C"]["offset_estimated"] and st["D"]["offset_estimated"]
+    # two offsets fixed at their true values: C and D still estimated, within 4 u of the truth
+    for sid, o in (("C", 2.105e-3), ("D", 0.412e-3)):
+        assert abs(st[sid]["offset_m"] - o) < 4 * st[sid]["offset_u_m"]
+    assert doc["dof"] == 4 + 2
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(PTS), "--json", "--fix-offsets-um", "0"])
+    assert rc == 0 and not any(v["offset_estimated"] for v in json.loads(out)["stations"].values())
+    for bad, msg in (("A=1234,Q=5", "unknown station id 'Q'"), ("A=x", "not a number"),
+                     ("12x", "expected a number"), ("A=1,A=2", "given twice")):
+        rc, _, err = _run(capsys, ["adjust", str(OBS), "--fix-offsets-um", bad])
+        lines = err.strip().splitlines()
+        assert rc == 2 and len(lines) == 1 and msg in lines[0], (bad, err)
+
+
+def test_unknown_point_ids_warn_and_reference_errors_name_the_line(capsys, tmp_path):
+    pts = tmp_path / "pts.csv"
+    pts.write_text(PTS.read_text() + "ZZ,0,0,0\nYY,1,1,1\n")
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(pts), "--json"])
+    assert rc == 0
+    assert "warning: points: 2 id(s) not in the observations, ignored: ZZ, YY" in err
+    ref = tmp_path / "ref.csv"
+    ref.write_text("# comment\ntarget_a,target_b,length_m\n1,2,0.15\n\n1,99,0.15\n")
+    rc, _, err = _run(capsys, ["adjust", str(OBS), "--references", str(ref)])
+    assert rc == 2 and err.strip() == f"error: {ref}:5: unknown point id '99'"

@@ -124,3 +124,55 @@ def test_stations_collinear_with_a_target():
         warnings.simplefilter("ignore")
         with pytest.raises(MultilatError, match="target 'T0' is not determined"):
             adjust(_obs(H, T, np.zeros(5), pairs), initial=Start(H, T, np.zeros(5)))
+
+
+def _ring_network(h_m, *, s=5, t=15, sigma=5e-6, seed=1):
+    """5 stations on a 1.2 m ring lifted off its plane by an RMS of ``h_m``, 15 targets in a box."""
+    rng = np.random.default_rng(seed)
+    ang = np.linspace(0, 2 * np.pi, s, endpoint=False) + 0.3
+    H = np.c_[np.cos(ang), np.sin(ang), np.zeros(s)] * 1.2
+    z = rng.normal(size=s)
+    z -= z.mean()
+    H[:, 2] = h_m * z / np.sqrt(np.mean(z ** 2))
+    T = rng.uniform(-0.6, 0.6, (t, 3))
+    off = rng.normal(0, 2e-3, s)
+    return H, T, off, _obs(H, T, off, sigma=sigma)
+
+
+def test_coplanarity_tolerance_follows_the_resolution_of_the_out_of_plane_spread():
+    """The bound h_min = sqrt(sigma L / sqrt(m)) of flat_geometry against the covariance the
+    adjustment reports (an independent computation): the stations' out-of-plane standard
+    uncertainty scales as sigma L / (h sqrt(m)) with a constant of order 1 (0.1-3), i.e. a spread
+    below h_min is not resolved by the distances. Below the bound the network is refused with the
+    cause named, above it it is adjusted."""
+    from multilat.network.solvability import flat_geometry, resolvable_spread_m
+
+    sigma = 5e-6
+    H, T, off, o = _ring_network(1.0)
+    L = np.linalg.svd(H - H.mean(0), compute_uv=False)[0] / np.sqrt(len(H))
+    h_min = resolvable_spread_m(L, sigma, o.n_obs)
+    for factor in (2.0, 5.0, 20.0):
+        H, T, off, o = _ring_network(factor * h_min)
+        assert flat_geometry(H, T, sigma_m=sigma, n_obs=o.n_obs) is None
+        res = adjust(o, initial=Start(H, T, off), snooping=False)
+        # out-of-plane direction: the normal of the stations' best-fit plane (z here, up to the
+        # datum's rotation which is tiny); largest z std over the stations
+        sz = float(np.sqrt(res.station_cov_m2[:, 2, 2]).max())
+        const = sz * (factor * h_min) * np.sqrt(o.n_obs) / (sigma * L)
+        assert 0.1 < const < 3.0, (factor, const)
+    H, T, off, o = _ring_network(0.3 * h_min)
+    with pytest.raises(MultilatError, match=r"initial coordinates\): the 5 stations are \(nearly\) "
+                                            r"coplanar .*resolvable"):
+        adjust(o, initial=Start(H, T, off))
+
+
+def test_collinear_targets_named_from_their_spread():
+    from multilat.network.solvability import flat_geometry
+
+    rng = np.random.default_rng(3)
+    u = np.array([1.0, 0.5, 0.3]) / np.linalg.norm([1.0, 0.5, 0.3])
+    T = np.outer(np.linspace(-1, 1, 15), u) + [1.5, 1, 0.5]
+    T += rng.normal(0, 5e-5, T.shape)                      # 50 um off the line: not resolvable
+    assert "15 targets are (nearly) collinear" in flat_geometry(H4, T, sigma_m=5e-6, n_obs=60)
+    T[:5] += [0.0, 0.3, -0.2]                              # a plane: fine
+    assert flat_geometry(H4, T, sigma_m=5e-6, n_obs=60) is None
