@@ -469,7 +469,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         :func:`multilat.network.initial.initial_values` from the distances (rigidly fitted onto
         ``points`` when >= 3 are given).
     points : Points, optional
-        Approximate coordinates (their frame is the frame of the ``free`` datum) or control.
+        Approximate coordinates (their frame is the frame of the ``free`` datum) or control. Ids
+        that are in no observation are ignored with a ``UserWarning`` naming them.
     cost : "distance" or "squared"
         ``"distance"``: residuals in metres weighted by ``1/sigma``; ``"squared"``: the paper's
         eq. (6), unweighted squared-distance differences (covariance scaled by the a-posteriori
@@ -501,8 +502,10 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     Raises
     ------
     MultilatError
-        Unsolvable network (disconnected, too few observations, degenerate geometry), bad options,
-        or no convergence — one line naming the cause.
+        Unsolvable network (disconnected, too few observations, degenerate geometry: coplanar
+        stations and collinear targets are tested on the initial coordinates), control coordinates
+        inconsistent with the distances (``datum="control"``, tested before data snooping), bad
+        options, or no convergence — one line naming the cause.
     """
     if not isinstance(obs, Observations):
         raise MultilatError("adjust: obs must be an Observations")

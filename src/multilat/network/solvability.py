@@ -12,8 +12,11 @@ Rules (documented in ``docs/network.md``):
   and every target seen by all 4: ``4 n >= 3 n + 10``, so ``n >= 10`` targets determine the
   network (zero redundancy) and ``n >= 11`` give redundancy (the paper's "nine" counts 9 system
   unknowns, as if the datum took 7 parameters, i.e. the scale too, which distances do determine);
+* shape (:func:`flat_geometry`, on the initial coordinates and again when the solver fails):
+  stations off one plane and targets off one line by more than the spread the distances resolve,
+  ``h_min = sqrt(sigma L / sqrt(m))`` (:func:`resolvable_spread_m`);
 * geometry: the reduced normal matrix (after the datum), scaled to unit diagonal, must be well
-  conditioned; otherwise the cause is named (coplanar stations, collinear/coplanar targets, or the
+  conditioned; otherwise the cause is named (coplanar stations, collinear targets, or the
   parameters of the weakest direction).
 """
 
