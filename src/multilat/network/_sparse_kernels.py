@@ -353,3 +353,165 @@ def target_covariance(ninv, u, w, si, tptr, tg, qa, kq, kck, out):
                     gm_ba += gj[b, r] * m6[r, a]
                     gkg += gk[a, r] * gj[b, r]
                 out[j, a, b] = ctt - gm_ab - gm_ba + gkg
+
+
+@njit(cache=True)
+def _sym3_eig_min_mid_max(a00, a01, a02, a11, a12, a22):
+    """Eigenvalues (ascending) of a symmetric 3x3 matrix, closed form (trigonometric)."""
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    p2 = (a00 - q) ** 2 + (a11 - q) ** 2 + (a22 - q) ** 2 + 2.0 * p1
+    if p2 <= 0.0:
+        return q, q, q
+    p = np.sqrt(p2 / 6.0)
+    b00, b11, b22 = (a00 - q) / p, (a11 - q) / p, (a22 - q) / p
+    b01, b02, b12 = a01 / p, a02 / p, a12 / p
+    r = 0.5 * (b00 * (b11 * b22 - b12 * b12) - b01 * (b01 * b22 - b12 * b02) + b02 * (b01 * b12 - b11 * b02))
+    r = min(1.0, max(-1.0, r))
+    phi = np.arccos(r) / 3.0
+    e_max = q + 2.0 * p * np.cos(phi)
+    e_min = q + 2.0 * p * np.cos(phi + 2.0 * np.pi / 3.0)
+    return e_min, 3.0 * q - e_max - e_min, e_max
+
+
+@njit(parallel=True, cache=True)
+def multilaterate(h, o, d, w, si, tptr, side, iterations, flat_tol, x_out, rms_out, status):
+    """Each target from known stations ``h`` (s, 3) and offsets ``o`` (s,), one target per loop.
+
+    Linear solution of the differenced squared-distance equations about the centroid ``c`` of the
+    target's stations, ``M p = b`` with ``M = sum a a^T``, ``b = -1/2 sum a (r^2 - |a|^2)``,
+    ``a = H - c``, ``r = d - o``; when ``M``'s smallest eigenvalue is below ``flat_tol`` times its
+    largest (coplanar stations), the in-plane solution plus the height ``sqrt(mean(r^2 - |p - a|^2))``
+    along the plane's normal, on the side of ``side`` (3,). Then ``iterations`` Gauss-Newton steps
+    (weights ``w``). Writes ``x_out`` (t, 3), ``rms_out`` (t,) (RMS residual) and ``status`` (t,):
+    0 ok, 1 coplanar stations (mirror side chosen), 2 collinear stations, 3 singular normal matrix.
+    """
+    t = len(tptr) - 1
+    for j in prange(t):
+        k0, k1 = tptr[j], tptr[j + 1]
+        n = k1 - k0
+        cx = cy = cz = 0.0
+        for k in range(k0, k1):
+            i = si[k]
+            cx += h[i, 0]
+            cy += h[i, 1]
+            cz += h[i, 2]
+        cx /= n
+        cy /= n
+        cz /= n
+        m00 = m01 = m02 = m11 = m12 = m22 = 0.0
+        b0 = b1 = b2 = 0.0
+        for k in range(k0, k1):
+            i = si[k]
+            ax, ay, az = h[i, 0] - cx, h[i, 1] - cy, h[i, 2] - cz
+            r = d[k] - o[i]
+            y = r * r - (ax * ax + ay * ay + az * az)
+            m00 += ax * ax
+            m01 += ax * ay
+            m02 += ax * az
+            m11 += ay * ay
+            m12 += ay * az
+            m22 += az * az
+            b0 += ax * y
+            b1 += ay * y
+            b2 += az * y
+        b0 *= -0.5
+        b1 *= -0.5
+        b2 *= -0.5
+        e0, e1, e2 = _sym3_eig_min_mid_max(m00, m01, m02, m11, m12, m22)
+        st = 0
+        if e1 <= 1e-6 * e2:
+            status[j] = 2
+            x_out[j, 0] = x_out[j, 1] = x_out[j, 2] = np.nan
+            rms_out[j] = np.nan
+            continue
+        inv = np.empty((3, 3))
+        nx = ny = nz = 0.0
+        if e0 <= flat_tol * e2:
+            st = 1
+            # normal: null vector of M - e0 I, the largest cross product of two of its rows
+            a00, a11, a22 = m00 - e0, m11 - e0, m22 - e0
+            best = -1.0
+            for q in range(3):          # cross products of row pairs (0,1), (0,2), (1,2) of M - e0 I
+                if q == 0:
+                    u0, u1, u2, v0, v1, v2 = a00, m01, m02, m01, a11, m12
+                elif q == 1:
+                    u0, u1, u2, v0, v1, v2 = a00, m01, m02, m02, m12, a22
+                else:
+                    u0, u1, u2, v0, v1, v2 = m01, a11, m12, m02, m12, a22
+                cxx = u1 * v2 - u2 * v1
+                cyy = u2 * v0 - u0 * v2
+                czz = u0 * v1 - u1 * v0
+                nn = cxx * cxx + cyy * cyy + czz * czz
+                if nn > best:
+                    best = nn
+                    nx, ny, nz = cxx, cyy, czz
+            nn = np.sqrt(best)
+            nx /= nn
+            ny /= nn
+            nz /= nn
+            tr = m00 + m11 + m22
+            _inv3(m00 + tr * nx * nx, m01 + tr * nx * ny, m02 + tr * nx * nz, m11 + tr * ny * ny,
+                  m12 + tr * ny * nz, m22 + tr * nz * nz, inv)
+            bn = b0 * nx + b1 * ny + b2 * nz
+            b0 -= bn * nx
+            b1 -= bn * ny
+            b2 -= bn * nz
+        else:
+            _inv3(m00, m01, m02, m11, m12, m22, inv)
+        px = inv[0, 0] * b0 + inv[0, 1] * b1 + inv[0, 2] * b2
+        py = inv[1, 0] * b0 + inv[1, 1] * b1 + inv[1, 2] * b2
+        pz = inv[2, 0] * b0 + inv[2, 1] * b1 + inv[2, 2] * b2
+        if st == 1:
+            s2 = 0.0
+            for k in range(k0, k1):
+                i = si[k]
+                r = d[k] - o[i]
+                dx, dy, dz = px - (h[i, 0] - cx), py - (h[i, 1] - cy), pz - (h[i, 2] - cz)
+                s2 += r * r - (dx * dx + dy * dy + dz * dz)
+            hgt = np.sqrt(max(s2 / n, 0.0))
+            if (side[0] - cx) * nx + (side[1] - cy) * ny + (side[2] - cz) * nz < 0.0:
+                hgt = -hgt
+            px += hgt * nx
+            py += hgt * ny
+            pz += hgt * nz
+        x0, x1, x2 = px + cx, py + cy, pz + cz
+        for _ in range(iterations):
+            n00 = n01 = n02 = n11 = n12 = n22 = 0.0
+            g0 = g1 = g2 = 0.0
+            for k in range(k0, k1):
+                i = si[k]
+                dx, dy, dz = x0 - h[i, 0], x1 - h[i, 1], x2 - h[i, 2]
+                rho = np.sqrt(dx * dx + dy * dy + dz * dz)
+                if rho <= 0.0:
+                    rho = 1e-300
+                ux, uy, uz = dx / rho, dy / rho, dz / rho
+                v = d[k] - o[i] - rho
+                wk = w[k]
+                n00 += wk * ux * ux
+                n01 += wk * ux * uy
+                n02 += wk * ux * uz
+                n11 += wk * uy * uy
+                n12 += wk * uy * uz
+                n22 += wk * uz * uz
+                g0 += wk * ux * v
+                g1 += wk * uy * v
+                g2 += wk * uz * v
+            det = _inv3(n00, n01, n02, n11, n12, n22, inv)
+            if not (abs(det) > 1e-12 * (n00 + n11 + n22) ** 3):
+                st = 3
+                break
+            x0 += inv[0, 0] * g0 + inv[0, 1] * g1 + inv[0, 2] * g2
+            x1 += inv[1, 0] * g0 + inv[1, 1] * g1 + inv[1, 2] * g2
+            x2 += inv[2, 0] * g0 + inv[2, 1] * g1 + inv[2, 2] * g2
+        s2 = 0.0
+        for k in range(k0, k1):
+            i = si[k]
+            dx, dy, dz = x0 - h[i, 0], x1 - h[i, 1], x2 - h[i, 2]
+            v = d[k] - o[i] - np.sqrt(dx * dx + dy * dy + dz * dz)
+            s2 += v * v
+        x_out[j, 0] = x0
+        x_out[j, 1] = x1
+        x_out[j, 2] = x2
+        rms_out[j] = np.sqrt(s2 / n)
+        status[j] = st

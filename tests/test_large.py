@@ -1,0 +1,194 @@
+"""Large networks from distances alone (network.large): initial values + sparse solve vs truth and vs adjust."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from multilat.errors import MultilatError
+from multilat.io import to_jsonable
+from multilat.network import _sparse_kernels as K
+from multilat.network.data import Observations
+from multilat.network.initial import rigid_fit
+from multilat.network.large import adjust_large, large_result_to_json, multilaterate_targets
+from multilat.network.sparse import synthetic_network
+
+
+def as_obs(net):
+    s, t = len(net.station_xyz_m), len(net.target_xyz_m)
+    return Observations(tuple(f"S{i}" for i in range(s)), tuple(f"T{j}" for j in range(t)), net.station_index,
+                        net.target_index, net.distance_m, net.sigma_m)
+
+
+@pytest.fixture(scope="module")
+def big():
+    """20 stations x 2000 targets, 8 stations per target, 5 um noise; solved from the distances alone."""
+    net = synthetic_network(20, 2000, 8, rng=31)
+    return net, adjust_large(as_obs(net), rng=4)
+
+
+def _errors(net, res):
+    """Errors of the solution after fitting the truth rigidly onto it over the stations (the inner-constraint
+    datum over the stations, i.e. the datum of the covariance; a mirror is allowed: distances cannot tell)."""
+    R, tr = rigid_fit(net.station_xyz_m, res.station_xyz_m, allow_reflection=True)
+    return (res.station_xyz_m - (net.station_xyz_m @ R.T + tr), res.offset_m - net.offset_m,
+            res.target_xyz_m - (net.target_xyz_m @ R.T + tr))
+
+
+def test_converges_from_distances_alone(big):
+    net, res = big
+    assert res.initial_method == "algebraic"
+    assert 30 <= len(res.seed_target_ids) <= 96
+    # seed network and multilateration already at the noise level (sigma 5 um; the multilateration residuals
+    # also carry the seed stations' few-um errors): RMS below 2 sigma, where a wrong start would be mm
+    assert res.initial_rms_m < 1e-5 and res.multilateration_rms_m < 1e-5
+    assert res.iterations < 10
+    assert res.dof == 16000 - (4 * 20 + 3 * 2000) + 6
+    es, eo, et = _errors(net, res)
+    assert np.abs(es).max() < 1e-4 and np.abs(et).max() < 1e-3 and np.abs(eo).max() < 1e-4
+
+
+def test_errors_consistent_with_the_covariance(big):
+    """vs truth: offsets chi2(20) (datum-free) and stations + offsets chi2(74) (pseudo-inverse, rank 4s - 6)
+    within their 0.05-99.95 % quantiles; per-target chi2(3): mean within 5 standard errors sqrt(6/t) of 3
+    (targets share station errors, a small correlation), 95 % ellipsoid coverage within 4 binomial s.e.;
+    sigma0^2 dof within its chi2(dof) 0.05-99.95 % band."""
+    net, res = big
+    es, eo, et = _errors(net, res)
+    s, t = 20, 2000
+    lo, hi = stats.chi2.ppf([0.0005, 0.9995], s)
+    c_oo = res.station_cov_m2[3 * s:, 3 * s:]
+    assert lo < eo @ np.linalg.solve(c_oo, eo) < hi
+    e = np.concatenate([es.ravel(), eo])
+    w, v = np.linalg.eigh(res.station_cov_m2)
+    keep = w > 1e-9 * w.max()
+    assert keep.sum() == 4 * s - 6
+    z = v[:, keep].T @ e
+    lo, hi = stats.chi2.ppf([0.0005, 0.9995], 4 * s - 6)
+    assert lo < np.sum(z * z / w[keep]) < hi
+    chi = np.einsum("ti,ti->t", et, np.linalg.solve(res.target_cov_m2, et[:, :, None])[:, :, 0])
+    assert abs(chi.mean() - 3) < 5 * np.sqrt(6 / t), chi.mean()
+    inside = np.mean(chi <= stats.chi2.ppf(0.95, 3))
+    assert abs(inside - 0.95) < 4 * np.sqrt(0.95 * 0.05 / t), inside
+    lo, hi = stats.chi2.ppf([0.0005, 0.9995], res.dof)
+    assert lo < res.sigma0**2 * res.dof < hi
+    assert res.global_test.passed
+
+
+def test_agrees_with_dense_adjust_on_a_small_network():
+    """network.adjust (its own initial values, free datum over the stations) vs adjust_large: coordinates
+    after a rigid alignment < 1e-9 m, offsets < 1e-9 m, sigma0 1e-9 relative, covariances (rotated) 1e-6
+    relative to the largest element (the two datums are the same up to the rigid map)."""
+    from multilat.network.adjust import adjust
+
+    net = synthetic_network(8, 60, 6, rng=7)
+    obs = as_obs(net)
+    ref = adjust(obs, datum="free:" + ",".join(obs.station_ids), snooping=False, rng=1)
+    res = adjust_large(obs, rng=2)
+    R, tr = rigid_fit(ref.station_xyz_m, res.station_xyz_m, allow_reflection=True)
+    assert np.abs(ref.station_xyz_m @ R.T + tr - res.station_xyz_m).max() < 1e-9
+    assert np.abs(ref.target_xyz_m @ R.T + tr - res.target_xyz_m).max() < 1e-9
+    assert np.abs(ref.offset_m - res.offset_m).max() < 1e-9
+    assert abs(ref.sigma0 - res.sigma0) < 1e-9 * ref.sigma0 and ref.dof == res.dof
+    tc = R @ ref.target_cov_m2 @ R.T
+    assert np.abs(tc - res.target_cov_m2).max() < 1e-6 * np.abs(tc).max()
+    sc = R @ ref.station_cov_m2 @ R.T
+    assert np.abs(sc - res.station_point_cov_m2).max() < 1e-6 * np.abs(sc).max()
+    np.testing.assert_allclose(res.offset_std_m, ref.offset_std_m, rtol=1e-6)
+    # the JSON document has the keys of `multilat adjust --json` where they apply
+    from multilat.cli.network_cmd import result_to_json
+
+    dense = result_to_json(ref)
+    doc = large_result_to_json(res)
+    json.dumps(to_jsonable(doc))
+    for k in ("stations", "targets", "sigma0", "dof", "global_test", "outliers", "datum", "iterations", "n_obs"):
+        assert k in doc and k in dense
+    assert set(doc["global_test"]) == set(dense["global_test"])
+    assert {"xyz_m", "offset_m", "offset_u_m", "cov_m2"} <= set(doc["stations"]["S0"]) & set(dense["stations"]["S0"])
+    assert set(doc["targets"]["T0"]) == set(dense["targets"]["T0"])
+    assert doc["outliers"] == [] and "snooping" in doc["note"]
+    assert doc["global_test"]["passed"] == ref.global_test.passed
+    np.testing.assert_allclose(doc["targets"]["T5"]["xyz_m"], res.target_xyz_m[5], rtol=0, atol=0)
+
+
+def test_fast_reader_and_row_order(tmp_path):
+    """The network through read_observations_fast with its rows shuffled (ids renumbered in order of first
+    appearance): the same least-squares solution as solve_large started from the truth, after a rigid
+    alignment, to 1e-9 m (and the same offsets and sigma0)."""
+    from multilat.network.large import read_observations_fast
+    from multilat.network.sparse import solve_large
+
+    net = synthetic_network(8, 80, 6, rng=3)
+    ref = solve_large(net.station_index, net.target_index, net.distance_m, net.sigma_m, net.station_xyz_m,
+                      net.offset_m, net.target_xyz_m, covariance=False)
+    perm = np.random.default_rng(0).permutation(len(net.distance_m))
+    p = tmp_path / "big.csv"
+    with open(p, "w") as f:
+        f.write("station,target,distance_m,sigma_m\n")
+        for k in perm:
+            f.write(f"S{net.station_index[k]},T{net.target_index[k]},{float(net.distance_m[k])!r},"
+                    f"{float(net.sigma_m[k])!r}\n")
+    fo = read_observations_fast(p)
+    assert fo.station_ids != tuple(f"S{i}" for i in range(8))          # renumbered
+    b = adjust_large(fo, rng=5)
+    ib = [b.target_ids.index(f"T{j}") for j in range(80)]
+    jb = [b.station_ids.index(f"S{i}") for i in range(8)]
+    R, tr = rigid_fit(ref.station_xyz_m, b.station_xyz_m[jb], allow_reflection=True)
+    assert np.abs(ref.target_xyz_m @ R.T + tr - b.target_xyz_m[ib]).max() < 1e-9
+    assert np.abs(b.offset_m[jb] - ref.offset_m).max() < 1e-9
+    assert abs(b.sigma0 - ref.sigma0) < 1e-9
+
+
+def test_multilaterate_targets_exact_and_coplanar():
+    """Exact distances: every target to 1e-9 m, including targets whose stations are all coplanar (placed on
+    side_point's side; the mirror image on the other side); numba kernel == plain Python."""
+    rng = np.random.default_rng(8)
+    h = np.column_stack([rng.uniform(-10, 10, (12, 2)), np.where(np.arange(12) < 6, 0.0, 4.0)])
+    off = rng.uniform(-1e-3, 1e-3, 12)
+    tg = rng.uniform([-5, -5, 1], [5, 5, 3], (40, 3))
+    si = np.concatenate([rng.choice(12, 6, replace=False) for _ in range(30)] +
+                        [rng.choice(6, 5, replace=False) for _ in range(10)])   # last 10: floor stations only
+    ti = np.concatenate([np.full(6, j) for j in range(30)] + [np.full(5, j) for j in range(30, 40)])
+    d = np.linalg.norm(h[si] - tg[ti], axis=1) + off[si]
+    x, rms, flat = multilaterate_targets(h, off, si, ti, d, np.full(len(d), 5e-6), 40,
+                                         side_point_m=[0, 0, 2.0])
+    assert np.abs(x - tg).max() < 1e-9 and rms.max() < 1e-9
+    assert flat[30:].all() and not flat[:30].any()
+    x2, _, _ = multilaterate_targets(h, off, si, ti, d, np.full(len(d), 5e-6), 40, side_point_m=[0, 0, -2.0])
+    np.testing.assert_allclose(x2[30:], tg[30:] * [1, 1, -1], atol=1e-9)
+    if K.HAVE_NUMBA:
+        outs = []
+        for f in (K.multilaterate, K.multilaterate.py_func):
+            xo, ro, so = np.empty((40, 3)), np.empty(40), np.zeros(40, np.int64)
+            tptr = np.concatenate([[0], np.cumsum(np.bincount(ti))])
+            f(h, off, d, np.full(len(d), 4e10), si, tptr, np.array([0, 0, 2.0]), 3, 1e-3, xo, ro, so)
+            outs.append((xo, so))
+        np.testing.assert_allclose(outs[0][0], outs[1][0], rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(outs[0][1], outs[1][1])
+
+
+def test_bad_input():
+    net = synthetic_network(8, 40, 5, rng=2)
+    obs = as_obs(net)
+    keep = ~((net.target_index == 7) & (np.arange(len(net.target_index)) % 5 < 2))   # T7 keeps 3 stations
+    o3 = Observations(obs.station_ids, obs.target_ids, net.station_index[keep], net.target_index[keep],
+                      net.distance_m[keep], net.sigma_m[keep])
+    with pytest.raises(MultilatError, match="target 'T7' is seen by 3"):
+        adjust_large(o3)
+    with pytest.raises(MultilatError, match="sigma_m"):
+        adjust_large(obs, sigma_m=-1.0)
+
+    class Dup:
+        station_ids, target_ids = obs.station_ids, obs.target_ids
+        station_index = np.append(net.station_index, net.station_index[0])
+        target_index = np.append(net.target_index, net.target_index[0])
+        distance_m = np.append(net.distance_m, net.distance_m[0])
+        sigma_m = np.append(net.sigma_m, net.sigma_m[0])
+
+    with pytest.raises(MultilatError, match="duplicate observation S.*->T0"):
+        adjust_large(Dup())
+    with pytest.raises(MultilatError, match="obs lacks"):
+        adjust_large(object())
