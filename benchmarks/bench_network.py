@@ -13,13 +13,18 @@
   ``scipy.optimize.least_squares(method="trf")`` with the analytic sparse Jacobian (the issue's
   anchor, 129 s at 200k, is far too slow to repeat here). Goal at 200k: solve <= 0.5 s,
   covariances <= 0.5 s, peak <= 2 GiB.
+* ``large_200k_from_distances``: 200k targets from distances alone (initial values + solve):
+  :func:`network.large.adjust_large` — seed network (``initial_values`` on ~48 well-observed targets),
+  multilateration of every target, sparse solve; ``median_s`` excludes the covariances (in extra).
+  Baseline: ``solve_large`` from truth + N(0, 1 mm) on the same distances, same run (ratio < 1: the
+  price of finding the initial values). Extra: errors vs truth after a rigid fit, mean per-target chi2.
 * ``csv_read_1.6M``: :func:`fastio.read_observations_fast` on a 1.6 M-row file, against
   ``network.files.read_observations`` (the strict general reader) on its first 100 000 rows,
   scaled x16 (stated in extra). Goal <= 2 s.
 
 The machine is shared: each row records the 1-minute load average before it ran. Each section runs in
 a fresh process with ``OPENBLAS_NUM_THREADS=1`` (see :func:`run`).
-Quick mode: fewer repeats, 20k trials, sparse 2k/20k only, CSV 200k rows.
+Quick mode: fewer repeats, 20k trials, sparse 2k/20k only, large 20k, CSV 200k rows.
 """
 
 from __future__ import annotations
@@ -281,11 +286,55 @@ def bench_csv(quick):
             "extra": {"rows": len(body), "baseline_rows_timed": nb, "values_ok": ok, "load_avg_1min": load}}
 
 
+def bench_large(quick):
+    """200k targets from distances alone: network.large.adjust_large (seed network by initial_values,
+    multilateration of every target, sparse solve; covariances timed apart) vs solve_large started from
+    truth + N(0, 1 mm) on the same distances (the ``sparse_200k`` row), same run."""
+    from multilat.network.fastio import FastObservations
+    from multilat.network.initial import rigid_fit
+    from multilat.network.large import adjust_large
+    from multilat.network.sparse import solve_large
+
+    t = 20_000 if quick else 200_000
+    net, init = _sparse_problem(t)
+    obs = FastObservations(tuple(f"S{i}" for i in range(20)), tuple(f"T{j}" for j in range(t)),
+                           net.station_index, net.target_index, net.distance_m, net.sigma_m)
+    adjust_large(obs, rng=1)                                          # warm-up / compile
+    load = _load()
+    res = [adjust_large(obs, rng=1 + k) for k in range(3)]
+    tot = [r.timings_s["seed"] + r.timings_s["multilaterate"] + r.timings_s["solve"] for r in res]
+    med = statistics.median(tot)
+    args = (net.station_index, net.target_index, net.distance_m, net.sigma_m, *init)
+    base = statistics.median(solve_large(*args, covariance=False).timings_s["solve"] for _ in range(3))
+    r0 = res[int(np.argsort(tot)[1])]
+    R, tr = rigid_fit(net.station_xyz_m, r0.station_xyz_m, allow_reflection=True)
+    et = r0.target_xyz_m - (net.target_xyz_m @ R.T + tr)
+    chi = np.einsum("ti,ti->t", et, np.linalg.solve(r0.target_cov_m2, et[:, :, None])[:, :, 0])
+    hwm = 0.0
+    for line in open("/proc/self/status"):
+        if line.startswith("VmHWM"):
+            hwm = int(line.split()[1]) / 1024
+    med_of = lambda key: statistics.median(r.timings_s[key] for r in res)  # noqa: E731
+    return {"name": f"large_{t // 1000}k_from_distances", "median_s": med,
+            "baseline": "solve_large from truth + N(0, 1 mm) (no initial values to find)",
+            "baseline_median_s": base, "ratio": base / med,
+            "extra": {"what": f"{t // 1000}k targets from distances alone (initial values + solve)",
+                      "targets": t, "distances": len(net.distance_m), "seed_s": med_of("seed"),
+                      "multilaterate_s": med_of("multilaterate"), "solve_s": med_of("solve"),
+                      "covariance_s": med_of("covariance"), "iterations": r0.iterations,
+                      "seed_targets": len(r0.seed_target_ids), "initial_method": r0.initial_method,
+                      "multilateration_rms_m": r0.multilateration_rms_m, "sigma0": r0.sigma0,
+                      "max_offset_error_m": float(np.abs(r0.offset_m - net.offset_m).max()),
+                      "max_target_error_m": float(np.abs(et).max()),
+                      "mean_target_chi2_3": float(chi.mean()),
+                      "peak_rss_mib_section": hwm, "load_avg_1min": load}}
+
+
 _SECTIONS = {"batched": lambda q: [bench_batched(q)], "propagate": lambda q: [bench_propagate(q)],
-             "sparse": bench_sparse, "csv": lambda q: [bench_csv(q)]}
+             "sparse": bench_sparse, "csv": lambda q: [bench_csv(q)], "large": lambda q: [bench_large(q)]}
 
 
-def run(quick: bool = False, sections=("batched", "propagate", "sparse", "csv")) -> list[dict]:
+def run(quick: bool = False, sections=("batched", "propagate", "sparse", "large", "csv")) -> list[dict]:
     """Each section in a fresh process with ``OPENBLAS_NUM_THREADS=1``: OpenBLAS worker threads left
     spinning by a BLAS-heavy baseline (scipy LM) otherwise steal the second core from the numba
     kernels measured next (seen: 10x slower sparse solves after the LM baseline in one process)."""
@@ -306,6 +355,8 @@ if __name__ == "__main__":
         out = _SECTIONS[sys.argv[sys.argv.index("--section") + 1]](quick)
     elif "--sparse" in sys.argv:
         out = run(quick, sections=("sparse",))
+    elif "--large" in sys.argv:
+        out = run(quick, sections=("large",))
     else:
         out = run(quick)
     for r in out:
