@@ -54,3 +54,14 @@ def test_atomic_file_gets_umask_permissions(tmp_path):
     umask = os.umask(0)
     os.umask(umask)
     assert (p.stat().st_mode & 0o777) == (0o666 & ~umask)
+
+
+def test_unwritable_output_path_is_one_line_exit_2(tmp_path, capsys):
+    """An --out under an ordinary file (NotADirectoryError/FileExistsError): one line, exit 2."""
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    rc = main(["lbb", "simulate", "--grid", "2", "--trials", "5", "--out", str(blocker / "sub")])
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    err = err.strip()  # a transient progress bar may leave a blank line
+    assert err.startswith("error: ") and len(err.splitlines()) == 1 and "Traceback" not in err

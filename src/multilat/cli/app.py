@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import sys
 import warnings
 from collections.abc import Sequence
@@ -62,8 +64,8 @@ def _showwarning(message, category, filename, lineno, file=None, line=None):
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI with ``argv`` (default ``sys.argv[1:]``); return the exit code.
 
-    Bad input (:class:`MultilatError`, usage errors) prints one line on stderr and returns 2;
-    Ctrl-C returns 130. Tests call ``main([...])`` directly.
+    Bad input (:class:`MultilatError`, usage errors, an output path that cannot be written) prints
+    one line on stderr and returns 2; Ctrl-C returns 130; a closed stdout pipe returns 141 quietly. Tests call ``main([...])`` directly.
     """
     args = list(sys.argv[1:] if argv is None else argv)
     old = warnings.showwarning
@@ -79,6 +81,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (typer.Abort, KeyboardInterrupt):
         err_console.print("error: interrupted", markup=False)
         return 130
+    except BrokenPipeError:  # `multilat ... | head`: the reader left; nothing to report
+        with contextlib.suppress(OSError):
+            sys.stdout = open(os.devnull, "w")  # noqa: SIM115  (keep interpreter shutdown quiet)
+        return 141
+    except OSError as exc:  # an output path that cannot be written: a directory missing, disk full
+        where = exc.filename or "output"
+        err_console.print(f"error: {where}: {exc.strerror or exc}", markup=False, soft_wrap=True)
+        return 2
     except typer.TyperException as exc:  # click's usage errors (typer vendors click)
         if type(exc).__name__ == "NoArgsIsHelpError":
             err_console.print(exc.format_message(), markup=False)
