@@ -9,7 +9,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from multilat.cli.app import app, console, emit_json
+from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 from multilat.io import staging_dir
 
@@ -142,6 +142,12 @@ def adjust_command(
     extrapolate: bool = typer.Option(False, "--extrapolate",
                                      help="Raw readings only: extrapolate the environment outside "
                                           "the log's time span (warned) instead of refusing."),
+    solver: str = typer.Option("auto", "--solver",
+                               help="dense (full statistics: data snooping, redundancy numbers, reference "
+                                    "lengths, every datum), sparse (large networks: Schur-complement "
+                                    "Gauss-Newton, free of data snooping, 3-2-1 datum of the initial "
+                                    "values) or auto (sparse above 20 000 distances when no dense-only "
+                                    "option is given)."),
 ) -> None:
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
@@ -152,6 +158,23 @@ def adjust_command(
 
     if sigma_um is not None and not (np.isfinite(sigma_um) and sigma_um > 0):
         raise MultilatError(f"--sigma-um must be finite and > 0, got {sigma_um!r}")
+    from multilat.campaign.raw import is_raw_file
+
+    if solver not in ("auto", "dense", "sparse"):
+        raise MultilatError(f"--solver must be auto, dense or sparse, got {solver!r}")
+    dense_only = {"--references": references is not None, "--points": points is not None,
+                  "--datum": datum != "free", "--cost": cost != "distance",
+                  "--fix-offsets-um": fix_offsets_um is not None, "--scales": scales,
+                  "--environment": environment is not None,
+                  "raw readings": is_raw_file(observations)}
+    if solver == "sparse" or (solver == "auto" and not any(dense_only.values())
+                              and _data_rows(observations) > SPARSE_ABOVE_ROWS):
+        given = [k for k, v in dense_only.items() if v]
+        if given:
+            raise MultilatError(f"{', '.join(given)}: not available with the sparse solver "
+                                "(use --solver dense)")
+        return _adjust_sparse(observations, sigma_um=sigma_um, instrument=instrument,
+                              alpha_global=alpha_global, seed=seed, as_json=as_json, out=out)
     from multilat.campaign.raw import is_raw_file
 
     if is_raw_file(observations):
@@ -193,6 +216,84 @@ def adjust_command(
         emit_json(doc)
         return
     _print_summary(res, doc, out)
+
+
+SPARSE_ABOVE_ROWS = 20_000  # `--solver auto`: the dense path's per-observation statistics cost O(m s²)
+
+
+def _data_rows(path: Path) -> int:
+    """Number of lines of a file (a cheap upper bound of its data rows; 0 if it cannot be read:
+    the reader then reports the problem)."""
+    try:
+        with open(path, "rb") as f:
+            return sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b""))
+    except OSError:
+        return 0
+
+
+def _adjust_sparse(path: Path, *, sigma_um, instrument, alpha_global, seed, as_json, out) -> None:
+    """``multilat adjust --solver sparse``: :func:`multilat.network.large.adjust_large` on the fast
+    reader's arrays; the same JSON keys as the dense path where they apply."""
+    from multilat.network.fastio import read_observations_fast
+    from multilat.network.large import adjust_large, large_result_to_json
+
+    sigma_m = None if sigma_um is None else sigma_um * 1e-6
+    try:
+        obs = read_observations_fast(path, sigma_m=sigma_m)
+        model_sigma = False
+    except MultilatError as exc:
+        if sigma_m is not None or "no sigma_m column" not in str(exc):
+            raise
+        obs = read_observations_fast(path, sigma_m=1.0)   # placeholder, replaced just below
+        model_sigma = True
+    if model_sigma:
+        from multilat.network.files import _model_sigma
+
+        obs.sigma_m = _model_sigma(obs.distance_m, np.asarray(obs.station_ids)[obs.station_index],
+                                   instrument)
+    with progress() as p:
+        p.add_task(f"sparse adjustment of {obs.distance_m.size:,} distances", total=None)
+        res = adjust_large(obs, rng=seed, alpha_global=alpha_global)
+    doc = large_result_to_json(res)
+    if out is not None:
+        from multilat.io import write_csv_atomic, write_json_atomic
+
+        with staging_dir(out) as tmp:
+            sstd = np.sqrt(np.clip(np.diagonal(res.station_point_cov_m2, axis1=1, axis2=2), 0, None))
+            write_csv_atomic(tmp / "stations.csv",
+                             ["station", "x_m", "y_m", "z_m", "offset_m", "u_x_m", "u_y_m", "u_z_m",
+                              "u_offset_m"],
+                             [[sid, *res.station_xyz_m[i], res.offset_m[i], *sstd[i], res.offset_std_m[i]]
+                              for i, sid in enumerate(res.station_ids)])
+            tc = res.target_cov_m2
+            write_csv_atomic(tmp / "targets.csv",
+                             ["target", "x_m", "y_m", "z_m", "cov_xx_m2", "cov_xy_m2", "cov_xz_m2",
+                              "cov_yy_m2", "cov_yz_m2", "cov_zz_m2"],
+                             ([tid, *res.target_xyz_m[j], tc[j, 0, 0], tc[j, 0, 1], tc[j, 0, 2],
+                               tc[j, 1, 1], tc[j, 1, 2], tc[j, 2, 2]] for j, tid in enumerate(res.target_ids)))
+            write_json_atomic(tmp / "result.json", {k: v for k, v in doc.items() if k != "targets"})
+    if as_json:
+        emit_json(doc)
+        return
+    gt = res.global_test
+    console.print(f"adjusted {len(res.station_ids)} stations, {len(res.target_ids):,} targets from "
+                  f"{res.n_obs:,} distances (sparse solver, {res.iterations} iterations; {res.datum})")
+    console.print(f"  σ0 = {res.sigma0:.3f}, dof = {res.dof}; global χ² test: {gt.statistic:.2f} "
+                  f"{'<=' if gt.passed else '>'} {gt.critical:.2f} (α = {gt.alpha:g}): "
+                  f"{'passed' if gt.passed else 'FAILED'}")
+    console.print("  data snooping is not run by the sparse solver (use --solver dense for w-tests)")
+    t = Table(title="stations", title_justify="left")
+    for c in ("station", "x (m)", "y (m)", "z (m)", "offset (µm)", "u(offset) (µm)"):
+        t.add_column(c, justify="right")
+    for i, sid in enumerate(res.station_ids):
+        x = res.station_xyz_m[i]
+        t.add_row(sid, f"{x[0]:.6f}", f"{x[1]:.6f}", f"{x[2]:.6f}", f"{res.offset_m[i] * 1e6:+.1f}",
+                  f"{res.offset_std_m[i] * 1e6:.1f}")
+    console.print(t)
+    tim = ", ".join(f"{k} {v:.2f} s" for k, v in res.timings_s.items())
+    console.print(f"  timings: {tim}")
+    if out is not None:
+        console.print(f"results written to {out}")
 
 
 def _print_summary(res, doc, out):
