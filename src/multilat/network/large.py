@@ -302,6 +302,60 @@ def multilaterate_targets(station_xyz_m, offset_m, station_index, target_index, 
     return x, rms, status == 1
 
 
+def _refit_ambiguous(x, rms, flagged, station_xyz_m, offset_m, station_index, tptr, distance_m, sigma_m,
+                     *, iterations: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Re-place the targets whose multilateration is doubtful, choosing between mirror positions.
+
+    A target whose stations are nearly coplanar (``flagged``: placed by the mirror rule) or whose RMS
+    residual is far above the network's noise has two candidate positions: its current one and its
+    mirror image in the best-fit plane of its stations. Each is refined by ``iterations``
+    Gauss-Newton steps on the distances (stations held) and the one with the smaller weighted RMS
+    residual is kept: targets on either side of a flat ring of stations are placed correctly, which
+    one ``side_point_m`` cannot do. Loops over the doubtful targets only (a few per mille).
+
+    Parameters
+    ----------
+    x : ndarray, shape (t, 3)   target positions (m), modified copy returned
+    rms : ndarray, shape (t,)   their RMS residuals (m)
+    flagged : ndarray of bool, shape (t,)
+    station_xyz_m, offset_m : station positions (s, 3) and offsets (s,), metres
+    station_index, tptr, distance_m, sigma_m : observations grouped by target (see ``_group_by_target``)
+    """
+    x = x.copy()
+    rms = rms.copy()
+    noise = float(np.median(rms))
+    doubtful = np.flatnonzero(flagged | (rms > 10.0 * max(noise, 1e-12)))
+    for j in doubtful:
+        k = slice(tptr[j], tptr[j + 1])
+        h = station_xyz_m[station_index[k]]
+        r = distance_m[k] - offset_m[station_index[k]]
+        w = 1.0 / sigma_m[k] ** 2
+        c = h.mean(axis=0)
+        normal = np.linalg.svd(h - c)[2][-1]
+        best = (np.inf, x[j])
+        for start in (x[j], x[j] - 2.0 * np.dot(x[j] - c, normal) * normal):
+            p = start.astype(float).copy()
+            for _ in range(iterations):
+                v = p - h
+                g = np.linalg.norm(v, axis=1)
+                a = v / g[:, None]
+                e = r - g
+                n = (a * w[:, None]).T @ a
+                try:
+                    step = np.linalg.solve(n, (a * w[:, None]).T @ e)
+                except np.linalg.LinAlgError:
+                    break
+                p = p + step
+                if np.linalg.norm(step) < 1e-12:
+                    break
+            res = r - np.linalg.norm(p - h, axis=1)
+            q = float(np.sqrt(np.mean(res**2)))
+            if q < best[0]:
+                best = (q, p)
+        rms[j], x[j] = best
+    return x, rms
+
+
 # ---------------------------------------------------------------------------------------------
 def adjust_large(obs, *, sigma_m=None, rng=None, seed_size: int = 48, alpha_global: float = 0.05,
                  tol_m: float = 1e-10, max_iter: int = 30, covariance: bool = True) -> LargeResult:
@@ -395,8 +449,11 @@ def adjust_large(obs, *, sigma_m=None, rng=None, seed_size: int = 48, alpha_glob
 
     # 2. every target from the stations
     si, ti, _, (d, sig) = _group_by_target(si, ti, t, d, sig)    # once, for both passes
-    tg, trms, _ = multilaterate_targets(iv.station_xyz_m, iv.offset_m, si, ti, d, sig, t,
-                                        side_point_m=iv.target_xyz_m.mean(axis=0), target_ids=tids)
+    tg, trms, flat = multilaterate_targets(iv.station_xyz_m, iv.offset_m, si, ti, d, sig, t,
+                                           side_point_m=iv.target_xyz_m.mean(axis=0), target_ids=tids)
+    tptr = np.zeros(t + 1, np.int64)
+    np.cumsum(counts, out=tptr[1:])
+    tg, trms = _refit_ambiguous(tg, trms, flat, iv.station_xyz_m, iv.offset_m, si, tptr, d, sig)
     ml_rms = float(np.sqrt(np.sum(trms**2 * counts) / m))
     t2 = time.perf_counter()
 
