@@ -48,7 +48,7 @@ def test_raw_optical_and_phase_rows(tmp_path):
 
 
 @pytest.mark.parametrize("row,match", [
-    ("A,P1,2020-03-10T09:30:00,,6.2832,4895e6,3", r"raw.csv:3: column 'phase_rad': must be in \[0, 2π\)"),
+    ("A,P1,2020-03-10T09:30:00,,6.2832,4895e6,3", r"raw.csv:3: column 'phase_rad': must be in \[0, 2π\), got 6.2832$"),
     ("A,P1,2020-03-10T09:30:00,,-0.1,4895e6,3", r"raw.csv:3: column 'phase_rad'"),
     ("A,P1,2020-03-10T09:30:00,,1.0,0,3", r"raw.csv:3: column 'frequency_hz': must be > 0"),
     ("A,P1,10 March 2020,,1.0,4895e6,3", r"raw.csv:3: column 'time': not an ISO 8601 time"),

@@ -193,14 +193,14 @@ def read_raw(path: str | os.PathLike) -> RawObservations:
             if not np.isnan(phase[i]):
                 raise MultilatError(f"{where(i)}: give optical_path_m or phase_rad, not both")
             if not opt[i] > 0:
-                raise MultilatError(f"{where(i)}: column 'optical_path_m': must be > 0, got {opt[i]!r}")
+                raise MultilatError(f"{where(i)}: column 'optical_path_m': must be > 0, got {float(opt[i])!r}")
             continue
         if np.isnan(phase[i]):
             raise MultilatError(f"{where(i)}: neither optical_path_m nor phase_rad given")
         if not 0.0 <= phase[i] < 2 * math.pi:
-            raise MultilatError(f"{where(i)}: column 'phase_rad': must be in [0, 2π), got {phase[i]!r}")
+            raise MultilatError(f"{where(i)}: column 'phase_rad': must be in [0, 2π), got {float(phase[i])!r}")
         if np.isnan(freq[i]) or not freq[i] > 0:
-            raise MultilatError(f"{where(i)}: column 'frequency_hz': must be > 0, got {freq[i]!r}")
+            raise MultilatError(f"{where(i)}: column 'frequency_hz': must be > 0, got {float(freq[i])!r}")
         if np.isnan(kk[i]):
             if np.isnan(approx[i]):
                 raise MultilatError(f"{where(i)}: k missing and no approx_distance_m to resolve it")
@@ -211,7 +211,7 @@ def read_raw(path: str | os.PathLike) -> RawObservations:
             except MultilatError as exc:
                 raise MultilatError(f"{where(i)}: {exc}") from None
         elif kk[i] < 0 or kk[i] != round(kk[i]):
-            raise MultilatError(f"{where(i)}: column 'k': must be an integer >= 0, got {kk[i]!r}")
+            raise MultilatError(f"{where(i)}: column 'k': must be an integer >= 0, got {float(kk[i])!r}")
         opt[i] = float(adm.distance_from_phase(phase[i], int(kk[i]), freq[i], 1.0))
         if not opt[i] > 0:
             raise MultilatError(f"{where(i)}: phase and k give a zero distance")
