@@ -155,3 +155,30 @@ def test_readings_reproduced_at_their_own_times(tmp_path):
     # beams at the sensor heights: each sensor's own temperature (two sensors: the line through them)
     np.testing.assert_allclose(be.values["temperature_c"], [19.0, 20.8], atol=1e-12)
     assert not be.extrapolated.any()
+
+
+def test_a_long_gap_in_a_sensor_log_is_refused_not_bridged(tmp_path):
+    """S1 logs every 5 min but is silent 09:30-11:00: an observation at 10:15 would get a value
+    interpolated over 90 min (stale); it is refused naming the row, the sensor and the gap, and with
+    --extrapolate (or a larger max_gap_s) interpolated with a warning. Readings at the gap's ends and
+    times in regular intervals are untouched."""
+    rows = ["time,sensor,height_m,temperature_c,pressure_hpa,humidity_pct"]
+    for minute in list(range(0, 31, 5)) + list(range(120, 181, 5)):
+        t = f"2020-03-10T{9 + minute // 60:02d}:{minute % 60:02d}:00"
+        rows.append(f"{t},S1,0.3,{19.0 + 0.01 * minute:.3f},1016.5,40")
+    log = read_environment(_write(tmp_path / "env.csv", "\n".join(rows) + "\n"))
+    t0 = parse_time("2020-03-10T09:00:00")
+    ok = t0 + np.array([120.0, 1800.0, 7200.0, 7500.0])         # in regular intervals / at the gap's ends
+    be = beam_environment(log, ok)
+    np.testing.assert_allclose(be.values["temperature_c"], 19.0 + 0.01 * (ok - t0) / 60, atol=1e-12)
+    stale = t0 + np.array([120.0, 4500.0])
+    with pytest.raises(MultilatError, match=r"observation 2: time 2020-03-10T10:15:00Z falls in a 90.0 min "
+                                            r"gap of sensor 'S1'"):
+        beam_environment(log, stale)
+    with pytest.warns(UserWarning, match="gap"):
+        be = beam_environment(log, stale, extrapolate=True)
+    assert be.extrapolated.tolist() == [False, True]
+    be = beam_environment(log, stale, max_gap_s=5400.0)       # the user accepts 90 min
+    assert not be.extrapolated.any()
+    with pytest.raises(MultilatError, match="max_gap_s must be > 0"):
+        beam_environment(log, stale, max_gap_s=0.0)

@@ -216,6 +216,7 @@ def _group_index(env: dict, formula: str, wavelength_m: float, **delta) -> np.nd
 def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = None,
                 instrument="seed2020", formula: str = "ciddor",
                 heights: Mapping[str, float] | None = None, extrapolate: bool = False,
+                max_gap_s: float | None = None,
                 sensor_std: Mapping[str, float] | None = None) -> CorrectedObservations:
     """Correct raw readings into geometric distances with their covariance (module docstring).
 
@@ -232,7 +233,11 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
     heights : mapping id -> height (m), optional
         Station/target heights in the sensors' frame, where the raw file has no height columns.
     extrapolate : bool
-        Allow readings outside the log's time span (linear extrapolation, warned).
+        Allow readings outside the log's time span (linear extrapolation, warned) or in a sensor's
+        gap longer than ``max_gap_s`` (interpolated across, warned).
+    max_gap_s : float, optional
+        Longest gap of a sensor's log bridged by interpolation (s); default 3 x its median logging
+        interval (:func:`multilat.campaign.environment.beam_environment`).
     sensor_std : mapping quantity -> standard uncertainty, optional
         Overrides the instrument's sensor uncertainties (keys of :data:`QUANTITIES`).
 
@@ -254,7 +259,7 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
                             f"given; use one or the other")
     if environment is not None:
         be = beam_environment(environment, raw.time_s, mid_height_m=_mid_heights(raw, heights),
-                              extrapolate=extrapolate, where=raw.where, size=m)
+                              extrapolate=extrapolate, where=raw.where, size=m, max_gap_s=max_gap_s)
         env, weights, sensors = be.values, be.weights, be.sensor_ids
         grad, extrap = be.gradient_c_per_m, be.extrapolated
     elif raw.environment is not None:
@@ -351,24 +356,26 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
 def correct_file(path: str | os.PathLike, *, environment: str | os.PathLike | EnvironmentLog | None = None,
                  instrument="seed2020", formula: str = "ciddor",
                  heights: str | os.PathLike | Mapping[str, float] | None = None,
-                 extrapolate: bool = False) -> CorrectedObservations:
+                 extrapolate: bool = False, max_gap_s: float | None = None) -> CorrectedObservations:
     """:func:`correct_raw` on files: a raw file, an optional environment log and heights file."""
     raw = read_raw(path)
     log = environment if environment is None or isinstance(environment, EnvironmentLog) \
         else read_environment(environment)
     hts = read_heights(heights) if isinstance(heights, (str, os.PathLike)) else heights
     return correct_raw(raw, environment=log, instrument=instrument, formula=formula, heights=hts,
-                       extrapolate=extrapolate)
+                       extrapolate=extrapolate, max_gap_s=max_gap_s)
 
 
 def observations_from_raw(path: str | os.PathLike, *, environment=None, instrument="seed2020",
-                          formula: str = "ciddor", heights=None, extrapolate: bool = False):
+                          formula: str = "ciddor", heights=None, extrapolate: bool = False,
+                          max_gap_s: float | None = None):
     """Raw file -> :class:`multilat.network.data.Observations` with corrected distances and sigma_m.
 
     The entry point for ``multilat adjust RAW.csv --environment ENV.csv`` (see :func:`is_raw_file`).
     """
     return correct_file(path, environment=environment, instrument=instrument, formula=formula,
-                        heights=heights, extrapolate=extrapolate).to_observations()
+                        heights=heights, extrapolate=extrapolate,
+                        max_gap_s=max_gap_s).to_observations()
 
 
 def write_observations(path: str | os.PathLike, c: CorrectedObservations) -> None:

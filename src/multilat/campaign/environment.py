@@ -184,8 +184,11 @@ def _interp_series(ts: np.ndarray, ys: np.ndarray, t: np.ndarray) -> np.ndarray:
     return out
 
 
+GAP_FACTOR = 3.0  # default longest bridged gap: this many times a sensor's median logging interval
+
+
 def beam_environment(log: EnvironmentLog, time_s, *, mid_height_m=None, extrapolate: bool = False,
-                     where=None, size: int | None = None) -> BeamEnvironment:
+                     where=None, size: int | None = None, max_gap_s: float | None = None) -> BeamEnvironment:
     """Interpolate ``log`` at each observation's time and average it along each beam.
 
     Parameters
@@ -198,7 +201,13 @@ def beam_environment(log: EnvironmentLog, time_s, *, mid_height_m=None, extrapol
         Mid-height of each beam, ``(z_station + z_target)/2``, in the sensors' vertical frame;
         required when the sensors are at several heights.
     extrapolate : bool
-        Allow times outside a sensor's span (linear extrapolation, with a warning).
+        Allow times outside a sensor's span (linear extrapolation, with a warning) and inside a gap
+        of its log longer than ``max_gap_s`` (interpolation across the gap, with a warning).
+    max_gap_s : float, optional
+        Longest gap between two readings of one sensor across which an observation is interpolated
+        (seconds); default ``GAP_FACTOR`` (3) times that sensor's median logging interval, so a
+        regular log is never refused but a sensor that stopped reporting for a while is: its last
+        reading would be a stale value. ``inf`` bridges every gap.
     where : callable(i) -> str, optional
         Names row ``i`` in messages (default ``"observation i"``).
 
@@ -207,6 +216,8 @@ def beam_environment(log: EnvironmentLog, time_s, *, mid_height_m=None, extrapol
     BeamEnvironment
     """
     where = where or (lambda i: f"observation {i + 1}")
+    if max_gap_s is not None and not max_gap_s > 0:
+        raise MultilatError(f"max_gap_s must be > 0 (seconds), got {max_gap_s!r}")
     S = len(log.sensor_ids)
     no_time = time_s is None
     if no_time:
@@ -231,12 +242,30 @@ def beam_environment(log: EnvironmentLog, time_s, *, mid_height_m=None, extrapol
                                     f"{sid!r} around it (its readings span {span}); "
                                     f"use --extrapolate to extrapolate")
             extrap |= out
+        if ts.size > 1 and not no_time:
+            dt = np.diff(ts)
+            limit = GAP_FACTOR * float(np.median(dt)) if max_gap_s is None else float(max_gap_s)
+            k = np.searchsorted(ts, time_s, side="right") - 1        # reading at or before each time
+            inside = (k >= 0) & (k < ts.size - 1)
+            gap = np.zeros(m)
+            gap[inside] = dt[k[inside]]
+            long_gap = inside & (gap > limit) & (time_s != ts[np.clip(k, 0, ts.size - 1)])
+            if long_gap.any():
+                i = int(np.flatnonzero(long_gap)[0])
+                msg = (f"{where(i)}: time {format_time(time_s[i])} falls in a {gap[i] / 60:.1f} min gap of "
+                       f"sensor {sid!r} (readings {format_time(ts[k[i]])} and {format_time(ts[k[i] + 1])}; "
+                       f"longest bridged gap {limit / 60:.1f} min)")
+                if not extrapolate:
+                    raise MultilatError(msg + "; use --max-gap-s or --extrapolate to interpolate across it")
+                warnings.warn(msg + ": interpolated across it", UserWarning, stacklevel=2)
+                extrap |= long_gap
         for q in QUANTITIES:
             sensor_values[q][:, s] = _interp_series(ts, rd[q], time_s)
     if extrap.any():
         i = int(np.flatnonzero(extrap)[0])
-        warnings.warn(f"{int(extrap.sum())} observation(s) outside the environment log's span "
-                      f"(first: {where(i)}): environment extrapolated linearly", UserWarning, stacklevel=2)
+        warnings.warn(f"{int(extrap.sum())} observation(s) outside the environment log's span or in a "
+                      f"long gap of a sensor (first: {where(i)}): environment extrapolated or interpolated "
+                      "across the gap", UserWarning, stacklevel=2)
     for q, lo_hi in (("humidity_pct", (0.0, 100.0)), ("co2_ppm", (0.0, 2000.0))):
         np.clip(sensor_values[q], *lo_hi, out=sensor_values[q])
 

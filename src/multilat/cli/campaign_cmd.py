@@ -28,6 +28,8 @@ def correct_cmd(
                                  "points file id,x_m,y_m,z_m (z = height in the sensors' frame)."),
     extrapolate: bool = typer.Option(False, "--extrapolate", help="Extrapolate the environment "
                                      "outside the log's time span (warned) instead of refusing."),
+    max_gap_s: float = typer.Option(None, "--max-gap-s", help="Longest gap of a sensor's log "
+                                    "interpolated across, s (default: 3x its median logging interval)."),
     out: Path = typer.Option(None, "--out", "-o", help="Write the observation file "
                              "(station,target,distance_m,sigma_m[,azimuth_rad,elevation_rad])."),
     cov: Path = typer.Option(None, "--cov", help="Also write the full covariance matrix (m², CSV)."),
@@ -41,7 +43,7 @@ def correct_cmd(
 
     log = read_environment(environment) if environment is not None else None
     res = correct_file(raw, environment=log, instrument=instrument, formula=formula.value,
-                       heights=heights, extrapolate=extrapolate)
+                       heights=heights, extrapolate=extrapolate, max_gap_s=max_gap_s)
     if plot is not None:
         from multilat.report.campaign_figures import save_correction_figure
 

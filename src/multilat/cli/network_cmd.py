@@ -142,6 +142,9 @@ def adjust_command(
     extrapolate: bool = typer.Option(False, "--extrapolate",
                                      help="Raw readings only: extrapolate the environment outside "
                                           "the log's time span (warned) instead of refusing."),
+    max_gap_s: Optional[float] = typer.Option(None, "--max-gap-s",
+                                              help="Raw readings only: longest gap of a sensor's log "
+                                                   "interpolated across, s (as `multilat correct`)."),
     solver: str = typer.Option("auto", "--solver",
                                help="dense (full statistics: data snooping, redundancy numbers, reference "
                                     "lengths, every datum), sparse (large networks: Schur-complement "
@@ -187,9 +190,9 @@ def adjust_command(
 
         obs = observations_from_raw(observations, environment=environment,
                                     instrument=instrument or "seed2020", formula=formula,
-                                    heights=heights, extrapolate=extrapolate)
+                                    heights=heights, extrapolate=extrapolate, max_gap_s=max_gap_s)
     else:
-        if environment is not None or heights is not None or extrapolate:
+        if environment is not None or heights is not None or extrapolate or max_gap_s is not None:
             raise MultilatError(f"{observations}: --environment/--heights/--extrapolate apply to raw "
                                 "readings (optical_path_m or phase_rad), but this is an observation "
                                 "file with distance_m")
