@@ -117,6 +117,16 @@ def test_compare_reference(tmp_path, capsys):
     res = json.loads(capsys.readouterr().out)
     np.testing.assert_allclose([p["difference_m"] for p in res["points"]], [[1e-6, -1e-6, 2e-6]] * 4, atol=1e-12)
     assert (tmp_path / "c" / "fig7_comparison.png").is_file()
+    # per-axis statistics, recomputed here from the per-point fields (an independent evaluation)
+    d = np.array([p["difference_m"] for p in res["points"]])
+    m = np.array([p["sim_mean_error_m"] for p in res["points"]])
+    sd = np.array([p["sim_std_m"] for p in res["points"]])
+    z = (d - m) / sd
+    np.testing.assert_allclose([res["normalised_rms_per_axis"][a] for a in "xyz"], np.sqrt((z**2).mean(0)),
+                               rtol=1e-12)
+    np.testing.assert_allclose([res["fraction_inside_2sigma_per_axis"][a] for a in "xyz"],
+                               (np.abs(z) <= 2).mean(0), rtol=1e-12)
+    assert res["method"] == "procedure"
     r.write_text("point,x_m,y_m,z_m\nQ9,0.1,0.1,0.1\n")
     assert main(["lbb", "compare", str(e), str(r)]) == 2
     assert "without edges: Q9" in _one_error_line(capsys)

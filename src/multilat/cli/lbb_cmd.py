@@ -133,7 +133,10 @@ def compare(
                                "sim_mean_error_m": comp.simulation.mean_error_m[i],
                                "sim_std_m": comp.simulation.std_m[i], "inside_2sigma": comp.inside_2sigma[i]}
                               for i, pt in enumerate(comp.points)],
-                   "fraction_inside_2sigma": frac, "trials": comp.simulation.trials})
+                   "fraction_inside_2sigma": frac,
+                   "fraction_inside_2sigma_per_axis": dict(zip("xyz", comp.inside_fraction_per_axis)),
+                   "normalised_rms_per_axis": dict(zip("xyz", comp.normalised_rms_per_axis)),
+                   "method": method, "trials": comp.simulation.trials})
         return
     table = Table(title="LBB - reference (µm) and simulated 2σ")
     for c in ("point", "dx", "dy", "dz", "2σ x", "2σ y", "2σ z"):
@@ -142,4 +145,8 @@ def compare(
         table.add_row(pt, *(f"{v * 1e6:.2f}" for v in comp.difference_m[i]),
                       *(f"{2 * v * 1e6:.2f}" for v in comp.simulation.std_m[i]))
     console.print(table)
-    console.print(f"{frac:.0%} of the coordinate differences lie within the simulated mean ± 2σ")
+    console.print(f"{frac:.0%} of the coordinate differences lie within the simulated mean ± 2σ "
+                  f"({method}); per axis x/y/z: "
+                  + " / ".join(f"{v:.0%}" for v in comp.inside_fraction_per_axis))
+    console.print("RMS of (difference - mean) / σ per axis x/y/z (1 = the simulated σ fits the scatter): "
+                  + " / ".join(f"{v:.2f}" for v in comp.normalised_rms_per_axis))

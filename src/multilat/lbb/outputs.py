@@ -92,6 +92,24 @@ class Comparison:
     simulation: LBBSimulation
     inside_2sigma: np.ndarray
 
+    @property
+    def normalised_m(self) -> np.ndarray:
+        """(difference - simulated mean error) / simulated std, shape (p, 3): N(0, 1)-like per axis
+        when the model's uncertainty is right for that axis."""
+        return (self.difference_m - self.simulation.mean_error_m) / self.simulation.std_m
+
+    @property
+    def inside_fraction_per_axis(self) -> np.ndarray:
+        """Share of points inside mean ± 2σ, per axis x, y, z, shape (3,)."""
+        return self.inside_2sigma.mean(axis=0)
+
+    @property
+    def normalised_rms_per_axis(self) -> np.ndarray:
+        """RMS of :attr:`normalised_m` per axis, shape (3,): about 1 when the simulated σ of that
+        axis matches the scatter of the differences; < 1 the model overstates, > 1 understates it.
+        A pooled fraction inside ± 2σ can look right while the axes disagree in opposite senses."""
+        return np.sqrt(np.mean(self.normalised_m ** 2, axis=0))
+
 
 def compare_reference(cfg: LBBConfig, edges: EdgeTable, ref: ReferenceTable, *, method="procedure",
                       rng=None, trials=None, progress=None) -> Comparison:

@@ -148,6 +148,10 @@ def reference_comparison(labels, diff_m, sim_mean_m, sim_std_m, *, diff_std_m=No
                     elinewidth=0.8, label="LBB - reference" + (" ± 2σ" if yerr is not None else ""))
         ax.axhline(0, color="k", lw=0.6)
         ax.set_ylabel(f"{name} difference (µm)")
+        z = (diff_m[:, k] - sim_mean_m[:, k]) / sim_std_m[:, k]
+        inside = np.mean(np.abs(z) <= 2)
+        ax.set_title(f"{name}: {inside:.0%} inside ± 2σ, RMS (diff - mean)/σ = {np.sqrt(np.mean(z**2)):.2f}",
+                     fontsize=8, loc="right")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8, ncol=2)
     axes[-1].set_xlabel("point")
