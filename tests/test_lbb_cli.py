@@ -57,8 +57,26 @@ def test_trilaterate_bad_rows(tmp_path, capsys, edit, pattern):
 def test_trilaterate_singular_point_is_one_line_error(tmp_path, capsys):
     p = tmp_path / "e.csv"
     _write_edges(p, [[0.1, 0.2, 0.3], [0.3, 0.2, 0.0]])
-    assert main(["lbb", "trilaterate", str(p)]) == 2
+    assert main(["lbb", "trilaterate", str(p), "--on-singular", "error"]) == 2
     assert "point P1: the tool socket is at the base plane" in _one_error_line(capsys)
+
+
+def test_trilaterate_reports_singular_points_beside_the_valid_ones(tmp_path, capsys):
+    """Default --on-singular report: the valid points are printed (exact to 1e-9 m), the singular one
+    is flagged with its reason and z², never NaN, and the exit code is 3."""
+    p = tmp_path / "e.csv"
+    pts = [[0.1, 0.2, 0.3], [0.3, 0.2, 0.0], [0.25, 0.1, 0.4]]
+    _write_edges(p, pts)
+    assert main(["lbb", "trilaterate", str(p), "--json"]) == 3
+    doc = json.loads(capsys.readouterr().out)
+    assert [q["valid"] for q in doc["points"]] == [True, False, True] and doc["n_singular"] == 1
+    bad = doc["points"][1]
+    assert bad["xyz_m"] is None and "base plane" in bad["reason"] and abs(bad["z_squared_m2"]) < 1e-12
+    np.testing.assert_allclose([doc["points"][i]["xyz_m"] for i in (0, 2)], [pts[0], pts[2]], atol=1e-9)
+    assert main(["lbb", "trilaterate", str(p)]) == 3
+    assert "1 of 3 point(s) not trilaterated" in capsys.readouterr().out
+    _write_edges(p, [pts[0], pts[2]])
+    assert main(["lbb", "trilaterate", str(p)]) == 0
 
 
 def test_simulate_json_and_out(tmp_path, capsys):

@@ -20,25 +20,50 @@ app.add_typer(lbb, name="lbb")
 @lbb.command()
 def trilaterate(
     edges: Path = typer.Argument(..., help="CSV: point,l12_m,l13_m,l23_m,l1_m,l2_m,l3_m (metres)."),
-    json_out: bool = typer.Option(False, "--json", help="Print JSON: points [{point, xyz_m}]."),
-) -> None:
-    """Tool-socket coordinates in the base frame (socket 1 origin, 2 on +x, 3 in xy with y > 0, z > 0)."""
+    on_singular: str = typer.Option("report", "--on-singular",
+                                    help="report: every point, singular ones flagged (valid = false, "
+                                         "xyz_m null) and exit code 3 if any; error: stop at the first "
+                                         "with a one-line error, exit 2."),
+    json_out: bool = typer.Option(False, "--json", help="Print JSON: points [{point, xyz_m, valid, "
+                                                        "z_squared_m2, reason}]."),
+) -> int:
+    """Tool-socket coordinates in the base frame (socket 1 origin, 2 on +x, 3 in xy with y > 0, z > 0).
+
+    A point at the base plane (the trilateration singularity) or whose edges do not close a
+    tetrahedron is reported as such, never returned as NaN. Malformed rows (negative lengths, a face
+    violating the triangle inequality) are always a one-line error naming the line."""
     from multilat.lbb.files import read_edges
     from multilat.lbb.trilateration import trilaterate as tri
 
+    if on_singular not in ("report", "error"):
+        raise MultilatError(f"--on-singular must be report or error, got {on_singular!r}")
     t = read_edges(edges)
-    res = tri(*t.edges_m.T, on_singular="raise", labels=t.line_labels, validate=False)
-    pts = [{"point": p, "xyz_m": res.xyz_m[i]} for i, p in enumerate(t.points)]
+    res = tri(*t.edges_m.T, on_singular="raise" if on_singular == "error" else "mask",
+              labels=t.line_labels, validate=False)
+    pts = []
+    for i, p in enumerate(t.points):
+        ok = bool(res.valid[i])
+        reason = None if ok else ("edges do not close a tetrahedron" if res.z_squared_m2[i] < 0
+                                  else "at the base plane (trilateration singularity)")
+        pts.append({"point": p, "xyz_m": res.xyz_m[i] if ok else None, "valid": ok,
+                    "z_squared_m2": float(res.z_squared_m2[i]), "reason": reason})
+    n_bad = sum(not q["valid"] for q in pts)
     if json_out:
         emit_json({"frame": "base: socket 1 origin, socket 2 on +x, socket 3 in xy (y > 0), z > 0",
-                   "points": pts})
-        return
+                   "points": pts, "n_singular": n_bad})
+        return 3 if n_bad else 0
     table = Table(title=f"{edges}: tool socket in the base frame")
-    for c in ("point", "x (mm)", "y (mm)", "z (mm)"):
+    for c in ("point", "x (mm)", "y (mm)", "z (mm)", "note"):
         table.add_column(c, justify="right")
     for p in pts:
-        table.add_row(p["point"], *(f"{v * 1e3:.6f}" for v in p["xyz_m"]))
+        if p["valid"]:
+            table.add_row(p["point"], *(f"{v * 1e3:.6f}" for v in p["xyz_m"]), "")
+        else:
+            table.add_row(p["point"], "-", "-", "-", f"{p['reason']} (z² = {p['z_squared_m2']:.3g} m²)")
     console.print(table)
+    if n_bad:
+        console.print(f"{n_bad} of {len(pts)} point(s) not trilaterated (see note); exit code 3")
+    return 3 if n_bad else 0
 
 
 def _points(cfg, where: str, grid: int | None):
