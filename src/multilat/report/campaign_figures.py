@@ -43,7 +43,8 @@ def plot_index_correction(corrected, *, t0: float | None = None, ax=None):
     """Per-observation air-index correction, relative (µm/m), with its ±1σ sensor uncertainty.
 
     The correction of reading ``i`` is ``D_i - L_i = -L_i (1 - 1/n_i)``; plotted is its size per
-    metre ``(1 - 1/n_i)·1e6`` (so readings of different lengths compare), the error bar is
+    metre ``(1 - 1/n_i)·1e6``, positive: the correction shortens the reading (the JSON/CSV
+    ``index_correction_m`` = D - L is negative); readings of different lengths compare. The error bar is
     ``σ_air,i / D_i``. Against time (hours from ``t0``) when the readings have times, else against
     the row number. Returns ``ax``.
     """
@@ -63,7 +64,7 @@ def plot_index_correction(corrected, *, t0: float | None = None, ax=None):
     for h in heads:
         k = st == h
         ax.errorbar(x[k], y[k], yerr=yerr[k], fmt="o", ms=3, capsize=2, lw=1, label=f"head {h}")
-    ax.set_ylabel("index correction / (µm/m)")
+    ax.set_ylabel("shortening (L - D)/L / (µm/m)")
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, ncol=len(heads), title="error bar: sensor part (k=1)", title_fontsize=7)
     return ax
