@@ -226,6 +226,11 @@ def test_adjust_reads_raw_readings_like_correct_then_adjust(capsys, tmp_path):
     assert rc == 0, err
     twostep = json.loads(out)
     assert direct["dof"] == twostep["dof"] == 4
+    wc = direct["with_correlations"]          # G C Gᵀ with the sensors' correlations (campaign.correlated)
+    assert set(wc["stations"]) == set(direct["stations"]) and "with_correlations" not in twostep
+    diag_max = max(np.sqrt(np.diag(t["cov_m2"])).max() for t in direct["targets"].values())
+    assert wc["max_target_std_diagonal_m"] == pytest.approx(diag_max, rel=1e-12)
+    assert all(v["offset_u_m"] > 0 for v in wc["stations"].values())
     assert direct["sigma0"] == pytest.approx(twostep["sigma0"], rel=1e-6)
     for sid, st in direct["stations"].items():
         assert st["offset_m"] == pytest.approx(twostep["stations"][sid]["offset_m"], abs=1e-9)

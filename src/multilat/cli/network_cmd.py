@@ -180,17 +180,19 @@ def adjust_command(
                               alpha_global=alpha_global, seed=seed, as_json=as_json, out=out)
     from multilat.campaign.raw import is_raw_file
 
+    corrected = None
     if is_raw_file(observations):
         if sigma_um is not None:
             raise MultilatError("--sigma-um does not apply to raw readings: each corrected distance "
                                 "gets its sigma_m from the distance model and the sensors")
         if formula not in ("ciddor", "edlen"):
             raise MultilatError(f"--formula must be ciddor or edlen, got {formula!r}")
-        from multilat.campaign.correct import observations_from_raw
+        from multilat.campaign.correct import correct_file
 
-        obs = observations_from_raw(observations, environment=environment,
-                                    instrument=instrument or "seed2020", formula=formula,
-                                    heights=heights, extrapolate=extrapolate, max_gap_s=max_gap_s)
+        corrected = correct_file(observations, environment=environment,
+                                 instrument=instrument or "seed2020", formula=formula,
+                                 heights=heights, extrapolate=extrapolate, max_gap_s=max_gap_s)
+        obs = corrected.to_observations()
     else:
         if environment is not None or heights is not None or extrapolate or max_gap_s is not None:
             raise MultilatError(f"{observations}: --environment/--heights/--extrapolate apply to raw "
@@ -206,6 +208,8 @@ def adjust_command(
     res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
                  alpha_global=alpha_global, snooping=snooping, rng=seed)
     doc = result_to_json(res, refs)
+    if corrected is not None:
+        doc["with_correlations"] = _with_correlations(res, corrected, refs)
     if out is not None:
         from multilat.report.network_figures import save_figures
 
@@ -219,6 +223,38 @@ def adjust_command(
         emit_json(doc)
         return
     _print_summary(res, doc, out)
+    if corrected is not None:
+        wc = doc["with_correlations"]
+        offs = ", ".join(f"{sid} {v['offset_u_m'] * 1e6:.1f}" for sid, v in wc["stations"].items())
+        console.print(f"with the sensors' correlations (G C Gᵀ): u(offset) µm: {offs}; largest target "
+                      f"std {wc['max_target_std_m'] * 1e6:.1f} µm (diagonal weights only: "
+                      f"{wc['max_target_std_diagonal_m'] * 1e6:.1f} µm)", markup=False)
+
+
+def _with_correlations(res, corrected, refs) -> dict:
+    """The parameters' covariance with the corrected distances' full covariance (shared sensors):
+    :func:`multilat.campaign.correlated.correlated_covariance`, as a JSON block."""
+    from multilat.campaign.correlated import correlated_covariance
+
+    cc = correlated_covariance(res, corrected.covariance_m2)
+    tstd = np.sqrt(np.clip(np.diagonal(cc.target_cov_m2, axis1=1, axis2=2), 0, None))
+    tstd0 = np.sqrt(np.clip(np.diagonal(res.target_cov_m2, axis1=1, axis2=2), 0, None))
+    block = {
+        "note": "covariance G C Gᵀ of the adjusted parameters with the full covariance C of the corrected "
+                "distances (environment sensors shared between observations); the main keys use the "
+                "diagonal weights' covariance",
+        "stations": {sid: {"offset_u_m": float(cc.offset_std_m[i]), "cov_m2": cc.station_cov_m2[i]}
+                     for i, sid in enumerate(cc.station_ids)},
+        "targets": {tid: {"cov_m2": cc.target_cov_m2[j]} for j, tid in enumerate(cc.target_ids)},
+        "max_target_std_m": float(tstd.max()),
+        "max_target_std_diagonal_m": float(tstd0.max()),
+    }
+    if refs is not None:
+        xyz = {**dict(zip(res.station_ids, res.station_xyz_m)), **dict(zip(res.target_ids, res.target_xyz_m))}
+        pairs = list(zip(refs.target_a, refs.target_b))
+        block["reference_lengths_u_m"] = dict(zip((f"{a}-{b}" for a, b in pairs),
+                                                  cc.interpoint_std_m(pairs, xyz).tolist()))
+    return block
 
 
 SPARSE_ABOVE_ROWS = 20_000  # `--solver auto`: the dense path's per-observation statistics cost O(m s²)
