@@ -160,8 +160,10 @@ def section(*, seed: int, quick: bool) -> Section:
         z_toh.append((tf.transit_offset_m - toh) / tf.transit_offset_std_m)
         z_c.append((tf.constant_m - b_true) / tf.constant_std_m)
     z_toh, z_c = np.array(z_toh), np.array(z_c)
+    n = len(sessions)
+    se = f" (± {1 / np.sqrt(n):.2f}, ± {1 / np.sqrt(2 * (n - 1)):.2f})"   # MC standard errors of mean, std
     sec.table(["parameter", "true (simulated)", "one session: estimate ± u",
-               f"(estimate - true)/u over {len(sessions)} sessions: mean, std (ideal 0, 1)"],
+               f"(estimate - true)/u over {n} sessions: mean, std (ideal 0, 1{se})"],
               [["Toh of head A / µm", _um(toh), f"{_um(first.transit_offset_m)} ± {_um(first.transit_offset_std_m)}",
                 f"{z_toh.mean():+.2f}, {z_toh.std(ddof=1):.2f}"],
                ["C = beam-offset term (+ instrument constant 0) / µm", _um(b_true),
