@@ -277,14 +277,20 @@ def _adjust_sparse(path: Path, *, sigma_um, instrument, alpha_global, seed, as_j
     from multilat.network.large import adjust_large, large_result_to_json
 
     sigma_m = None if sigma_um is None else sigma_um * 1e-6
+    model_sigma = False
     try:
         obs = read_observations_fast(path, sigma_m=sigma_m)
-        model_sigma = False
     except MultilatError as exc:
-        if sigma_m is not None or "no sigma_m column" not in str(exc):
+        if "the fast reader needs the header" in str(exc):
+            # other column order or extra columns (angles): the general reader, then the same solver
+            from multilat.network.files import read_observations
+
+            obs = read_observations(path, sigma_m=sigma_m, instrument=instrument)
+        elif sigma_m is None and "no sigma_m column" in str(exc):
+            obs = read_observations_fast(path, sigma_m=1.0)   # placeholder, replaced just below
+            model_sigma = True
+        else:
             raise
-        obs = read_observations_fast(path, sigma_m=1.0)   # placeholder, replaced just below
-        model_sigma = True
     if model_sigma:
         from multilat.network.files import _model_sigma
 
