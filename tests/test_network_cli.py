@@ -342,31 +342,6 @@ def test_unknown_point_ids_warn_and_reference_errors_name_the_line(capsys, tmp_p
     assert rc == 2 and err.strip() == f"error: {ref}:5: unknown point id '99'"
 
 
-def test_sparse_solver_agrees_with_dense_and_auto_switches(capsys, monkeypatch):
-    """`--solver sparse` (network.large) gives the dense adjustment's σ0, dof and offsets (datum-free
-    quantities) to 1e-9 m on the small-volume example; `auto` switches above SPARSE_ABOVE_ROWS."""
-    from multilat.cli import network_cmd
-
-    rc, out, err = _run(capsys, ["adjust", str(OBS), "--no-snooping", "--json"])
-    assert rc == 0, err
-    dense = json.loads(out)
-    rc, out, err = _run(capsys, ["adjust", str(OBS), "--solver", "sparse", "--json"])
-    assert rc == 0, err
-    sparse = json.loads(out)
-    assert sparse["solver"] == "sparse" and sparse["dof"] == dense["dof"]
-    assert sparse["sigma0"] == pytest.approx(dense["sigma0"], rel=1e-6)
-    for sid in dense["stations"]:
-        assert sparse["stations"][sid]["offset_m"] == pytest.approx(dense["stations"][sid]["offset_m"], abs=1e-9)
-    monkeypatch.setattr(network_cmd, "SPARSE_ABOVE_ROWS", 10)
-    rc, out, err = _run(capsys, ["adjust", str(OBS), "--json"])
-    assert rc == 0 and json.loads(out)["solver"] == "sparse"
-    rc, out, err = _run(capsys, ["adjust", str(OBS), "--references", str(REF), "--json"])
-    assert rc == 0, err
-    assert json.loads(out).get("solver", "dense") == "dense"      # --references: dense-only, auto stays dense
-    rc, _, err = _run(capsys, ["adjust", str(OBS), "--solver", "sparse", "--datum", "321:B,D,C"])
-    assert rc == 2 and "--datum" in err and "--solver dense" in err
-
-
 def test_sparse_solver_reads_any_column_order(capsys, tmp_path):
     """The fast reader wants station,target,distance_m[,sigma_m]; another order or extra columns go
     through the general reader to the same sparse solver (same σ0 to 1e-9 relative)."""

@@ -88,15 +88,26 @@ def test_structure_errors():
     start = Start(H4, T, np.zeros(4))
     # a target seen by 2 stations
     pairs = [p for p in full if not (p[1] == 3 and p[0] >= 2)]
-    with pytest.raises(MultilatError, match="target 'T3' has 2 observation"):
-        adjust(_obs(H4, T, OFF4, pairs), initial=start)
-    # a target seen by 3: allowed with a warning (zero redundancy)
+    # ... is left out with a warning, the rest adjusted; --strict refuses
+    with pytest.warns(UserWarning, match="target 'T3' left out: has 2 observation"):
+        res = adjust(_obs(H4, T, OFF4, pairs), initial=start)
+    assert [(e.id, e.kind, e.n_obs) for e in res.excluded] == [("T3", "target", 2)]
+    assert "T3" not in res.target_ids and res.obs.n_obs == 4 * 13
+    full_res = adjust(_obs(H4, np.delete(T, 3, axis=0), OFF4, [(i, j) for j in range(13) for i in range(4)]),
+                      initial=Start(H4, np.delete(T, 3, axis=0), np.zeros(4)))
+    np.testing.assert_allclose(res.offset_m, full_res.offset_m, atol=1e-12)
+    with pytest.raises(MultilatError, match="target 'T3' has 2 observation.*--strict"):
+        adjust(_obs(H4, T, OFF4, pairs), initial=start, strict=True)
+    # a target seen by 3: allowed with a warning naming its mirror ambiguity (zero redundancy)
     pairs = [p for p in full if p != (3, 5)]
-    with pytest.warns(UserWarning, match="T5 seen by only 3 stations"):
-        adjust(_obs(H4, T, OFF4, pairs), initial=start)
-    # a station with 4 observations (3 coordinates + offset + 1 needed)
+    with pytest.warns(UserWarning, match="'T5' has 3 observations.*plane of S0, S1, S2"):
+        res = adjust(_obs(H4, T, OFF4, pairs), initial=start)
+    assert res.target_redundancy()[5] == pytest.approx(0.0, abs=1e-9)
+    # a station with 4 observations (3 coordinates + offset + 1 needed): left out, and the
+    # remaining 3 stations cannot determine the network: refused, naming both
     pairs = [p for p in full if not (p[0] == 1 and p[1] >= 4)]
-    with pytest.raises(MultilatError, match="station 'S1' has 4 observation"):
+    with pytest.raises(MultilatError, match="too few observations.*leaving out station 'S1'"), \
+            pytest.warns(UserWarning, match="station 'S1' left out"):
         adjust(_obs(H4, T, OFF4, pairs), initial=start)
     # two stations only
     with pytest.raises(MultilatError, match="at least 3 stations"):

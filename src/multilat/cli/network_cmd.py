@@ -14,52 +14,6 @@ from multilat.errors import MultilatError
 from multilat.io import staging_dir
 
 
-def result_to_json(res, refs=None) -> dict:
-    """The ``--json`` document of an adjustment (also used by tests and the demo)."""
-    stations = {}
-    corr = res.offset_correlations()
-    for i, sid in enumerate(res.station_ids):
-        stations[sid] = {"xyz_m": res.station_xyz_m[i], "offset_m": res.offset_m[i],
-                         "offset_u_m": res.offset_std_m[i], "offset_estimated": bool(res.offset_estimated[i]),
-                         "cov_m2": res.station_cov_m2[i],
-                         "offset_corr_xyz": corr[i, :3]}
-        if res.scale_estimated[i]:
-            stations[sid]["scale"] = res.scale[i]
-            stations[sid]["scale_u"] = res.scale_std[i]
-    targets = {tid: {"xyz_m": res.target_xyz_m[j], "cov_m2": res.target_cov_m2[j]}
-               for j, tid in enumerate(res.target_ids)}
-    gt = res.global_test
-    doc = {
-        "datum": res.datum.describe(),
-        "cost": res.cost,
-        "n_obs": res.obs.n_obs,
-        "n_used": int(res.used.sum()),
-        "stations": stations,
-        "targets": targets,
-        "sigma0": res.sigma0,
-        "sigma0_unit": res.sigma0_unit,
-        "dof": res.dof,
-        "global_test": {"statistic": gt.statistic, "critical": gt.critical, "passed": gt.passed,
-                        "alpha": gt.alpha},
-        "alpha": res.alpha,
-        "snooping": res.snooping,
-        "outliers": [{"station": o.station, "target": o.target, "w": o.w, "residual_m": o.residual_m}
-                     for o in res.outliers],
-        "unlocated": [{"station": o.station, "target": o.target, "w": o.w, "residual_m": o.residual_m}
-                      for o in res.unlocated],
-        "unlocated_reason": res.unlocated_reason,
-        "reference_lengths": [],
-        "iterations": res.iterations,
-        "condition": res.condition,
-    }
-    if refs is not None:
-        doc["reference_lengths"] = [
-            {"target_a": c.target_a, "target_b": c.target_b, "length_m": c.length_m, "u_m": c.u_m,
-             "reference_m": c.reference_m, "reference_u_m": c.reference_u_m,
-             "difference_m": c.difference_m} for c in res.compare_references(refs)]
-    return doc
-
-
 def parse_fixed_offsets(text: str, station_ids) -> float | dict:
     """``--fix-offsets-um``: ``"X"`` (every station, µm) -> metres; ``"A=1234,B=-871"`` -> {id: metres}.
 
@@ -146,11 +100,14 @@ def adjust_command(
                                               help="Raw readings only: longest gap of a sensor's log "
                                                    "interpolated across, s (as `multilat correct`)."),
     solver: str = typer.Option("auto", "--solver",
-                               help="dense (full statistics: data snooping, redundancy numbers, reference "
-                                    "lengths, every datum), sparse (large networks: Schur-complement "
-                                    "Gauss-Newton, free of data snooping, 3-2-1 datum of the initial "
-                                    "values) or auto (sparse above 20 000 distances when no dense-only "
-                                    "option is given)."),
+                               help="Linear-algebra back end, a choice of speed only (same results and "
+                                    "statistics): dense (numpy; every option), sparse (compiled kernels "
+                                    "for 10^5-10^6 distances; not with --scales, --cost squared or "
+                                    "--datum control) or auto (sparse above 20 000 distances where it "
+                                    "applies)."),
+    strict: bool = typer.Option(False, "--strict",
+                                help="Refuse the network when a point is too weakly observed, instead "
+                                     "of leaving it out with a warning."),
 ) -> None:
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
@@ -158,26 +115,10 @@ def adjust_command(
     from multilat.network.adjust import adjust
     from multilat.network.files import (read_observations, read_points, read_reference_lengths,
                                         write_result_csvs)
+    from multilat.network.result import result_to_json
 
     if sigma_um is not None and not (np.isfinite(sigma_um) and sigma_um > 0):
         raise MultilatError(f"--sigma-um must be finite and > 0, got {sigma_um!r}")
-    from multilat.campaign.raw import is_raw_file
-
-    if solver not in ("auto", "dense", "sparse"):
-        raise MultilatError(f"--solver must be auto, dense or sparse, got {solver!r}")
-    dense_only = {"--references": references is not None, "--points": points is not None,
-                  "--datum": datum != "free", "--cost": cost != "distance",
-                  "--fix-offsets-um": fix_offsets_um is not None, "--scales": scales,
-                  "--environment": environment is not None,
-                  "raw readings": is_raw_file(observations)}
-    if solver == "sparse" or (solver == "auto" and not any(dense_only.values())
-                              and _data_rows(observations) > SPARSE_ABOVE_ROWS):
-        given = [k for k, v in dense_only.items() if v]
-        if given:
-            raise MultilatError(f"{', '.join(given)}: not available with the sparse solver "
-                                "(use --solver dense)")
-        return _adjust_sparse(observations, sigma_um=sigma_um, instrument=instrument,
-                              alpha_global=alpha_global, seed=seed, as_json=as_json, out=out)
     from multilat.campaign.raw import is_raw_file
 
     corrected = None
@@ -205,8 +146,10 @@ def adjust_command(
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))
     pts = read_points(points) if points is not None else None
     offsets = None if fix_offsets_um is None else parse_fixed_offsets(fix_offsets_um, obs.station_ids)
-    res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
-                 alpha_global=alpha_global, snooping=snooping, rng=seed)
+    with progress() as p:
+        p.add_task(f"adjusting {obs.n_obs:,} distances", total=None)
+        res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
+                     alpha_global=alpha_global, snooping=snooping, solver=solver, strict=strict, rng=seed)
     doc = result_to_json(res, refs)
     if corrected is not None:
         doc["with_correlations"] = _with_correlations(res, corrected, refs)
@@ -257,94 +200,17 @@ def _with_correlations(res, corrected, refs) -> dict:
     return block
 
 
-SPARSE_ABOVE_ROWS = 20_000  # `--solver auto`: the dense path's per-observation statistics cost O(m s²)
-
-
-def _data_rows(path: Path) -> int:
-    """Number of lines of a file (a cheap upper bound of its data rows; 0 if it cannot be read:
-    the reader then reports the problem)."""
-    try:
-        with open(path, "rb") as f:
-            return sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b""))
-    except OSError:
-        return 0
-
-
-def _adjust_sparse(path: Path, *, sigma_um, instrument, alpha_global, seed, as_json, out) -> None:
-    """``multilat adjust --solver sparse``: :func:`multilat.network.large.adjust_large` on the fast
-    reader's arrays; the same JSON keys as the dense path where they apply."""
-    from multilat.network.fastio import read_observations_fast
-    from multilat.network.large import adjust_large, large_result_to_json
-
-    sigma_m = None if sigma_um is None else sigma_um * 1e-6
-    model_sigma = False
-    try:
-        obs = read_observations_fast(path, sigma_m=sigma_m)
-    except MultilatError as exc:
-        if "the fast reader needs the header" in str(exc):
-            # other column order or extra columns (angles): the general reader, then the same solver
-            from multilat.network.files import read_observations
-
-            obs = read_observations(path, sigma_m=sigma_m, instrument=instrument)
-        elif sigma_m is None and "no sigma_m column" in str(exc):
-            obs = read_observations_fast(path, sigma_m=1.0)   # placeholder, replaced just below
-            model_sigma = True
-        else:
-            raise
-    if model_sigma:
-        from multilat.network.files import _model_sigma
-
-        obs.sigma_m = _model_sigma(obs.distance_m, np.asarray(obs.station_ids)[obs.station_index],
-                                   instrument)
-    with progress() as p:
-        p.add_task(f"sparse adjustment of {obs.distance_m.size:,} distances", total=None)
-        res = adjust_large(obs, rng=seed, alpha_global=alpha_global)
-    doc = large_result_to_json(res)
-    if out is not None:
-        from multilat.io import write_csv_atomic, write_json_atomic
-
-        with staging_dir(out) as tmp:
-            sstd = np.sqrt(np.clip(np.diagonal(res.station_point_cov_m2, axis1=1, axis2=2), 0, None))
-            write_csv_atomic(tmp / "stations.csv",
-                             ["station", "x_m", "y_m", "z_m", "offset_m", "u_x_m", "u_y_m", "u_z_m",
-                              "u_offset_m"],
-                             [[sid, *res.station_xyz_m[i], res.offset_m[i], *sstd[i], res.offset_std_m[i]]
-                              for i, sid in enumerate(res.station_ids)])
-            tc = res.target_cov_m2
-            write_csv_atomic(tmp / "targets.csv",
-                             ["target", "x_m", "y_m", "z_m", "cov_xx_m2", "cov_xy_m2", "cov_xz_m2",
-                              "cov_yy_m2", "cov_yz_m2", "cov_zz_m2"],
-                             ([tid, *res.target_xyz_m[j], tc[j, 0, 0], tc[j, 0, 1], tc[j, 0, 2],
-                               tc[j, 1, 1], tc[j, 1, 2], tc[j, 2, 2]] for j, tid in enumerate(res.target_ids)))
-            write_json_atomic(tmp / "result.json", {k: v for k, v in doc.items() if k != "targets"})
-    if as_json:
-        emit_json(doc)
-        return
-    gt = res.global_test
-    console.print(f"adjusted {len(res.station_ids)} stations, {len(res.target_ids):,} targets from "
-                  f"{res.n_obs:,} distances (sparse solver, {res.iterations} iterations; {res.datum})")
-    console.print(f"  σ0 = {res.sigma0:.3f}, dof = {res.dof}; global χ² test: {gt.statistic:.2f} "
-                  f"{'<=' if gt.passed else '>'} {gt.critical:.2f} (α = {gt.alpha:g}): "
-                  f"{'passed' if gt.passed else 'FAILED'}")
-    console.print("  data snooping is not run by the sparse solver (use --solver dense for w-tests)")
-    t = Table(title="stations", title_justify="left")
-    for c in ("station", "x (m)", "y (m)", "z (m)", "offset (µm)", "u(offset) (µm)"):
-        t.add_column(c, justify="right")
-    for i, sid in enumerate(res.station_ids):
-        x = res.station_xyz_m[i]
-        t.add_row(sid, f"{x[0]:.6f}", f"{x[1]:.6f}", f"{x[2]:.6f}", f"{res.offset_m[i] * 1e6:+.1f}",
-                  f"{res.offset_std_m[i] * 1e6:.1f}")
-    console.print(t)
-    tim = ", ".join(f"{k} {v:.2f} s" for k, v in res.timings_s.items())
-    console.print(f"  timings: {tim}")
-    if out is not None:
-        console.print(f"results written to {out}")
-
-
 def _print_summary(res, doc, out):
     gt = res.global_test
     console.print(f"adjusted {res.obs.n_stations} stations, {res.obs.n_targets} targets from "
-                  f"{int(res.used.sum())}/{res.obs.n_obs} distances ({res.cost} cost; {res.datum.describe()})")
+                  f"{int(res.used.sum())}/{res.obs.n_obs} distances ({res.cost} cost; {res.datum.describe()})",
+                  markup=False)
+    cv = res.convergence
+    console.print(f"  {res.solver} solver: {cv.iterations} iterations, {cv.reason}; initial values: "
+                  f"{res.initial.get('method', '?')}", markup=False)
+    if res.excluded:
+        console.print(f"  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
+                                                               for e in res.excluded), markup=False)
     if res.cost == "squared":
         console.print(f"  σ0 = {res.sigma0:.4g} m² (unweighted squared-distance residuals, eq. 6), "
                       f"dof = {res.dof}; no global test for this cost")

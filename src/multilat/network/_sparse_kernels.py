@@ -51,8 +51,11 @@ def _inv3(a00, a01, a02, a11, a12, a22, out):
 
 
 @njit(parallel=True, cache=True)
-def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk):
+def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
     """Full Gauss-Newton assembly at the current point.
+
+    ``damping``: Levenberg-Marquardt factor applied to the diagonal of every target block
+    (``N_jj[a, a] *= 1 + damping``) before its inverse; the caller damps the station diagonal.
 
     Writes ``u`` (m, 3), ``ninv`` (t, 3, 3), ``gt`` (t, 3) = ``-sum w r u`` per target; returns the
     reduced system ``S`` (4s, 4s) (no datum), the reduced gradient ``gp`` (4s,), ``vtpv``, and the
@@ -111,6 +114,10 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk):
                     gcc[b + a] += e * av[a]
                     for q in range(4):
                         scc[b + a, b + q] += wk * av[a] * av[q]
+            if damping != 0.0:
+                n00 *= 1.0 + damping
+                n11 *= 1.0 + damping
+                n22 *= 1.0 + damping
             nj = ninv[j]
             det = _inv3(n00, n01, n02, n11, n12, n22, nj)
             tr = n00 + n11 + n22

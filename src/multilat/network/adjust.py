@@ -11,7 +11,7 @@ from __future__ import annotations
 import itertools
 import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import replace
 
 import numpy as np
 
@@ -19,202 +19,19 @@ from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.covariance import NetworkCovariance
 from multilat.network.data import Observations, Points, ReferenceLengths
-from multilat.network.datum import (Datum, apply_rigid, frame_321, helmert_basis, parse_datum,
+from multilat.network.datum import (Datum, apply_rigid, datum_matrices, frame_321, parse_datum,
                                     rigid_fit)
-from multilat.network.model import (COSTS, Q, back_substitute, reduced_normal_equations,
-                                    residuals_and_jacobian)
-from multilat.network.solvability import (CONDITION_LIMIT, check_structure, diagnose_degeneracy,
-                                          flat_geometry)
+from multilat.network.model import COSTS, Q
+from multilat.network.problem import Params, Problem
+from multilat.network.result import (AdjustmentResult, InterpointDistance, Outlier, Start,
+                                     build_result)
+from multilat.network.exclusion import exclude_weak_points, zero_redundancy_warnings
+from multilat.network.solvability import check_structure, flat_geometry
+from multilat.network.solve import choose_backend, gauss_newton, make_backend, solve_reduced
+from multilat.network.solve.loop import check_target_blocks
+from multilat.network.solve.system import whitened
 
 __all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
-
-
-@dataclass(frozen=True)
-class Start:
-    """Initial values (any object with these three attributes is accepted by :func:`adjust`)."""
-
-    station_xyz_m: np.ndarray
-    target_xyz_m: np.ndarray
-    offset_m: np.ndarray
-
-
-@dataclass(frozen=True)
-class Outlier:
-    """An observation rejected by data snooping: ``w`` its normalised residual when rejected,
-    ``residual_m`` observed minus computed in the final adjustment (without it)."""
-
-    station: str
-    target: str
-    w: float
-    residual_m: float
-    mdb_m: float
-
-
-@dataclass(frozen=True)
-class InterpointDistance:
-    """Distance between two points of the adjusted network and its standard uncertainty, compared to
-    a reference length when given (``difference_m = length_m - reference_m``)."""
-
-    target_a: str
-    target_b: str
-    length_m: float
-    u_m: float
-    reference_m: float | None = None
-    reference_u_m: float | None = None
-    difference_m: float | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class AdjustmentResult:
-    """Result of :func:`adjust`. Arrays are in the order of ``obs.station_ids`` / ``obs.target_ids``.
-
-    Attributes
-    ----------
-    obs : Observations  all observations given (including rejected ones)
-    used : ndarray of bool (m,)  False for observations rejected by data snooping
-    datum : Datum
-    cost : str  "distance" or "squared"
-    station_xyz_m : (s, 3) ; target_xyz_m : (t, 3)   adjusted coordinates in the datum frame, m
-    offset_m : (s,)  additive instrument offsets, m ; offset_estimated : (s,) bool
-    scale : (s,)  scale per station (0 when not estimated) ; scale_estimated : (s,) bool
-    station_cov_m2 : (s, 3, 3) ; target_cov_m2 : (t, 3, 3)   point covariances in the datum, m²
-    global_cov : (5s, 5s)  covariance of [x, y, z, offset, scale] per station (datum)
-    offset_std_m : (s,) ; scale_std : (s,)
-    residuals_m : (m,)  observed minus computed (``"squared"``: still in metres, d_obs - d_model)
-    redundancy : (m,)  redundancy numbers (0 for rejected observations)
-    w : (m,)  Baarda's normalised residuals (0 for rejected or uncontrolled observations)
-    mdb_m : (m,)  minimal detectable biases (alpha, power), m
-    sigma0 : float  a-posteriori standard deviation of unit weight (distance cost: dimensionless)
-    dof : int
-    global_test : statistics.GlobalTest
-    outliers : tuple of Outlier  rejected by data snooping, in order of rejection
-    unlocated : tuple of Outlier  a w-test failure that was not rejected: either it cannot be
-        located (these observations' w-tests are perfectly correlated, e.g. the 4 distances to a
-        target seen by only 4 stations) or rejecting it would leave the network unsolvable or a
-        point without redundancy; empty when snooping ended normally
-    unlocated_reason : str  why ``unlocated`` was not rejected (one phrase; "" when empty)
-    snooping : bool  whether data snooping was run (not for the ``"squared"`` cost, nor when off)
-    alpha, power : float  w-test significance and power used for the MDBs
-    iterations : int ; condition : float (unit-diagonal reduced normal matrix)
-    covariance : NetworkCovariance  any block of the full covariance in the datum
-    """
-
-    obs: Observations
-    used: np.ndarray
-    datum: Datum
-    cost: str
-    station_xyz_m: np.ndarray
-    target_xyz_m: np.ndarray
-    offset_m: np.ndarray
-    offset_estimated: np.ndarray
-    scale: np.ndarray
-    scale_estimated: np.ndarray
-    station_cov_m2: np.ndarray
-    target_cov_m2: np.ndarray
-    global_cov: np.ndarray
-    offset_std_m: np.ndarray
-    scale_std: np.ndarray
-    residuals_m: np.ndarray
-    redundancy: np.ndarray
-    w: np.ndarray
-    mdb_m: np.ndarray
-    sigma0: float
-    dof: int
-    global_test: st.GlobalTest
-    outliers: tuple
-    unlocated: tuple
-    alpha: float
-    power: float
-    iterations: int
-    condition: float
-    covariance: NetworkCovariance = field(repr=False)
-    unlocated_reason: str = ""
-    snooping: bool = True
-
-    @property
-    def sigma0_unit(self) -> str:
-        """Unit of ``sigma0``: ``"1"`` for the weighted distance cost (a ratio to the a-priori
-        uncertainties), ``"m^2"`` for the unweighted squared-distance cost (eq. 6)."""
-        return "1" if self.cost == "distance" else "m^2"
-
-    # ------------------------------------------------------------ derived quantities
-    @property
-    def station_ids(self):
-        return self.obs.station_ids
-
-    @property
-    def target_ids(self):
-        return self.obs.target_ids
-
-    def point_index(self, ident: str) -> tuple[str, int]:
-        """``("station", i)`` or ``("target", j)`` of a point id."""
-        if ident in self.obs.station_ids:
-            return "station", self.obs.station_ids.index(ident)
-        if ident in self.obs.target_ids:
-            return "target", self.obs.target_ids.index(ident)
-        raise MultilatError(f"unknown point id {ident!r}")
-
-    def xyz(self, ident: str) -> np.ndarray:
-        kind, i = self.point_index(ident)
-        return (self.station_xyz_m if kind == "station" else self.target_xyz_m)[i]
-
-    def _param_rows(self, ident: str) -> np.ndarray:
-        kind, i = self.point_index(ident)
-        if kind == "station":
-            return Q * i + np.arange(3)
-        return Q * self.obs.n_stations + 3 * i + np.arange(3)
-
-    def points_covariance(self, ids) -> np.ndarray:
-        """Joint covariance (3p, 3p) of the points ``ids`` (stations or targets), m²."""
-        rows = np.concatenate([self._param_rows(i) for i in ids])
-        return self.covariance.block(rows)
-
-    def interpoint_distance(self, a: str, b: str) -> InterpointDistance:
-        """Distance between points ``a`` and ``b`` with its standard uncertainty (datum-free)."""
-        d = self.xyz(a) - self.xyz(b)
-        L = float(np.linalg.norm(d))
-        g = np.concatenate([d / L, -d / L])
-        C = self.points_covariance([a, b])
-        return InterpointDistance(a, b, L, float(np.sqrt(max(g @ C @ g, 0.0))))
-
-    def compare_references(self, refs: ReferenceLengths) -> list[InterpointDistance]:
-        """Interpoint distances beside the reference lengths (seed 000 Tables V-VI)."""
-        known = self.obs.station_ids + self.obs.target_ids
-        refs.check_ids(known)
-        out = []
-        for a, b, L, u in zip(refs.target_a, refs.target_b, refs.length_m, refs.u_m):
-            ip = self.interpoint_distance(a, b)
-            out.append(InterpointDistance(a, b, ip.length_m, ip.u_m, float(L),
-                                          None if np.isnan(u) else float(u), ip.length_m - float(L)))
-        return out
-
-    def ellipsoids(self, *, level: float = 0.95):
-        """Confidence ellipsoids of stations and targets: ``(semi_axes_m, axes)`` each a pair of
-        arrays ((s, 3), (s, 3, 3)) and ((t, 3), (t, 3, 3)); see :func:`statistics.confidence_ellipsoid`."""
-        return (st.confidence_ellipsoid(self.station_cov_m2, level=level),
-                st.confidence_ellipsoid(self.target_cov_m2, level=level))
-
-    def offset_correlations(self) -> np.ndarray:
-        """Correlation of each station's offset with its own x, y, z and offset (s, 4):
-        ``corr[i] = (rho(o_i, x_i), rho(o_i, y_i), rho(o_i, z_i), 1)`` (NaN where not estimated)."""
-        s = self.obs.n_stations
-        C = self.global_cov
-        out = np.full((s, 4), np.nan)
-        for i in range(s):
-            o = Q * i + 3
-            if C[o, o] <= 0:
-                continue
-            for c in range(4):
-                v = C[Q * i + c, Q * i + c]
-                if v > 0:
-                    out[i, c] = C[o, Q * i + c] / np.sqrt(C[o, o] * v)
-        return out
-
-    def correlation_matrix(self) -> np.ndarray:
-        """Correlations among all station parameters (5s, 5s) (NaN rows for fixed parameters)."""
-        d = np.sqrt(np.clip(np.diag(self.global_cov), 0, None))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return self.global_cov / np.outer(d, d)
 
 
 # ====================================================================== solver internals
@@ -233,21 +50,29 @@ def _as_start(initial, obs: Observations) -> Start:
     return Start(sx, tx, off)
 
 
-def _initial(obs: Observations, initial, points: Points | None, rng) -> Start:
-    """Initial values: given; or all from ``points``; or from distances (fitted onto ``points``)."""
-    if initial is not None:
-        return _as_start(initial, obs)
+LARGE_TARGETS = 500   # above: initial values from a seed network + multilateration (network.large)
+
+
+def _initial(obs: Observations, given: Start | None, points: Points | None, rng) -> tuple[Start, dict]:
+    """Initial values and how they were found: given; or all from ``points``; or from distances
+    (fitted onto ``points``)."""
+    if given is not None:
+        return given, {"method": "given"}
     if points is not None:
         have = [points.get(i) is not None for i in obs.station_ids + obs.target_ids]
         if all(have):
             return Start(np.array([points.get(i) for i in obs.station_ids]),
-                         np.array([points.get(i) for i in obs.target_ids]), np.zeros(obs.n_stations))
-    try:
-        from multilat.network.initial import initial_values
-    except ImportError:
-        raise MultilatError("no initial values: give approximate coordinates of every point (--points) "
-                            "until multilat.network.initial is available") from None
-    iv = _as_start(initial_values(obs, rng=rng), obs)
+                         np.array([points.get(i) for i in obs.target_ids]),
+                         np.zeros(obs.n_stations)), {"method": "points"}
+    if obs.n_targets > LARGE_TARGETS:
+        from multilat.network.large import large_initial_values
+
+        raw = large_initial_values(obs, rng=rng)
+        how = {"method": "distances: " + raw.method, "seed_targets": len(raw.seed_target_ids),
+               "multilateration_rms_m": raw.multilateration_rms_m}
+    else:
+        raw, how = _initial_small(obs, rng)
+    iv = _as_start(raw, obs)
     if points is not None:
         ids = [i for i in obs.station_ids + obs.target_ids if points.get(i) is not None]
         if len(ids) >= 3:
@@ -259,7 +84,39 @@ def _initial(obs: Observations, initial, points: Points | None, rng) -> Start:
             except MultilatError:
                 R, t = np.eye(3), np.zeros(3)
             iv = Start(apply_rigid(R, t, iv.station_xyz_m), apply_rigid(R, t, iv.target_xyz_m), iv.offset_m)
-    return iv
+    return iv, how
+
+
+def _initial_small(obs: Observations, rng):
+    """:func:`initial_values` on the targets seen by 4+ stations, then the others (3 stations:
+    two mirror positions) by multilateration from those stations, on the side of the rest."""
+    from multilat.network.initial import initial_values
+    from multilat.network.large import multilaterate_targets
+
+    weak = np.bincount(obs.target_index, minlength=obs.n_targets) < 4
+    if not weak.any():
+        raw = initial_values(obs, rng=rng)
+        return raw, {"method": f"distances: {raw.method}", "rms_residual_m": float(raw.rms_residual_m)}
+    strong_obs = ~weak[obs.target_index]
+    sub = obs.subset(strong_obs)
+    if sub.n_stations != obs.n_stations:
+        raise MultilatError("initial values from distances need every station to see targets that 4 or "
+                            "more stations see; give approximate coordinates (--points)")
+    raw = initial_values(sub, rng=rng)
+    tx = np.empty((obs.n_targets, 3))
+    tx[~weak] = raw.target_xyz_m
+    wk = np.flatnonzero(weak)
+    remap = np.full(obs.n_targets, -1)
+    remap[wk] = np.arange(wk.size)
+    rows = ~strong_obs
+    x, _, _ = multilaterate_targets(raw.station_xyz_m, raw.offset_m, obs.station_index[rows],
+                                    remap[obs.target_index[rows]], obs.distance_m[rows], obs.sigma_m[rows],
+                                    wk.size, side_point_m=raw.target_xyz_m.mean(axis=0),
+                                    target_ids=[obs.target_ids[j] for j in wk])
+    tx[wk] = x
+    return (Start(raw.station_xyz_m, tx, raw.offset_m),
+            {"method": f"distances: {raw.method} + multilateration of {wk.size} target(s) seen by 3",
+             "rms_residual_m": float(raw.rms_residual_m)})
 
 
 def _pick_321_stations(sx) -> tuple[int, int, int]:
@@ -279,121 +136,6 @@ def _pick_321_stations(sx) -> tuple[int, int, int]:
         if area > best:
             best, bi = area, (a, b, k)
     return bi
-
-
-@dataclass
-class _Problem:
-    obs: Observations
-    cost: str
-    global_free: np.ndarray      # (s, 5) bool
-    target_free: np.ndarray      # (t,) bool
-    weights_sqrt: np.ndarray     # (m,) 1/sigma (distance) or 1 (squared)
-
-
-def _evaluate(pb: _Problem, sx, tx, off, sc):
-    o = pb.obs
-    r, Js, Jt = residuals_and_jacobian(o.distance_m, sx, tx, off, sc, o.station_index, o.target_index,
-                                       cost=pb.cost)
-    w = pb.weights_sqrt
-    r_w = r * w
-    Js_w = Js * w[:, None] * pb.global_free[o.station_index]
-    Jt_w = Jt * w[:, None] * pb.target_free[o.target_index][:, None]
-    return r_w, Js_w, Jt_w
-
-
-def _cost(pb, sx, tx, off, sc):
-    o = pb.obs
-    r, _, _ = residuals_and_jacobian(o.distance_m, sx, tx, off, sc, o.station_index, o.target_index,
-                                     cost=pb.cost)
-    return float(np.sum((r * pb.weights_sqrt) ** 2))
-
-
-def _param_names(obs):
-    names = []
-    for sid in obs.station_ids:
-        names += [f"x of {sid}", f"y of {sid}", f"z of {sid}", f"offset of {sid}", f"scale of {sid}"]
-    return names
-
-
-def _solve_reduced(N, b, free, obs, sx, tx):
-    """Solve the free part of ``N dg = b`` after a conditioning check; returns (dg, Qgg, cond)."""
-    Nf = N[np.ix_(free, free)]
-    d = np.sqrt(np.diag(Nf))
-    if np.any(~np.isfinite(d)) or np.any(d <= 0):
-        k = int(np.flatnonzero(~(d > 0))[0]) if np.any(~(d > 0)) else 0
-        name = np.array(_param_names(obs))[free][k]
-        raise MultilatError(f"near-degenerate geometry: {name} is not determined by the observations")
-    Ns = Nf / np.outer(d, d)
-    ev, V = np.linalg.eigh(Ns)
-    cond = float(ev[-1] / ev[0]) if ev[0] > 0 else np.inf
-    if not cond < CONDITION_LIMIT:
-        nv = np.zeros(free.size)
-        nv[free] = V[:, 0] / d
-        raise MultilatError(diagnose_degeneracy(sx, tx, obs.station_ids, obs.target_ids, nv,
-                                                _param_names(obs), condition=cond,
-                                                sigma_m=float(np.median(obs.sigma_m)),
-                                                n_obs=obs.n_obs))
-    # solve in the scaled form via the eigen-decomposition (well conditioned here)
-    Qs = (V / ev) @ V.T
-    Qf = Qs / np.outer(d, d)
-    dgf = Qf @ b[free]
-    dg = np.zeros(free.size)
-    dg[free] = dgf
-    Qgg = np.zeros((free.size, free.size))
-    Qgg[np.ix_(free, free)] = Qf
-    return dg, Qgg, cond
-
-
-def _check_target_blocks(Ntt, target_free, obs):
-    ev = np.linalg.eigvalsh(Ntt[target_free])
-    bad = ev[:, 0] <= 1e-10 * ev[:, 2]
-    if np.any(bad):
-        j = int(np.flatnonzero(target_free)[np.flatnonzero(bad)[0]])
-        raise MultilatError(f"near-degenerate geometry: target {obs.target_ids[j]!r} is not determined "
-                            "(its stations are (nearly) on one line through it)")
-
-
-def _gauss_newton(pb: _Problem, sx, tx, off, sc, *, max_iter, tol_m, chunk_targets):
-    """Levenberg-Marquardt on the Schur-reduced normal equations. Returns parameters and count."""
-    o = pb.obs
-    free = pb.global_free.ravel()
-    lam = 0.0
-    cost = _cost(pb, sx, tx, off, sc)
-    scale_len = float(np.max(np.abs(o.distance_m)))
-    for it in range(1, max_iter + 1):
-        r_w, Js_w, Jt_w = _evaluate(pb, sx, tx, off, sc)
-        while True:
-            sys_ = reduced_normal_equations(r_w, Js_w, Jt_w, o.station_index, o.target_index,
-                                            o.n_stations, o.n_targets, target_free=pb.target_free,
-                                            damping=lam, chunk_targets=chunk_targets)
-            _check_target_blocks(sys_.Ntt, pb.target_free, o)
-            dg, _, _ = _solve_reduced(sys_.N, sys_.b, free, o, sx, tx)
-            dt = back_substitute(sys_, dg, Js_w, Jt_w, o.station_index, o.target_index)
-            dgs = dg.reshape(-1, Q)
-            nsx, ntx = sx + dgs[:, :3], tx + dt
-            noff, nsc = off + dgs[:, 3], sc + dgs[:, 4]
-            new_cost = _cost(pb, nsx, ntx, noff, nsc)
-            step = max(float(np.max(np.abs(dgs[:, :4]))), float(np.max(np.abs(dt), initial=0.0)),
-                       float(np.max(np.abs(dgs[:, 4]))) * scale_len)
-            # at the minimum the cost changes only by rounding and the step is rounding noise
-            # amplified by the condition number: stop there instead of chasing it
-            flat = (abs(cost - new_cost) <= 1e-12 * max(cost, 1e-300) and step < 1e-7 * scale_len)
-            if step < tol_m or flat:
-                if new_cost <= cost:
-                    sx, tx, off, sc = nsx, ntx, noff, nsc
-                return sx, tx, off, sc, it
-            if np.isfinite(new_cost) and new_cost <= cost:
-                lam = 0.0 if lam < 1e-6 else lam / 10.0
-                break
-            lam = 1e-4 if lam == 0 else lam * 10.0
-            if lam > 1e8:
-                _raise_if_flat(o, sx, tx, "no convergence")
-                raise MultilatError("the adjustment did not converge (no decrease of the cost); "
-                                    "check initial values and the observations")
-        sx, tx, off, sc, cost = nsx, ntx, noff, nsc, new_cost
-    _raise_if_flat(o, sx, tx, f"no convergence in {max_iter} iterations")
-    raise MultilatError(f"the adjustment did not converge in {max_iter} iterations "
-                        f"(last step {step:.3g} m); check initial values, the geometry and the distances for gross errors")
 
 
 def _raise_if_flat(obs, sx, tx, when: str) -> None:
@@ -448,7 +190,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
            points: Points | None = None, cost: str = "distance", offsets=None, scales=False,
            alpha: float = 0.001, power: float = 0.80, alpha_global: float = 0.05,
            snooping: bool = True, max_rejections: int | None = None, max_iter: int = 100,
-           tol_m: float = 1e-10, chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
+           solver: str = "auto", strict: bool = False, chunk_targets: int = 20000,
+           rng=None) -> AdjustmentResult:
     """Adjust a self-calibrating multilateration network.
 
     Unknowns: station coordinates, target coordinates, one additive offset per station (estimated
@@ -488,8 +231,12 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     snooping : bool
         Iteratively reject the observation with the largest ``|w|`` above the critical value and
         re-adjust, while the network stays solvable (at most ``max_rejections``).
-    max_iter, tol_m : int, float
-        Iteration limit and convergence threshold on the largest step (metres).
+    max_iter : int
+        Iteration limit of the Gauss-Newton loop (the stopping rule is relative to sigma:
+        :mod:`multilat.network.solve.convergence`).
+    solver : "auto", "dense" or "sparse"
+        Linear-algebra back end (:mod:`multilat.network.solve`): a choice of speed only, the
+        results are the same. ``auto``: sparse above 20 000 observations when it applies.
     chunk_targets : int
         Targets per chunk in the normal-equation assembly.
     rng : numpy Generator, int or None
@@ -526,8 +273,37 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             warnings.warn(f"points: {len(stray)} id(s) not in the observations, ignored: "
                           f"{', '.join(stray[:8])}{'...' if len(stray) > 8 else ''}",
                           UserWarning, stacklevel=2)
-    _structure(obs, datum, points, off_free, sc_free, warn=False)   # before any initial values
-    start = _initial(obs, initial, points, rng)
+    given = None if initial is None else _as_start(initial, obs)
+    if obs.n_stations < 3:
+        raise MultilatError(f"a self-calibrating network needs at least 3 stations, got {obs.n_stations} "
+                            f"({', '.join(obs.station_ids)})")
+    # weak points are left out (named), not a reason to refuse the network
+    ctrl = _control_ids(obs, datum, points) if datum.kind == "control" else set()
+    keep, excluded = exclude_weak_points(obs, offset_free=off_free, scale_free=sc_free, fixed_targets=ctrl,
+                                         strict=strict)
+    if excluded:
+        if not keep.any():
+            raise MultilatError(f"nothing left to adjust: {excluded[0].kind} {excluded[0].id!r} "
+                                f"{excluded[0].reason}")
+        for e in excluded:
+            warnings.warn(f"{e.kind} {e.id!r} left out: {e.reason}", UserWarning, stacklevel=2)
+        smap, tmap = _station_map(obs, keep), _target_map(obs, keep)
+        obs = obs.subset(keep)
+        off_free, off_val, sc_free = off_free[smap], off_val[smap], sc_free[smap]
+        if given is not None:
+            given = Start(given.station_xyz_m[smap], given.target_xyz_m[tmap], given.offset_m[smap])
+    _check_scale_datum(obs, sc_free, datum)
+    try:
+        _structure(obs, datum, points, off_free, sc_free, warn=True)   # before any initial values
+    except MultilatError as exc:
+        if not excluded:
+            raise
+        left = "; ".join(f"{e.kind} {e.id!r} ({e.reason})" for e in excluded[:3])
+        raise MultilatError(f"{exc} — after leaving out {left}") from None
+    notes = zero_redundancy_warnings(obs, ctrl)
+    for msg in notes:
+        warnings.warn(msg, UserWarning, stacklevel=2)
+    start, how = _initial(obs, given, points, rng)
     # coplanar stations / collinear targets make the problem singular: say so before solving
     _raise_if_flat(obs, start.station_xyz_m, start.target_xyz_m, "initial coordinates")
     start = Start(start.station_xyz_m, start.target_xyz_m,
@@ -545,12 +321,12 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     while True:
         sub = obs if used.all() else obs.subset(used)
         core = _adjust_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
-                            sc_free, max_iter, tol_m, chunk_targets, warn=warn)
+                            sc_free, max_iter, solver, chunk_targets, warn=warn)
         if first and datum.kind == "control" and cost == "distance":
             # a failed global test under control may be the control coordinates, not the distances:
             # test them (against the free network) before data snooping blames the distances
             _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global,
-                           max_iter, tol_m, chunk_targets, datum)
+                           max_iter, solver, chunk_targets, datum)
         first = False
         # the next adjustment (after a rejection) starts from this solution
         gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
@@ -592,8 +368,44 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             break
         rejected.append((k, float(w_sub[k_sub])))
         used = trial
-    return _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global,
-                         reason=reason, snooped=do_snoop)
+    res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global,
+                       reason=reason, snooped=do_snoop)
+    groups = _w_failure_groups(core, used, crit) if cost == "distance" else ()
+    return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how)
+
+
+def _w_failure_groups(core, used, crit, limit: int = 50) -> tuple:
+    """Every w-test failing at the end (|w| > crit), grouped by perfect correlation (|rho| > 1 - 1e-6):
+    a group of several is a fault the data cannot locate. Indices into the full observations; at
+    most ``limit`` groups, largest |w| first."""
+    red = core["redundancy"]
+    w = st.w_statistics(core["residual_w"], np.ones_like(core["residual_w"]), red)
+    fail = np.flatnonzero(np.abs(w) > crit)
+    fail = fail[np.argsort(-np.abs(w[fail]))]
+    idx = np.flatnonzero(used)
+    seen: set[int] = set()
+    groups = []
+    for k in fail:
+        if int(k) in seen or len(groups) >= limit:
+            continue
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rho = -core["cov"].hat_row(int(k)) / np.sqrt(red[k] * red)
+        rho[k] = 1.0
+        members = [int(q) for q in np.flatnonzero(np.abs(np.nan_to_num(rho)) > 1.0 - 1e-6)]
+        members = [int(k)] + [q for q in members if q != k]
+        seen.update(members)
+        groups.append(tuple(int(idx[q]) for q in members))
+    return tuple(groups)
+
+
+def _check_scale_datum(obs: Observations, sc_free, datum) -> None:
+    """Distances fix the size of a network through the scales held fixed: with every station's scale
+    estimated (and no control points) the scale is a 7th datum defect."""
+    if datum.kind == "control" or not np.all(sc_free):
+        return
+    raise MultilatError("every station's scale is estimated, so the network's scale is undetermined (a 7th "
+                        "datum defect): estimate the scales of some stations only (--scales A,B) so the "
+                        "others fix it, or hold one station's scale (--fixed-scale STATION)")
 
 
 def _last_redundancy(obs, used, trial, k, datum, points) -> str:
@@ -612,7 +424,7 @@ def _last_redundancy(obs, used, trial, k, datum, points) -> str:
 
 
 def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global, max_iter,
-                   tol_m, chunk_targets, datum) -> None:
+                   solver, chunk_targets, datum) -> None:
     """Raise if the control coordinates are inconsistent with the distances.
 
     The adjustment with the control held fixed has ``Omega_c = v^T P v`` on ``dof_c``; the free
@@ -630,7 +442,7 @@ def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             free = _adjust_once(obs, parse_datum("free"), guess, guess, obs, used, None, "distance",
-                                off_free, off_val, sc_free, max_iter, tol_m, chunk_targets, warn=False)
+                                off_free, off_val, sc_free, max_iter, solver, chunk_targets, warn=False)
     except MultilatError:
         return            # not solvable without the control: nothing to compare; snooping goes on
     k = core["dof"] - free["dof"]
@@ -697,13 +509,13 @@ def _control_ids(sub, datum, points):
 
 
 def _adjust_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
-                 sc_free_all, max_iter, tol_m, chunk_targets, *, warn):
+                 sc_free_all, max_iter, solver, chunk_targets, *, warn):
     """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
     ``ref_start`` gives the reference coordinates of the free datum. Returns a dict of arrays in
     ``sub``'s order plus the maps back."""
     smap, tmap = _station_map(obs, used), _target_map(obs, used)
     off_free, off_val, sc_free = off_free_all[smap], off_val_all[smap], sc_free_all[smap]
-    _structure(sub, datum, points, off_free, sc_free, warn=warn)
+    _structure(sub, datum, points, off_free, sc_free, warn=False)
     s, t = sub.n_stations, sub.n_targets
     sx0 = start.station_xyz_m[smap].copy()
     tx0 = start.target_xyz_m[tmap].copy()
@@ -741,18 +553,21 @@ def _adjust_once(sub, datum, start, ref_start, obs, used, points, cost, off_free
         gfree[a, :3] = False
         gfree[b, 1:3] = False
         gfree[c, 2] = False
-    wsq = 1.0 / sub.sigma_m if cost == "distance" else np.ones(sub.n_obs)
-    pb = _Problem(sub, cost, gfree, tfree, wsq)
-    sx, tx, off, sc, iters = _gauss_newton(pb, sx0, tx0, off0, sc0, max_iter=max_iter, tol_m=tol_m,
-                                           chunk_targets=chunk_targets)
+    pb = Problem(sub, cost, gfree, tfree)
+    backend = make_backend(pb, choose_backend(pb, solver), chunk_targets=chunk_targets)
+    p, conv = gauss_newton(pb, Params(sx0, tx0, off0, sc0), backend, max_iter=max_iter)
+    if not conv.converged:
+        _raise_if_flat(sub, p.station_xyz_m, p.target_xyz_m, "no convergence")
+        raise MultilatError(f"the adjustment did not converge ({conv.reason} after {conv.iterations} "
+                            f"iterations, last step {conv.last_step_sigma:.3g} sigma); check the initial "
+                            "values, the geometry and the distances for gross errors")
+    sx, tx, off, sc = p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale
     # final normal equations at the solution
-    r_w, Js_w, Jt_w = _evaluate(pb, sx, tx, off, sc)
-    sys_ = reduced_normal_equations(r_w, Js_w, Jt_w, sub.station_index, sub.target_index, s, t,
-                                    target_free=tfree, chunk_targets=chunk_targets)
-    _check_target_blocks(sys_.Ntt, tfree, sub)
-    _, Qgg, cond = _solve_reduced(sys_.N, sys_.b, gfree.ravel(), sub, sx, tx)
-    n_free = int(gfree.sum()) + 3 * int(tfree.sum())
-    dof = sub.n_obs - n_free
+    fin = backend.assemble(p, 0.0)
+    check_target_blocks(fin.Ntt, pb)
+    _, Qgg, cond = solve_reduced(fin.N, fin.b, gfree.ravel(), pb, p)
+    r_w, Js_w, Jt_w = whitened(pb, p)
+    dof = pb.dof
     vtpv = float(r_w @ r_w)
     sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")
     factor = 1.0 if cost == "distance" else (sigma0 ** 2 if dof > 0 else float("nan"))
@@ -775,94 +590,12 @@ def _adjust_once(sub, datum, start, ref_start, obs, used, points, cost, off_free
             cur = {i: p for i, p in zip(all_ids, np.vstack([sx, tx]))}
             R, tr = rigid_fit(np.array([cur[i] for i in ids]), np.array([ref[i] for i in ids]))
         sx, tx = apply_rigid(R, tr, sx), apply_rigid(R, tr, tx)
-        G, E = _datum_matrices(datum, sub, sx, tx)
-    cov = NetworkCovariance(Qgg, sys_.Ntt_inv, Js_w, Jt_w, sub.station_index, sub.target_index,
+        G, E = datum_matrices(datum, sub.station_ids, sub.target_ids, sx, tx)
+    cov = NetworkCovariance(Qgg, fin.Ntt_inv, Js_w, Jt_w, sub.station_index, sub.target_index,
                             factor=factor, R=R, G=G, E=E)
     h = cov.hat_diagonal(chunk_targets)
     red = np.clip(1.0 - h, 0.0, 1.0)
     return dict(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free,
                 chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
-                vtpv=vtpv, iterations=iters, cond=cond, cov=cov)
-
-
-def _datum_matrices(datum, sub, sx, tx):
-    """G (n, 6) rigid motions of all coordinates, E (n, 6) the datum's constraint matrix."""
-    s, t = sub.n_stations, sub.n_targets
-    n = Q * s + 3 * t
-    rows = np.concatenate([(Q * np.arange(s)[:, None] + np.arange(3)).ravel(),
-                           Q * s + np.arange(3 * t)])
-    Gp = helmert_basis(np.vstack([sx, tx]))
-    G = np.zeros((n, 6))
-    G[rows] = Gp
-    pos = {pid: k for k, pid in enumerate(sub.station_ids + sub.target_ids)}
-
-    def prow(pid, c):
-        return rows[3 * pos[pid] + c]
-
-    E = np.zeros((n, 6))
-    if datum.kind == "321":
-        a, b, c = datum.points
-        for col, (pid, comp) in enumerate([(a, 0), (a, 1), (a, 2), (b, 1), (b, 2), (c, 2)]):
-            E[prow(pid, comp), col] = 1.0
-    else:
-        if datum.points is None:
-            E[rows] = G[rows]
-        else:
-            for pid in datum.points:
-                for comp in range(3):
-                    r = prow(pid, comp)
-                    E[r] = G[r]
-    return G, E
-
-
-def _build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global, *,
-                  reason="", snooped=True):
-    s, t, m = obs.n_stations, obs.n_targets, obs.n_obs
-    smap, tmap = core["smap"], core["tmap"]
-    sx = np.full((s, 3), np.nan)
-    tx = np.full((t, 3), np.nan)
-    off = np.full(s, np.nan)
-    sc = np.zeros(s)
-    sx[smap], tx[tmap], off[smap], sc[smap] = core["sx"], core["tx"], core["off"], core["sc"]
-    if len(smap) != s or len(tmap) != t:
-        lost = [obs.station_ids[i] for i in range(s) if i not in smap] + \
-               [obs.target_ids[j] for j in range(t) if j not in tmap]
-        raise MultilatError(f"data snooping removed every observation of {', '.join(lost)}")
-    cov = core["cov"]
-    gcov = cov.global_block()
-    scov = np.stack([gcov[Q * i:Q * i + 3, Q * i:Q * i + 3] for i in range(s)])
-    tcov = cov.target_blocks(core["chunk_targets"])
-    off_est = np.zeros(s, bool)
-    sc_est = np.zeros(s, bool)
-    off_est[smap], sc_est[smap] = core["off_free"], core["sc_free"]
-    # residuals of all observations (rejected ones against the final solution)
-    r_all = obs.distance_m - ((1 + sc[obs.station_index]) *
-                              np.linalg.norm(sx[obs.station_index] - tx[obs.target_index], axis=1)
-                              + off[obs.station_index])
-    red = np.zeros(m)
-    red[used] = core["redundancy"]
-    if cost == "distance":
-        w = st.w_statistics(r_all, obs.sigma_m, red)
-        w[~used] = 0.0
-        mdb = st.minimal_detectable_bias_m(obs.sigma_m, red, alpha=alpha, power=power)
-        gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global)
-    else:
-        w = np.zeros(m)
-        mdb = np.full(m, np.nan)
-        gt = st.GlobalTest(None, None, None, None, alpha_global, core["dof"])
-    outliers = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
-                             wk, float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"))
-                     for k, wk in rejected)
-    unloc = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
-                          float(w[k]), float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"))
-                  for k in unlocated)
-    cov = core["cov"]
-    gd = np.diag(gcov).reshape(s, Q)
-    return AdjustmentResult(
-        obs=obs, used=used, datum=datum, cost=cost, station_xyz_m=sx, target_xyz_m=tx, offset_m=off,
-        offset_estimated=off_est, scale=sc, scale_estimated=sc_est, station_cov_m2=scov,
-        target_cov_m2=tcov, global_cov=gcov, offset_std_m=np.sqrt(np.clip(gd[:, 3], 0, None)),
-        scale_std=np.sqrt(np.clip(gd[:, 4], 0, None)), residuals_m=r_all, redundancy=red, w=w,
-        mdb_m=mdb, sigma0=core["sigma0"], dof=core["dof"], global_test=gt, outliers=outliers,
-        unlocated=unloc, unlocated_reason=reason if unloc else "", snooping=bool(snooped),
-        alpha=alpha, power=power, iterations=core["iterations"], condition=core["cond"], covariance=cov)
+                vtpv=vtpv, iterations=conv.iterations, cond=cond, cov=cov, convergence=conv,
+                solver=backend.name)

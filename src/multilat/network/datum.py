@@ -33,8 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.model import Q
 
-__all__ = ["Datum", "parse_datum", "helmert_basis", "rigid_fit", "frame_321", "apply_rigid"]
+__all__ = ["Datum", "parse_datum", "helmert_basis", "rigid_fit", "frame_321", "apply_rigid", "datum_matrices"]
 
 KINDS = ("free", "321", "control")
 
@@ -153,3 +154,35 @@ def frame_321(p_origin, p_x, p_xy):
 def apply_rigid(R, t, xyz_m):
     """``R x + t`` for points (..., 3)."""
     return np.asarray(xyz_m) @ np.asarray(R).T + t
+
+
+def datum_matrices(datum: Datum, station_ids, target_ids, sx, tx):
+    """G (n, 6) rigid motions of all coordinates, E (n, 6) the datum's constraint matrix."""
+    s, t = len(station_ids), len(target_ids)
+    n = Q * s + 3 * t
+    rows = np.concatenate([(Q * np.arange(s)[:, None] + np.arange(3)).ravel(),
+                           Q * s + np.arange(3 * t)])
+    Gp = helmert_basis(np.vstack([sx, tx]))
+    G = np.zeros((n, 6))
+    G[rows] = Gp
+    pos = {pid: k for k, pid in enumerate(tuple(station_ids) + tuple(target_ids))}
+
+    def prow(pid, c):
+        return rows[3 * pos[pid] + c]
+
+    E = np.zeros((n, 6))
+    if datum.kind == "321":
+        a, b, c = datum.points
+        for col, (pid, comp) in enumerate([(a, 0), (a, 1), (a, 2), (b, 1), (b, 2), (c, 2)]):
+            E[prow(pid, comp), col] = 1.0
+    else:
+        if datum.points is None:
+            E[rows] = G[rows]
+        else:
+            for pid in datum.points:
+                for comp in range(3):
+                    r = prow(pid, comp)
+                    E[r] = G[r]
+    return G, E
+
+

@@ -1,29 +1,22 @@
-"""Large self-calibrating networks from distances alone: initial values, sparse solve, covariances.
+"""Initial values of large self-calibrating networks from distances alone.
 
-:func:`multilat.network.sparse.solve_large` solves a network of hundreds of thousands of targets in
-a fraction of a second, but only from initial values good to about a centimetre.
-:func:`adjust_large` finds them itself, from the distances alone, in three steps:
+The adjustment (:func:`multilat.network.adjust.adjust`) converges from approximate values good to
+about a centimetre. For small networks :func:`multilat.network.initial.initial_values` finds them
+from all distances at once; for networks of thousands of targets :func:`large_initial_values` does
+it in two steps, and the adjustment's sparse back end takes over:
 
 1. **Seed network.** A few dozen targets seen by many stations (:func:`select_seed_targets`: three
    complete blocks of 4+ stations x 12 common targets, then targets that cover every station at
    least 6 times) are handed with all their distances to
-   :func:`multilat.network.initial.initial_values`, the closed-form/affine self-calibration of
-   small networks. It gives every station's coordinates and offset, in its frame convention
-   (3-2-1 on three well-shaped stations, mirror fixed by the first other station off their plane).
+   :func:`multilat.network.initial.initial_values`. It gives every station's coordinates and
+   offset.
 2. **Every target by multilateration** from those stations and offsets, vectorised over all
    targets (:func:`multilaterate_targets`): the linearised (differenced) equations
    ``-2 (H_k - c).(T - c) = (r_k^2 - |H_k - c|^2) - mean_k(...)``, ``r_k = d_k - o_k``, ``c`` the
    centroid of the target's stations (a 3x3 system per target), then Gauss-Newton steps on the
    distances with the stations held. A target whose stations are (nearly) coplanar has two mirror
-   solutions about their plane; it is put on the side of the plane where the seed targets are.
-3. **Sparse Gauss-Newton** (:func:`multilat.network.sparse.solve_large`) of everything, with the
-   full station/offset covariance and a 3x3 covariance per target.
-
-Datum: free network, inner constraints over the stations (minimum trace of the station
-coordinates' covariance), positioned on the seed network's frame (the solution is moved rigidly to
-fit the seed station coordinates). Offsets, interpoint distances, sigma0 and the global test do not
-depend on it. No data snooping is run (the redundancy numbers of a 10^6-observation network are not
-computed); a gross error shows in the global test.
+   solutions about their plane; it is put on the side of the plane where the seed targets are, and
+   doubtful ones are re-fitted from both mirror positions.
 """
 
 from __future__ import annotations
@@ -34,83 +27,29 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.fastio import read_observations_fast
-from multilat.network.statistics import GlobalTest, global_test
 
-__all__ = ["LargeResult", "adjust_large", "large_result_to_json", "multilaterate_targets",
-           "select_seed_targets", "read_observations_fast"]
+__all__ = ["LargeStart", "large_initial_values", "multilaterate_targets", "select_seed_targets",
+           "SyntheticNetwork", "synthetic_network"]
 
 
 @dataclass(frozen=True, eq=False)
-class LargeResult:
-    """Result of :func:`adjust_large`. Arrays follow ``station_ids`` / ``target_ids``; metres.
+class LargeStart:
+    """Initial values of a large network (:func:`large_initial_values`); metres.
 
-    Attributes
-    ----------
-    station_ids, target_ids : tuple of str
-    station_xyz_m : ndarray, shape (s, 3)
-    offset_m : ndarray, shape (s,)
-        Additive instrument offsets (``distance = |H - T| + offset``).
-    station_cov_m2 : ndarray, shape (4s, 4s)
-        Full covariance of ``[station xyz (station-major, 3s), offsets (s)]`` in the datum, m^2
-        (a-priori variance factor 1, i.e. ``sigma_m`` taken as known).
-    target_xyz_m : ndarray, shape (t, 3)
-    target_cov_m2 : ndarray, shape (t, 3, 3)
-        Covariance of each target in the same datum, m^2.
-    sigma0 : float
-        A-posteriori standard deviation of unit weight.
-    dof : int
-        Observations - unknowns + 6 (datum defect).
-    global_test : statistics.GlobalTest
-        chi^2 test of ``sigma0^2 dof`` (upper, ``alpha_global``).
-    iterations : int
-        Gauss-Newton iterations of the sparse solve.
-    n_obs : int
-    seed_target_ids : tuple of str
-        The targets of the seed network (step 1).
-    initial_method : str
-        How ``initial_values`` solved the seed network (``"algebraic"`` or ``"restarts"``).
-    initial_rms_m : float
-        RMS residual of the seed network; ``multilateration_rms_m``: RMS residual of all distances
-        after step 2 (both at the noise level for a sound network).
-    multilateration_rms_m : float
-    datum : str
-        Description of the datum.
-    timings_s : dict
-        Wall times of ``seed``, ``multilaterate``, ``solve``, ``covariance`` (seconds).
+    station_xyz_m (s, 3), target_xyz_m (t, 3), offset_m (s,): the start of the adjustment.
+    seed_target_ids : the targets of the seed network; method : how it was solved;
+    seed_rms_m, multilateration_rms_m : RMS residuals of the seed network and of all distances
+    after multilateration (both at the noise level for a sound network); timings_s : seconds.
     """
 
-    station_ids: tuple
-    target_ids: tuple
     station_xyz_m: np.ndarray
-    offset_m: np.ndarray
-    station_cov_m2: np.ndarray
     target_xyz_m: np.ndarray
-    target_cov_m2: np.ndarray
-    sigma0: float
-    dof: int
-    global_test: GlobalTest
-    iterations: int
-    n_obs: int
+    offset_m: np.ndarray
     seed_target_ids: tuple
-    initial_method: str
-    initial_rms_m: float
+    method: str
+    seed_rms_m: float
     multilateration_rms_m: float
-    datum: str
     timings_s: dict
-
-    @property
-    def offset_std_m(self) -> np.ndarray:
-        """Standard uncertainty of each offset, shape (s,)."""
-        s = len(self.station_ids)
-        return np.sqrt(np.clip(np.diag(self.station_cov_m2)[3 * s:], 0, None))
-
-    @property
-    def station_point_cov_m2(self) -> np.ndarray:
-        """3x3 covariance of each station's coordinates, shape (s, 3, 3)."""
-        s = len(self.station_ids)
-        idx = 3 * np.arange(s)[:, None] + np.arange(3)
-        return self.station_cov_m2[idx[:, :, None], idx[:, None, :]]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -257,7 +196,8 @@ def multilaterate_targets(station_xyz_m, offset_m, station_index, target_index, 
     station_index, target_index : ndarray of int, shape (m,)
     distance_m, sigma_m : ndarray, shape (m,)
     n_targets : int
-        ``t``; every target needs >= 4 observations.
+        ``t``; every target needs >= 3 observations (with 3, or with coplanar stations, the mirror
+        position through their plane fits equally: the side of ``side_point_m`` is taken).
     side_point_m : ndarray, shape (3,), optional
         Mirror choice for coplanar stations (default: the stations' centroid + 1 m in +z).
     iterations : int
@@ -283,10 +223,9 @@ def multilaterate_targets(station_xyz_m, offset_m, station_index, target_index, 
     si, ti, tptr, (d, sig) = _group_by_target(station_index, target_index, t, distance_m, sigma_m)
     counts = np.diff(tptr)
     name = (lambda j: repr(target_ids[j])) if target_ids is not None else (lambda j: f"index {j}")
-    if counts.min() < 4:
+    if counts.min() < 3:
         j = int(np.argmin(counts))
-        raise MultilatError(f"target {name(j)} has {int(counts[j])} observations (needs >= 4 from "
-                            "distances alone)")
+        raise MultilatError(f"target {name(j)} has {int(counts[j])} observations (needs >= 3)")
     side = (np.asarray(side_point_m, float) if side_point_m is not None
             else h.mean(axis=0) + np.array([0.0, 0.0, 1.0]))
     x = np.empty((t, 3))
@@ -357,84 +296,37 @@ def _refit_ambiguous(x, rms, flagged, station_xyz_m, offset_m, station_index, tp
 
 
 # ---------------------------------------------------------------------------------------------
-def adjust_large(obs, *, sigma_m=None, rng=None, seed_size: int = 48, alpha_global: float = 0.05,
-                 tol_m: float = 1e-10, max_iter: int = 30, covariance: bool = True) -> LargeResult:
-    """Adjust a large self-calibrating network from its distances alone.
+def large_initial_values(obs, *, rng=None, seed_size: int = 48) -> LargeStart:
+    """Initial values of a large network from its distances alone (steps 1-2 of the module doc).
 
     Parameters
     ----------
-    obs : Observations or FastObservations
-        Any object with ``station_ids``, ``target_ids``, ``station_index``, ``target_index``,
-        ``distance_m`` and ``sigma_m`` (:class:`multilat.network.data.Observations`, or
-        :func:`read_observations_fast` for files of millions of rows). Every target needs >= 4
-        stations (from distances alone a target seen by 3 has two mirror positions).
-    sigma_m : float or ndarray (m,), optional
-        Replaces the observations' standard uncertainties (metres, > 0).
+    obs : Observations
+        Every station needs >= 4 targets; targets seen by 3 stations are placed on the side of their
+        stations' plane where the seed targets are.
     rng : numpy Generator, int or None
         Seed-target tie-breaking and ``initial_values``' random starts.
     seed_size : int
         About how many targets form the seed network (:func:`select_seed_targets`).
-    alpha_global : float
-        Significance of the global chi^2 test.
-    tol_m, max_iter
-        Convergence of the sparse Gauss-Newton (largest step, metres; iteration limit).
-    covariance : bool
-        Compute the covariances (else ``station_cov_m2`` / ``target_cov_m2`` are None).
 
     Returns
     -------
-    LargeResult
-
-    Raises
-    ------
-    MultilatError
-        Bad input (shapes, non-finite or non-positive values, duplicate pairs, an id used as station
-        and target, a target with < 4 stations), a seed network that cannot be solved, collinear
-        stations of a target, or no convergence.
+    LargeStart
     """
     from multilat.network.data import Observations
     from multilat.network.initial import initial_values
-    from multilat.network.sparse import solve_large
 
     t0 = time.perf_counter()
-    if not (0 < alpha_global < 1):
-        raise MultilatError(f"alpha_global must be in (0, 1), got {alpha_global!r}")
-    try:
-        sids = tuple(obs.station_ids)
-        tids = tuple(obs.target_ids)
-        si = np.asarray(obs.station_index, np.int64)
-        ti = np.asarray(obs.target_index, np.int64)
-        d = np.asarray(obs.distance_m, float)
-        sig = np.asarray(obs.sigma_m if sigma_m is None else sigma_m, float)
-    except AttributeError as e:
-        raise MultilatError(f"adjust_large: obs lacks {e.name!r} (give Observations or FastObservations)") \
-            from None
+    sids, tids = tuple(obs.station_ids), tuple(obs.target_ids)
+    si = np.asarray(obs.station_index, np.int64)
+    ti = np.asarray(obs.target_index, np.int64)
+    d = np.asarray(obs.distance_m, float)
+    sig = np.asarray(obs.sigma_m, float)
     s, t, m = len(sids), len(tids), len(d)
-    sig = np.broadcast_to(sig, (m,)) if sig.ndim == 0 else sig
-    if not (si.shape == ti.shape == d.shape == sig.shape == (m,)) or m == 0:
-        raise MultilatError("station_index, target_index, distance_m and sigma_m must be 1-D of one length")
-    if si.min() < 0 or si.max() >= s or ti.min() < 0 or ti.max() >= t:
-        raise MultilatError("observation indices out of range of station_ids / target_ids")
-    for name, v in (("distance_m", d), ("sigma_m", sig)):
-        bad = ~(np.isfinite(v) & (v > 0))
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise MultilatError(f"{name} must be finite and > 0: observation {k} "
-                                f"({sids[si[k]]}->{tids[ti[k]]}) has {v[k]!r}")
-    _check_pattern(si, ti, s, t, sids, tids)
     counts = np.bincount(ti, minlength=t)
-    if counts.min() < 4:
-        j = int(np.argmin(counts))
-        raise MultilatError(f"target {tids[j]!r} is seen by {int(counts[j])} station(s); from distances "
-                            "alone at least 4 are needed")
-    scount = np.bincount(si, minlength=s)
-    if scount.min() < 4:
-        i = int(np.argmin(scount))
-        raise MultilatError(f"station {sids[i]!r} sees {int(scount[i])} target(s); at least 4 are needed")
     if s < 4:
         raise MultilatError(f"initial values need at least 4 stations, got {s}")
     gen = np.random.default_rng(rng)
-
     # 1. seed network
     seed = select_seed_targets(si, ti, s, t, size=seed_size, rng=gen)
     remap = np.full(t, -1, np.int64)
@@ -446,84 +338,69 @@ def adjust_large(obs, *, sigma_m=None, rng=None, seed_size: int = 48, alpha_glob
         raise MultilatError(f"station {sids[i]!r} sees too few well-observed targets for the seed network")
     iv = initial_values(sub, rng=gen)
     t1 = time.perf_counter()
-
     # 2. every target from the stations
-    si, ti, _, (d, sig) = _group_by_target(si, ti, t, d, sig)    # once, for both passes
+    si, ti, _, (d, sig) = _group_by_target(si, ti, t, d, sig)
     tg, trms, flat = multilaterate_targets(iv.station_xyz_m, iv.offset_m, si, ti, d, sig, t,
                                            side_point_m=iv.target_xyz_m.mean(axis=0), target_ids=tids)
     tptr = np.zeros(t + 1, np.int64)
     np.cumsum(counts, out=tptr[1:])
     tg, trms = _refit_ambiguous(tg, trms, flat, iv.station_xyz_m, iv.offset_m, si, tptr, d, sig)
     ml_rms = float(np.sqrt(np.sum(trms**2 * counts) / m))
-    t2 = time.perf_counter()
-
-    # 3. sparse Gauss-Newton
-    sol = solve_large(si, ti, d, sig, iv.station_xyz_m, iv.offset_m, tg, covariance=covariance,
-                      tol_m=tol_m, max_iter=max_iter)
-    if not sol.converged:
-        raise MultilatError(f"the sparse adjustment did not converge in {sol.iterations} iterations (last "
-                            f"step {sol.last_step_m:.3g} m); multilateration RMS residual {ml_rms:.3g} m")
-    gt = global_test(sol.sigma0**2 * sol.dof, sol.dof, alpha=alpha_global)
-    frame = _frame_names(iv.station_xyz_m, sids)
-    datum = ("free network, inner constraints over the stations (frame of the initial values: "
-             f"{frame})")
-    timings = {"seed": t1 - t0, "multilaterate": t2 - t1, "solve": sol.timings_s["solve"],
-               "covariance": sol.timings_s["covariance"], "total": time.perf_counter() - t0}
-    return LargeResult(sids, tids, sol.station_xyz_m, sol.offset_m, sol.station_cov_m2, sol.target_xyz_m,
-                       sol.target_cov_m2, sol.sigma0, sol.dof, gt, sol.iterations, m,
-                       tuple(tids[j] for j in seed), iv.method, iv.rms_residual_m, ml_rms, datum, timings)
+    return LargeStart(iv.station_xyz_m, tg, iv.offset_m, tuple(tids[j] for j in seed),
+                      f"seed network ({iv.method}) + multilateration", iv.rms_residual_m, ml_rms,
+                      {"seed": t1 - t0, "multilaterate": time.perf_counter() - t1})
 
 
-def _frame_names(h, sids) -> str:
-    """Which stations define the initial values' 3-2-1 frame (origin, +x, xy-plane)."""
-    a = int(np.argmin(np.linalg.norm(h, axis=1)))
-    rest = [i for i in range(len(h)) if i != a]
-    onx = [i for i in rest if np.hypot(h[i, 1], h[i, 2]) <= 1e-9 * max(1.0, np.abs(h).max())]
-    inxy = [i for i in rest if i not in onx and abs(h[i, 2]) <= 1e-9 * max(1.0, np.abs(h).max())]
-    if onx and inxy:
-        return f"3-2-1: {sids[a]} at origin, {sids[onx[0]]} on +x, {sids[inxy[0]]} in the xy-plane"
-    return "3-2-1 on three stations"
+# --------------------------------------------------------------------------- a test network
+@dataclass(frozen=True, eq=False)
+class SyntheticNetwork:
+    """A generated network with its truth (see :func:`synthetic_network`)."""
+
+    station_index: np.ndarray
+    target_index: np.ndarray
+    distance_m: np.ndarray
+    sigma_m: np.ndarray
+    station_xyz_m: np.ndarray
+    offset_m: np.ndarray
+    target_xyz_m: np.ndarray
 
 
-def large_result_to_json(res: LargeResult) -> dict:
-    """A JSON-ready dict with the keys of ``multilat adjust --json`` where they apply.
+def synthetic_network(n_stations: int = 20, n_targets: int = 200_000, per_target: int = 8, *,
+                      sigma_m: float = 5e-6, size_m: float = 20.0, rng=None) -> SyntheticNetwork:
+    """A large-volume test network with a known truth.
 
-    ``stations{id: {xyz_m, offset_m, offset_u_m, offset_estimated, cov_m2}}``,
-    ``targets{id: {xyz_m, cov_m2}}``, ``sigma0``, ``dof``, ``global_test{statistic, critical,
-    passed, alpha}``, ``outliers`` and ``unlocated`` (always empty: data snooping is not run by the
-    sparse solver, see ``note``), ``iterations``, ``datum``, ``cost``, ``n_obs``, ``n_used``, plus
-    ``solver`` ("sparse") and ``initial`` (seed network, RMS residuals, timings).
+    Stations on a ring of radius ``0.6 size_m`` at alternating heights (0 and ``0.3 size_m``),
+    offsets uniform in +-5 mm; targets uniform in a ``size_m x size_m x 0.25 size_m`` box; each target
+    observed by ``per_target`` distinct stations chosen at random, half on each ring (a target seen only
+    by the low ring at floor height would have coplanar lines of sight); gaussian noise ``sigma_m``.
+    Observations are listed target by target.
     """
-    s = len(res.station_ids)
-    scov = res.station_point_cov_m2 if res.station_cov_m2 is not None else None
-    ostd = res.offset_std_m if res.station_cov_m2 is not None else np.full(s, np.nan)
-    stations = {sid: {"xyz_m": res.station_xyz_m[i].tolist(), "offset_m": float(res.offset_m[i]),
-                      "offset_u_m": float(ostd[i]), "offset_estimated": True,
-                      "cov_m2": None if scov is None else scov[i].tolist()}
-                for i, sid in enumerate(res.station_ids)}
-    txyz = res.target_xyz_m.tolist()
-    tcov = res.target_cov_m2.tolist() if res.target_cov_m2 is not None else [None] * len(txyz)
-    targets = {tid: {"xyz_m": txyz[j], "cov_m2": tcov[j]} for j, tid in enumerate(res.target_ids)}
-    gt = res.global_test
-    return {
-        "datum": res.datum,
-        "cost": "distance",
-        "solver": "sparse",
-        "n_obs": res.n_obs,
-        "n_used": res.n_obs,
-        "stations": stations,
-        "targets": targets,
-        "sigma0": res.sigma0,
-        "dof": res.dof,
-        "global_test": {"statistic": gt.statistic, "critical": gt.critical, "passed": gt.passed,
-                        "alpha": gt.alpha},
-        "outliers": [],
-        "unlocated": [],
-        "note": "data snooping is not run in the sparse path (no redundancy numbers for large networks); "
-                "a gross error shows in the global test",
-        "reference_lengths": [],
-        "iterations": res.iterations,
-        "initial": {"seed_targets": list(res.seed_target_ids), "method": res.initial_method,
-                    "seed_rms_m": res.initial_rms_m, "multilateration_rms_m": res.multilateration_rms_m,
-                    "timings_s": dict(res.timings_s)},
-    }
+    rng = np.random.default_rng(rng)
+    if per_target < 3 or per_target > n_stations:
+        raise MultilatError(f"per_target must be in 3..n_stations, got {per_target}")
+    ang = 2 * np.pi * np.arange(n_stations) / n_stations
+    rad = 0.6 * size_m
+    hz = np.where(np.arange(n_stations) % 2 == 0, 0.0, 0.3 * size_m)
+    h = np.column_stack([rad * np.cos(ang), rad * np.sin(ang), hz])
+    off = rng.uniform(-5e-3, 5e-3, n_stations)
+    tg = rng.uniform([-size_m / 2, -size_m / 2, 0.0], [size_m / 2, size_m / 2, 0.25 * size_m],
+                     (n_targets, 3))
+    # per_target distinct stations per target, half from the low ring and half from the high one
+    # (all-low stations would leave a target at floor height with coplanar lines of sight)
+    low = np.arange(0, n_stations, 2)
+    high = np.arange(1, n_stations, 2)
+    n_low = min(len(low), per_target // 2)
+    n_high = per_target - n_low
+    if n_high > len(high):
+        n_high = len(high)
+        n_low = per_target - n_high
+    pick_l = np.argpartition(rng.random((n_targets, len(low))), n_low - 1, axis=1)[:, :n_low]
+    pick_h = np.argpartition(rng.random((n_targets, len(high))), n_high - 1, axis=1)[:, :n_high]
+    st = np.concatenate([low[pick_l], high[pick_h]], axis=1)
+    st.sort(axis=1)
+    si = st.ravel().astype(np.int64)
+    ti = np.repeat(np.arange(n_targets, dtype=np.int64), per_target)
+    diff = h[si] - tg[ti]
+    dist = np.sqrt(np.einsum("mi,mi->m", diff, diff)) + off[si]
+    dist = dist + rng.normal(0.0, sigma_m, len(si))
+    return SyntheticNetwork(si, ti, dist, np.full(len(si), sigma_m), h, off, tg)

@@ -112,11 +112,6 @@ def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets
         raise MultilatError(f"too few observations: {m} distances for {n_unknown} unknowns "
                             f"({s} stations, {t} targets, {n_off} offsets, datum {datum_defect}){hint}")
     if warn:
-        low = [obs.target_ids[j] for j in range(t) if not fixed_targets[j] and per_target[j] == 3]
-        if low:
-            warnings.warn(f"target(s) {', '.join(low[:5])}{'...' if len(low) > 5 else ''} seen by only "
-                          "3 stations: zero redundancy, their observations are uncontrolled",
-                          UserWarning, stacklevel=3)
         if dof == 0:
             warnings.warn("zero redundancy: the adjustment is exactly determined, no statistics",
                           UserWarning, stacklevel=3)

@@ -1,0 +1,103 @@
+"""The registry of unknowns of a network adjustment: which parameters exist, which are free, and
+how observations are weighted. Every solver back end, the datum and the statistics use it.
+
+Parameter layout (see :mod:`multilat.network.model`)::
+
+    [station 0: x, y, z, offset, scale, station 1: ..., target 0: x, y, z, target 1: ...]
+
+``Q = 5`` global parameters per station (index ``Q i + c``), then 3 per target. A parameter that is
+held (a fixed offset, an unestimated scale, a coordinate of the internal minimal constraint, a
+control point) keeps its value and its column is zero in every Jacobian.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from multilat.network.data import Observations
+from multilat.network.model import COSTS, Q
+
+__all__ = ["Problem", "Params", "param_names"]
+
+
+@dataclass(frozen=True, eq=False)
+class Params:
+    """Values of all parameters, in the order of the observations' ids.
+
+    station_xyz_m (s, 3), target_xyz_m (t, 3), offset_m (s,), scale (s,) (dimensionless).
+    """
+
+    station_xyz_m: np.ndarray
+    target_xyz_m: np.ndarray
+    offset_m: np.ndarray
+    scale: np.ndarray
+
+    def step(self, dg: np.ndarray, dt: np.ndarray) -> "Params":
+        """These parameters plus a global step ``dg`` (5s,) and target steps ``dt`` (t, 3)."""
+        d = dg.reshape(-1, Q)
+        return Params(self.station_xyz_m + d[:, :3], self.target_xyz_m + dt,
+                      self.offset_m + d[:, 3], self.scale + d[:, 4])
+
+    def is_finite(self) -> bool:
+        return bool(np.isfinite(self.station_xyz_m).all() and np.isfinite(self.target_xyz_m).all()
+                    and np.isfinite(self.offset_m).all() and np.isfinite(self.scale).all())
+
+
+@dataclass(frozen=True, eq=False)
+class Problem:
+    """One least-squares problem: observations, cost, and which parameters are free.
+
+    Attributes
+    ----------
+    obs : Observations
+    cost : "distance" (weighted by 1/sigma) or "squared" (the paper's eq. 6, unweighted)
+    station_free : ndarray of bool (s, Q)   free station parameters (x, y, z, offset, scale)
+    target_free : ndarray of bool (t,)      False for targets held fixed (control points)
+    """
+
+    obs: Observations
+    cost: str
+    station_free: np.ndarray
+    target_free: np.ndarray
+
+    def __post_init__(self):
+        if self.cost not in COSTS:
+            raise ValueError(f"cost must be one of {COSTS}, got {self.cost!r}")
+        sf = np.asarray(self.station_free, bool)
+        tf = np.asarray(self.target_free, bool)
+        if sf.shape != (self.obs.n_stations, Q) or tf.shape != (self.obs.n_targets,):
+            raise ValueError("station_free (s, 5) / target_free (t,) shapes disagree with obs")
+        object.__setattr__(self, "station_free", sf)
+        object.__setattr__(self, "target_free", tf)
+
+    @property
+    def weight_sqrt(self) -> np.ndarray:
+        """Square roots of the weights (m,): ``1/sigma`` for the distance cost, 1 for squared."""
+        return 1.0 / self.obs.sigma_m if self.cost == "distance" else np.ones(self.obs.n_obs)
+
+    @property
+    def sigma_ref_m(self) -> float:
+        """The length that steps are measured against (the smallest a-priori sigma)."""
+        return float(np.min(self.obs.sigma_m))
+
+    @property
+    def n_free(self) -> int:
+        return int(self.station_free.sum()) + 3 * int(self.target_free.sum())
+
+    @property
+    def dof(self) -> int:
+        return self.obs.n_obs - self.n_free
+
+    def with_free(self, station_free=None, target_free=None) -> "Problem":
+        return replace(self, station_free=self.station_free if station_free is None else station_free,
+                       target_free=self.target_free if target_free is None else target_free)
+
+
+def param_names(station_ids) -> list[str]:
+    """Names of the global parameters in layout order (for messages)."""
+    names = []
+    for sid in station_ids:
+        names += [f"x of {sid}", f"y of {sid}", f"z of {sid}", f"offset of {sid}", f"scale of {sid}"]
+    return names

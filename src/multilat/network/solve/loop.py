@@ -1,0 +1,148 @@
+"""The one Gauss-Newton / Levenberg-Marquardt loop of the network adjustment.
+
+Each iteration asks the back end for the reduced normal equations at the current point (damped by
+``lambda`` on the diagonal of station and target blocks), solves the station system by a scaled
+eigen-decomposition (with a conditioning check that names the weak parameters), back-substitutes the
+targets, and accepts the step when the cost decreases (``lambda`` then shrinks) or retries with more
+damping. It stops by :func:`.convergence.step_verdict` and returns the parameters with a
+:class:`.convergence.Convergence` record; no non-finite value leaves it (a step that produces one is
+rejected like any step that does not decrease the cost).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network.problem import Params, Problem, param_names
+from multilat.network.solvability import CONDITION_LIMIT, diagnose_degeneracy
+from multilat.network.solve.convergence import Convergence, step_verdict
+from multilat.network.solve.system import weighted_cost
+
+__all__ = ["BACKENDS", "make_backend", "choose_backend", "gauss_newton", "solve_reduced",
+           "check_target_blocks", "SPARSE_ABOVE_OBS"]
+
+BACKENDS = ("auto", "dense", "sparse")
+SPARSE_ABOVE_OBS = 20_000   # ``auto``: the compiled back end above this many observations
+
+
+def choose_backend(problem: Problem, solver: str = "auto") -> str:
+    """``"dense"`` or ``"sparse"`` for ``solver`` in :data:`BACKENDS`; raises for an explicit
+    ``"sparse"`` on a problem it cannot handle."""
+    from multilat.network.solve.sparse import supports
+
+    if solver not in BACKENDS:
+        raise MultilatError(f"solver must be one of {', '.join(BACKENDS)}, got {solver!r}")
+    why = supports(problem)
+    if solver == "sparse" and why:
+        raise MultilatError(f"the sparse solver does not handle {why}: use --solver dense (or auto)")
+    if solver == "auto":
+        return "sparse" if (why is None and problem.obs.n_obs > SPARSE_ABOVE_OBS) else "dense"
+    return solver
+
+
+def make_backend(problem: Problem, name: str, *, chunk_targets: int = 20000):
+    if name == "sparse":
+        from multilat.network.solve.sparse import SparseBackend
+
+        return SparseBackend(problem)
+    from multilat.network.solve.dense import DenseBackend
+
+    return DenseBackend(problem, chunk_targets=chunk_targets)
+
+
+def solve_reduced(N, b, free, problem: Problem, p: Params):
+    """Solve the free part of ``N dg = b`` after a conditioning check.
+
+    Returns ``(dg (5s,), Qgg (5s, 5s), condition)``: the step, the inverse of the free block
+    (zeros elsewhere) and the condition number of the unit-diagonal matrix. Raises
+    :class:`MultilatError` naming the weak parameters when it is not below ``CONDITION_LIMIT``.
+    """
+    obs = problem.obs
+    Nf = N[np.ix_(free, free)]
+    diag = np.diag(Nf)
+    if not (np.all(np.isfinite(diag)) and np.all(diag > 0)):
+        k = int(np.flatnonzero(~(diag > 0))[0]) if np.any(~(diag > 0)) else 0
+        name = np.array(param_names(obs.station_ids))[free][k]
+        raise MultilatError(f"near-degenerate geometry: {name} is not determined by the observations")
+    d = np.sqrt(diag)
+    Ns = Nf / np.outer(d, d)
+    if not np.all(np.isfinite(Ns)):
+        raise MultilatError("the normal equations are not finite: check the observations for absurd "
+                            "values (distances or sigmas)")
+    ev, V = np.linalg.eigh(Ns)
+    cond = float(ev[-1] / ev[0]) if ev[0] > 0 else np.inf
+    if not cond < CONDITION_LIMIT:
+        nv = np.zeros(free.size)
+        nv[free] = V[:, 0] / d
+        raise MultilatError(diagnose_degeneracy(p.station_xyz_m, p.target_xyz_m, obs.station_ids,
+                                                obs.target_ids, nv, param_names(obs.station_ids),
+                                                condition=cond, sigma_m=float(np.median(obs.sigma_m)),
+                                                n_obs=obs.n_obs))
+    Qf = ((V / ev) @ V.T) / np.outer(d, d)
+    dg = np.zeros(free.size)
+    dg[free] = Qf @ b[free]
+    Qgg = np.zeros((free.size, free.size))
+    Qgg[np.ix_(free, free)] = Qf
+    return dg, Qgg, cond
+
+
+def check_target_blocks(Ntt, problem: Problem) -> None:
+    """Raise naming the first free target whose 3x3 normal block is (nearly) singular."""
+    tf = problem.target_free
+    with np.errstate(invalid="ignore"):
+        ev = np.linalg.eigvalsh(np.where(np.isfinite(Ntt[tf]), Ntt[tf], 0.0))
+    bad = ~(ev[:, 0] > 1e-10 * ev[:, 2])
+    if np.any(bad):
+        j = int(np.flatnonzero(tf)[np.flatnonzero(bad)[0]])
+        raise MultilatError(f"near-degenerate geometry: target {problem.obs.target_ids[j]!r} is not "
+                            "determined (its stations are (nearly) on one line through it)")
+
+
+def _step_length_m(dg, dt, scale_len):
+    d = dg.reshape(-1, 5)
+    return max(float(np.max(np.abs(d[:, :4]))), float(np.max(np.abs(dt), initial=0.0)),
+               float(np.max(np.abs(d[:, 4]))) * scale_len)
+
+
+def gauss_newton(problem: Problem, start: Params, backend, *, max_iter: int = 100):
+    """Minimise the weighted cost of ``problem`` from ``start``.
+
+    Returns ``(params, convergence)``; ``params`` is the lowest-cost point reached (finite).
+    Raises :class:`MultilatError` only for degenerate geometry (named).
+    """
+    free = problem.station_free.ravel()
+    sig = problem.sigma_ref_m
+    scale_len = float(np.max(np.abs(problem.obs.distance_m)))
+    p = start
+    lam = 0.0
+    cost = weighted_cost(problem, p)
+    prev = np.inf
+    step_sigma = np.inf
+    # rounding noise of the cost: each whitened residual is known to about delta = 4 eps L / sigma
+    # (distance cost) or 4 eps L^2 (squared cost, unweighted)
+    m = problem.obs.n_obs
+    delta = 4 * np.finfo(float).eps * (scale_len / sig if problem.cost == "distance" else scale_len ** 2)
+    for it in range(1, max_iter + 1):
+        while True:
+            a = backend.assemble(p, lam)
+            check_target_blocks(a.Ntt, problem)
+            dg, _, _ = solve_reduced(a.N, a.b, free, problem, p)
+            dt = a.back_substitute(dg)
+            q = p.step(dg, dt)
+            new_cost = weighted_cost(problem, q) if q.is_finite() else np.inf
+            step_sigma = _step_length_m(dg, dt, scale_len) / sig
+            noise = 2.0 * np.sqrt(cost * m) * delta + m * delta * delta + 1e-12 * cost
+            if new_cost <= cost or (step_sigma < 1.0 and new_cost <= cost + noise):
+                break
+            lam = 1e-4 if lam == 0.0 else lam * 10.0
+            if lam > 1e8:
+                return p, Convergence(False, it, float(step_sigma), "no decrease of the cost")
+        p, cost = q, new_cost
+        undamped = lam == 0.0
+        lam = 0.0 if lam < 1e-6 else lam / 10.0
+        why = step_verdict(step_sigma, prev) if undamped else None
+        if why:
+            return p, Convergence(True, it, float(step_sigma), why)
+        prev = step_sigma
+    return p, Convergence(False, max_iter, float(step_sigma), "iteration limit")

@@ -1,0 +1,52 @@
+"""What a back end hands to the solver loop: the reduced normal equations at one point."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from multilat.network.model import residuals_and_jacobian
+from multilat.network.problem import Params, Problem
+
+__all__ = ["Assembly", "whitened", "weighted_cost"]
+
+
+@dataclass(frozen=True, eq=False)
+class Assembly:
+    """Reduced normal equations ``N dg = b`` at a point (targets eliminated by the Schur complement).
+
+    N : (5s, 5s)  (rows/columns of held parameters are zero)
+    b : (5s,)
+    Ntt : (t, 3, 3)  target blocks (damped as assembled); Ntt_inv their inverses (zero if held)
+    vtpv : float  weighted sum of squared residuals at the point
+    back_substitute : callable dg (5s,) -> dt (t, 3)
+    """
+
+    N: np.ndarray
+    b: np.ndarray
+    Ntt: np.ndarray
+    Ntt_inv: np.ndarray
+    vtpv: float
+    back_substitute: Callable[[np.ndarray], np.ndarray]
+
+
+def whitened(problem: Problem, p: Params):
+    """Whitened residuals (m,) and Jacobian blocks (m, 5), (m, 3) with held columns zeroed."""
+    o = problem.obs
+    r, Js, Jt = residuals_and_jacobian(o.distance_m, p.station_xyz_m, p.target_xyz_m, p.offset_m,
+                                       p.scale, o.station_index, o.target_index, cost=problem.cost)
+    w = problem.weight_sqrt
+    Js_w = Js * w[:, None] * problem.station_free[o.station_index]
+    Jt_w = Jt * w[:, None] * problem.target_free[o.target_index][:, None]
+    return r * w, Js_w, Jt_w
+
+
+def weighted_cost(problem: Problem, p: Params) -> float:
+    """``sum (w r)^2`` at ``p`` (inf when not finite)."""
+    o = problem.obs
+    r, _, _ = residuals_and_jacobian(o.distance_m, p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale,
+                                     o.station_index, o.target_index, cost=problem.cost)
+    v = float(np.sum((r * problem.weight_sqrt) ** 2))
+    return v if np.isfinite(v) else np.inf

@@ -1,0 +1,161 @@
+"""One network core: dense and sparse back ends give the same result (keys and numbers), the
+convergence record is explicit, and the stopping rule reaches the minimum to the limits of float64."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from multilat.cli.app import main
+from multilat.errors import MultilatError
+from multilat.network.adjust import Start, adjust
+from multilat.network.data import Observations
+from multilat.network.files import read_observations
+from multilat.network.large import synthetic_network
+
+EX = Path(__file__).resolve().parents[1] / "examples" / "network"
+OBS = EX / "small_volume_obs.csv"
+
+
+def _run(capsys, args):
+    rc = main(args)
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+def _blundered(tmp_path) -> Path:
+    """A 8-station, 60-target network (6 stations per target) with a 40-sigma blunder on one distance."""
+    net = synthetic_network(8, 60, 6, size_m=8.0, rng=3)
+    d = net.distance_m.copy()
+    d[100] += 40 * net.sigma_m[100]
+    p = tmp_path / "blunder.csv"
+    rows = [f"S{i},T{j},{float(x)!r},{float(sg)!r}" for i, j, x, sg in zip(net.station_index, net.target_index, d, net.sigma_m)]
+    p.write_text("station,target,distance_m,sigma_m\n" + "\n".join(rows) + "\n")
+    return p
+
+
+def _tolerance(path: str, a: float) -> float:
+    """Lengths to 1e-12 m (the float64 floor of a 10 m network is ~1e-15 m, each back end stops
+    within a few of it); covariances (m^2) to 1e-7 relative; dimensionless statistics (w,
+    redundancy, sigma0, ...) to 1e-9 relative or 1e-8 absolute (a w of 1e-8 is a residual of
+    5e-14 m at sigma 5 µm)."""
+    key = path.rsplit(".", 1)[-1].split("[")[0]
+    if key.endswith("_m2"):
+        return 1e-7 * abs(a) + 1e-22
+    if key.endswith("_m") or key == "xyz_m":
+        return 1e-12
+    return max(1e-8, 1e-9 * abs(a))
+
+
+def _same(a, b, path="$"):
+    """Same keys everywhere; numbers equal within :func:`_tolerance`."""
+    if isinstance(a, dict):
+        assert isinstance(b, dict) and set(a) == set(b), f"{path}: keys {set(a) ^ set(b)}"
+        for k in a:
+            if k in ("solver", "initial"):
+                continue
+            _same(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, list):
+        assert isinstance(b, list) and len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b)):
+            _same(x, y, f"{path}[{i}]")
+    elif isinstance(a, float) and isinstance(b, float):
+        if np.isnan(a):
+            assert np.isnan(b), path
+        else:
+            assert abs(a - b) <= _tolerance(path, a), f"{path}: {a!r} vs {b!r}"
+    elif path.endswith(".iterations") or ".convergence." in path:
+        pass                                     # how each back end got there may differ
+    else:
+        assert a == b, f"{path}: {a!r} vs {b!r}"
+
+
+def test_dense_and_sparse_identical_with_a_blunder(capsys, tmp_path):
+    """The whole --json document (statistics, data snooping, reference lengths, ellipsoids via
+    covariances) is the same from both back ends on a network with a blunder."""
+    p = _blundered(tmp_path)
+    rc, out, err = _run(capsys, ["adjust", str(p), "--solver", "dense", "--json"])
+    assert rc == 0, err
+    dense = json.loads(out)
+    rc, out, err = _run(capsys, ["adjust", str(p), "--solver", "sparse", "--json"])
+    assert rc == 0, err
+    sparse = json.loads(out)
+    assert (dense["solver"], sparse["solver"]) == ("dense", "sparse")
+    assert len(dense["outliers"]) == 1 and dense["outliers"][0]["target"] == sparse["outliers"][0]["target"]
+    assert dense["convergence"]["converged"] and sparse["convergence"]["converged"]
+    _same(dense, sparse)
+
+
+def test_auto_switches_and_sparse_refuses_what_it_cannot_do(capsys, monkeypatch):
+    from multilat.network.solve import loop
+
+    monkeypatch.setattr(loop, "SPARSE_ABOVE_OBS", 10)
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--json"])
+    assert rc == 0 and json.loads(out)["solver"] == "sparse"
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--cost", "squared", "--json"])
+    assert rc == 0 and json.loads(out)["solver"] == "dense"          # auto: dense where sparse cannot
+    rc, _, err = _run(capsys, ["adjust", str(OBS), "--solver", "sparse", "--cost", "squared"])
+    assert rc == 2 and err.strip().count("\n") == 0 and "--solver dense" in err and "squared" in err
+
+
+def test_sparse_equals_dense_on_a_large_network():
+    """2 000 targets x 8 of 12 stations, from initial values 1 mm off: the same minimum (1e-9 m) and
+    the same statistics from both back ends."""
+    net = synthetic_network(12, 2000, 8, rng=5)
+    obs = Observations(tuple(f"S{i}" for i in range(12)), tuple(f"T{j}" for j in range(2000)),
+                       net.station_index, net.target_index, net.distance_m, net.sigma_m)
+    rng = np.random.default_rng(6)
+    start = Start(net.station_xyz_m + rng.normal(0, 1e-3, (12, 3)),
+                  net.target_xyz_m + rng.normal(0, 1e-3, (2000, 3)), net.offset_m + rng.normal(0, 1e-3, 12))
+    d = adjust(obs, initial=start, solver="dense", snooping=False)
+    s = adjust(obs, initial=start, solver="sparse", snooping=False)
+    assert d.solver == "dense" and s.solver == "sparse"
+    assert np.abs(d.target_xyz_m - s.target_xyz_m).max() < 1e-9
+    assert np.abs(d.offset_m - s.offset_m).max() < 1e-12
+    assert s.sigma0 == pytest.approx(d.sigma0, rel=1e-10)
+    np.testing.assert_allclose(s.redundancy, d.redundancy, atol=1e-9)
+    np.testing.assert_allclose(s.target_cov_m2, d.target_cov_m2, rtol=1e-7, atol=1e-20)
+    # and against the truth: the offsets' errors are consistent with their covariance
+    e = s.offset_m - net.offset_m
+    z = e / s.offset_std_m
+    assert np.sqrt(np.mean(z**2)) < 3.0
+
+
+@pytest.mark.parametrize("solver", ["dense", "sparse"])
+def test_convergence_reaches_the_minimum_of_a_solver_started_from_the_truth(solver):
+    """Started 5 mm off or at the truth, the solver ends at the same point to the float64 floor
+    (a few 1e-15 m at a few metres), and the record says converged."""
+    net = synthetic_network(8, 300, 6, size_m=6.0, rng=9)
+    obs = Observations(tuple(f"S{i}" for i in range(8)), tuple(f"T{j}" for j in range(300)),
+                       net.station_index, net.target_index, net.distance_m, net.sigma_m)
+    truth = Start(net.station_xyz_m, net.target_xyz_m, net.offset_m)
+    rng = np.random.default_rng(1)
+    far = Start(net.station_xyz_m + rng.normal(0, 5e-3, (8, 3)), net.target_xyz_m + rng.normal(0, 5e-3, (300, 3)),
+                net.offset_m)
+    a = adjust(obs, initial=truth, solver=solver, snooping=False)
+    b = adjust(obs, initial=far, solver=solver, snooping=False, datum="free:" + ",".join(obs.station_ids))
+    a2 = adjust(obs, initial=truth, solver=solver, snooping=False, datum="free:" + ",".join(obs.station_ids))
+    assert a.convergence.converged and b.convergence.converged
+    assert b.convergence.last_step_sigma < 1e-4
+    # datum-free quantities: offsets and sigma0
+    assert np.abs(a.offset_m - b.offset_m).max() < 1e-13
+    # sigma0: the cost itself is known to ~2 sqrt(cost) eps L / sigma ~ 1e-11 relative here
+    assert b.sigma0 == pytest.approx(a.sigma0, rel=1e-10)
+    # interpoint distances (datum-free) between far-apart targets
+    for i, j in [(0, 299), (10, 200), (50, 51)]:
+        da = np.linalg.norm(a2.target_xyz_m[i] - a2.target_xyz_m[j])
+        db = np.linalg.norm(b.target_xyz_m[i] - b.target_xyz_m[j])
+        assert abs(da - db) < 1e-13
+
+
+def test_no_silent_exit_iteration_limit_is_an_error():
+    """A solver stopped by its iteration limit is not a result: one-line error with the record."""
+    obs = read_observations(OBS)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(MultilatError, match="did not converge \\(iteration limit after 1 iterations"):
+            adjust(obs, max_iter=1)
