@@ -84,6 +84,7 @@ __all__ = [
     "block_trials",
     "chunk_ranges",
     "AdaptiveRule",
+    "resolve_map",
 ]
 
 #: Trials per spawned block: the unit of reproducibility (chunks are whole blocks).
@@ -592,7 +593,9 @@ def _run_chunk(spec: _ChunkSpec) -> _Partial:
 
 
 # ============================================================================ summary helpers
-def _get_map(map):
+def resolve_map(map):
+    """``map(func, iterable)`` for a ``map=`` argument: builtin ``map`` for None, ``obj.map`` for an
+    object with a ``.map`` method (e.g. :class:`multilat.parallel.DaskMap`), else the callable itself."""
     if map is None:
         import builtins
 
@@ -843,7 +846,7 @@ def run_mc(
     if nonfinite not in ("raise", "drop"):
         raise MultilatError(f"nonfinite must be 'raise' or 'drop', got {nonfinite!r}")
     root = resolve_seed(rng)
-    mapper = _get_map(map)
+    mapper = resolve_map(map)
     common = dict(
         model=model,
         inputs=inp,
