@@ -249,6 +249,10 @@ def test_cli_errors(tmp_path, capsys):
     assert main(["propagate", "small-volume", "--noise", "uniform"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:")
+    for opt in ("--chunk-size", "--trials"):
+        assert main(["propagate", "small-volume", opt, "0"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:") and opt in err[0]
     assert main(["propagate", str(tmp_path / "missing.csv"), "--trials", "100"]) == 2
     bad = tmp_path / "bad.csv"
     bad.write_text("station,target,distance_m\nA,T1,-1\n")
