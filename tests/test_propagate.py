@@ -197,7 +197,7 @@ def test_adaptive_is_the_engines_procedure(tetra_problem):
     _assert_same_run(r, fixed)
     # not converged within max_trials: every check failed, and the run stops at max_trials
     n = propagate(pb, rng=2, noise="gaussian", adaptive=True, ndigits=2, max_trials=40_000, chunk_size=1000)
-    assert n.adaptive == {"converged": False, "batches": 4, "batch_trials": 10_000,
+    assert n.adaptive == {"converged": False, "batches": 4, "batch_trials": 10_000, "n_fixed_by_datum": 0,
                           "tolerance_m_min": n.adaptive["tolerance_m_min"]}
     assert n.trials == 40_000
     assert not any(_stops_by_hand(n.samples, g, 2) for g in range(2, 5))
@@ -349,6 +349,9 @@ def test_321_datum_fixes_six_coordinates():
     # C moves in a plane: its 2-dof region still covers 95 % (binomial s.e. 0.004, 4 sigma)
     assert abs(r.ellipsoid_coverage_mc[list(r.point_ids).index("C")] - 0.95) < 0.016
     assert r.agrees.all()
+    # adaptive: the 6 datum-fixed coordinates (rounding noise, ~1e-20 m) are not watched by the criterion
+    ad = propagate(pb, rng=2, noise="gaussian", adaptive=True, ndigits=1, max_trials=30_000, keep_samples=False)
+    assert ad.adaptive["n_fixed_by_datum"] == 6 and ad.adaptive["tolerance_m_min"] >= 5e-7
     # datum-free quantities are the same as in the free datum, trial by trial
     f = propagate(problem_from_config(small_volume(), sigma_m=4.7e-6), trials=3000, rng=2, noise="gaussian",
                   chunk_size=1500)

@@ -363,7 +363,8 @@ class PropagationResult:
     noise : str
     seed_entropy : int
     adaptive : dict or None
-        ``{"converged": bool, "tolerance_m": ..., "rounds": int}`` for adaptive runs.
+        Adaptive runs: ``{"converged": bool, "batches": int, "batch_trials": int, "tolerance_m_min": float,
+        "n_fixed_by_datum": int}`` (:class:`multilat.montecarlo.AdaptiveRule`).
     elapsed_s : float
     input_std_m : ndarray (m,)
         Standard deviation of each distance's input error used by the linear propagation: the
@@ -597,7 +598,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         batches of 10^4 trials (10 blocks) until twice the standard deviation of the batch averages
         of every quantity's estimate, standard uncertainty and symmetric interval ends is within the
         numerical tolerance of its standard uncertainty (``ndigits`` significant digits), or
-        ``max_trials`` is reached.
+        ``max_trials`` is reached. Quantities held by the datum (3-2-1) are not watched.
     chunk_size : int
         Trials per unit of parallel work, rounded up to whole blocks. Only distributes the work: the
         numbers do not depend on it.
@@ -660,6 +661,10 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
                 progress(done)
     else:
         rule = AdaptiveRule(0.95, ndigits, max_trials, block=BLOCK)
+        # the criterion watches the quantities that vary: not those held by the datum (3-2-1), whose
+        # samples are rounding noise (same rule as PropagationResult.fixed)
+        lin0, _ = _linear(problem, noise_std)
+        watch = lin0 > 1e-9 * np.max(lin0)
         if batches_per_round is None:
             batches_per_round = 1 if map is None else 4
 
@@ -688,12 +693,12 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
             if dev_b.shape[0] < 2:
                 raise MultilatError(f"only {dev_b.shape[0]} trials of adaptive batch {rule.h} converged: the "
                                     "network is too weak for a Monte Carlo from its nominal solution")
-            if rule.add(dev_b):
+            if rule.add(dev_b[:, watch]):
                 break
         tol = rule.tolerance
         adaptive_info = {"converged": rule.converged, "batches": rule.h, "batch_trials": rule.batch_trials,
-                         "tolerance_m_min": float(np.min(tol[tol > 0])) if tol is not None and (tol > 0).any()
-                         else None}
+                         "tolerance_m_min": None if tol is None else float(np.min(tol)),
+                         "n_fixed_by_datum": int((~watch).sum())}
     return _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done)
 
 
