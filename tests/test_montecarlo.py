@@ -441,3 +441,29 @@ def test_correlated_vector_input():
 def test_partial_model_is_accepted():
     r = run_mc(partial(eq3_error_m, distance_m=0.0), EQ3_INPUTS, trials=1000, rng=1)
     assert r.trials == 1000
+
+
+def test_chunk_ranges_are_whole_blocks_covering_the_run():
+    from multilat.montecarlo import block_trials, chunk_ranges
+
+    for trials, chunk, block in ((3500, 1700, 1000), (4000, 1000, 1000), (10, 1, 3), (2 * BLOCK + 5, 1, BLOCK)):
+        ch = chunk_ranges(trials, chunk, block)
+        blocks = [b for s, e in ch for b in range(s, e)]
+        assert blocks == list(range(-(-trials // block)))                    # every block once, in order
+        assert all(e - s == max(1, -(-chunk // block)) for s, e in ch[:-1])  # whole blocks per chunk
+        assert sum(block_trials(b, trials, block) for b in blocks) == trials
+    assert chunk_ranges(20_000, 3000, 1000, first_block=10) == [(10, 13), (13, 16), (16, 19), (19, 20)]
+
+
+def test_adaptive_rule_pools_u_and_stops_at_max_batches():
+    """u(y) pooled from batch means/stds equals the std of all samples (1e-12 relative); a rule that cannot
+    converge stops after max_batches with converged False."""
+    from multilat.montecarlo import AdaptiveRule
+
+    rng = np.random.default_rng(3)
+    rule = AdaptiveRule(0.95, 2, max_trials=30_000, block=1000)
+    assert (rule.batch_trials, rule.max_batches, rule.batch_range(2)) == (10_000, 3, (20, 30))
+    ys = [rng.normal(h, 1 + h, (10_000, 2)) for h in range(3)]   # drifting batches: never stable
+    stops = [rule.add(y) for y in ys]
+    assert stops == [False, False, True] and rule.converged is False
+    np.testing.assert_allclose(rule.u(), np.concatenate(ys).std(axis=0, ddof=1), rtol=1e-12)

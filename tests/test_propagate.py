@@ -70,37 +70,71 @@ def test_model_noise_is_propagated(small_problem):
     assert 0.95 < r.input_std_ratio < 1.05
 
 
+def _assert_same_run(a, b):
+    """Bit-identical: samples and every statistic derived from them."""
+    np.testing.assert_array_equal(a.samples, b.samples)
+    for name in ("mc_mean", "mc_std", "mc_std_se", "lin_std", "interval_symmetric", "interval_shortest",
+                 "point_cov_mc", "ellipsoid_coverage_mc", "ellipsoid_coverage_lin", "input_std_m"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    assert (a.trials, a.n_failed, a.sigma0_mean, a.sigma0_rms, a.input_std_ratio) == \
+        (b.trials, b.n_failed, b.sigma0_mean, b.sigma0_rms, b.input_std_ratio)
+
+
+def test_identical_for_any_chunk_size(small_problem):
+    """Fixed blocks of BLOCK trials are the unit of seeding and solving; chunk_size only groups whole
+    blocks: 1000, 3000 and 1700 (rounded up to 2 blocks; divides neither 3500 nor 2000) give the same
+    bits, with a partial last block (3500 trials) and distance-model noise."""
+    from multilat.network.propagate import BLOCK
+
+    assert BLOCK == 1000
+    runs = [propagate(small_problem, trials=3500, rng=9, noise="model", chunk_size=c) for c in (1000, 3000, 1700)]
+    for r in runs[1:]:
+        _assert_same_run(runs[0], r)
+    # the blocks do not depend on the run length: a shorter run is a prefix of a longer one
+    # (no trial fails here, so row i of the samples is trial i)
+    assert runs[0].n_failed == 0
+    short = propagate(small_problem, trials=2000, rng=9, noise="model", chunk_size=4000)
+    np.testing.assert_array_equal(short.samples, runs[0].samples[:2000])
+
+
 def test_identical_whatever_the_map(small_problem):
-    """Chunks are seeded by SeedSequence spawn keys: a thread pool that runs them out of order gives the
-    same numbers as the in-process run."""
+    """A thread pool that runs chunks concurrently gives the same numbers as the in-process run."""
     a = propagate(small_problem, trials=4000, rng=11, noise="gaussian", chunk_size=1000)
     with ThreadPoolExecutor(2) as ex:
-        b = propagate(small_problem, trials=4000, rng=11, noise="gaussian", chunk_size=1000, map=ex.map)
-    np.testing.assert_array_equal(a.samples, b.samples)
-    np.testing.assert_array_equal(a.mc_std, b.mc_std)
+        b = propagate(small_problem, trials=4000, rng=11, noise="gaussian", chunk_size=2000, map=ex.map)
+    _assert_same_run(a, b)
     c = propagate(small_problem, trials=4000, rng=12, noise="gaussian", chunk_size=1000)
     assert not np.array_equal(a.samples, c.samples)
 
 
-def test_identical_on_a_small_dask_local_cluster(small_problem):
-    """A real LocalCluster (2 worker processes), 2 chunks: bit-identical to the in-process run."""
+def test_identical_on_dask_local_clusters_of_1_and_2_workers(small_problem):
+    """Real LocalClusters (worker processes): 1 and 2 workers, 3 chunks, bit-identical to in-process."""
     from multilat.parallel import dask_map
 
-    a = propagate(small_problem, trials=2000, rng=5, noise="model", chunk_size=1000)
-    with dask_map(workers=2) as m:
-        b = propagate(small_problem, trials=2000, rng=5, noise="model", chunk_size=1000, map=m)
-    np.testing.assert_array_equal(a.samples, b.samples)
-    np.testing.assert_array_equal(a.mc_std, b.mc_std)
+    a = propagate(small_problem, trials=2500, rng=5, noise="model", chunk_size=1000)
+    for workers in (1, 2):
+        with dask_map(workers=workers) as m:
+            b = propagate(small_problem, trials=2500, rng=5, noise="model", chunk_size=1000, map=m)
+        _assert_same_run(a, b)
 
 
 @pytest.mark.slow
 def test_identical_on_a_dask_local_cluster(small_problem):
     from multilat.parallel import dask_map
 
-    a = propagate(small_problem, trials=4000, rng=5, noise="model", chunk_size=1000)
+    a = propagate(small_problem, trials=8000, rng=5, noise="model", chunk_size=3000)
     with dask_map(workers=2) as m:
-        b = propagate(small_problem, trials=4000, rng=5, noise="model", chunk_size=1000, map=m)
-    np.testing.assert_array_equal(a.samples, b.samples)
+        b = propagate(small_problem, trials=8000, rng=5, noise="model", chunk_size=1000, map=m)
+    _assert_same_run(a, b)
+
+
+def test_identical_in_a_process_pool(small_problem):
+    from multilat.parallel import process_map
+
+    a = propagate(small_problem, trials=2000, rng=6, noise="gaussian", chunk_size=2000)
+    with process_map(2) as m:
+        b = propagate(small_problem, trials=2000, rng=6, noise="gaussian", chunk_size=1000, map=m)
+    _assert_same_run(a, b)
 
 
 def test_failed_trials_are_counted_and_dropped(small_problem, monkeypatch):
@@ -119,19 +153,60 @@ def test_failed_trials_are_counted_and_dropped(small_problem, monkeypatch):
     assert r.samples.shape[0] == 1800
 
 
-def test_adaptive_stops_when_stable():
+@pytest.fixture(scope="module")
+def tetra_problem():
     rng = np.random.default_rng(4)
     h = np.array([[0.0, 0, 0], [1.0, 0, 0], [0.5, 0.9, 0], [0.5, 0.3, 0.8]])
     tg = rng.uniform(0.1, 0.8, (14, 3))
     si, ti = (a.ravel() for a in np.meshgrid(np.arange(4), np.arange(14), indexing="ij"))
-    pb = problem_from_truth("ABCD", [f"P{j}" for j in range(14)], si, ti, np.full(56, 5e-6), h,
-                            np.zeros(4), tg, pairs=[("P0", "P1")])
-    r = propagate(pb, rng=2, noise="gaussian", adaptive=True, ndigits=1, chunk_size=10_000,
-                  max_trials=400_000, keep_samples=False)
-    assert r.adaptive["converged"]
-    assert r.trials % 10_000 == 0 and r.trials >= 100_000
-    with pytest.raises(MultilatError):
-        propagate(pb, adaptive=True, chunk_size=1000)
+    return problem_from_truth("ABCD", [f"P{j}" for j in range(14)], si, ti, np.full(56, 5e-6), h,
+                              np.zeros(4), tg, pairs=[("P0", "P1")])
+
+
+def _stops_by_hand(samples, h, ndigits, batch=10_000):
+    """JCGM 101 §7.9 written out independently: after h batches of ``batch`` trials, is twice the standard
+    deviation of the batch averages of y, u(y), y_low, y_high within delta(u(y) of all trials), everywhere?
+    Symmetric interval by the §7.7 index rule on the sorted batch: q = floor(pM + 1/2), r = (M - q + 1) // 2."""
+    from multilat.montecarlo import numerical_tolerance
+
+    y = samples[: h * batch].astype(np.float64)
+    m = batch
+    q = int(np.floor(0.95 * m + 0.5))
+    r = (m - q + 1) // 2
+    stats = []
+    for j in range(h):
+        yb = np.sort(y[j * batch:(j + 1) * batch], axis=0)
+        stats.append([yb.mean(axis=0), yb.std(axis=0, ddof=1), yb[r - 1], yb[r - 1 + q]])
+    sd = np.std(np.array(stats), axis=0, ddof=1) / np.sqrt(h)          # (4, k)
+    u = y.std(axis=0, ddof=1)
+    delta = np.array([numerical_tolerance(v, ndigits) for v in u])
+    return bool(np.all(2 * sd <= delta))
+
+
+def test_adaptive_is_the_engines_procedure(tetra_problem):
+    """The adaptive run checks after every batch of 10^4 trials (h >= 2) and stops at the first batch where the
+    criterion written out by hand holds; its trials are those of a fixed run of the same length."""
+    pb = tetra_problem
+    r = propagate(pb, rng=2, noise="gaussian", adaptive=True, ndigits=1, max_trials=400_000)
+    assert r.adaptive["converged"] and r.adaptive["batch_trials"] == 10_000
+    h = r.adaptive["batches"]
+    assert r.trials == 10_000 * h and r.n_failed == 0
+    assert _stops_by_hand(r.samples, h, 1)
+    assert not any(_stops_by_hand(r.samples, g, 1) for g in range(2, h))
+    fixed = propagate(pb, rng=2, noise="gaussian", trials=r.trials, chunk_size=3000)
+    _assert_same_run(r, fixed)
+    # not converged within max_trials: every check failed, and the run stops at max_trials
+    n = propagate(pb, rng=2, noise="gaussian", adaptive=True, ndigits=2, max_trials=40_000, chunk_size=1000)
+    assert n.adaptive == {"converged": False, "batches": 4, "batch_trials": 10_000, "n_fixed_by_datum": 0,
+                          "tolerance_m_min": n.adaptive["tolerance_m_min"]}
+    assert n.trials == 40_000
+    assert not any(_stops_by_hand(n.samples, g, 2) for g in range(2, 5))
+    # the same decision whatever the chunk size, map and round size
+    with ThreadPoolExecutor(2) as ex:
+        n2 = propagate(pb, rng=2, noise="gaussian", adaptive=True, ndigits=2, max_trials=40_000, chunk_size=3000,
+                       map=ex.map, batches_per_round=3)
+    _assert_same_run(n, n2)
+    assert n2.adaptive == n.adaptive
 
 
 def test_bad_arguments(small_problem):
@@ -174,6 +249,10 @@ def test_cli_errors(tmp_path, capsys):
     assert main(["propagate", "small-volume", "--noise", "uniform"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:")
+    for opt in ("--chunk-size", "--trials"):
+        assert main(["propagate", "small-volume", opt, "0"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("error:") and opt in err[0]
     assert main(["propagate", str(tmp_path / "missing.csv"), "--trials", "100"]) == 2
     bad = tmp_path / "bad.csv"
     bad.write_text("station,target,distance_m\nA,T1,-1\n")
@@ -270,6 +349,9 @@ def test_321_datum_fixes_six_coordinates():
     # C moves in a plane: its 2-dof region still covers 95 % (binomial s.e. 0.004, 4 sigma)
     assert abs(r.ellipsoid_coverage_mc[list(r.point_ids).index("C")] - 0.95) < 0.016
     assert r.agrees.all()
+    # adaptive: the 6 datum-fixed coordinates (rounding noise, ~1e-20 m) are not watched by the criterion
+    ad = propagate(pb, rng=2, noise="gaussian", adaptive=True, ndigits=1, max_trials=30_000, keep_samples=False)
+    assert ad.adaptive["n_fixed_by_datum"] == 6 and ad.adaptive["tolerance_m_min"] >= 5e-7
     # datum-free quantities are the same as in the free datum, trial by trial
     f = propagate(problem_from_config(small_volume(), sigma_m=4.7e-6), trials=3000, rng=2, noise="gaussian",
                   chunk_size=1500)

@@ -81,6 +81,10 @@ __all__ = [
     "numerical_tolerance",
     "resolve_seed",
     "block_generator",
+    "block_trials",
+    "chunk_ranges",
+    "AdaptiveRule",
+    "resolve_map",
 ]
 
 #: Trials per spawned block: the unit of reproducibility (chunks are whole blocks).
@@ -118,6 +122,25 @@ def block_generator(entropy, spawn_key: tuple, block: int) -> np.random.Generato
     """Generator of block ``block``: the ``block``-th spawn child of ``SeedSequence(entropy, spawn_key)``."""
     ss = np.random.SeedSequence(entropy, spawn_key=tuple(spawn_key) + (int(block),))
     return np.random.Generator(np.random.SFC64(ss))
+
+
+def block_trials(b: int, trials: int, block: int = BLOCK) -> int:
+    """Number of trials in block ``b`` of a run of ``trials`` trials cut into blocks of ``block``
+    (every block is full except possibly the last)."""
+    return min(int(block), int(trials) - int(b) * int(block))
+
+
+def chunk_ranges(trials: int, chunk_size: int, block: int = BLOCK, first_block: int = 0) -> list[tuple[int, int]]:
+    """Chunks (units of work for a ``map``) as ``[block_start, block_stop)`` ranges of whole blocks.
+
+    Trials ``first_block * block .. trials - 1`` are cut into blocks of ``block`` trials (the unit of
+    seeding: block ``b`` draws from :func:`block_generator` ``(..., b)``); a chunk is
+    ``ceil(chunk_size / block)`` consecutive blocks (the last chunk may have fewer). Chunking only
+    distributes work: the blocks, hence the numbers, do not depend on ``chunk_size``.
+    """
+    n_blocks = -(-int(trials) // int(block))
+    per_chunk = max(1, -(-int(chunk_size) // int(block)))
+    return [(s, min(s + per_chunk, n_blocks)) for s in range(int(first_block), n_blocks, per_chunk)]
 
 
 # ============================================================================ interval helpers
@@ -447,7 +470,7 @@ class _Partial:
 
 
 def _eval_block(spec: _ChunkSpec, b: int) -> np.ndarray:
-    n = min(BLOCK, spec.trials - b * BLOCK)
+    n = block_trials(b, spec.trials)
     gen = block_generator(spec.entropy, spec.spawn_key, b)
     kw = {name: dist.sample(gen, n) for name, dist in spec.inputs}
     y = np.asarray(spec.model(**kw), dtype=float)
@@ -570,7 +593,9 @@ def _run_chunk(spec: _ChunkSpec) -> _Partial:
 
 
 # ============================================================================ summary helpers
-def _get_map(map):
+def resolve_map(map):
+    """``map(func, iterable)`` for a ``map=`` argument: builtin ``map`` for None, ``obj.map`` for an
+    object with a ``.map`` method (e.g. :class:`multilat.parallel.DaskMap`), else the callable itself."""
     if map is None:
         import builtins
 
@@ -821,8 +846,7 @@ def run_mc(
     if nonfinite not in ("raise", "drop"):
         raise MultilatError(f"nonfinite must be 'raise' or 'drop', got {nonfinite!r}")
     root = resolve_seed(rng)
-    mapper = _get_map(map)
-    blocks_per_chunk = max(1, -(-chunk_size // BLOCK))
+    mapper = resolve_map(map)
     common = dict(
         model=model,
         inputs=inp,
@@ -840,7 +864,6 @@ def run_mc(
         return _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact_limit, quantiles, entropy,
                              batches_per_round)
     trials = 1_000_000 if trials is None else _check_int("trials", trials, 2)
-    n_blocks = -(-trials // BLOCK)
 
     # k from a 16-trial probe on its own seed branch (does not touch the blocks' streams)
     probe_gen = np.random.Generator(np.random.PCG64(
@@ -865,9 +888,9 @@ def run_mc(
     direct = exact and map is None and nonfinite == "raise"
     sink = _Store(store, coverage, tails=True) if direct else None
     specs = (
-        _ChunkSpec(**common, block_start=s, block_stop=min(s + blocks_per_chunk, n_blocks), trials=trials,
+        _ChunkSpec(**common, block_start=start, block_stop=stop, trials=trials,
                    keep_samples=exact, hist_lo=lo, hist_hi=hi, out=sink)
-        for s in range(0, n_blocks, blocks_per_chunk)
+        for start, stop in chunk_ranges(trials, chunk_size)
     )
     n, mean, m2, rejected, counts, out_ndim = 0, None, None, 0, None, 1
     filled = 0
@@ -892,45 +915,125 @@ def run_mc(
                    seed_entropy=entropy, n_rejected=rejected)
 
 
+class AdaptiveRule:
+    """The adaptive procedure of JCGM 101 §7.9: batch size, check cadence and stopping decision.
+
+    One implementation, driven by :func:`run_mc` and by :func:`multilat.network.propagate.propagate`.
+    A batch is ``max(100 / (1 - p), 10^4)`` trials rounded up to whole blocks of ``block`` trials
+    (batch ``h`` is blocks ``h * batch_blocks .. (h + 1) * batch_blocks - 1``, so an adaptive run
+    draws exactly the trials of a fixed run of the same length). The driver hands every batch's
+    output samples, in batch order, to :meth:`add`; after each batch h >= 2 the rule compares twice
+    the standard deviation of the batch averages (``std over batches / sqrt(h)``) of y, u(y) and
+    both ends of the probabilistically symmetric interval (§7.7, the index rule of
+    :func:`coverage_interval`) with the numerical tolerance δ of u(y) over all trials so far
+    (:func:`numerical_tolerance`, ``ndigits`` significant digits); the run stops when all are
+    ≤ δ for every output (``converged``), or after ``max_batches = max(2, max_trials // batch)``.
+
+    Attributes
+    ----------
+    batch_blocks, batch_trials : int
+    max_batches : int
+    h : int
+        Batches examined.
+    converged : bool
+    tolerance : ndarray (k,) or None
+        δ per output at the last check.
+    """
+
+    def __init__(self, coverage: float = 0.95, ndigits: int = 2, max_trials: int = 100_000_000,
+                 block: int = BLOCK):
+        _check_coverage(coverage)
+        self.coverage = float(coverage)
+        self.ndigits = _check_int("ndigits", ndigits, 1)
+        block = _check_int("block", block, 1)
+        batch = max(block, int(math.ceil(100.0 / (1.0 - coverage))), 10_000)
+        self.batch_blocks = -(-batch // block)
+        self.batch_trials = self.batch_blocks * block
+        self.max_batches = max(2, _check_int("max_trials", max_trials, 2) // self.batch_trials)
+        self.h = 0
+        self.converged = False
+        self.tolerance = None
+        self._stats = []  # per batch (k, 4): y, u, ylow, yhigh
+        self._n = []
+
+    def batch_range(self, h: int) -> tuple[int, int]:
+        """Blocks ``[start, stop)`` of batch ``h``."""
+        return h * self.batch_blocks, (h + 1) * self.batch_blocks
+
+    def batches(self, evaluate_round: Callable[[int, int], Iterable], batches_per_round: int = 1):
+        """Yield the results of batches 0, 1, ... in order, at most ``max_batches``.
+
+        ``evaluate_round(h0, h1)`` returns an iterable of the results of batches ``h0 .. h1 - 1``,
+        submitted together (``batches_per_round`` of them, in parallel when its map allows). The
+        caller stops consuming when :meth:`add` returns True; batches computed past that one are
+        discarded, so the result does not depend on the round size.
+        """
+        per_round = _check_int("batches_per_round", batches_per_round, 1)
+        h = 0
+        while h < self.max_batches:
+            stop = min(h + per_round, self.max_batches)
+            yield from evaluate_round(h, stop)
+            h = stop
+
+    def u(self) -> np.ndarray:
+        """Standard uncertainty u(y) of all trials of the batches added (pooled from the batches)."""
+        st = np.stack(self._stats)
+        n = np.asarray(self._n, dtype=float)[:, None]
+        total = n.sum()
+        mean = (n * st[:, :, 0]).sum(axis=0) / total
+        ss = ((n - 1.0) * st[:, :, 1] ** 2 + n * (st[:, :, 0] - mean) ** 2).sum(axis=0)
+        return np.sqrt(ss / (total - 1.0))
+
+    def add(self, samples, mean=None, std=None) -> bool:
+        """Examine the next batch (``samples`` (n,) or (n, k), finite); True when the run stops.
+
+        ``mean`` and ``std`` (ddof = 1) of the batch may be passed when already computed.
+        """
+        y2 = np.asarray(samples, dtype=float)
+        y2 = y2.reshape(y2.shape[0], -1)
+        n, k = y2.shape
+        mean = y2.mean(axis=0) if mean is None else np.asarray(mean, dtype=float)
+        std = y2.std(axis=0, ddof=1) if std is None else np.asarray(std, dtype=float)
+        stats = np.empty((k, 4))
+        for j in range(k):
+            sym, _, _ = _exact_intervals(np.ascontiguousarray(y2[:, j]), self.coverage)
+            stats[j] = mean[j], std[j], *sym
+        self._stats.append(stats)
+        self._n.append(n)
+        self.h += 1
+        if self.h >= 2:
+            s = np.stack(self._stats).std(axis=0, ddof=1) / math.sqrt(self.h)  # std of the average
+            delta = np.array([numerical_tolerance(x, self.ndigits) if x > 0 else 0.0 for x in self.u()])
+            self.tolerance = delta
+            if np.all(2.0 * s <= delta[:, None]):
+                self.converged = True
+                return True
+        return self.h >= self.max_batches
+
+
 def _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact_limit, quantiles, entropy,
                   batches_per_round):
-    """JCGM 101 §7.9 adaptive procedure (see :func:`run_mc`).
-
-    Batches are submitted ``batches_per_round`` at a time but examined one by one in order; batches
-    computed beyond the one where the rule stops are discarded, so the result does not depend on
-    the round size.
-    """
-    batch = max(BLOCK, int(math.ceil(100.0 / (1.0 - coverage))), 10_000)
-    bpb = -(-batch // BLOCK)
-    batch = bpb * BLOCK
-    h = 0
+    """Drive :class:`AdaptiveRule` over the engine's blocks (see :func:`run_mc`)."""
+    rule = AdaptiveRule(coverage, ndigits, max_trials)
+    batch = rule.batch_trials
     n, mean, m2, rejected = 0, None, None, 0
-    per_batch = []  # (k, 4): y, u, ylow, yhigh
     kept, counts, edges, lo, hi = [], None, None, None, None
     bins = common["hist_bins"]
     exact = quantiles != "histogram"
-    converged = False
-    delta = None
     out_ndim = 1
-    max_batches = max(2, max_trials // batch)
-    round_iter = iter(())
-    while True:
-        part = next(round_iter, None)
-        if part is None:  # submit the next round of batches (in parallel when the map allows)
-            stop = min(h + batches_per_round, max_batches)
-            specs = [_ChunkSpec(**common, block_start=i * bpb, block_stop=(i + 1) * bpb, trials=(i + 1) * batch,
-                                keep_samples=True, hist_lo=None, hist_hi=None) for i in range(h, stop)]
-            round_iter = iter(mapper(_run_chunk, specs))
-            part = next(round_iter)
+
+    def evaluate_round(h0, h1):
+        specs = []
+        for i in range(h0, h1):
+            start, stop = rule.batch_range(i)
+            specs.append(_ChunkSpec(**common, block_start=start, block_stop=stop, trials=(i + 1) * batch,
+                                    keep_samples=True, hist_lo=None, hist_hi=None))
+        return mapper(_run_chunk, specs)
+
+    for part in rule.batches(evaluate_round, batches_per_round):
         out_ndim = part.out_ndim
         y2 = part.samples
         k = y2.shape[1]
-        # batch summaries
-        stats = np.empty((k, 4))
-        for j in range(k):
-            sym, _, _ = _exact_intervals(np.ascontiguousarray(y2[:, j]), coverage)
-            stats[j] = part.mean[j], math.sqrt((np.diag(part.m2) if part.m2.ndim == 2 else part.m2)[j] / (part.n - 1)), *sym
-        per_batch.append(stats)
         n, mean, m2 = _merge_blocks(n, mean, m2, part.blocks)
         rejected += part.n_rejected
         if lo is None:  # histogram range from batch 0 (deterministic)
@@ -946,24 +1049,16 @@ def _run_adaptive(common, coverage, ndigits, mapper, progress, max_trials, exact
             edges = edges_all
             c = _histogram_counts(y2, lo, hi, bins)
             counts = c if counts is None else counts + c
-        h += 1
         if progress is not None:
-            progress(h * batch, max_trials)
-        if h >= 2:
-            arr = np.stack(per_batch)  # (h, k, 4)
-            s = arr.std(axis=0, ddof=1) / math.sqrt(h)  # standard deviation of the average
-            var = (np.diag(m2) if m2.ndim == 2 else m2) / (n - 1)
-            u = np.sqrt(var)
-            delta = np.array([numerical_tolerance(x, ndigits) if x > 0 else 0.0 for x in u])
-            if np.all(2.0 * s <= delta[:, None]):
-                converged = True
-                break
-        if h >= max_batches:
+            progress((rule.h + 1) * batch, max_trials)
+        std_b = np.sqrt((np.diag(part.m2) if part.m2.ndim == 2 else part.m2) / (part.n - 1))
+        if rule.add(y2, part.mean, std_b):
             break
     samples = np.concatenate(kept, axis=0) if exact else None
+    delta = rule.tolerance
     tol = None if delta is None else (float(delta[0]) if out_ndim == 1 else delta)
     return _finish(n, mean, m2, coverage, samples=samples, counts=counts if not exact else None,
-                   edges=edges if not exact else None, out_ndim=out_ndim, converged=converged,
+                   edges=edges if not exact else None, out_ndim=out_ndim, converged=rule.converged,
                    tolerance=tol, seed_entropy=entropy, n_rejected=rejected)
 
 

@@ -46,14 +46,16 @@ def propagate_cmd(
     source: str = typer.Argument(..., help="Observations CSV, or small-volume / large-volume."),
     trials: int = typer.Option(100_000, "--trials", help="Monte Carlo trials (fixed-size run)."),
     adaptive: bool = typer.Option(False, "--adaptive", help="JCGM 101 7.9 adaptive number of trials."),
-    seed: int = typer.Option(1, "--seed", help="Root seed (chunks get SeedSequence spawn children)."),
+    seed: int = typer.Option(1, "--seed",
+                             help="Root seed (fixed blocks of 1000 trials get SeedSequence spawn children)."),
     instrument: str = typer.Option("seed2020", "--instrument", help="Instrument preset or TOML file."),
     noise: str = typer.Option("model", "--noise", help="model (distance model, non-gaussian) or gaussian."),
     sigma_um: Optional[float] = typer.Option(None, "--sigma-um",
                                              help="Gaussian sigma / weights in um (default: file or 4.7)."),
     datum: str = typer.Option("free", "--datum", help="free[:P,..] or 321:A,B,C (same in every trial)."),
     references: Optional[Path] = typer.Option(None, "--references", help="Reference lengths CSV."),
-    chunk_size: int = typer.Option(10_000, "--chunk-size", help="Trials per chunk (unit of seeding)."),
+    chunk_size: int = typer.Option(10_000, "--chunk-size",
+                                   help="Trials per unit of parallel work (whole blocks; no effect on the numbers)."),
     workers: Optional[int] = typer.Option(None, "--workers", help="Start a local Dask cluster of N workers."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of an existing Dask scheduler."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
@@ -65,6 +67,10 @@ def propagate_cmd(
 
     if noise not in ("model", "gaussian"):
         raise MultilatError(f"--noise must be model or gaussian, got {noise!r}")
+    if trials < 2:
+        raise MultilatError(f"--trials must be >= 2, got {trials}")
+    if chunk_size < 1:
+        raise MultilatError(f"--chunk-size must be >= 1, got {chunk_size}")
     if sigma_um is not None and not (np.isfinite(sigma_um) and sigma_um > 0):
         raise MultilatError(f"--sigma-um must be > 0, got {sigma_um!r}")
     problem = load_problem(source, datum=datum, noise=noise, instrument=instrument, sigma_um=sigma_um,
@@ -136,7 +142,8 @@ def _print(res, doc, out) -> None:
                       "as well: sigma0_trial^2 ~ sigma0_nominal^2 + (errors alone)^2")
     if doc["adaptive"]:
         a = doc["adaptive"]
-        console.print(f"adaptive (JCGM 101 7.9): converged={a['converged']} after {a['chunks']} chunks")
+        console.print(f"adaptive (JCGM 101 7.9): converged={a['converged']} after {a['batches']} batches "
+                      f"of {a['batch_trials']} trials")
     t = Table(title="Points: standard uncertainties (um), MC vs linear; 95 % ellipsoid coverage")
     for c in ("point", "u_x MC", "u_y MC", "u_z MC", "u_x lin", "u_y lin", "u_z lin", "cov MC ell.",
               "MC in lin ell."):

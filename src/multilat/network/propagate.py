@@ -22,9 +22,13 @@ of trials inside it, and inside the linear ellipsoid; per interpoint distance th
 summaries; and a validation table beside the linear (first-order) covariance of the adjustment,
 with the Monte Carlo standard error of each standard deviation.
 
-Chunks of ``chunk_size`` trials are seeded by ``SeedSequence(seed).spawn``: the numbers do not depend
-on the number of workers or on how the chunks were distributed (``map=`` from
-:mod:`multilat.parallel`). Trials that fail to converge are dropped and counted (``n_failed``).
+Seeding, chunking and statistics are the Monte Carlo engine's (:mod:`multilat.montecarlo`): trials are
+drawn and solved in fixed blocks of :data:`BLOCK` trials, block ``b`` from
+``block_generator(entropy, spawn_key, b)``; a chunk (``chunk_size``, the unit of work handed to
+``map=`` from :mod:`multilat.parallel`) is a run of whole blocks, so the numbers are bit-identical
+whatever the chunk size, the map or the number of workers. The adaptive run is the engine's
+:class:`AdaptiveRule` (JCGM 101 §7.9) and the summaries its :func:`summarize` (§7.6-7.7). Trials that
+fail to converge are dropped and counted (``n_failed``).
 """
 
 from __future__ import annotations
@@ -37,11 +41,17 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.montecarlo import (AdaptiveRule, resolve_map, block_generator, block_trials, chunk_ranges,
+                                 resolve_seed, summarize)
 from multilat.network import batched as bt
 
-__all__ = ["Problem", "problem_from_observations", "problem_from_truth", "problem_from_config",
+__all__ = ["BLOCK", "Problem", "problem_from_observations", "problem_from_truth", "problem_from_config",
            "propagate", "PropagationResult", "chi2_3_95"]
 
+#: Trials per seeded block (a constant of the seeding, like :data:`multilat.montecarlo.BLOCK` for
+#: ``run_mc``, smaller because every trial solves a whole network): block ``b`` draws from
+#: ``montecarlo.block_generator(entropy, spawn_key, b)`` and is solved as one batch.
+BLOCK = 1000
 #: chi-square quantile with 3 degrees of freedom at 0.95 (JCGM 102 ellipsoid scale), exact to 1e-12
 chi2_3_95 = 7.814727903251178
 
@@ -275,11 +285,9 @@ def _draw_errors(spec: _ChunkSpec, n: int, rng: np.random.Generator) -> np.ndarr
     return e
 
 
-def _run_chunk(args):
-    """One chunk: draw, solve, summarise. Module-level so process pools and Dask can pickle it."""
-    spec, seed, n = args
-    rng = np.random.default_rng(seed)
-    e = _draw_errors(spec, n, rng)
+def _solve_block(spec: _ChunkSpec, entropy, spawn_key: tuple, b: int, n: int) -> dict:
+    """Block ``b`` (``n`` trials): draw from the engine's block generator, solve, keep the deviations."""
+    e = _draw_errors(spec, n, block_generator(entropy, spawn_key, b))
     d = spec.distance_m + e
     net = spec.network
     sol = net.solve(d)
@@ -289,16 +297,23 @@ def _run_chunk(args):
     pts = np.concatenate([sol.station_xyz_m[ok], sol.target_xyz_m[ok]], axis=1)
     p0 = np.concatenate([net.station_xyz_m, net.target_xyz_m])
     if len(spec.pair_index):
-        a, b = spec.pair_index[:, 0], spec.pair_index[:, 1]
-        dist = np.linalg.norm(pts[:, a] - pts[:, b], axis=2)
-        dist0 = np.linalg.norm(p0[a] - p0[b], axis=1)
+        pa, pb = spec.pair_index[:, 0], spec.pair_index[:, 1]
+        dist = np.linalg.norm(pts[:, pa] - pts[:, pb], axis=2)
+        dist0 = np.linalg.norm(p0[pa] - p0[pb], axis=1)
         ddev = dist - dist0
     else:
         ddev = np.zeros((int(ok.sum()), 0))
     dev = np.concatenate([x - x0, ddev], axis=1)
-    return dict(dev=dev.astype(np.float32) if dev.size else dev, n=n, n_failed=int((~ok).sum()),
+    return dict(dev=dev.astype(np.float32), n=n, n_failed=int((~ok).sum()),
                 n_retried=int(sol.retried.sum()) if sol.retried is not None else 0,
                 sigma0=sol.sigma0[ok], e_sum=e.sum(axis=0), e2_sum=(e * e).sum(axis=0))
+
+
+def _run_chunk(args) -> list:
+    """One chunk: blocks ``[start, stop)`` of a run of ``trials`` trials, one result per block.
+    Module-level so process pools and Dask can pickle it."""
+    spec, entropy, spawn_key, start, stop, trials = args
+    return [_solve_block(spec, entropy, spawn_key, b, block_trials(b, trials, BLOCK)) for b in range(start, stop)]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -348,7 +363,8 @@ class PropagationResult:
     noise : str
     seed_entropy : int
     adaptive : dict or None
-        ``{"converged": bool, "tolerance_m": ..., "rounds": int}`` for adaptive runs.
+        Adaptive runs: ``{"converged": bool, "batches": int, "batch_trials": int, "tolerance_m_min": float,
+        "n_fixed_by_datum": int}`` (:class:`multilat.montecarlo.AdaptiveRule`).
     elapsed_s : float
     input_std_m : ndarray (m,)
         Standard deviation of each distance's input error used by the linear propagation: the
@@ -561,45 +577,49 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
               instrument="seed2020", adaptive: bool = False, ndigits: int = 2,
               max_trials: int = 2_000_000, chunk_size: int = 10_000, map=None,
               progress: Callable[[int], None] | None = None, keep_samples: bool = True,
-              max_memory_bytes: int = 1_500_000_000) -> PropagationResult:
+              max_memory_bytes: int = 1_500_000_000, batches_per_round: int | None = None) -> PropagationResult:
     """Monte Carlo propagation of the distance errors through the adjustment.
 
     Parameters
     ----------
     problem : Problem
     trials : int
-        Number of trials (fixed-size run); rounded up to whole chunks is *not* done: the last chunk
-        is shorter.
+        Number of trials (fixed-size run).
     rng : int, SeedSequence, Generator or None
-        Root seed; chunk ``c`` uses ``SeedSequence(seed).spawn(...)[c]``.
+        Root seed (:func:`multilat.montecarlo.resolve_seed`). Trials are drawn in fixed blocks of
+        :data:`BLOCK` trials; block ``b`` draws from :func:`multilat.montecarlo.block_generator`
+        ``(entropy, spawn_key, b)`` (the ``b``-th spawn child of the root) and is solved as one batch.
     noise : {"model", "gaussian"}
         Distance errors from the distance model (non-gaussian) or gaussian with ``sigma_m``.
     instrument : Instrument or preset name
         For ``noise="model"``.
     adaptive : bool
-        JCGM 101 §7.9 adaptive procedure: chunks (``chunk_size`` >= 10^4 trials each) are added
-        until twice the standard deviation of the chunk-wise estimates, standard uncertainties and
-        interval ends (divided by sqrt(h)) is below the numerical tolerance of every quantity's
-        standard uncertainty (``ndigits`` significant digits), or ``max_trials`` is reached.
+        JCGM 101 §7.9 adaptive procedure, the engine's :class:`multilat.montecarlo.AdaptiveRule`:
+        batches of 10^4 trials (10 blocks) until twice the standard deviation of the batch averages
+        of every quantity's estimate, standard uncertainty and symmetric interval ends is within the
+        numerical tolerance of its standard uncertainty (``ndigits`` significant digits), or
+        ``max_trials`` is reached. Quantities held by the datum (3-2-1) are not watched.
     chunk_size : int
-        Trials per chunk (the unit of seeding and of parallel work).
+        Trials per unit of parallel work, rounded up to whole blocks. Only distributes the work: the
+        numbers do not depend on it.
     map : callable or object with ``.map``, optional
         Ordered map for the chunks (:func:`multilat.parallel.map_from_options`); default in-process.
     progress : callable(int), optional
-        Called with the number of trials finished after each chunk.
+        Called with the number of trials finished after each chunk (each batch when adaptive).
     keep_samples : bool
         Keep the float32 deviation samples in the result (for figures).
+    batches_per_round : int, optional
+        Adaptive runs: batches submitted to ``map`` together (default 1 in-process, 4 with a
+        ``map``); batches computed past the stopping one are discarded (no effect on the numbers).
 
     Returns
     -------
     PropagationResult
     """
-    from multilat.montecarlo import numerical_tolerance, resolve_seed
-
     t0 = time.perf_counter()
     if noise not in ("model", "gaussian"):
         raise MultilatError(f"noise must be 'model' or 'gaussian', got {noise!r}")
-    for name, v, lo in (("trials", trials, 2), ("chunk_size", chunk_size, 2), ("max_trials", max_trials, 2)):
+    for name, v, lo in (("trials", trials, 2), ("chunk_size", chunk_size, 1), ("max_trials", max_trials, 2)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
             raise MultilatError(f"{name} must be an integer >= {lo}, got {v!r}")
     inst = None
@@ -608,6 +628,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
 
         inst = _instrument.load_instrument(instrument) if isinstance(instrument, str) else instrument
     ss = resolve_seed(rng)
+    entropy, key = ss.entropy, tuple(ss.spawn_key)
     net = problem.network
     s = len(problem.station_ids)
     pidx = []
@@ -623,118 +644,134 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
     if limit * k * 4 > max_memory_bytes:   # float32 samples (statistics are computed per column block)
         raise MultilatError(f"{limit} trials x {k} outputs would need {limit * k * 4 / 2**30:.1f} GiB of "
                             "samples; use fewer trials")
-    mapper = map if map is not None else None
+    mapper = resolve_map(map)
 
-    def run(chunk_ids, sizes):
-        children = [np.random.SeedSequence(ss.entropy, spawn_key=ss.spawn_key + (c,)) for c in chunk_ids]
-        items = [(spec, ch, n) for ch, n in zip(children, sizes)]
-        if mapper is None:
-            it = (_run_chunk(x) for x in items)
-        elif hasattr(mapper, "map"):
-            it = mapper.map(_run_chunk, items)
-        else:
-            it = mapper(_run_chunk, items)
-        for r in it:
-            yield r
+    def items(trials_, first_block=0):
+        return [(spec, entropy, key, c0, c1, trials_)
+                for c0, c1 in chunk_ranges(trials_, chunk_size, BLOCK, first_block=first_block)]
 
-    parts = []
+    blocks = []          # per-block results, in block order
     done = 0
     adaptive_info = None
     if not adaptive:
-        n_chunks = -(-trials // chunk_size)
-        sizes = [chunk_size] * (n_chunks - 1) + [trials - chunk_size * (n_chunks - 1)]
-        for r in run(range(n_chunks), sizes):
-            parts.append(r)
-            done += r["n"]
+        for res in mapper(_run_chunk, items(trials)):
+            blocks.extend(res)
+            done += sum(r["n"] for r in res)
             if progress:
                 progress(done)
     else:
-        if chunk_size < 10_000:
-            raise MultilatError("adaptive runs need chunk_size >= 10000 (JCGM 101 7.9.4: M >= 10^4)")
-        next_chunk = 0
-        rounds = 0
-        converged = False
-        batch = 10
-        tol = None
-        while True:
-            ids = list(range(next_chunk, next_chunk + batch))
-            next_chunk += batch
-            for r in run(ids, [chunk_size] * batch):
-                r["stats"] = _chunk_stats(r["dev"])
-                parts.append(r)
-                done += r["n"]
-                if progress:
-                    progress(done)
-            rounds += 1
-            stats = np.array([p["stats"] for p in parts])                     # (h, 4, k)
-            h = len(parts)
-            sd = stats.std(axis=0, ddof=1) / math.sqrt(h)                      # (4, k)
-            u_all = np.sqrt(np.mean(stats[:, 1] ** 2, axis=0))
-            tol = np.array([numerical_tolerance(u, ndigits) if u > 0 else np.inf for u in u_all])
-            if np.all(2 * sd <= tol):
-                converged = True
+        rule = AdaptiveRule(0.95, ndigits, max_trials, block=BLOCK)
+        # the criterion watches the quantities that vary: not those held by the datum (3-2-1), whose
+        # samples are rounding noise (same rule as PropagationResult.fixed)
+        lin0, _ = _linear(problem, noise_std)
+        watch = lin0 > 1e-9 * np.max(lin0)
+        if batches_per_round is None:
+            batches_per_round = 1 if map is None else 4
+
+        def evaluate_round(h0, h1):
+            """Chunks of batches h0..h1-1 submitted together; yields each batch's block results."""
+            work, owner = [], []
+            for h in range(h0, h1):
+                b0, b1 = rule.batch_range(h)
+                for it in items(b1 * BLOCK, first_block=b0):
+                    work.append(it)
+                    owner.append(h)
+            batch, current = [], h0
+            for h, res in zip(owner, mapper(_run_chunk, work)):
+                if h != current:
+                    yield batch
+                    batch, current = [], h
+                batch.extend(res)
+            yield batch
+
+        for batch in rule.batches(evaluate_round, batches_per_round):
+            blocks.extend(batch)
+            done += sum(r["n"] for r in batch)
+            if progress:
+                progress(done)
+            dev_b = np.concatenate([r["dev"] for r in batch])
+            if dev_b.shape[0] < 2:
+                raise MultilatError(f"only {dev_b.shape[0]} trials of adaptive batch {rule.h} converged: the "
+                                    "network is too weak for a Monte Carlo from its nominal solution")
+            if rule.add(dev_b[:, watch]):
                 break
-            if done + batch * chunk_size > max_trials:
-                break
-        adaptive_info = {"converged": converged, "rounds": rounds, "chunks": len(parts),
-                         "tolerance_m_min": float(np.min(tol))}
-    # float32 deviations kept once; statistics column block by column block in float64 (bounded memory)
-    dev = np.concatenate([p["dev"] for p in parts]) if parts else np.zeros((0, k), np.float32)
-    for p in parts:
-        p["dev"] = None
-    n_failed = int(sum(p["n_failed"] for p in parts))
-    n_retried = int(sum(p["n_retried"] for p in parts))
+        tol = rule.tolerance
+        adaptive_info = {"converged": rule.converged, "batches": rule.h, "batch_trials": rule.batch_trials,
+                         "tolerance_m_min": None if tol is None else float(np.min(tol)),
+                         "n_fixed_by_datum": int((~watch).sum())}
+    return _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done)
+
+
+def _kurtosis(y: np.ndarray, mean: np.ndarray) -> np.ndarray:
+    """Sample kurtosis m4 / m2^2 per column (3 where a column is constant)."""
+    c = y - mean
+    m2 = np.mean(c**2, axis=0)
+    m4 = np.mean(c**4, axis=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(m2 > 0, m4 / np.where(m2 > 0, m2, 1.0) ** 2, 3.0)
+
+
+def _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done):
+    """Statistics of all blocks' deviations (the engine's :func:`summarize`: JCGM 101 §7.6-7.7)."""
+    net = problem.network
+    # float32 deviations kept once; statistics point by point / column block by column block in float64
+    dev = np.concatenate([b["dev"] for b in blocks]) if blocks else np.zeros((0, k), np.float32)
+    for b in blocks:
+        b["dev"] = None
+    n_failed = int(sum(b["n_failed"] for b in blocks))
+    n_retried = int(sum(b["n_retried"] for b in blocks))
     n = dev.shape[0]
     if n < 2:
         raise MultilatError(f"only {n} of {done} trials converged: the network is too weak for a "
                             "Monte Carlo from its nominal solution")
-    sig0_all = np.concatenate([p["sigma0"] for p in parts])
+    sig0_all = np.concatenate([b["sigma0"] for b in blocks])
     sig0 = float(np.mean(sig0_all))
     sig0_rms = float(np.sqrt(np.mean(sig0_all**2)))
-    from multilat.montecarlo import coverage_interval
-
     x0 = np.concatenate([bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m),
                          [np.linalg.norm(problem.point_xyz(a) - problem.point_xyz(b)) for a, b in problem.pairs]])
     mean_dev, std, kurt = np.empty(k), np.empty(k), np.empty(k)
     iv_sym, iv_short = np.empty((k, 2)), np.empty((k, 2))
-    for c0 in range(0, k, 8):
-        blk = dev[:, c0:c0 + 8].astype(np.float64)
-        mu = blk.mean(axis=0)
-        cc = blk - mu
-        m2 = np.mean(cc**2, axis=0)
-        m4 = np.mean(cc**4, axis=0)
-        mean_dev[c0:c0 + 8] = mu
-        std[c0:c0 + 8] = np.sqrt(m2 * n / (n - 1))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            kurt[c0:c0 + 8] = np.where(m2 > 0, m4 / np.where(m2 > 0, m2, 1.0) ** 2, 3.0)
-        iv_sym[c0:c0 + 8] = coverage_interval(blk, 0.95, "symmetric")
-        iv_short[c0:c0 + 8] = coverage_interval(blk, 0.95, "shortest")
+    pids = problem.station_ids + problem.target_ids
+    pc_mc = np.empty((len(pids), 3, 3))
+    d3s = []
+
+    def put(cols, y):
+        r = summarize(y, 0.95)
+        mean_dev[cols], std[cols] = r.estimate, r.std
+        iv_sym[cols], iv_short[cols] = r.interval_symmetric, r.interval_shortest
+        kurt[cols] = _kurtosis(y, r.estimate)
+        return r
+
+    for q, pid in enumerate(pids):                       # every coordinate, point by point
+        rows = problem.param_rows(pid)
+        d3 = dev[:, rows].astype(np.float64)
+        pc_mc[q] = put(rows, d3).cov
+        d3s.append(rows)
+    s = len(problem.station_ids)
+    rest = np.concatenate([3 * s + np.arange(s), np.arange(net.n_params, k)])   # offsets, distances
+    for c0 in range(0, len(rest), 8):
+        cols = rest[c0:c0 + 8]
+        put(cols, dev[:, cols].astype(np.float64))
     iv_sym += x0[:, None]
     iv_short += x0[:, None]
     se = std * np.sqrt(np.maximum(kurt - 1.0, 0.0) / (4.0 * n))
     if noise == "model":
         # the linear sandwich uses the input errors' empirical std over all trials drawn, so that the
         # comparison tests the propagation, not the distance model's own (MC-estimated) std
-        n_all = sum(p["n"] for p in parts)
-        es = sum(p["e_sum"] for p in parts)
-        e2 = sum(p["e2_sum"] for p in parts)
+        n_all = sum(b["n"] for b in blocks)
+        es = sum(b["e_sum"] for b in blocks)
+        e2 = sum(b["e2_sum"] for b in blocks)
         emp_std = np.sqrt(np.maximum(e2 / n_all - (es / n_all) ** 2, 0.0) * n_all / (n_all - 1))
         input_std_ratio = float(np.mean(emp_std / noise_std))
         noise_std = emp_std
     else:
         input_std_ratio = 1.0
     lin_std, pc_lin = _linear(problem, noise_std)
-    pids = problem.station_ids + problem.target_ids
-    pc_mc = np.empty((len(pids), 3, 3))
     cov_mc_frac = np.empty(len(pids))
     cov_lin_frac = np.empty(len(pids))
-    for q, pid in enumerate(pids):
-        rows = problem.param_rows(pid)
+    for q, rows in enumerate(d3s):
         d3 = dev[:, rows].astype(np.float64)
-        mu = mean_dev[rows]
-        cmc = np.cov(d3, rowvar=False)
-        pc_mc[q] = cmc
-        cov_mc_frac[q] = _ellipsoid_fraction(d3, mu, cmc)
+        cov_mc_frac[q] = _ellipsoid_fraction(d3, mean_dev[rows], pc_mc[q])
         cov_lin_frac[q] = _ellipsoid_fraction(d3, np.zeros(3), pc_lin[q])
     return PropagationResult(
         problem=problem, labels=_labels(problem), nominal=x0, mc_mean=x0 + mean_dev, mc_std=std,
@@ -744,10 +781,3 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         seed_entropy=int(ss.entropy), adaptive=adaptive_info, elapsed_s=time.perf_counter() - t0,
         input_std_m=noise_std, input_std_ratio=input_std_ratio, n_retried=n_retried,
         samples=dev if keep_samples else None, sigma0_rms=sig0_rms)
-
-
-def _chunk_stats(dev) -> np.ndarray:
-    """Per-chunk mean, std and 2.5 / 97.5 % quantiles of each column, shape (4, k) (JCGM 101 7.9)."""
-    d = np.asarray(dev, float)
-    q = np.quantile(d, [0.025, 0.975], axis=0)
-    return np.stack([d.mean(axis=0), d.std(axis=0, ddof=1), q[0], q[1]])
