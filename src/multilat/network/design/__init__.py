@@ -8,3 +8,5 @@
 from multilat.network.design.preanalysis import (CRITERIA, Layout, PreAnalysis, SigmaModel,  # noqa: F401
                                                  covariance, criterion_value, layout_observations,
                                                  preanalyse)
+from multilat.network.design.search import (DesignResult, choose_candidates, optimise_heads,  # noqa: F401
+                                            visibility)

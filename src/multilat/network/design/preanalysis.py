@@ -344,6 +344,55 @@ class PreAnalysis:
     alpha: float
     power: float
 
+    # the attributes the network figures read (multilat.report.network_figures)
+    @property
+    def station_ids(self):
+        return self.layout.station_ids
+
+    @property
+    def target_ids(self):
+        return self.layout.target_ids
+
+    @property
+    def station_xyz_m(self):
+        return self.layout.station_xyz_m
+
+    @property
+    def target_xyz_m(self):
+        return self.layout.target_xyz_m
+
+    def ellipsoids(self, *, level: float = 0.95):
+        """95 % ellipsoids of stations and targets, as :meth:`AdjustmentResult.ellipsoids`."""
+        return (st.confidence_ellipsoid(self.station_cov_m2, level=level),
+                st.confidence_ellipsoid(self.target_cov_m2, level=level))
+
+    def probe_cov_m2(self, points_xyz_m, *, min_range_m: float = 0.0, max_range_m: float = np.inf):
+        """Predicted covariance (p, 3, 3) of new points measured by the calibrated heads (the heads
+        within range of each point), for a map of the work volume: the trilateration covariance
+        ``M^-1`` with ``M = J_p^T W J_p`` plus the heads' and offsets' covariance carried through,
+        ``M^-1 J_p^T W J_g C_gg J_g^T W J_p M^-1`` (the Schur complement of one more target).
+        The distance uncertainty is the mean of this layout's ``sigma_m``. NaN where fewer than 3
+        heads reach a point."""
+        p = np.asarray(points_xyz_m, float).reshape(-1, 3)
+        s = self.layout.n_stations
+        diff = self.layout.station_xyz_m[None] - p[:, None]            # (p, s, 3)
+        d = np.linalg.norm(diff, axis=2)
+        u = diff / d[..., None]
+        seen = (d >= max(min_range_m, 1e-9)) & (d <= max_range_m)
+        w = seen / float(np.mean(self.sigma_m)) ** 2                   # (p, s)
+        Jp = -u                                                         # d dist / d point
+        Jg = np.zeros((p.shape[0], s, Q * s))                           # d dist / d [x,y,z,o,k]
+        for i in range(s):
+            Jg[:, i, Q * i:Q * i + 3] = u[:, i]
+            Jg[:, i, Q * i + 3] = 1.0 if self.offsets else 0.0
+        M = np.einsum("psa,ps,psb->pab", Jp, w, Jp)
+        ok = seen.sum(axis=1) >= 3
+        Minv = np.full_like(M, np.nan)
+        Minv[ok] = np.linalg.inv(M[ok])
+        Cgg = self.cov[:Q * s, :Q * s]
+        B = np.einsum("pab,psb,ps,psg->pag", Minv, Jp, w, Jg)           # (p, 3, 5s)
+        return Minv + np.einsum("pag,gh,pbh->pab", B, Cgg, B)
+
     def criterion(self, name: str) -> float:
         """The value of criterion ``name`` for this layout (metres)."""
         if name == "max_u95":
