@@ -37,12 +37,13 @@ if "cube" in which:
     g = np.stack(np.meshgrid(*[np.linspace(0, 1, 3)] * 3, indexing="ij"), -1).reshape(-1, 3)
     reg = np.array([[0, 0, 0], [1, 1, 0], [1, 0, 1], [0, 1, 1]], float)
     for crit in ("max_u95", "rms_u"):
-        for name, c in (("cube corners", reg), ("regular tetrahedron x3 about the centre",
+        for name, c in (("regular tetrahedron x1.5 about the centre", 0.5 + 1.5 * (reg - 0.5)),
+                        ("regular tetrahedron x3 about the centre",
                                                 0.5 + 3 * (reg - 0.5))):
             v = preanalyse(Layout("ABCD", c, [f"T{k}" for k in range(27)], g), sigma).criterion(crit)
             print(f"cube {crit}: {name}: {v * um:.2f} um")
         r = optimise_heads(g, count=4, box_min_m=[-1.5] * 3, box_max_m=[2.5] * 3, sigma=sigma,
-                           criterion=crit, min_range_m=0.2, starts=6, max_evaluations=9000, rng=2)
+                           criterion=crit, min_range_m=0.2, starts=6, max_evaluations=6000, rng=2)
         e, dev = edges(r.layout.station_xyz_m)
         print(f"cube {crit}: start {r.start_criterion_m * um:.2f} um, optimum {r.criterion_m * um:.2f} um, "
               f"evals {r.evaluations}, starts {[round(s.end_criterion_m * um, 2) for s in r.starts]}; heads "
