@@ -29,6 +29,7 @@ from multilat.cli import (  # noqa: F401  (registration side effects)
     campaign_cmd,
     propagate_cmd,
     demo_cmd,
+    design_cmd,
 )
 
 

@@ -1,0 +1,12 @@
+"""Network design: pre-analysis of a multilateration layout and optimisation of head positions.
+
+- :mod:`.preanalysis`  predicted covariance, redundancy, MDBs of a layout (no measurements)
+- :mod:`.search`       global search for head positions under a criterion
+- :mod:`.config`       the validated TOML of ``multilat design``
+"""
+
+from multilat.network.design.preanalysis import (CRITERIA, Layout, PreAnalysis, SigmaModel,  # noqa: F401
+                                                 covariance, criterion_value, layout_observations,
+                                                 preanalyse)
+from multilat.network.design.search import (DesignResult, choose_candidates, optimise_heads,  # noqa: F401
+                                            visibility)

@@ -1,0 +1,305 @@
+"""The ``multilat design`` configuration: a pydantic-validated TOML, and the one call that runs it.
+
+Example (docs/design.md lists every key)::
+
+    [targets]                      # or: file = "targets.csv" (point,x_m,y_m,z_m)
+    box_min_m = [0, 0, 0]
+    box_max_m = [1, 1, 1]
+    grid = [3, 3, 3]
+    [heads]                        # or: file = "candidates.csv", or fixed = "heads.csv"
+    count = 4
+    box_min_m = [-1.5, -1.5, 0]
+    box_max_m = [2.5, 2.5, 2.0]
+    min_range_m = 0.2              # optional range limits of a head
+    max_range_m = 20.0
+    [instrument]                   # or: sigma_um = 4.7
+    preset = "seed2020"
+    [criterion]
+    name = "max_u95"               # rms_u, length_u (with lengths = [["1", "27"], ...]), max_mdb
+    [network]                      # optional
+    offsets = true
+    datum = "free"
+    [search]                       # optional
+    method = "multistart"          # or differential_evolution
+    starts = 8
+    max_evaluations = 20000
+
+Files named in the config are read relative to the config file's directory. Every error is one
+line naming the file and the key.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
+
+from multilat.errors import MultilatError, validation_error_line
+from multilat.network.design.preanalysis import CRITERIA, Layout, PreAnalysis, SigmaModel, preanalyse
+from multilat.network.design.search import (DesignResult, choose_candidates, head_ids, min_heads,
+                                            optimise_heads, visibility)
+
+__all__ = ["DesignConfig", "parse_design_config", "load_design_config", "run_design", "DesignRun"]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+def _box(lo, hi, what):
+    if (lo is None) != (hi is None):
+        raise ValueError(f"{what}: give both box_min_m and box_max_m")
+    if lo is not None:
+        if len(lo) != 3 or len(hi) != 3:
+            raise ValueError("box_min_m and box_max_m need 3 values (x, y, z)")
+        if not all(b > a for a, b in zip(lo, hi)):
+            raise ValueError(f"box_max_m must exceed box_min_m in every axis (empty or inside-out box: "
+                             f"{list(lo)} .. {list(hi)})")
+
+
+class TargetsCfg(_Model):
+    file: str | None = None
+    box_min_m: list[float] | None = None
+    box_max_m: list[float] | None = None
+    grid: list[int] | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        _box(self.box_min_m, self.box_max_m, "targets")
+        has_box = self.box_min_m is not None
+        if (self.file is None) == (not has_box):
+            raise ValueError("give either file or box_min_m/box_max_m/grid")
+        if has_box:
+            if self.grid is None or len(self.grid) != 3 or min(self.grid) < 1:
+                raise ValueError("grid: need 3 counts >= 1 (points per axis)")
+        return self
+
+
+class HeadsCfg(_Model):
+    count: int | None = None
+    box_min_m: list[float] | None = None
+    box_max_m: list[float] | None = None
+    file: str | None = None
+    fixed: str | None = None
+    start: str | None = None
+    min_range_m: float = 0.0
+    max_range_m: float | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        _box(self.box_min_m, self.box_max_m, "heads")
+        modes = [self.box_min_m is not None, self.file is not None, self.fixed is not None]
+        if sum(modes) != 1:
+            raise ValueError("give exactly one of box_min_m/box_max_m, file (candidates) or fixed")
+        if self.fixed is None and self.count is None:
+            raise ValueError("count: number of heads is required with a box or candidates")
+        if self.count is not None and self.count < min_heads(True):
+            raise ValueError(f"count: self-calibration needs at least {min_heads(True)} heads, "
+                             f"got {self.count}")
+        if self.min_range_m < 0:
+            raise ValueError("min_range_m must be >= 0")
+        if self.max_range_m is not None and not self.max_range_m > self.min_range_m:
+            raise ValueError("max_range_m must exceed min_range_m")
+        return self
+
+
+class InstrumentCfg(_Model):
+    preset: str | None = None
+    file: str | None = None
+    sigma_um: float | None = None
+
+    @model_validator(mode="after")
+    def _one(self):
+        if sum(x is not None for x in (self.preset, self.file, self.sigma_um)) != 1:
+            raise ValueError("give exactly one of preset, file or sigma_um")
+        if self.sigma_um is not None and not self.sigma_um > 0:
+            raise ValueError("sigma_um must be > 0")
+        return self
+
+
+class CriterionCfg(_Model):
+    name: str = "max_u95"
+    lengths: list[tuple[str, str]] = []
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v):
+        if v not in CRITERIA:
+            raise ValueError(f"unknown criterion {v!r} (one of {', '.join(CRITERIA)})")
+        return v
+
+    @model_validator(mode="after")
+    def _lengths(self):
+        if self.name == "length_u" and not self.lengths:
+            raise ValueError("criterion length_u needs lengths = [[id, id], ...]")
+        return self
+
+
+class NetworkCfg(_Model):
+    offsets: bool = True
+    datum: str = "free"
+
+
+class SearchCfg(_Model):
+    method: str = "multistart"
+    starts: int = 8
+    max_evaluations: int = 20_000
+
+    @field_validator("method")
+    @classmethod
+    def _m(cls, v):
+        if v not in ("multistart", "differential_evolution"):
+            raise ValueError(f"unknown method {v!r} (multistart or differential_evolution)")
+        return v
+
+    @field_validator("starts", "max_evaluations")
+    @classmethod
+    def _pos(cls, v):
+        if v < 1:
+            raise ValueError("must be >= 1")
+        return v
+
+
+class DesignConfig(_Model):
+    targets: TargetsCfg
+    heads: HeadsCfg
+    instrument: InstrumentCfg = InstrumentCfg(preset="seed2020")
+    criterion: CriterionCfg = CriterionCfg()
+    network: NetworkCfg = NetworkCfg()
+    search: SearchCfg = SearchCfg()
+
+
+def parse_design_config(data: dict, *, source: str = "<dict>") -> DesignConfig:
+    """Validate a decoded mapping; :class:`MultilatError` names the source and the key path."""
+    try:
+        return DesignConfig.model_validate(data)
+    except ValidationError as err:
+        raise MultilatError(validation_error_line(err, source)) from None
+
+
+def load_design_config(path: str | Path) -> DesignConfig:
+    p = Path(path)
+    if not p.is_file():
+        raise MultilatError(f"config file not found: {p}")
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise MultilatError(f"cannot read config file {p}: {exc}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise MultilatError(f"{p}: malformed TOML: {exc}") from None
+    return parse_design_config(data, source=str(p))
+
+
+# ---------------------------------------------------------------------------------------------
+def _read_points(base: Path, name: str):
+    from multilat.network.files import read_points
+
+    return read_points(base / name)
+
+
+def _targets(cfg: TargetsCfg, base: Path):
+    if cfg.file is not None:
+        pts = _read_points(base, cfg.file)
+        return pts.ids, pts.xyz_m
+    axes = [np.linspace(a, b, n) if n > 1 else np.array([(a + b) / 2])
+            for a, b, n in zip(cfg.box_min_m, cfg.box_max_m, cfg.grid)]
+    g = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    return tuple(f"T{k + 1}" for k in range(len(g))), g
+
+
+def _check_reach(tid, tx, heads_pts, box, rmin, rmax, source):
+    """Every target must be within range of some admissible head position."""
+    if box is not None:
+        lo, hi = np.asarray(box[0]), np.asarray(box[1])
+        near = np.linalg.norm(tx - np.clip(tx, lo, hi), axis=1)
+        corners = lo + np.array([[i, j, k] for i in (0, 1) for j in (0, 1) for k in (0, 1)]) * (hi - lo)
+        far = np.linalg.norm(tx[:, None] - corners[None], axis=2).max(axis=1)
+        bad = (near > rmax) | (far < rmin)
+    else:
+        vis = visibility(heads_pts, tx, min_range_m=rmin, max_range_m=rmax)
+        bad = vis.sum(axis=0) < 3
+    if bad.any():
+        j = int(np.flatnonzero(bad)[0])
+        raise MultilatError(f"{source}: heads: target {tid[j]!r} is out of range of every head position "
+                            f"(min_range_m {rmin:g}, max_range_m {rmax:g}); {int(bad.sum())} target(s)")
+
+
+@dataclass(frozen=True, eq=False)
+class DesignRun:
+    """What ``multilat design`` computed: the search (None with fixed or evaluated heads), the
+    pre-analysis of the returned layout and of the start (or given) layout."""
+
+    criterion: str
+    search: DesignResult | None
+    best: PreAnalysis
+    start: PreAnalysis
+    sigma: SigmaModel
+
+
+def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, rng=None,
+               source: str = "config") -> DesignRun:
+    """Run a validated config: optimise (box or candidates) or, with fixed heads or ``evaluate``
+    (a :class:`~multilat.network.data.Points` of heads), score the given layout only."""
+    from multilat import instrument as _inst
+
+    base = Path(base_dir)
+    tid, tx = _targets(cfg.targets, base)
+    h = cfg.heads
+    rmin, rmax = h.min_range_m, (math.inf if h.max_range_m is None else h.max_range_m)
+    ic = cfg.instrument
+    sigma = SigmaModel(ic.sigma_um * 1e-6) if ic.sigma_um is not None else \
+        SigmaModel(instrument=_inst.load_instrument(ic.preset or str(base / ic.file)),
+                   max_distance_m=max(100.0, 2 * rmax if np.isfinite(rmax) else 100.0))
+    c = cfg.criterion
+    kw = dict(offsets=cfg.network.offsets, datum=cfg.network.datum, lengths=tuple(c.lengths))
+    known = set(tid)
+    fixed = evaluate if evaluate is not None else (_read_points(base, h.fixed) if h.fixed else None)
+    if fixed is not None:
+        if len(fixed.ids) < min_heads(cfg.network.offsets):
+            raise MultilatError(f"{source}: heads: self-calibration needs at least "
+                                f"{min_heads(cfg.network.offsets)} heads, got {len(fixed.ids)}")
+        known |= set(fixed.ids)
+    else:
+        known |= set(head_ids(h.count))
+    for a, b in c.lengths:
+        for p in (a, b):
+            if p not in known:
+                raise MultilatError(f"{source}: criterion.lengths: unknown point id {p!r}")
+    search = None
+    if fixed is not None:
+        _check_reach(tid, tx, fixed.xyz_m, None, rmin, rmax, source)
+        lay = Layout(fixed.ids, fixed.xyz_m, tid, tx,
+                     visibility(fixed.xyz_m, tx, min_range_m=rmin, max_range_m=rmax))
+        pa = preanalyse(lay, sigma, **kw)
+        return DesignRun(c.name, None, pa, pa, sigma)
+    s = cfg.search
+    if h.file is not None:
+        cand = _read_points(base, h.file)
+        _check_reach(tid, tx, cand.xyz_m, None, rmin, rmax, source)
+        search = choose_candidates(tx, cand.xyz_m, count=h.count, sigma=sigma, target_ids=tid,
+                                   candidate_ids=cand.ids, criterion=c.name, min_range_m=rmin,
+                                   max_range_m=rmax, max_evaluations=s.max_evaluations, rng=rng, **kw)
+    else:
+        _check_reach(tid, tx, None, (h.box_min_m, h.box_max_m), rmin, rmax, source)
+        start = None
+        if h.start is not None:
+            sp = _read_points(base, h.start)
+            if len(sp.ids) != h.count:
+                raise MultilatError(f"{source}: heads.start: {len(sp.ids)} heads, count is {h.count}")
+            start = sp.xyz_m
+        search = optimise_heads(tx, count=h.count, box_min_m=h.box_min_m, box_max_m=h.box_max_m,
+                                sigma=sigma, target_ids=tid, criterion=c.name, start=start,
+                                min_range_m=rmin, max_range_m=rmax, method=s.method, starts=s.starts,
+                                max_evaluations=s.max_evaluations, rng=rng, **kw)
+    if search.criterion_m >= 1e3:
+        raise MultilatError(f"{source}: no solvable layout found (every head layout tried leaves a "
+                            "target seen by too few heads): widen the heads box or the range limits")
+    try:
+        start_pa = preanalyse(search.start_layout, sigma, **kw)
+    except MultilatError:
+        start_pa = None
+    return DesignRun(c.name, search, preanalyse(search.layout, sigma, **kw), start_pa, sigma)

@@ -1,0 +1,74 @@
+"""Figures of a network design: the layout in 3-D and top view with predicted 95 % ellipsoids
+(the network figures, fed a :class:`~multilat.network.design.PreAnalysis`), and maps of the
+predicted uncertainty of a point measured anywhere in the volume, over horizontal slices (as seed
+003's work-volume maps).
+
+Plot functions take ``ax=None`` and return the axes; :func:`save_design_figures` writes PNGs atomically.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from multilat.report.network_figures import _plt, plot_3d, plot_top_view
+
+__all__ = ["plot_slice_maps", "save_design_figures"]
+
+_CHI2_3_95 = 7.814727903251178
+
+
+def plot_slice_maps(pre, box_min_m, box_max_m, *, n_slices: int = 3, n_grid: int = 40,
+                    min_range_m: float = 0.0, max_range_m: float = np.inf, axes=None):
+    """Largest 95 % semi-axis (µm) of a point measured by the designed heads, over ``n_slices``
+    horizontal (z) slices of the box; returns the axes (one per slice)."""
+    plt = _plt()
+    lo, hi = np.asarray(box_min_m, float), np.asarray(box_max_m, float)
+    if axes is None:
+        _, axes = plt.subplots(1, n_slices, figsize=(4.2 * n_slices, 3.8), squeeze=False)
+        axes = axes[0]
+    xs, ys = np.linspace(lo[0], hi[0], n_grid), np.linspace(lo[1], hi[1], n_grid)
+    X, Y = np.meshgrid(xs, ys)
+    zs = np.linspace(lo[2], hi[2], n_slices) if n_slices > 1 else [(lo[2] + hi[2]) / 2]
+    maps = []
+    for z in zs:
+        pts = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
+        cov = pre.probe_cov_m2(pts, min_range_m=min_range_m, max_range_m=max_range_m)
+        ev = np.linalg.eigvalsh(np.nan_to_num(cov, nan=0.0))[:, -1]
+        ev[~np.isfinite(cov).all(axis=(1, 2))] = np.nan
+        maps.append(np.sqrt(_CHI2_3_95 * np.clip(ev, 0, None)).reshape(X.shape) * 1e6)
+    vmax = np.nanmax([np.nanmax(m) for m in maps])
+    for ax, z, m in zip(axes, zs, maps):
+        im = ax.pcolormesh(X, Y, m, shading="auto", vmin=0, vmax=vmax, cmap="viridis")
+        ax.plot(pre.station_xyz_m[:, 0], pre.station_xyz_m[:, 1], "r^", ms=6)
+        ax.set_aspect("equal")
+        ax.set_title(f"z = {z:.2f} m")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.figure.colorbar(im, ax=ax, shrink=0.8, label="largest 95 % semi-axis (µm)")
+    return axes
+
+
+def save_design_figures(pre, out_dir: str | os.PathLike, *, box_min_m, box_max_m,
+                        min_range_m: float = 0.0, max_range_m: float = np.inf) -> list[Path]:
+    """Write ``layout_3d.png``, ``layout_top.png`` and ``uncertainty_slices.png`` into ``out_dir``."""
+    plt = _plt()
+    from multilat.io import atomic_path
+
+    out = Path(out_dir)
+    written = []
+    figs = [("layout_3d.png", plot_3d(pre).figure), ("layout_top.png", plot_top_view(pre).figure),
+            ("uncertainty_slices.png",
+             plot_slice_maps(pre, box_min_m, box_max_m, min_range_m=min_range_m,
+                             max_range_m=max_range_m)[0].figure)]
+    for name, fig in figs:
+        p = out / name
+        try:
+            with atomic_path(p) as tmp:
+                fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
+        finally:
+            plt.close(fig)
+        written.append(p)
+    return written

@@ -1,0 +1,219 @@
+"""Network design: pre-analysis against adjust's covariance on exact distances and against the Monte
+Carlo of propagate; the search; the config and the CLI."""
+
+from __future__ import annotations
+
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from multilat.cli import main
+from multilat.network import configs
+from multilat.network.adjust import adjust
+from multilat.network.design import (Layout, SigmaModel, choose_candidates, criterion_value,
+                                     layout_observations, optimise_heads, preanalyse)
+from multilat.network.design.config import parse_design_config, run_design
+from multilat.network.model import Q
+
+SIG = 4.7e-6
+
+
+def _layout(cfg, visible=None):
+    return Layout(cfg.station_ids, cfg.station_xyz_m, cfg.target_ids, cfg.target_xyz_m, visible)
+
+
+def _adjust_exact(cfg, lay, **kw):
+    obs = layout_observations(lay, SIG, cfg.offset_m)
+    start = SimpleNamespace(station_xyz_m=lay.station_xyz_m, target_xyz_m=lay.target_xyz_m,
+                            offset_m=np.asarray(cfg.offset_m, float))
+    return adjust(obs, initial=start, snooping=False, **kw)
+
+
+def _rel(a, b):
+    return np.abs(a - b).max() / np.abs(b).max()
+
+
+@pytest.mark.parametrize("name,datum", [("small", "free"), ("small", "free:1,2,3,4,5,A"),
+                                        ("large", "free")])
+def test_preanalysis_equals_adjust_on_exact_distances(name, datum):
+    cfg = configs.small_volume() if name == "small" else configs.large_volume()
+    lay = _layout(cfg)
+    pa = preanalyse(lay, SIG, datum=datum)
+    r = _adjust_exact(cfg, lay, datum=datum)
+    assert r.iterations <= 2                     # started at the truth: nothing to adjust
+    assert _rel(pa.cov, r.covariance.full()) < 1e-9
+    assert _rel(pa.target_cov_m2, r.target_cov_m2) < 1e-9
+    assert _rel(pa.station_cov_m2, r.station_cov_m2) < 1e-9
+    assert np.allclose(pa.offset_std_m, r.offset_std_m, rtol=1e-9, atol=0)
+    assert np.allclose(pa.redundancy, r.redundancy, rtol=0, atol=1e-9)
+    assert np.allclose(pa.mdb_m, r.mdb_m, rtol=1e-9, atol=0)
+    assert pa.dof == r.dof and pa.redundancy.sum() == pytest.approx(pa.dof, abs=1e-9)
+    for a, b, _, u in preanalyse(lay, SIG, lengths=[("1", "3"), ("A", "7")]).lengths:
+        assert u == pytest.approx(r.interpoint_distance(a, b).u_m, rel=1e-9)
+
+
+def test_preanalysis_known_offsets_partial_visibility_and_321_frame():
+    from multilat.network.datum import apply_rigid, frame_321
+
+    cfg = configs.small_volume()
+    vis = np.ones((4, 14), bool)
+    vis[0, [2, 9]] = vis[3, 4] = False           # three targets seen by 3 heads only
+    lay = _layout(cfg, vis)
+    pa = preanalyse(lay, SIG, offsets=False)
+    r = _adjust_exact(cfg, lay, offsets=dict(zip("ABCD", cfg.offset_m)))
+    assert _rel(pa.cov, r.covariance.full()) < 1e-9
+    assert np.allclose(pa.redundancy, r.redundancy, atol=1e-9)
+    # 321: adjust works in the frame of the three points; so does the pre-analysis given that frame
+    R, t = frame_321(cfg.station_xyz_m[1], cfg.station_xyz_m[3], cfg.station_xyz_m[2])
+    lay = Layout(cfg.station_ids, apply_rigid(R, t, cfg.station_xyz_m), cfg.target_ids,
+                 apply_rigid(R, t, cfg.target_xyz_m))
+    pa = preanalyse(lay, SIG, datum="321:B,D,C")
+    r = _adjust_exact(cfg, lay, datum="321:B,D,C")
+    assert _rel(pa.cov, r.covariance.full()) < 1e-9
+    assert np.abs(pa.station_cov_m2[1]).max() < 1e-12 * np.abs(pa.cov).max()    # B fixed
+
+
+def test_invariances_rigid_motion_and_sigma_scaling():
+    cfg = configs.small_volume()
+    lay = _layout(cfg)
+    pa = preanalyse(lay, SIG)
+    th = 0.7
+    R = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]])
+    moved = Layout(lay.station_ids, lay.station_xyz_m @ R.T + [3, -2, 1], lay.target_ids,
+                   lay.target_xyz_m @ R.T + [3, -2, 1])
+    pm = preanalyse(moved, SIG)
+    assert np.allclose(pm.u95_max_m, pa.u95_max_m, rtol=1e-9)          # datum over all points: rigid-invariant
+    assert np.allclose(pm.target_cov_m2, R @ pa.target_cov_m2 @ R.T, rtol=0,
+                       atol=1e-9 * np.abs(pa.target_cov_m2).max())
+    p2 = preanalyse(lay, 2 * SIG)
+    assert np.allclose(p2.cov, 4 * pa.cov, rtol=0, atol=1e-9 * np.abs(4 * pa.cov).max())
+    assert np.allclose(p2.redundancy, pa.redundancy, atol=1e-12)
+    # criterion_value (fast path) equals the full pre-analysis' criterion
+    for name in ("max_u95", "rms_u", "max_mdb"):
+        assert criterion_value(name, lay, SigmaModel(SIG)) == pytest.approx(pa.criterion(name), rel=1e-12)
+    # rms_u closed form: sqrt(mean trace)
+    assert pa.criterion("rms_u") == pytest.approx(
+        np.sqrt(np.mean([np.trace(c) for c in pa.target_cov_m2])), rel=1e-12)
+
+
+def test_predicted_target_uncertainties_match_propagate_monte_carlo():
+    from multilat.network.propagate import problem_from_truth, propagate
+
+    cfg = configs.small_volume()
+    lay = _layout(cfg)
+    pa = preanalyse(lay, SIG)
+    si, ti = lay.pairs()
+    prob = problem_from_truth(cfg.station_ids, cfg.target_ids, si, ti, np.full(si.size, SIG),
+                              cfg.station_xyz_m, cfg.offset_m, cfg.target_xyz_m, datum="free")
+    res = propagate(prob, trials=4000, rng=11, noise="gaussian", chunk_size=2000, keep_samples=False)
+    lab = list(res.labels)
+    rows = [lab.index(f"{t}.{c}") for t in cfg.target_ids for c in "xyz"]
+    pred = np.sqrt(np.diagonal(pa.target_cov_m2, axis1=1, axis2=2)).ravel()
+    z = (res.mc_std[rows] - pred) / res.mc_std_se[rows]
+    assert np.abs(z).max() < 4.5                 # 42 coordinates, each within 4.5 MC standard errors
+    assert abs(z.mean()) < 1.5                   # no common bias (correlated coordinates: loose)
+    assert np.allclose(res.lin_std[rows], pred, rtol=1e-6)
+
+
+def test_search_improves_and_is_reproducible():
+    cfg = configs.small_volume()
+    pts = np.vstack([cfg.station_xyz_m, cfg.target_xyz_m])
+    kw = dict(count=4, box_min_m=pts.min(0), box_max_m=pts.max(0), sigma=SIG, start=cfg.station_xyz_m,
+              target_ids=cfg.target_ids, min_range_m=0.2, starts=2, max_evaluations=1200)
+    r1 = optimise_heads(cfg.target_xyz_m, rng=3, **kw)
+    r2 = optimise_heads(cfg.target_xyz_m, rng=3, **kw)
+    assert r1.criterion_m == r2.criterion_m
+    assert r1.start_criterion_m == pytest.approx(preanalyse(_layout(cfg), SIG).criterion("max_u95"), rel=1e-12)
+    assert r1.criterion_m < 0.5 * r1.start_criterion_m
+    assert preanalyse(r1.layout, SIG).criterion("max_u95") == pytest.approx(r1.criterion_m, rel=1e-12)
+    d = np.linalg.norm(r1.layout.station_xyz_m[:, None] - cfg.target_xyz_m[None], axis=2)
+    assert r1.layout.visible.sum() == (d >= 0.2).sum()
+    assert np.all(r1.layout.station_xyz_m >= pts.min(0)) and np.all(r1.layout.station_xyz_m <= pts.max(0))
+
+
+def test_candidates_exhaustive_is_the_brute_force_minimum():
+    rng = np.random.default_rng(0)
+    cand = rng.uniform([-1, -1, 0], [2, 2, 1.5], size=(7, 3))
+    tx = np.stack(np.meshgrid(*[np.linspace(0, 1, 3)] * 2, [0.2, 0.8], indexing="ij"), -1).reshape(-1, 3)
+    r = choose_candidates(tx, cand, count=4, sigma=SIG, criterion="rms_u")
+    assert r.method == "exhaustive" and r.evaluations == 35
+    import itertools
+
+    brute = min(criterion_value("rms_u", Layout("ABCD", cand[list(c)], [str(i) for i in range(len(tx))], tx),
+                                SigmaModel(SIG)) for c in itertools.combinations(range(7), 4))
+    assert r.criterion_m == pytest.approx(brute, rel=1e-12)
+
+
+CFG = """
+[targets]
+box_min_m = [0, 0, 0]
+box_max_m = [1, 1, 1]
+grid = [3, 3, 2]
+[heads]
+count = 4
+box_min_m = [-1.5, -1.5, 0]
+box_max_m = [2.5, 2.5, 2.0]
+[instrument]
+sigma_um = 4.7
+[criterion]
+name = "max_u95"
+[search]
+starts = 1
+max_evaluations = 150
+"""
+
+
+def _run(capsys, args):
+    rc = main(args)
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+def test_cli_json_evaluate_and_out(tmp_path, capsys):
+    p = tmp_path / "d.toml"
+    p.write_text(CFG)
+    rc, out, err = _run(capsys, ["design", str(p), "--json", "--seed", "2"])
+    assert rc == 0, err
+    doc = json.loads(out)
+    assert doc["criterion"] == "max_u95" and doc["criterion_m"] <= doc["start_criterion_m"]
+    assert set(doc["stations"]) == set("ABCD") and len(doc["targets"]) == 18
+    t = doc["targets"]["T1"]
+    assert len(t["xyz_m"]) == 3 and np.array(t["cov_m2"]).shape == (3, 3)
+    assert max(v["u95_max_m"] for v in doc["targets"].values()) == pytest.approx(doc["criterion_m"], rel=1e-12)
+    # --evaluate scores the returned layout again: the same number
+    heads = tmp_path / "heads.csv"
+    heads.write_text("point,x_m,y_m,z_m\n" + "".join(f"{k},{v['xyz_m'][0]!r},{v['xyz_m'][1]!r},{v['xyz_m'][2]!r}\n"
+                                                      for k, v in doc["stations"].items()))
+    rc, out, err = _run(capsys, ["design", str(p), "--evaluate", str(heads), "--json", "--out",
+                                 str(tmp_path / "o")])
+    assert rc == 0, err
+    assert json.loads(out)["criterion_m"] == pytest.approx(doc["criterion_m"], rel=1e-12)
+    assert {f.name for f in (tmp_path / "o").iterdir()} == {"design.json", "layout_3d.png", "layout_top.png",
+                                                          "uncertainty_slices.png"}
+
+
+@pytest.mark.parametrize("edit,msg", [
+    (("box_max_m = [2.5, 2.5, 2.0]", "box_max_m = [2.5, -2.5, 2.0]"), "inside-out"),
+    (("count = 4", "count = 3"), "at least 4 heads"),
+    (('name = "max_u95"', 'name = "smallest"'), "unknown criterion"),
+    (("box_min_m = [-1.5, -1.5, 0]", "box_min_m = [1.8, 1.8, 0]\nmax_range_m = 1.0"),
+     "out of range of every head"),
+    (("grid = [3, 3, 2]", "grid = [3, 3, 2]\ncolour = 1"), "unknown key"),
+])
+def test_cli_bad_config_one_line_errors(tmp_path, capsys, edit, msg):
+    p = tmp_path / "d.toml"
+    p.write_text(CFG.replace(*edit))
+    rc, out, err = _run(capsys, ["design", str(p)])
+    assert rc == 2 and err.startswith("error: ") and msg in err and err.count("\n") == 1, err
+
+
+def test_config_parses_the_issue_example(tmp_path):
+    cfg = parse_design_config({"targets": {"box_min_m": [0, 0, 0], "box_max_m": [1, 1, 1], "grid": [2, 2, 3]},
+                               "heads": {"fixed": "h.csv"}, "instrument": {"sigma_um": 4.7}})
+    (tmp_path / "h.csv").write_text("point,x_m,y_m,z_m\nA,-1,-1,0\nB,2,-1,0.5\nC,0.5,2,0\nD,0.5,0.5,2\n")
+    run = run_design(cfg, base_dir=tmp_path)
+    assert run.search is None and run.best.layout.n_targets == 12
+    assert run.best.criterion("max_u95") == pytest.approx(
+        preanalyse(run.best.layout, SIG).criterion("max_u95"), rel=1e-12)
