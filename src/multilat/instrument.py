@@ -338,12 +338,9 @@ def load_instrument(name_or_path: str | Path = "seed2020") -> Instrument:
     s = str(name_or_path)
     path = Path(s)
     if path.suffix == ".toml" or path.exists() or "/" in s or "\\" in s:
-        if not path.is_file():
-            raise MultilatError(f"instrument file not found: {s}")
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise MultilatError(f"cannot read instrument file {s}: {exc}") from None
+        from multilat.io import decode_text, read_input_bytes
+
+        text = decode_text(read_input_bytes(path), path)
         source = s
     else:
         if s not in presets():

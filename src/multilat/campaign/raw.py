@@ -130,14 +130,15 @@ class RawObservations:
 
 
 def _header(path) -> tuple[str, ...] | None:
-    p = Path(path)
+    from multilat.io import read_input_head
+
     try:
-        with p.open(encoding="utf-8-sig") as fh:
-            for line in fh:
-                if line.strip() and not line.lstrip().startswith("#"):
-                    return tuple(c.strip() for c in line.strip().split(","))
-    except (OSError, UnicodeDecodeError):
-        return None
+        text = read_input_head(path).decode("utf-8-sig", errors="replace")
+    except MultilatError:
+        return None          # the reader proper reports the problem
+    for line in text.splitlines():
+        if line.strip() and not line.lstrip().startswith("#"):
+            return tuple(c.strip() for c in line.strip().split(","))
     return None
 
 
