@@ -340,6 +340,8 @@ def load_instrument(name_or_path: str | Path = "seed2020") -> Instrument:
     if path.suffix == ".toml" or path.exists() or "/" in s or "\\" in s:
         from multilat.io import decode_text, read_input_bytes
 
+        if not path.exists():
+            raise MultilatError(f"instrument file not found: {s}")
         text = decode_text(read_input_bytes(path), path)
         source = s
     else:

@@ -39,8 +39,10 @@ def count(value: int | None, option: str, *, lo: int = 1, hi: int = MAX_TRIALS) 
     """An integer option in ``[lo, hi]`` (None passes: the default applies)."""
     if value is None:
         return None
-    if not lo <= value <= hi:
-        raise MultilatError(f"{option} must be between {lo} and {hi:,}, got {value:,}")
+    if value < lo:
+        raise MultilatError(f"{option} must be >= {lo}, got {value}")
+    if value > hi:
+        raise MultilatError(f"{option} must be at most {hi:,}, got {value:,}")
     return value
 
 
@@ -53,9 +55,14 @@ def quantity(value: float | None, option: str, *, lo: float, hi: float, unit: st
     """A finite value in ``[lo, hi]`` (None passes)."""
     if value is None:
         return None
-    if not (math.isfinite(value) and lo <= value <= hi):
-        u = f" {unit}" if unit else ""
-        raise MultilatError(f"{option} must be finite and in [{lo:g}, {hi:g}]{u}, got {value:g}")
+    u = f" {unit}" if unit else ""
+    if not math.isfinite(value):
+        raise MultilatError(f"{option} must be finite, got {value!r}")
+    if value < lo:
+        low = "> 0" if lo > 0 and lo < 1e-3 else f">= {lo:g}{u}"
+        raise MultilatError(f"{option} must be {low}, got {value:g}")
+    if value > hi:
+        raise MultilatError(f"{option} must be at most {hi:g}{u}, got {value:g}")
     return value
 
 

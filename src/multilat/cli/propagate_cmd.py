@@ -71,6 +71,10 @@ def propagate_cmd(
     checks.trials(trials, lo=2)
     checks.count(chunk_size, "--chunk-size", hi=10**8)
     checks.count(workers, "--workers", hi=4096)
+    if scheduler is not None:
+        from multilat.parallel import parse_scheduler_address
+
+        parse_scheduler_address(scheduler)
     if out is not None:
         from multilat.io import check_output_dir
 

@@ -291,6 +291,8 @@ def load_config(path: str | Path | None = None) -> LBBConfig:
     p = Path(path) if path is not None else DEFAULT_CONFIG
     from multilat.io import decode_text, read_input_bytes
 
+    if not p.exists():
+        raise MultilatError(f"config file not found: {p}")
     text = decode_text(read_input_bytes(p), p)
     try:
         data = tomllib.loads(text)

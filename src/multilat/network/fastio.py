@@ -187,7 +187,12 @@ def _plain(data: bytes, end: int, ncol: int, sigma_m, id_width: int, number_widt
     pair = si * len(tids) + ti
     if np.unique(pair).size != n or set(sids) & set(tids):
         raise _NotPlain                    # duplicates, an id both station and target
-    return FastObservations(sids, tids, si, ti, d, sig)
+    obs = FastObservations(sids, tids, si, ti, d, sig)
+    from multilat.network.screening import suspect_rows
+
+    if suspect_rows(obs):
+        raise _NotPlain                    # the general reader names the rows with their lines
+    return obs
 
 
 def _general(path: Path, sigma_m) -> FastObservations:

@@ -21,6 +21,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.io import read_csv_table, write_csv_atomic
 from multilat.network.data import Observations, Points, ReferenceLengths
+from multilat.network.screening import screen_observations
 
 __all__ = ["read_observations", "read_reference_lengths", "read_points", "write_result_csvs"]
 
@@ -89,7 +90,13 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         sig = np.full(d.shape, float(sigma_m))
     else:
         sig = _model_sigma(d, st, instrument)
-    return Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
+    if el is not None:
+        bad = np.flatnonzero(np.abs(el) > np.pi / 2)
+        if bad.size:
+            raise tab.error(int(bad[0]), f"column 'elevation_rad': must be within ±π/2, got {el[bad[0]]:g}")
+    obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
+    screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
+    return obs
 
 
 def _model_sigma(d, stations, instrument):
