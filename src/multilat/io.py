@@ -335,6 +335,14 @@ class CsvTable:
     def has(self, name: str) -> bool:
         return name in self.columns
 
+    def ids(self, name: str) -> list[str]:
+        """Column ``name`` as ids: an empty cell is ``FILE:LINE: column 'name': empty id``."""
+        vals = self.column(name)
+        for k, v in enumerate(vals):
+            if v == "":
+                raise self.error(k, f"column '{name}': empty id")
+        return vals
+
     def floats(self, name: str, *, positive: bool = False, nonnegative: bool = False,
                required: bool = True) -> np.ndarray:
         """Column ``name`` as float64, each cell checked: finite (and > 0 / >= 0 if asked).
