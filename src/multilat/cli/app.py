@@ -117,6 +117,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except BrokenPipeError:  # `multilat ... | head`: the reader left; nothing to report
         _quiet_stdout()
         return 141
+    except SystemExit as exc:  # click turns EPIPE into sys.exit(1) (and silences stderr): 141 instead
+        if isinstance(exc.__context__, BrokenPipeError):
+            sys.stderr = sys.__stderr__
+            _quiet_stdout()
+            return 141
+        raise
     except OSError as exc:  # an output path that cannot be written: a directory missing, disk full
         where = exc.filename or "output"
         _error(f"{format_error(where)}: {format_error(exc.strerror or exc)}")
