@@ -11,10 +11,11 @@ about the geometry ("near-degenerate", "singular"), which points the user at the
 - **against the other distances of the same target**: by the triangle inequality two distances
   to one target differ by at most the distance between their stations, which is itself at most
   the size of the network. A distance farther from the median of its target's distances than
-  :data:`SPREAD_FACTOR` times the network's size (the largest median of a target's distances) is a
-  gross error (a value in mm among metres, a digit slipped), so is a distance farther than
-  :data:`SPREAD_FACTOR` times that size from *every* median when its target has too few
-  distances for a median of its own.
+  :data:`SPREAD_FACTOR` times the network's size (the median over targets of the median of each
+  target's distances) is a gross error (a value in mm among metres, a digit slipped), so is a
+  distance beyond ``1 + SPREAD_FACTOR`` sizes when its target has too few distances for a median
+  of its own, and so are all the distances of a target whose median exceeds
+  :data:`TARGET_FACTOR` sizes (a whole target in mm).
 
 Pure numpy; the distances in an ordinary 1 m blunder are left to the adjustment's data snooping.
 """
@@ -36,6 +37,8 @@ MIN_SIGMA_M = 1e-12
 MAX_SIGMA_M = 1e3
 #: A distance farther than this many network sizes from its target's median is a gross error.
 SPREAD_FACTOR = 3.0
+#: A target whose distances' median exceeds this many network sizes is measured in a wrong unit.
+TARGET_FACTOR = 50.0
 #: At most this many rows are named in the message (the count says how many more).
 NAMED = 3
 
@@ -70,10 +73,13 @@ def suspect_rows(obs) -> list[tuple[int, str]]:
     if ok.sum() >= 3 and ti.size:
         n_t = int(ti.max()) + 1
         counts = np.bincount(ti[ok], minlength=n_t)
-        med = _group_medians(d[ok], ti[ok], n_t)
-        med[counts < 3] = np.nan                      # a median that one bad value cannot move far
+        med_all = _group_medians(d[ok], ti[ok], n_t)
+        med = np.where(counts >= 3, med_all, np.nan)  # a median that one bad value cannot move far
         if np.any(np.isfinite(med)):
-            size = float(np.nanmax(med))              # the network's size (a target's typical range)
+            size = float(np.nanmedian(med))           # the network's size (a target's typical range)
+            whole = ok & (med_all[ti] > TARGET_FACTOR * size)
+            add(whole, lambda k: f"target {obs.target_ids[ti[k]]}'s distances (median {med_all[ti[k]]:.6g} m) "
+                                 f"against {size:.6g} m for the network's targets (a wrong unit?)")
             ref = med[ti]
             far = ok & np.isfinite(ref) & (np.abs(d - ref) > SPREAD_FACTOR * size)
             add(far, lambda k: f"distance {d[k]:.6g} m against a median of {med[ti[k]]:.6g} m for target "
