@@ -36,6 +36,9 @@ def simulate_cmd(
     checks.sigma_um(sigma_um)
     checks.count(trials, "--trials", hi=10**6)   # each trial is a whole adjustment
     checks.seed(seed)
+    from multilat.instrument import load_instrument
+
+    load_instrument(instrument)          # a bad --instrument is an error even when --noise ignores it
     if cost not in ("distance", "squared"):
         raise MultilatError(f"--cost must be distance or squared, got {cost!r}")
     if start not in ("distances", "truth"):
