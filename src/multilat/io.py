@@ -22,6 +22,9 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
+#: The range of an elevation angle, for :meth:`CsvTable.floats` ``within=``.
+ELEVATION_RANGE = (-np.pi / 2, np.pi / 2, "±π/2 rad")
+
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
@@ -344,11 +347,12 @@ class CsvTable:
         return vals
 
     def floats(self, name: str, *, positive: bool = False, nonnegative: bool = False,
-               required: bool = True) -> np.ndarray:
+               required: bool = True, within: tuple[float, float, str] | None = None) -> np.ndarray:
         """Column ``name`` as float64, each cell checked: finite (and > 0 / >= 0 if asked).
 
         Raises :class:`MultilatError` ``"FILE:LINE: column 'name': ..."`` on the first bad cell.
-        An empty cell is an error when ``required``, otherwise NaN.
+        An empty cell is an error when ``required``, otherwise NaN. ``within=(lo, hi, text)``: also
+        ``lo <= value <= hi`` (``text`` states the range in the message, e.g. ``"±π/2"``).
         """
         i = self.columns.index(name)
         out = np.empty(len(self.rows))
@@ -367,6 +371,8 @@ class CsvTable:
                 raise MultilatError(f"{self.path}:{ln}: column '{name}': must be > 0, got {s!r}")
             if nonnegative and not v >= 0:
                 raise MultilatError(f"{self.path}:{ln}: column '{name}': must be >= 0, got {s!r}")
+            if within is not None and not within[0] <= v <= within[1]:
+                raise MultilatError(f"{self.path}:{ln}: column '{name}': must be within {within[2]}, got {s!r}")
             out[k] = v
         return out
 

@@ -141,9 +141,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         import numpy as np
 
         if isinstance(exc, (np.linalg.LinAlgError, FloatingPointError, OverflowError)):
-            _error(f"numerical failure ({format_error(exc)}): the inputs overflow the model; check the "
-                   "observations for gross errors (a distance in the wrong unit, an absurd sigma) "
-                   "and the options for absurd values")
+            _error(f"numerical failure ({format_error(exc)}): the problem is singular or overflows for "
+                   "these inputs; check the observations for gross errors (a distance in the wrong "
+                   "unit, an absurd sigma) and the options for values far beyond the network's size")
             return 2
         if os.environ.get("MULTILAT_TRACEBACK"):
             raise

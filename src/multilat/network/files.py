@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.io import read_csv_table, write_csv_atomic
+from multilat.io import ELEVATION_RANGE, read_csv_table, write_csv_atomic
 from multilat.network.data import Observations, Points, ReferenceLengths
 from multilat.network.screening import screen_observations
 
@@ -77,7 +77,7 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         raise MultilatError(f"{path}: give both azimuth_rad and elevation_rad columns, or neither")
     if tab.has("azimuth_rad"):
         az = tab.floats("azimuth_rad", required=False)
-        el = tab.floats("elevation_rad", required=False)
+        el = tab.floats("elevation_rad", required=False, within=ELEVATION_RANGE)
     if tab.has("sigma_m"):
         sig = tab.floats("sigma_m", positive=True)
         if sigma_m is not None:
@@ -90,10 +90,6 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         sig = np.full(d.shape, float(sigma_m))
     else:
         sig = _model_sigma(d, st, instrument)
-    if el is not None:
-        bad = np.flatnonzero(np.abs(el) > np.pi / 2)
-        if bad.size:
-            raise tab.error(int(bad[0]), f"column 'elevation_rad': must be within ±π/2, got {el[bad[0]]:g}")
     obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
     return obs
