@@ -75,6 +75,9 @@ CASES = [
     (["air", "--humidity-pct", "150"], "humidity"),
     (["air", "--wavelength-nm", "0"], "wavelength"),
     (["nosuchcommand"], "nosuchcommand"),
+    (["demo", "--seed", "-1"], "--seed"),
+    (["demo", "--out", "{d}/obs.csv", "--quick"], "obs.csv"),
+    (["budget", "--plot", "{d}"], "--plot"),
     (["adjust", "{d}/obs.csv", "--no-such-option"], "--no-such-option"),
 ]
 

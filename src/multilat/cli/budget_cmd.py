@@ -35,6 +35,10 @@ def budget_command(
 
     checks.seed(seed)
     checks.trials(trials, lo=2)
+    if plot is not None:
+        from multilat.io import check_not_input
+
+        check_not_input(plot, [instrument if str(instrument).endswith(".toml") else None], "--plot")
     inst = load_instrument(instrument)
     inst.head(head)
     n = inst.budget.trials_per_distance if trials is None else trials
