@@ -116,6 +116,21 @@ class Environment(_Model):
     def _p(cls, v):
         if not v > 0:
             raise ValueError(f"must be > 0, got {v}")
+        from multilat.air import PRESSURE_RANGE_PA
+
+        lo, hi = (x / 100 for x in PRESSURE_RANGE_PA)
+        if not lo <= v <= hi:
+            raise ValueError(f"must lie in [{lo:g}, {hi:g}] hPa (the air formulas' range), got {v}")
+        return v
+
+    @field_validator("temperature_c", "co2_ppm")
+    @classmethod
+    def _air_range(cls, v, info):
+        from multilat.air import CO2_RANGE_PPM, TEMPERATURE_RANGE_C
+
+        lo, hi = TEMPERATURE_RANGE_C if info.field_name == "temperature_c" else CO2_RANGE_PPM
+        if not lo <= v <= hi:
+            raise ValueError(f"must lie in [{lo:g}, {hi:g}] (the air formulas' range), got {v}")
         return v
 
     @field_validator("humidity_pct")
