@@ -140,19 +140,37 @@ def staging_dir(out: str | os.PathLike, *, inputs: Sequence[str | os.PathLike] =
             yield tmp
         except OSError as exc:
             raise _named(exc, out) from None
-        try:
-            if out.exists():
-                old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
-                os.replace(out, old / "d")
-            os.replace(tmp, out)
-        except OSError as exc:
-            if old is not None and (old / "d").exists() and not out.exists():
-                os.replace(old / "d", out)       # put the previous results back
-            raise _named(exc, out) from None
+        with _signals_held():                    # no Ctrl-C / SIGTERM between the two renames
+            try:
+                if out.exists():
+                    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+                    os.replace(out, old / "d")
+                os.replace(tmp, out)
+            except OSError as exc:
+                if old is not None and (old / "d").exists() and not out.exists():
+                    os.replace(old / "d", out)       # put the previous results back
+                raise _named(exc, out) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Hold SIGINT and SIGTERM (delivered on exit from the block) in the main thread."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def check_output_dir(out: str | os.PathLike, *, inputs: Sequence[str | os.PathLike] = ()) -> None:

@@ -221,3 +221,23 @@ def test_inputs_untouched_after_success(ws):
     after = snapshot(ws.path)
     assert {k: v for k, v in after.items() if not k.startswith("res")} == before
     assert time.time()  # noqa: the run is bounded by the CLI itself
+
+
+def test_concurrent_writers_of_one_out(ws):
+    """Two `adjust --out res` at once: whatever the interleaving, res holds one whole set of files
+    (the other run finishes or gives one error line), and no staging directory is left."""
+    out = ws / "res"
+    procs = [subprocess.Popen(CLI + ["adjust", str(ws / "obs.csv"), "--out", str(out)] + extra,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=cli_env(), text=True)
+             for extra in ([], ["--references", str(ws / "refs.csv")])]
+    results = [(p.wait(timeout=120), p.stderr.read()) for p in procs]
+    assert any(rc == 0 for rc, _ in results), results
+    for rc, err in results:
+        assert rc in (0, 2), err
+        if rc == 2:
+            assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    names = sorted(p.name for p in out.iterdir())
+    base = ["residuals.csv", "residuals.png", "result.json", "stations.csv", "targets.csv", "top_view.png",
+            "view_3d.png"]
+    assert names in (base, sorted(base + ["reference_lengths.csv"]))
+    _no_parts(ws.path)
