@@ -59,9 +59,11 @@ def test_error_formatter(raw, shown):
     assert format_error(MultilatError(raw)) == shown
 
 
-def test_directory_for_a_file_is_named_as_such(ws):
+@pytest.mark.parametrize("cmd", [["adjust"], ["propagate"], ["simulate"], ["two-face"], ["lbb", "trilaterate"],
+                                 ["correct"]])
+def test_directory_for_a_file_is_named_as_such(ws, cmd):
     (ws / "d.csv").mkdir()
-    ws.fails(["adjust", "{d}/d.csv"], "d.csv", "is a directory")
+    ws.fails(cmd + ["{d}/d.csv"], "d.csv", "is a directory")
 
 
 def test_adjust_twice_same_results(ws):
