@@ -90,3 +90,17 @@ def test_read_only_directory_out(ws, monkeypatch):
     monkeypatch.setattr(tempfile, "mkdtemp", denied)
     line = ws.fails(["adjust", "{d}/obs.csv", "--out", "{d}/res"], "res", "Permission denied")
     assert ".part" not in line
+
+
+@pytest.mark.parametrize("exc,rc,needle", [(TypeError("bad operand"), 70, "internal error"),
+                                           (MemoryError(), 2, "out of memory"),
+                                           (np.linalg.LinAlgError("Singular matrix"), 2, "numerical failure"),
+                                           (KeyboardInterrupt(), 130, "interrupted")])
+def test_last_guard_is_one_line(ws, monkeypatch, exc, rc, needle):
+    import multilat.lbb.files as lf
+
+    def boom(*a, **k):
+        raise exc
+
+    monkeypatch.setattr(lf, "read_edges", boom)
+    ws.fails(["lbb", "trilaterate", "{d}/edges.csv"], needle, rc=rc)

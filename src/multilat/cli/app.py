@@ -102,6 +102,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         old_term = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         rv = app(args=args, standalone_mode=False, prog_name="multilat")
+        if rv == 130:             # typer turns Ctrl-C into a return value of 130 in this mode
+            _error("interrupted")
         return int(rv) if isinstance(rv, int) else 0
     except MultilatError as exc:
         _error(format_error(exc))
