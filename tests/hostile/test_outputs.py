@@ -204,16 +204,6 @@ def test_named_pipe_input_is_opened_once(ws):
     assert json.loads(p.stdout)["n_obs"] == 56
 
 
-def test_named_pipe_input_propagate(ws):
-    fifo = ws / "obs.fifo"
-    os.mkfifo(fifo)
-    data = (ws / "obs.csv").read_bytes()
-    threading.Thread(target=lambda: open(fifo, "wb").write(data), daemon=True).start()
-    p = subprocess.run(CLI + ["propagate", str(fifo), "--trials", "200", "--json"], capture_output=True,
-                       env=cli_env(), timeout=90, text=True)
-    assert p.returncode == 0, p.stderr
-
-
 def test_inputs_untouched_after_success(ws):
     before = snapshot(ws.path)
     rc, _, err = ws.run(["adjust", "{d}/obs.csv", "--references", "{d}/refs.csv", "--out", "{d}/res"])

@@ -21,7 +21,7 @@ def test_elevation_out_of_range_in_observations(ws):
     ws.fails(["adjust", str(p)], "o.csv:2", "elevation_rad")
 
 
-@pytest.mark.parametrize("trials", ["500", "2000"])
+@pytest.mark.parametrize("trials", ["500"])
 def test_huge_gaussian_sigma_is_one_line(ws, trials):
     """σ = 3 cm on a 1 m network: the trials fail (counted) or the nominal problem is singular;
     either way one line, never 'Singular matrix' as a traceback."""
