@@ -182,6 +182,8 @@ def check_output_dir(out: str | os.PathLike, *, inputs: Sequence[str | os.PathLi
     for i in inputs:
         if i is not None and _inside(Path(i), out):
             raise MultilatError(f"--out {out}: holds the input {i}; write the results elsewhere")
+    if _inside(Path.cwd(), out):
+        raise MultilatError(f"--out {out}: is the working directory or holds it; give a sub-directory")
     if out.is_dir():
         try:
             foreign = sorted(e.name for e in os.scandir(out)

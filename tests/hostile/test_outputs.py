@@ -231,3 +231,10 @@ def test_concurrent_writers_of_one_out(ws):
             "view_3d.png"]
     assert names in (base, sorted(base + ["reference_lengths.csv"]))
     _no_parts(ws.path)
+
+
+def test_out_is_the_working_directory(ws, monkeypatch):
+    empty = ws / "empty"
+    empty.mkdir()
+    monkeypatch.chdir(empty)
+    ws.fails(["adjust", "{d}/obs.csv", "--out", "."], "--out")
