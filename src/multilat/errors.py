@@ -53,3 +53,33 @@ def validation_error_line(err, source: str) -> str:
         not isinstance(inp, dict) and "got" not in msg else ""
     more = f" (+{len(err.errors()) - 1} more)" if len(err.errors()) > 1 else ""
     return f"{source}: {loc}: {msg}{extra}{more}".replace("\n", " ")
+
+
+_NP_SCALAR = None
+
+
+def printable(text: str, *, keep_newlines: bool = True) -> str:
+    """``text`` with control characters (ANSI escapes, BEL, C1 codes) written as ``\\xNN`` escapes,
+    so that an id or a file name is shown literally and never acts on the terminal."""
+    out = []
+    for ch in str(text):
+        o = ord(ch)
+        if (o < 32 and not (keep_newlines and ch in "\n\t")) or 0x7F <= o < 0xA0:
+            out.append(f"\\x{o:02x}")
+        else:
+            out.append(ch)
+    return "".join(out)
+
+
+def format_error(exc: BaseException) -> str:
+    """The one line printed for an error: ``np.float64(1.5)`` shown as ``1.5``, control characters
+    escaped, newlines folded; used by the CLI for every error it reports."""
+    import re
+
+    global _NP_SCALAR
+    if _NP_SCALAR is None:
+        _NP_SCALAR = re.compile(r"np\.(?:float|int|uint|bool_|complex)\d*\((.*?)\)")
+    msg = str(exc) or type(exc).__name__
+    msg = _NP_SCALAR.sub(r"\1", msg)
+    msg = " ".join(part.strip() for part in msg.splitlines() if part.strip())
+    return printable(msg, keep_newlines=False)

@@ -116,6 +116,21 @@ class Environment(_Model):
     def _p(cls, v):
         if not v > 0:
             raise ValueError(f"must be > 0, got {v}")
+        from multilat.air import PRESSURE_RANGE_PA
+
+        lo, hi = (x / 100 for x in PRESSURE_RANGE_PA)
+        if not lo <= v <= hi:
+            raise ValueError(f"must lie in [{lo:g}, {hi:g}] hPa (the air formulas' range), got {v}")
+        return v
+
+    @field_validator("temperature_c", "co2_ppm")
+    @classmethod
+    def _air_range(cls, v, info):
+        from multilat.air import CO2_RANGE_PPM, TEMPERATURE_RANGE_C
+
+        lo, hi = TEMPERATURE_RANGE_C if info.field_name == "temperature_c" else CO2_RANGE_PPM
+        if not lo <= v <= hi:
+            raise ValueError(f"must lie in [{lo:g}, {hi:g}] (the air formulas' range), got {v}")
         return v
 
     @field_validator("humidity_pct")
@@ -338,12 +353,11 @@ def load_instrument(name_or_path: str | Path = "seed2020") -> Instrument:
     s = str(name_or_path)
     path = Path(s)
     if path.suffix == ".toml" or path.exists() or "/" in s or "\\" in s:
-        if not path.is_file():
+        from multilat.io import decode_text, read_input_bytes
+
+        if not path.exists():
             raise MultilatError(f"instrument file not found: {s}")
-        try:
-            text = path.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as exc:
-            raise MultilatError(f"cannot read instrument file {s}: {exc}") from None
+        text = decode_text(read_input_bytes(path), path)
         source = s
     else:
         if s not in presets():

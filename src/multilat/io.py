@@ -22,17 +22,26 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
+#: The range of an elevation angle, for :meth:`CsvTable.floats` ``within=``.
+ELEVATION_RANGE = (-np.pi / 2, np.pi / 2, "±π/2 rad")
+
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it over ``path`` only if the block succeeds.
 
-    An exception or KeyboardInterrupt inside the block removes the temporary file, so the target is
-    written whole or not at all (the rename is atomic on POSIX file systems).
+    An exception, Ctrl-C or SIGTERM (the CLI turns it into an exception) inside the block removes the
+    temporary file, so the target is written whole or not at all (the rename is atomic on POSIX file
+    systems). An :class:`OSError` names ``path``, never the temporary file.
     """
     target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+    if target.is_dir():
+        raise MultilatError(f"{target}: is a directory (expected a file to write)")
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+    except OSError as exc:
+        raise _named(exc, target) from None
     os.close(fd)
     tmp_path = Path(tmp)
     umask = os.umask(0)
@@ -41,32 +50,244 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp_path
         os.replace(tmp_path, target)
+    except OSError as exc:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()
+        raise _named(exc, target) from None
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
         raise
 
 
-@contextlib.contextmanager
-def staging_dir(out: str | os.PathLike) -> Iterator[Path]:
-    """Write a set of output files into ``out`` all or nothing.
+def _named(exc: OSError, target: Path) -> OSError:
+    """``exc`` re-addressed to ``target`` when it names one of our temporary ``.part`` paths."""
+    name = str(exc.filename or "")
+    if not name or ".part" in name or name.startswith(tempfile.gettempdir()):
+        return OSError(exc.errno, exc.strerror or str(exc), str(target))
+    return exc
 
-    Yields a temporary directory beside ``out`` (same file system); when the block ends normally its
-    files are moved into ``out`` (created if missing), each by an atomic rename; when it raises (an
-    error, or Ctrl-C) the temporary directory is removed and ``out`` is left as it was.
+
+@contextlib.contextmanager
+def atomic_paths(*paths: str | os.PathLike) -> Iterator[list[Path]]:
+    """Several output files all or nothing: yields one temporary path per target (beside it),
+    renamed over the targets only when the whole block succeeds (``correct --out a --cov b``)."""
+    targets = [Path(p) for p in paths]
+    tmps: list[Path] = []
+    try:
+        for target in targets:
+            if target.is_dir():
+                raise MultilatError(f"{target}: is a directory (expected a file to write)")
+            try:
+                target.parent.mkdir(parents=True, exist_ok=True)
+                fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+            except OSError as exc:
+                raise _named(exc, target) from None
+            os.close(fd)
+            tmps.append(Path(tmp))
+        yield tmps
+        for tmp, target in zip(tmps, targets):
+            try:
+                os.chmod(tmp, 0o666 & ~_umask())
+                os.replace(tmp, target)
+            except OSError as exc:
+                raise _named(exc, target) from None
+    finally:
+        for tmp in tmps:
+            with contextlib.suppress(FileNotFoundError):
+                tmp.unlink()
+
+
+def _umask() -> int:
+    u = os.umask(0)
+    os.umask(u)
+    return u
+
+
+#: Every file name a multilat ``--out`` directory can hold. An existing ``--out`` directory holding
+#: only such files is a previous run's output and is replaced whole; anything else in it is refused.
+OUTPUT_NAMES = frozenset({
+    "stations.csv", "targets.csv", "residuals.csv", "reference_lengths.csv", "result.json",
+    "residuals.png", "top_view.png", "view_3d.png",                                  # adjust
+    "summary.json", "parameters.csv", "distances.csv", "points.csv", "clouds.png",   # propagate
+    "sides.csv", "fig8_mean_error.png", "fig8_std.png", "fig9_cdf.png",              # lbb simulate
+    "comparison.csv", "fig7_comparison.png", "report.html",                          # lbb compare, demo
+})
+
+
+@contextlib.contextmanager
+def staging_dir(out: str | os.PathLike, *, inputs: Sequence[str | os.PathLike] = ()) -> Iterator[Path]:
+    """Write a set of output files into the directory ``out`` all or nothing.
+
+    Yields a temporary directory beside ``out`` (same file system). When the block ends normally the
+    staged directory *replaces* ``out`` whole (a previous run's files do not survive beside the new
+    ones); when it raises (an error, Ctrl-C, SIGTERM) the staged directory is removed and ``out`` is
+    left as it was. An existing ``out`` is replaced only if it is empty or a previous multilat
+    output (nothing but :data:`OUTPUT_NAMES` files), and never if it holds one of ``inputs``.
     """
     import shutil
 
     out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    check_output_dir(out, inputs=inputs)
     try:
-        yield tmp
-        out.mkdir(parents=True, exist_ok=True)
-        for f in sorted(tmp.iterdir()):
-            os.replace(f, out / f.name)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+    except OSError as exc:
+        raise _named(exc, out) from None
+    old = None
+    try:
+        try:
+            yield tmp
+        except OSError as exc:
+            raise _named(exc, out) from None
+        with _signals_held():                    # no Ctrl-C / SIGTERM between the two renames
+            try:
+                if out.exists():
+                    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+                    os.replace(out, old / "d")
+                os.replace(tmp, out)
+            except OSError as exc:
+                if old is not None and (old / "d").exists() and not out.exists():
+                    os.replace(old / "d", out)       # put the previous results back
+                raise _named(exc, out) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
+
+
+@contextlib.contextmanager
+def _signals_held():
+    """Hold SIGINT and SIGTERM (delivered on exit from the block) in the main thread."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread() or not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    held = {signal.SIGINT, signal.SIGTERM}
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def check_output_dir(out: str | os.PathLike, *, inputs: Sequence[str | os.PathLike] = ()) -> None:
+    """Refuse an ``--out`` directory that cannot be replaced whole: a file, a non-empty directory
+    not written by multilat, or one holding an input file. Called before any work starts."""
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise MultilatError(f"--out {out}: exists and is not a directory")
+    for i in inputs:
+        if i is not None and _inside(Path(i), out):
+            raise MultilatError(f"--out {out}: holds the input {i}; write the results elsewhere")
+    if _inside(Path.cwd(), out):
+        raise MultilatError(f"--out {out}: is the working directory or holds it; give a sub-directory")
+    if out.is_dir():
+        try:
+            foreign = sorted(e.name for e in os.scandir(out)
+                             if e.name not in OUTPUT_NAMES or not e.is_file(follow_symlinks=False))
+        except OSError as exc:
+            raise MultilatError(f"--out {out}: {exc.strerror or exc}") from None
+        if foreign:
+            raise MultilatError(f"--out {out}: holds {foreign[0]!r}, not a multilat output; the directory "
+                                "is replaced whole, so give a new or empty one")
+
+
+def _inside(path: Path, directory: Path) -> bool:
+    try:
+        return path.resolve().is_relative_to(directory.resolve())
+    except (OSError, RuntimeError):
+        return False
+
+
+def check_not_input(out: str | os.PathLike | None, inputs: Sequence[str | os.PathLike | None],
+                    option: str = "--out") -> None:
+    """Refuse an output file that is one of the inputs (``correct raw.csv --out raw.csv``)."""
+    if out is None:
+        return
+    o = Path(out)
+    for i in inputs:
+        if i is None:
+            continue
+        same = False
+        with contextlib.suppress(OSError):
+            same = o.exists() and Path(i).exists() and os.path.samefile(o, i)
+        if same or o.resolve() == Path(i).resolve():
+            raise MultilatError(f"{option} {out}: is the input file {i}; it would be overwritten")
+    if o.is_dir():
+        raise MultilatError(f"{option} {out}: is a directory (expected a file to write)")
+
+
+_PIPES: dict[str, bytes] = {}
+
+
+def read_input_bytes(path: str | os.PathLike) -> bytes:
+    """The bytes of an input file, read once.
+
+    A missing path, a directory or an unreadable file is a one-line :class:`MultilatError`. A named
+    pipe or other non-regular file (``<(cmd)``, ``/dev/stdin``) is read once and remembered for the
+    process, so a command that sniffs a header and then parses the file does not open it twice
+    (the second open of a pipe would wait for a writer that never comes).
+    """
+    p = Path(path)
+    key = str(p)
+    if key in _PIPES:
+        return _PIPES[key]
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise MultilatError(f"{p}: no such file") from None
+    except OSError as exc:
+        raise MultilatError(f"{p}: {exc.strerror or exc}") from None
+    import stat as _stat
+
+    if _stat.S_ISDIR(st.st_mode):
+        raise MultilatError(f"{p}: is a directory, not a file")
+    try:
+        with open(p, "rb") as fh:
+            data = fh.read()
+    except OSError as exc:
+        raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    if not _stat.S_ISREG(st.st_mode):
+        _PIPES[key] = data
+    return data
+
+
+def read_input_head(path: str | os.PathLike, size: int = 1 << 16) -> bytes:
+    """The first ``size`` bytes of an input (for sniffing a header) without reading a large regular
+    file whole; a pipe is read whole once (:func:`read_input_bytes`) and served from memory."""
+    p = Path(path)
+    if str(p) not in _PIPES and p.is_file():
+        try:
+            with open(p, "rb") as fh:
+                return fh.read(size)
+        except OSError as exc:
+            raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
+    return read_input_bytes(p)[:size]
+
+
+def count_lines(path: str | os.PathLike) -> int:
+    """Number of newline characters of an input, streamed for regular files (0 if unreadable)."""
+    p = Path(path)
+    try:
+        if str(p) not in _PIPES and p.is_file():
+            with open(p, "rb") as f:
+                return sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b""))
+        return read_input_bytes(p).count(b"\n")
+    except (OSError, MultilatError):
+        return 0
+
+
+def decode_text(data: bytes, path) -> str:
+    """UTF-8 text of an input file (a BOM dropped); a bad byte is ``FILE:LINE: not UTF-8 ...``."""
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        line = data.count(b"\n", 0, exc.start) + 1
+        raise MultilatError(f"{path}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
+                            "save the file as UTF-8") from None
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
@@ -137,12 +358,21 @@ class CsvTable:
     def has(self, name: str) -> bool:
         return name in self.columns
 
+    def ids(self, name: str) -> list[str]:
+        """Column ``name`` as ids: an empty cell is ``FILE:LINE: column 'name': empty id``."""
+        vals = self.column(name)
+        for k, v in enumerate(vals):
+            if v == "":
+                raise self.error(k, f"column '{name}': empty id")
+        return vals
+
     def floats(self, name: str, *, positive: bool = False, nonnegative: bool = False,
-               required: bool = True) -> np.ndarray:
+               required: bool = True, within: tuple[float, float, str] | None = None) -> np.ndarray:
         """Column ``name`` as float64, each cell checked: finite (and > 0 / >= 0 if asked).
 
         Raises :class:`MultilatError` ``"FILE:LINE: column 'name': ..."`` on the first bad cell.
-        An empty cell is an error when ``required``, otherwise NaN.
+        An empty cell is an error when ``required``, otherwise NaN. ``within=(lo, hi, text)``: also
+        ``lo <= value <= hi`` (``text`` states the range in the message, e.g. ``"±π/2"``).
         """
         i = self.columns.index(name)
         out = np.empty(len(self.rows))
@@ -161,6 +391,8 @@ class CsvTable:
                 raise MultilatError(f"{self.path}:{ln}: column '{name}': must be > 0, got {s!r}")
             if nonnegative and not v >= 0:
                 raise MultilatError(f"{self.path}:{ln}: column '{name}': must be >= 0, got {s!r}")
+            if within is not None and not within[0] <= v <= within[1]:
+                raise MultilatError(f"{self.path}:{ln}: column '{name}': must be within {within[2]}, got {s!r}")
             out[k] = v
         return out
 
@@ -175,17 +407,23 @@ def read_csv_table(path: str | os.PathLike, *, required: Sequence[str], optional
 
     Checks: the file exists and is not empty, every ``required`` column is in the header, every row
     has as many cells as the header. Columns neither required nor optional give a warning (or are
-    ignored with ``warn_unknown=False``). Blank lines and lines starting with ``#`` are skipped.
+    ignored with ``warn_unknown=False``). Blank lines are skipped; lines starting with ``#`` are
+    comments above the header and an error below it (an id may not begin with ``#``: such a row must
+    not vanish silently). Bytes that are not UTF-8 are an error naming the line.
     """
     p = Path(path)
-    if not p.is_file():
-        raise MultilatError(f"{p}: no such file")
-    try:
-        text = p.read_text(encoding="utf-8-sig")
-    except UnicodeDecodeError:
-        raise MultilatError(f"{p}: not a UTF-8 text file") from None
-    lines = [(n + 1, ln) for n, ln in enumerate(text.splitlines())
-             if ln.strip() and not ln.lstrip().startswith("#")]
+    text = decode_text(read_input_bytes(p), p)
+    lines, header_seen = [], False
+    for n, ln in enumerate(text.splitlines()):
+        if not ln.strip():
+            continue
+        if ln.lstrip().startswith("#"):
+            if header_seen:
+                raise MultilatError(f"{p}:{n + 1}: a line beginning with '#' after the header: an id may "
+                                    "not begin with '#' (comment lines go above the header)")
+            continue
+        header_seen = True
+        lines.append((n + 1, ln))
     if not lines:
         raise MultilatError(f"{p}: empty file (expected a header with {', '.join(required)})")
     reader = csv.reader([ln for _, ln in lines])

@@ -35,7 +35,13 @@ from collections.abc import Callable, Iterable, Iterator
 
 from multilat.errors import MultilatError
 
-__all__ = ["DaskMap", "dask_map", "process_map", "map_from_options"]
+__all__ = ["DaskMap", "dask_map", "process_map", "map_from_options", "parse_scheduler_address",
+           "probe_scheduler"]
+
+#: Seconds to wait for a TCP connection to a scheduler and for its Dask handshake.
+CONNECT_TIMEOUT_S = 5.0
+#: Seconds for the Dask client to finish connecting once the handshake was seen.
+CLIENT_TIMEOUT_S = 10.0
 
 #: glibc trim and mmap thresholds (bytes) for the local cluster's workers (see :func:`dask_map`).
 MALLOC_THRESHOLD = 64 * 2**20
@@ -99,10 +105,13 @@ def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory
     cluster = None
     try:
         if scheduler is not None:
+            address = probe_scheduler(scheduler)
             try:
-                client = distributed.Client(scheduler, timeout="10s")
-            except (OSError, TimeoutError) as exc:
-                raise MultilatError(f"cannot connect to Dask scheduler {scheduler!r}: {exc}") from None
+                client = distributed.Client(address, timeout=f"{CLIENT_TIMEOUT_S}s")
+            except Exception as exc:  # noqa: BLE001  Dask raises many kinds; all are "cannot connect"
+                raise MultilatError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
+                                    f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
+                                    ) from None
         else:
             import dask
 
@@ -130,6 +139,62 @@ def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory
             cluster.close()
 
 
+def parse_scheduler_address(text: str) -> tuple[str, str, int]:
+    """``tcp://HOST:PORT`` or ``HOST:PORT`` (``tls://`` too) -> (scheme, host, port).
+
+    Raises :class:`MultilatError` naming ``--scheduler`` for anything else: an empty string, another
+    scheme (``http://`` is the dashboard, not the scheduler), no port, a port outside 1-65535.
+    """
+    import re
+
+    s = (text or "").strip()
+    m = re.fullmatch(r"(?:(tcp|tls)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+):(\d{1,5})/?", s)
+    if not m:
+        raise MultilatError(f"--scheduler: expected tcp://HOST:PORT (a Dask scheduler, usually port "
+                            f"8786), got {text!r}")
+    scheme, host, port = m.group(1) or "tcp", m.group(2), int(m.group(3))
+    if not 1 <= port <= 65535:
+        raise MultilatError(f"--scheduler {text}: port must be in 1-65535, got {port}")
+    return scheme, host.strip("[]"), port
+
+
+def probe_scheduler(text: str, timeout_s: float | None = None) -> str:
+    """Check that a Dask scheduler answers at ``text`` before handing it to Dask; return the address.
+
+    Opens a TCP connection (``timeout_s``, default :data:`CONNECT_TIMEOUT_S`) and waits as long for
+    the first bytes: a Dask scheduler sends its handshake as soon as a client connects, while a web
+    server (the dashboard's port) or another service waits silently — which would otherwise hang Dask.
+    Every failure is a one-line :class:`MultilatError` naming ``--scheduler``.
+    """
+    import socket
+
+    scheme, host, port = parse_scheduler_address(text)
+    t = CONNECT_TIMEOUT_S if timeout_s is None else timeout_s
+    try:
+        sock = socket.create_connection((host, port), timeout=t)
+    except socket.timeout:
+        raise MultilatError(f"--scheduler {text}: no answer within {t:g} s (unreachable host?)") from None
+    except OSError as exc:
+        raise MultilatError(f"--scheduler {text}: cannot connect ({exc.strerror or exc})") from None
+    try:
+        if scheme == "tcp":
+            sock.settimeout(t)
+            try:
+                first = sock.recv(64)
+            except socket.timeout:
+                raise MultilatError(f"--scheduler {text}: something listens there but it is not a Dask "
+                                    f"scheduler (no handshake within {t:g} s; the scheduler's port is "
+                                    "usually 8786, the dashboard's 8787)") from None
+            except OSError as exc:
+                raise MultilatError(f"--scheduler {text}: connection failed ({exc.strerror or exc})") from None
+            if not first:
+                raise MultilatError(f"--scheduler {text}: the connection was closed at once; not a Dask "
+                                    "scheduler")
+    finally:
+        sock.close()
+    return f"{scheme}://{host if ':' not in host else '[' + host + ']'}:{port}"
+
+
 @contextlib.contextmanager
 def process_map(workers: int):
     """Context manager yielding the ordered, lazy ``map`` of a ``ProcessPoolExecutor`` (no Dask)."""
@@ -154,5 +219,7 @@ def map_from_options(workers: int | None = None, scheduler: str | None = None):
         return
     if workers is not None and scheduler is not None:
         raise MultilatError("--workers and --scheduler are mutually exclusive")
+    if scheduler is not None:
+        parse_scheduler_address(scheduler)       # a malformed address is refused before Dask loads
     with dask_map(workers=workers, scheduler=scheduler) as m:
         yield m

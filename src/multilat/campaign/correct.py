@@ -182,7 +182,7 @@ def read_heights(path: str | os.PathLike) -> dict:
     if col is None:
         raise MultilatError(f"{t.path}: heights file needs a height_m or z_m column")
     z = t.floats(col)
-    ids = t.column("id")
+    ids = t.ids("id")
     out: dict = {}
     for i, k in enumerate(ids):
         if k in out:

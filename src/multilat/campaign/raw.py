@@ -43,7 +43,7 @@ import numpy as np
 
 from multilat import adm
 from multilat.errors import MultilatError
-from multilat.io import CsvTable, read_csv_table
+from multilat.io import ELEVATION_RANGE, CsvTable, read_csv_table
 
 __all__ = ["RawObservations", "read_raw", "is_raw_file", "parse_time", "format_time",
            "ENV_COLUMNS", "RAW_COLUMNS", "SPEED_OF_LIGHT_M_S"]
@@ -130,14 +130,15 @@ class RawObservations:
 
 
 def _header(path) -> tuple[str, ...] | None:
-    p = Path(path)
+    from multilat.io import read_input_head
+
     try:
-        with p.open(encoding="utf-8-sig") as fh:
-            for line in fh:
-                if line.strip() and not line.lstrip().startswith("#"):
-                    return tuple(c.strip() for c in line.strip().split(","))
-    except (OSError, UnicodeDecodeError):
-        return None
+        text = read_input_head(path).decode("utf-8-sig", errors="replace")
+    except MultilatError:
+        return None          # the reader proper reports the problem
+    for line in text.splitlines():
+        if line.strip() and not line.lstrip().startswith("#"):
+            return tuple(c.strip() for c in line.strip().split(","))
     return None
 
 
@@ -240,8 +241,8 @@ def read_raw(path: str | os.PathLike) -> RawObservations:
     return RawObservations(
         path=t.path, line_numbers=t.line_numbers, station_ids=stations, target_ids=targets,
         optical_path_m=opt, phase_rad=phase, frequency_hz=freq, k=kk, time_s=time_s,
-        elevation_rad=_opt_floats(t, "elevation_rad"),
-        target_elevation_rad=_opt_floats(t, "target_elevation_rad"),
+        elevation_rad=_opt_floats(t, "elevation_rad", within=ELEVATION_RANGE),
+        target_elevation_rad=_opt_floats(t, "target_elevation_rad", within=ELEVATION_RANGE),
         azimuth_rad=_opt_floats(t, "azimuth_rad"),
         environment=env,
         station_height_m=_opt_floats(t, "station_height_m"),

@@ -93,7 +93,7 @@ def read_two_face(path: str | os.PathLike) -> TwoFaceData:
             raise MultilatError(f"{where(i)}: empty target id")
     head = None
     if t.has("head"):
-        hs = t.column("head")
+        hs = t.ids("head")
         head = hs[0]
         for i, h in enumerate(hs):
             if h != head:

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import sys
 
-from multilat.cli.app import app, main  # noqa: F401
+from multilat.cli.app import app, main, run_and_exit  # noqa: F401
 from multilat.cli import (  # noqa: F401  (registration side effects)
     air_cmd,
     budget_cmd,
@@ -35,4 +35,4 @@ from multilat.cli import (  # noqa: F401  (registration side effects)
 
 def run() -> None:
     """Console-script entry point."""
-    sys.exit(main())
+    run_and_exit()

@@ -5,14 +5,16 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import signal
 import sys
+import threading
 import warnings
 from collections.abc import Sequence
 
 import typer
 from rich.console import Console
 
-from multilat.errors import MultilatError
+from multilat.errors import MultilatError, format_error, printable
 from multilat.io import to_jsonable
 
 app = typer.Typer(
@@ -30,8 +32,20 @@ def _root() -> None:
     """Large-volume coordinate metrology: distance model, self-calibrating multilateration,
     laser ball bar, Monte Carlo uncertainty. Every computing command takes --json."""
 
-console = Console(stderr=False, highlight=False)
-err_console = Console(stderr=True, highlight=False)
+class LiteralConsole(Console):
+    """A console that prints every string literally: no rich markup (an id ``[/bold]`` is text, not
+    a closing tag), no emoji codes, control characters (an ANSI escape in an id or a file name)
+    written as ``\\xNN``. Tables, titles and messages all go through :meth:`render_str`; styling is
+    asked for explicitly with ``markup=True`` on a string that holds no user text."""
+
+    def render_str(self, text, *, markup=None, **kw):
+        if markup:
+            return super().render_str(text, markup=True, **kw)
+        return super().render_str(printable(text), markup=False, **kw)
+
+
+console = LiteralConsole(stderr=False, highlight=False, markup=False, emoji=False)
+err_console = LiteralConsole(stderr=True, highlight=False, markup=False, emoji=False)
 
 
 def emit_json(obj) -> None:
@@ -58,7 +72,20 @@ def progress(*, transient: bool = True, disable: bool = False):
 
 
 def _showwarning(message, category, filename, lineno, file=None, line=None):
-    err_console.print(f"warning: {message}", markup=False, soft_wrap=True)
+    err_console.print(f"warning: {format_error(message)}", soft_wrap=True)
+
+
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread so that every ``finally`` (staged outputs, temporary
+    files) runs before the process exits with 143."""
+
+
+def _on_sigterm(signum, frame):
+    raise Terminated()
+
+
+def _error(message: str) -> None:
+    err_console.print(f"error: {message}", soft_wrap=True)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -70,30 +97,83 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     old = warnings.showwarning
     warnings.showwarning = _showwarning
+    old_term = None
+    if threading.current_thread() is threading.main_thread():
+        old_term = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         rv = app(args=args, standalone_mode=False, prog_name="multilat")
+        if rv == 130:             # typer turns Ctrl-C into a return value of 130 in this mode
+            _error("interrupted")
         return int(rv) if isinstance(rv, int) else 0
     except MultilatError as exc:
-        err_console.print(f"error: {exc}", markup=False, soft_wrap=True)
+        _error(format_error(exc))
         return 2
     except typer.Exit as exc:
         return int(getattr(exc, "exit_code", 0) or 0)
     except (typer.Abort, KeyboardInterrupt):
-        err_console.print("error: interrupted", markup=False)
+        _error("interrupted")
         return 130
+    except Terminated:
+        _error("terminated (SIGTERM); no output written")
+        return 143
     except BrokenPipeError:  # `multilat ... | head`: the reader left; nothing to report
-        with contextlib.suppress(OSError):
-            sys.stdout = open(os.devnull, "w")  # noqa: SIM115  (keep interpreter shutdown quiet)
+        _quiet_stdout()
         return 141
+    except SystemExit as exc:  # click turns EPIPE into sys.exit(1) (and silences stderr): 141 instead
+        if isinstance(exc.__context__, BrokenPipeError):
+            sys.stderr = sys.__stderr__
+            _quiet_stdout()
+            return 141
+        raise
     except OSError as exc:  # an output path that cannot be written: a directory missing, disk full
         where = exc.filename or "output"
-        err_console.print(f"error: {where}: {exc.strerror or exc}", markup=False, soft_wrap=True)
+        _error(f"{format_error(where)}: {format_error(exc.strerror or exc)}")
         return 2
     except typer.TyperException as exc:  # click's usage errors (typer vendors click)
         if type(exc).__name__ == "NoArgsIsHelpError":
-            err_console.print(exc.format_message(), markup=False)
+            err_console.print(exc.format_message())
             return 0
-        err_console.print(f"error: {exc.format_message()}", markup=False, soft_wrap=True)
+        _error(format_error(exc.format_message()))
         return int(getattr(exc, "exit_code", 2) or 2)
+    except MemoryError:
+        _error("out of memory: the request is too large for this machine (reduce --trials, --grid "
+               "or the problem size)")
+        return 2
+    except Exception as exc:  # noqa: BLE001  the last guard: one line, never a traceback
+        import numpy as np
+
+        if isinstance(exc, (np.linalg.LinAlgError, FloatingPointError, OverflowError)):
+            _error(f"numerical failure ({format_error(exc)}): the problem is singular or overflows for "
+                   "these inputs; check the observations for gross errors (a distance in the wrong "
+                   "unit, an absurd sigma) and the options for values far beyond the network's size")
+            return 2
+        if os.environ.get("MULTILAT_TRACEBACK"):
+            raise
+        _error(f"internal error ({type(exc).__name__}: {format_error(exc)}); please report it "
+               "(MULTILAT_TRACEBACK=1 shows the traceback)")
+        return 70
     finally:
         warnings.showwarning = old
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
+
+
+def run_and_exit(argv: Sequence[str] | None = None) -> None:
+    """:func:`main`, then flush stdout (a reader that left early gives 141, quietly) and exit."""
+    code = main(argv)
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        _quiet_stdout()
+        code = 141
+    except (OSError, ValueError):
+        pass
+    sys.exit(code)
+
+
+def _quiet_stdout() -> None:
+    """After EPIPE: point stdout at /dev/null so the interpreter's final flush stays quiet."""
+    with contextlib.suppress(OSError, ValueError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)

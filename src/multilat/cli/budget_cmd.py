@@ -7,6 +7,7 @@ from typing import Optional
 import typer
 from rich.table import Table
 
+from multilat.cli import checks
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 
@@ -32,10 +33,14 @@ def budget_command(
     from multilat import budget as bmod
     from multilat.instrument import load_instrument
 
+    checks.seed(seed)
+    checks.trials(trials, lo=2)
+    if plot is not None:
+        from multilat.io import check_not_input
+
+        check_not_input(plot, [instrument if str(instrument).endswith(".toml") else None], "--plot")
     inst = load_instrument(instrument)
     inst.head(head)
-    if trials is not None and trials < 2:
-        raise MultilatError(f"--trials must be >= 2, got {trials}")
     n = inst.budget.trials_per_distance if trials is None else trials
     total = n * inst.budget.distances_m.size
     with progress(disable=total < 500_000) as bar:

@@ -40,18 +40,36 @@ def correct_cmd(
     """Correct raw readings (air group index, transit offsets) into distances with sigma_m."""
     from multilat.campaign.correct import correct_file, write_covariance, write_observations
     from multilat.campaign.environment import read_environment
+    from multilat.errors import MultilatError
+    from multilat.io import atomic_paths, check_not_input
 
+    inputs = [raw, environment, heights, instrument if str(instrument).endswith(".toml") else None]
+    outputs = {"--out": out, "--cov": cov, "--plot": plot}
+    for opt, path in outputs.items():
+        check_not_input(path, inputs, opt)
+    given = [(o, p) for o, p in outputs.items() if p is not None]
+    for i, (o, p) in enumerate(given):
+        for o2, p2 in given[i + 1:]:
+            if Path(p).resolve() == Path(p2).resolve():
+                raise MultilatError(f"{o} and {o2} name the same file {p}")
+    if max_gap_s is not None:
+        from multilat.cli import checks
+
+        checks.quantity(max_gap_s, "--max-gap-s", lo=0.0, hi=1e9, unit="s")
     log = read_environment(environment) if environment is not None else None
     res = correct_file(raw, environment=log, instrument=instrument, formula=formula.value,
                        heights=heights, extrapolate=extrapolate, max_gap_s=max_gap_s)
-    if plot is not None:
-        from multilat.report.campaign_figures import save_correction_figure
+    # --out, --cov and --plot all or nothing: each written to a temporary file, renamed together
+    with atomic_paths(*(p for _, p in given)) as tmps:
+        tmp = dict(zip((o for o, _ in given), tmps))
+        if plot is not None:
+            from multilat.report.campaign_figures import save_correction_figure
 
-        save_correction_figure(plot, res, log)
-    if cov is not None:
-        write_covariance(cov, res)
-    if out is not None:
-        write_observations(out, res)
+            save_correction_figure(tmp["--plot"], res, log)
+        if cov is not None:
+            write_covariance(tmp["--cov"], res)
+        if out is not None:
+            write_observations(tmp["--out"], res)
     if as_json:
         emit_json(res)
         return
@@ -85,12 +103,13 @@ def two_face_cmd(
     """Estimate a head's transit offset (and, with reference distances, its additive constant) from
     distances measured in face I and face II (double-centering)."""
     from multilat.campaign.twoface import estimate_two_face, read_two_face
-    from multilat.errors import require_finite
 
+    from multilat.cli import checks
+
+    checks.sigma_um(sigma_um)
     data = read_two_face(file)
     sig = None
     if sigma_um is not None:
-        require_finite("--sigma-um", sigma_um, positive=True)
         sig = sigma_um * 1e-6
     res = estimate_two_face(data, sigma_m=sig)
     if as_json:

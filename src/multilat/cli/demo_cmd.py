@@ -27,8 +27,14 @@ def demo(
     quick: bool = typer.Option(False, "--quick", help="Smaller Monte Carlo sample sizes (for tests)."),
 ) -> None:
     """Reproduce the seed papers' numbers beside multilat's own, as DIR/report.html."""
+    from multilat.cli import checks
     from multilat.report.html import render
 
+    checks.seed(seed)
+    if out.exists() and not out.is_dir():
+        from multilat.errors import MultilatError
+
+        raise MultilatError(f"--out {out}: exists and is not a directory")
     sections = []
     with progress() as p:
         task = p.add_task("demo", total=len(DEMO_SECTIONS))

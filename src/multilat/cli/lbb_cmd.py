@@ -8,6 +8,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from multilat.cli import checks
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 
@@ -70,8 +71,10 @@ def _points(cfg, where: str, grid: int | None):
     from multilat.lbb.simulate import volume_points
 
     if where == "volume":
-        if grid is not None and grid < 2:
-            raise MultilatError(f"--grid must be >= 2, got {grid}")
+        if grid is not None:
+            checks.count(grid, "--grid", lo=2, hi=10**6)
+            # the lattice, its masks and per-point results: ~200 bytes a lattice point
+            checks.memory(grid * grid * len(cfg.volume.z_levels_m) * 200.0, f"--grid {grid}")
         return volume_points(cfg, grid)
     if where == "comparison":
         return cfg.comparison.points()
@@ -97,17 +100,24 @@ def simulate(
     from multilat.lbb.outputs import summary, write_simulation
     from multilat.lbb.simulate import simulate as run
 
+    checks.seed(seed)
+    checks.trials(trials, lo=2)
+    if out is not None:
+        from multilat.io import check_output_dir
+
+        check_output_dir(out, inputs=[config])
     cfg = load_config(config)
-    if trials is not None and trials < 2:
-        raise MultilatError(f"--trials must be >= 2, got {trials}")
     pts = _points(cfg, where, grid)
     with progress() as p:
         task = p.add_task(f"LBB {method}", total=len(pts))
         sim = run(cfg, pts, method=method, rng=seed, trials=trials,
                   progress=lambda done, total: p.update(task, completed=done))
     if out is not None:
+        from multilat.io import staging_dir
+
         marks = cfg.comparison.points() if where == "volume" else None
-        write_simulation(out, sim, cfg, marks_m=marks)
+        with staging_dir(out, inputs=[config]) as tmp:
+            write_simulation(tmp, sim, cfg, marks_m=marks)
     if json_out:
         emit_json(summary(sim))
         return
@@ -143,6 +153,12 @@ def compare(
     from multilat.lbb.files import read_edges, read_reference
     from multilat.lbb.outputs import compare_reference, write_comparison
 
+    checks.seed(seed)
+    checks.trials(trials, lo=2)
+    if out is not None:
+        from multilat.io import check_output_dir
+
+        check_output_dir(out, inputs=[edges, reference, config])
     cfg = load_config(config)
     e = read_edges(edges)
     r = read_reference(reference)
@@ -151,7 +167,10 @@ def compare(
         comp = compare_reference(cfg, e, r, method=method, rng=seed, trials=trials,
                                  progress=lambda d, t: p.update(task, completed=d))
     if out is not None:
-        write_comparison(out, comp)
+        from multilat.io import staging_dir
+
+        with staging_dir(out, inputs=[edges, reference, config]) as tmp:
+            write_comparison(tmp, comp)
     frac = float(np.mean(comp.inside_2sigma))
     if json_out:
         emit_json({"points": [{"point": pt, "difference_m": comp.difference_m[i],

@@ -11,7 +11,8 @@ from rich.table import Table
 
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
-from multilat.io import staging_dir
+from multilat.cli import checks
+from multilat.io import check_output_dir, staging_dir
 
 
 def parse_fixed_offsets(text: str, station_ids) -> float | dict:
@@ -26,8 +27,7 @@ def parse_fixed_offsets(text: str, station_ids) -> float | dict:
         except ValueError:
             raise MultilatError(f"--fix-offsets-um: expected a number of µm or STATION=µm,..., "
                                 f"got {text!r}") from None
-        if not np.isfinite(v):
-            raise MultilatError(f"--fix-offsets-um must be finite, got {text!r}")
+        checks.offset_um(v)
         return v * 1e-6
     out = {}
     for item in text.split(","):
@@ -44,8 +44,7 @@ def parse_fixed_offsets(text: str, station_ids) -> float | dict:
             v = float(val)
         except ValueError:
             raise MultilatError(f"--fix-offsets-um: {key}: not a number of µm: {val.strip()!r}") from None
-        if not np.isfinite(v):
-            raise MultilatError(f"--fix-offsets-um: {key}: must be finite, got {val.strip()!r}")
+        checks.offset_um(v, f"--fix-offsets-um {key}")
         out[key] = v * 1e-6
     return out
 
@@ -117,8 +116,12 @@ def adjust_command(
                                         write_result_csvs)
     from multilat.network.result import result_to_json
 
-    if sigma_um is not None and not (np.isfinite(sigma_um) and sigma_um > 0):
-        raise MultilatError(f"--sigma-um must be finite and > 0, got {sigma_um!r}")
+    checks.sigma_um(sigma_um)
+    checks.seed(seed)
+    if solver not in ("auto", "dense", "sparse"):
+        raise MultilatError(f"--solver must be auto, dense or sparse, got {solver!r}")
+    if out is not None:
+        check_output_dir(out, inputs=[observations, references, points, environment, heights])
     from multilat.campaign.raw import is_raw_file
 
     corrected = None
@@ -156,7 +159,7 @@ def adjust_command(
     if out is not None:
         from multilat.report.network_figures import save_figures
 
-        with staging_dir(out) as tmp:
+        with staging_dir(out, inputs=[observations, references, points, environment, heights]) as tmp:
             write_result_csvs(res, tmp, references=refs)
             save_figures(res, tmp)
             from multilat.io import write_json_atomic
@@ -233,10 +236,10 @@ def _print_summary(res, doc, out):
     if res.unlocated:
         ids = ", ".join(f"{o.station}->{o.target}" for o in res.unlocated)
         if len(res.unlocated) > 1:
-            console.print(f"  [bold]w-test failure that cannot be located[/bold] (perfectly correlated "
+            console.print(f"  w-test failure that cannot be located (perfectly correlated "
                           f"tests, |w| = {abs(res.unlocated[0].w):.1f}): one of {ids}; none rejected")
         else:
-            console.print(f"  [bold]w-test failure not rejected[/bold]: {ids} (|w| = "
+            console.print(f"  w-test failure not rejected: {ids} (|w| = "
                           f"{abs(res.unlocated[0].w):.1f}): {res.unlocated_reason}")
     t = Table(title="stations", title_justify="left")
     for c in ("station", "x (m)", "y (m)", "z (m)", "offset (µm)", "u(offset) (µm)", "95 % max (µm)"):

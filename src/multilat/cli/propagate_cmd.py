@@ -5,10 +5,10 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import typer
 from rich.table import Table
 
+from multilat.cli import checks
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 
@@ -67,12 +67,19 @@ def propagate_cmd(
 
     if noise not in ("model", "gaussian"):
         raise MultilatError(f"--noise must be model or gaussian, got {noise!r}")
-    if trials < 2:
-        raise MultilatError(f"--trials must be >= 2, got {trials}")
-    if chunk_size < 1:
-        raise MultilatError(f"--chunk-size must be >= 1, got {chunk_size}")
-    if sigma_um is not None and not (np.isfinite(sigma_um) and sigma_um > 0):
-        raise MultilatError(f"--sigma-um must be > 0, got {sigma_um!r}")
+    checks.sigma_um(sigma_um)
+    checks.seed(seed)
+    checks.trials(trials, lo=2)
+    checks.count(chunk_size, "--chunk-size", hi=10**8)
+    checks.count(workers, "--workers", hi=4096)
+    if scheduler is not None:
+        from multilat.parallel import parse_scheduler_address
+
+        parse_scheduler_address(scheduler)
+    if out is not None:
+        from multilat.io import check_output_dir
+
+        check_output_dir(out, inputs=[source, references])
     problem = load_problem(source, datum=datum, noise=noise, instrument=instrument, sigma_um=sigma_um,
                            references=references)
     total = None if adaptive else trials
@@ -86,7 +93,7 @@ def propagate_cmd(
         from multilat.io import staging_dir
 
         # all or nothing: files go to a temporary directory beside OUT, moved in only on success
-        with staging_dir(out) as tmp:
+        with staging_dir(out, inputs=[source, references]) as tmp:
             write_outputs(res, doc, tmp)
     if as_json:
         emit_json(doc)
@@ -132,7 +139,7 @@ def _um(v):
 
 def _print(res, doc, out) -> None:
     s = doc["summary"]
-    console.print(f"[bold]Monte Carlo through the adjustment[/bold] ({doc['source']}): {doc['trials']} trials "
+    console.print(f"Monte Carlo through the adjustment ({doc['source']}): {doc['trials']} trials "
                   f"kept, {doc['n_failed']} failed to converge ({doc['n_retried']} re-solved by full "
                   f"Gauss-Newton), noise={doc['noise']}, {doc['elapsed_s']:.1f} s")
     console.print(f"sigma0: nominal {doc['sigma0_nominal']:.3f}, trials' mean {doc['sigma0_mean']:.3f} "

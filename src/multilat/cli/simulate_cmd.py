@@ -7,6 +7,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from multilat.cli import checks
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 
@@ -32,10 +33,12 @@ def simulate_cmd(
 
     if noise not in NOISES:
         raise MultilatError(f"--noise must be one of {', '.join(NOISES)}, got {noise!r}")
-    if not (np.isfinite(sigma_um) and sigma_um > 0):
-        raise MultilatError(f"--sigma-um must be > 0, got {sigma_um!r}")
-    if trials < 1:
-        raise MultilatError(f"--trials must be >= 1, got {trials}")
+    checks.sigma_um(sigma_um)
+    checks.count(trials, "--trials", hi=10**6)   # each trial is a whole adjustment
+    checks.seed(seed)
+    from multilat.instrument import load_instrument
+
+    load_instrument(instrument)          # a bad --instrument is an error even when --noise ignores it
     if cost not in ("distance", "squared"):
         raise MultilatError(f"--cost must be distance or squared, got {cost!r}")
     if start not in ("distances", "truth"):
@@ -67,7 +70,7 @@ def simulate_cmd(
     if as_json:
         emit_json(doc)
         return
-    console.print(f"[bold]Simulation of the self-calibrating adjustment[/bold] ({res.config}): "
+    console.print(f"Simulation of the self-calibrating adjustment ({res.config}): "
                   f"{doc['converged']} of {res.trials} simulations converged, noise={noise}"
                   + (f" {sigma_um:g} um" if noise == "gaussian" else " (distance model)")
                   + f", cost={cost}, {len(res.pairs)} interpoint pairs, mean sigma0={doc['sigma0_mean']:.2f}")

@@ -268,7 +268,8 @@ class LBBConfig(_Model):
                 data[sec][key] = v
             else:
                 data[k] = v
-        return parse_config(data, source="<replace>")
+        keys = ", ".join(sorted(sections))
+        return parse_config(data, source=f"config with {keys} replaced")
 
 
 def parse_config(data: dict, *, source: str = "<dict>") -> LBBConfig:
@@ -288,12 +289,11 @@ def load_config(path: str | Path | None = None) -> LBBConfig:
         Missing/unreadable file, malformed TOML (with its line), a missing, unknown or mistyped key.
     """
     p = Path(path) if path is not None else DEFAULT_CONFIG
-    if not p.is_file():
+    from multilat.io import decode_text, read_input_bytes
+
+    if not p.exists():
         raise MultilatError(f"config file not found: {p}")
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MultilatError(f"cannot read config file {p}: {exc}") from None
+    text = decode_text(read_input_bytes(p), p)
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -85,4 +85,11 @@ def match_points(edges: EdgeTable, ref: ReferenceTable):
     missing = [p for p in ref.points if p not in pos]
     if missing:
         raise MultilatError(f"reference point(s) without edges: {', '.join(missing[:5])}")
+    extra = [p for p in edges.points if p not in set(ref.points)]
+    if extra:
+        import warnings
+
+        warnings.warn(f"{len(extra)} measured point(s) without a reference coordinate, "
+                      f"not compared: {', '.join(extra[:5])}{' ...' if len(extra) > 5 else ''}",
+                      UserWarning, stacklevel=2)
     return np.array([pos[p] for p in ref.points])

@@ -2,10 +2,15 @@
 
 :func:`multilat.network.files.read_observations` checks every cell in Python, which is right for
 hand-made files but takes seconds per million rows. :func:`read_observations_fast` reads the same
-format — header ``station,target,distance_m[,sigma_m]`` (in this order; no quoting; ``#`` comment
-lines and blank lines only before the header) — vectorised: the bytes are split on newlines and
-commas with ``np.flatnonzero``, ids are gathered into fixed-width byte strings and numbered with
-``np.unique``, numbers are converted by numpy's bytes-to-float cast. Errors name ``FILE:LINE``.
+format — header ``station,target,distance_m[,sigma_m]`` (in this order) — vectorised: the bytes are
+split on newlines and commas with ``np.flatnonzero``, ids are gathered into fixed-width byte strings
+and numbered with ``np.unique``, numbers are converted by numpy's bytes-to-float cast.
+
+One grammar, two speeds: the vectorised path only takes the plain subset of the format (ASCII, no
+quotes, no spaces, no blank or ``#`` lines after the header, ids of at most ``id_width`` characters,
+every cell valid, no duplicate observation, no id both station and target). Any file outside it is
+handed whole to the general reader, which accepts it or refuses it with its ``FILE:LINE`` message,
+so both readers accept and refuse the same files with the same messages.
 """
 
 from __future__ import annotations
@@ -44,15 +49,15 @@ class FastObservations:
                             self.distance_m, self.sigma_m)
 
 
-def _fields(buf, starts, ends, width, path, line0):
+class _NotPlain(Exception):
+    """The file is outside the vectorised path's plain subset: the general reader decides."""
+
+
+def _fields(buf, starts, ends, width):
     """Gather byte fields [starts, ends) into an (n, w) uint8 array (zero padded), w = longest field."""
     ln = ends - starts
-    if ln.size and ln.max() > width:
-        k = int(np.argmax(ln > width))
-        raise MultilatError(f"{path}:{line0 + k}: field longer than {width} characters")
-    if ln.size and ln.min() <= 0:
-        k = int(np.argmax(ln <= 0))
-        raise MultilatError(f"{path}:{line0 + k}: empty field")
+    if ln.size and (ln.max() > width or ln.min() <= 0):
+        raise _NotPlain
     w = int(ln.max())
     out = np.zeros((len(starts), w), np.uint8)
     last = len(buf) - 1
@@ -76,27 +81,22 @@ def _ids(fields):
     rank = np.empty_like(order)
     rank[order] = np.arange(len(order))
     sel = np.ascontiguousarray(fields[first[order]]).view(f"S{w}").ravel()   # trailing NULs dropped
-    names = tuple(s.strip() for s in np.char.decode(sel, "utf-8").tolist())
+    names = tuple(np.char.decode(sel, "ascii").tolist())
     return names, rank[inv.ravel()].astype(np.int64)
 
 
-def _floats(fields, name, path, line0):
+def _floats(fields):
     fields = np.ascontiguousarray(fields).view(f"S{fields.shape[1]}").ravel()
     try:
         v = fields.astype(np.float64)
     except ValueError:
-        for k, f in enumerate(fields):
-            try:
-                float(f)
-            except ValueError:
-                raise MultilatError(f"{path}:{line0 + k}: column '{name}': not a number: "
-                                    f"{f.decode(errors='replace')!r}") from None
-        raise MultilatError(f"{path}: column '{name}': not a number")  # pragma: no cover
-    bad = ~(np.isfinite(v) & (v > 0))
-    if bad.any():
-        k = int(np.argmax(bad))
-        raise MultilatError(f"{path}:{line0 + k}: column '{name}': must be finite and > 0, got {v[k]!r}")
+        raise _NotPlain from None
+    if not np.all(np.isfinite(v) & (v > 0)):
+        raise _NotPlain
     return v
+
+
+_HEADER = ["station", "target", "distance_m"]
 
 
 def read_observations_fast(path: str | os.PathLike, *, sigma_m: float | None = None,
@@ -109,20 +109,30 @@ def read_observations_fast(path: str | os.PathLike, *, sigma_m: float | None = N
     sigma_m : float, optional
         Standard uncertainty for every row when the file has no ``sigma_m`` column.
     id_width, number_width : int
-        Longest id / number field accepted (characters).
+        Longest id / number field taken by the vectorised path (characters); longer fields go
+        through the general reader (accepted there).
 
     Returns
     -------
     FastObservations
+
+    Raises
+    ------
+    MultilatError
+        ``FILE:LINE: ...`` exactly as :func:`multilat.network.files.read_observations`; a header
+        other than the four columns above ("the fast reader needs the header ..."); no ``sigma_m``
+        column and no ``sigma_m`` argument ("no sigma_m column: give sigma_m").
     """
+    from multilat.io import read_input_bytes
+
     p = Path(path)
-    if not p.is_file():
-        raise MultilatError(f"{p}: no such file")
-    data = p.read_bytes()
+    if sigma_m is not None and not (np.isfinite(sigma_m) and sigma_m > 0):
+        raise MultilatError(f"sigma_m must be finite and > 0, got {float(sigma_m)!r}")
+    data = read_input_bytes(p)
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
     data = data.replace(b"\r\n", b"\n")
-    # skip comment / blank lines before the header
+    # comment / blank lines before the header
     pos, line = 0, 1
     while pos < len(data) and (data[pos:pos + 1] in (b"#", b"\n") or data[pos:pos + 1].isspace()):
         nxt = data.find(b"\n", pos)
@@ -130,43 +140,66 @@ def read_observations_fast(path: str | os.PathLike, *, sigma_m: float | None = N
         line += 1
     end = data.find(b"\n", pos)
     if end < 0:
-        raise MultilatError(f"{p}: empty file (expected a header station,target,distance_m)")
+        end = len(data)
     header = [h.strip() for h in data[pos:end].decode("utf-8", errors="replace").split(",")]
-    if header[:3] != ["station", "target", "distance_m"] or len(header) > 4 or \
-            (len(header) == 4 and header[3] != "sigma_m"):
+    if pos >= len(data):
+        return _general(p, sigma_m)          # empty: the general reader's message
+    if header[:3] != _HEADER or len(header) > 4 or (len(header) == 4 and header[3] != "sigma_m"):
         raise MultilatError(f"{p}:{line}: the fast reader needs the header station,target,distance_m[,sigma_m]"
                             f" (got {','.join(header)})")
     ncol = len(header)
     if ncol == 3 and sigma_m is None:
         raise MultilatError(f"{p}: no sigma_m column: give sigma_m")
-    body = np.frombuffer(data, np.uint8, offset=end + 1)
+    try:
+        return _plain(data, end, ncol, sigma_m, id_width, number_width)
+    except _NotPlain:
+        return _general(p, sigma_m)
+
+
+def _plain(data: bytes, end: int, ncol: int, sigma_m, id_width: int, number_width: int) -> FastObservations:
+    """The vectorised path; raises :class:`_NotPlain` on anything outside the plain subset."""
+    body = np.frombuffer(data, np.uint8, offset=min(end + 1, len(data)))
     if body.size and body[-1] != 10:
         body = np.concatenate([body, np.array([10], np.uint8)])
-    line0 = line + 1
+    if body.size == 0 or np.any((body >= 0x80) | (body == 34) | (body == 35) | (body == 32)
+                                | (body == 9) | (body == 13)):
+        raise _NotPlain                    # non-ASCII, quotes, '#', spaces, lone CR
     nl = np.flatnonzero(body == 10)
     n = len(nl)
-    if n == 0:
-        raise MultilatError(f"{p}: no data rows after the header")
     starts = np.concatenate([[0], nl[:-1] + 1])
     if np.any(nl == starts):
-        k = int(np.argmax(nl == starts))
-        raise MultilatError(f"{p}:{line0 + k}: blank line inside the data")
+        raise _NotPlain                    # blank lines
     commas = np.flatnonzero(body == 44)
     per_line = np.diff(np.searchsorted(commas, np.concatenate([starts, [len(body)]])))
     if np.any(per_line != ncol - 1):
-        k = int(np.argmax(per_line != ncol - 1))
-        raise MultilatError(f"{p}:{line0 + k}: expected {ncol} cells, got {int(per_line[k]) + 1}")
+        raise _NotPlain
     c = commas.reshape(n, ncol - 1)
-    sf = _fields(body, starts, c[:, 0], id_width, p, line0)
-    tf = _fields(body, c[:, 0] + 1, c[:, 1], id_width, p, line0)
+    sf = _fields(body, starts, c[:, 0], id_width)
+    tf = _fields(body, c[:, 0] + 1, c[:, 1], id_width)
     dend = c[:, 2] if ncol == 4 else nl
-    d = _floats(_fields(body, c[:, 1] + 1, dend, number_width, p, line0), "distance_m", p, line0)
+    d = _floats(_fields(body, c[:, 1] + 1, dend, number_width))
     if ncol == 4:
-        sig = _floats(_fields(body, c[:, 2] + 1, nl, number_width, p, line0), "sigma_m", p, line0)
+        sig = _floats(_fields(body, c[:, 2] + 1, nl, number_width))
     else:
-        if not (np.isfinite(sigma_m) and sigma_m > 0):
-            raise MultilatError(f"sigma_m must be finite and > 0, got {sigma_m!r}")
         sig = np.full(n, float(sigma_m))
     sids, si = _ids(sf)
     tids, ti = _ids(tf)
-    return FastObservations(sids, tids, si, ti, d, sig)
+    pair = si * len(tids) + ti
+    if np.unique(pair).size != n or set(sids) & set(tids):
+        raise _NotPlain                    # duplicates, an id both station and target
+    obs = FastObservations(sids, tids, si, ti, d, sig)
+    from multilat.network.screening import suspect_rows
+
+    if suspect_rows(obs):
+        raise _NotPlain                    # the general reader names the rows with their lines
+    return obs
+
+
+def _general(path: Path, sigma_m) -> FastObservations:
+    """The general reader's verdict on a file outside the plain subset, as FastObservations."""
+    from multilat.network.files import read_observations
+
+    obs = read_observations(path, sigma_m=sigma_m)
+    return FastObservations(tuple(obs.station_ids), tuple(obs.target_ids),
+                            np.asarray(obs.station_index, np.int64), np.asarray(obs.target_index, np.int64),
+                            np.asarray(obs.distance_m, float), np.asarray(obs.sigma_m, float))

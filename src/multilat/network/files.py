@@ -19,8 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.io import read_csv_table, write_csv_atomic
+from multilat.io import ELEVATION_RANGE, read_csv_table, write_csv_atomic
 from multilat.network.data import Observations, Points, ReferenceLengths
+from multilat.network.screening import screen_observations
 
 __all__ = ["read_observations", "read_reference_lengths", "read_points", "write_result_csvs"]
 
@@ -76,7 +77,7 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         raise MultilatError(f"{path}: give both azimuth_rad and elevation_rad columns, or neither")
     if tab.has("azimuth_rad"):
         az = tab.floats("azimuth_rad", required=False)
-        el = tab.floats("elevation_rad", required=False)
+        el = tab.floats("elevation_rad", required=False, within=ELEVATION_RANGE)
     if tab.has("sigma_m"):
         sig = tab.floats("sigma_m", positive=True)
         if sigma_m is not None:
@@ -89,7 +90,9 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         sig = np.full(d.shape, float(sigma_m))
     else:
         sig = _model_sigma(d, st, instrument)
-    return Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
+    obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
+    screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
+    return obs
 
 
 def _model_sigma(d, stations, instrument):

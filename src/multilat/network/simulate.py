@@ -358,6 +358,8 @@ def load_config_file(path: str | os.PathLike) -> NetworkConfig:
     ``target``; all target pairs are compared).
     """
     p = Path(path)
+    if p.is_dir():
+        raise MultilatError(f"{p}: is a directory, not a configuration file")
     if not p.is_file():
         raise MultilatError(f"{p}: no such file (and not a built-in configuration: "
                             f"{', '.join(BUILTIN)})")
