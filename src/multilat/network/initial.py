@@ -445,6 +445,60 @@ def _refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
     return Hx, Tx, ox, float(np.sqrt(np.mean(r ** 2))), float(1.4826 * np.median(np.abs(r)))
 
 
+def _point_fit(A, d, w, p, *, iters=8):
+    """Gauss-Newton for one point ``p`` (3,) from anchors ``A`` (n, 3), offset-corrected distances
+    ``d`` (n,) and weights ``w`` (n,); returns the point and its weighted cost ``sum w r^2``."""
+    for _ in range(iters):
+        diff = p - A
+        rho = np.sqrt((diff ** 2).sum(1))
+        J = diff / np.where(rho > 0, rho, 1e-12)[:, None]
+        r = d - rho
+        sw = np.sqrt(w)
+        step, *_ = np.linalg.lstsq(sw[:, None] * J, sw * r, rcond=None)
+        p = p + step
+        if np.max(np.abs(step)) < 1e-12 * (1.0 + np.max(np.abs(p))):
+            break
+    r = d - np.sqrt(((p - A) ** 2).sum(1))
+    return p, float(w @ r ** 2)
+
+
+def _mirror_sweep(D, W, H, T, o):
+    """Targets whose mirror image through the best-fitting plane of their stations fits their own
+    distances better (weighted cost lower by more than 1; stations and offsets held): moved there. Returns the moved indices.
+
+    With (nearly) coplanar stations a target and its mirror image are (nearly) equivalent, and the
+    block factorisation or a multilateration from 4 stations can put single targets on the wrong
+    side; the refinement cannot bring them back (a wrong local minimum, issue 10). ``T`` is
+    modified in place."""
+    seen = np.isfinite(D)
+    moved = []
+    for j in range(T.shape[0]):
+        st = np.flatnonzero(seen[:, j])
+        if len(st) < 4:       # 3 stations: the two sides fit exactly, nothing to decide
+            continue
+        A, d, w = H[st], D[st, j] - o[st], W[st, j]
+        r0 = d - np.sqrt(((T[j] - A) ** 2).sum(1))
+        c0 = float(w @ r0 ** 2)
+        c = A.mean(0)
+        n = np.linalg.svd(A - c)[2][2]
+        Tm, c1 = _point_fit(A, d, w, T[j] - 2.0 * ((T[j] - c) @ n) * n)
+        if c1 < c0 - 1.0:   # clearly lower (the cost is a chi-square sum: 1 is its noise scale)
+            T[j] = Tm
+            moved.append(j)
+    return moved
+
+
+def _refine_unmirrored(D, W, H, T, o, frame, *, rounds=4, **kw):
+    """:func:`_refine`, then :func:`_mirror_sweep` and a new refinement while targets move."""
+    out = _refine(D, W, H, T, o, frame, **kw)
+    for _ in range(rounds):
+        H, T, o = out[0], out[1].copy(), out[2]
+        if not _mirror_sweep(D, W, H, T, o):
+            break
+        out = _refine(D, W, H, T, o, frame, **kw)
+    return out
+
+
 #: unknowns from which the refinement uses sparse normal equations (SuperLU) instead of dense ones
 _SPARSE_FROM = 150
 
@@ -653,7 +707,7 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
             continue
         frame = _choose_frame(H)
         H, T = _to_frame(H, T, frame)
-        H, T, o, rms, rob = _refine(D, W, H, T, o, frame)
+        H, T, o, rms, rob = _refine_unmirrored(D, W, H, T, o, frame)
         # a second block reaching the same RMS confirms the minimum; a lower one replaces it
         # (a false minimum can fit the noise level too: seen in ~0.5 % of gappy networks)
         confirmed = best is not None and best[4] <= good and abs(rms - best[4]) <= 1e-6 * best[4]
@@ -686,7 +740,7 @@ def _restarts(D, W, *, rng, restarts):
         T = rng.uniform(-0.5 * L, 0.5 * L, (t, 3))
         frame = _choose_frame(H)
         H, T = _to_frame(H, T, frame)
-        Hr, Tr, orr, rms, rob = _refine(D, W, H, T, np.zeros(s), frame, max_nfev=100)
+        Hr, Tr, orr, rms, rob = _refine_unmirrored(D, W, H, T, np.zeros(s), frame, max_nfev=100)
         if np.isfinite(rms) and (best is None or rms < best[4]):
             best = (Hr, Tr, orr, frame, rms, rob)
     return best
