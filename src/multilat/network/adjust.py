@@ -29,7 +29,7 @@ from multilat.network.exclusion import exclude_weak_points, zero_redundancy_warn
 from multilat.network.solvability import check_structure, flat_geometry
 from multilat.network.solve import choose_backend, gauss_newton, make_backend, solve_reduced
 from multilat.network.solve.loop import check_target_blocks
-from multilat.network.solve.system import whitened
+from multilat.network.solve.system import weighted_cost, whitened
 
 __all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
 
@@ -136,6 +136,13 @@ def _pick_321_stations(sx) -> tuple[int, int, int]:
         if area > best:
             best, bi = area, (a, b, k)
     return bi
+
+
+def _raise_unconverged(obs, p: Params, conv) -> None:
+    _raise_if_flat(obs, p.station_xyz_m, p.target_xyz_m, "no convergence")
+    raise MultilatError(f"the adjustment did not converge ({conv.reason} after {conv.iterations} "
+                        f"iterations, last step {conv.last_step_sigma:.3g} sigma); check the initial "
+                        "values, the geometry and the distances for gross errors")
 
 
 def _raise_if_flat(obs, sx, tx, when: str) -> None:
@@ -321,7 +328,16 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     while True:
         sub = obs if used.all() else obs.subset(used)
         core = _adjust_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
-                            sc_free, max_iter, solver, chunk_targets, warn=warn)
+                            sc_free, max_iter, solver, chunk_targets, warn=warn,
+                            partial_ok=first and cost == "distance")
+        if first and cost == "distance":
+            # a converged result failing the global test by far may be a wrong minimum: search
+            core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
+                                           max_iter, solver, chunk_targets, rng)
+            how["search"] = search.as_dict()
+            if search.warning:
+                notes.append(search.warning)
+                warnings.warn(search.warning, UserWarning, stacklevel=2)
         if first and datum.kind == "control" and cost == "distance":
             # a failed global test under control may be the control coordinates, not the distances:
             # test them (against the free network) before data snooping blames the distances
@@ -372,6 +388,36 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                        reason=reason, snooped=do_snoop)
     groups = _w_failure_groups(core, used, crit) if cost == "distance" else ()
     return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how)
+
+
+def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free, max_iter, solver,
+                    chunk_targets, rng):
+    """:func:`multilat.network.search.find_minimum` from the first adjustment (converged or the
+    lowest-cost point it reached); returns the best core and the search record. Raises the
+    non-convergence error when no start converges."""
+    from types import SimpleNamespace
+
+    from multilat.network.search import find_minimum
+
+    used = np.ones(obs.n_obs, bool)
+
+    def wrap(c):
+        return SimpleNamespace(station_xyz_m=c["sx"], target_xyz_m=c["tx"], offset_m=c["off"],
+                               vtpv=c["vtpv"], dof=c["dof"], core=c)
+
+    def solve(st_):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return wrap(_adjust_once(obs, datum, st_, start, obs, used, points, "distance", off_free,
+                                     off_val, sc_free, max_iter, solver, chunk_targets, warn=False))
+
+    first = wrap(core)
+    res = find_minimum(obs, solve, first, rng=rng)
+    best = res.solution.core
+    if best.get("partial"):
+        conv = best["convergence"]
+        _raise_unconverged(obs, Params(best["sx"], best["tx"], best["off"], np.zeros(obs.n_stations)), conv)
+    return best, res
 
 
 def _w_failure_groups(core, used, crit, limit: int = 50) -> tuple:
@@ -509,7 +555,7 @@ def _control_ids(sub, datum, points):
 
 
 def _adjust_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
-                 sc_free_all, max_iter, solver, chunk_targets, *, warn):
+                 sc_free_all, max_iter, solver, chunk_targets, *, warn, partial_ok=False):
     """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
     ``ref_start`` gives the reference coordinates of the free datum. Returns a dict of arrays in
     ``sub``'s order plus the maps back."""
@@ -557,10 +603,10 @@ def _adjust_once(sub, datum, start, ref_start, obs, used, points, cost, off_free
     backend = make_backend(pb, choose_backend(pb, solver), chunk_targets=chunk_targets)
     p, conv = gauss_newton(pb, Params(sx0, tx0, off0, sc0), backend, max_iter=max_iter)
     if not conv.converged:
-        _raise_if_flat(sub, p.station_xyz_m, p.target_xyz_m, "no convergence")
-        raise MultilatError(f"the adjustment did not converge ({conv.reason} after {conv.iterations} "
-                            f"iterations, last step {conv.last_step_sigma:.3g} sigma); check the initial "
-                            "values, the geometry and the distances for gross errors")
+        if partial_ok:      # the lowest-cost point reached: a start for the minimum search
+            return dict(partial=True, sx=p.station_xyz_m, tx=p.target_xyz_m, off=p.offset_m,
+                        vtpv=weighted_cost(pb, p), dof=pb.dof, convergence=conv)
+        _raise_unconverged(sub, p, conv)
     sx, tx, off, sc = p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale
     # final normal equations at the solution
     fin = backend.assemble(p, 0.0)
