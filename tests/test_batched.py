@@ -7,7 +7,8 @@ import pytest
 from scipy.optimize import least_squares
 
 from multilat.errors import MultilatError
-from multilat.network.batched import BatchedNetwork, Datum, flatten, inv3_sym, numba_available
+from multilat.network.batched import BatchedNetwork, TrialDatum as Datum, flatten, numba_available
+from multilat.network.model import inv3 as inv3_sym
 
 H = np.array([[504, 938, 491], [0, 0, 0], [524, -7, 909], [1050, 0, 0]]) / 1000.0   # seed 000 §4.1
 

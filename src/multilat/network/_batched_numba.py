@@ -101,12 +101,12 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
 
 
 @njit(parallel=True, cache=True)
-def apply_inner(pts, idx, x0c, proj, c0):  # pragma: no cover - jit
+def apply_inner(pts, idx, x0c, proj, c0, iterations):  # pragma: no cover - jit
     """Rigid least-squares fit of ``pts[:, idx]`` onto ``x0c + c0`` per trial, in place.
 
     pts (n, P, 3); idx (q,) datum point indices; x0c (q, 3) nominal datum points minus centroid c0;
     proj (q, 3, 6) = G (G^T G)^-1 of the Helmert basis about the centroid. Same iteration as the
-    numpy path of :meth:`Datum.apply` (linearised fit, exact Rodrigues rotation, repeated).
+    numpy path of :meth:`TrialDatum.apply` (linearised fit, exact Rodrigues rotation, repeated).
     """
     n, npts, _ = pts.shape
     q = idx.shape[0]
@@ -114,7 +114,7 @@ def apply_inner(pts, idx, x0c, proj, c0):  # pragma: no cover - jit
         for p in range(npts):
             for a in range(3):
                 pts[r, p, a] -= c0[a]
-        for it in range(4):
+        for it in range(iterations):
             xi = np.zeros(6)
             for b in range(q):
                 pb = idx[b]

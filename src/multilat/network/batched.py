@@ -35,9 +35,9 @@ advances all trials of a chunk together:
 
 The datum (distances leave translation and rotation free) is applied to every trial in the same
 way by :class:`Datum`: the solved network is moved rigidly so that its datum points coincide with
-the nominal ones — a least-squares (Kabsch) fit over the chosen points for ``Datum.inner`` (to first
+the nominal ones — a least-squares (Kabsch) fit over the chosen points for ``TrialDatum.inner`` (to first
 order the inner-constraint, minimum-trace datum of the free-network adjustment), or the 3-2-1
-definition on three stations for ``Datum.three_two_one``. :meth:`BatchedNetwork.linear_covariance`
+definition on three stations for ``TrialDatum.three_two_one``. :meth:`BatchedNetwork.linear_covariance`
 returns the first-order covariance in exactly that datum, for the MC-vs-linear validation.
 
 Parameter vector layout (used by the covariance and by :func:`flatten`):
@@ -51,75 +51,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.datum import RIGID_FIT_ITERATIONS, frame_axes, helmert_basis, parse_datum
+from multilat.network.model import inv3
 
 __all__ = [
-    "Datum",
+    "TrialDatum",
     "BatchedNetwork",
     "BatchSolution",
     "flatten",
-    "helmert_basis",
     "numba_available",
 ]
 
 
 # ----------------------------------------------------------------------------------------------
 # small vectorised helpers
-
-def inv3_sym(a: np.ndarray) -> np.ndarray:
-    """Inverse of symmetric 3x3 matrices in closed form (adjugate / determinant).
-
-    Parameters
-    ----------
-    a : ndarray, shape (..., 3, 3)
-
-    Returns
-    -------
-    ndarray, shape (..., 3, 3)
-    """
-    a00, a01, a02 = a[..., 0, 0], a[..., 0, 1], a[..., 0, 2]
-    a11, a12, a22 = a[..., 1, 1], a[..., 1, 2], a[..., 2, 2]
-    c00 = a11 * a22 - a12 * a12
-    c01 = a02 * a12 - a01 * a22
-    c02 = a01 * a12 - a02 * a11
-    c11 = a00 * a22 - a02 * a02
-    c12 = a01 * a02 - a00 * a12
-    c22 = a00 * a11 - a01 * a01
-    det = a00 * c00 + a01 * c01 + a02 * c02
-    out = np.empty_like(a)
-    inv = 1.0 / det
-    out[..., 0, 0] = c00 * inv
-    out[..., 0, 1] = out[..., 1, 0] = c01 * inv
-    out[..., 0, 2] = out[..., 2, 0] = c02 * inv
-    out[..., 1, 1] = c11 * inv
-    out[..., 1, 2] = out[..., 2, 1] = c12 * inv
-    out[..., 2, 2] = c22 * inv
-    return out
-
-
-def helmert_basis(points_xyz_m: np.ndarray) -> np.ndarray:
-    """Rigid-motion basis of point coordinates: columns tx, ty, tz, rx, ry, rz.
-
-    Parameters
-    ----------
-    points_xyz_m : ndarray, shape (q, 3)
-
-    Returns
-    -------
-    ndarray, shape (3q, 6)
-        ``d(points.ravel()) / d(translation, small rotation vector)`` at ``points_xyz_m``;
-        the rotation columns are ``omega x p`` for unit ``omega``.
-    """
-    p = np.asarray(points_xyz_m, float)
-    q = p.shape[0]
-    g = np.zeros((q, 3, 6))
-    g[:, 0, 0] = g[:, 1, 1] = g[:, 2, 2] = 1.0
-    x, y, z = p[:, 0], p[:, 1], p[:, 2]
-    # omega x p for omega = e_x, e_y, e_z
-    g[:, 1, 3], g[:, 2, 3] = -z, y
-    g[:, 0, 4], g[:, 2, 4] = z, -x
-    g[:, 0, 5], g[:, 1, 5] = -y, x
-    return g.reshape(3 * q, 6)
-
 
 def _rotation_from_vector(omega: np.ndarray) -> np.ndarray:
     """Rodrigues: rotation matrices (n, 3, 3) from rotation vectors (n, 3) in radians."""
@@ -161,17 +106,18 @@ def flatten(station_xyz_m, offset_m, target_xyz_m) -> np.ndarray:
 # datum
 
 @dataclass(frozen=True)
-class Datum:
-    """How every solution is placed in space (the same way in every trial).
+class TrialDatum:
+    """How every solution is placed in space (the same way in every trial): the index form of the
+    one datum definition, :class:`multilat.network.datum.Datum` (build it with :meth:`from_datum`).
 
     Use the constructors:
 
-    ``Datum.inner(points="all"|"stations"|"targets"|sequence of ('station'|'target', index))``
+    ``TrialDatum.inner(points="all"|"stations"|"targets"|sequence of ('station'|'target', index))``
         Least-squares rigid fit (Kabsch) of the datum points onto their nominal coordinates. To first
         order this is the inner-constraint (free-network, minimum-trace over the datum points) datum
         of the adjustment: the linearised conditions ``G^T (x - x_nominal) = 0`` of the inner
         constraints are exactly the stationarity conditions of the rigid fit.
-    ``Datum.three_two_one(origin, axis, plane)`` (station indices or ``(kind, index)``)
+    ``TrialDatum.three_two_one(origin, axis, plane)`` (station indices or ``(kind, index)``)
         Point ``origin`` keeps its nominal position, the direction ``origin -> axis`` its nominal
         direction, and the plane (origin, axis, plane) its nominal orientation. With nominal
         coordinates from ``adjust(..., datum="321:A,B,C")`` (A at the origin, B on +x, C in the
@@ -182,7 +128,30 @@ class Datum:
     points: object = "all"
 
     @classmethod
-    def inner(cls, points="all") -> "Datum":
+    def from_datum(cls, datum, station_ids, target_ids) -> "TrialDatum":
+        """The index form of a :class:`multilat.network.datum.Datum` (or its text, e.g.
+        ``"321:B,D,C"``) for the network ``station_ids``/``target_ids``: the one datum definition,
+        applied to every trial. The control datum is refused (it fixes points that a Monte Carlo
+        must perturb too)."""
+        d = parse_datum(datum)
+        station_ids, target_ids = list(station_ids), list(target_ids)
+
+        def ref(p):
+            if p in station_ids:
+                return ("station", station_ids.index(p))
+            if p in target_ids:
+                return ("target", target_ids.index(p))
+            raise MultilatError(f"datum point {p!r} is neither a station nor a target")
+
+        if d.kind == "free":
+            return cls.inner("all" if d.points is None else [ref(p) for p in d.points])
+        if d.kind == "321":
+            return cls.three_two_one(*[ref(p) for p in d.points])
+        raise MultilatError("propagation supports the free and 321 datums (a control datum fixes points "
+                            "that the Monte Carlo would have to perturb too)")
+
+    @classmethod
+    def inner(cls, points="all") -> "TrialDatum":
         if isinstance(points, str):
             if points not in ("all", "stations", "targets"):
                 raise MultilatError(f"datum points must be all, stations or targets, got {points!r}")
@@ -196,7 +165,7 @@ class Datum:
         return cls("inner", pts)
 
     @classmethod
-    def three_two_one(cls, origin, axis, plane) -> "Datum":
+    def three_two_one(cls, origin, axis, plane) -> "TrialDatum":
         """Each point: a station index (int) or ``("station"|"target", index)``."""
         pts = tuple(("station", int(p)) if isinstance(p, (int, np.integer)) else (str(p[0]), int(p[1]))
                     for p in (origin, axis, plane))
@@ -244,14 +213,13 @@ class Datum:
         e = np.zeros((p, 6))
         if self.kind == "inner":
             mask = self._mask(s, t)
-            gh = helmert_basis(h0).reshape(s, 3, 6) * mask[:s, None, None]
-            gt = helmert_basis(t0).reshape(t, 3, 6) * mask[s:, None, None]
-            e[: 3 * s] = gh.reshape(3 * s, 6)
-            e[4 * s:] = gt.reshape(3 * t, 6)
+            g = helmert_basis(np.concatenate([h0, t0])).reshape(s + t, 3, 6) * mask[:, None, None]
+            e[: 3 * s] = g[:s].reshape(3 * s, 6)
+            e[4 * s:] = g[s:].reshape(3 * t, 6)
             return e
         a, b, c = self._stacked(s, t)
         x0 = np.concatenate([h0, t0])
-        ex, ey, ez = _frame(x0[a], x0[b], x0[c])
+        ex, ey, ez = frame_axes(x0[a], x0[b], x0[c])
         rows = [3 * q if q < s else 4 * s + 3 * (q - s) for q in (a, b, c)]
         e[rows[0]: rows[0] + 3, 0:3] = np.eye(3)
         e[rows[1]: rows[1] + 3, 3] = ey
@@ -283,8 +251,8 @@ class Datum:
             a, b, c = self._stacked(s, t)
             x0 = np.concatenate([h0, t0])
             x = np.concatenate([h, tg], axis=1)
-            f0 = np.stack(_frame(x0[a], x0[b], x0[c]), axis=0)          # rows ex, ey, ez (3, 3)
-            f = np.stack(_frame(x[:, a], x[:, b], x[:, c]), axis=-2)   # (n, 3, 3) rows
+            f0 = np.stack(frame_axes(x0[a], x0[b], x0[c]), axis=0)          # rows ex, ey, ez (3, 3)
+            f = np.stack(frame_axes(x[:, a], x[:, b], x[:, c]), axis=-2)   # (n, 3, 3) rows
             rot = np.einsum("ji,njk->nik", f0, f)                        # R = F0^T F
             org, org0 = x[:, a], x0[a]
             hn = np.einsum("nij,nsj->nsi", rot, h - org[:, None]) + org0
@@ -293,15 +261,15 @@ class Datum:
         mask = self._mask(s, t)
         x0 = np.concatenate([h0, t0])[mask]                     # (q, 3)
         c0 = x0.mean(axis=0)
-        g = helmert_basis(x0 - c0)                              # about the nominal centroid
+        g = helmert_basis(x0)                                   # about the nominal centroid
         proj = (g @ np.linalg.inv(g.T @ g)).reshape(-1, 3, 6)   # (q, 3, 6)
         if engine == "numba":
             from multilat.network import _batched_numba as nb
             pts = np.ascontiguousarray(np.concatenate([h, tg], axis=1))
-            nb.apply_inner(pts, np.nonzero(mask)[0], x0 - c0, np.ascontiguousarray(proj), c0)
+            nb.apply_inner(pts, np.nonzero(mask)[0], x0 - c0, np.ascontiguousarray(proj), c0, RIGID_FIT_ITERATIONS)
             return pts[:, :s], pts[:, s:]
         pts = np.concatenate([h, tg], axis=1) - c0              # (n, s + t, 3)
-        for _ in range(3):   # Gauss-Newton on the rigid fit; rotations are ~1e-5 rad: 2 suffice
+        for _ in range(RIGID_FIT_ITERATIONS):   # Gauss-Newton on the rigid fit (rotations ~1e-5 rad)
             dev = pts[:, mask] - (x0 - c0)
             xi = -np.tensordot(dev, proj, axes=([1, 2], [0, 1]))  # (n, 6)
             rot = _rotation_from_vector(xi[:, 3:])
@@ -311,20 +279,6 @@ class Datum:
         pts = pts + c0
         hn, tn = pts[:, :s], pts[:, s:]
         return hn, tn
-
-
-def _frame(pa, pb, pc):
-    """Orthonormal frame (ex, ey, ez) of three points: ex along a->b, ez normal to the plane."""
-    ex = pb - pa
-    ex = ex / np.linalg.norm(ex, axis=-1, keepdims=True)
-    v = pc - pa
-    ez = np.cross(ex, v)
-    nz = np.linalg.norm(ez, axis=-1, keepdims=True)
-    if np.any(nz < 1e-9 * np.linalg.norm(v, axis=-1, keepdims=True)):
-        raise MultilatError("3-2-1 datum stations are collinear")
-    ez = ez / nz
-    ey = np.cross(ez, ex)
-    return ex, ey, ez
 
 
 # ----------------------------------------------------------------------------------------------
@@ -403,7 +357,7 @@ class BatchedNetwork:
     station_xyz_m: np.ndarray
     offset_m: np.ndarray
     target_xyz_m: np.ndarray
-    datum: Datum = field(default_factory=Datum.inner)
+    datum: "TrialDatum" = field(default_factory=lambda: TrialDatum.inner())
     # precomputed (filled in __post_init__)
     _pre: dict = field(default=None, repr=False, compare=False)
 
@@ -485,8 +439,8 @@ class BatchedNetwork:
         if len(bad):
             raise MultilatError(f"target {int(bad[0])} is not determined by its observations "
                                 "(fewer than 3 stations or collinear lines of sight)")
-        ninv0 = inv3_sym(ntt)
-        g_s = helmert_basis(self.station_xyz_m - self.station_xyz_m.mean(axis=0))
+        ninv0 = inv3(ntt)
+        g_s = helmert_basis(self.station_xyz_m)
         e_pen = np.zeros((4 * s, 6))
         e_pen.reshape(s, 4, 6)[:, :3] = g_s.reshape(s, 3, 6)
         s0 = _schur(u0[None], w, si, ti, ninv0[None], s, a_s, a_t)[0]
@@ -517,7 +471,7 @@ class BatchedNetwork:
         """First-order covariance of the parameters in this network's datum, shape (p, p), m².
 
         ``Q = S (J^T W J)^+ S^T`` where ``W = diag(1/sigma**2)`` are the solver's weights and ``S`` the
-        S-transformation onto the datum (``E^T dx = 0``, ``E`` = :meth:`Datum.constraint_matrix`).
+        S-transformation onto the datum (``E^T dx = 0``, ``E`` = :meth:`TrialDatum.constraint_matrix`).
         With ``sigma_m`` (the distances' actual standard uncertainties, if they differ from the
         weighting sigmas) the sandwich ``N^+ J^T W C W J N^+`` is returned instead.
         """
@@ -527,8 +481,9 @@ class BatchedNetwork:
         e = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)
         g = np.zeros((self.n_params, 6))
         s = self.n_stations
-        g[: 3 * s] = helmert_basis(self.station_xyz_m)
-        g[4 * s:] = helmert_basis(self.target_xyz_m)
+        gp = helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m]))
+        g[: 3 * s] = gp[: 3 * s]
+        g[4 * s:] = gp[3 * s:]
         etg = e.T @ g
         if abs(np.linalg.det(etg)) < 1e-14 * np.linalg.norm(etg) ** 6:
             raise MultilatError("the datum does not fix translation and rotation (degenerate points)")
@@ -657,7 +612,7 @@ class BatchedNetwork:
             sinv = p["s0inv"][None]
         else:
             ub = u
-            ninv = inv3_sym(_target_blocks(u, w, a_t))
+            ninv = inv3(_target_blocks(u, w, a_t))
             sm = _schur(u, w, si, ti, ninv, s, a_s, a_t) + p["pen"]
             sinv = None
         y_t = np.einsum("ntab,ntb->nta", np.broadcast_to(ninv, (n,) + ninv.shape[1:]), g_t)

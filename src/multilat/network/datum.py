@@ -35,7 +35,11 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.model import Q
 
-__all__ = ["Datum", "parse_datum", "helmert_basis", "rigid_fit", "frame_321", "apply_rigid", "datum_matrices"]
+__all__ = ["Datum", "parse_datum", "helmert_basis", "rigid_fit", "frame_321", "frame_axes", "apply_rigid",
+           "datum_matrices", "RIGID_FIT_ITERATIONS"]
+
+#: Gauss-Newton iterations of the per-trial rigid fit (batched solver, numpy and numba alike)
+RIGID_FIT_ITERATIONS = 4
 
 KINDS = ("free", "321", "control")
 
@@ -113,9 +117,13 @@ def helmert_basis(xyz_m) -> np.ndarray:
     return G.reshape(3 * p, 6)
 
 
-def rigid_fit(src_xyz_m, dst_xyz_m):
+def rigid_fit(src_xyz_m, dst_xyz_m, *, allow_reflection: bool = False):
     """Rotation ``R`` (3, 3) and translation ``t`` (3,) minimising ``sum |R src + t - dst|**2``
-    (Kabsch, proper rotation). Needs >= 3 non-collinear points."""
+    (Kabsch). Needs >= 3 non-collinear points.
+
+    ``allow_reflection``: allow ``det R = -1`` (a mirror), for comparing networks known only from
+    distances (which cannot tell a network from its mirror image).
+    """
     a = np.asarray(src_xyz_m, float)
     b = np.asarray(dst_xyz_m, float)
     if a.shape != b.shape or a.ndim != 2 or a.shape[1] != 3:
@@ -128,27 +136,33 @@ def rigid_fit(src_xyz_m, dst_xyz_m):
         raise MultilatError("datum: the datum points are collinear and cannot fix the rotation")
     H = (a - ca).T @ (b - cb)
     U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0
+    d = 1.0 if allow_reflection else (np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0)
     R = Vt.T @ np.diag([1.0, 1.0, d]) @ U.T
     return R, cb - R @ ca
+
+
+def frame_axes(p_origin, p_x, p_xy):
+    """Unit axes ``(ex, ey, ez)`` of the 3-2-1 frame of three points (each (..., 3), broadcast over
+    leading axes): ``ex`` along origin -> x, ``ez`` normal to the plane of the three, ``ey = ez x ex``
+    (so the third point has y > 0). Raises when the points are (nearly) collinear."""
+    o = np.asarray(p_origin, float)
+    ex = np.asarray(p_x, float) - o
+    v = np.asarray(p_xy, float) - o
+    nx = np.linalg.norm(ex, axis=-1, keepdims=True)
+    ez = np.cross(ex, v)
+    nz = np.linalg.norm(ez, axis=-1, keepdims=True)
+    if np.any(nx == 0) or np.any(nz <= 1e-9 * nx * np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-300)):
+        raise MultilatError("datum 321: the three points are (nearly) collinear")
+    ex = ex / nx
+    ez = ez / nz
+    return ex, np.cross(ez, ex), ez
 
 
 def frame_321(p_origin, p_x, p_xy):
     """Rotation and translation taking coordinates into the 3-2-1 frame of three points: the first
     at the origin, the second on +x, the third in the xy-plane with y > 0."""
-    o = np.asarray(p_origin, float)
-    ex = np.asarray(p_x, float) - o
-    v = np.asarray(p_xy, float) - o
-    nx = np.linalg.norm(ex)
-    ez = np.cross(ex, v)
-    nz = np.linalg.norm(ez)
-    if nx == 0 or nz <= 1e-9 * nx * max(np.linalg.norm(v), 1e-300):
-        raise MultilatError("datum 321: the three points are (nearly) collinear")
-    ex = ex / nx
-    ez = ez / nz
-    ey = np.cross(ez, ex)
-    R = np.vstack([ex, ey, ez])
-    return R, -R @ o
+    R = np.vstack(frame_axes(p_origin, p_x, p_xy))
+    return R, -R @ np.asarray(p_origin, float)
 
 
 def apply_rigid(R, t, xyz_m):

@@ -52,6 +52,7 @@ import scipy.sparse
 import scipy.sparse.linalg
 
 from multilat.errors import MultilatError
+from multilat.network.datum import rigid_fit
 
 __all__ = ["InitialValues", "initial_values", "rigid_fit", "multilaterate"]
 
@@ -79,31 +80,6 @@ class InitialValues:
 
 
 # ----------------------------------------------------------------------------- helpers
-
-
-def rigid_fit(src, dst, *, allow_reflection: bool = False):
-    """Least-squares rigid map ``dst ~ src @ R.T + t`` (Kabsch).
-
-    Parameters
-    ----------
-    src, dst : ndarray, shape (n, 3)
-    allow_reflection : bool
-        Allow ``det R = -1`` (a mirror), for comparing networks known only from distances.
-
-    Returns
-    -------
-    R : ndarray (3, 3), t : ndarray (3,)
-    """
-    src = np.asarray(src, float)
-    dst = np.asarray(dst, float)
-    cs, cd = src.mean(0), dst.mean(0)
-    u, _, vt = np.linalg.svd((src - cs).T @ (dst - cd))
-    d = np.ones(3)
-    if not allow_reflection and np.linalg.det(u @ vt) < 0:
-        d[2] = -1.0
-    R = (u * d) @ vt
-    R = R.T
-    return R, cd - cs @ R.T
 
 
 def multilaterate(anchor_xyz_m, distance_m, *, with_offset: bool = False):

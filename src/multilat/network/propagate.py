@@ -109,27 +109,6 @@ class Problem:
         return 3 * i + np.arange(3) if k == "station" else 4 * s + 3 * i + np.arange(3)
 
 
-def _convert_datum(datum, station_ids, target_ids) -> bt.Datum:
-    """The network helper's :class:`multilat.network.datum.Datum` (or its text) as a batched datum."""
-    from multilat.network.datum import parse_datum
-
-    d = parse_datum(datum)
-
-    def ref(p):
-        if p in station_ids:
-            return ("station", station_ids.index(p))
-        if p in target_ids:
-            return ("target", target_ids.index(p))
-        raise MultilatError(f"datum point {p!r} is neither a station nor a target")
-
-    if d.kind == "free":
-        return bt.Datum.inner("all" if d.points is None else [ref(p) for p in d.points])
-    if d.kind == "321":
-        return bt.Datum.three_two_one(*[ref(p) for p in d.points])
-    raise MultilatError("propagation supports the free and 321 datums (a control datum fixes points "
-                        "that the Monte Carlo would have to perturb too)")
-
-
 def _heads_for(station_ids, instrument, head: str | None):
     """Each station's instrument head: the station id when it names a head, else ``head`` ("A")."""
     names = set(getattr(instrument, "heads", {}) or {}) if instrument is not None else set()
@@ -157,7 +136,7 @@ def problem_from_truth(station_ids, target_ids, station_index, target_index, sig
     """
     station_ids = tuple(str(s) for s in station_ids)
     target_ids = tuple(str(t) for t in target_ids)
-    dt = _convert_datum(datum, station_ids, target_ids)
+    dt = bt.TrialDatum.from_datum(datum, station_ids, target_ids)
     h = np.asarray(station_xyz_m, float)
     tg = np.asarray(target_xyz_m, float)
     if dt.kind == "321":   # express the truth in the 3-2-1 frame (as network.adjust does)
@@ -212,7 +191,7 @@ def problem_from_observations(obs, *, datum="free", pairs=None, references=None,
         raise MultilatError("propagation does not model per-station scales; adjust without scales")
     station_ids = tuple(obs.station_ids)
     target_ids = tuple(obs.target_ids)
-    dt = _convert_datum(datum, station_ids, target_ids)
+    dt = bt.TrialDatum.from_datum(datum, station_ids, target_ids)
     net = bt.BatchedNetwork(obs.station_index, obs.target_index, obs.sigma_m, res.station_xyz_m,
                             res.offset_m, res.target_xyz_m, datum=dt)
     pairs_, ref = _pairs_and_refs(pairs, references, target_ids, station_ids)
