@@ -50,6 +50,7 @@ def _as_start(initial, obs: Observations) -> Start:
     return Start(sx, tx, off)
 
 
+PARTIAL_RESTARTS = 6   # random initial-value starts tried when the first solve does not converge
 LARGE_TARGETS = 500   # above: initial values from a seed network + multilateration (network.large)
 
 
@@ -89,20 +90,31 @@ def _initial(obs: Observations, given: Start | None, points: Points | None, rng)
 
 def _initial_small(obs: Observations, rng):
     """:func:`initial_values` on the targets seen by 4+ stations, then the others (3 stations:
-    two mirror positions) by multilateration from those stations, on the side of the rest."""
+    two mirror positions) by multilateration from those stations, on the side of the rest.
+
+    Initial values that come out flat (stations on one plane, targets on one line, where the
+    distances say otherwise: a collapsed solution of a weak network) are retried from other random
+    starts, up to ``PARTIAL_RESTARTS`` times."""
     from multilat.network.initial import initial_values
     from multilat.network.large import multilaterate_targets
 
+    gen = np.random.default_rng(rng)
     weak = np.bincount(obs.target_index, minlength=obs.n_targets) < 4
-    if not weak.any():
-        raw = initial_values(obs, rng=rng)
-        return raw, {"method": f"distances: {raw.method}", "rms_residual_m": float(raw.rms_residual_m)}
     strong_obs = ~weak[obs.target_index]
-    sub = obs.subset(strong_obs)
+    sub = obs if not weak.any() else obs.subset(strong_obs)
     if sub.n_stations != obs.n_stations:
         raise MultilatError("initial values from distances need every station to see targets that 4 or "
                             "more stations see; give approximate coordinates (--points)")
-    raw = initial_values(sub, rng=rng)
+    for attempt in range(PARTIAL_RESTARTS + 1):
+        raw = initial_values(sub, rng=gen)
+        if not flat_geometry(raw.station_xyz_m, raw.target_xyz_m, sigma_m=float(np.median(sub.sigma_m)),
+                             n_obs=sub.n_obs):
+            break
+    how = {"method": f"distances: {raw.method}", "rms_residual_m": float(raw.rms_residual_m)}
+    if attempt:
+        how["flat_restarts"] = attempt
+    if not weak.any():
+        return raw, how
     tx = np.empty((obs.n_targets, 3))
     tx[~weak] = raw.target_xyz_m
     wk = np.flatnonzero(weak)
@@ -114,9 +126,8 @@ def _initial_small(obs: Observations, rng):
                                     wk.size, side_point_m=raw.target_xyz_m.mean(axis=0),
                                     target_ids=[obs.target_ids[j] for j in wk])
     tx[wk] = x
-    return (Start(raw.station_xyz_m, tx, raw.offset_m),
-            {"method": f"distances: {raw.method} + multilateration of {wk.size} target(s) seen by 3",
-             "rms_residual_m": float(raw.rms_residual_m)})
+    how["method"] += f" + multilateration of {wk.size} target(s) seen by 3"
+    return Start(raw.station_xyz_m, tx, raw.offset_m), how
 
 
 def _pick_321_stations(sx) -> tuple[int, int, int]:
@@ -311,8 +322,10 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     for msg in notes:
         warnings.warn(msg, UserWarning, stacklevel=2)
     start, how = _initial(obs, given, points, rng)
-    # coplanar stations / collinear targets make the problem singular: say so before solving
-    _raise_if_flat(obs, start.station_xyz_m, start.target_xyz_m, "initial coordinates")
+    if how["method"] in ("given", "points"):
+        # coplanar stations / collinear targets make the problem singular: say so before solving
+        # (computed initial values that came out flat are a bad start, left to the solver and the search)
+        _raise_if_flat(obs, start.station_xyz_m, start.target_xyz_m, "initial coordinates")
     start = Start(start.station_xyz_m, start.target_xyz_m,
                   np.where(off_free, start.offset_m, off_val))
     do_snoop = snooping and cost == "distance"
@@ -397,7 +410,7 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
     non-convergence error when no start converges."""
     from types import SimpleNamespace
 
-    from multilat.network.search import find_minimum
+    from multilat.network.search import Candidate, find_minimum
 
     used = np.ones(obs.n_obs, bool)
 
@@ -405,14 +418,46 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
         return SimpleNamespace(station_xyz_m=c["sx"], target_xyz_m=c["tx"], offset_m=c["off"],
                                vtpv=c["vtpv"], dof=c["dof"], core=c)
 
-    def solve(st_):
+    def solve(st_, *, held_offsets=False):
+        of, ov = (np.zeros_like(off_free), np.zeros_like(off_val)) if held_offsets else (off_free, off_val)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            return wrap(_adjust_once(obs, datum, st_, start, obs, used, points, "distance", off_free,
-                                     off_val, sc_free, max_iter, solver, chunk_targets, warn=False))
+            return wrap(_adjust_once(obs, datum, st_, start, obs, used, points, "distance", of,
+                                     ov, sc_free, max_iter, solver, chunk_targets, warn=False))
 
+    def continuation(st_):
+        """Offsets held at zero first (a better conditioned problem for weak, flat networks), then
+        the full problem from there."""
+        return solve(solve(st_, held_offsets=True))
+
+    gen = np.random.default_rng(rng)
+    restarts = []
+    if core.get("partial"):
+        # the first solve did not converge: the same start by continuation, then other initial
+        # values (the random starts of initial_values), before searching around the lowest-cost
+        # point it reached
+        from multilat.network.initial import initial_values
+
+        def starts():
+            yield "the first start, offsets held then freed", lambda: continuation(start)
+            for k in range(PARTIAL_RESTARTS):
+                yield (f"initial values, random start {k + 1}, offsets held then freed",
+                       lambda: continuation(initial_values(obs, rng=gen)))
+
+        for label, attempt in starts():
+            try:
+                cand = attempt()
+            except MultilatError as exc:
+                restarts.append({"label": label, "cost": None, "note": str(exc)[:200]})
+                continue
+            restarts.append({"label": label, "cost": cand.vtpv})
+            core = cand.core
+            break
     first = wrap(core)
-    res = find_minimum(obs, solve, first, rng=rng)
+    res = find_minimum(obs, solve, first, rng=gen)
+    if restarts:
+        res = replace(res, candidates=tuple(Candidate(r["label"], r["cost"], None, r["cost"] is not None,
+                                                      r.get("note", "")) for r in restarts) + res.candidates)
     best = res.solution.core
     if best.get("partial"):
         conv = best["convergence"]
