@@ -77,7 +77,15 @@ def adjust_command(
                                                       "every station (e.g. 0), or per station "
                                                       "A=1234,B=-871 (the others stay estimated). "
                                                       "Default: estimate them all."),
-    scales: bool = typer.Option(False, "--scales", help="Also estimate a scale per station."),
+    scales: bool = typer.Option(False, "--scales",
+                                help="Also estimate a scale per station; the network's scale then needs "
+                                     "a datum: --fixed-scale STATION or --scale-bar."),
+    fixed_scale: Optional[str] = typer.Option(None, "--fixed-scale",
+                                              help="With --scales: hold this station's scale (the scale "
+                                                   "datum); the others are estimated."),
+    scale_bar: bool = typer.Option(False, "--scale-bar",
+                                   help="With --scales: the one reference length of --references (with "
+                                        "its u_m) is the scale datum."),
     snooping: bool = typer.Option(True, "--snooping/--no-snooping",
                                   help="Iteratively reject the worst w-test failure."),
     seed: int = typer.Option(0, "--seed", help="Seed for the initial-value search (if used)."),
@@ -149,10 +157,20 @@ def adjust_command(
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))
     pts = read_points(points) if points is not None else None
     offsets = None if fix_offsets_um is None else parse_fixed_offsets(fix_offsets_um, obs.station_ids)
+    if (fixed_scale is not None or scale_bar) and not scales:
+        raise MultilatError("--fixed-scale and --scale-bar go with --scales")
+    if scale_bar and refs is None:
+        raise MultilatError("--scale-bar needs --references FILE (one reference length)")
+    if fixed_scale is not None:
+        if fixed_scale not in obs.station_ids:
+            raise MultilatError(f"--fixed-scale: unknown station id {fixed_scale!r} "
+                                f"(stations: {', '.join(obs.station_ids)})")
+        scales = [sid for sid in obs.station_ids if sid != fixed_scale]
     with progress() as p:
         p.add_task(f"adjusting {obs.n_obs:,} distances", total=None)
         res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
-                     alpha_global=alpha_global, snooping=snooping, solver=solver, strict=strict, rng=seed)
+                     alpha_global=alpha_global, snooping=snooping, solver=solver, strict=strict,
+                     scale_bar=refs if scale_bar else None, rng=seed)
     doc = result_to_json(res, refs)
     if corrected is not None:
         doc["with_correlations"] = _with_correlations(res, corrected, refs)

@@ -208,8 +208,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
            points: Points | None = None, cost: str = "distance", offsets=None, scales=False,
            alpha: float = 0.001, power: float = 0.80, alpha_global: float = 0.05,
            snooping: bool = True, max_rejections: int | None = None, max_iter: int = 100,
-           solver: str = "auto", strict: bool = False, chunk_targets: int = 20000,
-           rng=None) -> AdjustmentResult:
+           solver: str = "auto", strict: bool = False, scale_bar: ReferenceLengths | None = None,
+           chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
     """Adjust a self-calibrating multilateration network.
 
     Unknowns: station coordinates, target coordinates, one additive offset per station (estimated
@@ -239,7 +239,15 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     offsets : None, "estimate", float or mapping station -> metres
         Estimate all offsets (default), fix all to one value, or fix the named ones.
     scales : bool or iterable of station ids
-        Estimate a scale per station (all, or the named ones). Default: none.
+        Estimate a scale per station (all, or the named ones). Default: none. With every station's
+        scale estimated the network's scale is a 7th datum defect: give ``scale_bar``.
+    scale_bar : ReferenceLengths with one row, optional
+        A reference length (with its uncertainty ``u_m``) as the scale datum when every station's
+        scale is estimated: the adjusted length equals it, and its uncertainty enters every
+        coordinate's covariance along the scale direction.
+    strict : bool
+        Refuse the network when a point is too weakly observed, instead of leaving it out
+        (``excluded`` in the result, with a warning).
     alpha : float
         Significance of Baarda's w-test (two-sided) for data snooping; also the MDBs' alpha.
     power : float
@@ -310,6 +318,11 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         off_free, off_val, sc_free = off_free[smap], off_val[smap], sc_free[smap]
         if given is not None:
             given = Start(given.station_xyz_m[smap], given.target_xyz_m[tmap], given.offset_m[smap])
+    bar = None
+    if scale_bar is not None:
+        bar = _scale_bar(scale_bar, obs, sc_free, datum, cost)
+        sc_free = sc_free.copy()
+        sc_free[0] = False          # the internal minimal constraint on the scale; the bar fixes it
     _check_scale_datum(obs, sc_free, datum)
     try:
         _structure(obs, datum, points, off_free, sc_free, warn=True)   # before any initial values
@@ -397,6 +410,11 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             break
         rejected.append((k, float(w_sub[k_sub])))
         used = trial
+    if bar is not None:
+        core = _apply_scale_bar(core, bar, obs, used, datum, start, points, off_free, off_val, sc_free,
+                                max_iter, solver, chunk_targets)
+        how["scale_datum"] = {"kind": "reference length", "points": [bar[0], bar[1]], "length_m": bar[2],
+                              "u_m": bar[3]}
     res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global,
                        reason=reason, snooped=do_snoop)
     groups = _w_failure_groups(core, used, crit) if cost == "distance" else ()
@@ -496,7 +514,74 @@ def _check_scale_datum(obs: Observations, sc_free, datum) -> None:
         return
     raise MultilatError("every station's scale is estimated, so the network's scale is undetermined (a 7th "
                         "datum defect): estimate the scales of some stations only (--scales A,B) so the "
-                        "others fix it, or hold one station's scale (--fixed-scale STATION)")
+                        "others fix it, hold one station's scale (--fixed-scale STATION), or fix the "
+                        "scale by a reference length (--references FILE --scale-bar)")
+
+
+def _scale_bar(refs: ReferenceLengths, obs: Observations, sc_free, datum, cost):
+    """Validate a reference length as the scale datum: (a, b, length_m, u_m)."""
+    if len(refs) != 1:
+        raise MultilatError(f"scale bar: one reference length fixes the scale, got {len(refs)} (several scale "
+                            "bars as weighted observations are not supported yet)")
+    refs.check_ids(obs.station_ids + obs.target_ids)
+    if datum.kind == "control" or cost != "distance":
+        raise MultilatError("scale bar: needs the free or 321 datum and the distance cost (control points "
+                            "already fix the scale)")
+    if not np.all(sc_free):
+        raise MultilatError("scale bar: the stations whose scale is held already fix the network's scale; "
+                            "a scale bar is the scale datum when every station's scale is estimated "
+                            "(--scales)")
+    u = float(refs.u_m[0])
+    return refs.target_a[0], refs.target_b[0], float(refs.length_m[0]), 0.0 if np.isnan(u) else u
+
+
+def _apply_scale_bar(core, bar, obs, used, datum, start, points, off_free, off_val, sc_free, max_iter,
+                     solver, chunk_targets):
+    """Move the adjusted network (scale held on its first station) along the exact similarity that
+    leaves every distance residual unchanged — coordinates times ``f`` about their centroid, each
+    ``1 + k_i`` divided by ``f`` — so that the bar's length is the reference; re-adjust there (the
+    Jacobian at the scaled solution) and express the covariance in the datum whose 7th condition
+    is the bar's length, plus the bar's own uncertainty along the scale direction."""
+    from types import SimpleNamespace
+
+    sub = obs if used.all() else obs.subset(used)
+    smap, tmap = core["smap"], core["tmap"]
+    ids = list(sub.station_ids + sub.target_ids)
+    xyz = np.vstack([core["sx"], core["tx"]])
+    a, b, L_ref, u_L = bar
+    ia, ib = ids.index(a), ids.index(b)
+    f = L_ref / float(np.linalg.norm(xyz[ia] - xyz[ib]))
+    c = xyz.mean(axis=0)
+    xyz = c + f * (xyz - c)
+    s = sub.n_stations
+    S_all, T_all = obs.n_stations, obs.n_targets
+    sx_all, tx_all = np.zeros((S_all, 3)), np.zeros((T_all, 3))
+    off_all, sc_all = np.zeros(S_all), np.zeros(S_all)
+    sx_all[smap], tx_all[tmap] = xyz[:s], xyz[s:]
+    off_all[smap], sc_all[smap] = core["off"], (1.0 + core["sc"]) / f - 1.0
+    scaled = SimpleNamespace(station_xyz_m=sx_all, target_xyz_m=tx_all, offset_m=off_all, scale=sc_all)
+    new = _adjust_once(sub, datum, scaled, start, obs, used, points, "distance", off_free, off_val, sc_free,
+                       max_iter, solver, chunk_targets, warn=False)
+    sx, tx, sc = new["sx"], new["tx"], new["sc"]
+    G, E = datum_matrices(datum, sub.station_ids, sub.target_ids, sx, tx)
+    n = G.shape[0]
+    rows = np.concatenate([(Q * np.arange(s)[:, None] + np.arange(3)).ravel(), Q * s + np.arange(3 * sub.n_targets)])
+    pts = np.vstack([sx, tx])
+    g_s = np.zeros(n)
+    g_s[rows] = (pts - pts.mean(axis=0)).ravel()
+    g_s[Q * np.arange(s) + 4] = -(1.0 + sc)
+    e_bar = np.zeros(n)
+    d = pts[ia] - pts[ib]
+    d /= np.linalg.norm(d)
+    e_bar[rows[3 * ia:3 * ia + 3]] = d
+    e_bar[rows[3 * ib:3 * ib + 3]] = -d
+    g_hat = g_s - G @ np.linalg.solve(E.T @ G, E.T @ g_s)
+    cov = new["cov"]
+    new["cov"] = NetworkCovariance(cov.Qgg, cov.Minv, cov.Js_w, cov.Jt_w, cov.si, cov.ti, factor=cov.factor,
+                                   R=cov.R, G=np.column_stack([G, g_s]), E=np.column_stack([E, e_bar]),
+                                   extra=(u_L / L_ref) * g_hat[:, None] if u_L > 0 else None)
+    new["sc_free"] = np.ones(s, bool)
+    return new
 
 
 def _last_redundancy(obs, used, trial, k, datum, points) -> str:
@@ -611,7 +696,7 @@ def _adjust_once(sub, datum, start, ref_start, obs, used, points, cost, off_free
     sx0 = start.station_xyz_m[smap].copy()
     tx0 = start.target_xyz_m[tmap].copy()
     off0 = np.where(off_free, start.offset_m[smap], off_val)
-    sc0 = np.zeros(s)
+    sc0 = np.asarray(getattr(start, "scale", np.zeros(len(start.offset_m))), float)[smap].copy()
     gfree = np.ones((s, Q), bool)
     gfree[:, 3] = off_free
     gfree[:, 4] = sc_free

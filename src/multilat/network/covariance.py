@@ -33,11 +33,14 @@ class NetworkCovariance:
     station_index, target_index : ndarray of int (m,)
     factor : float   multiplies everything (sigma0**2 for an unweighted cost, else 1)
     R : ndarray (3, 3)   rotation from the solving frame to the final frame
-    G, E : ndarray (n, 6) or None   S-transformation (None: no datum transformation)
+    G, E : ndarray (n, d) or None   S-transformation (None: no datum transformation); d = 6 for the
+        rigid datum, 7 when the network's scale is a datum defect too (scales of every station)
+    extra : ndarray (n, r) or None   a low-rank term ``V V^T`` added in the final datum (e.g. the
+        uncertainty of the reference length that fixes the scale)
     """
 
     def __init__(self, Qgg, Minv, Js_w, Jt_w, station_index, target_index, *, factor=1.0,
-                 R=None, G=None, E=None):
+                 R=None, G=None, E=None, extra=None):
         self.Qgg = Qgg
         self.Minv = Minv
         self.Js_w = Js_w
@@ -58,6 +61,7 @@ class NetworkCovariance:
             self.CHt = self._rot_times(H.T)               # (n, 6)  C_rot H^T
             self.HCHt = H @ self.CHt
         self._point_rows = None
+        self.extra = None if extra is None else np.asarray(extra, float).reshape(self.n, -1)
 
     # ------------------------------------------------------------ internal (solving frame)
     def _times(self, V):
@@ -99,7 +103,10 @@ class NetworkCovariance:
         # S C S^T V with S = I - G H
         W = V - self.H.T @ (self.G.T @ V)
         Y = self._rot_times(W)
-        return Y - self.G @ (self.H @ Y)
+        out = Y - self.G @ (self.H @ Y)
+        if self.extra is not None:
+            out = out + self.extra @ (self.extra.T @ V)
+        return out
 
     def block(self, idx):
         """Dense covariance of the parameters ``idx`` (k,) -> (k, k)."""
@@ -123,6 +130,9 @@ class NetworkCovariance:
             g = slice(0, Q * s)
             Gg, Cg = self.G[g], self.CHt[g]
             out = out - Gg @ Cg.T - Cg @ Gg.T + Gg @ self.HCHt @ Gg.T
+        if self.extra is not None:
+            Xg = self.extra[:Q * s]
+            out = out + Xg @ Xg.T
         return 0.5 * (out + out.T)
 
     def target_blocks(self, chunk_targets: int = 20000):
@@ -144,10 +154,14 @@ class NetworkCovariance:
         out = np.einsum("ij,tjk,lk->til", self.R, out, self.R)
         if self.G is not None:
             rows = Q * s + np.arange(3 * t)
-            Gp = self.G[rows].reshape(t, 3, 6)
-            Cp = self.CHt[rows].reshape(t, 3, 6)
+            dcol = self.G.shape[1]
+            Gp = self.G[rows].reshape(t, 3, dcol)
+            Cp = self.CHt[rows].reshape(t, 3, dcol)
             out = (out - np.einsum("tia,tja->tij", Gp, Cp) - np.einsum("tia,tja->tij", Cp, Gp)
                    + np.einsum("tia,ab,tjb->tij", Gp, self.HCHt, Gp))
+        if self.extra is not None:
+            Xp = self.extra[Q * s:].reshape(t, 3, -1)
+            out = out + np.einsum("tia,tja->tij", Xp, Xp)
         return 0.5 * (out + np.swapaxes(out, 1, 2))
 
     def hat_row(self, k: int):
