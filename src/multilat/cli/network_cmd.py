@@ -230,7 +230,7 @@ def _print_summary(res, doc, out):
     console.print(f"  {res.solver} solver: {cv.iterations} iterations, {cv.reason}; initial values: "
                   f"{res.initial.get('method', '?')}", markup=False)
     if res.excluded:
-        console.print(f"  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
+        console.print("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
                                                                for e in res.excluded), markup=False)
     if res.cost == "squared":
         console.print(f"  σ0 = {res.sigma0:.4g} m² (unweighted squared-distance residuals, eq. 6), "

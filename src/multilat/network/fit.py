@@ -1,0 +1,207 @@
+"""One adjustment of a fixed set of observations: the internal minimal constraint, the solver
+loop (:mod:`multilat.network.solve`), the final normal equations, and the move to the requested
+datum with the S-transformed covariance. :func:`multilat.network.adjust.adjust` calls it once, then
+again after each rejection of data snooping.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network.covariance import NetworkCovariance
+from multilat.network.data import Observations
+from multilat.network.datum import apply_rigid, datum_matrices, frame_321, rigid_fit
+from multilat.network.model import Q
+from multilat.network.problem import Params, Problem
+from multilat.network.result import Start
+from multilat.network.solvability import check_structure, flat_geometry
+from multilat.network.solve import choose_backend, gauss_newton, make_backend, solve_reduced
+from multilat.network.solve.loop import check_target_blocks
+from multilat.network.solve.system import weighted_cost, whitened
+
+__all__ = ["fit_once", "as_start", "check_network", "control_ids", "station_map", "target_map",
+           "raise_if_flat", "raise_unconverged", "pick_321_stations"]
+
+
+def as_start(initial, obs: Observations) -> Start:
+    try:
+        sx = np.array(initial.station_xyz_m, dtype=float)
+        tx = np.array(initial.target_xyz_m, dtype=float)
+        off = np.array(initial.offset_m, dtype=float)
+    except AttributeError:
+        raise MultilatError("initial values need station_xyz_m, target_xyz_m and offset_m") from None
+    if sx.shape != (obs.n_stations, 3) or tx.shape != (obs.n_targets, 3) or off.shape != (obs.n_stations,):
+        raise MultilatError(f"initial values: expected shapes ({obs.n_stations}, 3), ({obs.n_targets}, 3), "
+                            f"({obs.n_stations},), got {sx.shape}, {tx.shape}, {off.shape}")
+    if not (np.all(np.isfinite(sx)) and np.all(np.isfinite(tx)) and np.all(np.isfinite(off))):
+        raise MultilatError("initial values must be finite")
+    return Start(sx, tx, off)
+
+
+def pick_321_stations(sx) -> tuple[int, int, int]:
+    """Three stations spanning the largest triangle (for the internal minimal constraint)."""
+    s = sx.shape[0]
+    best, bi = -1.0, (0, 1, 2)
+    combos = itertools.combinations(range(s), 3) if s <= 40 else [
+        (0, int(np.argmax(np.linalg.norm(sx - sx[0], axis=1))), None)]
+    for c in combos:
+        if c[2] is None:
+            a, b = c[0], c[1]
+            area = np.linalg.norm(np.cross(sx[b] - sx[a], sx - sx[a]), axis=1)
+            k = int(np.argmax(area))
+            c = (a, b, k)
+        a, b, k = c
+        area = np.linalg.norm(np.cross(sx[b] - sx[a], sx[k] - sx[a]))
+        if area > best:
+            best, bi = area, (a, b, k)
+    return bi
+
+
+def raise_unconverged(obs, p: Params, conv) -> None:
+    raise_if_flat(obs, p.station_xyz_m, p.target_xyz_m, "no convergence")
+    raise MultilatError(f"the adjustment did not converge ({conv.reason} after {conv.iterations} "
+                        f"iterations, last step {conv.last_step_sigma:.3g} sigma); check the initial "
+                        "values, the geometry and the distances for gross errors")
+
+
+def raise_if_flat(obs, sx, tx, when: str) -> None:
+    """Raise the one-line 'near-degenerate geometry (when): cause' if the points are (nearly)
+    coplanar stations or collinear targets by :func:`solvability.flat_geometry`."""
+    cause = flat_geometry(sx, tx, sigma_m=float(np.median(obs.sigma_m)), n_obs=obs.n_obs)
+    if cause:
+        raise MultilatError(f"near-degenerate geometry ({when}): {cause}")
+
+
+def station_map(obs, used):
+    """Indices (into obs.station_ids) of the stations present in obs.subset(used), in its order."""
+    return np.flatnonzero(np.bincount(obs.station_index[used], minlength=obs.n_stations) > 0)
+
+
+def target_map(obs, used):
+    return np.flatnonzero(np.bincount(obs.target_index[used], minlength=obs.n_targets) > 0)
+
+
+def check_network(sub, datum, points, off_free, sc_free, *, warn):
+    fixed_t = np.zeros(sub.n_targets, bool)
+    fixed_sc = 0
+    defect = 6
+    if datum.kind == "control":
+        ctrl = control_ids(sub, datum, points)
+        fixed_t = np.array([t in ctrl for t in sub.target_ids])
+        fixed_sc = 3 * sum(s in ctrl for s in sub.station_ids)
+        defect = 0
+    return check_structure(sub, offset_free=off_free, scale_free=sc_free, fixed_targets=fixed_t,
+                           fixed_station_coords=fixed_sc, datum_defect=defect, warn=warn)
+
+
+def control_ids(sub, datum, points):
+    given = [i for i in sub.station_ids + sub.target_ids if points.get(i) is not None]
+    ids = given if datum.points is None else list(datum.points)
+    for i in ids:
+        if i not in sub.station_ids + sub.target_ids:
+            raise MultilatError(f"datum control: unknown point id {i!r}")
+        if points.get(i) is None:
+            raise MultilatError(f"datum control: no coordinates given for {i!r}")
+    if len(ids) < 3:
+        raise MultilatError(f"datum control needs at least 3 control points, got {len(ids)}")
+    sv = np.linalg.svd(np.array([points.get(i) for i in ids]) - np.mean([points.get(i) for i in ids], 0),
+                       compute_uv=False)
+    if sv[1] <= 1e-9 * sv[0]:
+        raise MultilatError("datum control: the control points are collinear")
+    return set(ids)
+
+
+def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
+                 sc_free_all, max_iter, solver, chunk_targets, *, warn, partial_ok=False):
+    """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
+    ``ref_start`` gives the reference coordinates of the free datum. Returns a dict of arrays in
+    ``sub``'s order plus the maps back."""
+    smap, tmap = station_map(obs, used), target_map(obs, used)
+    off_free, off_val, sc_free = off_free_all[smap], off_val_all[smap], sc_free_all[smap]
+    check_network(sub, datum, points, off_free, sc_free, warn=False)
+    s, t = sub.n_stations, sub.n_targets
+    sx0 = start.station_xyz_m[smap].copy()
+    tx0 = start.target_xyz_m[tmap].copy()
+    off0 = np.where(off_free, start.offset_m[smap], off_val)
+    sc0 = np.asarray(getattr(start, "scale", np.zeros(len(start.offset_m))), float)[smap].copy()
+    gfree = np.ones((s, Q), bool)
+    gfree[:, 3] = off_free
+    gfree[:, 4] = sc_free
+    tfree = np.ones(t, bool)
+    all_ids = sub.station_ids + sub.target_ids
+    if datum.kind == "control":
+        ctrl = control_ids(sub, datum, points)
+        # bring the initial values into the control frame first (rigid fit on the control points)
+        cur = dict(zip(all_ids, np.vstack([sx0, tx0])))
+        cids = sorted(ctrl)
+        Rc, tc = rigid_fit(np.array([cur[i] for i in cids]), np.array([points.get(i) for i in cids]))
+        sx0, tx0 = apply_rigid(Rc, tc, sx0), apply_rigid(Rc, tc, tx0)
+        for i, sid in enumerate(sub.station_ids):
+            if sid in ctrl:
+                sx0[i] = points.get(sid)
+                gfree[i, :3] = False
+        for j, tid in enumerate(sub.target_ids):
+            if tid in ctrl:
+                tx0[j] = points.get(tid)
+                tfree[j] = False
+        R0, t0 = np.eye(3), np.zeros(3)
+    else:
+        if datum.kind == "321":
+            for p in datum.points:
+                if p not in all_ids:
+                    raise MultilatError(f"datum 321: unknown point id {p!r}")
+        a, b, c = pick_321_stations(sx0)
+        R0, t0 = frame_321(sx0[a], sx0[b], sx0[c])
+        sx0, tx0 = apply_rigid(R0, t0, sx0), apply_rigid(R0, t0, tx0)
+        gfree[a, :3] = False
+        gfree[b, 1:3] = False
+        gfree[c, 2] = False
+    pb = Problem(sub, cost, gfree, tfree)
+    backend = make_backend(pb, choose_backend(pb, solver), chunk_targets=chunk_targets)
+    p, conv = gauss_newton(pb, Params(sx0, tx0, off0, sc0), backend, max_iter=max_iter)
+    if not conv.converged:
+        if partial_ok:      # the lowest-cost point reached: a start for the minimum search
+            return dict(partial=True, sx=p.station_xyz_m, tx=p.target_xyz_m, off=p.offset_m,
+                        vtpv=weighted_cost(pb, p), dof=pb.dof, convergence=conv)
+        raise_unconverged(sub, p, conv)
+    sx, tx, off, sc = p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale
+    # final normal equations at the solution
+    fin = backend.assemble(p, 0.0)
+    check_target_blocks(fin.Ntt, pb)
+    _, Qgg, cond = solve_reduced(fin.N, fin.b, gfree.ravel(), pb, p)
+    r_w, Js_w, Jt_w = whitened(pb, p)
+    dof = pb.dof
+    vtpv = float(r_w @ r_w)
+    sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")
+    factor = 1.0 if cost == "distance" else (sigma0 ** 2 if dof > 0 else float("nan"))
+    # move to the requested datum
+    if datum.kind == "control":
+        R, tr, G, E = np.eye(3), np.zeros(3), None, None
+    else:
+        if datum.kind == "321":
+            xyz = {i: p for i, p in zip(all_ids, np.vstack([sx, tx]))}
+            R, tr = frame_321(xyz[datum.points[0]], xyz[datum.points[1]], xyz[datum.points[2]])
+        else:
+            ids = all_ids if datum.points is None else datum.points
+            for p in ids:
+                if p not in all_ids:
+                    raise MultilatError(f"datum free: unknown point id {p!r}")
+            ref = {i: p for i, p in zip(all_ids, np.vstack([ref_start.station_xyz_m[smap],
+                                                             ref_start.target_xyz_m[tmap]]))}
+            if points is not None:
+                ref.update({i: points.get(i) for i in ids if points.get(i) is not None})
+            cur = {i: p for i, p in zip(all_ids, np.vstack([sx, tx]))}
+            R, tr = rigid_fit(np.array([cur[i] for i in ids]), np.array([ref[i] for i in ids]))
+        sx, tx = apply_rigid(R, tr, sx), apply_rigid(R, tr, tx)
+        G, E = datum_matrices(datum, sub.station_ids, sub.target_ids, sx, tx)
+    cov = NetworkCovariance(Qgg, fin.Ntt_inv, Js_w, Jt_w, sub.station_index, sub.target_index,
+                            factor=factor, R=R, G=G, E=E)
+    h = cov.hat_diagonal(chunk_targets)
+    red = np.clip(1.0 - h, 0.0, 1.0)
+    return dict(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free,
+                chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
+                vtpv=vtpv, iterations=conv.iterations, cond=cond, cov=cov, convergence=conv,
+                solver=backend.name)

@@ -1,0 +1,96 @@
+"""Initial values of an adjustment: given, from approximate coordinates of every point, or from
+the distances alone (:func:`multilat.network.initial.initial_values` for small networks, the seed
+network + multilateration of :mod:`multilat.network.large` for large ones)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network.data import Observations, Points
+from multilat.network.datum import apply_rigid, rigid_fit
+from multilat.network.fit import as_start
+from multilat.network.result import Start
+from multilat.network.solvability import flat_geometry
+
+__all__ = ["initial_for", "initial_from_distances", "PARTIAL_RESTARTS", "LARGE_TARGETS"]
+
+
+PARTIAL_RESTARTS = 6   # random initial-value starts tried when the first solve does not converge
+LARGE_TARGETS = 500   # above: initial values from a seed network + multilateration (network.large)
+
+
+def initial_for(obs: Observations, given: Start | None, points: Points | None, rng) -> tuple[Start, dict]:
+    """Initial values and how they were found: given; or all from ``points``; or from distances
+    (fitted onto ``points``)."""
+    if given is not None:
+        return given, {"method": "given"}
+    if points is not None:
+        have = [points.get(i) is not None for i in obs.station_ids + obs.target_ids]
+        if all(have):
+            return Start(np.array([points.get(i) for i in obs.station_ids]),
+                         np.array([points.get(i) for i in obs.target_ids]),
+                         np.zeros(obs.n_stations)), {"method": "points"}
+    if obs.n_targets > LARGE_TARGETS:
+        from multilat.network.large import large_initial_values
+
+        raw = large_initial_values(obs, rng=rng)
+        how = {"method": "distances: " + raw.method, "seed_targets": len(raw.seed_target_ids),
+               "multilateration_rms_m": raw.multilateration_rms_m}
+    else:
+        raw, how = initial_from_distances(obs, rng)
+    iv = as_start(raw, obs)
+    if points is not None:
+        ids = [i for i in obs.station_ids + obs.target_ids if points.get(i) is not None]
+        if len(ids) >= 3:
+            allx = np.vstack([iv.station_xyz_m, iv.target_xyz_m])
+            allids = obs.station_ids + obs.target_ids
+            src = np.array([allx[allids.index(i)] for i in ids])
+            try:
+                R, t = rigid_fit(src, np.array([points.get(i) for i in ids]))
+            except MultilatError:
+                R, t = np.eye(3), np.zeros(3)
+            iv = Start(apply_rigid(R, t, iv.station_xyz_m), apply_rigid(R, t, iv.target_xyz_m), iv.offset_m)
+    return iv, how
+
+
+def initial_from_distances(obs: Observations, rng):
+    """:func:`initial_values` on the targets seen by 4+ stations, then the others (3 stations:
+    two mirror positions) by multilateration from those stations, on the side of the rest.
+
+    Initial values that come out flat (stations on one plane, targets on one line, where the
+    distances say otherwise: a collapsed solution of a weak network) are retried from other random
+    starts, up to ``PARTIAL_RESTARTS`` times."""
+    from multilat.network.initial import initial_values
+    from multilat.network.large import multilaterate_targets
+
+    gen = np.random.default_rng(rng)
+    weak = np.bincount(obs.target_index, minlength=obs.n_targets) < 4
+    strong_obs = ~weak[obs.target_index]
+    sub = obs if not weak.any() else obs.subset(strong_obs)
+    if sub.n_stations != obs.n_stations:
+        raise MultilatError("initial values from distances need every station to see targets that 4 or "
+                            "more stations see; give approximate coordinates (--points)")
+    for attempt in range(PARTIAL_RESTARTS + 1):
+        raw = initial_values(sub, rng=gen)
+        if not flat_geometry(raw.station_xyz_m, raw.target_xyz_m, sigma_m=float(np.median(sub.sigma_m)),
+                             n_obs=sub.n_obs):
+            break
+    how = {"method": f"distances: {raw.method}", "rms_residual_m": float(raw.rms_residual_m)}
+    if attempt:
+        how["flat_restarts"] = attempt
+    if not weak.any():
+        return raw, how
+    tx = np.empty((obs.n_targets, 3))
+    tx[~weak] = raw.target_xyz_m
+    wk = np.flatnonzero(weak)
+    remap = np.full(obs.n_targets, -1)
+    remap[wk] = np.arange(wk.size)
+    rows = ~strong_obs
+    x, _, _ = multilaterate_targets(raw.station_xyz_m, raw.offset_m, obs.station_index[rows],
+                                    remap[obs.target_index[rows]], obs.distance_m[rows], obs.sigma_m[rows],
+                                    wk.size, side_point_m=raw.target_xyz_m.mean(axis=0),
+                                    target_ids=[obs.target_ids[j] for j in wk])
+    tx[wk] = x
+    how["method"] += f" + multilateration of {wk.size} target(s) seen by 3"
+    return Start(raw.station_xyz_m, tx, raw.offset_m), how
