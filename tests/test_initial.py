@@ -99,12 +99,12 @@ def test_affine_fit_jacobian_against_finite_differences():
         captured.update(fun=fun, jac=jac, x=x)
         return x
 
-    orig = ini._levenberg_marquardt
-    ini._levenberg_marquardt = spy
+    orig = ini.levenberg_marquardt
+    ini.levenberg_marquardt = spy
     try:
         ini._affine_fit(D, Ut, Vv, rng.normal(size=(3, 3)), rng.normal(size=3), 0.01 * rng.normal(size=5))
     finally:
-        ini._levenberg_marquardt = orig
+        ini.levenberg_marquardt = orig
     f, x = captured["fun"], captured["x"]
     J = captured["jac"](x)
     h = 1e-7
@@ -118,25 +118,26 @@ def test_refinement_jacobian_against_finite_differences(n_targets):
     import scipy.sparse
 
     from multilat.network import initial as ini
+    from multilat.network import initial_refine as ir
 
     net = random_network(np.random.default_rng(3), n_stations=(5, 5), n_targets=(n_targets, n_targets), drop=0.0)
-    D, W = ini._distance_matrix(net.obs)
+    D, W = ini.distance_matrix(net.obs)
     captured = {}
 
     def spy(fun, jac, x, **kw):
         captured.update(fun=fun, jac=jac, x=x)
         return x
 
-    orig = ini._levenberg_marquardt
-    ini._levenberg_marquardt = spy
+    orig = ir.levenberg_marquardt
+    ir.levenberg_marquardt = spy
     try:
-        H, T = ini._to_frame(net.station_xyz_m, net.target_xyz_m, (0, 1, 2))
-        ini._refine(D, W, H, T, net.offset_m, (0, 1, 2), robust=False)
+        H, T = ir.to_frame(net.station_xyz_m, net.target_xyz_m, (0, 1, 2))
+        ir.refine(D, W, H, T, net.offset_m, (0, 1, 2), robust=False)
     finally:
-        ini._levenberg_marquardt = orig
+        ir.levenberg_marquardt = orig
     f, x = captured["fun"], captured["x"] + 1e-3
     J = captured["jac"](x)
-    assert scipy.sparse.issparse(J) == (len(x) > ini._SPARSE_FROM)
+    assert scipy.sparse.issparse(J) == (len(x) > ir.SPARSE_FROM)
     J = J.toarray() if scipy.sparse.issparse(J) else J
     h = 1e-7
     Jn = np.column_stack([(f(x + h * e) - f(x - h * e)) / (2 * h) for e in np.eye(len(x))])

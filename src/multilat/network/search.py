@@ -45,7 +45,8 @@ import numpy as np
 from scipy import stats
 
 from multilat.errors import MultilatError
-from multilat.network import initial as _init
+from multilat.network.initial import distance_matrix, initial_values
+from multilat.network.initial_refine import choose_frame, point_fit, refine_unmirrored, to_frame
 
 __all__ = ["Candidate", "MinimumSearch", "find_minimum", "needs_search", "P_MIN"]
 
@@ -147,7 +148,7 @@ def _place(obs, H, T, o, j):
         return T[j]
     best = None
     for p0 in (T[j], _mirror(T[j], A)):
-        p, c = _init._point_fit(A, d, w, p0.copy())
+        p, c = point_fit(A, d, w, p0.copy())
         if np.all(np.isfinite(p)) and (best is None or c < best[1]):
             best = (p, c)
     return best[0] if best is not None else T[j]
@@ -170,10 +171,10 @@ def _partial_restart(obs, H, T, o, drop):
     if got is None:
         return None
     sub, tmap = got
-    D, W = _init._distance_matrix(sub)
-    frame = _init._choose_frame(H)
-    Hf, Tf = _init._to_frame(H, T, frame)
-    Hs, Ts, os_, _, _ = _init._refine_unmirrored(D, W, Hf, Tf[tmap], o.copy(), frame, robust=False)
+    D, W = distance_matrix(sub)
+    frame = choose_frame(H)
+    Hf, Tf = to_frame(H, T, frame)
+    Hs, Ts, os_, _, _ = refine_unmirrored(D, W, Hf, Tf[tmap], o.copy(), frame, robust=False)
     T2 = Tf.copy()
     T2[tmap] = Ts
     for j in drop:
@@ -187,7 +188,7 @@ def _other_anchors(obs, T, drop, rng):
     if got is None:
         return None
     sub, tmap = got
-    iv = _init.initial_values(sub, rng=rng)
+    iv = initial_values(sub, rng=rng)
     H, o = iv.station_xyz_m, iv.offset_m
     T2 = np.zeros_like(T)
     T2[tmap] = iv.target_xyz_m
