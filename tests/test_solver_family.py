@@ -159,3 +159,45 @@ def test_no_silent_exit_iteration_limit_is_an_error():
         warnings.simplefilter("ignore")
         with pytest.raises(MultilatError, match="did not converge \\(iteration limit after 1 iterations"):
             adjust(obs, max_iter=1)
+
+
+@pytest.mark.parametrize("solver", ["dense", "sparse"])
+def test_statistics_equal_an_independent_dense_implementation(solver):
+    """σ0, redundancy numbers, w-tests and MDBs from either back end against a second method: the
+    whole whitened Jacobian in one dense matrix, its pseudo-inverse (SVD) and Baarda's formulas
+    written out here. Datum-free quantities: 1e-9 relative, redundancy 1e-9 absolute. w and the MDB
+    divide by sqrt(r): a redundancy number known to 1e-9 gives them to 1e-9/(2r) relative; the sparse
+    back end's compiled assembly sums in another order, which the condition number of the reduced
+    system (~1e6 here) turns into ~1e-9 on r: w and MDB to 1e-7 relative there (the residuals agree
+    to 4e-15 m)."""
+    from scipy import stats
+
+    from multilat.network.model import dense_jacobian, residuals_and_jacobian
+
+    net = synthetic_network(6, 40, 5, size_m=6.0, rng=21)
+    obs = Observations(tuple(f"S{i}" for i in range(6)), tuple(f"T{j}" for j in range(40)),
+                       net.station_index, net.target_index, net.distance_m, net.sigma_m)
+    res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), solver=solver,
+                 snooping=False)
+    o = obs
+    r, Js, Jt = residuals_and_jacobian(o.distance_m, res.station_xyz_m, res.target_xyz_m, res.offset_m,
+                                       res.scale, o.station_index, o.target_index)
+    A = dense_jacobian(Js, Jt, o.station_index, o.target_index, 6, 40) / o.sigma_m[:, None]
+    A = np.delete(A, np.arange(4, 5 * 6, 5), axis=1)               # no scales
+    v = r / o.sigma_m
+    U, sv, _ = np.linalg.svd(A, full_matrices=False)
+    rank = int(np.sum(sv > 1e-10 * sv[0]))
+    assert rank == A.shape[1] - 6
+    h = np.sum(U[:, :rank] ** 2, axis=1)                             # hat matrix diagonal
+    red = 1.0 - h
+    dof = o.n_obs - rank
+    sigma0 = np.sqrt(v @ v / dof)
+    w = v / np.sqrt(red)
+    delta = stats.norm.isf(0.001 / 2) + stats.norm.ppf(0.80)
+    mdb = delta * o.sigma_m / np.sqrt(red)
+    assert res.dof == dof
+    assert res.sigma0 == pytest.approx(sigma0, rel=1e-9)
+    np.testing.assert_allclose(res.redundancy, red, rtol=0, atol=1e-9)
+    tol = 1e-9 if solver == "dense" else 1e-7
+    np.testing.assert_allclose(res.w, w, rtol=tol, atol=1e-9)
+    np.testing.assert_allclose(res.mdb_m, mdb, rtol=tol)
