@@ -223,9 +223,17 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     search_ok = cost == "distance" and datum.kind != "control"
     while True:
         sub = obs if used.all() else obs.subset(used)
-        core = fit_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
+        try:
+            core = fit_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
                             sc_free, max_iter, solver, chunk_targets, warn=warn,
                             partial_ok=first and search_ok)
+        except MultilatError as exc:
+            # computed initial values can make a solvable network look degenerate (a collapsed
+            # start): the search's restarts get their chance before the error is final
+            if not (first and search_ok and how["method"].startswith("distances")
+                    and "near-degenerate" in str(exc)):
+                raise
+            core = _start_as_partial(obs, start, exc)
         if first and search_ok:
             # a converged result failing the global test by far may be a wrong minimum: search
             # (not under control points: they give the frame and the start; a failing test there
@@ -350,9 +358,24 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
                                                       r.get("note", "")) for r in restarts) + res.candidates)
     best = res.solution.core
     if best.get("partial"):
+        if best.get("error") is not None:
+            raise best["error"]
         conv = best["convergence"]
         raise_unconverged(obs, Params(best["sx"], best["tx"], best["off"], np.zeros(obs.n_stations)), conv)
     return best, res
+
+
+def _start_as_partial(obs: Observations, start: Start, error: MultilatError) -> dict:
+    """A start that the solver refused (near-degenerate there) as the lowest-cost point of a first
+    solve: the minimum search restarts from other initial values; ``error`` is raised if none works."""
+    from multilat.network.solve import Convergence
+
+    rho = np.linalg.norm(start.station_xyz_m[obs.station_index] - start.target_xyz_m[obs.target_index], axis=1)
+    v = (obs.distance_m - rho - start.offset_m[obs.station_index]) / obs.sigma_m
+    n_unknown = 4 * obs.n_stations + 3 * obs.n_targets - 6
+    return dict(partial=True, sx=start.station_xyz_m, tx=start.target_xyz_m, off=start.offset_m,
+                vtpv=float(v @ v), dof=obs.n_obs - n_unknown, error=error,
+                convergence=Convergence(False, 0, float("inf"), str(error)))
 
 
 def _w_failure_groups(core, used, crit, limit: int = 50) -> tuple:
