@@ -26,7 +26,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["CorrelatedCovariance", "adjustment_gain", "correlated_covariance"]
+__all__ = ["CorrelatedCovariance", "adjustment_gain", "correlated_covariance", "correlated_json"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,3 +159,28 @@ def correlated_covariance(result, obs_covariance_m2, *, step_m: float = 1e-6,
         cov_m2=cov, station_cov_m2=cov[st[:, :, None], st[:, None, :]],
         target_cov_m2=cov[tg[:, :, None], tg[:, None, :]],
         offset_std_m=np.sqrt(np.clip(np.diag(cov)[4 * np.arange(s) + 3], 0.0, None)))
+
+
+def correlated_json(res, covariance_m2, refs=None) -> dict:
+    """The parameters' covariance with the corrected distances' full covariance ``covariance_m2``
+    (shared sensors): :func:`correlated_covariance` as the ``with_correlations`` JSON block of
+    ``multilat adjust RAW``; ``refs`` adds the reference lengths' standard uncertainties."""
+    cc = correlated_covariance(res, covariance_m2)
+    tstd = np.sqrt(np.clip(np.diagonal(cc.target_cov_m2, axis1=1, axis2=2), 0, None))
+    tstd0 = np.sqrt(np.clip(np.diagonal(res.target_cov_m2, axis1=1, axis2=2), 0, None))
+    block = {
+        "note": "covariance G C Gᵀ of the adjusted parameters with the full covariance C of the corrected "
+                "distances (environment sensors shared between observations); the main keys use the "
+                "diagonal weights' covariance",
+        "stations": {sid: {"offset_u_m": float(cc.offset_std_m[i]), "cov_m2": cc.station_cov_m2[i]}
+                     for i, sid in enumerate(cc.station_ids)},
+        "targets": {tid: {"cov_m2": cc.target_cov_m2[j]} for j, tid in enumerate(cc.target_ids)},
+        "max_target_std_m": float(tstd.max()),
+        "max_target_std_diagonal_m": float(tstd0.max()),
+    }
+    if refs is not None:
+        xyz = {**dict(zip(res.station_ids, res.station_xyz_m)), **dict(zip(res.target_ids, res.target_xyz_m))}
+        pairs = list(zip(refs.target_a, refs.target_b))
+        block["reference_lengths_u_m"] = dict(zip((f"{a}-{b}" for a, b in pairs),
+                                                  cc.interpoint_std_m(pairs, xyz).tolist()))
+    return block

@@ -173,7 +173,9 @@ def adjust_command(
                      scale_bar=refs if scale_bar else None, rng=seed)
     doc = result_to_json(res, refs)
     if corrected is not None:
-        doc["with_correlations"] = _with_correlations(res, corrected, refs)
+        from multilat.campaign.correlated import correlated_json
+
+        doc["with_correlations"] = correlated_json(res, corrected.covariance_m2, refs)
     if out is not None:
         from multilat.report.network_figures import save_figures
 
@@ -193,32 +195,6 @@ def adjust_command(
         console.print(f"with the sensors' correlations (G C Gᵀ): u(offset) µm: {offs}; largest target "
                       f"std {wc['max_target_std_m'] * 1e6:.1f} µm (diagonal weights only: "
                       f"{wc['max_target_std_diagonal_m'] * 1e6:.1f} µm)", markup=False)
-
-
-def _with_correlations(res, corrected, refs) -> dict:
-    """The parameters' covariance with the corrected distances' full covariance (shared sensors):
-    :func:`multilat.campaign.correlated.correlated_covariance`, as a JSON block."""
-    from multilat.campaign.correlated import correlated_covariance
-
-    cc = correlated_covariance(res, corrected.covariance_m2)
-    tstd = np.sqrt(np.clip(np.diagonal(cc.target_cov_m2, axis1=1, axis2=2), 0, None))
-    tstd0 = np.sqrt(np.clip(np.diagonal(res.target_cov_m2, axis1=1, axis2=2), 0, None))
-    block = {
-        "note": "covariance G C Gᵀ of the adjusted parameters with the full covariance C of the corrected "
-                "distances (environment sensors shared between observations); the main keys use the "
-                "diagonal weights' covariance",
-        "stations": {sid: {"offset_u_m": float(cc.offset_std_m[i]), "cov_m2": cc.station_cov_m2[i]}
-                     for i, sid in enumerate(cc.station_ids)},
-        "targets": {tid: {"cov_m2": cc.target_cov_m2[j]} for j, tid in enumerate(cc.target_ids)},
-        "max_target_std_m": float(tstd.max()),
-        "max_target_std_diagonal_m": float(tstd0.max()),
-    }
-    if refs is not None:
-        xyz = {**dict(zip(res.station_ids, res.station_xyz_m)), **dict(zip(res.target_ids, res.target_xyz_m))}
-        pairs = list(zip(refs.target_a, refs.target_b))
-        block["reference_lengths_u_m"] = dict(zip((f"{a}-{b}" for a, b in pairs),
-                                                  cc.interpoint_std_m(pairs, xyz).tolist()))
-    return block
 
 
 def _print_summary(res, doc, out):
