@@ -1,4 +1,5 @@
-"""Kernels of :mod:`multilat.network.sparse` (one pass over targets; observations grouped by target).
+"""Kernels of the sparse back end :mod:`multilat.network.solve.sparse` and of the multilateration of
+:mod:`multilat.network.large` (one pass over targets; observations grouped by target).
 
 Compiled with numba when it is installed; otherwise the same functions run as plain Python (slow,
 but identical arithmetic — the tests run a tiny network both ways).
