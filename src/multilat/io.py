@@ -34,30 +34,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     temporary file, so the target is written whole or not at all (the rename is atomic on POSIX file
     systems). An :class:`OSError` names ``path``, never the temporary file.
     """
-    target = Path(path)
-    if target.is_dir():
-        raise MultilatError(f"{target}: is a directory (expected a file to write)")
-    try:
-        target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
-    except OSError as exc:
-        raise _named(exc, target) from None
-    os.close(fd)
-    tmp_path = Path(tmp)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp_path, 0o666 & ~umask)  # mkstemp makes 0600; give the file the usual permissions
-    try:
-        yield tmp_path
-        os.replace(tmp_path, target)
-    except OSError as exc:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
-        raise _named(exc, target) from None
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
-        raise
+    with atomic_paths(path) as (tmp,):
+        yield tmp
 
 
 def _named(exc: OSError, target: Path) -> OSError:

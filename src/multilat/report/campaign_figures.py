@@ -97,13 +97,6 @@ def correction_figure(corrected, log=None):
 
 def save_correction_figure(path: str | os.PathLike, corrected, log=None) -> None:
     """Write :func:`correction_figure` as a PNG, atomically."""
-    import matplotlib.pyplot as plt
+    from multilat.report.png import save_png
 
-    from multilat.io import atomic_path
-
-    fig = correction_figure(corrected, log)
-    try:
-        with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png", dpi=110)
-    finally:
-        plt.close(fig)
+    save_png(correction_figure(corrected, log), path, tight=False)

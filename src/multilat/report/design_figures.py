@@ -54,8 +54,8 @@ def plot_slice_maps(pre, box_min_m, box_max_m, *, n_slices: int = 3, n_grid: int
 def save_design_figures(pre, out_dir: str | os.PathLike, *, box_min_m, box_max_m,
                         min_range_m: float = 0.0, max_range_m: float = np.inf) -> list[Path]:
     """Write ``layout_3d.png``, ``layout_top.png`` and ``uncertainty_slices.png`` into ``out_dir``."""
-    plt = _plt()
-    from multilat.io import atomic_path
+    _plt()                      # the non-interactive backend
+    from multilat.report.png import save_png
 
     out = Path(out_dir)
     written = []
@@ -65,10 +65,6 @@ def save_design_figures(pre, out_dir: str | os.PathLike, *, box_min_m, box_max_m
                              max_range_m=max_range_m)[0].figure)]
     for name, fig in figs:
         p = out / name
-        try:
-            with atomic_path(p) as tmp:
-                fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
-        finally:
-            plt.close(fig)
+        save_png(fig, p)
         written.append(p)
     return written

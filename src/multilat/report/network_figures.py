@@ -186,8 +186,8 @@ def plot_3d(result, ax=None, *, magnify: float | None = None):
 
 def save_figures(result, out_dir: str | os.PathLike) -> list[Path]:
     """Write ``residuals.png``, ``top_view.png`` and ``view_3d.png`` into ``out_dir`` atomically."""
-    plt = _plt()
-    from multilat.io import atomic_path
+    _plt()                      # the non-interactive backend
+    from multilat.report.png import save_png
 
     out = Path(out_dir)
     written = []
@@ -196,10 +196,6 @@ def save_figures(result, out_dir: str | os.PathLike) -> list[Path]:
         ax = fn(result)
         fig = ax.figure
         p = out / name
-        try:
-            with atomic_path(p) as tmp:
-                fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
-        finally:
-            plt.close(fig)
+        save_png(fig, p)
         written.append(p)
     return written
