@@ -276,12 +276,12 @@ class Points:
             raise MultilatError("points: coordinates must be finite")
         object.__setattr__(self, "ids", ids)
         object.__setattr__(self, "xyz_m", x)
+        object.__setattr__(self, "_row", _index_of(ids))
 
     def get(self, ident: str) -> np.ndarray | None:
-        try:
-            return self.xyz_m[self.ids.index(ident)]
-        except ValueError:
-            return None
+        """Coordinates (3,) of ``ident``, or None when not given (a dict look-up)."""
+        k = self._row.get(ident)
+        return None if k is None else self.xyz_m[k]
 
     def as_dict(self) -> dict[str, np.ndarray]:
         return {i: self.xyz_m[k] for k, i in enumerate(self.ids)}

@@ -185,16 +185,22 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
             xyz = {i: p for i, p in zip(all_ids, np.vstack([sx, tx]))}
             R, tr = frame_321(xyz[datum.points[0]], xyz[datum.points[1]], xyz[datum.points[2]])
         else:
-            ids = all_ids if datum.points is None else datum.points
-            for p in ids:
-                if p not in all_ids:
-                    raise MultilatError(f"datum free: unknown point id {p!r}")
-            ref = {i: p for i, p in zip(all_ids, np.vstack([ref_start.station_xyz_m[smap],
-                                                             ref_start.target_xyz_m[tmap]]))}
+            pos = {pid: k for k, pid in enumerate(all_ids)}
+            if datum.points is None:
+                sel = np.arange(len(all_ids))
+            else:
+                for pid in datum.points:
+                    if pid not in pos:
+                        raise MultilatError(f"datum free: unknown point id {pid!r}")
+                sel = np.array([pos[pid] for pid in datum.points])
+            ref = np.vstack([ref_start.station_xyz_m[smap], ref_start.target_xyz_m[tmap]])[sel]
             if points is not None:
-                ref.update({i: points.get(i) for i in ids if points.get(i) is not None})
-            cur = {i: p for i, p in zip(all_ids, np.vstack([sx, tx]))}
-            R, tr = rigid_fit(np.array([cur[i] for i in ids]), np.array([ref[i] for i in ids]))
+                given = points.as_dict()
+                for n, k in enumerate(sel):
+                    v = given.get(all_ids[k])
+                    if v is not None:
+                        ref[n] = v
+            R, tr = rigid_fit(np.vstack([sx, tx])[sel], ref)
         sx, tx = apply_rigid(R, tr, sx), apply_rigid(R, tr, tx)
         G, E = datum_matrices(datum, sub.station_ids, sub.target_ids, sx, tx)
     cov = NetworkCovariance(Qgg, fin.Ntt_inv, Js_w, Jt_w, sub.station_index, sub.target_index,
