@@ -6,25 +6,30 @@
   parametrisation, started from the nominal solution like ours), same run. Goal >= 1e5 trials/s and
   >= 50x. Extra: the plain-numpy path's trials/s.
 * ``propagate_small_volume``: end to end (distance-model errors drawn + solved + summarised), trials/s.
-* ``sparse_{2k,20k,200k}``: :func:`solve_large` on 20 stations x t targets, 8 stations per target
-  (1.6 M distances at 200k), initial values = truth + N(0, 1 mm) on every coordinate and offset.
-  ``median_s`` is the solve; ``extra`` has the covariance time and, for the largest, the peak RSS of
-  a fresh process doing generation + solve + covariances. Baseline at 2k only:
-  ``scipy.optimize.least_squares(method="trf")`` with the analytic sparse Jacobian (the issue's
-  anchor, 129 s at 200k, is far too slow to repeat here). Goal at 200k: solve <= 0.5 s,
-  covariances <= 0.5 s, peak <= 2 GiB.
-* ``large_200k_from_distances``: 200k targets from distances alone (initial values + solve):
-  :func:`network.large.adjust_large` — seed network (``initial_values`` on ~48 well-observed targets),
-  multilateration of every target, sparse solve; ``median_s`` excludes the covariances (in extra).
-  Baseline: ``solve_large`` from truth + N(0, 1 mm) on the same distances, same run (ratio < 1: the
-  price of finding the initial values). Extra: errors vs truth after a rigid fit, mean per-target chi2.
+* ``sparse_{2k,20k,200k}``: the one entry point, ``adjust(obs, solver="sparse", initial=truth +
+  N(0, 1 mm), snooping=False)``, on 20 stations x t targets, 8 stations per target (1.6 M distances at
+  200k): the whole call (solve + every statistic). Baseline, same run, interleaved: the same call with
+  ``solver="dense"`` (2k and 20k; too slow at 200k). ``extra`` splits the wall time (timers wrapped
+  around ``fit.gauss_newton`` = the solve, and the statistics parts: hat diagonal, ``build_result``,
+  w-test groups); at 2k the issue-5 scipy ``trf``/lsmr figure (no statistics); for the largest size the
+  peak RSS of a fresh process doing generation + ``adjust``.
+* ``large_{20k,200k}_from_distances``: ``adjust(obs, solver="sparse", snooping=False)`` with no
+  coordinates (initial values by ``large_initial_values`` inside ``adjust``: seed network +
+  multilateration). Baseline, same run: the same call from truth + N(0, 1 mm) (ratio < 1: the price of
+  finding the initial values). Extra: the split, errors vs truth after a rigid fit, mean per-target chi2.
+* ``cli_adjust_20k_json_no_snooping``: the whole command ``multilat adjust big.csv --solver sparse --json
+  --no-snooping > /dev/null`` (20 x 20 000, a CSV written once in a temp dir), subprocess wall time,
+  against the library ``adjust(solver="sparse", snooping=False)`` on the same file in-process (reader,
+  result_to_json and JSON text timed apart in extra). ``cli_adjust_20k_json`` (full run only): the
+  user's default command (data snooping on), once, under a 120 s limit.
 * ``csv_read_1.6M``: :func:`fastio.read_observations_fast` on a 1.6 M-row file, against
   ``network.files.read_observations`` (the strict general reader) on its first 100 000 rows,
   scaled x16 (stated in extra). Goal <= 2 s.
 
 The machine is shared: each row records the 1-minute load average before it ran. Each section runs in
 a fresh process with ``OPENBLAS_NUM_THREADS=1`` (see :func:`run`).
-Quick mode: fewer repeats, 20k trials, sparse 2k/20k only, large 20k, CSV 200k rows.
+Quick mode: fewer repeats, 20k trials, sparse 2k/20k only, large 20k, CLI without the default
+(snooping) command, CSV 200k rows.
 """
 
 from __future__ import annotations
@@ -42,6 +47,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 SEED = 20200613
+# Largest network of the sparse/large rows (full mode: 200 000 targets). Lower it to skip the 200k rows:
+# BENCH_NETWORK_MAX_TARGETS=20000 (each adjust call at 200k took minutes on the code of 2026-11-23,
+# see network.md).
+MAX_TARGETS = int(os.environ.get("BENCH_NETWORK_MAX_TARGETS", "200000"))
 
 
 def _load():
@@ -149,22 +158,100 @@ def bench_propagate(quick):
                                      "note": "includes drawing the distance-model errors"}}
 
 
+def _observations(net, t):
+    from multilat.network.data import Observations
+
+    return Observations(tuple(f"S{i}" for i in range(len(net.offset_m))), tuple(f"T{j}" for j in range(t)),
+                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
+
+
 def _sparse_problem(t, seed=SEED):
-    from multilat.network.sparse import synthetic_network
+    """20 stations x t targets, 8 stations per target: (truth, Observations, initial values =
+    truth + N(0, 1 mm) on every coordinate and offset)."""
+    from types import SimpleNamespace
+
+    from multilat.network.large import synthetic_network
 
     net = synthetic_network(20, t, 8, rng=seed)
     rng = np.random.default_rng(seed + 1)
-    init = (net.station_xyz_m + rng.normal(0, 1e-3, net.station_xyz_m.shape),
-            net.offset_m + rng.normal(0, 1e-3, net.offset_m.shape),
-            net.target_xyz_m + rng.normal(0, 1e-3, net.target_xyz_m.shape))
-    return net, init
+    init = SimpleNamespace(station_xyz_m=net.station_xyz_m + rng.normal(0, 1e-3, net.station_xyz_m.shape),
+                           offset_m=net.offset_m + rng.normal(0, 1e-3, net.offset_m.shape),
+                           target_xyz_m=net.target_xyz_m + rng.normal(0, 1e-3, net.target_xyz_m.shape))
+    return net, _observations(net, t), init
+
+
+# Where the time of one ``adjust`` call goes: these functions are wrapped by timers while it runs
+# (module attribute, wrapped in place and restored). ``solve`` is the Gauss-Newton loop alone (every
+# call, also those of a minimum search); ``initial`` the initial values from distances; the rest are
+# statistics: ``redundancy`` (hat-matrix diagonal), ``result`` (build_result: point covariances,
+# w-tests, MDBs), ``w_groups`` (grouping the failing w-tests by correlation).
+_PARTS = (("multilat.network.fit", "gauss_newton", "solve"),
+          ("multilat.network.adjust", "initial_for", "initial"),
+          ("multilat.network.covariance", "NetworkCovariance.hat_diagonal", "redundancy"),
+          ("multilat.network.adjust", "build_result", "result"),
+          ("multilat.network.adjust", "_w_failure_groups", "w_groups"))
+
+
+class _Split:
+    """Context manager: wraps the functions of ``_PARTS`` with timers; ``times`` accumulates seconds."""
+
+    def __enter__(self):
+        import functools
+        import importlib
+
+        self.times = {key: 0.0 for _, _, key in _PARTS}
+        self._undo = []
+        for mod, attr, key in _PARTS:
+            owner = importlib.import_module(mod)
+            *path, name = attr.split(".")
+            for p in path:
+                owner = getattr(owner, p)
+            orig = owner.__dict__[name]
+
+            def wrapper(*a, _f=orig, _k=key, **kw):
+                t0 = time.perf_counter()
+                try:
+                    return _f(*a, **kw)
+                finally:
+                    self.times[_k] += time.perf_counter() - t0
+
+            setattr(owner, name, functools.wraps(orig)(wrapper))
+            self._undo.append((owner, name, orig))
+        return self
+
+    def __exit__(self, *exc):
+        for owner, name, orig in reversed(self._undo):
+            setattr(owner, name, orig)
+        return False
+
+
+def _timed_adjust(obs, **kw):
+    """(result, wall seconds, split dict) of one ``adjust(obs, **kw)``; split has the parts of
+    ``_PARTS`` and ``statistics`` = wall - solve - initial (final assembly, covariances, redundancy
+    numbers, w-tests, result building, checks)."""
+    import warnings
+
+    from multilat.network.adjust import adjust
+
+    with _Split() as sp, warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        t0 = time.perf_counter()
+        res = adjust(obs, **kw)
+        wall = time.perf_counter() - t0
+    split = dict(sp.times)
+    split["statistics"] = wall - split["solve"] - split["initial"]
+    return res, wall, split
+
+
+def _median_split(splits):
+    return {k: statistics.median(s[k] for s in splits) for k in splits[0]}
 
 
 def _scipy_trf_sparse(net, init):
     from scipy.optimize import least_squares
     from scipy.sparse import csr_matrix
 
-    h0, o0, t0 = init
+    h0, o0, t0 = init.station_xyz_m, init.offset_m, init.target_xyz_m
     s, t, m = len(h0), len(t0), len(net.distance_m)
     si, ti = net.station_index, net.target_index
     w = 1 / net.sigma_m
@@ -197,58 +284,76 @@ import json, sys, time
 sys.path.insert(0, %r)
 import numpy as np
 from bench_network import _sparse_problem
-from multilat.network.sparse import solve_large
-net, init = _sparse_problem(%d)
-res = solve_large(net.station_index, net.target_index, net.distance_m, net.sigma_m, *init)
+from multilat.network.adjust import adjust
+net, obs, init = _sparse_problem(%d)
+t0 = time.perf_counter()
+res = adjust(obs, solver="sparse", initial=init, snooping=False)
+wall = time.perf_counter() - t0
 hwm = 0
 for line in open("/proc/self/status"):
     if line.startswith("VmHWM"):
         hwm = int(line.split()[1]) / 1024
-print(json.dumps({"peak_rss_mib": hwm, "solve_s": res.timings_s["solve"],
-                  "covariance_s": res.timings_s["covariance"]}))
+print(json.dumps({"peak_rss_mib": hwm, "first_adjust_s": wall}))
 """
 
 
-def bench_sparse(quick):
-    from multilat.network.sparse import solve_large
+def _warm_up():
+    """Compile / load the numba kernels and import everything on a small network (not timed)."""
+    _, obs, init = _sparse_problem(500, seed=SEED + 7)
+    for solver in ("sparse", "dense"):
+        _timed_adjust(obs, solver=solver, initial=init, snooping=False)
+    _timed_adjust(obs, solver="sparse", snooping=False, rng=1)
 
-    sizes = [2000, 20_000] if quick else [2000, 20_000, 200_000]
+
+def bench_sparse(quick):
+    """``adjust(obs, solver="sparse", initial=truth + N(0, 1 mm), snooping=False)`` against the same
+    call with ``solver="dense"`` (2k, 20k), same run, interleaved."""
+    sizes = [n for n in ([2000, 20_000] if quick else [2000, 20_000, 200_000]) if n <= max(MAX_TARGETS, 2000)]
+    _warm_up()
     out = []
     for t in sizes:
-        net, init = _sparse_problem(t)
-        args = (net.station_index, net.target_index, net.distance_m, net.sigma_m, *init)
-        solve_large(*args)                           # warm-up / compile
+        net, obs, init = _sparse_problem(t)
+        reps = 3 if quick else {2000: 5, 20_000: 3, 200_000: 2}[t]
+        do_dense = t <= 20_000
         load = _load()
-        res, cpu = [], []
-        for _ in range(3 if quick or t == 200_000 else 5):
+        sp, dn, cpu = [], [], []
+        for _ in range(reps):
             c0 = time.process_time()
-            res.append(solve_large(*args))
-            cpu.append(time.process_time() - c0)   # CPU seconds of all threads, solve + covariances
-        solve = statistics.median(r.timings_s["solve"] for r in res)
-        cov = statistics.median(r.timings_s["covariance"] for r in res)
-        r0 = res[0]
-        err_off = float(np.abs(r0.offset_m - net.offset_m).max())
-        extra = {"targets": t, "distances": len(net.distance_m), "covariance_s": cov,
-                 "best_solve_s": min(r.timings_s["solve"] for r in res),
-                 "best_covariance_s": min(r.timings_s["covariance"] for r in res),
-                 "cpu_s_solve_plus_cov": statistics.median(cpu),
-                 "iterations": r0.iterations, "full_assemblies": r0.full_assemblies,
-                 "converged": r0.converged, "sigma0": r0.sigma0, "max_offset_error_m": err_off,
-                 "load_avg_1min": load, "initial_values": "truth + N(0, 1 mm)"}
-        row = {"name": f"sparse_{t // 1000}k", "median_s": solve, "baseline": None, "baseline_median_s": None,
+            sp.append(_timed_adjust(obs, solver="sparse", initial=init, snooping=False))
+            cpu.append(time.process_time() - c0)       # CPU seconds of all threads
+            if do_dense:
+                dn.append(_timed_adjust(obs, solver="dense", initial=init, snooping=False))
+        med = statistics.median(w for _, w, _ in sp)
+        r0 = sp[0][0]
+        split = _median_split([s for _, _, s in sp])
+        extra = {"targets": t, "distances": obs.n_obs, "what": "adjust(solver='sparse', snooping=False), "
+                 "initial = truth + N(0, 1 mm)", "reps": reps,
+                 "solve_s": split["solve"], "statistics_s": split["statistics"],
+                 "redundancy_s": split["redundancy"], "result_s": split["result"],
+                 "w_groups_s": split["w_groups"], "best_s": min(w for _, w, _ in sp),
+                 "cpu_s": statistics.median(cpu), "iterations": r0.iterations,
+                 "converged": bool(r0.convergence.converged), "solver": r0.solver, "sigma0": r0.sigma0,
+                 "failing_w_tests": int(np.sum(np.abs(r0.w) > _w_crit(r0.alpha))),
+                 "max_offset_error_m": float(np.abs(r0.offset_m - net.offset_m).max()),
+                 "load_avg_1min": load}
+        row = {"name": f"sparse_{t // 1000}k", "median_s": med, "baseline": None, "baseline_median_s": None,
                "ratio": None, "extra": extra}
+        if do_dense:
+            dmed = statistics.median(w for _, w, _ in dn)
+            dsplit = _median_split([s for _, _, s in dn])
+            d0 = dn[0][0]
+            row.update(baseline="adjust(solver='dense'), same call", baseline_median_s=dmed, ratio=dmed / med)
+            extra.update(dense_solve_s=dsplit["solve"], dense_statistics_s=dsplit["statistics"],
+                         dense_vs_sparse_max_offset_diff_m=float(np.abs(d0.offset_m - r0.offset_m).max()),
+                         dense_vs_sparse_sigma0_rel_diff=abs(d0.sigma0 / r0.sigma0 - 1))
         if t == 2000:
             t0 = time.perf_counter()
             lr = _scipy_trf_sparse(net, init)
-            tb = time.perf_counter() - t0
-            row.update(baseline="scipy least_squares trf (sparse analytic Jacobian, lsmr)", baseline_median_s=tb,
-                       ratio=tb / solve)
-            s = len(net.offset_m)
-            extra["baseline_max_offset_diff_m"] = float(np.abs(lr.x[3 * s: 4 * s] - r0.offset_m).max())
-            extra["baseline_nfev"] = int(lr.nfev)
+            extra["scipy_trf_lsmr_s"] = time.perf_counter() - t0      # the issue-5 baseline, no statistics
+            extra["scipy_trf_nfev"] = int(lr.nfev)
         if t == max(sizes):
             p = subprocess.run([sys.executable, "-c", _PEAK_CHILD % (str(Path(__file__).parent), t)],
-                               capture_output=True, text=True, timeout=600)
+                               capture_output=True, text=True, timeout=1200)
             if p.returncode == 0:
                 extra["fresh_process"] = json.loads(p.stdout.strip().splitlines()[-1])
             else:  # pragma: no cover
@@ -257,10 +362,16 @@ def bench_sparse(quick):
     return out
 
 
+def _w_crit(alpha):
+    from multilat.network.statistics import w_critical
+
+    return w_critical(alpha)
+
+
 def bench_csv(quick):
     from multilat.network.fastio import read_observations_fast
     from multilat.network.files import read_observations
-    from multilat.network.sparse import synthetic_network
+    from multilat.network.large import synthetic_network
 
     t = 25_000 if quick else 200_000
     net = synthetic_network(20, t, 8, rng=SEED)
@@ -287,26 +398,24 @@ def bench_csv(quick):
 
 
 def bench_large(quick):
-    """200k targets from distances alone: network.large.adjust_large (seed network by initial_values,
-    multilateration of every target, sparse solve; covariances timed apart) vs solve_large started from
-    truth + N(0, 1 mm) on the same distances (the ``sparse_200k`` row), same run."""
-    from multilat.network.fastio import FastObservations
-    from multilat.network.initial import rigid_fit
-    from multilat.network.large import adjust_large
-    from multilat.network.sparse import solve_large
+    """Targets from distances alone: ``adjust(obs, solver="sparse", snooping=False)`` (initial values by
+    :func:`multilat.network.large.large_initial_values` inside ``adjust``, solve, statistics) against
+    the same call given truth + N(0, 1 mm) as initial values, same run, interleaved."""
+    from multilat.network.datum import rigid_fit
 
-    t = 20_000 if quick else 200_000
-    net, init = _sparse_problem(t)
-    obs = FastObservations(tuple(f"S{i}" for i in range(20)), tuple(f"T{j}" for j in range(t)),
-                           net.station_index, net.target_index, net.distance_m, net.sigma_m)
-    adjust_large(obs, rng=1)                                          # warm-up / compile
+    t = 20_000 if quick else min(200_000, max(MAX_TARGETS, 20_000))
+    reps = 3 if quick else 2
+    _warm_up()
+    net, obs, init = _sparse_problem(t)
     load = _load()
-    res = [adjust_large(obs, rng=1 + k) for k in range(3)]
-    tot = [r.timings_s["seed"] + r.timings_s["multilaterate"] + r.timings_s["solve"] for r in res]
-    med = statistics.median(tot)
-    args = (net.station_index, net.target_index, net.distance_m, net.sigma_m, *init)
-    base = statistics.median(solve_large(*args, covariance=False).timings_s["solve"] for _ in range(3))
-    r0 = res[int(np.argsort(tot)[1])]
+    res, base = [], []
+    for k in range(reps):
+        res.append(_timed_adjust(obs, solver="sparse", snooping=False, rng=1 + k))
+        base.append(_timed_adjust(obs, solver="sparse", initial=init, snooping=False))
+    med = statistics.median(w for _, w, _ in res)
+    bmed = statistics.median(w for _, w, _ in base)
+    split = _median_split([s for _, _, s in res])
+    r0 = res[0][0]
     R, tr = rigid_fit(net.station_xyz_m, r0.station_xyz_m, allow_reflection=True)
     et = r0.target_xyz_m - (net.target_xyz_m @ R.T + tr)
     chi = np.einsum("ti,ti->t", et, np.linalg.solve(r0.target_cov_m2, et[:, :, None])[:, :, 0])
@@ -314,27 +423,141 @@ def bench_large(quick):
     for line in open("/proc/self/status"):
         if line.startswith("VmHWM"):
             hwm = int(line.split()[1]) / 1024
-    med_of = lambda key: statistics.median(r.timings_s[key] for r in res)  # noqa: E731
+    ini = r0.initial
+    search = ini.get("search") or {}
     return {"name": f"large_{t // 1000}k_from_distances", "median_s": med,
-            "baseline": "solve_large from truth + N(0, 1 mm) (no initial values to find)",
-            "baseline_median_s": base, "ratio": base / med,
-            "extra": {"what": f"{t // 1000}k targets from distances alone (initial values + solve)",
-                      "targets": t, "distances": len(net.distance_m), "seed_s": med_of("seed"),
-                      "multilaterate_s": med_of("multilaterate"), "solve_s": med_of("solve"),
-                      "covariance_s": med_of("covariance"), "iterations": r0.iterations,
-                      "seed_targets": len(r0.seed_target_ids), "initial_method": r0.initial_method,
-                      "multilateration_rms_m": r0.multilateration_rms_m, "sigma0": r0.sigma0,
-                      "max_offset_error_m": float(np.abs(r0.offset_m - net.offset_m).max()),
-                      "max_target_error_m": float(np.abs(et).max()),
-                      "mean_target_chi2_3": float(chi.mean()),
+            "baseline": "adjust(solver='sparse') from truth + N(0, 1 mm) (no initial values to find)",
+            "baseline_median_s": bmed, "ratio": bmed / med,
+            "extra": {"what": f"adjust(solver='sparse', snooping=False), {t // 1000}k targets from distances "
+                              "alone", "targets": t, "distances": obs.n_obs, "reps": reps,
+                      "initial_s": split["initial"], "solve_s": split["solve"],
+                      "statistics_s": split["statistics"], "redundancy_s": split["redundancy"],
+                      "result_s": split["result"], "w_groups_s": split["w_groups"],
+                      "baseline_solve_s": _median_split([s for _, _, s in base])["solve"],
+                      "iterations": r0.iterations, "initial_method": ini.get("method"),
+                      "seed_targets": ini.get("seed_targets"),
+                      "multilateration_rms_m": ini.get("multilateration_rms_m"),
+                      "search_candidates": len(search.get("candidates", ())) if isinstance(search, dict) else None,
+                      "sigma0": r0.sigma0, "max_offset_error_m": float(np.abs(r0.offset_m - net.offset_m).max()),
+                      "max_target_error_m": float(np.abs(et).max()), "mean_target_chi2_3": float(chi.mean()),
                       "peak_rss_mib_section": hwm, "load_avg_1min": load}}
 
 
+def _write_csv(net, path):
+    s = np.char.add("S", net.station_index.astype(str))
+    tg = np.char.add("T", net.target_index.astype(str))
+    dd = np.char.mod("%.9f", net.distance_m)
+    body = np.char.add(np.char.add(np.char.add(np.char.add(np.char.add(s, ","), tg), ","), dd), ",5e-06")
+    Path(path).write_text("station,target,distance_m,sigma_m\n" + "\n".join(body.tolist()) + "\n")
+    return len(body)
+
+
+def _cli_cmd(*args):
+    exe = Path(sys.executable).with_name("multilat")
+    if exe.exists():
+        return [str(exe), *args]
+    return [sys.executable, "-c", "from multilat.cli import run; run()", *args]  # pragma: no cover
+
+
+def _cli_env():
+    src = str(ROOT / "src")
+    pp = os.environ.get("PYTHONPATH")
+    return dict(os.environ, PYTHONPATH=src if not pp else src + os.pathsep + pp)
+
+
+def _run_cli(args, timeout):
+    t0 = time.perf_counter()
+    p = subprocess.run(_cli_cmd(*args), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                       env=_cli_env(), timeout=timeout)
+    wall = time.perf_counter() - t0
+    if p.returncode != 0:
+        raise RuntimeError(f"multilat {' '.join(args)} failed: {p.stderr.strip()[-400:]}")
+    return wall
+
+
+def bench_cli(quick):
+    """The user's command, whole: ``multilat adjust big.csv --solver sparse --json > /dev/null`` on
+    20 stations x 20 000 targets (160 000 distances), wall time of the subprocess; beside it, the
+    library path on the same file in this process (reader + ``adjust`` + ``result_to_json`` + JSON text),
+    each part timed. ``--no-snooping`` is measured against ``snooping=False``; the default command
+    (data snooping on) once, under a time limit, in the full run only."""
+    import resource
+    import warnings
+
+    from multilat.cli.app import to_jsonable
+    from multilat.network.files import read_observations
+    from multilat.network.large import synthetic_network
+    from multilat.network.result import result_to_json
+
+    t = 20_000
+    reps = 2 if quick else 3
+    _warm_up()
+    net = synthetic_network(20, t, 8, rng=SEED)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "big.csv"
+        n = _write_csv(net, path)
+        _run_cli(["--help"], 120)                               # numba cache / .pyc warm, not timed
+        load = _load()
+        startup = statistics.median(_run_cli(["--help"], 120) for _ in range(reps))
+        cli, lib = [], []
+        for _ in range(reps):
+            cli.append(_run_cli(["adjust", str(path), "--solver", "sparse", "--json", "--no-snooping"], 1200))
+            t0 = time.perf_counter()
+            obs = read_observations(path)
+            t1 = time.perf_counter()
+            res, wall, split = _timed_adjust(obs, solver="sparse", snooping=False, rng=0)
+            t2 = time.perf_counter()
+            doc = result_to_json(res)
+            t3 = time.perf_counter()
+            text = json.dumps(to_jsonable(doc), indent=2)
+            t4 = time.perf_counter()
+            lib.append({"read": t1 - t0, "adjust": wall, "solve": split["solve"], "initial": split["initial"],
+                        "statistics": split["statistics"], "result_to_json": t3 - t2, "json_text": t4 - t3,
+                        "total": t4 - t0})
+        peak_children = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
+        med = statistics.median(cli)
+        lm = _median_split(lib)
+        failing = int(np.sum(np.abs(res.w) > _w_crit(res.alpha)))
+        rows.append({"name": "cli_adjust_20k_json_no_snooping", "median_s": med,
+                     "baseline": "library in-process: adjust(solver='sparse', snooping=False) alone",
+                     "baseline_median_s": lm["adjust"], "ratio": lm["adjust"] / med,
+                     "extra": {"command": "multilat adjust big.csv --solver sparse --json --no-snooping "
+                                          "> /dev/null", "targets": t, "distances": n, "reps": reps,
+                               "csv_mib": path.stat().st_size / 2**20, "cli_startup_help_s": startup,
+                               "lib_read_s": lm["read"], "lib_initial_s": lm["initial"],
+                               "lib_solve_s": lm["solve"], "lib_statistics_s": lm["statistics"],
+                               "lib_result_to_json_s": lm["result_to_json"], "lib_json_text_s": lm["json_text"],
+                               "lib_total_s": lm["total"], "json_mib": len(text) / 2**20,
+                               "peak_rss_mib_largest_child": peak_children,
+                               "failing_w_tests_without_snooping": failing, "load_avg_1min": load,
+                               "goal_issue_12": "<= 0.6 s (whole CLI, --json)"}})
+        if not quick:
+            limit = 120
+            load = _load()
+            try:
+                wall = _run_cli(["adjust", str(path), "--solver", "sparse", "--json"], limit)
+                note = "finished"
+            except subprocess.TimeoutExpired:
+                wall, note = None, f"not finished after {limit} s (killed)"
+            rows.append({"name": "cli_adjust_20k_json", "median_s": wall,
+                         "baseline": "the same command with --no-snooping (row above, median)",
+                         "baseline_median_s": med, "ratio": None if wall is None else med / wall,
+                         "extra": {"command": "multilat adjust big.csv --solver sparse --json > /dev/null "
+                                              "(the default: data snooping on)", "runs": 1, "note": note,
+                                   "time_limit_s": limit, "failing_w_tests_before_snooping": failing,
+                                   "load_avg_1min": load}})
+        else:
+            warnings.warn("quick mode: the default command (data snooping on) is not run", stacklevel=1)
+    return rows
+
+
 _SECTIONS = {"batched": lambda q: [bench_batched(q)], "propagate": lambda q: [bench_propagate(q)],
-             "sparse": bench_sparse, "csv": lambda q: [bench_csv(q)], "large": lambda q: [bench_large(q)]}
+             "sparse": bench_sparse, "csv": lambda q: [bench_csv(q)], "large": lambda q: [bench_large(q)],
+             "cli": bench_cli}
 
 
-def run(quick: bool = False, sections=("batched", "propagate", "sparse", "large", "csv")) -> list[dict]:
+def run(quick: bool = False, sections=("batched", "propagate", "sparse", "large", "cli", "csv")) -> list[dict]:
     """Each section in a fresh process with ``OPENBLAS_NUM_THREADS=1``: OpenBLAS worker threads left
     spinning by a BLAS-heavy baseline (scipy LM) otherwise steal the second core from the numba
     kernels measured next (seen: 10x slower sparse solves after the LM baseline in one process)."""
@@ -342,7 +565,7 @@ def run(quick: bool = False, sections=("batched", "propagate", "sparse", "large"
     rows = []
     for name in sections:
         cmd = [sys.executable, str(Path(__file__).resolve()), "--section", name] + (["--quick"] if quick else [])
-        p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=1800)
+        p = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=3600)
         if p.returncode != 0:
             raise RuntimeError(f"bench_network section {name} failed: {p.stderr.strip()[-500:]}")
         rows += [json.loads(line) for line in p.stdout.splitlines() if line.startswith("{")]
@@ -353,10 +576,14 @@ if __name__ == "__main__":
     quick = "--quick" in sys.argv
     if "--section" in sys.argv:
         out = _SECTIONS[sys.argv[sys.argv.index("--section") + 1]](quick)
+    elif "--sections" in sys.argv:
+        out = run(quick, sections=tuple(sys.argv[sys.argv.index("--sections") + 1].split(",")))
     elif "--sparse" in sys.argv:
         out = run(quick, sections=("sparse",))
     elif "--large" in sys.argv:
         out = run(quick, sections=("large",))
+    elif "--cli" in sys.argv:
+        out = run(quick, sections=("cli",))
     else:
         out = run(quick)
     for r in out:
