@@ -257,6 +257,11 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         warn = False
         if not do_snoop or len(rejected) >= limit:
             break
+        # detection first: data snooping only while the global test fails (Baarda's DIA procedure;
+        # with it passing, the w-tests' own false alarms at alpha over thousands of observations
+        # would reject good distances)
+        if st.global_test(core["vtpv"], core["dof"], alpha=alpha_global).passed is not False:
+            break
         w_sub = st.w_statistics(core["residual_w"], np.ones_like(core["residual_w"]), core["redundancy"])
         order = np.argsort(-np.abs(w_sub))
         k_sub = int(order[0])
