@@ -227,6 +227,11 @@ def _print_summary(res, doc, out):
             console.print(f"    {o.station}->{o.target}: w = {o.w:+.1f}, residual {o.residual_m * 1e6:+.1f} µm")
     else:
         console.print(f"  no observation rejected by data snooping (α = {res.alpha:g})")
+    if res.w_failure_groups and res.global_test.passed and not res.outliers:
+        n = sum(len(g) for g in res.w_failure_groups)
+        console.print(f"  the global test passes: {n} w-test(s) above the critical value are not acted on "
+                      f"(about α = {res.alpha:g} of all tests fail by chance); listed in w_failures",
+                      markup=False)
     if res.unlocated:
         ids = ", ".join(f"{o.station}->{o.target}" for o in res.unlocated)
         if len(res.unlocated) > 1:

@@ -27,6 +27,7 @@ from multilat.network.model import COSTS
 from multilat.network.problem import Params
 from multilat.network.result import (AdjustmentResult, InterpointDistance, Outlier, Start,
                                      build_result)
+from multilat.network.search import P_MIN, p_value
 from multilat.network.scale_datum import apply_scale_bar, check_scale_datum, scale_bar_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 
@@ -221,6 +222,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     reason = ""
     first = True
     search_ok = cost == "distance" and datum.kind != "control"
+    search = None
     while True:
         sub = obs if used.all() else obs.subset(used)
         try:
@@ -241,9 +243,6 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
                                            max_iter, solver, chunk_targets, rng)
             how["search"] = search.as_dict()
-            if search.warning:
-                notes.append(search.warning)
-                warnings.warn(search.warning, UserWarning, stacklevel=2)
         if first and datum.kind == "control" and cost == "distance":
             # a failed global test under control may be the control coordinates, not the distances:
             # test them (against the free network) before data snooping blames the distances
@@ -295,6 +294,14 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             break
         rejected.append((k, float(w_sub[k_sub])))
         used = trial
+    if search is not None and p_value(core["vtpv"], core["dof"]) < P_MIN:
+        # still failing by far after data snooping: a possible false minimum, never passed as ordinary
+        msg = search.warning or (
+            f"possible false minimum: the global test fails by far (sigma0 "
+            f"{core['sigma0']:.3g}, chi-square p {p_value(core['vtpv'], core['dof']):.1e}): check for gross "
+            "errors, a-priori sigma too small, or give approximate coordinates")
+        notes.append(msg)
+        warnings.warn(msg, UserWarning, stacklevel=2)
     if bar is not None:
         core = apply_scale_bar(core, bar, obs, used, datum, start, points, off_free, off_val, sc_free,
                                 max_iter, solver, chunk_targets)
@@ -357,6 +364,13 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
             core = cand.core
             break
     first = wrap(core)
+    if not core.get("partial") and _one_gross_error(core):
+        # one observation carries most of the excess: a gross error, for data snooping, not a wrong
+        # minimum (which spreads its misfit over many distances); the search is not run
+        res = find_minimum(obs, solve, first, rng=gen, max_rounds=0)
+        return core, replace(res, warning=None, candidates=(Candidate(
+            "not searched: one observation carries most of the excess (a gross error)", None, None,
+            False),))
     res = find_minimum(obs, solve, first, rng=gen)
     if restarts:
         res = replace(res, candidates=tuple(Candidate(r["label"], r["cost"], None, r["cost"] is not None,
@@ -381,6 +395,16 @@ def _start_as_partial(obs: Observations, start: Start, error: MultilatError) -> 
     return dict(partial=True, sx=start.station_xyz_m, tx=start.target_xyz_m, off=start.offset_m,
                 vtpv=float(v @ v), dof=obs.n_obs - n_unknown, error=error,
                 convergence=Convergence(False, 0, float("inf"), str(error)))
+
+
+def _one_gross_error(core) -> bool:
+    """Whether one observation explains the failure: without its squared normalised residual
+    ``w_k^2`` (its contribution to vtpv when rejected) the global test no longer fails by far. A single
+    blunder does; a wrong minimum spreads its misfit over many distances and does not."""
+    red = core["redundancy"]
+    w = st.w_statistics(core["residual_w"], np.ones_like(core["residual_w"]), red)
+    w2 = float(np.max(w ** 2, initial=0.0))
+    return core["dof"] > 1 and p_value(core["vtpv"] - w2, core["dof"] - 1) >= P_MIN
 
 
 def _w_failure_groups(core, used, crit, limit: int = 50) -> tuple:
