@@ -220,3 +220,19 @@ def test_no_snooping_while_the_global_test_passes():
     bad = adjust(obs.with_distances(d), initial=start, solver="sparse")
     assert [f"{o.station}->{o.target}" for o in bad.outliers] == [obs.label(123)] and bad.global_test.passed
     assert bad.initial["search"]["tried"][0]["label"].startswith("not searched") and not bad.warnings
+
+
+def test_weak_target_left_out_from_the_cli_and_strict_refuses(capsys, tmp_path):
+    """A target with 2 distances: left out with a warning and listed in `excluded`; --strict: one line."""
+    lines = OBS.read_text().splitlines()
+    keep = [ln for ln in lines if not (ln.startswith("C,3,") or ln.startswith("D,3,"))]
+    p = tmp_path / "weak.csv"
+    p.write_text("\n".join(keep) + "\n")
+    rc, out, err = _run(capsys, ["adjust", str(p), "--json"])
+    assert rc == 0, err
+    doc = json.loads(out)
+    assert doc["excluded"] == [{"id": "3", "kind": "target", "reason": "has 2 observation(s); 3 are needed "
+                                "to place it", "n_obs": 2}]
+    assert "3" not in doc["targets"] and "warning: target '3' left out" in err
+    rc, out, err = _run(capsys, ["adjust", str(p), "--strict"])
+    assert rc == 2 and "target '3' has 2 observation(s)" in err and "--strict" in err
