@@ -217,3 +217,19 @@ def test_config_parses_the_issue_example(tmp_path):
     assert run.search is None and run.best.layout.n_targets == 12
     assert run.best.criterion("max_u95") == pytest.approx(
         preanalyse(run.best.layout, SIG).criterion("max_u95"), rel=1e-12)
+
+
+def test_shipped_example_config_runs_and_improves_on_its_start(capsys):
+    """examples/design/cube.toml (the README's command): a short search ends no worse than its start."""
+    import json
+    from pathlib import Path
+
+    from multilat.cli.app import main
+
+    cfg = Path(__file__).resolve().parents[1] / "examples" / "design" / "cube.toml"
+    rc = main(["design", str(cfg), "--seed", "1", "--json"])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    doc = json.loads(out.out)
+    assert doc["criterion"] == "max_u95" and len(doc["stations"]) == 4 and len(doc["targets"]) == 27
+    assert doc["criterion_m"] <= doc["start_criterion_m"]
