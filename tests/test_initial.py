@@ -97,7 +97,7 @@ def test_affine_fit_jacobian_against_finite_differences():
 
     def spy(fun, jac, x, **kw):
         captured.update(fun=fun, jac=jac, x=x)
-        return x
+        return x, None
 
     orig = ini.levenberg_marquardt
     ini.levenberg_marquardt = spy
@@ -126,7 +126,7 @@ def test_refinement_jacobian_against_finite_differences(n_targets):
 
     def spy(fun, jac, x, **kw):
         captured.update(fun=fun, jac=jac, x=x)
-        return x
+        return x, None
 
     orig = ir.levenberg_marquardt
     ir.levenberg_marquardt = spy

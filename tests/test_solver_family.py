@@ -236,3 +236,16 @@ def test_weak_target_left_out_from_the_cli_and_strict_refuses(capsys, tmp_path):
     assert "3" not in doc["targets"] and "warning: target '3' left out" in err
     rc, out, err = _run(capsys, ["adjust", str(p), "--strict"])
     assert rc == 2 and "target '3' has 2 observation(s)" in err and "--strict" in err
+
+
+def test_initial_values_carry_their_refinement_record():
+    """The initial values' own least squares does not end silently: its record is in the result."""
+    from multilat.network.initial import initial_values
+
+    obs = read_observations(OBS)
+    iv = initial_values(obs, rng=0)
+    assert iv.refinement is not None and iv.refinement.converged and iv.refinement.iterations >= 1
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        res = adjust(obs, rng=0)
+    assert res.initial["refinement"]["converged"] is True

@@ -70,6 +70,8 @@ class InitialValues:
         ``"angles"``, ``"algebraic"`` (closed form from distances) or ``"restarts"``.
     rms_residual_m : float
         RMS of the distance residuals after the refinement (a converged network shows the noise level).
+    refinement : Convergence or None
+        How the final least-squares refinement ended (None without refinement).
     """
 
     station_xyz_m: np.ndarray
@@ -77,6 +79,7 @@ class InitialValues:
     offset_m: np.ndarray
     method: str
     rms_residual_m: float
+    refinement: object = None
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -207,7 +210,7 @@ def _affine_fit(D, Ut, Vv, A, delta, o):
         return J.reshape(p * q, len(x))
 
     x0 = np.concatenate([A.ravel(), delta, o])
-    x = levenberg_marquardt(fun, jac, x0, max_iter=200)
+    x, _ = levenberg_marquardt(fun, jac, x0, max_iter=200)   # judged by the residuals after it
     Ax = x[:9].reshape(3, 3)
     if not np.all(np.isfinite(x)) or abs(np.linalg.det(Ax)) < 1e-300:
         return None
@@ -333,7 +336,7 @@ def _grow(D, W, H, T, o, placedH, placedT):
             if placedH.sum() >= 3:
                 frame = choose_frame(H[si])
                 Hs, Ts = to_frame(H[si], T[ti], frame)
-                Hs, Ts, os_, _, _ = refine_fit(Dsub, W[np.ix_(si, ti)], Hs, Ts, o[si], frame, robust=False)
+                Hs, Ts, os_, _, _, _ = refine_fit(Dsub, W[np.ix_(si, ti)], Hs, Ts, o[si], frame, robust=False)
                 H[si], T[ti], o[si] = Hs, Ts, os_
 
 
@@ -417,10 +420,10 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
         H, T = to_frame(H, T, frame)
         rms = float("nan")
         if refine:
-            H, T, o, rms, _ = refine_fit(D, W, H, T, o, frame)
+            H, T, o, rms, _, conv = refine_fit(D, W, H, T, o, frame)
         Hs, Ts = angle_frame
         R, tr = rigid_fit(np.vstack([H, T]), np.vstack([Hs, Ts]))
-        return InitialValues(H @ R.T + tr, T @ R.T + tr, o, method, rms)
+        return InitialValues(H @ R.T + tr, T @ R.T + tr, o, method, rms, conv if refine else None)
 
     # distances alone: complete blocks, best first, until the fit reaches the noise level
     gen = np.random.default_rng(rng)
@@ -446,12 +449,12 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
             continue
         frame = choose_frame(H)
         H, T = to_frame(H, T, frame)
-        H, T, o, rms, rob = refine_unmirrored(D, W, H, T, o, frame)
+        H, T, o, rms, rob, conv = refine_unmirrored(D, W, H, T, o, frame)
         # a second block reaching the same RMS confirms the minimum; a lower one replaces it
         # (a false minimum can fit the noise level too: seen in ~0.5 % of gappy networks)
         confirmed = best is not None and best[4] <= good and abs(rms - best[4]) <= 1e-6 * best[4]
         if best is None or rms < best[4]:
-            best = (H, T, o, frame, rms, rob, "algebraic")
+            best = (H, T, o, frame, rms, rob, "algebraic", conv)
         if rms <= good:
             n_good += 1
         if confirmed or n_good >= 3:
@@ -459,13 +462,13 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
     if best is None or best[4] > good:
         alt = _restarts(D, W, rng=gen, restarts=restarts)
         if alt is not None and (best is None or alt[4] < best[4]):
-            best = alt + ("restarts",)
+            best = alt[:6] + ("restarts", alt[6])
     if best is None:
         raise MultilatError("initial values: the network could not be built up from its distances "
                             "(disconnected or too few common targets)")
-    H, T, o, frame, rms, _, method = best
+    H, T, o, frame, rms, _, method, conv = best
     H, T = fix_mirror(H, T, frame)
-    return InitialValues(H, T, o, method, rms)
+    return InitialValues(H, T, o, method, rms, conv)
 
 
 def _restarts(D, W, *, rng, restarts):
@@ -479,7 +482,7 @@ def _restarts(D, W, *, rng, restarts):
         T = rng.uniform(-0.5 * L, 0.5 * L, (t, 3))
         frame = choose_frame(H)
         H, T = to_frame(H, T, frame)
-        Hr, Tr, orr, rms, rob = refine_unmirrored(D, W, H, T, np.zeros(s), frame, max_nfev=100)
+        Hr, Tr, orr, rms, rob, conv = refine_unmirrored(D, W, H, T, np.zeros(s), frame, max_nfev=100)
         if np.isfinite(rms) and (best is None or rms < best[4]):
-            best = (Hr, Tr, orr, frame, rms, rob)
+            best = (Hr, Tr, orr, frame, rms, rob, conv)
     return best

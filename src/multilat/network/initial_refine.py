@@ -11,6 +11,8 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
+from multilat.network.solve.convergence import Convergence
+
 
 __all__ = ["refine", "refine_unmirrored", "point_fit", "mirror_sweep", "levenberg_marquardt", "row_scale",
            "to_frame", "choose_frame", "fix_mirror", "SPARSE_FROM"]
@@ -18,7 +20,8 @@ __all__ = ["refine", "refine_unmirrored", "point_fit", "mirror_sweep", "levenber
 
 def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
     """Weighted least squares over all coordinates and offsets in the 3-2-1 frame ``frame``
-    (station indices a, b, c: a fixed, b's y, z fixed, c's z fixed). Returns H, T, o, rms."""
+    (station indices a, b, c: a fixed, b's y, z fixed, c's z fixed). Returns H, T, o, rms, robust
+    scale of the residuals and the solver's convergence record."""
     s, t = D.shape
     si, tj = np.nonzero(np.isfinite(D))
     d = D[si, tj]
@@ -72,8 +75,8 @@ def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
         J[rr, cc] = vv
         return J
 
-    x = levenberg_marquardt(fun, jac, np.concatenate([H[free_h], T.ravel(), o]),
-                             max_iter=max_nfev)
+    x, conv = levenberg_marquardt(fun, jac, np.concatenate([H[free_h], T.ravel(), o]),
+                                   max_iter=max_nfev)
     if robust:
         r = fun(x)
         scale = max(1.4826 * np.median(np.abs(r)), 1.0)
@@ -81,12 +84,12 @@ def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
             for _ in range(5):
                 k = 3 * scale
                 hw = np.sqrt(np.minimum(1.0, k / np.maximum(np.abs(fun(x)), 1e-300)))
-                x = levenberg_marquardt(lambda z: hw * fun(z), lambda z: row_scale(jac(z), hw), x,
-                                         max_iter=max_nfev)
+                x, conv = levenberg_marquardt(lambda z: hw * fun(z), lambda z: row_scale(jac(z), hw), x,
+                                               max_iter=max_nfev)
     Hx, Tx, ox = unpack(x)
     diff = Hx[si] - Tx[tj]
     r = d - np.sqrt((diff ** 2).sum(1)) - ox[si]
-    return Hx, Tx, ox, float(np.sqrt(np.mean(r ** 2))), float(1.4826 * np.median(np.abs(r)))
+    return Hx, Tx, ox, float(np.sqrt(np.mean(r ** 2))), float(1.4826 * np.median(np.abs(r))), conv
 
 
 def point_fit(A, d, w, p, *, iters=8):
@@ -155,11 +158,15 @@ def row_scale(J, w):
 
 def levenberg_marquardt(fun, jac, x, *, max_iter=200, tol=1e-10):
     """Minimise ``|fun(x)|^2`` by Levenberg-Marquardt with Marquardt scaling; ``jac`` may return a
-    dense array or a scipy sparse matrix (then the normal equations are solved by SuperLU)."""
+    dense array or a scipy sparse matrix (then the normal equations are solved by SuperLU).
+
+    Returns ``(x, convergence)``: the lowest-cost point and a :class:`~multilat.network.solve.Convergence`
+    (``last_step_sigma`` is NaN here: the step is relative to the parameters)."""
     r = fun(x)
     cost = r @ r
     lam = 1e-3
-    for _ in range(max_iter):
+    it = 0
+    for it in range(1, max_iter + 1):
         J = jac(x)
         sp = scipy.sparse.issparse(J)
         A = (J.T @ J).tocsc() if sp else J.T @ J
@@ -184,14 +191,14 @@ def levenberg_marquardt(fun, jac, x, *, max_iter=200, tol=1e-10):
                     break
             lam *= 10.0
             if lam > 1e12:
-                return x
+                return x, Convergence(False, it, float("nan"), "no decrease of the cost")
         small = np.all(np.abs(step) <= tol * (np.abs(x) + 1e-3))
         x, r, done = xn, rn, (cost - cn) <= 1e-10 * cost or small
         cost = cn
         lam = max(lam / 10.0, 1e-12)
         if done:
-            break
-    return x
+            return x, Convergence(True, it, float("nan"), "step or cost change below tolerance")
+    return x, Convergence(False, it, float("nan"), "iteration limit")
 
 
 def to_frame(H, T, frame):

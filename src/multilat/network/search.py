@@ -174,7 +174,7 @@ def _partial_restart(obs, H, T, o, drop):
     D, W = distance_matrix(sub)
     frame = choose_frame(H)
     Hf, Tf = to_frame(H, T, frame)
-    Hs, Ts, os_, _, _ = refine_unmirrored(D, W, Hf, Tf[tmap], o.copy(), frame, robust=False)
+    Hs, Ts, os_, _, _, _ = refine_unmirrored(D, W, Hf, Tf[tmap], o.copy(), frame, robust=False)
     T2 = Tf.copy()
     T2[tmap] = Ts
     for j in drop:

@@ -77,6 +77,8 @@ def initial_from_distances(obs: Observations, rng):
                              n_obs=sub.n_obs):
             break
     how = {"method": f"distances: {raw.method}", "rms_residual_m": float(raw.rms_residual_m)}
+    if raw.refinement is not None:
+        how["refinement"] = raw.refinement.to_json()
     if attempt:
         how["flat_restarts"] = attempt
     if not weak.any():
