@@ -13,21 +13,17 @@ The machine is shared: each row records the 1-minute load average before it ran.
 
 from __future__ import annotations
 
-import os
 import statistics
 import time
 from types import SimpleNamespace
 
 import numpy as np
 
+from common import load_avg as _load
+
 SEED = 20200808
 
 
-def _load():
-    try:
-        return os.getloadavg()[0]
-    except OSError:  # pragma: no cover
-        return None
 
 
 def _bench_eval(quick):

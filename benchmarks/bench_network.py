@@ -45,6 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
+from common import load_avg as _load
+
 ROOT = Path(__file__).resolve().parent.parent
 SEED = 20200613
 # Largest network of the sparse/large rows (full mode: 200 000 targets). Lower it to skip the 200k rows:
@@ -53,11 +55,6 @@ SEED = 20200613
 MAX_TARGETS = int(os.environ.get("BENCH_NETWORK_MAX_TARGETS", "200000"))
 
 
-def _load():
-    try:
-        return os.getloadavg()[0]
-    except OSError:  # pragma: no cover
-        return None
 
 
 def _median_time(f, reps):
