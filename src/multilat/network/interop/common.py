@@ -25,7 +25,7 @@ from multilat.io import decode_text, read_input_bytes
 from multilat.network.data import Observations, Points
 
 __all__ = ["Network", "apply_offsets", "check_ids", "fmt_m", "read_text", "XmlNode", "parse_xml",
-           "DISTANCE_DECIMALS", "SIGMA_DECIMALS"]
+           "DISTANCE_DECIMALS", "SIGMA_DECIMALS", "read_result_dir"]
 
 #: decimals of metres written for coordinates and distances (1e-8 m = 0.01 µm)
 DISTANCE_DECIMALS = 8
@@ -84,7 +84,8 @@ def apply_offsets(obs: Observations, offsets, fmt: str) -> tuple[Observations, l
     if offsets is None or (isinstance(offsets, str) and offsets == "estimate"):
         raise MultilatError(f"{fmt} has no additive constant per instrument, so the offsets cannot "
                             "be estimated there: give them fixed (--offsets-um A=..,B=.. or "
-                            "--offsets-from RESULT.json) to export the distances corrected by them")
+                            "--result DIR of `multilat adjust --out`) to export the distances "
+                            "corrected by them")
     if isinstance(offsets, Mapping):
         missing = [s for s in obs.station_ids if s not in offsets]
         if missing:
@@ -105,23 +106,6 @@ def apply_offsets(obs: Observations, offsets, fmt: str) -> tuple[Observations, l
     notes = [f"station {s}: offset {o[i] * 1e6:.4f} um subtracted from its distances"
              for i, s in enumerate(obs.station_ids)]
     return obs.with_distances(d), notes
-
-
-def offsets_from_result(doc: Mapping) -> dict[str, float]:
-    """Station -> offset (m) from a ``multilat adjust --json`` document (``stations`` rows with
-    ``station`` and ``offset_m``)."""
-    rows = doc.get("stations") if isinstance(doc, Mapping) else None
-    if not isinstance(rows, list) or not rows:
-        raise MultilatError("offsets from result: no 'stations' list in the JSON document")
-    out = {}
-    for k, r in enumerate(rows):
-        sid = r.get("station", r.get("id")) if isinstance(r, Mapping) else None
-        val = r.get("offset_m") if isinstance(r, Mapping) else None
-        if sid is None or not isinstance(val, (int, float)) or not math.isfinite(val):
-            raise MultilatError(f"offsets from result: stations[{k}] has no station id and finite "
-                                "offset_m")
-        out[str(sid)] = float(val)
-    return out
 
 
 # ----------------------------------------------------------------------------- XML
@@ -238,3 +222,22 @@ def build_network(path, rows, declared: dict, coords: dict, fixed, notes, fmt: s
     ids = [p for p in coords]
     pts = Points(tuple(ids), np.array([coords[p] for p in ids]).reshape(len(ids), 3))
     return Network(obs, pts, tuple(fixed), tuple(notes))
+
+
+def read_result_dir(directory) -> tuple[Points, dict[str, float]]:
+    """Adjusted coordinates (stations and targets) and station offsets from the ``--out``
+    directory of ``multilat adjust`` (``stations.csv``: station, x_m, y_m, z_m, offset_m;
+    ``targets.csv``: target, x_m, y_m, z_m; other columns ignored)."""
+    from multilat.io import read_csv_table
+
+    d = Path(directory)
+    if not d.is_dir():
+        raise MultilatError(f"--result {directory}: not a directory (give the --out directory of "
+                            "`multilat adjust`)")
+    st = read_csv_table(d / "stations.csv", required=("station", "x_m", "y_m", "z_m", "offset_m"),
+                        warn_unknown=False)
+    tg = read_csv_table(d / "targets.csv", required=("target", "x_m", "y_m", "z_m"), warn_unknown=False)
+    ids = st.ids("station") + tg.ids("target")
+    xyz = np.vstack([np.column_stack([t.floats(c) for c in ("x_m", "y_m", "z_m")]) for t in (st, tg)])
+    offsets = dict(zip(st.ids("station"), st.floats("offset_m")))
+    return Points(tuple(ids), xyz), offsets
