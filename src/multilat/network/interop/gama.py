@@ -17,7 +17,9 @@ Input format (GNU Gama manual, ch. 2 "XML input data format for gama-local"; sch
 Distances and coordinates are in metres, standard deviations of distances in **millimetres**.
 ``adj="XYZ"`` (capitals: *constrained*) makes every point a datum point of Gama's free network
 (the regularisation over constrained coordinates, as multilat's free datum over all points);
-``fix="XYZ"`` holds a point fixed. ``axes-xy="en"``: Gama's x is east, y north, z up, the same
+``fix="XYZ"`` holds a point fixed. ``update-constrained-coordinates="yes"`` lets gama-local move
+the constrained points between its linearisation iterations (without it, gama-local 1.18b keeps
+them at the approximate values and does not converge from a start a few mm off). ``axes-xy="en"``: Gama's x is east, y north, z up, the same
 right-handed axes as multilat's x, y, z; on import any ``axes-xy`` is turned to those axes.
 
 Gama has **no additive constant per instrument**: the export writes ``d - o_i`` with the offsets
@@ -85,7 +87,7 @@ def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=()
            '<network axes-xy="en" angles="right-handed">',
            f"<description>\n{xml_escape(desc)}\n</description>",
            '<parameters sigma-apr="1" conf-pr="0.95" tol-abs="1000" sigma-act="apriori" '
-           'algorithm="svd" />',
+           'update-constrained-coordinates="yes" algorithm="svd" />',
            "<points-observations>"]
     fixed = set(fixed)
     for i in ids:
