@@ -159,7 +159,7 @@ XSD = {
     "description": {},
     "parameters": {"sigma-apr": float, "conf-pr": float, "tol-abs": float,
                    "sigma-act": {"aposteriori", "apriori"},
-                   "update-constrained-coordinates": {"yes", "no"},
+                   "update-constrained-coordinates": {"yes", "no"}, "cov-band": int,
                    "algorithm": {"gso", "svd", "cholesky", "envelope"}},
     "points-observations": {},
     "point": {"id": str, "x": float, "y": float, "z": float,
@@ -191,6 +191,8 @@ def test_gama_export_follows_gama_local_xsd(net):
                 assert v in allowed, (tag, a, v)
             elif allowed is float:
                 float(v)
+            elif allowed is int:
+                assert int(v) >= -1
         assert REQUIRED.get(tag, set()) <= set(el.attrib), (tag, el.attrib)
         for c in el:
             assert c.tag.removeprefix(ns) in CHILDREN.get(tag, set()), (tag, c.tag)
@@ -218,6 +220,10 @@ def _compare_with_gama(g, obs, pts, res):
     dmax = max(abs(np.linalg.norm(P[a] - P[b]) - np.linalg.norm(res.xyz(a) - res.xyz(b)))
                for a, b in itertools.combinations(res.target_ids, 2))
     assert dmax < 1e-8, dmax          # interpoint distances of targets, to 0.01 µm
+    # their standard uncertainties from Gama's full covariance (a-priori σ, offsets fixed in both)
+    urel = max(abs(g.interpoint_distance_std_m(a, b) / fixed.interpoint_distance(a, b).u_m - 1)
+               for a, b in itertools.combinations(res.target_ids, 2))
+    assert urel < 1e-6, urel
     key = {fixed.obs.label(k): k for k in range(fixed.obs.n_obs)}
     idx = [key[f"{s}->{t}"] for s, t in zip(g.station, g.target)]
     assert np.abs(g.residual_m - fixed.residuals_m[idx]).max() < 1e-9           # residuals

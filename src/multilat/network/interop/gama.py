@@ -19,7 +19,9 @@ Distances and coordinates are in metres, standard deviations of distances in **m
 (the regularisation over constrained coordinates, as multilat's free datum over all points);
 ``fix="XYZ"`` holds a point fixed. ``update-constrained-coordinates="yes"`` lets gama-local move
 the constrained points between its linearisation iterations (without it, gama-local 1.18b keeps
-them at the approximate values and does not converge from a start a few mm off). ``axes-xy="en"``: Gama's x is east, y north, z up, the same
+them at the approximate values and does not converge from a start a few mm off);
+``cov-band="-1"``: the full covariance of the adjusted coordinates in the XML output (its default
+there is a band of 1). ``axes-xy="en"``: Gama's x is east, y north, z up, the same
 right-handed axes as multilat's x, y, z; on import any ``axes-xy`` is turned to those axes.
 
 Gama has **no additive constant per instrument**: the export writes ``d - o_i`` with the offsets
@@ -87,7 +89,7 @@ def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=()
            '<network axes-xy="en" angles="right-handed">',
            f"<description>\n{xml_escape(desc)}\n</description>",
            '<parameters sigma-apr="1" conf-pr="0.95" tol-abs="1000" sigma-act="apriori" '
-           'update-constrained-coordinates="yes" algorithm="svd" />',
+           'update-constrained-coordinates="yes" algorithm="svd" cov-band="-1" />',
            "<points-observations>"]
     fixed = set(fixed)
     for i in ids:
@@ -260,6 +262,10 @@ class GamaAdjustment:
     ids, xyz_m : adjusted and fixed points ; fixed : ids of the fixed ones
     dof, defect : degrees of freedom and network defect ; sum_of_squares : vᵀPv (Gama's units)
     sigma_apriori, sigma_aposteriori : reference standard deviations (Gama's units, sigma-apr = 1)
+    adjusted_ids : the adjusted points, in the order of the rows of ``covariance_m2``
+    covariance_m2 : (3a, 3a) covariance of their x, y, z (multilat's axes), m², scaled by Gama's
+        ``sigma_used`` reference deviation ("apriori" in multilat's export); None when Gama wrote
+        only a band of it
     station, target : per slope distance ; observed_m, adjusted_m ; residual_m = observed - adjusted
     adjusted_std_m : standard deviation of the adjusted distance
     residual_cofactor_mm2 : Gama's ``qrr``, the weight coefficient of the residual (mm² with
@@ -287,6 +293,26 @@ class GamaAdjustment:
     residual_cofactor_mm2: np.ndarray
     control_percent: np.ndarray
     std_residual: np.ndarray
+    adjusted_ids: tuple = ()
+    covariance_m2: np.ndarray | None = None
+    sigma_used: str = ""
+
+    def interpoint_distance_std_m(self, a: str, b: str) -> float:
+        """Standard deviation of the distance between adjusted points ``a`` and ``b`` from Gama's
+        covariance of the adjusted coordinates (needs its full band: ``cov-band="-1"``)."""
+        if self.covariance_m2 is None:
+            raise MultilatError("gama-local's output has no full covariance (run it with "
+                                "--cov-band -1 or cov-band=\"-1\" in <parameters>)")
+        rows = []
+        for p in (a, b):
+            if p not in self.adjusted_ids:
+                raise MultilatError(f"point {p!r} is not an adjusted point of gama-local's output")
+            i = self.adjusted_ids.index(p)
+            rows += [3 * i, 3 * i + 1, 3 * i + 2]
+        P = dict(zip(self.ids, self.xyz_m))
+        d = P[a] - P[b]
+        g = np.concatenate([d, -d]) / np.linalg.norm(d)
+        return float(np.sqrt(max(g @ self.covariance_m2[np.ix_(rows, rows)] @ g, 0.0)))
 
     @property
     def redundancy(self) -> np.ndarray:
@@ -359,6 +385,8 @@ def read_gama_adjustment(path) -> GamaAdjustment:
             xyz.append(_to_enu(vals, ex, ey))
             if part == "fixed":
                 fixed.append(pid)
+    adjusted_ids = tuple(i for i in ids if i not in fixed)
+    cov = _covariance(path, coords.find("cov-mat"), len(adjusted_ids), ex, ey)
     obs_node = root.find("observations")
     rows = []
     for o in (obs_node.children if obs_node is not None else []):
@@ -376,4 +404,30 @@ def read_gama_adjustment(path) -> GamaAdjustment:
                           _num(path, eq, "defect", integer=True), _num(path, eq, "sum-of-squares"),
                           _num(path, sd, "apriori"), _num(path, sd, "aposteriori"),
                           tuple(col[0]), tuple(col[1]), np.array(col[2]), np.array(col[3]),
-                          np.array(col[4]), np.array(col[5]), np.array(col[6]), np.array(col[7]))
+                          np.array(col[4]), np.array(col[5]), np.array(col[6]), np.array(col[7]),
+                          adjusted_ids, cov, (sd.child_text("used", "") if sd is not None else ""))
+
+
+def _covariance(path, cm, n_points, ex, ey):
+    """The full covariance (m², multilat's axes) from ``<cov-mat>`` (mm², upper band by rows), or
+    None when Gama wrote only a band or it holds more than the adjusted x, y, z (orientations)."""
+    if cm is None:
+        return None
+    dim, band = _num(path, cm, "dim", integer=True), _num(path, cm, "band", integer=True)
+    if dim != 3 * n_points or band < dim - 1:
+        return None
+    vals = []
+    for f in cm.findall("flt"):
+        try:
+            vals.append(float(f.text))
+        except ValueError:
+            raise MultilatError(f"{path}:{f.line}: <flt> {f.text.strip()!r} is not a number") from None
+    if len(vals) != dim * (dim + 1) // 2:
+        raise MultilatError(f"{path}:{cm.line}: <cov-mat> holds {len(vals)} values, expected "
+                            f"{dim * (dim + 1) // 2} for dim {dim}")
+    C = np.zeros((dim, dim))
+    C[np.triu_indices(dim)] = vals
+    C = C + np.triu(C, 1).T
+    R = np.array([[ex[0], ey[0], 0.0], [ex[1], ey[1], 0.0], [0.0, 0.0, 1.0]])
+    T = np.kron(np.eye(n_points), R)
+    return T @ C @ T.T * 1e-6
