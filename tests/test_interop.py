@@ -394,3 +394,43 @@ def test_cli_errors_are_one_line(capsys, tmp_path):
     assert not (tmp_path / "i").exists()
     rc, o, e = _run(capsys, ["export", "gama-xml", OBS, "-o", tmp_path / "y"])
     assert rc == 2 and "export FORMAT must be one of gama, jag3d, starnet" in e
+
+
+def test_xml_with_a_dtd_is_refused(tmp_path):
+    p = tmp_path / "lol.xml"
+    p.write_text('<?xml version="1.0"?>\n<!DOCTYPE lolz [<!ENTITY lol "lol"><!ENTITY lol2 '
+                 '"&lol;&lol;&lol;&lol;">]>\n<gama-local>&lol2;</gama-local>\n')
+    with pytest.raises(MultilatError, match=r"lol\.xml:2: XML with a DTD"):
+        read_gama_local(p)
+
+
+def test_gama_fixed_points_and_2d_points(net, tmp_path):
+    obs, pts, res = net
+    p = tmp_path / "f.xml"
+    write_gama_local(p, obs, pts, offsets=_offsets(res), fixed=("B", "D", "C"))
+    assert read_gama_local(p).fixed == ("B", "C", "D")           # file order (stations first)
+    text = p.read_text().replace('<point id="7" x="0.52100000" y="0.69500000" z="0.38190000"',
+                                 '<point id="7" x="0.52100000" y="0.69500000"')
+    assert text != p.read_text()
+    p.write_text(text)
+    with pytest.raises(MultilatError, match=r"f\.xml:\d+: point '7' has some of x, y, z but not all"):
+        read_gama_local(p)
+
+
+def test_starnet_end_and_data_off(tmp_path):
+    p = tmp_path / "e.dat"
+    p.write_text("C A 0 0 0 ! ! !\nC 1 1 0 0\nC 2 0 1 0\n.DATA OFF\nD A-2 9.0 0.001\n.DATA ON\n"
+                 "D A-1 1.0 0.001\n.END\nM this is not read\n")
+    got = read_starnet(p)
+    assert _by_pair(got.obs) == {("A", "1"): (1.0, 0.001)}
+
+
+def test_cli_fix_and_control_note(capsys, tmp_path):
+    rc, o, e = _run(capsys, ["export", "starnet", OBS, "--points", PTS, "--offsets-um", "0",
+                             "--fix", "A,B,C", "-o", tmp_path / "n.dat"])
+    assert rc == 0, e
+    rc, o, e = _run(capsys, ["import", "starnet", tmp_path / "n.dat", "-o", tmp_path / "i"])
+    assert rc == 0 and "--datum control:A,B,C" in o
+    rc, o, e = _run(capsys, ["export", "jag3d", OBS, "--points", PTS, "--fix", "A",
+                             "-o", tmp_path / "j.txt"])
+    assert rc == 2 and "point type" in e

@@ -189,3 +189,6 @@ def import_command(
                   f"{len(net.points.ids)} points with coordinates -> {out}")
     for n in net.notes:
         console.print(f"note: {n}")
+    if net.fixed:
+        console.print(f"note: the file holds {', '.join(net.fixed)} fixed: adjust with --datum "
+                      f"control:{','.join(net.fixed)} to keep them")

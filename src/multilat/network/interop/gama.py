@@ -222,9 +222,12 @@ def _read_point(path, el, declared, coords, fixed, ex, ey):
     xyz = [xml_float(path, el, c, required=False) for c in ("x", "y", "z")]
     if all(v is not None for v in xyz):
         coords[pid] = _to_enu(xyz, ex, ey)
-    elif any(v is not None for v in xyz) and "fix" in el.attrib:
-        raise MultilatError(f"{path}:{el.line}: fixed point {pid!r} needs x, y and z")
+    elif any(v is not None for v in xyz):
+        raise MultilatError(f"{path}:{el.line}: point {pid!r} has some of x, y, z but not all (a 2D "
+                            "or height-only point): multilat's network is 3D")
     flag = el.attrib.get("fix", "")
+    if flag and pid not in coords:
+        raise MultilatError(f"{path}:{el.line}: fixed point {pid!r} needs x, y and z")
     if flag:
         if flag.lower() != "xyz":
             raise MultilatError(f"{path}:{el.line}: fix={flag!r} (a 2D or height-only fix) is not "

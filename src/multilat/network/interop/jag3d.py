@@ -94,9 +94,11 @@ def write_jag3d(points_path, obs_path, obs: Observations, points: Points | None,
     write_text_atomic(obs_path, o)
 
 
-def _number(path, n, tok, what):
+def _number(path, n, tok, what, *, comma=False):
+    """A finite number; ``comma``: a decimal comma is accepted (JAG3D's point reader replaces it;
+    its observation reader, an English-locale scanner, does not)."""
     try:
-        v = float(tok.replace(",", "."))
+        v = float(tok.replace(",", ".") if comma else tok)
     except ValueError:
         raise MultilatError(f"{path}:{n}: {what}: not a number: {tok!r}") from None
     if not math.isfinite(v):
@@ -122,7 +124,7 @@ def read_jag3d(points_path, obs_path, *, sigma_m: float | None = None) -> Networ
             raise MultilatError(f"{points_path}:{n}: point {name!r} given twice (first at line "
                                 f"{declared[name]})")
         declared[name] = n
-        coords[name] = tuple(_number(points_path, n, t, c) for t, c in zip(tok[1:4], "YXZ"))
+        coords[name] = tuple(_number(points_path, n, t, c, comma=True) for t, c in zip(tok[1:4], "YXZ"))
         point_sigmas += len(tok) > 4
     if point_sigmas:
         notes.append(f"{point_sigmas} point σ ignored (multilat's points are approximate values or "

@@ -14,7 +14,7 @@ STAR*NET Input Data Types and Inline Options"): one record per line, ``#`` start
 
 ``.ORDER EN`` puts easting before northing on ``C`` lines: multilat's x, y, z (east, north, up).
 The reader also takes ``.ORDER NE`` (Star*Net's default), ``.UNITS FeetUS/FeetInt``,
-``.MULTIPLIER``, ``.SEP`` and ``.DATA OFF/ON``; ``C`` lines with three numeric σ are read as
+``.MULTIPLIER``, ``.SEP``, ``.DATA OFF/ON`` and ``.END`` (the rest of the file is not read); ``C`` lines with three numeric σ are read as
 approximate coordinates (their σ ignored, a note). Other data types (``A``, ``V``, ``B``, ``M``,
 ``BM``, ``DV``, ``DB``/``DN``/``DM``/``DE``, ``L``, ``G``, ``T``, ``SS``, ``E``, ``P``, ...), 2D
 and levelling modes, ``.DELTA ON`` (horizontal distances), non-zero HI/HT and inline options that
@@ -53,10 +53,10 @@ _CODES = {"A": "horizontal angles", "V": "vertical observations", "B": "bearings
           "ellipsoid heights", "I": "instrument setups", "F": "fixed-direction lines"}
 #: inline options read (full names; Star*Net accepts any unambiguous abbreviation)
 _INLINE_READ = ("UNITS", "ORDER", "3D", "2D", "3REDUCE", "LEVEL", "DELTA", "SEPARATOR",
-                "MULTIPLIER", "DATA")
+                "MULTIPLIER", "DATA", "END")
 #: inline options with no effect on slope distances and coordinates (ignored)
 _INLINE_HARMLESS = ("COPY", "ELLIPSE", "RELATIVE", "PTOLERANCE", "LONGITUDE", "REFRACTION",
-                    "ELEVATION", "END")
+                    "ELEVATION")
 
 
 def starnet_text(obs: Observations, points: Points | None, *, offsets=None, fixed=()) -> str:
@@ -149,6 +149,8 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
                 data_on = not args or args[0] != "OFF"
             elif not data_on:
                 continue
+            elif opt == "END":
+                break
             elif opt == "UNITS":
                 for a in args:
                     if a.startswith("M"):
