@@ -434,3 +434,21 @@ def test_cli_fix_and_control_note(capsys, tmp_path):
     rc, o, e = _run(capsys, ["export", "jag3d", OBS, "--points", PTS, "--fix", "A",
                              "-o", tmp_path / "j.txt"])
     assert rc == 2 and "point type" in e
+
+
+def test_cli_result_dir_gives_coordinates_and_offsets(capsys, tmp_path, net):
+    obs, pts, res = net
+    rc, o, e = _run(capsys, ["adjust", OBS, "--points", PTS, "--out", tmp_path / "adj"])
+    assert rc == 0, e
+    for fmt in ("gama", "jag3d"):
+        rc, o, e = _run(capsys, ["export", fmt, OBS, "--result", tmp_path / "adj",
+                                 "-o", tmp_path / f"r.{fmt}", "--json"])
+        assert rc == 0, e
+        assert json.loads(o)["offsets_subtracted"] == (fmt == "gama")   # JAG3D estimates them
+    g = read_gama_local(tmp_path / "r.gama")        # offsets restored from the description
+    _same_network(obs, g.obs, Points(res.station_ids + res.target_ids,
+                                     np.vstack([res.station_xyz_m, res.target_xyz_m])),
+                  g.points, d_tol=D_TOL / 2 + 1e-10)
+    text = (tmp_path / "r.gama").read_text()
+    o = _offsets(res)
+    assert f"A={o['A']:.10f}" in text

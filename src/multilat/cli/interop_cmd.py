@@ -36,12 +36,12 @@ def export_command(
     points: Optional[Path] = typer.Option(None, "--points", help="Points CSV: point,x_m,y_m,z_m "
                                           "(approximate coordinates; gama and jag3d need every point)."),
     result: Optional[Path] = typer.Option(None, "--result", help="The --out directory of `multilat "
-                                          "adjust`: its adjusted coordinates (approximate values) and "
-                                          "offsets (fixed, subtracted where the format has no "
-                                          "per-instrument constant)."),
+                                          "adjust`: its adjusted coordinates (approximate values) and, "
+                                          "for gama and starnet, its offsets (fixed, subtracted from "
+                                          "the distances; jag3d keeps them as unknowns)."),
     offsets_um: Optional[str] = typer.Option(None, "--offsets-um", help="Fixed station offsets, µm: "
-                                             "one value for all or A=1234,B=-871,... (every station); "
-                                             "subtracted from the distances for gama and starnet."),
+                                             "one value for all or A=1234,B=-871,... (every station), "
+                                             "subtracted from the distances (any format)."),
     fix: Optional[str] = typer.Option(None, "--fix", help="Points held fixed in the tool (gama, "
                                       "starnet): P1,P2,... Default gama: a free network over all "
                                       "points; starnet: none (Star*Net then needs a datum)."),
@@ -65,6 +65,8 @@ def export_command(
     pts = read_points(points) if points is not None else None
     if result is not None:
         pts, offsets = read_result_dir(result)
+        if fmt == "jag3d":
+            offsets = None        # JAG3D estimates them itself (one zero-point offset per group)
     if offsets_um is not None:
         offsets = parse_fixed_offsets(offsets_um, obs.station_ids)
         if isinstance(offsets, dict) and set(offsets) != set(obs.station_ids):
