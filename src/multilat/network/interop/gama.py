@@ -38,6 +38,7 @@ observation), ``qrr`` (redundancy number) and ``std-residual``: :func:`read_gama
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 import re
 from dataclasses import dataclass
 
@@ -80,7 +81,7 @@ def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=()
     for f in fixed:
         if f not in ids:
             raise MultilatError(f"gama: fixed point {f!r} is in no observation")
-    o = np.array([offsets[s] if isinstance(offsets, dict) else float(offsets)
+    o = np.array([offsets[s] if isinstance(offsets, Mapping) else float(offsets)
                   for s in obs.station_ids])
     off_line = _OFFSETS_TAG + " " + " ".join(f"{s}={fmt_m(v, 10)}" for s, v in zip(obs.station_ids, o))
     desc = "\n".join([description or "multilat network", off_line, *notes])

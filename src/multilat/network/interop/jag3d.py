@@ -34,6 +34,7 @@ which the reader adds back.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 import re
 
 import numpy as np
@@ -67,7 +68,7 @@ def jag3d_texts(obs: Observations, points: Points | None, *, offsets=None) -> tu
         corrected = obs
     else:
         corrected, notes = apply_offsets(obs, offsets, "JAG3D")
-        o = [offsets[s] if isinstance(offsets, dict) else float(offsets) for s in obs.station_ids]
+        o = [offsets[s] if isinstance(offsets, Mapping) else float(offsets) for s in obs.station_ids]
         head.append(_OFFSETS_TAG + " " + " ".join(f"{s}={fmt_m(v, 10)}"
                                                   for s, v in zip(obs.station_ids, o)))
         head += ["# " + n + " (keep the zero point offsets fixed at 0)" for n in notes]

@@ -28,6 +28,7 @@ Star*Net needs a datum (fixed or weighted control): give the points to hold fixe
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -70,7 +71,7 @@ def starnet_text(obs: Observations, points: Points | None, *, offsets=None, fixe
     for f in fixed:
         if f not in ids:
             raise MultilatError(f"starnet: fixed point {f!r} is in no observation")
-    o = [offsets[s] if isinstance(offsets, dict) else float(offsets) for s in obs.station_ids]
+    o = [offsets[s] if isinstance(offsets, Mapping) else float(offsets) for s in obs.station_ids]
     out = ["# multilat network: slope distances for STAR*NET (3D), metres",
            _OFFSETS_TAG + " " + " ".join(f"{s}={fmt_m(v, 10)}" for s, v in zip(obs.station_ids, o)),
            *("# " + n for n in notes)]
