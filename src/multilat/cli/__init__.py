@@ -10,6 +10,7 @@ Each command area lives in its own module and registers its commands on :data:`a
 - ``campaign_cmd``  ``multilat correct``, ``multilat two-face``
 - ``propagate_cmd`` ``multilat propagate``
 - ``demo_cmd``      ``multilat demo``
+- ``interop_cmd``   ``multilat export``, ``multilat import`` (GNU Gama, JAG3D, Star*Net)
 
 :func:`main` runs the app without sys.exit and turns :class:`multilat.MultilatError` (and other
 anticipated input errors) into ``error: <one line>`` on stderr with exit code 2.
@@ -30,6 +31,7 @@ from multilat.cli import (  # noqa: F401  (registration side effects)
     propagate_cmd,
     demo_cmd,
     design_cmd,
+    interop_cmd,
 )
 
 

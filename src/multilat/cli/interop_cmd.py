@@ -1,0 +1,196 @@
+"""``multilat export`` and ``multilat import``: the network in the files of GNU Gama (gama-local
+XML, and its adjusted XML output), JAG3D (flat-file import) and Star*Net (.dat). See
+docs/interop.md."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from multilat.cli import checks
+from multilat.cli.app import app, console, emit_json
+from multilat.errors import MultilatError
+from multilat.io import check_not_input
+
+EXPORT_FORMATS = ("gama", "jag3d", "starnet")
+IMPORT_FORMATS = ("gama", "gama-adjusted", "jag3d", "starnet")
+
+
+def _fixed_ids(text: str | None) -> tuple[str, ...]:
+    if not text:
+        return ()
+    ids = tuple(t.strip() for t in text.split(","))
+    if any(not t for t in ids):
+        raise MultilatError(f"--fix: empty point id in {text!r}")
+    return ids
+
+
+@app.command("export")
+def export_command(
+    fmt: str = typer.Argument(..., metavar="FORMAT", help="gama (gama-local XML), jag3d (flat "
+                              "files: OUT and OUT's name with -points) or starnet (.dat)."),
+    observations: Path = typer.Argument(..., help="Observations CSV: station,target,distance_m[,sigma_m]."),
+    out: Path = typer.Option(..., "--out", "-o", help="File to write (written whole or not at all)."),
+    points: Optional[Path] = typer.Option(None, "--points", help="Points CSV: point,x_m,y_m,z_m "
+                                          "(approximate coordinates; gama and jag3d need every point)."),
+    result: Optional[Path] = typer.Option(None, "--result", help="The --out directory of `multilat "
+                                          "adjust`: its adjusted coordinates (approximate values) and, "
+                                          "for gama and starnet, its offsets (fixed, subtracted from "
+                                          "the distances; jag3d keeps them as unknowns)."),
+    offsets_um: Optional[str] = typer.Option(None, "--offsets-um", help="Fixed station offsets, µm: "
+                                             "one value for all or A=1234,B=-871,... (every station), "
+                                             "subtracted from the distances (any format)."),
+    fix: Optional[str] = typer.Option(None, "--fix", help="Points held fixed in the tool (gama, "
+                                      "starnet): P1,P2,... Default gama: a free network over all "
+                                      "points; starnet: none (Star*Net then needs a datum)."),
+    sigma_um: Optional[float] = typer.Option(None, "--sigma-um", help="σ of every distance, µm, "
+                                             "when the CSV has no sigma_m column."),
+    as_json: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
+) -> None:
+    """Write the network for GNU Gama, JAG3D or Star*Net. What a format cannot carry (a per-station
+    additive offset in Gama and Star*Net) is applied as a fixed correction or refused."""
+    from multilat.cli.network_cmd import parse_fixed_offsets
+    from multilat.network.files import read_observations, read_points
+    from multilat.network.interop.common import read_result_dir
+
+    if fmt not in EXPORT_FORMATS:
+        raise MultilatError(f"export FORMAT must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}")
+    checks.sigma_um(sigma_um)
+    if points is not None and result is not None:
+        raise MultilatError("give --points or --result, not both")
+    obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6)
+    offsets = None
+    pts = read_points(points) if points is not None else None
+    if result is not None:
+        pts, offsets = read_result_dir(result)
+        if fmt == "jag3d":
+            offsets = None        # JAG3D estimates them itself (one zero-point offset per group)
+    if offsets_um is not None:
+        offsets = parse_fixed_offsets(offsets_um, obs.station_ids)
+        if isinstance(offsets, dict) and set(offsets) != set(obs.station_ids):
+            missing = [s for s in obs.station_ids if s not in offsets][0]
+            raise MultilatError(f"--offsets-um: no value for station {missing!r}; give every station's")
+    fixed = _fixed_ids(fix)
+    inputs = [observations, points] + ([result / "stations.csv", result / "targets.csv"] if result else [])
+    written = [out]
+    if fmt == "gama":
+        from multilat.network.interop.gama import write_gama_local
+
+        check_not_input(out, inputs)
+        write_gama_local(out, obs, pts if pts is not None else _no_points(), offsets=offsets,
+                         fixed=fixed, description=f"multilat export of {observations.name}")
+    elif fmt == "jag3d":
+        from multilat.network.interop.jag3d import write_jag3d
+
+        if fixed:
+            raise MultilatError("--fix: JAG3D's point type (reference/datum/new) is chosen on its "
+                                "import, not in the file")
+        p_out = out.with_name(out.stem + "-points" + (out.suffix or ".txt"))
+        check_not_input(out, inputs)
+        check_not_input(p_out, inputs)
+        write_jag3d(p_out, out, obs, pts, offsets=offsets)
+        written = [out, p_out]
+    else:
+        from multilat.network.interop.starnet import write_starnet
+
+        check_not_input(out, inputs)
+        write_starnet(out, obs, pts, offsets=offsets, fixed=fixed)
+    doc = {"format": fmt, "files": [str(w) for w in written], "n_obs": obs.n_obs,
+           "n_stations": obs.n_stations, "n_targets": obs.n_targets,
+           "offsets_subtracted": offsets is not None}
+    if as_json:
+        emit_json(doc)
+        return
+    console.print(f"{fmt}: {obs.n_obs} distances, {obs.n_stations} stations, {obs.n_targets} "
+                  f"targets -> {', '.join(str(w) for w in written)}")
+
+
+def _no_points():
+    import numpy as np
+
+    from multilat.network.data import Points
+
+    return Points((), np.zeros((0, 3)))
+
+
+@app.command("import")
+def import_command(
+    fmt: str = typer.Argument(..., metavar="FORMAT", help="gama (gama-local XML input), "
+                              "gama-adjusted (gama-local's --xml output), jag3d (slope distances; "
+                              "with --points-file) or starnet (.dat)."),
+    source: Path = typer.Argument(..., help="The file to read."),
+    out: Path = typer.Option(..., "--out", "-o", help="Directory for distances.csv and points.csv "
+                             "(gama-adjusted: points.csv, residuals.csv, summary.json), written "
+                             "all or nothing."),
+    points_file: Optional[Path] = typer.Option(None, "--points-file", help="jag3d: the points file "
+                                               "(NAME Y X Z)."),
+    sigma_um: Optional[float] = typer.Option(None, "--sigma-um", help="σ, µm, for distances without "
+                                             "one in the file (jag3d, starnet)."),
+    as_json: bool = typer.Option(False, "--json", help="Print a summary as JSON."),
+) -> None:
+    """Read a network (or gama-local's adjusted result) from GNU Gama, JAG3D or Star*Net files into
+    multilat's CSVs (`multilat adjust OUT/distances.csv --points OUT/points.csv`)."""
+    from multilat.io import staging_dir, write_csv_atomic, write_json_atomic
+
+    if fmt not in IMPORT_FORMATS:
+        raise MultilatError(f"import FORMAT must be one of {', '.join(IMPORT_FORMATS)}, got {fmt!r}")
+    checks.sigma_um(sigma_um)
+    sig = None if sigma_um is None else sigma_um * 1e-6
+    if (points_file is not None) != (fmt == "jag3d"):
+        raise MultilatError("--points-file goes with jag3d (and jag3d needs it)")
+    if fmt == "gama-adjusted":
+        from multilat.network.interop.gama import read_gama_adjustment
+
+        g = read_gama_adjustment(source)
+        doc = {"format": fmt, "dof": g.dof, "defect": g.defect, "sigma0": g.sigma_aposteriori,
+               "sigma0_apriori": g.sigma_apriori, "n_obs": len(g.station), "n_points": len(g.ids),
+               "fixed": list(g.fixed)}
+        with staging_dir(out, inputs=[source]) as tmp:
+            write_csv_atomic(tmp / "points.csv", ["point", "x_m", "y_m", "z_m"],
+                             [[i, *x] for i, x in zip(g.ids, g.xyz_m)])
+            write_csv_atomic(tmp / "residuals.csv",
+                             ["station", "target", "distance_m", "adjusted_m", "residual_m",
+                              "adjusted_std_m", "redundancy", "w_abs"],
+                             [[s, t, d, a, r, u, q, w] for s, t, d, a, r, u, q, w in
+                              zip(g.station, g.target, g.observed_m, g.adjusted_m, g.residual_m,
+                                  g.adjusted_std_m, g.redundancy, g.std_residual)])
+            write_json_atomic(tmp / "summary.json", doc)
+        if as_json:
+            emit_json(doc)
+        else:
+            console.print(f"gama-local result: {doc['n_obs']} slope distances, {doc['n_points']} "
+                          f"points, dof {g.dof}, sigma0 {g.sigma_aposteriori:.4f} -> {out}")
+        return
+    if fmt == "gama":
+        from multilat.network.interop.gama import read_gama_local
+
+        net = read_gama_local(source)
+    elif fmt == "jag3d":
+        from multilat.network.interop.jag3d import read_jag3d
+
+        net = read_jag3d(points_file, source, sigma_m=sig)
+    else:
+        from multilat.network.interop.starnet import read_starnet
+
+        net = read_starnet(source, sigma_m=sig)
+    o = net.obs
+    doc = {"format": fmt, "n_obs": o.n_obs, "n_stations": o.n_stations, "n_targets": o.n_targets,
+           "n_points": len(net.points.ids), "fixed": list(net.fixed), "notes": list(net.notes)}
+    with staging_dir(out, inputs=[source, points_file]) as tmp:
+        write_csv_atomic(tmp / "distances.csv", ["station", "target", "distance_m", "sigma_m"],
+                         [[o.station_ids[o.station_index[k]], o.target_ids[o.target_index[k]],
+                           o.distance_m[k], o.sigma_m[k]] for k in range(o.n_obs)])
+        write_csv_atomic(tmp / "points.csv", ["point", "x_m", "y_m", "z_m"],
+                         [[i, *x] for i, x in zip(net.points.ids, net.points.xyz_m)])
+    if as_json:
+        emit_json(doc)
+        return
+    console.print(f"{fmt}: {o.n_obs} distances, {o.n_stations} stations, {o.n_targets} targets, "
+                  f"{len(net.points.ids)} points with coordinates -> {out}")
+    for n in net.notes:
+        console.print(f"note: {n}")
+    if net.fixed:
+        console.print(f"note: the file holds {', '.join(net.fixed)} fixed: adjust with --datum "
+                      f"control:{','.join(net.fixed)} to keep them")

@@ -1,0 +1,437 @@
+"""GNU Gama: the ``gama-local`` XML input (write and read) and its adjusted XML output (read).
+
+Input format (GNU Gama manual, ch. 2 "XML input data format for gama-local"; schema
+``xml/gama-local.xsd`` v0.91 of the Gama sources)::
+
+    <gama-local xmlns="http://www.gnu.org/software/gama/gama-local">
+    <network axes-xy="en" angles="right-handed">
+      <description>...</description>
+      <parameters sigma-apr="1" sigma-act="apriori" .../>
+      <points-observations>
+        <point id="A" x=".." y=".." z=".." adj="XYZ"/>     (fix="XYZ" for control)
+        <obs from="A"> <s-distance to="1" val="0.7756052" stdev="0.0047"/> </obs>
+      </points-observations>
+    </network>
+    </gama-local>
+
+Distances and coordinates are in metres, standard deviations of distances in **millimetres**.
+``adj="XYZ"`` (capitals: *constrained*) makes every point a datum point of Gama's free network
+(the regularisation over constrained coordinates, as multilat's free datum over all points);
+``fix="XYZ"`` holds a point fixed. ``update-constrained-coordinates="yes"`` lets gama-local move
+the constrained points between its linearisation iterations (without it, gama-local 1.18b keeps
+them at the approximate values and does not converge from a start a few mm off);
+``cov-band="-1"``: the full covariance of the adjusted coordinates in the XML output (its default
+there is a band of 1). ``axes-xy="en"``: Gama's x is east, y north, z up, the same
+right-handed axes as multilat's x, y, z; on import any ``axes-xy`` is turned to those axes.
+
+Gama has **no additive constant per instrument**: the export writes ``d - o_i`` with the offsets
+fixed at given values (:func:`~.common.apply_offsets`), records them in ``<description>`` as
+``multilat-offsets-m: A=.. B=..``, and the importer adds them back when it finds that line
+(any other Gama file is read as distances without offsets).
+
+Adjusted output (``gama-local --xml``; schema ``xml/gama-local-adjustment.xsd``): adjusted and
+fixed coordinates, degrees of freedom, a-priori and a-posteriori reference standard deviations and
+per observation ``<slope-distance>`` with ``obs``, ``adj`` (m), ``stdev`` (mm, of the adjusted
+observation), ``qrr`` (redundancy number) and ``std-residual``: :func:`read_gama_adjustment`.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+import re
+from dataclasses import dataclass
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.io import write_text_atomic
+from multilat.network.data import Observations, Points
+from multilat.network.interop.common import (Network, apply_offsets, build_network, check_ids, fmt_m,
+                                              parse_xml, xml_escape, xml_float)
+
+__all__ = ["write_gama_local", "gama_local_text", "read_gama_local", "read_gama_adjustment",
+           "GamaAdjustment", "NAMESPACE"]
+
+NAMESPACE = "http://www.gnu.org/software/gama/gama-local"
+OUT_NAMESPACE = "http://www.gnu.org/software/gama/gama-local-adjustment"
+_OFFSETS_TAG = "multilat-offsets-m:"
+#: gama-local's observation elements that multilat does not read (refused, named)
+_UNSUPPORTED = {"direction": "horizontal directions", "distance": "horizontal distances",
+                "angle": "horizontal angles", "z-angle": "zenith angles", "azimuth": "azimuths",
+                "height-differences": "height differences", "dh": "height differences",
+                "coordinates": "observed coordinates", "vectors": "coordinate differences",
+                "vec": "coordinate differences", "cov-mat": "a covariance matrix of observations"}
+_AXES = {"n": (0.0, 1.0), "s": (0.0, -1.0), "e": (1.0, 0.0), "w": (-1.0, 0.0)}
+
+
+# ============================================================================ write
+def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=(),
+                    description: str = "") -> str:
+    """The gama-local XML of the network (see the module docstring). ``offsets``: fixed values
+    (mapping station -> m, or a number) subtracted from the distances; ``fixed``: point ids held
+    fixed (``fix="XYZ"``), the others are constrained datum points of a free network."""
+    check_ids(obs, points, "gama")
+    corrected, notes = apply_offsets(obs, offsets, "GNU Gama")
+    ids = list(obs.station_ids) + list(obs.target_ids)
+    missing = [i for i in ids if points.get(i) is None]
+    if missing:
+        raise MultilatError(f"gama: point {missing[0]!r} has no approximate coordinates; gama-local "
+                            "needs x, y, z for every point (give --points covering every point)")
+    for f in fixed:
+        if f not in ids:
+            raise MultilatError(f"gama: fixed point {f!r} is in no observation")
+    o = np.array([offsets[s] if isinstance(offsets, Mapping) else float(offsets)
+                  for s in obs.station_ids])
+    off_line = _OFFSETS_TAG + " " + " ".join(f"{s}={fmt_m(v, 10)}" for s, v in zip(obs.station_ids, o))
+    desc = "\n".join([description or "multilat network", off_line, *notes])
+    out = ['<?xml version="1.0" encoding="UTF-8"?>',
+           f'<gama-local xmlns="{NAMESPACE}">',
+           '<network axes-xy="en" angles="right-handed">',
+           f"<description>\n{xml_escape(desc)}\n</description>",
+           '<parameters sigma-apr="1" conf-pr="0.95" tol-abs="1000" sigma-act="apriori" '
+           'update-constrained-coordinates="yes" algorithm="svd" cov-band="-1" />',
+           "<points-observations>"]
+    fixed = set(fixed)
+    for i in ids:
+        x, y, z = points.get(i)
+        flag = 'fix="XYZ"' if i in fixed else 'adj="XYZ"'
+        out.append(f'<point id="{xml_escape(i)}" x="{fmt_m(x)}" y="{fmt_m(y)}" z="{fmt_m(z)}" {flag} />')
+    d, sig = corrected.distance_m, corrected.sigma_m
+    for si, sid in enumerate(obs.station_ids):
+        ks = np.flatnonzero(obs.station_index == si)
+        out.append(f'<obs from="{xml_escape(sid)}">')
+        for k in ks:
+            tid = obs.target_ids[obs.target_index[k]]
+            out.append(f'  <s-distance to="{xml_escape(tid)}" val="{fmt_m(d[k])}" '
+                       f'stdev="{fmt_m(sig[k] * 1e3, 7)}" />')
+        out.append("</obs>")
+    out += ["</points-observations>", "</network>", "</gama-local>", ""]
+    return "\n".join(out)
+
+
+def write_gama_local(path, obs: Observations, points: Points, **kw) -> None:
+    """Write :func:`gama_local_text` to ``path`` atomically."""
+    write_text_atomic(path, gama_local_text(obs, points, **kw))
+
+
+# ============================================================================ read input
+def _axes(path, node, code: str | None):
+    code = (code or "ne").strip()
+    if len(code) != 2 or code[0] not in _AXES or code[1] not in _AXES:
+        raise MultilatError(f"{path}:{node.line}: axes-xy={code!r} is not one of Gama's codes")
+    ex, ey = np.array(_AXES[code[0]]), np.array(_AXES[code[1]])
+    return ex, ey
+
+
+def _to_enu(xyz, ex, ey):
+    x, y, z = xyz
+    e, n = x * ex + y * ey
+    return (float(e), float(n), float(z))
+
+
+def _stdev_model(path, node):
+    """``distance-stdev="a [b [c]]"``: σ = a + b·D^c mm with D in km (None when absent)."""
+    text = node.attrib.get("distance-stdev")
+    if text is None:
+        return None
+    try:
+        vals = [float(v) for v in text.split()]
+    except ValueError:
+        vals = []
+    if not 1 <= len(vals) <= 3 or not all(math.isfinite(v) for v in vals):
+        raise MultilatError(f"{path}:{node.line}: distance-stdev={text!r} must be 'a [b [c]]'")
+    a, b, c = (vals + [0.0, 1.0][len(vals) - 1:])[:3]
+    return lambda d_m: (a + b * (d_m / 1000.0) ** c) * 1e-3
+
+
+def read_gama_local(path) -> Network:
+    """Read a gama-local XML input: points and slope distances (metres; stdev mm -> m).
+
+    Refused with the element named: any other observation type (directions, horizontal distances,
+    angles, zenith angles, azimuths, height differences, observed coordinates and vectors,
+    covariance matrices), non-zero instrument/target heights. An observation to a point without a
+    ``<point>`` element is an error ``FILE:LINE``."""
+    root = parse_xml(path)
+    if root.tag != "gama-local":
+        raise MultilatError(f"{path}:{root.line}: expected a <gama-local> document, found <{root.tag}>"
+                            + (" (the adjusted output: import it with --adjusted)"
+                               if root.tag == "gama-local-adjustment" else ""))
+    net = root.find("network")
+    if net is None:
+        raise MultilatError(f"{path}:{root.line}: <gama-local> has no <network>")
+    ex, ey = _axes(path, net, net.attrib.get("axes-xy"))
+    declared, coords, fixed, rows, notes = {}, {}, [], [], []
+    offsets = None
+    desc = net.child_text("description", "")
+    for line in desc.splitlines():
+        if line.strip().startswith(_OFFSETS_TAG):
+            offsets = _parse_offsets(path, net.find("description"), line.strip()[len(_OFFSETS_TAG):])
+    for po in net.findall("points-observations"):
+        model = _stdev_model(path, po)
+        for el in po.children:
+            if el.tag == "point":
+                _read_point(path, el, declared, coords, fixed, ex, ey)
+            elif el.tag == "obs":
+                for o in el.children:
+                    if o.tag == "s-distance":
+                        rows.append(_read_sdist(path, o, el.attrib.get("from"), model))
+                    else:
+                        _refuse(path, o)
+            else:
+                _refuse(path, el)
+    if offsets is not None:
+        unknown = [s for s in offsets if s not in {r[1] for r in rows}]
+        if unknown:
+            raise MultilatError(f"{path}: {_OFFSETS_TAG} names {unknown[0]!r}, a station with no "
+                                "distances")
+        rows = [(ln, s, t, d + offsets.get(s, 0.0), sg) for ln, s, t, d, sg in rows]
+        notes.append("per-station offsets restored from the description: "
+                     + ", ".join(f"{s} {v * 1e6:.4f} um" for s, v in offsets.items()))
+    return build_network(path, rows, declared, coords, fixed, notes, "Gama")
+
+
+def _parse_offsets(path, node, text):
+    out = {}
+    for item in text.split():
+        key, sep, val = item.partition("=")
+        try:
+            out[key] = float(val)
+        except ValueError:
+            raise MultilatError(f"{path}:{node.line}: {_OFFSETS_TAG} item {item!r} is not ID=metres") from None
+        if not sep or not key or not math.isfinite(out[key]):
+            raise MultilatError(f"{path}:{node.line}: {_OFFSETS_TAG} item {item!r} is not ID=metres")
+    return out
+
+
+def _refuse(path, el):
+    what = _UNSUPPORTED.get(el.tag)
+    if what is None:
+        raise MultilatError(f"{path}:{el.line}: unknown element <{el.tag}> in a gama-local document")
+    raise MultilatError(f"{path}:{el.line}: <{el.tag}> ({what}) is not supported: multilat's model "
+                        "has slope distances (<s-distance>) only")
+
+
+def _read_point(path, el, declared, coords, fixed, ex, ey):
+    pid = el.attrib.get("id", "").strip()
+    if not pid:
+        raise MultilatError(f"{path}:{el.line}: <point> without id")
+    if pid in declared:
+        raise MultilatError(f"{path}:{el.line}: point {pid!r} declared twice (first at line "
+                            f"{declared[pid]})")
+    declared[pid] = el.line
+    xyz = [xml_float(path, el, c, required=False) for c in ("x", "y", "z")]
+    if all(v is not None for v in xyz):
+        coords[pid] = _to_enu(xyz, ex, ey)
+    elif any(v is not None for v in xyz):
+        raise MultilatError(f"{path}:{el.line}: point {pid!r} has some of x, y, z but not all (a 2D "
+                            "or height-only point): multilat's network is 3D")
+    flag = el.attrib.get("fix", "")
+    if flag and pid not in coords:
+        raise MultilatError(f"{path}:{el.line}: fixed point {pid!r} needs x, y and z")
+    if flag:
+        if flag.lower() != "xyz":
+            raise MultilatError(f"{path}:{el.line}: fix={flag!r} (a 2D or height-only fix) is not "
+                                "supported: multilat fixes x, y and z together")
+        fixed.append(pid)
+
+
+def _read_sdist(path, o, obs_from, model):
+    s = (o.attrib.get("from") or obs_from or "").strip()
+    t = o.attrib.get("to", "").strip()
+    if not s or not t:
+        raise MultilatError(f"{path}:{o.line}: <s-distance> needs from (or <obs from=>) and to")
+    d = xml_float(path, o, "val", positive=True)
+    for h in ("from_dh", "to_dh"):
+        v = xml_float(path, o, h, required=False)
+        if v:
+            raise MultilatError(f"{path}:{o.line}: <s-distance> {h}={v} is not supported "
+                                "(instrument and target heights are not in multilat's model)")
+    sd = xml_float(path, o, "stdev", positive=True, required=False)
+    if sd is None:
+        if model is None:
+            raise MultilatError(f"{path}:{o.line}: <s-distance> {s}->{t} has no stdev and "
+                                "<points-observations> no distance-stdev")
+        sig = model(d)
+    else:
+        sig = sd * 1e-3
+    return (o.line, s, t, d, sig)
+
+
+# ============================================================================ read output
+@dataclass(frozen=True, eq=False)
+class GamaAdjustment:
+    """What multilat reads from gama-local's XML output (SI units; coordinates in multilat's axes).
+
+    ids, xyz_m : adjusted and fixed points ; fixed : ids of the fixed ones
+    dof, defect : degrees of freedom and network defect ; sum_of_squares : vᵀPv (Gama's units)
+    sigma_apriori, sigma_aposteriori : reference standard deviations (Gama's units, sigma-apr = 1)
+    adjusted_ids : the adjusted points, in the order of the rows of ``covariance_m2``
+    covariance_m2 : (3a, 3a) covariance of their x, y, z (multilat's axes), m², scaled by Gama's
+        ``sigma_used`` reference deviation ("apriori" in multilat's export); None when Gama wrote
+        only a band of it
+    station, target : per slope distance ; observed_m, adjusted_m ; residual_m = observed - adjusted
+    adjusted_std_m : standard deviation of the adjusted distance
+    residual_cofactor_mm2 : Gama's ``qrr``, the weight coefficient of the residual (mm² with
+        sigma-apr = 1; printed with 3 decimals, so 0.000 for µm-level σ: not the redundancy number)
+    control_percent : Gama's ``f = 100 (σ - σ_adj) / σ`` (Charamza), so the redundancy number is
+        ``r = 1 - (1 - f/100)²`` (:attr:`redundancy`), or better ``1 - (σ_adj/σ)²`` from the inputs'
+        σ (:meth:`redundancy_from_sigma`)
+    std_residual : Gama's studentised residual ``|v| / (m0 √qrr)`` (NaN where Gama prints none:
+        f < 0.1 %)
+    """
+
+    ids: tuple
+    xyz_m: np.ndarray
+    fixed: tuple
+    dof: int
+    defect: int
+    sum_of_squares: float
+    sigma_apriori: float
+    sigma_aposteriori: float
+    station: tuple
+    target: tuple
+    observed_m: np.ndarray
+    adjusted_m: np.ndarray
+    adjusted_std_m: np.ndarray
+    residual_cofactor_mm2: np.ndarray
+    control_percent: np.ndarray
+    std_residual: np.ndarray
+    adjusted_ids: tuple = ()
+    covariance_m2: np.ndarray | None = None
+    sigma_used: str = ""
+
+    def interpoint_distance_std_m(self, a: str, b: str) -> float:
+        """Standard deviation of the distance between adjusted points ``a`` and ``b`` from Gama's
+        covariance of the adjusted coordinates (needs its full band: ``cov-band="-1"``)."""
+        if self.covariance_m2 is None:
+            raise MultilatError("gama-local's output has no full covariance (run it with "
+                                "--cov-band -1 or cov-band=\"-1\" in <parameters>)")
+        rows = []
+        for p in (a, b):
+            if p not in self.adjusted_ids:
+                raise MultilatError(f"point {p!r} is not an adjusted point of gama-local's output")
+            i = self.adjusted_ids.index(p)
+            rows += [3 * i, 3 * i + 1, 3 * i + 2]
+        P = dict(zip(self.ids, self.xyz_m))
+        d = P[a] - P[b]
+        g = np.concatenate([d, -d]) / np.linalg.norm(d)
+        return float(np.sqrt(max(g @ self.covariance_m2[np.ix_(rows, rows)] @ g, 0.0)))
+
+    @property
+    def redundancy(self) -> np.ndarray:
+        """Redundancy numbers from Gama's ``f`` (3 decimals of a percent: ±2e-5)."""
+        return 1.0 - (1.0 - self.control_percent / 100.0) ** 2
+
+    def redundancy_from_sigma(self, sigma_m) -> np.ndarray:
+        """Redundancy numbers ``1 - (σ_adj/σ)²`` from the a-priori σ of each distance (m)."""
+        return 1.0 - (self.adjusted_std_m / np.asarray(sigma_m, float)) ** 2
+
+    @property
+    def residual_m(self) -> np.ndarray:
+        return self.observed_m - self.adjusted_m
+
+    def points(self) -> Points:
+        return Points(self.ids, self.xyz_m)
+
+
+def _num(path, node, tag, *, integer=False):
+    c = node.find(tag) if node is not None else None
+    if c is None:
+        where = node.line if node is not None else 1
+        raise MultilatError(f"{path}:{where}: missing <{tag}> in gama-local's output")
+    try:
+        v = int(c.text.strip()) if integer else float(c.text.strip())
+    except ValueError:
+        raise MultilatError(f"{path}:{c.line}: <{tag}> {c.text.strip()!r} is not a number") from None
+    if not integer and not math.isfinite(v):
+        raise MultilatError(f"{path}:{c.line}: <{tag}> is not finite")
+    return v
+
+
+def read_gama_adjustment(path) -> GamaAdjustment:
+    """Read gama-local's adjusted XML output (``gama-local IN.xml --xml OUT.xml``).
+
+    Observation kinds other than ``<slope-distance>`` are refused with the kind named; an error
+    document (``<error>``) is reported with Gama's message."""
+    root = parse_xml(path)
+    if root.tag != "gama-local-adjustment":
+        raise MultilatError(f"{path}:{root.line}: expected a <gama-local-adjustment> document, found "
+                            f"<{root.tag}>")
+    err = root.find("error")
+    if err is not None:
+        msg = re.sub(r"\s+", " ", err.child_text("description", "") or "")
+        raise MultilatError(f"{path}:{err.line}: gama-local reported an error: {msg}")
+    gp = root.find("network-general-parameters")
+    ex, ey = _axes(path, gp or root, gp.attrib.get("axes-xy") if gp is not None else None)
+    summ = root.find("network-processing-summary")
+    eq = summ.find("project-equations") if summ is not None else None
+    sd = summ.find("standard-deviation") if summ is not None else None
+    coords = root.find("coordinates")
+    if coords is None:
+        raise MultilatError(f"{path}:{root.line}: no <coordinates> in gama-local's output")
+    ids, xyz, fixed = [], [], []
+    for part in ("fixed", "adjusted"):
+        sec = coords.find(part)
+        for p in (sec.findall("point") if sec is not None else []):
+            pid = p.child_text("id")
+            vals = []
+            for c in ("x", "y", "z"):
+                v = p.find(c) or p.find(c.upper())
+                if v is None:
+                    raise MultilatError(f"{path}:{p.line}: point {pid!r} has no {c} (a 3D network "
+                                        "is expected)")
+                try:
+                    vals.append(float(v.text))
+                except ValueError:
+                    raise MultilatError(f"{path}:{v.line}: {c} of {pid!r} is not a number") from None
+            ids.append(pid)
+            xyz.append(_to_enu(vals, ex, ey))
+            if part == "fixed":
+                fixed.append(pid)
+    adjusted_ids = tuple(i for i in ids if i not in fixed)
+    cov = _covariance(path, coords.find("cov-mat"), len(adjusted_ids), ex, ey)
+    obs_node = root.find("observations")
+    rows = []
+    for o in (obs_node.children if obs_node is not None else []):
+        if o.tag != "slope-distance":
+            raise MultilatError(f"{path}:{o.line}: <{o.tag}> observations are not supported: "
+                                "multilat reads slope distances only")
+        rows.append((o.child_text("from"), o.child_text("to"), _num(path, o, "obs"),
+                     _num(path, o, "adj"), _num(path, o, "stdev") * 1e-3, _num(path, o, "qrr"), _num(path, o, "f"),
+                     _num(path, o, "std-residual") if o.find("std-residual") else math.nan))
+    if not rows:
+        raise MultilatError(f"{path}: no slope distances in gama-local's output")
+    col = list(zip(*rows))
+    return GamaAdjustment(tuple(ids), np.array(xyz).reshape(-1, 3), tuple(fixed),
+                          _num(path, eq, "degrees-of-freedom", integer=True),
+                          _num(path, eq, "defect", integer=True), _num(path, eq, "sum-of-squares"),
+                          _num(path, sd, "apriori"), _num(path, sd, "aposteriori"),
+                          tuple(col[0]), tuple(col[1]), np.array(col[2]), np.array(col[3]),
+                          np.array(col[4]), np.array(col[5]), np.array(col[6]), np.array(col[7]),
+                          adjusted_ids, cov, (sd.child_text("used", "") if sd is not None else ""))
+
+
+def _covariance(path, cm, n_points, ex, ey):
+    """The full covariance (m², multilat's axes) from ``<cov-mat>`` (mm², upper band by rows), or
+    None when Gama wrote only a band or it holds more than the adjusted x, y, z (orientations)."""
+    if cm is None:
+        return None
+    dim, band = _num(path, cm, "dim", integer=True), _num(path, cm, "band", integer=True)
+    if dim != 3 * n_points or band < dim - 1:
+        return None
+    vals = []
+    for f in cm.findall("flt"):
+        try:
+            vals.append(float(f.text))
+        except ValueError:
+            raise MultilatError(f"{path}:{f.line}: <flt> {f.text.strip()!r} is not a number") from None
+    if len(vals) != dim * (dim + 1) // 2:
+        raise MultilatError(f"{path}:{cm.line}: <cov-mat> holds {len(vals)} values, expected "
+                            f"{dim * (dim + 1) // 2} for dim {dim}")
+    C = np.zeros((dim, dim))
+    C[np.triu_indices(dim)] = vals
+    C = C + np.triu(C, 1).T
+    R = np.array([[ex[0], ey[0], 0.0], [ex[1], ey[1], 0.0], [0.0, 0.0, 1.0]])
+    T = np.kron(np.eye(n_points), R)
+    return T @ C @ T.T * 1e-6
