@@ -485,9 +485,11 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
 
 def _kurtosis(y: np.ndarray, mean: np.ndarray) -> np.ndarray:
     """Sample kurtosis m4 / m2^2 per column (3 where a column is constant)."""
-    c = y - mean
-    m2 = np.mean(c**2, axis=0)
-    m4 = np.mean(c**4, axis=0)
+    c2 = y - mean
+    c2 *= c2
+    m2 = np.mean(c2, axis=0)
+    c2 *= c2
+    m4 = np.mean(c2, axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(m2 > 0, m4 / np.where(m2 > 0, m2, 1.0) ** 2, 3.0)
 
