@@ -242,25 +242,19 @@ class _ChunkSpec:
     heads: tuple
     pair_index: np.ndarray          # (q, 2) indices into the stacked [stations; targets] points
     noise: str
-    instrument: object
+    error_model: object             # distance_errors.ErrorModel (noise="model"), else None
     noise_sigma_m: np.ndarray
 
 
 def _draw_errors(spec: _ChunkSpec, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Distance errors of n trials, shape (n, m)."""
-    m = len(spec.distance_m)
+    """Distance errors of n trials, shape (n, m): gaussian, or the distance model in one compiled pass
+    (:func:`multilat.distance_errors.draw_errors`, a row of the model per head)."""
     if spec.noise == "gaussian":
-        return rng.standard_normal((n, m)) * spec.noise_sigma_m
-    from multilat import budget
+        return rng.standard_normal((n, len(spec.distance_m))) * spec.noise_sigma_m
+    from multilat.distance_errors import draw_errors
 
-    e = np.empty((n, m))
-    si = spec.network.station_index
-    for i, hd in enumerate(spec.heads):      # fixed order: reproducible
-        sel = np.nonzero(si == i)[0]
-        if len(sel):
-            e[:, sel] = budget.sample_distance_errors(spec.instrument, spec.distance_m[sel], rng=rng,
-                                                      head=hd, trials=n)
-    return e
+    head_row = spec.network.station_index     # one model row per station, in station order
+    return draw_errors(spec.error_model, head_row, spec.distance_m, n, rng)
 
 
 def _solve_block(spec: _ChunkSpec, entropy, spawn_key: tuple, b: int, n: int) -> dict:
@@ -420,7 +414,12 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         pidx.append((ia if ka == "station" else s + ia, ib if kb == "station" else s + ib))
     pidx = np.array(pidx, np.int64).reshape(-1, 2)
     noise_std = _noise_std(problem, noise, inst)
-    spec = _ChunkSpec(net, problem.distance_m, problem.heads, pidx, noise, inst, net.sigma_m)
+    model = None
+    if noise == "model":
+        from multilat.distance_errors import error_model
+
+        model = error_model(inst, problem.heads)
+    spec = _ChunkSpec(net, problem.distance_m, problem.heads, pidx, noise, model, net.sigma_m)
     k = net.n_params + len(problem.pairs)
     limit = max_trials if adaptive else trials
     if limit * k * 4 > max_memory_bytes:   # float32 samples (statistics are computed per column block)
@@ -486,9 +485,11 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
 
 def _kurtosis(y: np.ndarray, mean: np.ndarray) -> np.ndarray:
     """Sample kurtosis m4 / m2^2 per column (3 where a column is constant)."""
-    c = y - mean
-    m2 = np.mean(c**2, axis=0)
-    m4 = np.mean(c**4, axis=0)
+    c2 = y - mean
+    c2 *= c2
+    m2 = np.mean(c2, axis=0)
+    c2 *= c2
+    m4 = np.mean(c2, axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(m2 > 0, m4 / np.where(m2 > 0, m2, 1.0) ** 2, 3.0)
 

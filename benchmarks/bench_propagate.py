@@ -1,0 +1,113 @@
+"""Monte Carlo of the small volume end to end (issue 12 item 1): whole ``multilat propagate`` commands.
+
+Rows (each beside its baseline, same run):
+
+* ``draw_model_small_volume``: drawing the distance model's errors for T trials x 56 distances with
+  :func:`multilat.distance_errors.draw_errors` (one compiled pass) against the plain-numpy draw of the
+  same model, :func:`multilat.budget.sample_distance_errors` per head (the path ``propagate`` used
+  before). ratio = numpy time / compiled time.
+* ``cli_propagate_model``: ``multilat propagate small-volume --trials T --json > /dev/null`` as a
+  subprocess (start-up, drawing, solving, statistics, JSON), trials/s; baseline: the batched solver
+  alone on the same trials (:meth:`BatchedNetwork.solve` of gaussian distances, in-process), so the
+  ratio says what the rest of the command costs next to the solve. Goal: >= 1e5 trials/s.
+* ``cli_propagate_gaussian``: the same command with ``--noise gaussian``. Goal: >= 1.5e5 trials/s.
+* ``cli_propagate_model_dask2``: the model command with ``--workers 2`` (a local Dask cluster) against
+  the in-process command of the row above (ratio = in-process time / Dask time). Goal: >= 1.8x.
+
+Each row records the 1-minute load average before it ran (the machine is shared: compare ratios).
+Quick mode: 20 000 trials, one repeat; full: 200 000 trials, median of 3.
+"""
+
+from __future__ import annotations
+
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from common import load_avg
+
+ROOT = Path(__file__).resolve().parent.parent
+CLI = [sys.executable, "-c", "from multilat.cli import run; run()"]
+
+
+def _median(f, reps):
+    ts = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        f()
+        ts.append(time.perf_counter() - t0)
+    return statistics.median(ts)
+
+
+def _command(*args):
+    env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+
+    def run():
+        subprocess.run([*CLI, "propagate", "small-volume", *args, "--json"], check=True, env=env,
+                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    return run
+
+
+def _row(name, t, baseline, tb, trials, **extra):
+    return {"name": name, "median_s": t, "baseline": baseline, "baseline_median_s": tb,
+            "ratio": None if tb is None else tb / t,
+            "extra": {"trials": trials, "trials_per_s": trials / t, **extra}}
+
+
+def run(quick: bool = False) -> list[dict]:
+    from multilat import budget, instrument as instr
+    from multilat.distance_errors import draw_errors, error_model
+    from multilat.network.configs import small_volume
+    from multilat.network.propagate import problem_from_config
+
+    trials = 20_000 if quick else 200_000
+    reps = 1 if quick else 3
+    rows = []
+    pb = problem_from_config(small_volume(), sigma_m=4.7e-6)
+    inst = instr.load_instrument("seed2020")
+    d = pb.distance_m
+    si = pb.network.station_index
+    model = error_model(inst, pb.heads)
+    draw_errors(model, si, d, 10, np.random.default_rng(0))          # compile / load the cache
+    load = load_avg()
+    t_fused = _median(lambda: draw_errors(model, si, d, trials, np.random.default_rng(1)), reps)
+
+    def numpy_draw():
+        rng = np.random.default_rng(1)
+        for i, hd in enumerate(pb.heads):
+            sel = np.nonzero(si == i)[0]
+            budget.sample_distance_errors(inst, d[sel], rng=rng, head=hd, trials=trials)
+    t_numpy = _median(numpy_draw, reps)
+    rows.append(_row("draw_model_small_volume", t_fused, "numpy budget.sample_distance_errors", t_numpy, trials,
+                     distances=int(d.size), load_avg_1min=load))
+
+    net = pb.network
+    rng = np.random.default_rng(2)
+    dist = d + rng.standard_normal((trials, d.size)) * 4.7e-6
+    net.solve(dist[:100])
+    t_solve = _median(lambda: net.solve(dist), reps)
+
+    _command("--trials", "2000")()                                    # warm caches once
+    load = load_avg()
+    t_model = _median(_command("--trials", str(trials)), reps)
+    rows.append(_row("cli_propagate_model", t_model, "batched solver alone (in-process)", t_solve, trials,
+                     load_avg_1min=load, goal_trials_per_s=1e5))
+    load = load_avg()
+    t_gauss = _median(_command("--trials", str(trials), "--noise", "gaussian"), reps)
+    rows.append(_row("cli_propagate_gaussian", t_gauss, "batched solver alone (in-process)", t_solve, trials,
+                     load_avg_1min=load, goal_trials_per_s=1.5e5))
+    load = load_avg()
+    t_dask = _median(_command("--trials", str(trials), "--workers", "2"), reps)
+    rows.append(_row("cli_propagate_model_dask2", t_dask, "the same command in-process", t_model, trials,
+                     load_avg_1min=load, goal_speedup=1.8))
+    return rows
+
+
+if __name__ == "__main__":  # pragma: no cover
+    for r in run(quick="--quick" in sys.argv):
+        print(r)
