@@ -301,3 +301,21 @@ def test_readings_validation():
         Readings(np.zeros(3, int), np.ones(3), np.ones(2))
     with pytest.raises(MultilatError, match="together"):
         Readings(np.zeros(3, int), np.ones(3), np.ones(3), air_jacobian_m=np.ones((3, 2)))
+
+
+@pytest.mark.filterwarnings("ignore:possible false minimum")
+def test_adjust_average_repeats_cli(raw9, capsys):
+    """`adjust RAW --average-repeats`: the scatter per pair in the JSON, offsets (datum-free) equal to
+    those of the separate readings to 1e-9 m, and the correlated block computed on A C Aᵀ."""
+    base = [str(raw9), "-e", str(ENV), "--heights", str(HTS), "--json", "--no-snooping"]
+    assert main(["adjust", *base, "--average-repeats"]) == 0
+    avg = json.loads(capsys.readouterr().out)
+    assert len(avg["repeats"]) == 56 and avg["repeats"][0]["n"] == 9 and avg["dof"] == 4
+    assert "with_correlations" in avg
+    from multilat.campaign.correct import correct_file
+    from multilat.network.adjust import adjust
+
+    sep = adjust(correct_file(raw9, **KW).to_observations(), snooping=False)
+    off = {k: v["offset_m"] for k, v in avg["stations"].items()}
+    for i, sid in enumerate(sep.station_ids):
+        assert abs(off[sid] - sep.offset_m[i]) < 1e-9
