@@ -319,3 +319,32 @@ def test_adjust_average_repeats_cli(raw9, capsys):
     off = {k: v["offset_m"] for k, v in avg["stations"].items()}
     for i, sid in enumerate(sep.station_ids):
         assert abs(off[sid] - sep.offset_m[i]) < 1e-9
+
+
+def test_redundancy_of_repeated_readings_against_a_dense_hat_matrix(tmp_path):
+    """The pair table scaled for repeats (model.slot_gain, covariance.hat_diagonal) against the plain
+    hat matrix ``A (AᵀA)⁺ Aᵀ`` of the whole whitened Jacobian (an independent computation), with
+    2-4 readings per pair of unequal sigma: redundancy numbers equal to 1e-8."""
+    from multilat.network.adjust import adjust
+    from multilat.network.data import Observations
+    from multilat.network.model import dense_jacobian, residuals_and_jacobian
+
+    p = _write_repeats(tmp_path / "r.csv", k=1)
+    from multilat.campaign.correct import correct_file
+
+    o = correct_file(p, **KW).to_observations()
+    rng = np.random.default_rng(4)
+    k = rng.integers(1, 5, o.n_obs)                         # 1-4 readings per pair
+    rows = np.repeat(np.arange(o.n_obs), k)
+    sig = o.sigma_m[rows] * rng.uniform(0.7, 1.4, rows.size)
+    d = o.distance_m[rows] + 0.5 * sig * rng.standard_normal(rows.size)
+    rep = Observations(o.station_ids, o.target_ids, o.station_index[rows], o.target_index[rows], d, sig)
+    res = adjust(rep, snooping=False)
+    _, js, jt = residuals_and_jacobian(rep.distance_m, res.station_xyz_m, res.target_xyz_m, res.offset_m,
+                                       np.zeros(rep.n_stations), rep.station_index, rep.target_index,
+                                       cost="distance")
+    js = js.copy()
+    js[:, 4] = 0.0                                          # scales not estimated
+    a = dense_jacobian(js, jt, rep.station_index, rep.target_index, rep.n_stations, rep.n_targets) / sig[:, None]
+    hat = np.einsum("ij,ji->i", a, np.linalg.pinv(a.T @ a, rcond=1e-12) @ a.T)
+    assert np.allclose(res.redundancy, 1.0 - hat, atol=1e-8)
