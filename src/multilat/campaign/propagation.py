@@ -95,6 +95,8 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
     obs, corrected = read_campaign(path, sigma_m=sigma_m, instrument=inst, environment=environment,
                                    heights=heights, formula=formula, extrapolate=extrapolate,
                                    max_gap_s=max_gap_s)
+    if hasattr(references, "check_ids"):      # unknown ids named with the reference file (and its line)
+        references.check_ids(tuple(obs.station_ids) + tuple(obs.target_ids))
     readings_obs = obs
     matrix = scatter = None
     if average:
