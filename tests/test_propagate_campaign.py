@@ -210,6 +210,7 @@ def test_nine_readings_kept_or_averaged_give_the_same_result(raw9):
     assert np.allclose(a.lin_std[keep], b.lin_std[keep], rtol=1e-6)
 
 
+@pytest.mark.filterwarnings("ignore:possible false minimum")
 def test_averaged_scatter_is_reported(raw9):
     """The scatter per pair (sample std, n) equals numpy's std (ddof=1) of the corrected readings."""
     from multilat.campaign.propagation import campaign_problem
