@@ -112,6 +112,10 @@ def adjust_command(
                                     "for 10^5-10^6 distances; not with --scales, --cost squared or "
                                     "--datum control) or auto (sparse above 20 000 distances where it "
                                     "applies)."),
+    average_repeats: bool = typer.Option(False, "--average-repeats",
+                                         help="Average repeated readings of a pair into one observation "
+                                              "(weighted mean; scatter per pair in the JSON 'repeats'); "
+                                              "default: keep them as separate observations."),
     strict: bool = typer.Option(False, "--strict",
                                 help="Refuse the network when a point is too weakly observed, instead "
                                      "of leaving it out with a warning."),
@@ -152,6 +156,12 @@ def adjust_command(
                                 "file with distance_m")
         obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
                                 instrument=instrument)
+    averaged = None
+    if average_repeats:
+        from multilat.network.repeats import average_repeats as _average
+
+        averaged = _average(obs)
+        obs = averaged.obs
     refs = read_reference_lengths(references) if references is not None else None
     if refs is not None:
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))
@@ -175,7 +185,10 @@ def adjust_command(
     if corrected is not None:
         from multilat.campaign.correlated import correlated_json
 
-        doc["with_correlations"] = correlated_json(res, corrected.covariance_m2, refs)
+        c = corrected.covariance_m2 if averaged is None else averaged.matrix @ corrected.covariance_m2 @ averaged.matrix.T
+        doc["with_correlations"] = correlated_json(res, c, refs)
+    if averaged is not None:
+        doc["repeats"] = averaged.scatter_json()
     if out is not None:
         from multilat.report.network_figures import save_figures
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
 import typer
 from rich.table import Table
 
@@ -16,13 +17,21 @@ BUILTIN = ("small-volume", "large-volume")
 
 
 def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_um: float | None,
-                 references: Path | None):
-    """The propagation problem for ``source`` (a built-in configuration name or an observations CSV)."""
+                 references: Path | None, environment: Path | None = None, heights: Path | None = None,
+                 formula: str = "ciddor", extrapolate: bool = False, max_gap_s: float | None = None,
+                 average_repeats: bool = False):
+    """The propagation problem for ``source``: a built-in configuration name, or what ``adjust``
+    reads (an observations CSV, or raw readings with their environment log; repeated readings kept
+    or averaged), :func:`multilat.campaign.propagation.campaign_problem`."""
     from multilat import instrument as _inst
     from multilat.network import propagate as pr
 
     inst = _inst.load_instrument(instrument)
     if source in BUILTIN:
+        if environment is not None or heights is not None or extrapolate or max_gap_s is not None \
+                or average_repeats:
+            raise MultilatError(f"--environment/--heights/--extrapolate/--max-gap-s/--average-repeats "
+                                f"apply to a campaign file, not to the built-in {source!r}")
         try:
             from multilat.network import configs
         except ImportError:
@@ -31,19 +40,23 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
         sigma = None if noise == "model" else (sigma_um * 1e-6 if sigma_um else 4.7e-6)
         return pr.problem_from_config(cfg, sigma_m=sigma, instrument=inst if noise == "model" else None,
                                       datum=datum, source=source)
-    from multilat.network.files import read_observations, read_reference_lengths
+    from multilat.campaign.propagation import campaign_problem
+    from multilat.network.files import read_reference_lengths
 
-    obs = read_observations(source, sigma_m=None if sigma_um is None else sigma_um * 1e-6, instrument=inst)
+    if not Path(source).exists():
+        raise MultilatError(f"{source}: no such file (and not a built-in: {', '.join(BUILTIN)})")
     refs = read_reference_lengths(references) if references is not None else None
-    if refs is not None:      # unknown ids named with the reference file (and its line)
-        refs.check_ids(tuple(obs.station_ids) + tuple(obs.target_ids), what=str(references))
-    return pr.problem_from_observations(obs, datum=datum, references=refs, instrument=inst,
-                                        source=str(source))
+    problem, _ = campaign_problem(source, datum=datum, references=refs, instrument=inst,
+                                  sigma_m=None if sigma_um is None else sigma_um * 1e-6,
+                                  environment=environment, heights=heights, formula=formula,
+                                  extrapolate=extrapolate, max_gap_s=max_gap_s, average=average_repeats)
+    return problem
 
 
 @app.command("propagate")
 def propagate_cmd(
-    source: str = typer.Argument(..., help="Observations CSV, or small-volume / large-volume."),
+    source: str = typer.Argument(..., help="What `adjust` reads (observations CSV, or raw readings with "
+                                           "--environment), or small-volume / large-volume."),
     trials: int = typer.Option(100_000, "--trials", help="Monte Carlo trials (fixed-size run)."),
     adaptive: bool = typer.Option(False, "--adaptive", help="JCGM 101 7.9 adaptive number of trials."),
     seed: int = typer.Option(1, "--seed",
@@ -54,6 +67,18 @@ def propagate_cmd(
                                              help="Gaussian sigma / weights in um (default: file or 4.7)."),
     datum: str = typer.Option("free", "--datum", help="free[:P,..] or 321:A,B,C (same in every trial)."),
     references: Optional[Path] = typer.Option(None, "--references", help="Reference lengths CSV."),
+    environment: Optional[Path] = typer.Option(None, "--environment", "-e",
+                                               help="Raw readings only: environment log CSV; each trial "
+                                                    "draws every sensor's error once (as `adjust RAW`)."),
+    heights: Optional[Path] = typer.Option(None, "--heights", help="Raw readings only: heights file."),
+    formula: str = typer.Option("ciddor", "--formula", help="Raw readings only: ciddor or edlen."),
+    extrapolate: bool = typer.Option(False, "--extrapolate",
+                                     help="Raw readings only: extrapolate the environment (warned)."),
+    max_gap_s: Optional[float] = typer.Option(None, "--max-gap-s",
+                                              help="Raw readings only: longest sensor-log gap bridged, s."),
+    average_repeats: bool = typer.Option(False, "--average-repeats",
+                                         help="Average repeated readings of a pair (weighted means; the "
+                                              "scatter per pair reported) instead of keeping them."),
     chunk_size: int = typer.Option(10_000, "--chunk-size",
                                    help="Trials per unit of parallel work (whole blocks; no effect on the numbers)."),
     workers: Optional[int] = typer.Option(None, "--workers", help="Start a local Dask cluster of N workers."),
@@ -79,9 +104,11 @@ def propagate_cmd(
     if out is not None:
         from multilat.io import check_output_dir
 
-        check_output_dir(out, inputs=[source, references])
+        check_output_dir(out, inputs=[source, references, environment, heights])
     problem = load_problem(source, datum=datum, noise=noise, instrument=instrument, sigma_um=sigma_um,
-                           references=references)
+                           references=references, environment=environment, heights=heights,
+                           formula=formula, extrapolate=extrapolate, max_gap_s=max_gap_s,
+                           average_repeats=average_repeats)
     total = None if adaptive else trials
     with map_from_options(workers=workers, scheduler=scheduler) as m, progress(disable=as_json) as bar:
         task = bar.add_task("Monte Carlo", total=total)
@@ -89,11 +116,13 @@ def propagate_cmd(
                         adaptive=adaptive, chunk_size=chunk_size, map=m,
                         progress=lambda n: bar.update(task, completed=n), keep_samples=out is not None)
     doc = res.to_dict()
+    if problem.readings is not None:
+        doc["readings"] = problem.readings.to_json()
     if out is not None:
         from multilat.io import staging_dir
 
         # all or nothing: files go to a temporary directory beside OUT, moved in only on success
-        with staging_dir(out, inputs=[source, references]) as tmp:
+        with staging_dir(out, inputs=[source, references, environment, heights]) as tmp:
             write_outputs(res, doc, tmp)
     if as_json:
         emit_json(doc)
@@ -130,6 +159,11 @@ def write_outputs(res, doc, out: Path) -> None:
     import matplotlib.pyplot as plt
 
     plt.close(fig)
+    reps = (doc.get("readings") or {}).get("repeats")
+    if reps:
+        write_csv_atomic(out / "repeats.csv", ["station", "target", "n", "mean_m", "std_m"],
+                         ([r["station"], r["target"], r["n"], r["mean_m"], "" if r["std_m"] is None else r["std_m"]]
+                          for r in reps))
     write_json_atomic(out / "summary.json", doc)
 
 
@@ -147,6 +181,19 @@ def _print(res, doc, out) -> None:
     if doc["sigma0_nominal"] > 0:
         console.print("  trials are centred on the measured distances, so each carries the nominal residuals "
                       "as well: sigma0_trial^2 ~ sigma0_nominal^2 + (errors alone)^2")
+    rd = doc.get("readings")
+    if rd:
+        console.print(f"readings: {rd['n_readings']} behind {rd['n_observations']} observations"
+                      + (f"; {rd['n_sensor_errors']} sensor errors ({', '.join(rd['sensors'])}) drawn once per "
+                         "trial and applied to every reading they serve (linearised sensitivities)"
+                         if rd["n_sensor_errors"] else ""), markup=False)
+        if rd["repeats"]:
+            many = [r for r in rd["repeats"] if r["n"] > 1]
+            if many:
+                sd = np.array([r["std_m"] for r in many])
+                console.print(f"repeats averaged: {len(many)} pairs of {min(r['n'] for r in many)}.."
+                              f"{max(r['n'] for r in many)} readings, scatter (std) {_um(sd.min())}.."
+                              f"{_um(sd.max())} um (median {_um(float(np.median(sd)))})", markup=False)
     if doc["adaptive"]:
         a = doc["adaptive"]
         console.print(f"adaptive (JCGM 101 7.9): converged={a['converged']} after {a['batches']} batches "

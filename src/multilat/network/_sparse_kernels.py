@@ -155,7 +155,13 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
                     bv[2] = u[l, 2]
                     bv[3] = 1.0
                     # accumulate into the upper block triangle only (symmetrised by the caller)
-                    if i <= il:
+                    if i == il and l > k:
+                        # repeated readings of one pair (or two of one station): the diagonal
+                        # block gets both orders (k, l) and (l, k), as it is used as it stands
+                        for a in range(4):
+                            for q in range(4):
+                                scc[b + a, b + q] -= cc * (av[a] * bv[q] + bv[a] * av[q])
+                    elif i <= il:
                         bl = 4 * il
                         for a in range(4):
                             ca = cc * av[a]

@@ -274,13 +274,15 @@ class BatchedNetwork:
         j[k, 3 * s + self.station_index] = 1.0
         return j
 
-    def linear_covariance(self, *, sigma_m: np.ndarray | None = None) -> np.ndarray:
+    def linear_covariance(self, *, sigma_m: np.ndarray | None = None,
+                          cov_m2: np.ndarray | None = None) -> np.ndarray:
         """First-order covariance of the parameters in this network's datum, shape (p, p), m².
 
         ``Q = S (J^T W J)^+ S^T`` where ``W = diag(1/sigma**2)`` are the solver's weights and ``S`` the
         S-transformation onto the datum (``E^T dx = 0``, ``E`` = :meth:`TrialDatum.constraint_matrix`).
         With ``sigma_m`` (the distances' actual standard uncertainties, if they differ from the
-        weighting sigmas) the sandwich ``N^+ J^T W C W J N^+`` is returned instead.
+        weighting sigmas) the sandwich ``N^+ J^T W C W J N^+`` is returned instead; ``cov_m2`` (m, m)
+        gives a full ``C`` (correlated distances, e.g. shared environment sensors).
         """
         j = self.jacobian()
         w = self._pre["w"]
@@ -296,7 +298,10 @@ class BatchedNetwork:
             raise MultilatError("the datum does not fix translation and rotation (degenerate points)")
         c_pen = np.trace(n) / self.n_params / max(np.trace(e.T @ e) / 6, 1e-300)
         q = np.linalg.inv(n + c_pen * (e @ e.T))     # a generalised inverse of N, well conditioned
-        if sigma_m is not None:
+        if cov_m2 is not None:
+            jw = j.T * w
+            q = q @ (jw @ np.asarray(cov_m2, float) @ jw.T) @ q
+        elif sigma_m is not None:
             c = np.asarray(sigma_m, float) ** 2
             jw = j.T * w
             q = q @ (jw @ (c[:, None] * jw.T)) @ q

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat.network.model import Q, segment_sum, target_slots
+from multilat.network.model import Q, repeat_share, segment_sum, slot_gain, target_slots
 
 __all__ = ["NetworkCovariance"]
 
@@ -139,14 +139,16 @@ class NetworkCovariance:
         """3x3 covariance of every target (t, 3, 3) in the final datum, O(t s^2)."""
         s, t = self.s, self.t
         slots = target_slots(self.si, self.ti, s, t)
+        gain = slot_gain(slots, self.si, self.ti, self.Js_w, self.Jt_w)     # repeated readings
         Q4 = self.Qgg.reshape(s, Q, s, Q)
         out = np.empty((t, 3, 3))
         for lo in range(0, t, chunk_targets):
             sl = slots[lo:lo + chunk_targets]
             seen = sl >= 0
             ix = np.where(seen, sl, 0)
-            A = self.Js_w[ix] * seen[..., None]           # (c, s, Q)
-            P = self.P[ix] * seen[..., None]              # (c, s, 3)
+            sc = seen if gain is None else seen * gain[ix]
+            A = self.Js_w[ix] * sc[..., None]             # (c, s, Q)
+            P = self.P[ix] * sc[..., None]                # (c, s, 3)
             S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)
             out[lo:lo + chunk_targets] = (self.Minv[lo:lo + chunk_targets]
                                           + np.einsum("cai,cab,cbj->cij", P, S, P, optimize=True))
@@ -184,15 +186,19 @@ class NetworkCovariance:
         """
         s, t = self.s, self.t
         slots = target_slots(self.si, self.ti, s, t)
+        # repeated readings of a pair: the pair's hat as one observation of all their weight, shared
+        # among them by weight (their rows are proportional)
+        gain = slot_gain(slots, self.si, self.ti, self.Js_w, self.Jt_w)
         Q4 = self.Qgg.reshape(s, Q, s, Q)
         h = np.empty(self.si.shape[0])
         for lo in range(0, t, chunk_targets):
             sl = slots[lo:lo + chunk_targets]
             seen = sl >= 0
             ix = np.where(seen, sl, 0)
-            A = self.Js_w[ix] * seen[..., None]
-            B = self.Jt_w[ix] * seen[..., None]
-            P = self.P[ix] * seen[..., None]
+            sc = seen if gain is None else seen * gain[ix]
+            A = self.Js_w[ix] * sc[..., None]
+            B = self.Jt_w[ix] * sc[..., None]
+            P = self.P[ix] * sc[..., None]
             S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)      # a Q a
             BP = np.einsum("cai,cbi->cab", B, P)                             # b_a . p_b
             diagS = np.einsum("cbb->cb", S)
@@ -200,4 +206,7 @@ class NetworkCovariance:
             term3 = np.einsum("cbb->cb", BP) + np.einsum("cba,cae,cbe->cb", BP, S, BP, optimize=True)
             hh = diagS - 2.0 * term2 + term3
             h[sl[seen]] = hh[seen]
+        if gain is not None:
+            key = self.ti.astype(np.int64) * s + self.si
+            h = h[slots.ravel()[key]] * repeat_share(slots, self.si, self.ti, self.Js_w, self.Jt_w)
         return h

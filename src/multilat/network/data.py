@@ -8,8 +8,9 @@ Conventions
   offset, ``distance_m = |H_i - T_j| + offset_i`` (seed 000 §4.3).
 * Ids are strings; ``station_ids``/``target_ids`` keep first-appearance order, and
   ``station_index[k]``/``target_index[k]`` point into them.
-* Each (station, target) pair appears at most once: repeated measurements must be averaged before
-  (their mean is one observation with the standard uncertainty of the mean).
+* A (station, target) pair may appear several times: repeated readings are separate observations
+  (or averaged first, :func:`multilat.network.repeats.average_repeats`); geometric counts (targets
+  per station, stations per target) count distinct pairs.
 """
 
 from __future__ import annotations
@@ -54,7 +55,7 @@ class Observations:
         Pointing angles of the head for each observation when known (NaN where unknown).
 
     Build with :meth:`from_labels` (ids per row); the constructor checks shapes, finiteness,
-    positivity, index ranges and duplicate (station, target) pairs.
+    positivity and index ranges; repeated (station, target) pairs are allowed (repeated readings).
     """
 
     station_ids: tuple[str, ...]
@@ -110,12 +111,6 @@ class Observations:
                 if np.any(np.isinf(a)):
                     raise MultilatError(f"{name}: infinite angle")
                 set_(self, name, a)
-        key = self.station_index.astype(np.int64) * len(self.target_ids) + self.target_index
-        uniq, first, counts = np.unique(key, return_index=True, return_counts=True)
-        if np.any(counts > 1):
-            k = int(np.flatnonzero(key == uniq[np.argmax(counts > 1)])[1])
-            raise MultilatError(f"duplicate observation {self.label(k)} (average repeated "
-                                "measurements into one row)")
         for a in (self.station_index, self.target_index, self.distance_m, self.sigma_m):
             a.flags.writeable = False
 

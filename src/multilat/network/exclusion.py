@@ -26,6 +26,14 @@ from multilat.network.result import Excluded
 __all__ = ["exclude_weak_points", "zero_redundancy_warnings"]
 
 
+def _distinct_counts(obs: Observations, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct stations per target (t,) and distinct targets per station (s,) over the kept
+    observations: repeated readings of one pair add no geometry."""
+    s, t = obs.n_stations, obs.n_targets
+    pair = np.unique(obs.station_index[keep].astype(np.int64) * t + obs.target_index[keep])
+    return np.bincount(pair % t, minlength=t), np.bincount(pair // t, minlength=s)
+
+
 def _largest_component(obs: Observations, keep: np.ndarray) -> np.ndarray:
     """Mask (m,) of the kept observations that belong to the component with the most observations."""
     from scipy.sparse import coo_matrix
@@ -93,11 +101,10 @@ def exclude_weak_points(obs: Observations, *, offset_free: np.ndarray, scale_fre
 
     while True:
         changed = False
-        per_t = np.bincount(obs.target_index[keep], minlength=t)
+        per_t, per_s = _distinct_counts(obs, keep)
         for j in np.flatnonzero((per_t < 3) & ~fixed & ~gone_t):
             drop("target", int(j), f"has {int(per_t[j])} observation(s); 3 are needed to place it")
             changed = True
-        per_s = np.bincount(obs.station_index[keep], minlength=s)
         for i in np.flatnonzero((per_s < need_s + 1) & ~gone_s):
             drop("station", int(i), f"has {int(per_s[i])} usable observation(s); its {int(need_s[i])} "
                                     f"unknowns need at least {int(need_s[i]) + 1}")
@@ -122,14 +129,14 @@ def exclude_weak_points(obs: Observations, *, offset_free: np.ndarray, scale_fre
 
 def zero_redundancy_warnings(obs: Observations, fixed_targets=()) -> list[str]:
     """One warning per free target with exactly 3 observations, naming its mirror ambiguity."""
-    per_t = np.bincount(obs.target_index, minlength=obs.n_targets)
+    per_t, _ = _distinct_counts(obs, np.ones(obs.n_obs, bool))
     msgs = []
     fixed = set(fixed_targets)
     for j in np.flatnonzero(per_t == 3):
         tid = obs.target_ids[j]
         if tid in fixed:
             continue
-        st = [obs.station_ids[i] for i in obs.station_index[obs.target_index == j]]
+        st = [obs.station_ids[i] for i in dict.fromkeys(obs.station_index[obs.target_index == j])]
         msgs.append(f"target {tid!r} has 3 observations: determined without redundancy (its distances "
                     f"are unchecked); from distances alone its mirror image through the plane of "
                     f"{', '.join(st)} fits them equally")

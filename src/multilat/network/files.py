@@ -61,12 +61,6 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     st = _check_ids(tab, "station")
     tg = _check_ids(tab, "target")
     d = tab.floats("distance_m", positive=True)
-    seen: dict[tuple[str, str], int] = {}
-    for k, key in enumerate(zip(st, tg)):
-        if key in seen:
-            raise tab.error(k, f"duplicate observation {key[0]}->{key[1]} (first at line "
-                               f"{tab.line_numbers[seen[key]]}); average repeated measurements into one row")
-        seen[key] = k
     both = set(st) & set(tg)
     if both:
         v = sorted(both)[0]

@@ -36,7 +36,7 @@ Q = 5  # global parameters per station: x, y, z, offset, scale
 COSTS = ("distance", "squared")
 
 __all__ = ["Q", "COSTS", "segment_sum", "geometric_distance_m", "predicted_distance_m", "residuals_and_jacobian",
-           "dense_jacobian", "target_slots", "ReducedSystem", "reduced_normal_equations",
+           "dense_jacobian", "target_slots", "slot_gain", "repeat_share", "ReducedSystem", "reduced_normal_equations",
            "back_substitute", "inv3"]
 
 
@@ -145,12 +145,45 @@ def dense_jacobian(J_station, J_target, station_index, target_index, n_stations,
 def target_slots(station_index, target_index, n_stations, n_targets):
     """Dense ``(t, s)`` table of observation indices (-1 where a target is not seen by a station).
 
-    Requires at most one observation per (station, target) pair (checked by
-    :class:`~multilat.network.data.Observations`).
+    With repeated readings of a pair the table holds one of them; :func:`slot_gain` scales its
+    whitened row so that it stands for all of them.
     """
     slots = np.full((n_targets, n_stations), -1, dtype=np.intp)
     slots[target_index, station_index] = np.arange(station_index.shape[0])
     return slots
+
+
+def slot_gain(slots, station_index, target_index, *rows):
+    """Per-observation factors ``g`` (m,) for the pair table of :func:`target_slots`, or None when
+    every pair has one reading.
+
+    Repeated readings of one (station, target) pair have proportional whitened Jacobian rows (same
+    geometry, weights ``1/sigma_k**2``), so their sum of outer products is that of the table's
+    reading scaled by ``g**2 = sum_k |row_k|**2 / |row_slot|**2``; ``rows`` are the whitened blocks
+    (e.g. ``Js_w, Jt_w``) whose concatenation is the row.
+    """
+    m = station_index.shape[0]
+    n2 = sum(np.einsum("mi,mi->m", r, r) for r in rows)
+    key = target_index.astype(np.int64) * slots.shape[1] + station_index
+    flat = slots.ravel()
+    if np.count_nonzero(flat >= 0) == m:
+        return None
+    tot = np.bincount(key, weights=n2, minlength=flat.size)
+    g = np.ones(m)
+    own = n2[flat[flat >= 0]]
+    ok = own > 0
+    idx = flat[flat >= 0]
+    g[idx[ok]] = np.sqrt(tot[flat >= 0][ok] / own[ok])
+    return g
+
+
+def repeat_share(slots, station_index, target_index, *rows):
+    """Share ``|row_k|**2 / sum over the pair's readings`` (m,) of each reading (1 without repeats)."""
+    n2 = sum(np.einsum("mi,mi->m", r, r) for r in rows)
+    key = target_index.astype(np.int64) * slots.shape[1] + station_index
+    tot = np.bincount(key, weights=n2, minlength=slots.size)[key]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(tot > 0, n2 / np.where(tot > 0, tot, 1.0), 1.0)
 
 
 def inv3(A):
@@ -241,13 +274,15 @@ def reduced_normal_equations(r_w, Js_w, Jt_w, station_index, target_index, n_sta
     bg -= segment_sum(station_index, Js_w * e[:, None], s)
     # coupling: sum_j N_gj M_j N_jg in station-slot form
     slots = target_slots(station_index, target_index, s, t)
+    gain = slot_gain(slots, station_index, target_index, Js_w, Jt_w)     # repeated readings
     R = np.zeros((s, Q, s, Q))
     for lo in range(0, t, chunk_targets):
         sl = slots[lo:lo + chunk_targets]                       # (c, s)
         seen = sl >= 0
         ix = np.where(seen, sl, 0)
-        A = Js_w[ix] * seen[..., None]                          # (c, s, Q)
-        B = Jt_w[ix] * seen[..., None]                          # (c, s, 3)
+        sc = seen if gain is None else seen * gain[ix]
+        A = Js_w[ix] * sc[..., None]                            # (c, s, Q)
+        B = Jt_w[ix] * sc[..., None]                            # (c, s, 3)
         MB = np.einsum("cij,csj->csi", Minv[lo:lo + chunk_targets], B)
         C = np.einsum("cai,cbi->cab", B, MB)                    # (c, s, s)
         R += np.einsum("caq,cab,cbr->aqbr", A, C, A, optimize=True)

@@ -78,6 +78,10 @@ class Problem:
     sigma0_nominal : float
         A-posteriori sigma0 of the nominal solution: 0 for a known truth (exact nominal distances),
         the adjustment's sigma0 for measured observations (their residuals are in every trial).
+    readings : multilat.network.readings.Readings or None
+        The readings behind the observations (shared environment sensors, repeated readings): each
+        trial draws the readings' and the sensors' errors (:meth:`Readings.draw`); None: one
+        independent error per observation.
     """
 
     station_ids: tuple
@@ -89,6 +93,7 @@ class Problem:
     reference_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     source: str = ""
     sigma0_nominal: float = 0.0
+    readings: object = None
 
     def point_xyz(self, ident: str) -> np.ndarray:
         k, i = self.point_index(ident)
@@ -244,11 +249,15 @@ class _ChunkSpec:
     noise: str
     error_model: object             # distance_errors.ErrorModel (noise="model"), else None
     noise_sigma_m: np.ndarray
+    readings: object = None         # network.readings.Readings (raw campaign, repeats) or None
 
 
 def _draw_errors(spec: _ChunkSpec, n: int, rng: np.random.Generator) -> np.ndarray:
     """Distance errors of n trials, shape (n, m): gaussian, or the distance model in one compiled pass
-    (:func:`multilat.distance_errors.draw_errors`, a row of the model per head)."""
+    (:func:`multilat.distance_errors.draw_errors`, a row of the model per head); a campaign's readings
+    (shared sensors, repeats) through :meth:`multilat.network.readings.Readings.draw`."""
+    if spec.readings is not None:
+        return spec.readings.draw(n, rng, noise=spec.noise, error_model=spec.error_model)
     if spec.noise == "gaussian":
         return rng.standard_normal((n, len(spec.distance_m))) * spec.noise_sigma_m
     from multilat.distance_errors import draw_errors
@@ -311,10 +320,11 @@ def _noise_std(problem: Problem, noise: str, instrument) -> np.ndarray:
     return out
 
 
-def _linear(problem: Problem, noise_std):
-    """Linear std of every reported quantity and the 3x3 covariance of each point."""
+def _linear(problem: Problem, noise_std, obs_cov=None):
+    """Linear std of every reported quantity and the 3x3 covariance of each point (``obs_cov``: the
+    observations' full covariance, correlated readings)."""
     net = problem.network
-    q = net.linear_covariance(sigma_m=noise_std)
+    q = net.linear_covariance(sigma_m=noise_std) if obs_cov is None else net.linear_covariance(cov_m2=obs_cov)
     std = list(np.sqrt(np.clip(np.diag(q), 0, None)))
     for a, b in problem.pairs:
         ra, rb = problem.param_rows(a), problem.param_rows(b)
@@ -413,13 +423,15 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         kb, ib = problem.point_index(b)
         pidx.append((ia if ka == "station" else s + ia, ib if kb == "station" else s + ib))
     pidx = np.array(pidx, np.int64).reshape(-1, 2)
-    noise_std = _noise_std(problem, noise, inst)
+    obs_cov = None if problem.readings is None else \
+        problem.readings.covariance_m2(noise, inst, problem.heads)
+    noise_std = _noise_std(problem, noise, inst) if obs_cov is None else np.sqrt(np.diag(obs_cov))
     model = None
     if noise == "model":
         from multilat.distance_errors import error_model
 
         model = error_model(inst, problem.heads)
-    spec = _ChunkSpec(net, problem.distance_m, problem.heads, pidx, noise, model, net.sigma_m)
+    spec = _ChunkSpec(net, problem.distance_m, problem.heads, pidx, noise, model, net.sigma_m, problem.readings)
     k = net.n_params + len(problem.pairs)
     limit = max_trials if adaptive else trials
     if limit * k * 4 > max_memory_bytes:   # float32 samples (statistics are computed per column block)
@@ -444,7 +456,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         rule = AdaptiveRule(0.95, ndigits, max_trials, block=BLOCK)
         # the criterion watches the quantities that vary: not those held by the datum (3-2-1), whose
         # samples are rounding noise (same rule as PropagationResult.fixed)
-        lin0, _ = _linear(problem, noise_std)
+        lin0, _ = _linear(problem, noise_std, obs_cov)
         watch = lin0 > 1e-9 * np.max(lin0)
         if batches_per_round is None:
             batches_per_round = 1 if map is None else 4
@@ -480,7 +492,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         adaptive_info = {"converged": rule.converged, "batches": rule.h, "batch_trials": rule.batch_trials,
                          "tolerance_m_min": None if tol is None else float(np.min(tol)),
                          "n_fixed_by_datum": int((~watch).sum())}
-    return _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done)
+    return _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done, obs_cov)
 
 
 def _kurtosis(y: np.ndarray, mean: np.ndarray) -> np.ndarray:
@@ -494,7 +506,7 @@ def _kurtosis(y: np.ndarray, mean: np.ndarray) -> np.ndarray:
         return np.where(m2 > 0, m4 / np.where(m2 > 0, m2, 1.0) ** 2, 3.0)
 
 
-def _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done):
+def _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done, obs_cov=None):
     """Statistics of all blocks' deviations (the engine's :func:`summarize`: JCGM 101 §7.6-7.7)."""
     net = problem.network
     # float32 deviations kept once; statistics point by point / column block by column block in float64
@@ -538,7 +550,7 @@ def _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep
     iv_sym += x0[:, None]
     iv_short += x0[:, None]
     se = std * np.sqrt(np.maximum(kurt - 1.0, 0.0) / (4.0 * n))
-    if noise == "model":
+    if noise == "model" or obs_cov is not None:
         # the linear sandwich uses the input errors' empirical std over all trials drawn, so that the
         # comparison tests the propagation, not the distance model's own (MC-estimated) std
         n_all = sum(b["n"] for b in blocks)
@@ -546,10 +558,11 @@ def _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep
         e2 = sum(b["e2_sum"] for b in blocks)
         emp_std = np.sqrt(np.maximum(e2 / n_all - (es / n_all) ** 2, 0.0) * n_all / (n_all - 1))
         input_std_ratio = float(np.mean(emp_std / noise_std))
-        noise_std = emp_std
+        if obs_cov is None:       # correlated readings: the analytic covariance (its diagonal alone
+            noise_std = emp_std   # would drop the sensors' correlations)
     else:
         input_std_ratio = 1.0
-    lin_std, pc_lin = _linear(problem, noise_std)
+    lin_std, pc_lin = _linear(problem, noise_std, obs_cov)
     cov_mc_frac = np.empty(len(pids))
     cov_lin_frac = np.empty(len(pids))
     for q, rows in enumerate(d3s):

@@ -73,8 +73,9 @@ def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets
         raise MultilatError(f"a self-calibrating network needs at least 3 stations, got {s} "
                             f"({', '.join(obs.station_ids)})")
     fixed_targets = np.zeros(t, bool) if fixed_targets is None else np.asarray(fixed_targets, bool)
-    per_station = np.bincount(obs.station_index, minlength=s)
-    per_target = np.bincount(obs.target_index, minlength=t)
+    pair = np.unique(obs.station_index.astype(np.int64) * t + obs.target_index)   # distinct pairs:
+    per_station = np.bincount(pair // t, minlength=s)                        # repeated readings add
+    per_target = np.bincount(pair % t, minlength=t)                          # no geometry
     need_s = 3 + np.asarray(offset_free, int) + np.asarray(scale_free, int)
     for i in range(s):
         if per_station[i] < need_s[i] + 1:
