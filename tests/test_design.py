@@ -233,3 +233,40 @@ def test_shipped_example_config_runs_and_improves_on_its_start(capsys):
     doc = json.loads(out.out)
     assert doc["criterion"] == "max_u95" and len(doc["stations"]) == 4 and len(doc["targets"]) == 27
     assert doc["criterion_m"] <= doc["start_criterion_m"]
+
+
+@pytest.mark.parametrize("datum,offsets", [("free", True), ("free:1,2,3,4,5,A", True), ("321:B,D,C", True),
+                                           ("free", False)])
+def test_blocked_preanalysis_equals_dense(datum, offsets):
+    """The reduced-system pre-analysis (blocked.py, used above DENSE_MAX_PARAMS) gives the dense
+    numbers: covariance blocks, offsets, redundancy, MDBs, external reliability, lengths (1e-9 rel;
+    MDBs/external 1e-8: 1/sqrt(r) amplifies rounding where r is small)."""
+    cfg = configs.large_volume()
+    vis = np.ones((4, len(cfg.target_ids)), bool)
+    vis[0, [2, 9]] = vis[3, 4] = False
+    lay = _layout(cfg, vis)
+    kw = dict(datum=datum, offsets=offsets, lengths=[("1", "3"), ("A", "7")])
+    a, b = preanalyse(lay, SIG, method="dense", **kw), preanalyse(lay, SIG, method="blocked", **kw)
+    assert b.cov is None and a.cov is not None
+    assert _rel(b.target_cov_m2, a.target_cov_m2) < 1e-9
+    assert _rel(b.global_cov, a.global_cov) < 1e-9 and _rel(b.station_cov_m2, a.station_cov_m2) < 1e-9
+    assert np.allclose(b.offset_std_m, a.offset_std_m, rtol=1e-9, atol=0)
+    assert np.allclose(b.redundancy, a.redundancy, rtol=0, atol=1e-9) and b.dof == a.dof
+    assert np.allclose(b.mdb_m, a.mdb_m, rtol=1e-8) and np.allclose(b.external_m, a.external_m, rtol=1e-8)
+    for x, y in zip(b.lengths, a.lengths):
+        assert x[:3] == y[:3] and x[3] == pytest.approx(y[3], rel=1e-9)
+    for name in ("max_u95", "rms_u", "max_mdb", "length_u"):
+        assert criterion_value(name, lay, SigmaModel(SIG), method="blocked", **kw) == pytest.approx(
+            criterion_value(name, lay, SigmaModel(SIG), method="dense", **kw), rel=1e-8)
+    # probe covariance (the slice maps) from either
+    p = np.array([[0.3, 0.2, 0.4], [1.0, 1.0, 0.5]])
+    assert _rel(b.probe_cov_m2(p), a.probe_cov_m2(p)) < 1e-9
+
+
+def test_blocked_criterion_singular_layout_is_inf():
+    g = np.stack(np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 5), [0.0, 0.5, 1.0], indexing="ij"),
+                 -1).reshape(-1, 3)
+    flat = np.array([[-1, -1, 0], [2, -1, 0], [2, 2, 0], [-1, 2, 0]], float)     # coplanar heads
+    lay = Layout("ABCD", flat, [str(i) for i in range(len(g))], g)
+    assert criterion_value("max_u95", lay, SigmaModel(SIG), method="blocked") == np.inf
+    assert criterion_value("max_u95", lay, SigmaModel(SIG), method="dense") == np.inf
