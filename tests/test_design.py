@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from multilat.cli import main
+from multilat.errors import MultilatError
 from multilat.network import configs
 from multilat.network.adjust import adjust
 from multilat.network.design import (Layout, SigmaModel, choose_candidates, criterion_value,
@@ -270,3 +271,107 @@ def test_blocked_criterion_singular_layout_is_inf():
     lay = Layout("ABCD", flat, [str(i) for i in range(len(g))], g)
     assert criterion_value("max_u95", lay, SigmaModel(SIG), method="blocked") == np.inf
     assert criterion_value("max_u95", lay, SigmaModel(SIG), method="dense") == np.inf
+
+
+def test_probe_covariance_is_the_target_block_with_a_station_datum():
+    """probe_cov_m2 (the slice maps, the work-volume value) at a network target equals that
+    target's own block of the adjustment covariance when the datum is on the stations only (the
+    Schur complement of one target): an independent check of the formula (1e-9)."""
+    cfg = configs.small_volume()
+    pa = preanalyse(_layout(cfg), SIG, datum="free:A,B,C,D")
+    assert _rel(pa.probe_cov_m2(cfg.target_xyz_m), pa.target_cov_m2) < 1e-9
+
+
+@pytest.mark.parametrize("factor", [1.3, 2.0])
+def test_fewest_targets_greedy_meets_wanted_is_locally_minimal_and_matches_brute_force(factor):
+    import itertools
+
+    from multilat.network.design.targets import select_targets, work_volume_u95_m
+
+    rng = np.random.default_rng(5)
+    T = rng.uniform([0, 0, 0], [1, 1, 0.6], size=(10, 3))
+    H = np.array([[-0.5, -0.5, 0], [1.5, -0.5, 0.2], [1.5, 1.5, 0], [-0.5, 1.5, 0.3], [0.5, 0.5, 1.5],
+                  [0.5, -0.6, 1.0]])
+    ids = [f"T{k + 1}" for k in range(10)]
+    lay = Layout("ABCDEF", H, ids, T)
+    allv = work_volume_u95_m(lay, np.full(60, SIG), T, np.ones((10, 6), bool))
+    r = select_targets(lay, SigmaModel(SIG), factor * allv)
+    assert r.feasible and r.all_u95_m == pytest.approx(allv, rel=1e-12) and len(r.target_ids) < 10
+
+    def value(keep):
+        sub = Layout("ABCDEF", H, [ids[j] for j in keep], T[list(keep)])
+        return work_volume_u95_m(sub, np.full(6 * len(keep), SIG), T, np.ones((10, 6), bool))
+
+    kept = [ids.index(t) for t in r.target_ids]
+    assert value(kept) == pytest.approx(r.u95_m, rel=1e-12) and r.u95_m <= factor * allv
+    # locally minimal: no single further removal meets the wanted value
+    assert all(value([k for k in kept if k != j]) > factor * allv for j in kept)
+    # the exhaustive search finds no smaller set in this case (greedy is a heuristic in general)
+    assert not any(value(c) <= factor * allv for k in range(6, len(kept))
+                   for c in itertools.combinations(range(10), k))
+    # infeasible wanted value: all candidates kept, flagged
+    r2 = select_targets(lay, SigmaModel(SIG), 0.5 * allv)
+    assert not r2.feasible and len(r2.target_ids) == 10
+
+
+def test_segment_box_test_against_sampled_segments():
+    from multilat.network.design.search import segment_hits_box
+
+    rng = np.random.default_rng(3)
+    a, b = rng.uniform(-1, 2, (30, 3)), rng.uniform(-1, 2, (40, 3))
+    a[:10, 2] = 0.5                      # segments parallel to a slab, inside it ...
+    b[:10, 2] = 0.5
+    a[10:20, 2] = 1.5                    # ... and outside it
+    b[10:20, 2] = 1.5
+    lo, hi = np.array([0.2, 0.1, 0.3]), np.array([0.8, 0.9, 0.6])
+    hit = segment_hits_box(a, b, lo, hi)
+    tt = np.linspace(0, 1, 4001)
+    pts = a[:, None, None, :] + tt[None, None, :, None] * (b[None, :, None, :] - a[:, None, None, :])
+    sampled = np.all((pts >= lo) & (pts <= hi), axis=3).any(axis=2)
+    # sampling can only miss grazing hits: every sampled hit is a hit, and disagreements are rare
+    assert np.all(hit[sampled]) and (hit & ~sampled).sum() <= 2 and 50 < hit.sum() < 1150
+
+
+def test_config_hidden_targets_and_occluders(tmp_path, capsys):
+    (tmp_path / "h.csv").write_text("point,x_m,y_m,z_m\nA,-1,-1,0\nB,2,-1,0.5\nC,0.5,2,0\nD,0.5,0.5,2\nE,2,2,1.5\n")
+    base = {"targets": {"box_min_m": [0, 0, 0], "box_max_m": [1, 1, 1], "grid": [2, 2, 3]},
+            "instrument": {"sigma_um": 4.7}}
+    cfg = parse_design_config(dict(base, heads={"fixed": "h.csv", "hidden": {"A": ["T1", "T2"], "E": ["T12"]}}))
+    vis = run_design(cfg, base_dir=tmp_path).best.layout.visible
+    assert (~vis).sum() == 3 and not vis[0, 0] and not vis[0, 1] and not vis[4, 11]
+    # a low wall (x 1.2..1.4, z < 0.3) hides some low targets from B and E (x = 2)
+    wall = {"box_min_m": [1.2, -3, -1], "box_max_m": [1.4, 3, 0.3]}
+    cfg = parse_design_config(dict(base, heads={"fixed": "h.csv"}, occluders=[wall]))
+    run = run_design(cfg, base_dir=tmp_path)
+    vis = run.best.layout.visible
+    from multilat.network.design.search import segment_hits_box
+
+    assert np.array_equal(~vis, segment_hits_box(run.best.station_xyz_m, run.best.target_xyz_m,
+                                                 wall["box_min_m"], wall["box_max_m"]))
+    assert vis[[0, 2, 3]].all() and 0 < (~vis[[1, 4]]).sum() < 24
+    # a full wall leaves B and E seeing nothing: refused in one line naming a head
+    full = {"box_min_m": [1.2, -3, -1], "box_max_m": [1.4, 3, 3]}
+    cfg = parse_design_config(dict(base, heads={"fixed": "h.csv"}, occluders=[full]))
+    with pytest.raises(MultilatError, match="head 'B' sees 0 targets"):
+        run_design(cfg, base_dir=tmp_path)
+    cfg = parse_design_config(dict(base, heads={"fixed": "h.csv", "hidden": {"A": ["T1"], "C": ["T1"]}},
+                                   occluders=[full]))
+    with pytest.raises(MultilatError, match="target 'T1' is seen by fewer than 3 heads"):
+        run_design(cfg, base_dir=tmp_path)
+    cfg = parse_design_config(dict(base, heads={"fixed": "h.csv", "hidden": {"Z": ["T1"]}}))
+    with pytest.raises(MultilatError, match="heads.hidden: unknown head 'Z'"):
+        run_design(cfg, base_dir=tmp_path)
+    cfg = parse_design_config(dict(base, heads={"fixed": "h.csv", "hidden": {"A": ["T99"]}}))
+    with pytest.raises(MultilatError, match="unknown target 'T99'"):
+        run_design(cfg, base_dir=tmp_path)
+
+
+def test_cli_target_selection_json(tmp_path, capsys):
+    p = tmp_path / "d.toml"
+    p.write_text(CFG.replace('name = "max_u95"', 'name = "max_u95"\ntarget_u95_m = 1.0e-4'))
+    rc, out, err = _run(capsys, ["design", str(p), "--json", "--seed", "2"])
+    assert rc == 0, err
+    sel = json.loads(out)["target_selection"]
+    assert sel["feasible"] and sel["count"] == len(sel["targets"]) <= sel["candidates"] == 18
+    assert sel["u95_m"] <= 1.0e-4 and "heuristic" in sel["method"]
+    assert [x["count"] for x in sel["path"]] == list(range(17, sel["count"] - 1, -1))

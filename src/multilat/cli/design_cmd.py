@@ -30,6 +30,14 @@ def design_document(run) -> dict:
         "reliability": {"redundancy_min": float(b.redundancy.min()), "mdb_max_m": float(b.mdb_m.max()),
                         "external_max_m": float(b.external_m.max())},
     }
+    if run.selection is not None:
+        sel = run.selection
+        doc["target_selection"] = {"method": sel.method, "wanted_u95_m": sel.wanted_u95_m,
+                                   "feasible": sel.feasible, "count": len(sel.target_ids),
+                                   "candidates": len(b.target_ids), "targets": list(sel.target_ids),
+                                   "u95_m": sel.u95_m, "all_candidates_u95_m": sel.all_u95_m,
+                                   "path": [{"count": n, "u95_m": v, "removed": r} for n, v, r in sel.path],
+                                   "evaluations": sel.evaluations}
     if run.search is not None:
         s = run.search
         doc["search"] = {"method": s.method, "evaluations": s.evaluations,
@@ -94,5 +102,14 @@ def design_cmd(
                   f"{doc['reliability']['mdb_max_m'] * um:.1f} µm")
     if run.search is not None:
         console.print(f"search: {run.search.method}, {run.search.evaluations} evaluations")
+    if run.selection is not None:
+        sel = run.selection
+        if sel.feasible:
+            console.print(f"targets for a work-volume 95 % semi-axis <= {sel.wanted_u95_m * um:.2f} µm: "
+                          f"{len(sel.target_ids)} of {len(u)} ({sel.u95_m * um:.2f} µm; greedy removal, "
+                          f"a heuristic): {', '.join(sel.target_ids)}")
+        else:
+            console.print(f"[yellow]warning:[/] even all {len(u)} candidate targets give "
+                          f"{sel.all_u95_m * um:.2f} µm > wanted {sel.wanted_u95_m * um:.2f} µm")
     if out is not None:
         console.print(f"wrote {out}/design.json and figures")

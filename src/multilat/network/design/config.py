@@ -20,6 +20,7 @@ Example (docs/design.md lists every key)::
     preset = "seed2020"
     [criterion]
     name = "max_u95"               # rms_u, length_u (with lengths = [["1", "27"], ...]), max_mdb
+    target_u95_m = 30e-6           # optional: the fewest targets keeping the work volume at this
     [network]                      # optional
     offsets = true
     datum = "free"
@@ -130,6 +131,14 @@ class InstrumentCfg(_Model):
 class CriterionCfg(_Model):
     name: str = "max_u95"
     lengths: list[tuple[str, str]] = []
+    target_u95_m: float | None = None
+
+    @field_validator("target_u95_m")
+    @classmethod
+    def _pos(cls, v):
+        if v is not None and not v > 0:
+            raise ValueError("must be > 0 (metres)")
+        return v
 
     @field_validator("name")
     @classmethod
@@ -236,7 +245,7 @@ def _targets(cfg: TargetsCfg, base: Path):
     return tuple(f"T{k + 1}" for k in range(len(g))), g
 
 
-def _check_reach(tid, tx, heads_pts, box, rmin, rmax, source, hidden=None, occluders=()):
+def _check_reach(tid, tx, heads_pts, box, rmin, rmax, source, hidden=None, occluders=(), head_names=()):
     """Every target must be within range of some admissible head position."""
     if box is not None:
         lo, hi = np.asarray(box[0]), np.asarray(box[1])
@@ -248,6 +257,11 @@ def _check_reach(tid, tx, heads_pts, box, rmin, rmax, source, hidden=None, occlu
         vis = visibility(heads_pts, tx, min_range_m=rmin, max_range_m=rmax, hidden=hidden,
                          occluders=occluders)
         bad = vis.sum(axis=0) < 3
+        few = vis.sum(axis=1) < 4
+        if few.any() and not bad.any():
+            i = int(np.flatnonzero(few)[0])
+            raise MultilatError(f"{source}: heads: head {head_names[i]!r} sees {int(vis[i].sum())} targets "
+                                "(range limits, hidden targets, occluders): a head needs at least 4")
     if bad.any():
         j = int(np.flatnonzero(bad)[0])
         why = "seen by fewer than 3 heads" if box is None else "out of range of every head position"
@@ -275,13 +289,15 @@ def _hidden(cfg, head_ids_, tid, source):
 @dataclass(frozen=True, eq=False)
 class DesignRun:
     """What ``multilat design`` computed: the search (None with fixed or evaluated heads), the
-    pre-analysis of the returned layout and of the start (or given) layout."""
+    pre-analysis of the returned layout and of the start (or given) layout; ``selection``: the
+    fewest targets for ``[criterion] target_u95_m`` (:class:`~.targets.TargetSelection`) or None."""
 
     criterion: str
     search: DesignResult | None
     best: PreAnalysis
     start: PreAnalysis
     sigma: SigmaModel
+    selection: object = None
 
 
 def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, rng=None,
@@ -318,12 +334,12 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
     occ = tuple((o.box_min_m, o.box_max_m) for o in cfg.occluders)
     if fixed is not None:
         hid = _hidden(cfg, tuple(fixed.ids), tid, source)
-        _check_reach(tid, tx, fixed.xyz_m, None, rmin, rmax, source, hid, occ)
+        _check_reach(tid, tx, fixed.xyz_m, None, rmin, rmax, source, hid, occ, tuple(fixed.ids))
         lay = Layout(fixed.ids, fixed.xyz_m, tid, tx,
                      visibility(fixed.xyz_m, tx, min_range_m=rmin, max_range_m=rmax, hidden=hid,
                                 occluders=occ))
         pa = preanalyse(lay, sigma, **kw)
-        return DesignRun(c.name, None, pa, pa, sigma)
+        return DesignRun(c.name, None, pa, pa, sigma, _select(c, pa, sigma, kw))
     s = cfg.search
     if h.file is not None:
         cand = _read_points(base, h.file)
@@ -353,4 +369,13 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         start_pa = preanalyse(search.start_layout, sigma, **kw)
     except MultilatError:
         start_pa = None
-    return DesignRun(c.name, search, preanalyse(search.layout, sigma, **kw), start_pa, sigma)
+    best = preanalyse(search.layout, sigma, **kw)
+    return DesignRun(c.name, search, best, start_pa, sigma, _select(c, best, sigma, kw))
+
+
+def _select(c: CriterionCfg, pa: PreAnalysis, sigma, kw):
+    if c.target_u95_m is None:
+        return None
+    from multilat.network.design.targets import select_targets
+
+    return select_targets(pa.layout, sigma, c.target_u95_m, offsets=kw["offsets"], datum=kw["datum"])

@@ -31,7 +31,7 @@ from multilat.network.datum import Datum, helmert_basis, parse_datum
 from multilat.network.model import Q, residuals_and_jacobian
 
 __all__ = ["Layout", "SigmaModel", "PreAnalysis", "preanalyse", "covariance", "CRITERIA",
-           "criterion_value", "layout_observations"]
+           "criterion_value", "layout_observations", "probe_cov_m2", "DENSE_MAX_PARAMS"]
 
 #: optimisation criteria (docs/design.md): name -> description
 CRITERIA = {
@@ -393,32 +393,14 @@ class PreAnalysis:
         return (st.confidence_ellipsoid(self.station_cov_m2, level=level),
                 st.confidence_ellipsoid(self.target_cov_m2, level=level))
 
-    def probe_cov_m2(self, points_xyz_m, *, min_range_m: float = 0.0, max_range_m: float = np.inf):
+    def probe_cov_m2(self, points_xyz_m, *, min_range_m: float = 0.0, max_range_m: float = np.inf,
+                     visible=None):
         """Predicted covariance (p, 3, 3) of new points measured by the calibrated heads (the heads
-        within range of each point), for a map of the work volume: the trilateration covariance
-        ``M^-1`` with ``M = J_p^T W J_p`` plus the heads' and offsets' covariance carried through,
-        ``M^-1 J_p^T W J_g C_gg J_g^T W J_p M^-1`` (the Schur complement of one more target).
-        The distance uncertainty is the mean of this layout's ``sigma_m``. NaN where fewer than 3
-        heads reach a point."""
-        p = np.asarray(points_xyz_m, float).reshape(-1, 3)
-        s = self.layout.n_stations
-        diff = self.layout.station_xyz_m[None] - p[:, None]            # (p, s, 3)
-        d = np.linalg.norm(diff, axis=2)
-        u = diff / d[..., None]
-        seen = (d >= max(min_range_m, 1e-9)) & (d <= max_range_m)
-        w = seen / float(np.mean(self.sigma_m)) ** 2                   # (p, s)
-        Jp = -u                                                         # d dist / d point
-        Jg = np.zeros((p.shape[0], s, Q * s))                           # d dist / d [x,y,z,o,k]
-        for i in range(s):
-            Jg[:, i, Q * i:Q * i + 3] = u[:, i]
-            Jg[:, i, Q * i + 3] = 1.0 if self.offsets else 0.0
-        M = np.einsum("psa,ps,psb->pab", Jp, w, Jp)
-        ok = seen.sum(axis=1) >= 3
-        Minv = np.full_like(M, np.nan)
-        Minv[ok] = np.linalg.inv(M[ok])
-        Cgg = self.global_cov
-        B = np.einsum("pab,psb,ps,psg->pag", Minv, Jp, w, Jg)           # (p, 3, 5s)
-        return Minv + np.einsum("pag,gh,pbh->pab", B, Cgg, B)
+        within range of each point, or ``visible`` (p, s)), for a map of the work volume:
+        :func:`probe_cov_m2` with this layout's station covariance and mean ``sigma_m``."""
+        return probe_cov_m2(self.layout.station_xyz_m, self.global_cov, float(np.mean(self.sigma_m)),
+                            points_xyz_m, offsets=self.offsets, min_range_m=min_range_m,
+                            max_range_m=max_range_m, visible=visible)
 
     def criterion(self, name: str) -> float:
         """The value of criterion ``name`` for this layout (metres)."""
@@ -531,3 +513,36 @@ def _xyz(layout, pid):
     k = ids.index(pid)
     s = layout.n_stations
     return layout.station_xyz_m[k] if k < s else layout.target_xyz_m[k - s]
+
+
+def probe_cov_m2(station_xyz_m, global_cov, sigma_m: float, points_xyz_m, *, offsets: bool = True,
+                 min_range_m: float = 0.0, max_range_m: float = np.inf, visible=None):
+    """Covariance (p, 3, 3) of points measured by heads whose parameters have covariance
+    ``global_cov`` (5s, 5s; x, y, z, offset, scale per station): the trilateration covariance
+    ``M^-1`` with ``M = J_p^T W J_p`` plus the heads' and offsets' covariance carried through,
+    ``M^-1 J_p^T W J_g C_gg J_g^T W J_p M^-1`` (the Schur complement of one more target). Each
+    distance has standard uncertainty ``sigma_m``. NaN where fewer than 3 heads see a point.
+
+    For a target of the network and a datum on the stations only, this is the adjustment's own
+    target block (tested)."""
+    p = np.asarray(points_xyz_m, float).reshape(-1, 3)
+    sx = np.asarray(station_xyz_m, float)
+    s = sx.shape[0]
+    diff = sx[None] - p[:, None]                                      # (p, s, 3)
+    d = np.linalg.norm(diff, axis=2)
+    u = diff / d[..., None]
+    seen = (d >= max(min_range_m, 1e-9)) & (d <= max_range_m)
+    if visible is not None:
+        seen &= np.asarray(visible, bool)
+    w = seen / float(sigma_m) ** 2                                    # (p, s)
+    Jp = -u                                                           # d dist / d point
+    Jg = np.zeros((p.shape[0], s, Q * s))                             # d dist / d [x,y,z,o,k]
+    for i in range(s):
+        Jg[:, i, Q * i:Q * i + 3] = u[:, i]
+        Jg[:, i, Q * i + 3] = 1.0 if offsets else 0.0
+    M = np.einsum("psa,ps,psb->pab", Jp, w, Jp)
+    ok = seen.sum(axis=1) >= 3
+    Minv = np.full_like(M, np.nan)
+    Minv[ok] = np.linalg.inv(M[ok])
+    B = np.einsum("pab,psb,ps,psg->pag", Minv, Jp, w, Jg)             # (p, 3, 5s)
+    return Minv + np.einsum("pag,gh,pbh->pab", B, global_cov, B)

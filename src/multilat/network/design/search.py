@@ -75,8 +75,8 @@ def segment_hits_box(a_xyz_m, b_xyz_m, box_min_m, box_max_m) -> np.ndarray:
         t1, t2 = (lo - a) / dv, (hi - a) / dv
     par = np.abs(dv) < 1e-15                                        # parallel to a slab
     inside = (a >= lo) & (a <= hi)
-    t1 = np.where(par, np.where(inside, -np.inf, np.inf), t1)
-    t2 = np.where(par, np.where(inside, np.inf, -np.inf), t2)
+    t1 = np.where(par, np.where(inside, -np.inf, np.inf), t1)      # outside a slab it is parallel
+    t2 = np.where(par, np.inf, t2)                                  # to: never enters (tmin = inf)
     tmin = np.minimum(t1, t2).max(axis=2)
     tmax = np.maximum(t1, t2).min(axis=2)
     return (tmin <= tmax) & (tmax >= 0.0) & (tmin <= 1.0)
