@@ -238,6 +238,12 @@ def test_cli_json_evaluate_and_out(tmp_path, capsys):
     (("box_min_m = [-1.5, -1.5, 0]", "box_min_m = [1.8, 1.8, 0]\nmax_range_m = 1.0"),
      "out of range of every head"),
     (("grid = [3, 3, 2]", "grid = [3, 3, 2]\ncolour = 1"), "unknown key"),
+    (("box_max_m = [2.5, 2.5, 2.0]", "box_max_m = [2.5, 2.5, 0]"), "empty or inside-out box"),
+    (("box_max_m = [1, 1, 1]", "box_max_m = [1, 0, 1]"), "empty or inside-out box"),
+    (("grid = [3, 3, 2]", "grid = [3, 3, 1]"), "need at least 10 targets"),
+    (('name = "max_u95"', 'name = "max_u95"\ntarget_u95_m = -1e-6'), "must be > 0"),
+    (("max_evaluations = 150", 'max_evaluations = 150\nevaluation = "sparse"'), "unknown evaluation"),
+    (("count = 4", 'count = 4\nhidden = { Q = ["T1"] }'), "unknown head 'Q'"),
 ])
 def test_cli_bad_config_one_line_errors(tmp_path, capsys, edit, msg):
     p = tmp_path / "d.toml"
@@ -425,3 +431,30 @@ def test_cli_simulate(tmp_path, capsys):
     assert sm["u95_max_predicted_m"] == pytest.approx(doc["criterion_m"], rel=1e-9)
     rc, out, err = _run(capsys, ["design", str(p), "--simulate", "10", "--noise", "model"])
     assert rc == 2 and err.startswith("error: ") and "needs an instrument" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("heads,msg", [
+    ("A,-1,-1,0\nB,2,-1,0.5\nC,0.5,2,0\n", "at least 4 heads, got 3"),
+    ("A,-1,-1,0\nB,2,-1,0.5\nC,0.5,2,0\nD,30,30,30\n", "head 'D' sees 0 targets"),
+    ("A,30,0,0\nB,31,0,0.5\nC,30,1,0\nD,30,0,1\n", "target 'T1' is seen by fewer than 3 heads"),
+])
+def test_cli_bad_evaluate_heads_one_line(tmp_path, capsys, heads, msg):
+    p = tmp_path / "d.toml"
+    p.write_text(CFG.replace("count = 4", "count = 4\nmax_range_m = 5.0"))
+    h = tmp_path / "h.csv"
+    h.write_text("point,x_m,y_m,z_m\n" + heads)
+    rc, out, err = _run(capsys, ["design", str(p), "--evaluate", str(h)])
+    assert rc == 2 and err.startswith("error: ") and msg in err and err.count("\n") == 1, err
+
+
+def test_python_api_bad_input_one_line():
+    g = np.stack(np.meshgrid(*[np.linspace(0, 1, 3)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    for kw, msg in [(dict(criterion="smallest"), "criterion must be one of"),
+                    (dict(count=3), "at least 4 heads"),
+                    (dict(box_max_m=[2, -2, 2]), "box_max_m must exceed box_min_m")]:
+        args = dict(count=4, box_min_m=[-1, -1, -1], box_max_m=[2, 2, 2], sigma=SIG, max_evaluations=10)
+        args.update(kw)
+        with pytest.raises(MultilatError, match=msg):
+            optimise_heads(g, **args)
+    with pytest.raises(MultilatError, match="criterion must be one of"):
+        criterion_value("smallest", Layout("ABCD", np.eye(4, 3), [str(i) for i in range(27)], g), SigmaModel(SIG))

@@ -326,6 +326,15 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         known |= set(fixed.ids)
     else:
         known |= set(head_ids(h.count))
+    n_heads = len(fixed.ids) if fixed is not None else h.count
+    per = 4 if cfg.network.offsets else 3
+    n_unknown = per * n_heads + 3 * len(tid) - 6
+    if n_heads * len(tid) < n_unknown:
+        t_min = per * n_heads - 6
+        t_min = -(-t_min // (n_heads - 3))
+        raise MultilatError(f"{source}: targets: {len(tid)} targets and {n_heads} heads give at most "
+                            f"{n_heads * len(tid)} distances for {n_unknown} unknowns: need at least "
+                            f"{t_min} targets")
     for a, b in c.lengths:
         for p in (a, b):
             if p not in known:
