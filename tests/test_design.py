@@ -189,6 +189,16 @@ def test_candidates_exhaustive_is_the_brute_force_minimum():
     brute = min(criterion_value("rms_u", Layout("ABCD", cand[list(c)], [str(i) for i in range(len(tx))], tx),
                                 SigmaModel(SIG)) for c in itertools.combinations(range(7), 4))
     assert r.criterion_m == pytest.approx(brute, rel=1e-12)
+    # targets hidden from given candidates: the brute force with the same visibility
+    hidden = np.zeros((7, len(tx)), bool)
+    hidden[[0, 3, 5], [1, 4, 7]] = True
+    r = choose_candidates(tx, cand, count=4, sigma=SIG, criterion="rms_u", hidden=hidden)
+    brute = min(criterion_value("rms_u", Layout("ABCD", cand[list(c)], [str(i) for i in range(len(tx))], tx,
+                                                ~hidden[list(c)]), SigmaModel(SIG))
+                for c in itertools.combinations(range(7), 4))
+    assert r.criterion_m == pytest.approx(brute, rel=1e-12)
+    chosen = [int(c[1:]) - 1 for c in r.layout.station_ids]
+    assert np.array_equal(r.layout.visible, ~hidden[chosen])
 
 
 CFG = """
