@@ -28,7 +28,7 @@ Example (docs/design.md lists every key)::
     method = "multistart"          # or differential_evolution
     starts = 8
     max_evaluations = 20000
-    evaluation = "auto"            # dense / blocked: how a criterion is computed (docs/design.md)
+    evaluation = "auto"            # fast / dense / blocked: how a criterion is computed (docs/design.md)
 
 Files named in the config are read relative to the config file's directory. Every error is one
 line naming the file and the key.
@@ -168,8 +168,8 @@ class SearchCfg(_Model):
     @field_validator("evaluation")
     @classmethod
     def _e(cls, v):
-        if v not in ("auto", "dense", "blocked"):
-            raise ValueError(f"unknown evaluation {v!r} (auto, dense or blocked)")
+        if v not in ("auto", "dense", "blocked", "fast"):
+            raise ValueError(f"unknown evaluation {v!r} (auto, dense, blocked or fast)")
         return v
 
     @field_validator("method")

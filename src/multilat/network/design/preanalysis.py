@@ -282,10 +282,16 @@ def _redundancy(A_w, Qplus):
 DENSE_MAX_PARAMS = 120
 
 
-def _method(method: str, layout: Layout) -> str:
-    if method not in ("auto", "dense", "blocked"):
-        raise MultilatError(f"method must be auto, dense or blocked, got {method!r}")
+def _method(method: str, layout: Layout, name: str | None = None) -> str:
+    """The evaluation to use: ``fast`` (:mod:`.fast`, a criterion other than length_u), else dense
+    up to :data:`DENSE_MAX_PARAMS` parameters and blocked above."""
+    if method not in ("auto", "dense", "blocked", "fast"):
+        raise MultilatError(f"method must be auto, dense, blocked or fast, got {method!r}")
+    if method == "fast" and name in (None, "length_u"):
+        method = "auto"
     if method == "auto":
+        if name is not None and name != "length_u":
+            return "fast"
         n = 4 * layout.n_stations + 3 * layout.n_targets
         return "dense" if n <= DENSE_MAX_PARAMS else "blocked"
     return method
@@ -296,13 +302,22 @@ def criterion_value(name: str, layout: Layout, sigma: SigmaModel, *, offsets=Tru
     """The design criterion ``name`` (:data:`CRITERIA`) of a layout, metres; ``inf`` when singular.
 
     ``method``: ``"dense"`` (the whole normal matrix), ``"blocked"`` (the adjustment's Schur-reduced
-    system, :mod:`.blocked`) or ``"auto"`` (dense up to :data:`DENSE_MAX_PARAMS` parameters)."""
+    system, :mod:`.blocked`), ``"fast"`` (the search's evaluator, :mod:`.fast`; not length_u) or
+    ``"auto"`` (fast, and for length_u dense up to :data:`DENSE_MAX_PARAMS` parameters, else
+    blocked). All four agree to 1e-9 (tested)."""
     if name not in CRITERIA:
         raise MultilatError(f"criterion must be one of {', '.join(CRITERIA)}, got {name!r}")
     si, ti = layout.pairs()
     d = np.linalg.norm(layout.station_xyz_m[si] - layout.target_xyz_m[ti], axis=1)
     sig = sigma(d, si, layout.station_ids)
-    if _method(method, layout) == "blocked":
+    how = _method(method, layout, name)
+    if how == "fast":
+        from multilat.network.design.fast import fast_criterion
+
+        sig_mat = np.ones(layout.visible.shape)
+        sig_mat[si, ti] = sig
+        return fast_criterion(name, layout, sig_mat, offsets=offsets, datum=datum, alpha=alpha, power=power)
+    if how == "blocked":
         from multilat.network.design.blocked import blocked_criterion
 
         return blocked_criterion(name, layout, sig, offsets=offsets, datum=datum, lengths=lengths,
