@@ -524,3 +524,12 @@ def test_docs_paper_volume_table():
     spec.loader.exec_module(mod)
     table = markdown_table([paper_volume_study(n, **mod.SETTINGS) for n in ("small-volume", "large-volume")])
     assert table in (root / "docs" / "design.md").read_text(encoding="utf-8")
+
+
+def test_cli_target_selection_unreachable_warns(tmp_path, capsys):
+    p = tmp_path / "d.toml"
+    p.write_text(CFG.replace('name = "max_u95"', 'name = "max_u95"\ntarget_u95_m = 1.0e-9'))
+    rc, out, err = _run(capsys, ["design", str(p), "--json", "--seed", "2"])
+    assert rc == 0 and "warning: criterion.target_u95_m: even all 18 candidate targets" in err
+    sel = json.loads(out)["target_selection"]
+    assert not sel["feasible"] and sel["count"] == 18 and sel["path"] == []

@@ -137,9 +137,7 @@ def design_cmd(
             console.print(f"targets for a work-volume 95 % semi-axis <= {sel.wanted_u95_m * um:.2f} µm: "
                           f"{len(sel.target_ids)} of {len(u)} ({sel.u95_m * um:.2f} µm; greedy removal, "
                           f"a heuristic): {', '.join(sel.target_ids)}")
-        else:
-            console.print(f"[yellow]warning:[/] even all {len(u)} candidate targets give "
-                          f"{sel.all_u95_m * um:.2f} µm > wanted {sel.wanted_u95_m * um:.2f} µm")
+
     if sim is not None:
         sm = doc["simulation"]
         console.print(f"Monte Carlo ({sm['noise']}, {sm['trials']} trials): largest 95 % semi-axis "

@@ -387,4 +387,11 @@ def _select(c: CriterionCfg, pa: PreAnalysis, sigma, kw):
         return None
     from multilat.network.design.targets import select_targets
 
-    return select_targets(pa.layout, sigma, c.target_u95_m, offsets=kw["offsets"], datum=kw["datum"])
+    sel = select_targets(pa.layout, sigma, c.target_u95_m, offsets=kw["offsets"], datum=kw["datum"])
+    if not sel.feasible:
+        import warnings
+
+        warnings.warn(f"criterion.target_u95_m: even all {len(sel.target_ids)} candidate targets give "
+                      f"{sel.all_u95_m * 1e6:.2f} um > wanted {sel.wanted_u95_m * 1e6:.2f} um (all kept)",
+                      stacklevel=2)
+    return sel
