@@ -30,6 +30,14 @@ def design_document(run) -> dict:
         "reliability": {"redundancy_min": float(b.redundancy.min()), "mdb_max_m": float(b.mdb_m.max()),
                         "external_max_m": float(b.external_m.max())},
     }
+    if run.selection is not None:
+        sel = run.selection
+        doc["target_selection"] = {"method": sel.method, "wanted_u95_m": sel.wanted_u95_m,
+                                   "feasible": sel.feasible, "count": len(sel.target_ids),
+                                   "candidates": len(b.target_ids), "targets": list(sel.target_ids),
+                                   "u95_m": sel.u95_m, "all_candidates_u95_m": sel.all_u95_m,
+                                   "path": [{"count": n, "u95_m": v, "removed": r} for n, v, r in sel.path],
+                                   "evaluations": sel.evaluations}
     if run.search is not None:
         s = run.search
         doc["search"] = {"method": s.method, "evaluations": s.evaluations,
@@ -42,6 +50,18 @@ def design_document(run) -> dict:
     return doc
 
 
+def simulation_document(sim) -> dict:
+    """The ``simulation`` block of the design JSON (:class:`~multilat.network.design.confirm.DesignSimulation`)."""
+    doc = sim.summary()
+    doc["targets"] = {t: {"std_predicted_m": sim.predicted_std_m[j], "std_mc_m": sim.mc_std_m[j],
+                          "std_mc_se_m": sim.mc_std_se_m[j], "z": sim.z[j],
+                          "u95_max_predicted_m": sim.predicted_u95_max_m[j],
+                          "u95_max_mc_m": sim.mc_u95_max_m[j],
+                          "ellipsoid_coverage": sim.ellipsoid_coverage_pred[j]}
+                      for j, t in enumerate(sim.target_ids)}
+    return doc
+
+
 @app.command("design")
 def design_cmd(
     config: Path = typer.Argument(..., help="Design TOML (targets, heads, instrument, criterion)."),
@@ -50,6 +70,11 @@ def design_cmd(
     seed: int = typer.Option(1, "--seed", help="Seed of the search."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
     out: Optional[Path] = typer.Option(None, "--out", help="Directory for design.json and the figures."),
+    simulate: int = typer.Option(0, "--simulate", min=0,
+                                 help="Confirm the returned layout by a Monte Carlo of this many trials (propagate)."),
+    noise: Optional[str] = typer.Option(None, "--noise",
+                                        help="Monte Carlo distance errors: gaussian or model (default: model "
+                                             "with an instrument, else gaussian)."),
 ) -> None:
     """Predict a layout's uncertainty (pre-analysis) and optimise where the heads go."""
     from multilat.network.design.config import load_design_config, run_design
@@ -60,8 +85,20 @@ def design_cmd(
         from multilat.network.files import read_points
 
         heads = read_points(evaluate)
+    if noise is not None and noise not in ("gaussian", "model"):
+        from multilat.errors import MultilatError
+
+        raise MultilatError(f"--noise must be gaussian or model, got {noise!r}")
     run = run_design(cfg, base_dir=config.parent, evaluate=heads, rng=seed, source=str(config))
     doc = design_document(run)
+    sim = None
+    if simulate:
+        from multilat.network.design.confirm import simulate_design
+
+        inst = run.sigma.instrument
+        sim = simulate_design(run.best, trials=simulate, rng=seed,
+                              noise=noise or ("model" if inst is not None else "gaussian"), instrument=inst)
+        doc["simulation"] = simulation_document(sim)
     if out is not None:
         import json
 
@@ -94,5 +131,19 @@ def design_cmd(
                   f"{doc['reliability']['mdb_max_m'] * um:.1f} µm")
     if run.search is not None:
         console.print(f"search: {run.search.method}, {run.search.evaluations} evaluations")
+    if run.selection is not None:
+        sel = run.selection
+        if sel.feasible:
+            console.print(f"targets for a work-volume 95 % semi-axis <= {sel.wanted_u95_m * um:.2f} µm: "
+                          f"{len(sel.target_ids)} of {len(u)} ({sel.u95_m * um:.2f} µm; greedy removal, "
+                          f"a heuristic): {', '.join(sel.target_ids)}")
+
+    if sim is not None:
+        sm = doc["simulation"]
+        console.print(f"Monte Carlo ({sm['noise']}, {sm['trials']} trials): largest 95 % semi-axis "
+                      f"{sm['u95_max_mc_m'] * um:.2f} µm (predicted {sm['u95_max_predicted_m'] * um:.2f}); "
+                      f"target std MC/predicted {sm['std_ratio_mean']:.4f} on average, largest |z| "
+                      f"{sm['max_abs_z']:.2f} MC standard errors; predicted 95 % ellipsoids hold "
+                      f"{sm['ellipsoid_coverage_mean'] * 100:.2f} % of the trials")
     if out is not None:
         console.print(f"wrote {out}/design.json and figures")

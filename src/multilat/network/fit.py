@@ -44,20 +44,13 @@ def as_start(initial, obs: Observations) -> Start:
 def pick_321_stations(sx) -> tuple[int, int, int]:
     """Three stations spanning the largest triangle (for the internal minimal constraint)."""
     s = sx.shape[0]
-    best, bi = -1.0, (0, 1, 2)
-    combos = itertools.combinations(range(s), 3) if s <= 40 else [
-        (0, int(np.argmax(np.linalg.norm(sx - sx[0], axis=1))), None)]
-    for c in combos:
-        if c[2] is None:
-            a, b = c[0], c[1]
-            area = np.linalg.norm(np.cross(sx[b] - sx[a], sx - sx[a]), axis=1)
-            k = int(np.argmax(area))
-            c = (a, b, k)
-        a, b, k = c
-        area = np.linalg.norm(np.cross(sx[b] - sx[a], sx[k] - sx[a]))
-        if area > best:
-            best, bi = area, (a, b, k)
-    return bi
+    if s <= 40:
+        c = np.array(list(itertools.combinations(range(s), 3)), dtype=np.intp).reshape(-1, 3)
+        area = np.linalg.norm(np.cross(sx[c[:, 1]] - sx[c[:, 0]], sx[c[:, 2]] - sx[c[:, 0]]), axis=1)
+        return tuple(int(x) for x in c[int(np.argmax(area))]) if c.size else (0, 1, 2)
+    b = int(np.argmax(np.linalg.norm(sx - sx[0], axis=1)))
+    area = np.linalg.norm(np.cross(sx[b] - sx[0], sx - sx[0]), axis=1)
+    return 0, b, int(np.argmax(area))
 
 
 def raise_unconverged(obs, p: Params, conv) -> None:

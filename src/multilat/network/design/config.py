@@ -12,10 +12,15 @@ Example (docs/design.md lists every key)::
     box_max_m = [2.5, 2.5, 2.0]
     min_range_m = 0.2              # optional range limits of a head
     max_range_m = 20.0
+    hidden = { A = ["T3", "T7"] }  # optional: targets a head (id; candidate id) cannot see
+    [[occluders]]                  # optional, repeatable: a box blocking the line of sight
+    box_min_m = [0.4, -1, 0]
+    box_max_m = [0.6, 2, 1.5]
     [instrument]                   # or: sigma_um = 4.7
     preset = "seed2020"
     [criterion]
     name = "max_u95"               # rms_u, length_u (with lengths = [["1", "27"], ...]), max_mdb
+    target_u95_m = 30e-6           # optional: the fewest targets keeping the work volume at this
     [network]                      # optional
     offsets = true
     datum = "free"
@@ -23,6 +28,7 @@ Example (docs/design.md lists every key)::
     method = "multistart"          # or differential_evolution
     starts = 8
     max_evaluations = 20000
+    evaluation = "auto"            # fast / dense / blocked: how a criterion is computed (docs/design.md)
 
 Files named in the config are read relative to the config file's directory. Every error is one
 line naming the file and the key.
@@ -88,6 +94,7 @@ class HeadsCfg(_Model):
     start: str | None = None
     min_range_m: float = 0.0
     max_range_m: float | None = None
+    hidden: dict[str, list[str]] = {}
 
     @model_validator(mode="after")
     def _one(self):
@@ -124,6 +131,14 @@ class InstrumentCfg(_Model):
 class CriterionCfg(_Model):
     name: str = "max_u95"
     lengths: list[tuple[str, str]] = []
+    target_u95_m: float | None = None
+
+    @field_validator("target_u95_m")
+    @classmethod
+    def _pos(cls, v):
+        if v is not None and not v > 0:
+            raise ValueError("must be > 0 (metres)")
+        return v
 
     @field_validator("name")
     @classmethod
@@ -148,6 +163,14 @@ class SearchCfg(_Model):
     method: str = "multistart"
     starts: int = 8
     max_evaluations: int = 20_000
+    evaluation: str = "auto"
+
+    @field_validator("evaluation")
+    @classmethod
+    def _e(cls, v):
+        if v not in ("auto", "dense", "blocked", "fast"):
+            raise ValueError(f"unknown evaluation {v!r} (auto, dense, blocked or fast)")
+        return v
 
     @field_validator("method")
     @classmethod
@@ -164,9 +187,20 @@ class SearchCfg(_Model):
         return v
 
 
+class OccluderCfg(_Model):
+    box_min_m: list[float]
+    box_max_m: list[float]
+
+    @model_validator(mode="after")
+    def _b(self):
+        _box(self.box_min_m, self.box_max_m, "occluders")
+        return self
+
+
 class DesignConfig(_Model):
     targets: TargetsCfg
     heads: HeadsCfg
+    occluders: list[OccluderCfg] = []
     instrument: InstrumentCfg = InstrumentCfg(preset="seed2020")
     criterion: CriterionCfg = CriterionCfg()
     network: NetworkCfg = NetworkCfg()
@@ -211,7 +245,7 @@ def _targets(cfg: TargetsCfg, base: Path):
     return tuple(f"T{k + 1}" for k in range(len(g))), g
 
 
-def _check_reach(tid, tx, heads_pts, box, rmin, rmax, source):
+def _check_reach(tid, tx, heads_pts, box, rmin, rmax, source, hidden=None, occluders=(), head_names=()):
     """Every target must be within range of some admissible head position."""
     if box is not None:
         lo, hi = np.asarray(box[0]), np.asarray(box[1])
@@ -220,24 +254,50 @@ def _check_reach(tid, tx, heads_pts, box, rmin, rmax, source):
         far = np.linalg.norm(tx[:, None] - corners[None], axis=2).max(axis=1)
         bad = (near > rmax) | (far < rmin)
     else:
-        vis = visibility(heads_pts, tx, min_range_m=rmin, max_range_m=rmax)
+        vis = visibility(heads_pts, tx, min_range_m=rmin, max_range_m=rmax, hidden=hidden,
+                         occluders=occluders)
         bad = vis.sum(axis=0) < 3
+        few = vis.sum(axis=1) < 4
+        if few.any() and not bad.any():
+            i = int(np.flatnonzero(few)[0])
+            raise MultilatError(f"{source}: heads: head {head_names[i]!r} sees {int(vis[i].sum())} targets "
+                                "(range limits, hidden targets, occluders): a head needs at least 4")
     if bad.any():
         j = int(np.flatnonzero(bad)[0])
-        raise MultilatError(f"{source}: heads: target {tid[j]!r} is out of range of every head position "
-                            f"(min_range_m {rmin:g}, max_range_m {rmax:g}); {int(bad.sum())} target(s)")
+        why = "seen by fewer than 3 heads" if box is None else "out of range of every head position"
+        raise MultilatError(f"{source}: heads: target {tid[j]!r} is {why} (min_range_m {rmin:g}, "
+                            f"max_range_m {rmax:g}); {int(bad.sum())} target(s)")
+
+
+def _hidden(cfg, head_ids_, tid, source):
+    """The ``[heads] hidden`` table as a bool (s, t) matrix over ``head_ids_`` (None when empty)."""
+    if not cfg.heads.hidden:
+        return None
+    pos = {t: j for j, t in enumerate(tid)}
+    hpos = {h: i for i, h in enumerate(head_ids_)}
+    out = np.zeros((len(head_ids_), len(tid)), bool)
+    for h, ts in cfg.heads.hidden.items():
+        if h not in hpos:
+            raise MultilatError(f"{source}: heads.hidden: unknown head {h!r} (heads: {', '.join(head_ids_)})")
+        for t in ts:
+            if t not in pos:
+                raise MultilatError(f"{source}: heads.hidden.{h}: unknown target {t!r}")
+            out[hpos[h], pos[t]] = True
+    return out
 
 
 @dataclass(frozen=True, eq=False)
 class DesignRun:
     """What ``multilat design`` computed: the search (None with fixed or evaluated heads), the
-    pre-analysis of the returned layout and of the start (or given) layout."""
+    pre-analysis of the returned layout and of the start (or given) layout; ``selection``: the
+    fewest targets for ``[criterion] target_u95_m`` (:class:`~.targets.TargetSelection`) or None."""
 
     criterion: str
     search: DesignResult | None
     best: PreAnalysis
     start: PreAnalysis
     sigma: SigmaModel
+    selection: object = None
 
 
 def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, rng=None,
@@ -256,6 +316,7 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
                    max_distance_m=max(100.0, 2 * rmax if np.isfinite(rmax) else 100.0))
     c = cfg.criterion
     kw = dict(offsets=cfg.network.offsets, datum=cfg.network.datum, lengths=tuple(c.lengths))
+    skw = dict(kw, evaluation=cfg.search.evaluation)
     known = set(tid)
     fixed = evaluate if evaluate is not None else (_read_points(base, h.fixed) if h.fixed else None)
     if fixed is not None:
@@ -265,24 +326,38 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         known |= set(fixed.ids)
     else:
         known |= set(head_ids(h.count))
+    n_heads = len(fixed.ids) if fixed is not None else h.count
+    per = 4 if cfg.network.offsets else 3
+    n_unknown = per * n_heads + 3 * len(tid) - 6
+    if n_heads * len(tid) < n_unknown:
+        t_min = per * n_heads - 6
+        t_min = -(-t_min // (n_heads - 3))
+        raise MultilatError(f"{source}: targets: {len(tid)} targets and {n_heads} heads give at most "
+                            f"{n_heads * len(tid)} distances for {n_unknown} unknowns: need at least "
+                            f"{t_min} targets")
     for a, b in c.lengths:
         for p in (a, b):
             if p not in known:
                 raise MultilatError(f"{source}: criterion.lengths: unknown point id {p!r}")
     search = None
+    occ = tuple((o.box_min_m, o.box_max_m) for o in cfg.occluders)
     if fixed is not None:
-        _check_reach(tid, tx, fixed.xyz_m, None, rmin, rmax, source)
+        hid = _hidden(cfg, tuple(fixed.ids), tid, source)
+        _check_reach(tid, tx, fixed.xyz_m, None, rmin, rmax, source, hid, occ, tuple(fixed.ids))
         lay = Layout(fixed.ids, fixed.xyz_m, tid, tx,
-                     visibility(fixed.xyz_m, tx, min_range_m=rmin, max_range_m=rmax))
+                     visibility(fixed.xyz_m, tx, min_range_m=rmin, max_range_m=rmax, hidden=hid,
+                                occluders=occ))
         pa = preanalyse(lay, sigma, **kw)
-        return DesignRun(c.name, None, pa, pa, sigma)
+        return DesignRun(c.name, None, pa, pa, sigma, _select(c, pa, sigma, kw))
     s = cfg.search
     if h.file is not None:
         cand = _read_points(base, h.file)
-        _check_reach(tid, tx, cand.xyz_m, None, rmin, rmax, source)
+        hid = _hidden(cfg, tuple(cand.ids), tid, source)
+        _check_reach(tid, tx, cand.xyz_m, None, rmin, rmax, source, hid, occ)
         search = choose_candidates(tx, cand.xyz_m, count=h.count, sigma=sigma, target_ids=tid,
                                    candidate_ids=cand.ids, criterion=c.name, min_range_m=rmin,
-                                   max_range_m=rmax, max_evaluations=s.max_evaluations, rng=rng, **kw)
+                                   hidden=hid, occluders=occ,
+                                   max_range_m=rmax, max_evaluations=s.max_evaluations, rng=rng, **skw)
     else:
         _check_reach(tid, tx, None, (h.box_min_m, h.box_max_m), rmin, rmax, source)
         start = None
@@ -293,8 +368,9 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
             start = sp.xyz_m
         search = optimise_heads(tx, count=h.count, box_min_m=h.box_min_m, box_max_m=h.box_max_m,
                                 sigma=sigma, target_ids=tid, criterion=c.name, start=start,
+                                hidden=_hidden(cfg, head_ids(h.count), tid, source), occluders=occ,
                                 min_range_m=rmin, max_range_m=rmax, method=s.method, starts=s.starts,
-                                max_evaluations=s.max_evaluations, rng=rng, **kw)
+                                max_evaluations=s.max_evaluations, rng=rng, **skw)
     if search.criterion_m >= 1e3:
         raise MultilatError(f"{source}: no solvable layout found (every head layout tried leaves a "
                             "target seen by too few heads): widen the heads box or the range limits")
@@ -302,4 +378,20 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         start_pa = preanalyse(search.start_layout, sigma, **kw)
     except MultilatError:
         start_pa = None
-    return DesignRun(c.name, search, preanalyse(search.layout, sigma, **kw), start_pa, sigma)
+    best = preanalyse(search.layout, sigma, **kw)
+    return DesignRun(c.name, search, best, start_pa, sigma, _select(c, best, sigma, kw))
+
+
+def _select(c: CriterionCfg, pa: PreAnalysis, sigma, kw):
+    if c.target_u95_m is None:
+        return None
+    from multilat.network.design.targets import select_targets
+
+    sel = select_targets(pa.layout, sigma, c.target_u95_m, offsets=kw["offsets"], datum=kw["datum"])
+    if not sel.feasible:
+        import warnings
+
+        warnings.warn(f"criterion.target_u95_m: even all {len(sel.target_ids)} candidate targets give "
+                      f"{sel.all_u95_m * 1e6:.2f} um > wanted {sel.wanted_u95_m * 1e6:.2f} um (all kept)",
+                      stacklevel=2)
+    return sel

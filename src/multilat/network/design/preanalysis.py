@@ -31,7 +31,7 @@ from multilat.network.datum import Datum, helmert_basis, parse_datum
 from multilat.network.model import Q, residuals_and_jacobian
 
 __all__ = ["Layout", "SigmaModel", "PreAnalysis", "preanalyse", "covariance", "CRITERIA",
-           "criterion_value", "layout_observations"]
+           "criterion_value", "layout_observations", "probe_cov_m2", "DENSE_MAX_PARAMS"]
 
 #: optimisation criteria (docs/design.md): name -> description
 CRITERIA = {
@@ -277,12 +277,51 @@ def _redundancy(A_w, Qplus):
     return np.clip(1.0 - h, 0.0, 1.0)
 
 
+#: above this many free parameters the pre-analysis works on the adjustment's reduced system
+#: (:mod:`.blocked`, O(t s^2)) instead of the dense normal matrix (O(t^3))
+DENSE_MAX_PARAMS = 120
+
+
+def _method(method: str, layout: Layout, name: str | None = None) -> str:
+    """The evaluation to use: ``fast`` (:mod:`.fast`, a criterion other than length_u), else dense
+    up to :data:`DENSE_MAX_PARAMS` parameters and blocked above."""
+    if method not in ("auto", "dense", "blocked", "fast"):
+        raise MultilatError(f"method must be auto, dense, blocked or fast, got {method!r}")
+    if method == "fast" and name in (None, "length_u"):
+        method = "auto"
+    if method == "auto":
+        if name is not None and name != "length_u":
+            return "fast"
+        n = 4 * layout.n_stations + 3 * layout.n_targets
+        return "dense" if n <= DENSE_MAX_PARAMS else "blocked"
+    return method
+
+
 def criterion_value(name: str, layout: Layout, sigma: SigmaModel, *, offsets=True, datum="free",
-                    lengths=(), alpha=0.001, power=0.80) -> float:
-    """The design criterion ``name`` (:data:`CRITERIA`) of a layout, metres; ``inf`` when singular."""
+                    lengths=(), alpha=0.001, power=0.80, method: str = "auto") -> float:
+    """The design criterion ``name`` (:data:`CRITERIA`) of a layout, metres; ``inf`` when singular.
+
+    ``method``: ``"dense"`` (the whole normal matrix), ``"blocked"`` (the adjustment's Schur-reduced
+    system, :mod:`.blocked`), ``"fast"`` (the search's evaluator, :mod:`.fast`; not length_u) or
+    ``"auto"`` (fast, and for length_u dense up to :data:`DENSE_MAX_PARAMS` parameters, else
+    blocked). All four agree to 1e-9 (tested)."""
+    if name not in CRITERIA:
+        raise MultilatError(f"criterion must be one of {', '.join(CRITERIA)}, got {name!r}")
     si, ti = layout.pairs()
     d = np.linalg.norm(layout.station_xyz_m[si] - layout.target_xyz_m[ti], axis=1)
     sig = sigma(d, si, layout.station_ids)
+    how = _method(method, layout, name)
+    if how == "fast":
+        from multilat.network.design.fast import fast_criterion
+
+        sig_mat = np.ones(layout.visible.shape)
+        sig_mat[si, ti] = sig
+        return fast_criterion(name, layout, sig_mat, offsets=offsets, datum=datum, alpha=alpha, power=power)
+    if how == "blocked":
+        from multilat.network.design.blocked import blocked_criterion
+
+        return blocked_criterion(name, layout, sig, offsets=offsets, datum=datum, lengths=lengths,
+                                 alpha=alpha, power=power)
     try:
         cov, A_w, _, Qplus = covariance(layout, sig, offsets=offsets, datum=datum)
     except MultilatError:
@@ -312,7 +351,9 @@ class PreAnalysis:
     layout : Layout
     station_index, target_index : ndarray of int (m,)  the observations (visible pairs)
     distance_m, sigma_m : ndarray (m,)  geometric distances and their standard uncertainties
-    cov : ndarray (5s + 3t, 5s + 3t)  full covariance, model layout, in the datum, m²
+    cov : ndarray (5s + 3t, 5s + 3t) or None  full covariance, model layout, in the datum, m²
+        (None from the blocked method: large layouts keep only the blocks below)
+    global_cov : ndarray (5s, 5s)  covariance of the station parameters (x, y, z, offset, scale)
     station_cov_m2 : (s, 3, 3) ; target_cov_m2 : (t, 3, 3)
     offset_std_m : (s,)  (0 when offsets are known)
     u95_max_m : (t,)  largest 95 % ellipsoid semi-axis of each target
@@ -329,7 +370,8 @@ class PreAnalysis:
     target_index: np.ndarray
     distance_m: np.ndarray
     sigma_m: np.ndarray
-    cov: np.ndarray
+    cov: np.ndarray | None
+    global_cov: np.ndarray
     station_cov_m2: np.ndarray
     target_cov_m2: np.ndarray
     offset_std_m: np.ndarray
@@ -366,32 +408,14 @@ class PreAnalysis:
         return (st.confidence_ellipsoid(self.station_cov_m2, level=level),
                 st.confidence_ellipsoid(self.target_cov_m2, level=level))
 
-    def probe_cov_m2(self, points_xyz_m, *, min_range_m: float = 0.0, max_range_m: float = np.inf):
+    def probe_cov_m2(self, points_xyz_m, *, min_range_m: float = 0.0, max_range_m: float = np.inf,
+                     visible=None):
         """Predicted covariance (p, 3, 3) of new points measured by the calibrated heads (the heads
-        within range of each point), for a map of the work volume: the trilateration covariance
-        ``M^-1`` with ``M = J_p^T W J_p`` plus the heads' and offsets' covariance carried through,
-        ``M^-1 J_p^T W J_g C_gg J_g^T W J_p M^-1`` (the Schur complement of one more target).
-        The distance uncertainty is the mean of this layout's ``sigma_m``. NaN where fewer than 3
-        heads reach a point."""
-        p = np.asarray(points_xyz_m, float).reshape(-1, 3)
-        s = self.layout.n_stations
-        diff = self.layout.station_xyz_m[None] - p[:, None]            # (p, s, 3)
-        d = np.linalg.norm(diff, axis=2)
-        u = diff / d[..., None]
-        seen = (d >= max(min_range_m, 1e-9)) & (d <= max_range_m)
-        w = seen / float(np.mean(self.sigma_m)) ** 2                   # (p, s)
-        Jp = -u                                                         # d dist / d point
-        Jg = np.zeros((p.shape[0], s, Q * s))                           # d dist / d [x,y,z,o,k]
-        for i in range(s):
-            Jg[:, i, Q * i:Q * i + 3] = u[:, i]
-            Jg[:, i, Q * i + 3] = 1.0 if self.offsets else 0.0
-        M = np.einsum("psa,ps,psb->pab", Jp, w, Jp)
-        ok = seen.sum(axis=1) >= 3
-        Minv = np.full_like(M, np.nan)
-        Minv[ok] = np.linalg.inv(M[ok])
-        Cgg = self.cov[:Q * s, :Q * s]
-        B = np.einsum("pab,psb,ps,psg->pag", Minv, Jp, w, Jg)           # (p, 3, 5s)
-        return Minv + np.einsum("pag,gh,pbh->pab", B, Cgg, B)
+        within range of each point, or ``visible`` (p, s)), for a map of the work volume:
+        :func:`probe_cov_m2` with this layout's station covariance and mean ``sigma_m``."""
+        return probe_cov_m2(self.layout.station_xyz_m, self.global_cov, float(np.mean(self.sigma_m)),
+                            points_xyz_m, offsets=self.offsets, min_range_m=min_range_m,
+                            max_range_m=max_range_m, visible=visible)
 
     def criterion(self, name: str) -> float:
         """The value of criterion ``name`` for this layout (metres)."""
@@ -418,7 +442,7 @@ def layout_observations(layout: Layout, sigma_m, offset_m=None) -> Observations:
 
 
 def preanalyse(layout: Layout, sigma, *, offsets: bool = True, datum="free", lengths=(),
-               alpha: float = 0.001, power: float = 0.80) -> PreAnalysis:
+               alpha: float = 0.001, power: float = 0.80, method: str = "auto") -> PreAnalysis:
     """Predicted covariance and reliability of a layout for error-free distances.
 
     Parameters
@@ -430,6 +454,7 @@ def preanalyse(layout: Layout, sigma, *, offsets: bool = True, datum="free", len
         ``321:A,B,C``
     lengths : sequence of (id, id)   interpoint lengths whose uncertainty to report
     alpha, power : float   w-test significance and power for the MDBs (``adjust``'s defaults)
+    method : "auto", "dense" or "blocked"  as :func:`criterion_value` (blocked: ``cov`` is None)
 
     Returns
     -------
@@ -450,6 +475,9 @@ def preanalyse(layout: Layout, sigma, *, offsets: bool = True, datum="free", len
             if p not in ids:
                 raise MultilatError(f"lengths: unknown point id {p!r}")
     dat = parse_datum(datum)
+    if _method(method, layout) == "blocked":
+        return _preanalyse_blocked(layout, sig, d, si, ti, offsets=offsets, datum=dat, lengths=lengths,
+                                   alpha=alpha, power=power)
     cov, A_w, free, Qplus = covariance(layout, sig, offsets=offsets, datum=dat)
     scov, tcov = _point_blocks(cov, s, t)
     red = _redundancy(A_w, Qplus)
@@ -464,8 +492,72 @@ def preanalyse(layout: Layout, sigma, *, offsets: bool = True, datum="free", len
     ext[~np.isfinite(mdb)] = np.inf
     lens = tuple((a, b, L, u) for (a, b), (L, u) in zip(lengths, _length_u(layout, cov, lengths)))
     return PreAnalysis(layout=layout, station_index=si, target_index=ti, distance_m=d, sigma_m=sig,
-                       cov=cov, station_cov_m2=scov, target_cov_m2=tcov,
+                       cov=cov, global_cov=cov[:Q * s, :Q * s], station_cov_m2=scov, target_cov_m2=tcov,
                        offset_std_m=np.sqrt(np.clip(np.diag(cov)[Q * np.arange(s) + 3], 0, None)),
                        u95_max_m=_u95_max(tcov), redundancy=red, mdb_m=mdb, external_m=ext,
                        dof=int(si.size - free.sum() + 6), lengths=lens, datum=dat, offsets=offsets,
                        alpha=alpha, power=power)
+
+
+def _preanalyse_blocked(layout, sig, d, si, ti, *, offsets, datum, lengths, alpha, power):
+    """:func:`preanalyse` on the reduced system (:mod:`.blocked`): the same numbers, no full matrix."""
+    from multilat.network.design.blocked import (_length_u as blocked_length_u, blocked_covariance,
+                                                 external_reliability_m)
+
+    s, t = layout.n_stations, layout.n_targets
+    bc = blocked_covariance(layout, sig, offsets=offsets, datum=datum)
+    gcov = bc.cov.global_block()
+    tcov = bc.target_cov_m2()
+    red = bc.redundancy()
+    mdb = st.minimal_detectable_bias_m(sig, red, alpha=alpha, power=power)
+    ext = external_reliability_m(bc, layout, mdb, offsets=offsets)
+    scov = np.stack([gcov[Q * i:Q * i + 3, Q * i:Q * i + 3] for i in range(s)])
+    lens = tuple((a, b, float(np.linalg.norm(_xyz(layout, a) - _xyz(layout, b))), u)
+                 for (a, b), u in zip(lengths, blocked_length_u(layout, bc.cov, lengths)))
+    nfree = (4 if offsets else 3) * s + 3 * t
+    return PreAnalysis(layout=layout, station_index=si, target_index=ti, distance_m=d, sigma_m=sig,
+                       cov=None, global_cov=gcov, station_cov_m2=scov, target_cov_m2=tcov,
+                       offset_std_m=np.sqrt(np.clip(np.diag(gcov)[Q * np.arange(s) + 3], 0, None)),
+                       u95_max_m=_u95_max(tcov), redundancy=red, mdb_m=mdb, external_m=ext,
+                       dof=int(si.size - nfree + 6), lengths=lens, datum=datum, offsets=offsets,
+                       alpha=alpha, power=power)
+
+
+def _xyz(layout, pid):
+    ids = layout.station_ids + layout.target_ids
+    k = ids.index(pid)
+    s = layout.n_stations
+    return layout.station_xyz_m[k] if k < s else layout.target_xyz_m[k - s]
+
+
+def probe_cov_m2(station_xyz_m, global_cov, sigma_m: float, points_xyz_m, *, offsets: bool = True,
+                 min_range_m: float = 0.0, max_range_m: float = np.inf, visible=None):
+    """Covariance (p, 3, 3) of points measured by heads whose parameters have covariance
+    ``global_cov`` (5s, 5s; x, y, z, offset, scale per station): the trilateration covariance
+    ``M^-1`` with ``M = J_p^T W J_p`` plus the heads' and offsets' covariance carried through,
+    ``M^-1 J_p^T W J_g C_gg J_g^T W J_p M^-1`` (the Schur complement of one more target). Each
+    distance has standard uncertainty ``sigma_m``. NaN where fewer than 3 heads see a point.
+
+    For a target of the network and a datum on the stations only, this is the adjustment's own
+    target block (tested)."""
+    p = np.asarray(points_xyz_m, float).reshape(-1, 3)
+    sx = np.asarray(station_xyz_m, float)
+    s = sx.shape[0]
+    diff = sx[None] - p[:, None]                                      # (p, s, 3)
+    d = np.linalg.norm(diff, axis=2)
+    u = diff / d[..., None]
+    seen = (d >= max(min_range_m, 1e-9)) & (d <= max_range_m)
+    if visible is not None:
+        seen &= np.asarray(visible, bool)
+    w = seen / float(sigma_m) ** 2                                    # (p, s)
+    Jp = -u                                                           # d dist / d point
+    Jg = np.zeros((p.shape[0], s, Q * s))                             # d dist / d [x,y,z,o,k]
+    for i in range(s):
+        Jg[:, i, Q * i:Q * i + 3] = u[:, i]
+        Jg[:, i, Q * i + 3] = 1.0 if offsets else 0.0
+    M = np.einsum("psa,ps,psb->pab", Jp, w, Jp)
+    ok = seen.sum(axis=1) >= 3
+    Minv = np.full_like(M, np.nan)
+    Minv[ok] = np.linalg.inv(M[ok])
+    B = np.einsum("pab,psb,ps,psg->pag", Minv, Jp, w, Jg)             # (p, 3, 5s)
+    return Minv + np.einsum("pag,gh,pbh->pab", B, global_cov, B)

@@ -29,7 +29,7 @@ from multilat.errors import MultilatError
 from multilat.network.design.preanalysis import CRITERIA, Layout, SigmaModel, criterion_value
 
 __all__ = ["DesignResult", "SearchStart", "optimise_heads", "choose_candidates", "head_ids",
-           "visibility", "corner_start", "PENALTY_M", "min_heads"]
+           "visibility", "segment_hits_box", "corner_start", "PENALTY_M", "min_heads"]
 
 #: criterion value of a layout the model cannot solve (metres)
 PENALTY_M = 1.0e3
@@ -49,11 +49,37 @@ def head_ids(count: int) -> tuple[str, ...]:
     return tuple(chr(65 + i) if i < 26 else f"H{i + 1}" for i in range(count))
 
 
-def visibility(station_xyz_m, target_xyz_m, *, min_range_m=0.0, max_range_m=math.inf, hidden=None):
-    """Which head sees which target (s, t): within the range limits and not ``hidden`` (s, t)."""
-    d = np.linalg.norm(np.asarray(station_xyz_m)[:, None, :] - np.asarray(target_xyz_m)[None], axis=2)
+def visibility(station_xyz_m, target_xyz_m, *, min_range_m=0.0, max_range_m=math.inf, hidden=None,
+               occluders=()):
+    """Which head sees which target (s, t): within the range limits, not ``hidden`` (s, t), and no
+    ``occluders`` box (``(box_min_m, box_max_m)`` pairs) cutting the line of sight (a target inside
+    a box is hidden)."""
+    h = np.asarray(station_xyz_m, float).reshape(-1, 3)
+    t = np.asarray(target_xyz_m, float).reshape(-1, 3)
+    d = np.linalg.norm(h[:, None, :] - t[None], axis=2)
     vis = (d >= max(min_range_m, 1e-6)) & (d <= max_range_m)
-    return vis if hidden is None else vis & ~np.asarray(hidden, bool)
+    if hidden is not None:
+        vis &= ~np.asarray(hidden, bool)
+    for lo, hi in occluders:
+        vis &= ~segment_hits_box(h, t, lo, hi)
+    return vis
+
+
+def segment_hits_box(a_xyz_m, b_xyz_m, box_min_m, box_max_m) -> np.ndarray:
+    """Whether the segment from each point of ``a`` (s, 3) to each of ``b`` (t, 3) meets the closed
+    axis-aligned box (slab method) -> bool (s, t)."""
+    a = np.asarray(a_xyz_m, float)[:, None, :]
+    dv = np.asarray(b_xyz_m, float)[None] - a                       # (s, t, 3)
+    lo, hi = np.asarray(box_min_m, float), np.asarray(box_max_m, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = (lo - a) / dv, (hi - a) / dv
+    par = np.abs(dv) < 1e-15                                        # parallel to a slab
+    inside = (a >= lo) & (a <= hi)
+    t1 = np.where(par, np.where(inside, -np.inf, np.inf), t1)      # outside a slab it is parallel
+    t2 = np.where(par, np.inf, t2)                                  # to: never enters (tmin = inf)
+    tmin = np.minimum(t1, t2).max(axis=2)
+    tmax = np.maximum(t1, t2).min(axis=2)
+    return (tmin <= tmax) & (tmax >= 0.0) & (tmin <= 1.0)
 
 
 def corner_start(count: int, box_min_m, box_max_m, rng) -> np.ndarray:
@@ -111,17 +137,17 @@ class DesignResult:
 class _Objective:
     """Counts evaluations and keeps the best layout seen."""
 
-    def __init__(self, target_ids, target_xyz_m, ids, sigma, criterion, kw, ranges, hidden):
+    def __init__(self, target_ids, target_xyz_m, ids, sigma, criterion, kw, ranges, hidden, occluders=()):
         self.tid, self.tx, self.ids = target_ids, target_xyz_m, ids
         self.sigma, self.criterion, self.kw = sigma, criterion, kw
-        self.ranges, self.hidden = ranges, hidden
+        self.ranges, self.hidden, self.occluders = ranges, hidden, tuple(occluders)
         self.n = 0
         self.best = (math.inf, None)
 
     def layout(self, heads_xyz_m) -> Layout:
         h = np.asarray(heads_xyz_m, float).reshape(-1, 3)
         vis = visibility(h, self.tx, min_range_m=self.ranges[0], max_range_m=self.ranges[1],
-                         hidden=self.hidden)
+                         hidden=self.hidden, occluders=self.occluders)
         return Layout(self.ids, h, self.tid, self.tx, vis)
 
     def __call__(self, x) -> float:
@@ -153,8 +179,8 @@ def _sigma(sigma):
 def optimise_heads(target_xyz_m, *, count: int, box_min_m, box_max_m, sigma, target_ids=None,
                    criterion: str = "max_u95", start=None, offsets: bool = True, datum="free",
                    lengths=(), min_range_m: float = 0.0, max_range_m: float = math.inf, hidden=None,
-                   method: str = "multistart", starts: int = 8, max_evaluations: int = 20_000,
-                   rng=None) -> DesignResult:
+                   occluders=(), method: str = "multistart", starts: int = 8, max_evaluations: int = 20_000,
+                   rng=None, evaluation: str = "auto") -> DesignResult:
     """Head positions in a box that minimise a design criterion for the given targets.
 
     Parameters
@@ -168,9 +194,12 @@ def optimise_heads(target_xyz_m, *, count: int, box_min_m, box_max_m, sigma, tar
     start : ndarray (count, 3), optional  start layout (default :func:`corner_start`)
     offsets, datum, lengths : as :func:`multilat.network.design.preanalysis.preanalyse`
     min_range_m, max_range_m : range limits of a head; hidden : bool (count, t), optional
+    occluders : sequence of (box_min_m, box_max_m)  boxes that block the line of sight
     method : "multistart" or "differential_evolution"
     starts : int  local searches (multistart) ; max_evaluations : int  total criterion evaluations
     rng : Generator, int or None
+    evaluation : "auto", "dense" or "blocked"  how the criterion is computed
+        (:func:`~multilat.network.design.preanalysis.criterion_value`'s ``method``)
 
     Returns
     -------
@@ -187,8 +216,8 @@ def optimise_heads(target_xyz_m, *, count: int, box_min_m, box_max_m, sigma, tar
         raise MultilatError("heads box: box_max_m must exceed box_min_m in every axis")
     x0 = corner_start(count, lo, hi, rng) if start is None else np.asarray(start, float).reshape(count, 3)
     obj = _Objective(tid, tx, head_ids(count), _sigma(sigma), criterion,
-                     dict(offsets=offsets, datum=datum, lengths=tuple(lengths)),
-                     (min_range_m, max_range_m), hidden)
+                     dict(offsets=offsets, datum=datum, lengths=tuple(lengths), method=evaluation),
+                     (min_range_m, max_range_m), hidden, occluders)
     bounds = list(zip(np.tile(lo, count), np.tile(hi, count)))
     f0 = obj(x0.ravel())
     runs, hist = [], []
@@ -227,10 +256,11 @@ def choose_candidates(target_xyz_m, candidates_xyz_m, *, count: int, sigma, targ
                       candidate_ids=None, criterion: str = "max_u95", offsets: bool = True,
                       datum="free", lengths=(), min_range_m: float = 0.0,
                       max_range_m: float = math.inf, max_evaluations: int = 20_000,
-                      rng=None) -> DesignResult:
+                      rng=None, evaluation: str = "auto", hidden=None, occluders=()) -> DesignResult:
     """The ``count`` candidate positions (c, 3) that minimise the criterion (exhaustive when the
     combinations fit in ``max_evaluations``, else random combinations then single swaps). The
-    returned layout's station ids are the chosen candidates' ids."""
+    returned layout's station ids are the chosen candidates' ids. ``hidden`` (c, t): targets each
+    candidate cannot see; ``occluders`` as :func:`optimise_heads`."""
     _check(criterion, count, offsets, lengths)
     rng = np.random.default_rng(rng)
     cx = np.asarray(candidates_xyz_m, float).reshape(-1, 3)
@@ -241,13 +271,15 @@ def choose_candidates(target_xyz_m, candidates_xyz_m, *, count: int, sigma, targ
     tx = np.asarray(target_xyz_m, float).reshape(-1, 3)
     tid = tuple(str(i + 1) for i in range(len(tx))) if target_ids is None else tuple(target_ids)
     obj = _Objective(tid, tx, head_ids(count), _sigma(sigma), criterion,
-                     dict(offsets=offsets, datum=datum, lengths=tuple(lengths)),
-                     (min_range_m, max_range_m), None)
+                     dict(offsets=offsets, datum=datum, lengths=tuple(lengths), method=evaluation),
+                     (min_range_m, max_range_m), None, occluders)
+    hid = None if hidden is None else np.asarray(hidden, bool).reshape(c, len(tx))
     cache: dict[tuple, float] = {}
 
     def score(sub):
         key = tuple(sorted(sub))
         if key not in cache:
+            obj.hidden = None if hid is None else hid[list(key)]
             cache[key] = obj(cx[list(key)].ravel())
         return cache[key]
 
@@ -279,6 +311,7 @@ def choose_candidates(target_xyz_m, candidates_xyz_m, *, count: int, sigma, targ
     hist.append(cache[best])
 
     def lay(sub):
+        obj.hidden = None if hid is None else hid[list(sub)]
         base = obj.layout(cx[list(sub)].ravel())
         return Layout(tuple(cid[i] for i in sub), base.station_xyz_m, tid, tx, base.visible)
 

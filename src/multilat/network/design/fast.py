@@ -1,0 +1,138 @@
+"""The search's evaluator: the criterion of a layout from the Schur complement in (heads x targets) arrays.
+
+A search calls the criterion thousands of times on layouts that differ only in head positions. The
+general paths pay for generality per call (:mod:`.preanalysis`: the dense normal matrix, ``O(t³)``;
+:mod:`.blocked`: the adjustment's own reduced system, observation lists, a 3-2-1 frame, the
+``NetworkCovariance`` object). Here the same algebra runs on fixed-shape arrays, the pairs a head
+does not see weighted zero:
+
+* per observation (head ``i``, target ``j``) the whitened Jacobian ``[u, 1] / σ`` (head ``x, y, z``,
+  offset) and ``-u / σ`` (target), ``u`` the unit vector from target to head;
+* target blocks ``D_j = Σ_i w u uᵀ``, head blocks ``A_i``, couplings ``B_ij``; the Schur complement
+  ``S = A - Σ_j B_j D_j⁻¹ B_jᵀ`` (``4s x 4s``);
+* a generalised inverse ``X = (N + c E Eᵀ)⁻¹`` with ``E`` the rigid motions of the heads only (it
+  touches the head block only, so ``X``'s blocks follow from ``(S + c E Eᵀ)⁻¹``);
+* the datum by the S-transform ``C = (I - G Hᵀ) X (I - G Hᵀ)ᵀ``, ``H = E_d (Gᵀ E_d)⁻¹``
+  (:func:`multilat.network.datum.datum_matrices`): every target's 3 x 3 block from ``X``'s blocks and
+  ``X H`` (6 columns), never the full matrix;
+* redundancy numbers ``1 - a_kᵀ X a_k`` (datum-free: ``a_k`` lies in the range of ``N``).
+
+Tested equal to the dense pre-analysis (1e-9). ``length_u`` is left to :mod:`.blocked`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network import statistics as st
+from multilat.network.datum import Datum, datum_matrices, helmert_basis, parse_datum
+from multilat.network.model import Q, inv3
+
+__all__ = ["fast_criterion", "fast_target_cov_m2"]
+
+_CHI2_3_95 = 7.814727903251178
+
+
+def _datum_GH(layout, datum, s, t, p):
+    """Rigid motions ``G`` and ``H = E_d (Gᵀ E_d)⁻¹`` on the head rows (sp, 6) and per target (t, 3, 6)."""
+    sx, tx = layout.station_xyz_m, layout.target_xyz_m
+    if datum.kind == "free" and datum.points is None:          # inner constraints over all points
+        Gp = helmert_basis(np.vstack([sx, tx]))                  # (3(s + t), 6)
+        Hp = Gp @ np.linalg.inv(Gp.T @ Gp)
+        Gs, Hs = np.zeros((s, p, 6)), np.zeros((s, p, 6))
+        Gs[:, :3], Hs[:, :3] = Gp[:3 * s].reshape(s, 3, 6), Hp[:3 * s].reshape(s, 3, 6)
+        return Gs.reshape(s * p, 6), Hs.reshape(s * p, 6), Gp[3 * s:].reshape(t, 3, 6), Hp[3 * s:].reshape(t, 3, 6)
+    G, E = datum_matrices(datum, layout.station_ids, layout.target_ids, sx, tx)
+    Hm = np.linalg.solve(E.T @ G, E.T).T                                # (n, 6)
+    rows_s = (Q * np.arange(s)[:, None] + np.arange(p)).ravel()
+    return G[rows_s], Hm[rows_s], G[Q * s:].reshape(t, 3, 6), Hm[Q * s:].reshape(t, 3, 6)
+
+
+def _parts(layout, sig_mat, offsets, datum):
+    sx, tx, vis = layout.station_xyz_m, layout.target_xyz_m, layout.visible
+    s, t = vis.shape
+    p = 4 if offsets else 3
+    sp = s * p
+    diff = (sx[:, None, :] - tx[None]).transpose(1, 0, 2)             # (t, s, 3)
+    d = np.sqrt((diff * diff).sum(axis=2))
+    u = diff / d[..., None]
+    w = np.where(vis, 1.0 / np.where(vis, sig_mat, 1.0) ** 2, 0.0).T    # (t, s)
+    a = np.concatenate([u, np.ones((t, s, 1))], axis=2) if offsets else u   # (t, s, p)
+    wu = w[..., None] * u
+    D = np.swapaxes(wu, 1, 2) @ u                                       # (t, 3, 3)
+    Dinv = inv3(D)
+    det_rel = np.linalg.det(D) / (np.trace(D, axis1=1, axis2=2) / 3.0) ** 3
+    if not np.all(det_rel > 1e-12):
+        raise MultilatError("a target is not determined")
+    B = (a[..., :, None] * wu[..., None, :]).reshape(t, sp, 3)          # -(coupling) head x target
+    F = B @ Dinv                                                        # (t, sp, 3)
+    Fm = F.transpose(1, 0, 2).reshape(sp, 3 * t)
+    S = -(Fm @ B.transpose(1, 0, 2).reshape(sp, 3 * t).T)               # - sum_j B_j D_j^-1 B_j^T
+    A = np.einsum("ts,tsp,tsq->spq", w, a, a)                           # (s, p, p)
+    for i in range(s):
+        S[i * p:(i + 1) * p, i * p:(i + 1) * p] += A[i]
+    # generalised inverse: the heads' rigid motions added to the head block
+    Es = np.zeros((s, p, 6))
+    Es[:, :3, :] = helmert_basis(sx).reshape(s, 3, 6)
+    Es = Es.reshape(sp, 6)
+    c = np.trace(S) / sp
+    try:
+        L = np.linalg.cholesky(S + c * (Es @ Es.T))
+    except np.linalg.LinAlgError:
+        raise MultilatError("the layout is singular") from None
+    Linv = np.linalg.inv(L)
+    Sinv = Linv.T @ Linv
+    if not np.all(np.isfinite(Sinv)) or np.abs(Sinv).max() * c > 1e12:
+        raise MultilatError("the layout is (nearly) singular")
+    # the coupling is -B: X_st = -S^-1 (-B) D^-1 ... signs: F here is (-coupling) D^-1
+    Z = Sinv @ F                                                        # (t, sp, 3)
+    FT = np.swapaxes(F, 1, 2)
+    Xtt = Dinv + FT @ Z                                                 # target blocks of X
+    Gs, Hs, Gt, Ht = _datum_GH(layout, datum, s, t, p)
+    Ys = Sinv @ (Hs + Fm @ Ht.reshape(3 * t, 6))                        # X H, head rows
+    Yt = Dinv @ Ht + FT @ Ys                                            # X H, target rows (t, 3, 6)
+    HXH = Hs.T @ Ys + Ht.reshape(3 * t, 6).T @ Yt.reshape(3 * t, 6)
+    GtT, YtT = np.swapaxes(Gt, 1, 2), np.swapaxes(Yt, 1, 2)
+    cov = Xtt - Gt @ YtT - Yt @ GtT + Gt @ HXH @ GtT
+    return dict(cov=0.5 * (cov + np.swapaxes(cov, 1, 2)), w=w, a=a, u=u, Sinv=Sinv, Z=Z, Dinv=Dinv,
+                F=F, Xtt=Xtt, s=s, t=t, p=p)
+
+
+def fast_target_cov_m2(layout, sig_mat, *, offsets=True, datum="free"):
+    """Every target's 3 x 3 covariance in the datum (t, 3, 3); ``sig_mat`` (s, t) the distance
+    uncertainties (ignored where not visible). Raises MultilatError for a singular layout."""
+    dat = datum if isinstance(datum, Datum) else parse_datum(datum)
+    return _parts(layout, sig_mat, offsets, dat)["cov"]
+
+
+def _hat(P):
+    """Whitened ``a_kᵀ X a_k`` for every (target, head) pair (t, s)."""
+    s, p, t = P["s"], P["p"], P["t"]
+    a, u, w = P["a"], P["u"], P["w"]
+    S4 = P["Sinv"].reshape(s, p, s, p)
+    Sii = S4[np.arange(s), :, np.arange(s), :]                          # (s, p, p)
+    h1 = np.einsum("tsp,spq,tsq->ts", a, Sii, a)
+    Zs = P["Z"].reshape(t, s, p, 3)                                     # X_st = +S^-1 F (F from -B)
+    h2 = -np.einsum("tsp,tspa,tsa->ts", a, Zs, u)                       # a^T X_st b, b = -u
+    h3 = np.einsum("tsa,tab,tsb->ts", u, P["Xtt"], u)
+    return w * (h1 + 2.0 * h2 + h3)
+
+
+def fast_criterion(name: str, layout, sig_mat, *, offsets=True, datum="free", alpha=0.001,
+                   power=0.80) -> float:
+    """``max_u95``, ``rms_u`` or ``max_mdb`` of a layout (m; inf when singular)."""
+    dat = datum if isinstance(datum, Datum) else parse_datum(datum)
+    try:
+        P = _parts(layout, sig_mat, offsets, dat)
+    except MultilatError:
+        return float("inf")
+    if name == "max_u95":
+        return float(np.sqrt(_CHI2_3_95 * max(np.linalg.eigvalsh(P["cov"])[:, -1].max(), 0.0)))
+    if name == "rms_u":
+        return float(np.sqrt(np.trace(P["cov"], axis1=1, axis2=2).mean()))
+    if name == "max_mdb":
+        vis = layout.visible
+        red = np.clip(1.0 - _hat(P).T[vis], 0.0, 1.0)
+        return float(st.minimal_detectable_bias_m(sig_mat[vis], red, alpha=alpha, power=power).max())
+    raise MultilatError(f"fast_criterion: {name!r} is not supported (use the blocked evaluation)")
