@@ -55,7 +55,8 @@ def emit_json(obj) -> None:
 
 
 def progress(*, transient: bool = True, disable: bool = False):
-    """A rich progress bar on stderr (so ``--json`` stdout stays clean).
+    """A rich progress bar on stderr (so ``--json`` stdout stays clean): shown whenever stderr is a
+    terminal, with ``--json`` too; nothing at all (not even a newline) when stderr is a file or pipe.
 
     Usage::
 
@@ -68,10 +69,20 @@ def progress(*, transient: bool = True, disable: bool = False):
 
     return Progress(TextColumn("[progress.description]{task.description}"), BarColumn(),
                     MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
-                    console=err_console, transient=transient, disable=disable)
+                    console=err_console, transient=transient,
+                    disable=disable or not err_console.is_terminal)
+
+
+_WARNINGS: list[str] = []
+
+
+def collected_warnings() -> tuple[str, ...]:
+    """The warnings printed by the running command so far (for its ``--report``)."""
+    return tuple(_WARNINGS)
 
 
 def _showwarning(message, category, filename, lineno, file=None, line=None):
+    _WARNINGS.append(format_error(message))
     err_console.print(f"warning: {format_error(message)}", soft_wrap=True)
 
 
@@ -97,6 +108,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     old = warnings.showwarning
     warnings.showwarning = _showwarning
+    _WARNINGS.clear()
     old_term = None
     if threading.current_thread() is threading.main_thread():
         old_term = signal.signal(signal.SIGTERM, _on_sigterm)

@@ -9,6 +9,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from multilat.cli import report_opt
 from multilat.cli.app import app, console, emit_json
 
 
@@ -50,10 +51,12 @@ def design_cmd(
     seed: int = typer.Option(1, "--seed", help="Seed of the search."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
     out: Optional[Path] = typer.Option(None, "--out", help="Directory for design.json and the figures."),
+    report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Predict a layout's uncertainty (pre-analysis) and optimise where the heads go."""
     from multilat.network.design.config import load_design_config, run_design
 
+    report_opt.check_report_path(report, [config, evaluate])
     cfg = load_design_config(config)
     heads = None
     if evaluate is not None:
@@ -75,6 +78,7 @@ def design_cmd(
             save_design_figures(run.best, tmp, box_min_m=tx.min(axis=0), box_max_m=tx.max(axis=0),
                                 min_range_m=h.min_range_m,
                                 max_range_m=np.inf if h.max_range_m is None else h.max_range_m)
+    report_opt.write_report(report, "design", doc, result=run)
     if as_json:
         emit_json(doc)
         return

@@ -67,6 +67,6 @@ def section(*, seed: int, quick: bool) -> Section:
         "metre the adjustment is linear to first order: the Monte Carlo confirms the GUM-style covariance rather "
         "than correcting it. The linear propagation uses the empirical std of the drawn distance errors; the "
         f"distance model's stated standard uncertainty is {1 / res_m.input_std_ratio:.3f} times its samples' std.")
-    sec.figure(clouds_figure(res_m, max_points=8 if quick else 16), caption="Point clouds of the distance-model Monte Carlo (top view, "
+    sec.figure(clouds_figure(res_m, max_points=6), caption="Point clouds of the distance-model Monte Carlo (x-y, x-z, y-z; "
                                              "deviation from the truth) with the MC and linear 95 % ellipsoids")
     return sec
