@@ -44,6 +44,41 @@ class LiteralConsole(Console):
         return super().render_str(printable(text), markup=False, **kw)
 
 
+    def print(self, *objects, **kw):
+        from rich.table import Table
+
+        for o in objects:
+            if isinstance(o, Table):
+                fit_table(o, self)
+        return super().print(*objects, **kw)
+
+
+def fit_table(table, console) -> None:
+    """Make a summary table fit the console's width without cutting a number: when its natural
+    width is too wide, drop the vertical rules and outer padding, let the headers wrap, and give
+    every column at least the width of its longest cell (ids fold onto a second line rather than
+    numbers being cut to ``-0.0000…``)."""
+    from rich import box
+    from rich.measure import Measurement
+
+    width = console.width
+    if Measurement.get(console, console.options.update_width(10**4), table).maximum <= width:
+        return
+    table.box = box.SIMPLE_HEAD
+    table.show_edge = False
+    table.pad_edge = False
+    table.padding = (0, 1)
+    table.title_justify = "left"
+    for i, col in enumerate(table.columns):
+        cells = [c if isinstance(c, str) else str(c) for c in col._cells]
+        col.overflow = "fold"
+        col.no_wrap = False
+        if i > 0 or col.justify == "right":
+            col.min_width = max((len(c) for c in cells), default=1)
+        if i == 0:
+            col.min_width = min(max((len(c) for c in cells), default=1), 8)
+
+
 console = LiteralConsole(stderr=False, highlight=False, markup=False, emoji=False)
 err_console = LiteralConsole(stderr=True, highlight=False, markup=False, emoji=False)
 
