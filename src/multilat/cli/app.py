@@ -73,9 +73,10 @@ def fit_table(table, console) -> None:
         cells = [c if isinstance(c, str) else str(c) for c in col._cells]
         col.overflow = "fold"
         col.no_wrap = False
-        if i > 0 or col.justify == "right":
-            col.min_width = max((len(c) for c in cells), default=1)
-        if i == 0:
+        if i > 0:   # values: a fixed width of the longest value (or header word); never shrunk
+            words = str(col.header).split() or [""]
+            col.width = max([len(c) for c in cells] + [len(w) for w in words] + [1])
+        else:       # ids: the column that gives way, folded onto more lines
             col.min_width = min(max((len(c) for c in cells), default=1), 8)
 
 
