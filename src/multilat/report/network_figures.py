@@ -107,14 +107,14 @@ def _as_pair(magnify, result) -> tuple[float, float]:
 
 
 def _scale_bar(ax, mag: float, length_m: float, col: str, label: str, row: int) -> None:
-    """A bar of ``length_m * mag`` (data units) in the lower left, labelled with the true length."""
-    x0, x1 = ax.get_xlim()
-    y0, y1 = ax.get_ylim()
-    bx = x0 + 0.04 * (x1 - x0)
-    by = y0 + (0.04 + 0.06 * row) * (y1 - y0)
-    ax.plot([bx, bx + length_m * mag], [by, by], "-", color=col, lw=2.5, solid_capstyle="butt")
-    ax.annotate(f"{label}: {length_m * 1e6:g} µm (×{mag:g})", (bx + length_m * mag, by), xytext=(4, -3),
-                textcoords="offset points", fontsize=7, color=col)
+    """A bar of ``length_m * mag`` (data units) anchored in a lower corner (row 0 left, 1 right),
+    labelled with the true length it stands for."""
+    from matplotlib.font_manager import FontProperties
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    ax.add_artist(AnchoredSizeBar(ax.transData, length_m * mag, f"{label}: {length_m * 1e6:g} µm (×{mag:g})",
+                                  "lower left" if row == 0 else "lower right", pad=0.4, color=col,
+                                  frameon=False, size_vertical=0, fontproperties=FontProperties(size=7)))
 
 
 def plot_top_view(result, ax=None, *, magnify=None):
