@@ -235,8 +235,8 @@ def propagate(doc: dict, result=None, options=None) -> list[Section]:
         ids = (options or {}).get("cloud_points")
         f = Section("Figures")
         f.figure(clouds_figure(result, points=_split_ids(ids)),
-                 caption="Monte Carlo clouds in three projections with the MC (solid) and linear (dashed) 95 % "
-                         "ellipsoids; right: the layout, chosen points circled")
+                 caption="Monte Carlo clouds (deviation from nominal) in the planes x-y, x-z, y-z with the MC (solid) "
+                         "and linear (dashed) 95 % ellipsoids; red: stations, blue: targets")
         out.append(f)
     return out
 
