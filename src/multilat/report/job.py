@@ -145,8 +145,15 @@ def meta_section(ctx: JobContext, doc: dict) -> Section:
             ("multilat version", ctx.version), ("date (UTC)", ctx.date_utc)]
     seed = ctx.options.get("seed")
     ent = doc.get("seed_entropy", doc.get("seed"))
-    rows.append(("seed", "-" if seed is None and ent is None else
-                 (f"{seed}" if seed is not None else f"fresh entropy {ent}")))
+    if seed is not None:
+        seed_text = f"{seed}"
+    elif ent is not None:
+        seed_text = f"fresh entropy {ent}"
+    elif "seed" in ctx.options:
+        seed_text = "fresh entropy (not recorded by this command: give --seed to repeat the run)"
+    else:
+        seed_text = "- (nothing random)"
+    rows.append(("seed", seed_text))
     sec.blocks.append("<table class='meta'><tbody>" + "".join(
         f"<tr><th>{_esc(k)}</th><td>{_esc(v)}</td></tr>" for k, v in rows) + "</tbody></table>")
     if ctx.inputs:

@@ -235,8 +235,8 @@ def propagate(doc: dict, result=None, options=None) -> list[Section]:
         ids = (options or {}).get("cloud_points")
         f = Section("Figures")
         f.figure(clouds_figure(result, points=_split_ids(ids)),
-                 caption="Monte Carlo clouds (deviation from nominal) in the planes x-y, x-z, y-z with the MC (solid) "
-                         "and linear (dashed) 95 % ellipsoids; red: stations, blue: targets")
+                 caption="Monte Carlo clouds (deviation from nominal) in the planes x-y, x-z, y-z with the "
+                         "MC (solid) and linear (dashed) 95 % ellipsoids; red: stations, blue: targets")
         out.append(f)
     return out
 
@@ -260,7 +260,8 @@ def simulate(doc: dict, result=None, options=None) -> list[Section]:
               caption=f"Standard deviation of the interpoint-distance errors per simulation "
                       f"({doc['converged']} of {doc['trials']} simulations converged)")
     sec.paragraph(f"First-order prediction of the rms per-simulation std: "
-                  f"{doc['predicted_rms_std_m'] * UM:.2f} µm (Monte Carlo rms {doc['interpoint_std_rms_m'] * UM:.2f} µm); "
+                  f"{doc['predicted_rms_std_m'] * UM:.2f} µm (Monte Carlo rms "
+                  f"{doc['interpoint_std_rms_m'] * UM:.2f} µm); "
                   f"the mean lies within 3 s.e. of the paper's: "
                   + (_verdict(abs(s["mean"] - doc["paper_m"]["mean"]) <= 3 * doc["interpoint_std_sem_m"])
                      if doc.get("paper_m") else "no paper value for this configuration"))

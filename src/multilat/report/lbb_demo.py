@@ -93,7 +93,8 @@ def section(*, seed: int, quick: bool) -> Section:
           f"{max(bc.l12_m, bc.l13_m, bc.l23_m) * 1e3:.0f} mm edges (sigma {_um(base_sigma, 1)} µm) dominates"],
          [f"height where std z at the centroid = {PAPER_MAX_STD_UM} µm (mm)", "'low z'", f"{z38 * 1e3:.0f}",
           "the paper's volume heights are not given (Table 2 lost)"],
-         ["log-log slope of std z vs z (z <= 80 mm)", "grows near the singularity", f"{slope:.2f}", "1/z law: -1 as z -> 0 (tested in tests/test_lbb_simulate.py)"]],
+         ["log-log slope of std z vs z (z <= 80 mm)", "grows near the singularity", f"{slope:.2f}",
+          "1/z law: -1 as z -> 0 (tested in tests/test_lbb_simulate.py)"]],
         caption="Seed 003 beside multilat (procedure of §5 unless stated)")
     sec.paragraph(
         f"Mean errors: with {mc.side_draws} side draws and {mc.point_draws} point draws, the mean of a point "

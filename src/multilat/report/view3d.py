@@ -18,7 +18,7 @@ _K95 = float(np.sqrt(7.814727903251178))     # sqrt(chi2_3(0.95))
 
 def available() -> bool:
     try:
-        import plotly  # noqa: F401
+        import plotly.graph_objects  # noqa: F401
     except ImportError:
         return False
     return True
