@@ -335,7 +335,8 @@ def budget(doc: dict, result=None, options=None) -> list[Section]:
     sec = Section("Budget")
     rows = []
     for g in doc["components"]:
-        rows.append((g, _um(doc, "components", g), _um(doc, "components", g, k=K),
+        label = g + (" (not in the combined)" if g == "air" and not doc.get("include_air") else "")
+        rows.append((label, _um(doc, "components", g), _um(doc, "components", g, k=K),
                      _um(doc, "means_m", g, sign=True), _um(doc, "stds_m", g)))
     ku, _ = _get(doc, "combined_std_m", "combined_u_m")
     rows.append(("combined" + (" (incl. air)" if doc.get("include_air") else ""), _um(doc, ku), _um(doc, ku, k=K),
@@ -343,7 +344,7 @@ def budget(doc: dict, result=None, options=None) -> list[Section]:
     sec.table(("group", "u (µm)", f"U, k = {K:g} (µm)", "mean (µm)", "standard deviation (µm)"), rows,
               caption=f"{doc['instrument']}, head {doc['head']}, {doc['trials']:,} trials over "
                       f"{len(doc['distances_m'])} distances; u = sqrt(mean² + variance): an uncorrected bias "
-                      "counts (seed 000 §3.4)")
+                      "counts (Guillory et al. 2020, Precision Engineering 66, §3.4)")
     sec.table(("interval", "low (µm)", "high (µm)"),
               [("95 % probabilistically symmetric", _um(doc, "coverage_95_m", 0, sign=True),
                 _um(doc, "coverage_95_m", 1, sign=True)),
