@@ -119,9 +119,13 @@ def _sigma_source(ctx: JobContext, doc: dict) -> list[str]:
     elif ctx.command in ("adjust", "propagate"):
         src = o.get("observations") or o.get("source")
         if src and os.path.isfile(str(src)):
+            header = ""
             with open(src, encoding="utf-8", errors="replace") as f:
-                header = f.readline()
-            if "sigma_m" in header.split(","):
+                for line in f:               # the first line that is not a comment or blank
+                    if line.strip() and not line.lstrip().startswith("#"):
+                        header = line
+                        break
+            if "sigma_m" in [c.strip() for c in header.split(",")]:
                 out.append(f"σ of each distance: the sigma_m column of {src} (k = 1)")
             else:
                 out.append("σ of each distance: the distance model of the instrument (k = 1)")
