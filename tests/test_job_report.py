@@ -185,6 +185,18 @@ def test_report_names_the_sigma_source(reports, tmp_path):
         assert words in (tmp_path / "r.html").read_text(encoding="utf-8")
 
 
+def test_report_lists_the_warnings_the_command_printed(tmp_path):
+    obs = EX / "network" / "small_volume_obs.csv"
+    rows = [r for r in obs.read_text().splitlines() if not r.startswith("#")]
+    f = tmp_path / "extra.csv"
+    f.write_text("\n".join([rows[0] + ",colour"] + [r + ",red" for r in rows[1:]]) + "\n")
+    rc, out, err = _run(["adjust", str(f), "--report", str(tmp_path / "r.html")])
+    assert rc == 0 and "warning:" in err and "colour" in err
+    text = (tmp_path / "r.html").read_text(encoding="utf-8")
+    warn = text[text.index("<h2>Warnings</h2>"):]
+    assert "colour" in warn and "No warning was raised" not in warn
+
+
 def test_report_figures_are_embedded(reports):
     for name in NAMES:
         p = _Cells()
