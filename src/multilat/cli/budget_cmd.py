@@ -65,17 +65,18 @@ def budget_command(
             raise MultilatError(f"cannot write --plot {plot}: {exc.strerror or exc}") from None
         finally:
             plt.close(fig)
-    d = res.to_dict()
-    d["seed"] = seed
-    d["plot"] = plot
-    d["unit"] = "m"
-    d["definition"] = ("standard uncertainty = sqrt(mean^2 + variance) of the error (uncorrected "
-                       "biases count, seed section 3.4); coverage_95_m: probabilistically symmetric "
-                       "interval of the combined error")
-    report_opt.write_report(report, "budget", d, result=res)
-    if as_json:
-        emit_json(d)
-        return
+    if as_json or report is not None:
+        d = res.to_dict()
+        d["seed"] = seed
+        d["plot"] = plot
+        d["unit"] = "m"
+        d["definition"] = ("standard uncertainty = sqrt(mean^2 + variance) of the error (uncorrected "
+                           "biases count, seed section 3.4); coverage_95_m: probabilistically symmetric "
+                           "interval of the combined error")
+        report_opt.write_report(report, "budget", d, result=res)
+        if as_json:
+            emit_json(d)
+            return
     t = Table(title=f"distance budget: {res.instrument}, head {res.head}, {res.trials:,} trials "
                     f"({res.distances_m.size} distances {res.distances_m[0]:g}-{res.distances_m[-1]:g} m), k = 1",
               title_justify="left")
