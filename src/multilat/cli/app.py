@@ -44,6 +44,42 @@ class LiteralConsole(Console):
         return super().render_str(printable(text), markup=False, **kw)
 
 
+    def print(self, *objects, **kw):
+        from rich.table import Table
+
+        for o in objects:
+            if isinstance(o, Table):
+                fit_table(o, self)
+        return super().print(*objects, **kw)
+
+
+def fit_table(table, console) -> None:
+    """Make a summary table fit the console's width without cutting a number: when its natural
+    width is too wide, drop the vertical rules and outer padding, let the headers wrap, and give
+    every column at least the width of its longest cell (ids fold onto a second line rather than
+    numbers being cut to ``-0.0000…``)."""
+    from rich import box
+    from rich.measure import Measurement
+
+    width = console.width
+    if Measurement.get(console, console.options.update_width(10**4), table).maximum <= width:
+        return
+    table.box = box.SIMPLE_HEAD
+    table.show_edge = False
+    table.pad_edge = False
+    table.padding = (0, 1)
+    table.title_justify = "left"
+    for i, col in enumerate(table.columns):
+        cells = [c if isinstance(c, str) else str(c) for c in col._cells]
+        col.overflow = "fold"
+        col.no_wrap = False
+        if i > 0:   # values: a fixed width of the longest value (or header word); never shrunk
+            words = str(col.header).split() or [""]
+            col.width = max([len(c) for c in cells] + [len(w) for w in words] + [1])
+        else:       # ids: the column that gives way, folded onto more lines
+            col.min_width = min(max((len(c) for c in cells), default=1), 8)
+
+
 console = LiteralConsole(stderr=False, highlight=False, markup=False, emoji=False)
 err_console = LiteralConsole(stderr=True, highlight=False, markup=False, emoji=False)
 
@@ -55,7 +91,8 @@ def emit_json(obj) -> None:
 
 
 def progress(*, transient: bool = True, disable: bool = False):
-    """A rich progress bar on stderr (so ``--json`` stdout stays clean).
+    """A rich progress bar on stderr (so ``--json`` stdout stays clean): shown whenever stderr is a
+    terminal, with ``--json`` too; nothing at all (not even a newline) when stderr is a file or pipe.
 
     Usage::
 
@@ -68,10 +105,20 @@ def progress(*, transient: bool = True, disable: bool = False):
 
     return Progress(TextColumn("[progress.description]{task.description}"), BarColumn(),
                     MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(),
-                    console=err_console, transient=transient, disable=disable)
+                    console=err_console, transient=transient,
+                    disable=disable or not err_console.is_terminal)
+
+
+_WARNINGS: list[str] = []
+
+
+def collected_warnings() -> tuple[str, ...]:
+    """The warnings printed by the running command so far (for its ``--report``)."""
+    return tuple(_WARNINGS)
 
 
 def _showwarning(message, category, filename, lineno, file=None, line=None):
+    _WARNINGS.append(format_error(message))
     err_console.print(f"warning: {format_error(message)}", soft_wrap=True)
 
 
@@ -97,6 +144,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = list(sys.argv[1:] if argv is None else argv)
     old = warnings.showwarning
     warnings.showwarning = _showwarning
+    _WARNINGS.clear()
     old_term = None
     if threading.current_thread() is threading.main_thread():
         old_term = signal.signal(signal.SIGTERM, _on_sigterm)

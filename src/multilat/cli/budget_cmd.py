@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Optional
 
 import typer
 from rich.table import Table
 
-from multilat.cli import checks
+from multilat.cli import checks, report_opt
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 
@@ -27,6 +28,7 @@ def budget_command(
                                             "(default from the instrument; the seed excludes it)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
     plot: Optional[str] = typer.Option(None, "--plot", help="Write the error histograms (Figs. 9-10) to this PNG."),
+    report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Uncertainty of one distance measurement by Monte Carlo: telemetric, head and target groups
     (and optionally air), pooled over 0.2 m to 20.2 m (seed paper section 3.4)."""
@@ -35,6 +37,7 @@ def budget_command(
 
     checks.seed(seed)
     checks.trials(trials, lo=2)
+    report_opt.check_report_path(report, [instrument if str(instrument).endswith(".toml") else None])
     if plot is not None:
         from multilat.io import check_not_input
 
@@ -46,7 +49,7 @@ def budget_command(
     with progress(disable=total < 500_000) as bar:
         task = bar.add_task("Monte Carlo", total=total)
         res = bmod.distance_budget(inst, head=head, trials=n, rng=seed, include_air=air,
-                                   keep_samples=plot is not None,
+                                   keep_samples=plot is not None or report is not None,
                                    progress=lambda done, tot: bar.update(task, completed=done))
     if plot is not None:
         from multilat.io import atomic_path
@@ -62,7 +65,7 @@ def budget_command(
             raise MultilatError(f"cannot write --plot {plot}: {exc.strerror or exc}") from None
         finally:
             plt.close(fig)
-    if as_json:
+    if as_json or report is not None:
         d = res.to_dict()
         d["seed"] = seed
         d["plot"] = plot
@@ -70,8 +73,10 @@ def budget_command(
         d["definition"] = ("standard uncertainty = sqrt(mean^2 + variance) of the error (uncorrected "
                            "biases count, seed section 3.4); coverage_95_m: probabilistically symmetric "
                            "interval of the combined error")
-        emit_json(d)
-        return
+        report_opt.write_report(report, "budget", d, result=res)
+        if as_json:
+            emit_json(d)
+            return
     t = Table(title=f"distance budget: {res.instrument}, head {res.head}, {res.trials:,} trials "
                     f"({res.distances_m.size} distances {res.distances_m[0]:g}-{res.distances_m[-1]:g} m), k = 1",
               title_justify="left")

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import typer
 
+from multilat.cli import report_opt
 from multilat.cli.app import app, console, emit_json
 
 
@@ -36,6 +37,7 @@ def correct_cmd(
     plot: Path = typer.Option(None, "--plot", help="Write a PNG: environment per sensor and the "
                               "per-observation index correction with its uncertainty."),
     as_json: bool = typer.Option(False, "--json", help="Print the full result as JSON."),
+    report: Path = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Correct raw readings (air group index, transit offsets) into distances with sigma_m."""
     from multilat.campaign.correct import correct_file, write_covariance, write_observations
@@ -48,6 +50,7 @@ def correct_cmd(
     for opt, path in outputs.items():
         check_not_input(path, inputs, opt)
     given = [(o, p) for o, p in outputs.items() if p is not None]
+    report_opt.check_report_path(report, inputs + [p for _, p in given])
     for i, (o, p) in enumerate(given):
         for o2, p2 in given[i + 1:]:
             if Path(p).resolve() == Path(p2).resolve():
@@ -70,6 +73,7 @@ def correct_cmd(
             write_covariance(tmp["--cov"], res)
         if out is not None:
             write_observations(tmp["--out"], res)
+    report_opt.write_report(report, "correct", res, result=(res, log))
     if as_json:
         emit_json(res)
         return

@@ -2,22 +2,13 @@
 
 from __future__ import annotations
 
-import importlib
 from pathlib import Path
 
 import typer
 
-from multilat.cli.app import app, console, progress
+from multilat.cli.app import app, collected_warnings, console, progress
 from multilat.io import write_text_atomic
-
-# Each module provides ``section(*, seed: int, quick: bool) -> multilat.report.html.Section``.
-DEMO_SECTIONS = (
-    "multilat.report.distance_demo",   # seed 000 §2-3: air index, ADM, budget
-    "multilat.report.network_demo",    # seed 000 §4: self-calibrating multilateration
-    "multilat.report.campaign_demo",   # seed 000 §3.2, 4.2: raw readings -> corrected distances
-    "multilat.report.propagate_demo",  # full Monte Carlo through the adjustment
-    "multilat.report.lbb_demo",        # seed 003: laser ball bar
-)
+from multilat.report.demo import DEMO_SECTIONS  # noqa: F401  (re-exported: tests count the sections)
 
 
 @app.command()
@@ -28,20 +19,22 @@ def demo(
 ) -> None:
     """Reproduce the seed papers' numbers beside multilat's own, as DIR/report.html."""
     from multilat.cli import checks
-    from multilat.report.html import render
+    from multilat.cli.report_opt import _current_context
+    from multilat.report.demo import build_demo
+    from multilat.report.job import JobContext
 
     checks.seed(seed)
     if out.exists() and not out.is_dir():
         from multilat.errors import MultilatError
 
         raise MultilatError(f"--out {out}: exists and is not a directory")
-    sections = []
+    ctx = _current_context()
+    jc = JobContext.from_options("demo", dict(ctx.params) if ctx else {"seed": seed, "quick": quick},
+                                 command_line=ctx.command_path if ctx else "multilat demo")
     with progress() as p:
         task = p.add_task("demo", total=len(DEMO_SECTIONS))
-        for name in DEMO_SECTIONS:
-            mod = importlib.import_module(name)
-            sections.append(mod.section(seed=seed, quick=quick))
-            p.advance(task)
+        page = build_demo(seed=seed, quick=quick, context=jc, advance=lambda: p.advance(task),
+                          warnings=collected_warnings)
     target = out / "report.html"
-    write_text_atomic(target, render("multilat: the seed papers reproduced", sections))
-    console.print(f"wrote {target} ({len(sections)} sections)")
+    write_text_atomic(target, page)
+    console.print(f"wrote {target} ({len(DEMO_SECTIONS)} sections)")

@@ -9,6 +9,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
+from multilat.cli import report_opt
 from multilat.cli.app import app, console, emit_json
 
 
@@ -75,10 +76,12 @@ def design_cmd(
     noise: Optional[str] = typer.Option(None, "--noise",
                                         help="Monte Carlo distance errors: gaussian or model (default: model "
                                              "with an instrument, else gaussian)."),
+    report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Predict a layout's uncertainty (pre-analysis) and optimise where the heads go."""
     from multilat.network.design.config import load_design_config, run_design
 
+    report_opt.check_report_path(report, [config, evaluate])
     cfg = load_design_config(config)
     heads = None
     if evaluate is not None:
@@ -112,6 +115,7 @@ def design_cmd(
             save_design_figures(run.best, tmp, box_min_m=tx.min(axis=0), box_max_m=tx.max(axis=0),
                                 min_range_m=h.min_range_m,
                                 max_range_m=np.inf if h.max_range_m is None else h.max_range_m)
+    report_opt.write_report(report, "design", doc, result=run)
     if as_json:
         emit_json(doc)
         return

@@ -8,7 +8,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from multilat.cli import checks
+from multilat.cli import checks, report_opt
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 
@@ -94,6 +94,7 @@ def simulate(
     json_out: bool = typer.Option(False, "--json", help="Print JSON (points, max_std_m, trials, ...)."),
     out: Path = typer.Option(None, "--out", help="Directory for points.csv, sides.csv, summary.json, "
                              "fig8_*.png, fig9_cdf.png."),
+    report: Path = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Monte Carlo coordinate uncertainty of LBB trilateration over the work volume."""
     from multilat.lbb.config import load_config
@@ -102,6 +103,7 @@ def simulate(
 
     checks.seed(seed)
     checks.trials(trials, lo=2)
+    report_opt.check_report_path(report, [config])
     if out is not None:
         from multilat.io import check_output_dir
 
@@ -118,6 +120,7 @@ def simulate(
         marks = cfg.comparison.points() if where == "volume" else None
         with staging_dir(out, inputs=[config]) as tmp:
             write_simulation(tmp, sim, cfg, marks_m=marks)
+    report_opt.write_report(report, "lbb simulate", summary(sim), result=(sim, cfg))
     if json_out:
         emit_json(summary(sim))
         return
@@ -147,6 +150,7 @@ def compare(
     method: str = typer.Option("procedure", "--method", help="procedure or direct."),
     json_out: bool = typer.Option(False, "--json", help="Print JSON."),
     out: Path = typer.Option(None, "--out", help="Directory for comparison.csv and fig7_comparison.png."),
+    report: Path = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """LBB coordinates vs reference coordinates with simulated 2σ bars (the paper's Fig. 7)."""
     from multilat.lbb.config import load_config
@@ -155,6 +159,7 @@ def compare(
 
     checks.seed(seed)
     checks.trials(trials, lo=2)
+    report_opt.check_report_path(report, [edges, reference, config])
     if out is not None:
         from multilat.io import check_output_dir
 
@@ -172,15 +177,17 @@ def compare(
         with staging_dir(out, inputs=[edges, reference, config]) as tmp:
             write_comparison(tmp, comp)
     frac = float(np.mean(comp.inside_2sigma))
+    doc = {"points": [{"point": pt, "difference_m": comp.difference_m[i],
+                       "sim_mean_error_m": comp.simulation.mean_error_m[i],
+                       "sim_std_m": comp.simulation.std_m[i], "inside_2sigma": comp.inside_2sigma[i]}
+                      for i, pt in enumerate(comp.points)],
+           "fraction_inside_2sigma": frac,
+           "fraction_inside_2sigma_per_axis": dict(zip("xyz", comp.inside_fraction_per_axis)),
+           "normalised_rms_per_axis": dict(zip("xyz", comp.normalised_rms_per_axis)),
+           "method": method, "trials": comp.simulation.trials}
+    report_opt.write_report(report, "lbb compare", doc, result=comp)
     if json_out:
-        emit_json({"points": [{"point": pt, "difference_m": comp.difference_m[i],
-                               "sim_mean_error_m": comp.simulation.mean_error_m[i],
-                               "sim_std_m": comp.simulation.std_m[i], "inside_2sigma": comp.inside_2sigma[i]}
-                              for i, pt in enumerate(comp.points)],
-                   "fraction_inside_2sigma": frac,
-                   "fraction_inside_2sigma_per_axis": dict(zip("xyz", comp.inside_fraction_per_axis)),
-                   "normalised_rms_per_axis": dict(zip("xyz", comp.normalised_rms_per_axis)),
-                   "method": method, "trials": comp.simulation.trials})
+        emit_json(doc)
         return
     table = Table(title="LBB - reference (µm) and simulated 2σ")
     for c in ("point", "dx", "dy", "dz", "2σ x", "2σ y", "2σ z"):

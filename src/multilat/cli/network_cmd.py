@@ -11,7 +11,7 @@ from rich.table import Table
 
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
-from multilat.cli import checks
+from multilat.cli import checks, report_opt
 from multilat.io import check_output_dir, staging_dir
 
 
@@ -119,6 +119,7 @@ def adjust_command(
     strict: bool = typer.Option(False, "--strict",
                                 help="Refuse the network when a point is too weakly observed, instead "
                                      "of leaving it out with a warning."),
+    report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
@@ -130,6 +131,7 @@ def adjust_command(
 
     checks.sigma_um(sigma_um)
     checks.seed(seed)
+    report_opt.check_report_path(report, [observations, references, points, environment, heights])
     if solver not in ("auto", "dense", "sparse"):
         raise MultilatError(f"--solver must be auto, dense or sparse, got {solver!r}")
     if out is not None:
@@ -198,6 +200,7 @@ def adjust_command(
             from multilat.io import write_json_atomic
 
             write_json_atomic(tmp / "result.json", doc)
+    report_opt.write_report(report, "adjust", doc, result=res)
     if as_json:
         emit_json(doc)
         return

@@ -9,7 +9,7 @@ import numpy as np
 import typer
 from rich.table import Table
 
-from multilat.cli import checks
+from multilat.cli import checks, report_opt
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 
@@ -85,6 +85,11 @@ def propagate_cmd(
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of an existing Dask scheduler."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
     out: Optional[Path] = typer.Option(None, "--out", help="Directory for CSVs, JSON and the figure."),
+    cloud_points: Optional[str] = typer.Option(None, "--cloud-points",
+                                               help="Points whose Monte Carlo clouds clouds.png (and the "
+                                                    "report) show, ID,ID,... (default: the stations and "
+                                                    "the targets with the largest ellipsoids)."),
+    report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Monte Carlo (JCGM 101/102) of stations, offsets, targets and interpoint distances."""
     from multilat.network.propagate import propagate
@@ -95,6 +100,7 @@ def propagate_cmd(
     checks.sigma_um(sigma_um)
     checks.seed(seed)
     checks.trials(trials, lo=2)
+    report_opt.check_report_path(report, [source, references, environment, heights])
     checks.count(chunk_size, "--chunk-size", hi=10**8)
     checks.count(workers, "--workers", hi=4096)
     if scheduler is not None:
@@ -110,11 +116,11 @@ def propagate_cmd(
                            formula=formula, extrapolate=extrapolate, max_gap_s=max_gap_s,
                            average_repeats=average_repeats)
     total = None if adaptive else trials
-    with map_from_options(workers=workers, scheduler=scheduler) as m, progress(disable=as_json) as bar:
+    with map_from_options(workers=workers, scheduler=scheduler) as m, progress() as bar:
         task = bar.add_task("Monte Carlo", total=total)
         res = propagate(problem, trials=trials, rng=seed, noise=noise, instrument=instrument,
                         adaptive=adaptive, chunk_size=chunk_size, map=m,
-                        progress=lambda n: bar.update(task, completed=n), keep_samples=out is not None)
+                        progress=lambda n: bar.update(task, completed=n), keep_samples=out is not None or report is not None)
     doc = res.to_dict()
     if problem.readings is not None:
         doc["readings"] = problem.readings.to_json()
@@ -123,14 +129,15 @@ def propagate_cmd(
 
         # all or nothing: files go to a temporary directory beside OUT, moved in only on success
         with staging_dir(out, inputs=[source, references, environment, heights]) as tmp:
-            write_outputs(res, doc, tmp)
+            write_outputs(res, doc, tmp, cloud_points=cloud_points)
+    report_opt.write_report(report, "propagate", doc, result=res)
     if as_json:
         emit_json(doc)
         return
     _print(res, doc, out)
 
 
-def write_outputs(res, doc, out: Path) -> None:
+def write_outputs(res, doc, out: Path, *, cloud_points: str | None = None) -> None:
     """Write ``summary.json``, ``parameters.csv``, ``distances.csv``, ``points.csv``, ``clouds.png``
     into ``out`` (the command passes a :func:`multilat.io.staging_dir`, so the set appears in
     ``--out`` whole or not at all)."""
@@ -153,7 +160,8 @@ def write_outputs(res, doc, out: Path) -> None:
                      ["id", "a1_95_m", "a2_95_m", "a3_95_m", "coverage_mc_ellipsoid", "coverage_lin_ellipsoid"],
                      ([p["id"], *p["semi_axes_95_m"], p["ellipsoid_coverage_mc"], p["ellipsoid_coverage_lin"]]
                       for p in doc["points"]))
-    fig = clouds_figure(res)
+    fig = clouds_figure(res, points=[s.strip() for s in cloud_points.split(",") if s.strip()]
+                        if cloud_points else None)
     with atomic_path(out / "clouds.png") as tmp:
         fig.savefig(tmp, format="png", dpi=110, bbox_inches="tight")
     import matplotlib.pyplot as plt

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+from typing import Optional
 
 import numpy as np
 import typer
 from rich.table import Table
 
-from multilat.cli import checks
+from multilat.cli import checks, report_opt
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 
@@ -26,6 +28,7 @@ def simulate_cmd(
                               "alone) or truth."),
     seed: int = typer.Option(2020, "--seed", help="Root seed (each simulation gets a SeedSequence child)."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
+    report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Simulate distances of a configuration (truth + offsets + noise), adjust them, and report the
     standard deviation of the interpoint-distance errors per simulation: min/mean/max beside the paper."""
@@ -36,6 +39,7 @@ def simulate_cmd(
     checks.sigma_um(sigma_um)
     checks.count(trials, "--trials", hi=10**6)   # each trial is a whole adjustment
     checks.seed(seed)
+    report_opt.check_report_path(report, [source])
     from multilat.instrument import load_instrument
 
     load_instrument(instrument)          # a bad --instrument is an error even when --noise ignores it
@@ -44,7 +48,7 @@ def simulate_cmd(
     if start not in ("distances", "truth"):
         raise MultilatError(f"--start must be distances or truth, got {start!r}")
     cfg = load_config(source)
-    with progress(disable=as_json) as bar:
+    with progress() as bar:
         task = bar.add_task(f"simulate {cfg.name}", total=trials)
         res = simulate(cfg, trials=trials, noise=noise, sigma_m=sigma_um * 1e-6, instrument=instrument,
                        rng=seed, cost=cost, initial=start, callback=lambda n: bar.advance(task, n))
@@ -67,6 +71,7 @@ def simulate_cmd(
         "sigma0_mean": float(np.mean(res.sigma0)),
         "per_simulation_std_m": res.interpoint_std_m,
     }
+    report_opt.write_report(report, "simulate", doc, result=res)
     if as_json:
         emit_json(doc)
         return

@@ -65,7 +65,9 @@ def section(*, seed: int, quick: bool) -> Section:
          ["readings", "56", f"{camp.raw.size}"],
          ["longest distance / m", f"{PAPER_LONGEST_M}", f"{long_m:.2f}"],
          ["temperature sensitivity / (µm/m/°C)", f"{PAPER_SENSITIVITY_UM_PER_M_C}", f"{s_t * 1e6:.3f}"],
-         ["distance error of 0.5 °C at 11.54 m / µm", f"{PAPER_ERROR_UM}",
+         [f"distance error of 0.5 °C at {PAPER_LONGEST_M} m / µm: sensitivity × 0.5 °C × {PAPER_LONGEST_M} m "
+          "(a product of the row above, not a result of the campaign; the campaign's errors are in the "
+          "next table)", f"{PAPER_ERROR_UM}",
           f"{abs(s_t) * 0.5 * PAPER_LONGEST_M * 1e6:.2f}"]],
         caption="The campaign's conditions and the paper's gradient error check (Ciddor group index, 1550 nm)")
 

@@ -11,8 +11,15 @@ __all__ = ["section"]
 PAPER_BUDGET_UM = {"telemetric": 2.1, "head": 1.4, "target": 3.9, "combined": 4.7}
 
 
-def _ok(ours: float, paper: float, digits: int = 1) -> str:
-    return "yes" if round(ours, digits) == round(paper, digits) else "no"
+def _ok(ours: float, paper: float, digits: int = 1, *, shown: int = 2) -> str:
+    """The verdict of a row, computed from the number the row shows: ours as printed (``shown``
+    decimals), rounded half-up to the paper's ``digits``, equals the paper's value."""
+    from decimal import ROUND_HALF_UP, Decimal
+
+    printed = Decimal(f"{ours:.{shown}f}")
+    q = Decimal(1).scaleb(-digits)
+    same = printed.quantize(q, ROUND_HALF_UP) == Decimal(f"{paper:.{digits}f}")
+    return "yes" if same else "no"
 
 
 def section(*, seed: int, quick: bool) -> Section:
@@ -41,7 +48,8 @@ def section(*, seed: int, quick: bool) -> Section:
     rows = [
         ("synthetic wavelength c/f (vacuum)", "61.2 mm", f"{lam * 1e3:.2f} mm", _ok(lam * 1e3, 61.2)),
         ("1 modulation frequency: 1.5e-9/yr ageing", "1.5e-9 x L (30 nm at 20 m)",
-         f"{t.clock_relative_std:.1e} x L ({t.clock_relative_std * 20 * 1e9:.0f} nm at 20 m)", "yes"),
+         f"{t.clock_relative_std:.1e} x L ({t.clock_relative_std * 20 * 1e9:.0f} nm at 20 m)",
+         _ok(t.clock_relative_std * 1e9, 1.5, shown=1)),
         ("2 crosstalk, SCR 65 dB: cyclic amplitude", "2.7 µm", f"{t.crosstalk_amplitude_m * 1e6:.2f} µm",
          _ok(t.crosstalk_amplitude_m * 1e6, 2.7)),
         ("2 crosstalk: arcsine std", "1.9 µm", f"{t.crosstalk_std_m * 1e6:.2f} µm", _ok(t.crosstalk_std_m * 1e6, 1.9)),
@@ -61,7 +69,7 @@ def section(*, seed: int, quick: bool) -> Section:
                               formula=formula)
         for k, (pv, scale, unit) in paper2.items():
             ours = float(s[k]) * 1e6 * scale
-            rows.append((f"{k} ({formula})", f"{pv:+.2f} {unit}", f"{ours:+.3f}", _ok(ours, pv, 2)))
+            rows.append((f"{k} ({formula})", f"{pv:+.2f} {unit}", f"{ours:+.3f}", _ok(ours, pv, 2, shown=3)))
     sec.table(("parameter", "paper", "multilat", "same to paper's rounding"), rows,
               caption="Table II: group-index sensitivities at 20 °C, 1013.25 hPa, 50 %RH, 450 ppm, 1550 nm "
                       "(computed by multilat.air)")

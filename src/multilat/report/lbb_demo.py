@@ -6,8 +6,8 @@ import numpy as np
 
 from multilat.report.html import Section
 
-PAPER_MAX_MEAN_ERROR_UM = 0.7      # §6: Fig. 8 colour scale "from zero to 0.7 um"
-PAPER_MAX_STD_UM = 3.8             # §6: "the uncertainty is highest, 3.8 um, at low z heights"
+PAPER_MAX_MEAN_ERROR_UM = 0.7      # §6: Fig. 8 colour scale "from zero to 0.7 µm"
+PAPER_MAX_STD_UM = 3.8             # §6: "the uncertainty is highest, 3.8 µm, at low z heights"
 PAPER_THERMAL_SIGMA_UM = 0.147     # §3.1.6
 PAPER_AGREEMENT = 0.96             # §6: Monte Carlo bars overlap the LBB bars in 96 % of cases
 
@@ -62,40 +62,56 @@ def section(*, seed: int, quick: bool) -> Section:
     l0 = l0_distribution(cfg, rng=seed + 3)
     th = pose_distributions(cfg)["thermal_m"].std
     no_base = run_procedure(cfg.replace(base__thermal_bound_c=0.0), pts[worst] if quick else pts, rng=seed)
+    # procedure vs direct at the centroid 200 mm up (the procedure's value is the profile's z = 0.2 m)
+    i200 = int(np.argmin(np.abs(z - 0.2)))
+    d200 = run_direct(cfg, np.array([[cx, cy, z[i200]]]), trials=500 if quick else 20000, rng=seed + 5)
+    bc = cfg.base
+    base_sigma = max(bc.l12_m, bc.l13_m, bc.l23_m) * bc.thermal_cte_per_c * bc.thermal_bound_c / np.sqrt(3.0)
+    mc = cfg.monte_carlo
+    mean_noise = np.sqrt(1.0 / mc.side_draws + 1.0 / mc.point_draws)
+    std_lo, std_hi = np.percentile(np.max(proc.std_m, axis=1), [10, 90])
 
     sec.table(
         ["quantity", "paper", "multilat", "note"],
         [["thermal error of the unsensed length, sigma (µm)", f"{PAPER_THERMAL_SIGMA_UM}", _um(th, 3),
-          "19.6 mm x 15 µm/(m°C) x 1 °C / 2 (paper's bound = 2 sigma); uniform ±1 °C gives 0.170"],
+          f"19.6 mm x 15 µm/(m°C) x 1 °C / 2 (paper's bound = 2 sigma); uniform ±1 °C gives "
+          f"{_um(2 * th / np.sqrt(3.0), 3)}"],
          ["L0 error: mean / std (µm)", "-", f"{_um(l0.estimate, 3)} / {_um(l0.std, 3)}",
-          "std = DMI 0.125 (+) thermal 0.147; mean = fixture offset bias (eq. 6), ~0.011 µm, + sag"],
+          "std = DMI (+) thermal; mean = fixture offset bias (eq. 6) + sag"],
          ["|mean error| over the volume: median / 90th percentile / max (µm)",
           f"0 to {PAPER_MAX_MEAN_ERROR_UM} (Fig. 8 scale)",
           " / ".join(_um(v) for v in np.percentile(proc.error_magnitude_m, [50, 90, 100])),
-          f"{len(pts)} points, 100 x 100 draws: Monte Carlo noise of the mean, see below"],
+          f"{len(pts)} points, {mc.side_draws} x {mc.point_draws} draws: Monte Carlo noise of the mean, "
+          "see below"],
          ["|mean error| at the worst points, direct, many trials (µm)", "-",
           ", ".join(_um(v) for v in direct.error_magnitude_m),
           f"{direct.trials} trials: the model's true bias is this small"],
          ["largest coordinate std over the volume (µm)", f"{PAPER_MAX_STD_UM}", _um(proc.max_std_m),
           f"lowest level z = {min(cfg.volume.z_levels_m) * 1e3:.0f} mm; grows like 1/z below"],
          ["largest std without the base-edge thermal drift (µm)", "-", _um(no_base.max_std_m),
-          "the ±1 °C, 12 µm/(m°C) drift of the 564 mm edges (sigma 3.9 µm) dominates"],
-         ["height where std z at the centroid = 3.8 µm (mm)", "'low z'", f"{z38 * 1e3:.0f}",
+          f"the ±{bc.thermal_bound_c:g} °C, {bc.thermal_cte_per_c * 1e6:g} µm/(m°C) drift of the "
+          f"{max(bc.l12_m, bc.l13_m, bc.l23_m) * 1e3:.0f} mm edges (sigma {_um(base_sigma, 1)} µm) dominates"],
+         [f"height where std z at the centroid = {PAPER_MAX_STD_UM} µm (mm)", "'low z'", f"{z38 * 1e3:.0f}",
           "the paper's volume heights are not given (Table 2 lost)"],
-         ["log-log slope of std z vs z (z <= 80 mm)", "grows near the singularity", f"{slope:.2f}", "1/z law: -1 as z -> 0 (tests: -1.00 +- 0.08 at 10-40 mm)"]],
+         ["log-log slope of std z vs z (z <= 80 mm)", "grows near the singularity", f"{slope:.2f}",
+          "1/z law: -1 as z -> 0 (tested in tests/test_lbb_simulate.py)"]],
         caption="Seed 003 beside multilat (procedure of §5 unless stated)")
     sec.paragraph(
-        "Mean errors: with 100 side draws and 100 point draws, the mean of a point cloud scatters by about "
-        "std x sqrt(1/100 + 1/100) = 0.14 std, i.e. 0.3-0.8 µm where the std is 2-6 µm; that is the size of "
-        "the paper's 'up to 0.7 µm'. With many trials the model's bias (second-order cosine and sag terms, "
-        "the eq. 6 fixture bias) is a few tens of nanometres. The 96 % LBB-CMM agreement of Fig. 7 cannot be "
+        f"Mean errors: with {mc.side_draws} side draws and {mc.point_draws} point draws, the mean of a point "
+        f"cloud scatters by about std x sqrt(1/{mc.side_draws} + 1/{mc.point_draws}) = {mean_noise:.2f} std, "
+        f"i.e. {_um(mean_noise * std_lo, 1)}-{_um(mean_noise * std_hi, 1)} µm where the std is "
+        f"{_um(std_lo, 1)}-{_um(std_hi, 1)} µm (10th-90th percentile over the volume); compare the paper's "
+        f"'up to {PAPER_MAX_MEAN_ERROR_UM} µm'. With {direct.trials} direct trials the model's bias (second-order "
+        f"cosine and sag terms, the eq. 6 fixture bias) is at most {_um(np.max(direct.error_magnitude_m), 3)} µm "
+        f"at the worst points. The {PAPER_AGREEMENT:.0%} LBB-CMM agreement of Fig. 7 cannot be "
         "recomputed: the measured data are only in the (lost) figure; `multilat lbb compare` does the "
         "comparison for a user's data.")
     sec.paragraph(
         "Procedure vs direct: both give each side length the same marginal distribution, but step 7 draws "
         "the six sides independently and so drops the L0 error they share and the table temperature the "
-        "three base edges share. At the centroid 200 mm up the direct propagation gives std (x, y, z) of "
-        f"about (1.95, 1.15, 3.7) µm against the procedure's (1.9, 2.7, 2.1) µm; linear propagation J S J^T "
+        f"three base edges share. At the centroid {z[i200] * 1e3:.0f} mm up the direct propagation gives std "
+        f"(x, y, z) = ({', '.join(_um(v, 2) for v in d200.std_m[0])}) µm ({d200.trials} trials) against the "
+        f"procedure's ({', '.join(_um(v, 2) for v in prof.std_m[i200])}) µm; linear propagation J S J^T "
         "vs J diag(S) J^T reproduces both (tests/test_lbb_simulate.py).")
     from multilat.lbb.contributions import contributions
 
@@ -122,5 +138,5 @@ def section(*, seed: int, quick: bool) -> Section:
     axes[1].axhline(PAPER_MAX_STD_UM, color="grey", lw=0.8, ls="--")
     sec.figure(fig, caption="Left: Fig. 9 (ours), cumulative distributions of error magnitudes. Right: "
                             "coordinate std above the base centroid against height (dashed: the paper's "
-                            "3.8 µm).")
+                            f"{PAPER_MAX_STD_UM} µm).")
     return sec

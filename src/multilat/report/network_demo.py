@@ -188,8 +188,12 @@ def section(*, seed: int, quick: bool) -> Section:
     sec.figure(fig, caption="Per-simulation std of the interpoint errors: our distribution beside the paper's "
                             "min / mean / max over 50 simulations.")
     sec.paragraph(
-        "With 9 (small) or 6 (large) correlated pairs the per-simulation std scatters by about 32 % / 43 % "
-        "(relative), so min and max over 50 simulations are wide and mostly reflect that scatter; the mean is the comparable figure, and "
+        "With " + " or ".join(f"{len(results[c.name].pairs)} ({c.name})" for c in cfgs)
+        + " correlated pairs the per-simulation std scatters by "
+        + " / ".join(f"{np.std(s, ddof=1) / np.mean(s):.0%}"
+                     for s in (results[c.name].interpoint_std_m for c in cfgs))
+        + f" (relative standard deviation over our {n_g} simulations), so min and max over 50 simulations "
+        "are wide and mostly reflect that scatter; the mean is the comparable figure, and "
         "the first-order prediction sqrt(tr(C Σ_L)/(k-1)) from the adjustment's covariance checks the Monte Carlo "
         "independently. Our reconstruction of the target layouts decides the level: see "
         "docs/network-simulation.md for the discussion.")

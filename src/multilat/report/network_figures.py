@@ -2,8 +2,9 @@
 views of heads, targets and their 95 % confidence ellipsoids (Figs. 11-12).
 
 Plot functions take ``ax=None`` and return the axes; :func:`save_figures` writes PNGs atomically.
-Ellipsoids are magnified (``magnify``) to be visible beside metre-sized layouts; the factor is in the
-title.
+Ellipsoids are magnified (``magnify``) to be visible beside metre-sized layouts, separately for heads
+and targets (:func:`class_magnifications`); the factors are in the title and legend, a scale bar per
+class gives the true size.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["plot_residuals", "plot_top_view", "plot_3d", "save_figures", "auto_magnify",
-           "place_labels"]
+           "class_magnifications", "place_labels"]
 
 
 def _plt():
@@ -66,27 +67,80 @@ def auto_magnify(result) -> float:
     return float(max(m for m in (1, 2, 5) if m * dec <= want) * dec)
 
 
-def plot_top_view(result, ax=None, *, magnify: float | None = None):
+def _nice(x: float) -> float:
+    """The largest 1-2-5 number <= x (x > 0)."""
+    dec = 10 ** np.floor(np.log10(x))
+    return float(max(m for m in (1, 2, 5) if m * dec <= x * (1 + 1e-12)) * dec)
+
+
+def _semi_axes_95(cov) -> np.ndarray:
+    """Largest 95 % semi-axis of each 3x3 covariance (NaN where it is not finite)."""
+    from scipy import stats
+
+    c = np.asarray(cov, float).reshape(-1, 3, 3)
+    out = np.full(len(c), np.nan)
+    ok = np.isfinite(c).all(axis=(1, 2))
+    if ok.any():
+        out[ok] = np.sqrt(stats.chi2.ppf(0.95, 3) * np.clip(np.linalg.eigvalsh(c[ok])[:, -1], 0, None))
+    return out
+
+
+def class_magnifications(result, *, share: float = 0.06) -> tuple[float, float]:
+    """1-2-5 magnifications (stations, targets), each making the largest 95 % ellipsoid of its class
+    about ``share`` of the layout's span: a target ellipsoid ten times smaller than the heads' does
+    not vanish beside them."""
+    pts = np.vstack([result.station_xyz_m, result.target_xyz_m])
+    span = float(np.ptp(pts, axis=0).max()) or 1.0
+    out = []
+    for cov in (result.station_cov_m2, result.target_cov_m2):
+        big = float(np.nanmax(_semi_axes_95(cov), initial=0.0)) if len(cov) else 0.0
+        out.append(1.0 if not big > 0 else _nice(share * span / big))
+    return out[0], out[1]
+
+
+def _as_pair(magnify, result) -> tuple[float, float]:
+    if magnify is None:
+        return class_magnifications(result)
+    if np.ndim(magnify) == 0:
+        return float(magnify), float(magnify)
+    return float(magnify[0]), float(magnify[1])
+
+
+def _scale_bar(ax, mag: float, length_m: float, col: str, label: str, row: int) -> None:
+    """A bar of ``length_m * mag`` (data units) anchored in a lower corner (row 0 left, 1 right),
+    labelled with the true length it stands for."""
+    from matplotlib.font_manager import FontProperties
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    ax.add_artist(AnchoredSizeBar(ax.transData, length_m * mag, f"{label}: {length_m * 1e6:g} µm (×{mag:g})",
+                                  "lower left" if row == 0 else "lower right", pad=0.4, color=col,
+                                  frameon=False, size_vertical=0, fontproperties=FontProperties(size=7)))
+
+
+def plot_top_view(result, ax=None, *, magnify=None):
     """Top view (x, y) of heads and targets with the shadows of their 95 % ellipsoids on the
     xy-plane (the projection of ``{x: x^T C^-1 x <= chi2_3(0.95)}`` is the ellipse of the 2x2
-    marginal with the same bound), magnified."""
+    marginal with the same bound), magnified per class (``magnify``: one factor, a pair
+    (stations, targets), or None for :func:`class_magnifications`); a scale bar per class gives the
+    true size."""
     plt = _plt()
     from matplotlib.patches import Ellipse
     from scipy import stats
 
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 6))
-    mag = auto_magnify(result) if magnify is None else magnify
+    mags = _as_pair(magnify, result)
     k = np.sqrt(stats.chi2.ppf(0.95, 3))
-    for xyz, cov, ids, style, col in ((result.station_xyz_m, result.station_cov_m2, result.station_ids,
-                                       "^", "C3"),
-                                      (result.target_xyz_m, result.target_cov_m2, result.target_ids,
-                                       "o", "C0")):
-        ax.plot(xyz[:, 0], xyz[:, 1], style, color=col, ms=6 if style == "^" else 4)
+    classes = ((result.station_xyz_m, result.station_cov_m2, "^", "C3", "heads"),
+               (result.target_xyz_m, result.target_cov_m2, "o", "C0", "targets"))
+    for (xyz, cov, style, col, name), mag in zip(classes, mags):
+        xyz = np.asarray(xyz, float)
+        ax.plot(xyz[:, 0], xyz[:, 1], style, color=col, ms=6 if style == "^" else 4,
+                label=f"{name}: 95 % ellipses ×{mag:g}")
         for p, c in zip(xyz, cov):
             if len(xyz) > 2000:      # too many to draw one by one
                 break
-            w, V = np.linalg.eigh(c[:2, :2])
+            w, V = np.linalg.eigh(np.asarray(c)[:2, :2])
             w = np.clip(w, 0, None)
             ang = np.degrees(np.arctan2(V[1, 1], V[0, 1]))
             ax.add_patch(Ellipse(p[:2], 2 * k * mag * np.sqrt(w[1]), 2 * k * mag * np.sqrt(w[0]),
@@ -96,9 +150,15 @@ def plot_top_view(result, ax=None, *, magnify: float | None = None):
     if len(names) <= 60:
         place_labels(ax, np.vstack([result.station_xyz_m, result.target_xyz_m])[:, :2], names,
                      colors=["darkred"] * len(result.station_ids) + ["k"] * len(result.target_ids))
+    ax.apply_aspect()
+    for row, ((xyz, cov, _s, col, name), mag) in enumerate(zip(classes, mags)):
+        big = float(np.nanmax(_semi_axes_95(cov), initial=0.0)) if len(cov) else 0.0
+        if big > 0:
+            _scale_bar(ax, mag, _nice(big), col, f"{name} scale", row)
+    ax.legend(fontsize=7, loc="upper right")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"top view: heads (▲), targets (●), 95 % ellipses ×{mag:g}")
+    ax.set_title(f"top view: heads (▲) ×{mags[0]:g}, targets (●) ×{mags[1]:g}; 95 % ellipses", fontsize=10)
     return ax
 
 
@@ -163,12 +223,12 @@ def plot_3d(result, ax=None, *, magnify: float | None = None):
     if ax is None:
         fig = plt.figure(figsize=(6.5, 6))
         ax = fig.add_subplot(projection="3d")
-    mag = auto_magnify(result) if magnify is None else magnify
+    mags = _as_pair(magnify, result)
     k = np.sqrt(stats.chi2.ppf(0.95, 3))
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 13), np.linspace(0, np.pi, 7))
     sphere = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)], axis=-1)
-    for xyz, cov, style, col in ((result.station_xyz_m, result.station_cov_m2, "^", "C3"),
-                                 (result.target_xyz_m, result.target_cov_m2, "o", "C0")):
+    for (xyz, cov, style, col), mag in zip(((result.station_xyz_m, result.station_cov_m2, "^", "C3"),
+                                            (result.target_xyz_m, result.target_cov_m2, "o", "C0")), mags):
         ax.scatter(xyz[:, 0], xyz[:, 1], xyz[:, 2], marker=style, color=col, s=18)
         if len(xyz) > 300:
             continue
@@ -180,7 +240,7 @@ def plot_3d(result, ax=None, *, magnify: float | None = None):
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
-    ax.set_title(f"heads (▲) and targets (●), 95 % ellipsoids ×{mag:g}")
+    ax.set_title(f"95 % ellipsoids: heads (▲) ×{mags[0]:g}, targets (●) ×{mags[1]:g}")
     return ax
 
 

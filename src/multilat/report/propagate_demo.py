@@ -29,7 +29,7 @@ def section(*, seed: int, quick: bool) -> Section:
         f"Every trial draws the 56 distances of the small-volume network (seed 000 §4.1, 14 reconstructed "
         f"targets) and re-solves the whole self-calibrating network (stations, targets, offsets) with the "
         f"batched solver, free datum (inner constraints over all points) in every trial; {trials} trials per "
-        "noise model. The paper (§4.4) ran 50 simulations with gaussian 4.7 um noise and reported, per "
+        "noise model. The paper (§4.4) ran 50 simulations with gaussian 4.7 µm noise and reported, per "
         "simulation, the standard deviation of the interpoint-distance errors; the same statistic over our "
         "trials is beside it (first 50 trials for min/max, all trials for the mean and the 95 % range).")
     pb_g = problem_from_config(cfg, sigma_m=4.7e-6, source="small-volume")
@@ -39,13 +39,13 @@ def section(*, seed: int, quick: bool) -> Section:
     inst = instrument.load_instrument("seed2020")
     pb_m = problem_from_config(cfg, instrument=inst, source="small-volume")
     res_m = propagate(pb_m, trials=trials, rng=seed + 1, noise="model", instrument=inst)
-    rows = [("paper (50 simulations, gaussian 4.7 um)", PAPER_SMALL_UM["min"], PAPER_SMALL_UM["mean"],
+    rows = [("paper (50 simulations, gaussian 4.7 µm)", PAPER_SMALL_UM["min"], PAPER_SMALL_UM["mean"],
              PAPER_SMALL_UM["max"], "-")]
-    for name, r in (("multilat, gaussian 4.7 um", res_g), ("multilat, distance model", res_m)):
+    for name, r in (("multilat, gaussian 4.7 µm", res_g), ("multilat, distance model", res_m)):
         s = _per_trial_std(r) * 1e6
         lo, hi = np.percentile(s, [2.5, 97.5])
         rows.append((name, f"{s[:50].min():.1f}", f"{s.mean():.1f}", f"{s[:50].max():.1f}", f"{lo:.1f} .. {hi:.1f}"))
-    sec.table(["", "min (um)", "mean (um)", "max (um)", "95 % range over trials (um)"], rows,
+    sec.table(["", "min (µm)", "mean (µm)", "max (µm)", "95 % range over trials (µm)"], rows,
               caption="Std of the 9 triplet-distance errors per simulation (seed 000 §4.4 beside ours)")
     tab = []
     for r in res_m.rows():
@@ -55,7 +55,7 @@ def section(*, seed: int, quick: bool) -> Section:
                         f"{r['lin_std_m'] * 1e6:.2f}", f"{r['ratio']:.3f}",
                         f"[{(lo - r['nominal_m']) * 1e6:.1f}, {(hi - r['nominal_m']) * 1e6:.1f}]",
                         "yes" if r["agrees"] else "no"))
-    sec.table(["quantity", "MC std (um)", "MC s.e. (um)", "linear std (um)", "ratio", "95 % interval (um)",
+    sec.table(["quantity", "MC std (µm)", "MC s.e. (µm)", "linear std (µm)", "ratio", "95 % interval (µm)",
                "agree (3 s.e.)"], tab,
               caption="Distance-model noise: Monte Carlo vs the adjustment's linear covariance")
     s = res_m.summary()
@@ -67,6 +67,6 @@ def section(*, seed: int, quick: bool) -> Section:
         "metre the adjustment is linear to first order: the Monte Carlo confirms the GUM-style covariance rather "
         "than correcting it. The linear propagation uses the empirical std of the drawn distance errors; the "
         f"distance model's stated standard uncertainty is {1 / res_m.input_std_ratio:.3f} times its samples' std.")
-    sec.figure(clouds_figure(res_m, max_points=8 if quick else 16), caption="Point clouds of the distance-model Monte Carlo (top view, "
+    sec.figure(clouds_figure(res_m, max_points=6), caption="Point clouds of the distance-model Monte Carlo (x-y, x-z, y-z; "
                                              "deviation from the truth) with the MC and linear 95 % ellipsoids")
     return sec

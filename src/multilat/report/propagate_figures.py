@@ -1,4 +1,5 @@
-"""Figures of the network Monte Carlo: point clouds with their 95 % coverage ellipsoids."""
+"""Figures of the network Monte Carlo: point clouds (any chosen points, stations by default) in the
+three coordinate planes with their 95 % coverage ellipsoids."""
 
 from __future__ import annotations
 
@@ -21,41 +22,60 @@ def ellipse_xy(cov3, *, plane=(0, 1), n=181) -> np.ndarray:
     return (circle * np.sqrt(chi2_3_95 * np.clip(ev, 0, None))) @ vec.T
 
 
-def clouds_figure(res, *, points=None, max_points: int = 16, plane=(0, 1), max_dots: int = 3000):
-    """Small multiples: each point's Monte Carlo cloud (deviation from nominal, um) in a coordinate
-    plane with the MC 95 % ellipsoid (solid) and the linear one (dashed)."""
+def default_cloud_points(res, max_points: int = 8) -> list[str]:
+    """The stations, then the targets with the largest MC 95 % ellipsoid, ``max_points`` in all."""
+    stations = [p for p in res.point_ids if p in set(res.problem.station_ids)]
+    others = [q for q, p in enumerate(res.point_ids) if p not in set(stations)]
+    big = sorted(others, key=lambda q: -float(np.linalg.eigvalsh(res.point_cov_mc[q])[-1]))
+    chosen = stations[:max_points] + [res.point_ids[q] for q in big][:max(0, max_points - len(stations))]
+    return chosen
+
+
+def clouds_figure(res, *, points=None, max_points: int = 8, max_dots: int = 3000):
+    """Each chosen point's Monte Carlo cloud (deviation from nominal, µm) in the three coordinate
+    planes x-y, x-z, y-z (one row a point), with the MC 95 % ellipsoid's shadow (solid) and the
+    linear one (dashed). ``points``: ids to show (stations or targets; an unknown id is a
+    :class:`~multilat.errors.MultilatError`); default :func:`default_cloud_points`."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    ids = list(points) if points is not None else list(res.point_ids)[-max_points:]
-    ncol = min(4, len(ids))
-    nrow = -(-len(ids) // ncol)
-    fig, axes = plt.subplots(nrow, ncol, figsize=(3.0 * ncol, 2.9 * nrow), squeeze=False)
+    from multilat.errors import MultilatError
+
+    ids = list(points) if points else default_cloud_points(res, max_points)
+    unknown = [p for p in ids if p not in res.point_ids]
+    if unknown:
+        raise MultilatError(f"--cloud-points: unknown point id(s) {', '.join(map(repr, unknown))} "
+                            f"(points: {', '.join(res.point_ids[:20])}{', ...' if len(res.point_ids) > 20 else ''})")
+    stations = set(res.problem.station_ids)
+    planes = ((0, 1), (0, 2), (1, 2))
+    fig, axes = plt.subplots(len(ids), 3, figsize=(9.0, 2.7 * len(ids)), squeeze=False)
     names = "xyz"
     samples = res.samples
     step = max(1, 0 if samples is None else samples.shape[0] // max_dots)
-    for ax, pid in zip(axes.ravel(), ids):
+    for row, pid in zip(axes, ids):
         q = list(res.point_ids).index(pid)
         idx = [res.labels.index(f"{pid}.{c}") for c in "xyz"]
-        if samples is not None:
-            d = samples[::step][:, idx].astype(float) * 1e6
-            ax.plot(d[:, plane[0]], d[:, plane[1]], ".", ms=1.5, alpha=0.35, color="tab:blue")
+        d = None if samples is None else samples[::step][:, idx].astype(float) * 1e6
         mu = (res.mc_mean[idx] - res.nominal[idx]) * 1e6
-        e_mc = ellipse_xy(res.point_cov_mc[q] * 1e12, plane=plane) + mu[list(plane)]
-        e_lin = ellipse_xy(res.point_cov_lin[q] * 1e12, plane=plane)
-        ax.plot(e_mc[:, 0], e_mc[:, 1], "-", color="tab:red", lw=1.2, label="MC 95 %")
-        ax.plot(e_lin[:, 0], e_lin[:, 1], "--", color="k", lw=1.0, label="linear 95 %")
-        ax.set_title(f"{pid}  (in MC ell.: {res.ellipsoid_coverage_mc[q]:.3f})", fontsize=8)
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.tick_params(labelsize=7)
-        ax.set_xlabel(f"d{names[plane[0]]} / um", fontsize=7)
-        ax.set_ylabel(f"d{names[plane[1]]} / um", fontsize=7)
-    for ax in axes.ravel()[len(ids):]:
-        ax.axis("off")
-    axes.ravel()[0].legend(fontsize=6, loc="upper right")
-    fig.suptitle(f"Monte Carlo point clouds, {res.trials} trials, noise={res.noise} "
+        kind = "station" if pid in stations else "target"
+        for ax, plane in zip(row, planes):
+            if d is not None:
+                ax.plot(d[:, plane[0]], d[:, plane[1]], ".", ms=1.5, alpha=0.35,
+                        color="tab:red" if kind == "station" else "tab:blue")
+            e_mc = ellipse_xy(res.point_cov_mc[q] * 1e12, plane=plane) + mu[list(plane)]
+            e_lin = ellipse_xy(res.point_cov_lin[q] * 1e12, plane=plane)
+            ax.plot(e_mc[:, 0], e_mc[:, 1], "-", color="k", lw=1.2, label="MC 95 %")
+            ax.plot(e_lin[:, 0], e_lin[:, 1], "--", color="0.4", lw=1.0, label="linear 95 %")
+            ax.set_aspect("equal", adjustable="datalim")
+            ax.tick_params(labelsize=7)
+            ax.set_xlabel(f"d{names[plane[0]]} (µm)", fontsize=7)
+            ax.set_ylabel(f"d{names[plane[1]]} (µm)", fontsize=7)
+        row[0].set_title(f"{kind} {pid}: inside the MC ellipsoid {res.ellipsoid_coverage_mc[q]:.3f}",
+                         fontsize=8, loc="left")
+    axes[0, 2].legend(fontsize=6, loc="upper right")
+    fig.suptitle(f"Monte Carlo clouds, {res.trials} trials, noise={res.noise}: x-y, x-z, y-z "
                  "(95 % coverage ellipsoids, JCGM 102)", fontsize=9)
     fig.tight_layout()
     return fig
