@@ -275,8 +275,9 @@ def write_text_atomic(path: str | os.PathLike, text: str) -> None:
 
 
 def write_json_atomic(path: str | os.PathLike, obj) -> None:
-    """Serialise ``obj`` with :func:`to_jsonable` and write it atomically."""
-    write_text_atomic(path, json.dumps(to_jsonable(obj), indent=2) + "\n")
+    """Serialise ``obj`` (:func:`write_json`) and write it whole or not at all."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        write_json(obj, fh)
 
 
 def write_csv_atomic(path: str | os.PathLike, header: Sequence[str], rows) -> None:
@@ -303,7 +304,7 @@ def to_jsonable(obj):
         return {f.name: to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
+    if isinstance(obj, (list, tuple, JsonRows)):
         return [to_jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
         return to_jsonable(obj.tolist())
@@ -317,6 +318,191 @@ def to_jsonable(obj):
     if isinstance(obj, Path):
         return str(obj)
     return obj
+
+
+# ---------------------------------------------------------------------------------------- JSON output
+# One writer for every JSON document: orjson (C, numpy-aware) when installed, else the standard library
+# through :func:`to_jsonable`. Both give the same values: non-finite floats are null, numpy scalars and
+# arrays are converted exactly as ``float()`` / ``int()`` / ``tolist()`` convert them, dataclasses are
+# objects of all their fields, paths are strings. Long per-row tables (:class:`JsonRows`) are written
+# from their columns in chunks, without one Python object per row.
+
+class JsonRows:
+    """A table written to JSON as a list of objects, one per row, from its columns.
+
+    ``columns`` maps each key to a float/int/bool array (m,) or to ``(labels, index)``: a sequence
+    of strings and an integer array (m,) into it (``labels[index[k]]``). As a Python sequence a
+    :class:`JsonRows` gives the row dicts (``float``/``int``/``bool``/``str`` values); the JSON writer
+    never builds them.
+    """
+
+    def __init__(self, columns: dict):
+        self.columns = {}
+        n = None
+        for name, col in columns.items():
+            if isinstance(col, tuple):
+                labels, index = col
+                col = (tuple(labels), np.asarray(index, dtype=np.intp))
+                size = col[1].shape[0]
+            else:
+                col = np.asarray(col)
+                if col.ndim != 1 or col.dtype.kind not in "fiub":
+                    raise ValueError(f"JsonRows column {name!r}: a 1-D numeric or bool array or (labels, index)")
+                size = col.shape[0]
+            if n is not None and size != n:
+                raise ValueError(f"JsonRows column {name!r}: {size} rows, expected {n}")
+            n = size
+            self.columns[str(name)] = col
+        self.n = 0 if n is None else int(n)
+
+    def __len__(self) -> int:
+        return self.n
+
+    def _row(self, k: int) -> dict:
+        out = {}
+        for name, col in self.columns.items():
+            if isinstance(col, tuple):
+                out[name] = col[0][col[1][k]]
+            else:
+                out[name] = col[k].item()
+        return out
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self._row(i) for i in range(*k.indices(self.n))]
+        k = int(k)
+        if k < 0:
+            k += self.n
+        if not 0 <= k < self.n:
+            raise IndexError("JsonRows index out of range")
+        return self._row(k)
+
+    def __iter__(self):
+        return (self._row(k) for k in range(self.n))
+
+    # ---- writer side (orjson)
+    def _tokens(self, orjson, lo: int, hi: int) -> list[list[bytes]]:
+        toks = []
+        for col in self.columns.values():
+            if isinstance(col, tuple):
+                enc = self._label_tokens(orjson, col[0])
+                toks.append(enc[col[1][lo:hi]].tolist())
+            elif col.dtype.kind == "b":
+                toks.append(np.where(col[lo:hi], b"true", b"false").astype(object).tolist())
+            else:
+                vals = col[lo:hi].astype(np.float64) if col.dtype.kind == "f" else col[lo:hi].tolist()
+                text = orjson.dumps(vals, option=orjson.OPT_SERIALIZE_NUMPY)
+                toks.append(text[1:-1].split(b","))
+        return toks
+
+    def _label_tokens(self, orjson, labels):
+        cache = self.__dict__.setdefault("_enc", {})
+        if id(labels) not in cache:
+            cache[id(labels)] = np.array([orjson.dumps(s) for s in labels] + [b""], dtype=object)[:-1]
+        return cache[id(labels)]
+
+    def write(self, orjson, write, indent: int | None, chunk: int = 1 << 16) -> None:
+        """Write the JSON list through ``write(bytes)``; ``indent``: the column of the line holding the
+        list (orjson's two-space style) or None (compact)."""
+        if self.n == 0:
+            write(b"[]")
+            return
+        names = [orjson.dumps(nm) for nm in self.columns]
+        if indent is None:
+            fixed = [b"{" + names[0] + b":"] + [b"," + nm + b":" for nm in names[1:]]
+            end, first, sep, close = b"}", b"[", b",", b"]"
+        else:
+            i1, i2 = b"\n" + b" " * (indent + 2), b"\n" + b" " * (indent + 4)
+            fixed = [i1 + b"{" + i2 + names[0] + b": "] + [b"," + i2 + nm + b": " for nm in names[1:]]
+            end, first, sep, close = i1 + b"}", b"[", b",", b"\n" + b" " * indent + b"]"
+        stride = 2 * len(names) + 1
+        write(first)
+        for lo in range(0, self.n, chunk):
+            hi = min(self.n, lo + chunk)
+            nr = hi - lo
+            parts: list = [None] * (nr * stride)
+            for c, tk in enumerate(self._tokens(orjson, lo, hi)):
+                parts[2 * c::stride] = [fixed[c]] * nr
+                parts[2 * c + 1::stride] = tk
+            parts[stride - 1::stride] = [end + sep] * nr
+            if hi == self.n:
+                parts[-1] = end
+            write(b"".join(parts))
+        write(close)
+
+
+def _orjson():
+    try:
+        import orjson
+    except ImportError:     # pragma: no cover - depends on the environment
+        return None
+    return orjson
+
+
+def _json_default(obj):
+    """orjson's fallback for the types it does not take natively, converted as :func:`to_jsonable`."""
+    import dataclasses
+
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.floating):
+        return float(obj)
+    if isinstance(obj, np.integer):
+        return int(obj)
+    if isinstance(obj, np.bool_):
+        return bool(obj)
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        return {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+    if isinstance(obj, Path):
+        return str(obj)
+    if isinstance(obj, tuple):
+        return list(obj)
+    raise TypeError(f"Object of type {type(obj).__name__} is not JSON serializable")
+
+
+def write_json(obj, fh, *, indent: bool = True) -> None:
+    """Write ``obj`` as JSON (two-space indented unless ``indent=False``) and a newline to the binary
+    file ``fh``. The same values as ``json.dumps(to_jsonable(obj))``; :class:`JsonRows` tables are
+    streamed in chunks."""
+    orjson = _orjson()
+    if orjson is None:
+        text = json.dumps(to_jsonable(obj), indent=2 if indent else None) + "\n"
+        fh.write(text.encode("utf-8"))
+        return
+    tables: list[JsonRows] = []
+    mark = f"\x00jsonrows:{os.getpid()}:{id(tables)}:"
+
+    def default(o):
+        if isinstance(o, JsonRows):
+            tables.append(o)
+            return f"{mark}{len(tables) - 1}"
+        return _json_default(o)
+
+    opt = orjson.OPT_NON_STR_KEYS | orjson.OPT_PASSTHROUGH_DATACLASS | (orjson.OPT_INDENT_2 if indent else 0)
+    text = orjson.dumps(obj, default=default, option=opt)
+    if not tables:
+        fh.write(text)
+        fh.write(b"\n")
+        return
+    key = orjson.dumps(mark)[:-1]          # the opening quote and the escaped mark
+    pos = 0
+    for k, tab in enumerate(tables):
+        tok = key + str(k).encode() + b'"'
+        at = text.index(tok, pos)
+        fh.write(text[pos:at])
+        line = text.rfind(b"\n", 0, at) + 1
+        lead = len(text[line:at]) - len(text[line:at].lstrip(b" "))
+        tab.write(orjson, fh.write, lead if indent else None)
+        pos = at + len(tok)
+    fh.write(text[pos:])
+    fh.write(b"\n")
+
+
+def dumps_json(obj, *, indent: bool = True) -> bytes:
+    """:func:`write_json` into bytes (UTF-8, ending with a newline)."""
+    buf = _io.BytesIO()
+    write_json(obj, buf, indent=indent)
+    return buf.getvalue()
 
 
 @dataclass(frozen=True)
