@@ -57,6 +57,12 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     -------
     Observations
     """
+    if _large_file(path):
+        from multilat.network.fastio import plain_observations
+
+        fast = plain_observations(path, sigma_m)       # None unless plain: then the checks below
+        if fast is not None:
+            return fast
     tab = read_csv_table(path, required=OBS_REQUIRED, optional=OBS_OPTIONAL)
     st = _check_ids(tab, "station")
     tg = _check_ids(tab, "target")
@@ -93,6 +99,19 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
     return obs
+
+
+#: Regular files at least this large go through the vectorised reader first (:mod:`.fastio`), which
+#: takes the plain subset of the format and leaves any other file to the checks here.
+FAST_READ_ABOVE_BYTES = 1 << 20
+
+
+def _large_file(path) -> bool:
+    try:
+        p = Path(path)
+        return p.is_file() and p.stat().st_size >= FAST_READ_ABOVE_BYTES
+    except OSError:
+        return False
 
 
 def _model_sigma(d, stations, instrument):
