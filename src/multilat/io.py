@@ -381,25 +381,33 @@ class JsonRows:
         return (self._row(k) for k in range(self.n))
 
     # ---- writer side (orjson)
-    def _tokens(self, orjson, lo: int, hi: int) -> list[list[bytes]]:
-        toks = []
-        for col in self.columns.values():
+    def _pieces(self, orjson, lo: int, hi: int, fixed: list[bytes]) -> list[list[bytes]]:
+        """Per column, the rows' text ``fixed[c] + value`` as one list (labels and booleans, whose
+        few distinct texts are joined once) or two (``fixed[c]`` repeated, then the number tokens)."""
+        out = []
+        nr = hi - lo
+        for c, col in enumerate(self.columns.values()):
             if isinstance(col, tuple):
-                enc = self._label_tokens(orjson, col[0])
-                toks.append(enc[col[1][lo:hi]].tolist())
+                enc = self._label_tokens(orjson, col[0], fixed[c])
+                out.append([enc[col[1][lo:hi]].tolist()])
             elif col.dtype.kind == "b":
-                toks.append(np.where(col[lo:hi], b"true", b"false").astype(object).tolist())
+                tf = np.array([fixed[c] + b"false", fixed[c] + b"true"], dtype=object)
+                out.append([tf[col[lo:hi].astype(np.intp)].tolist()])
             else:
                 vals = col[lo:hi].astype(np.float64) if col.dtype.kind == "f" else col[lo:hi].tolist()
                 text = orjson.dumps(vals, option=orjson.OPT_SERIALIZE_NUMPY)
-                toks.append(text[1:-1].split(b","))
-        return toks
+                out.append([[fixed[c]] * nr, text[1:-1].split(b",")])
+        return out
 
-    def _label_tokens(self, orjson, labels):
+    def _label_tokens(self, orjson, labels, prefix: bytes):
+        """``prefix + JSON string`` of every label (object array), encoded once per table and prefix."""
         cache = self.__dict__.setdefault("_enc", {})
-        if id(labels) not in cache:
-            cache[id(labels)] = np.array([orjson.dumps(s) for s in labels] + [b""], dtype=object)[:-1]
-        return cache[id(labels)]
+        key = (id(labels), prefix)
+        if key not in cache:
+            # one call for all labels: in JSON text the three bytes '","' only occur between strings
+            enc = orjson.dumps(list(labels))[2:-2].split(b'","') if labels else []
+            cache[key] = np.array([prefix + b'"' + e + b'"' for e in enc] + [b""], dtype=object)[:-1]
+        return cache[key]
 
     def write(self, orjson, write, indent: int | None, chunk: int = 1 << 16) -> None:
         """Write the JSON list through ``write(bytes)``; ``indent``: the column of the line holding the
@@ -410,21 +418,24 @@ class JsonRows:
         names = [orjson.dumps(nm) for nm in self.columns]
         if indent is None:
             fixed = [b"{" + names[0] + b":"] + [b"," + nm + b":" for nm in names[1:]]
-            end, first, sep, close = b"}", b"[", b",", b"]"
+            end, close = b"}", b"]"
         else:
             i1, i2 = b"\n" + b" " * (indent + 2), b"\n" + b" " * (indent + 4)
             fixed = [i1 + b"{" + i2 + names[0] + b": "] + [b"," + i2 + nm + b": " for nm in names[1:]]
-            end, first, sep, close = i1 + b"}", b"[", b",", b"\n" + b" " * indent + b"]"
-        stride = 2 * len(names) + 1
-        write(first)
+            end, close = i1 + b"}", b"\n" + b" " * indent + b"]"
+        write(b"[")
         for lo in range(0, self.n, chunk):
             hi = min(self.n, lo + chunk)
             nr = hi - lo
+            cols = self._pieces(orjson, lo, hi, fixed)
+            stride = sum(len(c) for c in cols) + 1
             parts: list = [None] * (nr * stride)
-            for c, tk in enumerate(self._tokens(orjson, lo, hi)):
-                parts[2 * c::stride] = [fixed[c]] * nr
-                parts[2 * c + 1::stride] = tk
-            parts[stride - 1::stride] = [end + sep] * nr
+            at = 0
+            for c in cols:
+                for lst in c:
+                    parts[at::stride] = lst
+                    at += 1
+            parts[at::stride] = [end + b","] * nr
             if hi == self.n:
                 parts[-1] = end
             write(b"".join(parts))

@@ -490,3 +490,43 @@ def hat_row(k, Qgg, Minv, Js_w, Jt_w, P, si, ti, order, tptr, out):
         for p in range(tptr[l], tptr[l + 1]):
             m = order[p]
             out[m] += Jt_w[m, 0] * v0 + Jt_w[m, 1] * v1 + Jt_w[m, 2] * v2
+
+
+@njit(parallel=True, cache=True)
+def cov_times(Qgg, Minv, Js_w, P, si, ti, order, tptr, vg, vt, out_g, out_t):
+    """Internal covariance (no factor) times one vector ``[vg (Qs,), vt (t, 3)]`` into ``out_g``,
+    ``out_t``: ``u = Qgg (vg - sum_m A_m (P_m . vt_j(m)))``, ``out_t_l = Minv_l vt_l - sum_{m in l}
+    P_m (A_m . u_station(m))`` (:meth:`NetworkCovariance._times` for one column)."""
+    nq = Js_w.shape[1]
+    ns = Qgg.shape[0] // nq
+    t = tptr.shape[0] - 1
+    m_all = si.shape[0]
+    acc = vg.copy()
+    for m in range(m_all):
+        j = ti[m]
+        pv = P[m, 0] * vt[j, 0] + P[m, 1] * vt[j, 1] + P[m, 2] * vt[j, 2]
+        if pv != 0.0:
+            for q in range(nq):
+                acc[nq * si[m] + q] -= Js_w[m, q] * pv
+    for q in range(nq * ns):
+        out_g[q] = 0.0
+    for r in range(nq * ns):
+        if acc[r] == 0.0:
+            continue
+        for q in range(nq * ns):
+            out_g[q] += Qgg[q, r] * acc[r]
+    for l in prange(t):
+        v0 = Minv[l, 0, 0] * vt[l, 0] + Minv[l, 0, 1] * vt[l, 1] + Minv[l, 0, 2] * vt[l, 2]
+        v1 = Minv[l, 1, 0] * vt[l, 0] + Minv[l, 1, 1] * vt[l, 1] + Minv[l, 1, 2] * vt[l, 2]
+        v2 = Minv[l, 2, 0] * vt[l, 0] + Minv[l, 2, 1] * vt[l, 1] + Minv[l, 2, 2] * vt[l, 2]
+        for p in range(tptr[l], tptr[l + 1]):
+            m = order[p]
+            au = 0.0
+            for q in range(nq):
+                au += Js_w[m, q] * out_g[nq * si[m] + q]
+            v0 -= P[m, 0] * au
+            v1 -= P[m, 1] * au
+            v2 -= P[m, 2] * au
+        out_t[l, 0] = v0
+        out_t[l, 1] = v1
+        out_t[l, 2] = v2

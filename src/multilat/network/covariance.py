@@ -68,6 +68,7 @@ class NetworkCovariance:
         self.R = np.eye(3) if R is None else np.asarray(R)
         # per-observation P_k = M_j b_k  (3,)
         self.P = np.einsum("mij,mj->mi", Minv[target_index], Jt_w)
+        self._csr = None
         self.G = G
         if G is not None:
             H = np.linalg.solve(E.T @ G, E.T)            # (6, n)
@@ -75,7 +76,6 @@ class NetworkCovariance:
             self.CHt = self._rot_times(H.T)               # (n, 6)  C_rot H^T
             self.HCHt = H @ self.CHt
         self._point_rows = None
-        self._csr = None
         self.extra = None if extra is None else np.asarray(extra, float).reshape(self.n, -1)
 
     # ------------------------------------------------------------ internal (solving frame)
@@ -83,6 +83,18 @@ class NetworkCovariance:
         """Internal covariance times V (n, c) -> (n, c)."""
         s, Qn = self.s, Q
         V = np.asarray(V, float)
+        K = _kernels(self.si.shape[0])
+        if K is not None:       # one column at a time: no (m, 5, c) temporaries
+            Qgg, Minv, Js, _, P, si, ti, order, tptr = self._kernel_args()
+            out = np.empty((self.n, V.shape[1]))
+            og, ot = np.empty(Qn * s), np.empty((self.t, 3))
+            for c in range(V.shape[1]):
+                col = np.ascontiguousarray(V[:, c])
+                K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, col[:Qn * s].copy(),
+                            col[Qn * s:].reshape(self.t, 3).copy(), og, ot)
+                out[:Qn * s, c] = og
+                out[Qn * s:, c] = ot.ravel()
+            return out * self.factor
         Vg = V[:Qn * s].reshape(s, Qn, -1)
         VT = V[Qn * s:].reshape(self.t, 3, -1)
         # Vg - K^T VT : per obs a_k (p_k . VT_j)
