@@ -262,3 +262,34 @@ def test_large_file_errors_name_the_line(tmp_path):
     _big_file(p, bad_line=30_001)
     with pytest.raises(MultilatError, match=r"big.csv:30001: column 'distance_m': not a number: 'abc'"):
         files.read_observations(p)
+
+
+def test_result_tables_written_from_columns_equal_the_row_writer(tmp_path):
+    """targets.csv and residuals.csv from the columns: byte for byte the text of the row-by-row csv
+    writer they replace (written here as it was), with an id that needs quoting and a rejected row."""
+    from multilat.io import write_csv_atomic
+    from multilat.network.files import write_result_csvs
+
+    net, obs = _network(t=25, rng=8)
+    tids = tuple(f'T{j}' if j != 4 else 'T,"4"' for j in range(25))
+    obs = Observations(obs.station_ids, tids, obs.station_index, obs.target_index, obs.distance_m, obs.sigma_m)
+    res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False)
+    used = res.used.copy()
+    used[3] = False
+    from dataclasses import replace
+    res = replace(res, used=used)
+    write_result_csvs(res, tmp_path)
+    (_, _), (t_ax, _) = res.ellipsoids()
+    write_csv_atomic(tmp_path / "old_t.csv", ["target", "x_m", "y_m", "z_m", "u_x_m", "u_y_m", "u_z_m",
+                                              "ell95_a_m", "ell95_b_m", "ell95_c_m"],
+                     [[tid, *res.target_xyz_m[j], *np.sqrt(np.clip(np.diag(res.target_cov_m2[j]), 0, None)),
+                       *t_ax[j][::-1]] for j, tid in enumerate(res.target_ids)])
+    o = res.obs
+    write_csv_atomic(tmp_path / "old_r.csv", ["station", "target", "distance_m", "sigma_m", "residual_m",
+                                              "redundancy", "w", "mdb_m", "used"],
+                     [[o.station_ids[o.station_index[k]], o.target_ids[o.target_index[k]], o.distance_m[k],
+                       o.sigma_m[k], res.residuals_m[k], res.redundancy[k], res.w[k], res.mdb_m[k],
+                       bool(res.used[k])] for k in range(o.n_obs)])
+    assert (tmp_path / "targets.csv").read_bytes() == (tmp_path / "old_t.csv").read_bytes()
+    new_r = (tmp_path / "residuals.csv").read_bytes()
+    assert new_r == (tmp_path / "old_r.csv").read_bytes() and b'"T,""4"""' in new_r and b",False\n" in new_r

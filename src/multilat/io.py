@@ -290,6 +290,61 @@ def write_csv_atomic(path: str | os.PathLike, header: Sequence[str], rows) -> No
     write_text_atomic(path, buf.getvalue())
 
 
+def write_csv_columns_atomic(path: str | os.PathLike, columns: dict, *, chunk: int = 1 << 16) -> None:
+    """The CSV :func:`write_csv_atomic` writes for the rows of ``columns`` (header = its keys), built
+    from the columns (no Python list per row): a column is a float/int/bool array (m,) or
+    ``(labels, index)`` (strings ``labels[index[k]]``). Same text: floats as ``repr(float)``,
+    booleans ``True``/``False``, strings quoted by the csv module when needed."""
+    names = list(columns)
+    cols = []
+    n = None
+    for name in names:
+        col = columns[name]
+        if isinstance(col, tuple):
+            enc = np.array([_csv_field(str(lab)) for lab in col[0]] + [""], dtype=object)[:-1]
+            cols.append(("label", enc, np.asarray(col[1], np.intp)))
+            size = len(col[1])
+        else:
+            col = np.asarray(col)
+            cols.append(("bool" if col.dtype.kind == "b" else "int" if col.dtype.kind in "iu" else "float",
+                         None, col))
+            size = col.shape[0]
+        if n is not None and size != n:
+            raise ValueError(f"column {name!r}: {size} rows, expected {n}")
+        n = size
+    n = n or 0
+    head = _io.StringIO()
+    csv.writer(head, lineterminator="\n").writerow(names)
+    tf = np.array(["False", "True"], dtype=object)
+    k = len(cols)
+    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as fh:
+        fh.write(head.getvalue())
+        for lo in range(0, n, chunk):
+            hi = min(n, lo + chunk)
+            parts: list = [None] * ((hi - lo) * 2 * k)
+            for c, (kind, enc, col) in enumerate(cols):
+                if kind == "label":
+                    tok = enc[col[lo:hi]].tolist()
+                elif kind == "bool":
+                    tok = tf[col[lo:hi].astype(np.intp)].tolist()
+                elif kind == "int":
+                    tok = list(map(str, col[lo:hi].tolist()))
+                else:
+                    tok = list(map(repr, col[lo:hi].astype(np.float64).tolist()))
+                parts[2 * c::2 * k] = tok
+                parts[2 * c + 1::2 * k] = [","] * (hi - lo) if c < k - 1 else ["\n"] * (hi - lo)
+            fh.write("".join(parts))
+
+
+def _csv_field(text: str) -> str:
+    """``text`` as the csv module writes it in a row of several fields (quoted when needed)."""
+    if not any(ch in text for ch in ',"\r\n'):
+        return text
+    buf = _io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerow([text, ""])
+    return buf.getvalue()[:-2]
+
+
 def _fmt(v):
     if isinstance(v, (float, np.floating)):
         return repr(float(v))
