@@ -239,6 +239,15 @@ class NetworkCovariance:
         return (np.einsum("mq,mq->m", self.Js_w, vg[self.si])
                 + np.einsum("mi,mi->m", self.Jt_w, vt[self.ti]))
 
+    def perfectly_correlated(self, k: int, redundancy, tol: float = 1e-6) -> np.ndarray:
+        """Observations ``l`` whose w-test is perfectly correlated with ``k``'s: ``|rho_kl| > 1 - tol``,
+        ``rho_kl = -hat_kl / sqrt(r_k r_l)`` (``k`` itself included when ``r_k > 0``). A zero denominator
+        counts as correlated when ``hat_kl != 0`` (an infinite ``rho``), not when ``hat_kl`` is 0 too."""
+        red = np.asarray(redundancy, float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = np.abs(self.hat_row(int(k))) / np.sqrt(red[k] * red)
+        return np.flatnonzero(q > 1.0 - tol)
+
     def hat_diagonal(self, chunk_targets: int = 20000, *, kernels=True):
         """Diagonal of the whitened hat matrix ``A C A^T`` per observation (m,) (datum-free).
 
