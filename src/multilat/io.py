@@ -293,15 +293,18 @@ def write_csv_atomic(path: str | os.PathLike, header: Sequence[str], rows) -> No
 def write_csv_columns_atomic(path: str | os.PathLike, columns: dict, *, chunk: int = 1 << 16) -> None:
     """The CSV :func:`write_csv_atomic` writes for the rows of ``columns`` (header = its keys), built
     from the columns (no Python list per row): a column is a float/int/bool array (m,) or
-    ``(labels, index)`` (strings ``labels[index[k]]``). Same text: floats as ``repr(float)``,
-    booleans ``True``/``False``, strings quoted by the csv module when needed."""
+    ``(labels, index)`` (strings ``labels[index[k]]``). The same values: booleans ``True``/``False``,
+    strings quoted by the csv module when needed, integers in decimal, floats in their shortest
+    round-trip text (orjson's, e.g. ``0.00001`` where ``repr`` writes ``1e-05``; ``repr`` itself for
+    ``nan``/``inf`` and when orjson is missing)."""
+    orjson = _orjson()
     names = list(columns)
     cols = []
     n = None
     for name in names:
         col = columns[name]
         if isinstance(col, tuple):
-            enc = np.array([_csv_field(str(lab)) for lab in col[0]] + [""], dtype=object)[:-1]
+            enc = np.array([_csv_field(str(lab)).encode() for lab in col[0]] + [b""], dtype=object)[:-1]
             cols.append(("label", enc, np.asarray(col[1], np.intp)))
             size = len(col[1])
         else:
@@ -315,10 +318,10 @@ def write_csv_columns_atomic(path: str | os.PathLike, columns: dict, *, chunk: i
     n = n or 0
     head = _io.StringIO()
     csv.writer(head, lineterminator="\n").writerow(names)
-    tf = np.array(["False", "True"], dtype=object)
+    tf = np.array([b"False", b"True"], dtype=object)
     k = len(cols)
-    with atomic_path(path) as tmp, open(tmp, "w", encoding="utf-8", newline="") as fh:
-        fh.write(head.getvalue())
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        fh.write(head.getvalue().encode("utf-8"))
         for lo in range(0, n, chunk):
             hi = min(n, lo + chunk)
             parts: list = [None] * ((hi - lo) * 2 * k)
@@ -328,12 +331,22 @@ def write_csv_columns_atomic(path: str | os.PathLike, columns: dict, *, chunk: i
                 elif kind == "bool":
                     tok = tf[col[lo:hi].astype(np.intp)].tolist()
                 elif kind == "int":
-                    tok = list(map(str, col[lo:hi].tolist()))
+                    tok = [str(v).encode() for v in col[lo:hi].tolist()]
                 else:
-                    tok = list(map(repr, col[lo:hi].astype(np.float64).tolist()))
+                    tok = _float_tokens(orjson, col[lo:hi].astype(np.float64))
                 parts[2 * c::2 * k] = tok
-                parts[2 * c + 1::2 * k] = [","] * (hi - lo) if c < k - 1 else ["\n"] * (hi - lo)
-            fh.write("".join(parts))
+                parts[2 * c + 1::2 * k] = [b","] * (hi - lo) if c < k - 1 else [b"\n"] * (hi - lo)
+            fh.write(b"".join(parts))
+
+
+def _float_tokens(orjson, vals: np.ndarray) -> list[bytes]:
+    """Shortest round-trip text of each float (bytes); ``repr`` for non-finite values."""
+    if orjson is None:
+        return [repr(v).encode() for v in vals.tolist()]
+    tok = orjson.dumps(vals, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].split(b",") if vals.size else []
+    for i in np.flatnonzero(~np.isfinite(vals)).tolist():
+        tok[i] = repr(float(vals[i])).encode()
+    return tok
 
 
 def _csv_field(text: str) -> str:
