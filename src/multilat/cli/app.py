@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import os
 import signal
 import sys
@@ -15,7 +14,7 @@ import typer
 from rich.console import Console
 
 from multilat.errors import MultilatError, format_error, printable
-from multilat.io import to_jsonable
+from multilat.io import dumps_json, to_jsonable, write_json
 
 app = typer.Typer(
     name="multilat",
@@ -86,7 +85,13 @@ err_console = LiteralConsole(stderr=True, highlight=False, markup=False, emoji=F
 
 def emit_json(obj) -> None:
     """Print ``obj`` (dataclasses, numpy values allowed) as JSON on stdout."""
-    sys.stdout.write(json.dumps(to_jsonable(obj), indent=2) + "\n")
+    sys.stdout.flush()
+    buf = getattr(sys.stdout, "buffer", None)
+    if buf is None:         # a text-only stream (some test harnesses)
+        sys.stdout.write(dumps_json(obj).decode("utf-8"))
+    else:
+        write_json(obj, buf)
+        buf.flush()
     sys.stdout.flush()
 
 

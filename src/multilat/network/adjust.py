@@ -269,12 +269,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         k = int(np.flatnonzero(used)[k_sub])
         # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
         # correlated with this one would show the same |w|: the data cannot tell which is wrong
-        red_sub = core["redundancy"]
-        hrow = core["cov"].hat_row(k_sub)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rho = -hrow / np.sqrt(red_sub[k_sub] * red_sub)
-        rho[k_sub] = 0.0
-        twins = np.flatnonzero(np.abs(np.nan_to_num(rho)) > 1.0 - 1e-6)
+        twins = core["cov"].perfectly_correlated(k_sub, core["redundancy"])
+        twins = twins[twins != k_sub]
         if twins.size:
             unlocated = tuple(int(np.flatnonzero(used)[q]) for q in np.concatenate([[k_sub], twins]))
             reason = "perfectly correlated w-tests: the data cannot tell which observation is wrong"
@@ -421,10 +417,7 @@ def _w_failure_groups(core, used, crit, limit: int = 50) -> tuple:
     for k in fail:
         if int(k) in seen or len(groups) >= limit:
             continue
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rho = -core["cov"].hat_row(int(k)) / np.sqrt(red[k] * red)
-        rho[k] = 1.0
-        members = [int(q) for q in np.flatnonzero(np.abs(np.nan_to_num(rho)) > 1.0 - 1e-6)]
+        members = [int(q) for q in core["cov"].perfectly_correlated(int(k), red)]
         members = [int(k)] + [q for q in members if q != k]
         seen.update(members)
         groups.append(tuple(int(idx[q]) for q in members))

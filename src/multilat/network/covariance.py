@@ -19,7 +19,21 @@ import numpy as np
 
 from multilat.network.model import Q, repeat_share, segment_sum, slot_gain, target_slots
 
-__all__ = ["NetworkCovariance"]
+__all__ = ["NetworkCovariance", "KERNELS_ABOVE_OBS"]
+
+#: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
+#: from the compiled kernels of :mod:`multilat.network._sparse_kernels` (numba, when installed); smaller
+#: ones from the numpy code below (no compile/load cost; the tests compare the two to 1e-12).
+KERNELS_ABOVE_OBS = 10_000
+
+
+def _kernels(m: int):
+    """The compiled kernels module for a network of ``m`` observations, or None (numpy path)."""
+    if m < KERNELS_ABOVE_OBS:
+        return None
+    from multilat.network import _sparse_kernels as K
+
+    return K if K.HAVE_NUMBA else None
 
 
 class NetworkCovariance:
@@ -54,6 +68,7 @@ class NetworkCovariance:
         self.R = np.eye(3) if R is None else np.asarray(R)
         # per-observation P_k = M_j b_k  (3,)
         self.P = np.einsum("mij,mj->mi", Minv[target_index], Jt_w)
+        self._csr = None
         self.G = G
         if G is not None:
             H = np.linalg.solve(E.T @ G, E.T)            # (6, n)
@@ -68,6 +83,18 @@ class NetworkCovariance:
         """Internal covariance times V (n, c) -> (n, c)."""
         s, Qn = self.s, Q
         V = np.asarray(V, float)
+        K = _kernels(self.si.shape[0])
+        if K is not None:       # one column at a time: no (m, 5, c) temporaries
+            Qgg, Minv, Js, _, P, si, ti, order, tptr = self._kernel_args()
+            out = np.empty((self.n, V.shape[1]))
+            og, ot = np.empty(Qn * s), np.empty((self.t, 3))
+            for c in range(V.shape[1]):
+                col = np.ascontiguousarray(V[:, c])
+                K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, col[:Qn * s].copy(),
+                            col[Qn * s:].reshape(self.t, 3).copy(), og, ot)
+                out[:Qn * s, c] = og
+                out[Qn * s:, c] = ot.ravel()
+            return out * self.factor
         Vg = V[:Qn * s].reshape(s, Qn, -1)
         VT = V[Qn * s:].reshape(self.t, 3, -1)
         # Vg - K^T VT : per obs a_k (p_k . VT_j)
@@ -135,8 +162,31 @@ class NetworkCovariance:
             out = out + Xg @ Xg.T
         return 0.5 * (out + out.T)
 
-    def target_blocks(self, chunk_targets: int = 20000):
-        """3x3 covariance of every target (t, 3, 3) in the final datum, O(t s^2)."""
+    def _by_target(self):
+        """Observations grouped by target: ``(order, tptr)`` (CSR, for the kernels)."""
+        if self._csr is None:
+            ti = np.asarray(self.ti)
+            order = np.argsort(ti, kind="stable").astype(np.int64)
+            tptr = np.zeros(self.t + 1, np.int64)
+            np.cumsum(np.bincount(ti, minlength=self.t), out=tptr[1:])
+            self._csr = (order, tptr)
+        return self._csr
+
+    def _kernel_args(self):
+        order, tptr = self._by_target()
+        c = np.ascontiguousarray
+        return (c(self.Qgg, dtype=float), c(self.Minv, dtype=float), c(self.Js_w, dtype=float),
+                c(self.Jt_w, dtype=float), c(self.P, dtype=float), c(self.si, dtype=np.int64),
+                c(self.ti, dtype=np.int64), order, tptr)
+
+    def _target_blocks_internal(self, chunk_targets: int = 20000, *, kernels=True):
+        """Per-target 3x3 blocks of the internal covariance (solving frame, without ``factor``)."""
+        K = _kernels(self.si.shape[0]) if kernels else None
+        if K is not None:
+            Qgg, Minv, Js, _, P, si, _, order, tptr = self._kernel_args()
+            out = np.empty((self.t, 3, 3))
+            K.target_blocks(Qgg, Minv, Js, P, si, order, tptr, out)
+            return out
         s, t = self.s, self.t
         slots = target_slots(self.si, self.ti, s, t)
         gain = slot_gain(slots, self.si, self.ti, self.Js_w, self.Jt_w)     # repeated readings
@@ -152,6 +202,12 @@ class NetworkCovariance:
             S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)
             out[lo:lo + chunk_targets] = (self.Minv[lo:lo + chunk_targets]
                                           + np.einsum("cai,cab,cbj->cij", P, S, P, optimize=True))
+        return out
+
+    def target_blocks(self, chunk_targets: int = 20000, *, kernels=True):
+        """3x3 covariance of every target (t, 3, 3) in the final datum, O(t s^2)."""
+        s, t = self.s, self.t
+        out = self._target_blocks_internal(chunk_targets, kernels=kernels)
         out *= self.factor
         out = np.einsum("ij,tjk,lk->til", self.R, out, self.R)
         if self.G is not None:
@@ -166,9 +222,15 @@ class NetworkCovariance:
             out = out + np.einsum("tia,tja->tij", Xp, Xp)
         return 0.5 * (out + np.swapaxes(out, 1, 2))
 
-    def hat_row(self, k: int):
+    def hat_row(self, k: int, *, kernels=True):
         """Row ``k`` of the whitened hat matrix ``A C A^T`` (m,) (datum-free; for the correlation
         of w-tests: ``rho_kl = -hat_kl / sqrt(r_k r_l)``)."""
+        K = _kernels(self.si.shape[0]) if kernels else None
+        if K is not None:
+            Qgg, Minv, Js, Jt, P, si, ti, order, tptr = self._kernel_args()
+            out = np.empty(si.shape[0])
+            K.hat_row(int(k), Qgg, Minv, Js, Jt, P, si, ti, order, tptr, out)
+            return out
         a = np.zeros(self.n)
         i, j = self.si[k], self.ti[k]
         a[Q * i:Q * i + Q] = self.Js_w[k]
@@ -179,11 +241,26 @@ class NetworkCovariance:
         return (np.einsum("mq,mq->m", self.Js_w, vg[self.si])
                 + np.einsum("mi,mi->m", self.Jt_w, vt[self.ti]))
 
-    def hat_diagonal(self, chunk_targets: int = 20000):
+    def perfectly_correlated(self, k: int, redundancy, tol: float = 1e-6) -> np.ndarray:
+        """Observations ``l`` whose w-test is perfectly correlated with ``k``'s: ``|rho_kl| > 1 - tol``,
+        ``rho_kl = -hat_kl / sqrt(r_k r_l)`` (``k`` itself included when ``r_k > 0``). A zero denominator
+        counts as correlated when ``hat_kl != 0`` (an infinite ``rho``), not when ``hat_kl`` is 0 too."""
+        red = np.asarray(redundancy, float)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = np.abs(self.hat_row(int(k))) / np.sqrt(red[k] * red)
+        return np.flatnonzero(q > 1.0 - tol)
+
+    def hat_diagonal(self, chunk_targets: int = 20000, *, kernels=True):
         """Diagonal of the whitened hat matrix ``A C A^T`` per observation (m,) (datum-free).
 
-        ``1 - hat`` are the redundancy numbers.
+        ``1 - hat`` are the redundancy numbers. ``kernels=False``: the numpy path whatever the size.
         """
+        K = _kernels(self.si.shape[0]) if kernels else None
+        if K is not None:
+            Qgg, Minv, Js, Jt, P, si, _, order, tptr = self._kernel_args()
+            h = np.empty(si.shape[0])
+            K.hat_diagonal(Qgg, Minv, Js, Jt, P, si, order, tptr, h)
+            return h
         s, t = self.s, self.t
         slots = target_slots(self.si, self.ti, s, t)
         # repeated readings of a pair: the pair's hat as one observation of all their weight, shared

@@ -22,7 +22,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["read_observations_fast", "FastObservations"]
+__all__ = ["read_observations_fast", "FastObservations", "plain_observations"]
 
 
 class FastObservations:
@@ -156,6 +156,41 @@ def read_observations_fast(path: str | os.PathLike, *, sigma_m: float | None = N
         return _general(p, sigma_m)
 
 
+def plain_observations(path: str | os.PathLike, sigma_m: float | None = None):
+    """:class:`~multilat.network.data.Observations` of a file in the plain subset, read vectorised;
+    None for any other file (the general reader then reads it and names its errors).
+
+    Used by :func:`multilat.network.files.read_observations` for large files: header exactly
+    ``station,target,distance_m,sigma_m`` (or the three columns and a ``sigma_m`` option), every
+    row plain. A file with both a ``sigma_m`` column and option is left to the general reader (it warns).
+    """
+    from multilat.io import read_input_bytes
+
+    try:
+        data = read_input_bytes(path)
+    except MultilatError:
+        return None
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    end = data.find(b"\n")
+    if end < 0:
+        return None
+    header = data[:end].rstrip(b"\r")
+    if header == b"station,target,distance_m,sigma_m" and sigma_m is None:
+        ncol = 4
+    elif header == b"station,target,distance_m" and sigma_m is not None and np.isfinite(sigma_m) and sigma_m > 0:
+        ncol = 3
+    else:
+        return None
+    if b"\r" in data:
+        data = data.replace(b"\r\n", b"\n")
+        end = data.find(b"\n")
+    try:
+        return _plain(data, end, ncol, sigma_m, 32, 32).to_observations()
+    except (_NotPlain, MultilatError):
+        return None
+
+
 def _plain(data: bytes, end: int, ncol: int, sigma_m, id_width: int, number_width: int) -> FastObservations:
     """The vectorised path; raises :class:`_NotPlain` on anything outside the plain subset."""
     body = np.frombuffer(data, np.uint8, offset=min(end + 1, len(data)))
@@ -184,8 +219,7 @@ def _plain(data: bytes, end: int, ncol: int, sigma_m, id_width: int, number_widt
         sig = np.full(n, float(sigma_m))
     sids, si = _ids(sf)
     tids, ti = _ids(tf)
-    pair = si * len(tids) + ti
-    if np.unique(pair).size != n or set(sids) & set(tids):
+    if _has_duplicate_pair(si, ti, len(sids), len(tids)) or set(sids) & set(tids):
         raise _NotPlain                    # duplicates, an id both station and target
     obs = FastObservations(sids, tids, si, ti, d, sig)
     from multilat.network.screening import suspect_rows
@@ -193,6 +227,15 @@ def _plain(data: bytes, end: int, ncol: int, sigma_m, id_width: int, number_widt
     if suspect_rows(obs):
         raise _NotPlain                    # the general reader names the rows with their lines
     return obs
+
+
+def _has_duplicate_pair(si, ti, s: int, t: int) -> bool:
+    """Whether some (station, target) pair occurs twice (counting when the table is small, else sorting)."""
+    pair = si * t + ti
+    if s * t <= 8 * len(pair) + 1024:
+        return bool(np.bincount(pair, minlength=s * t).max(initial=0) > 1)
+    p = np.sort(pair)
+    return bool(np.any(p[1:] == p[:-1]))
 
 
 def _general(path: Path, sigma_m) -> FastObservations:

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.io import ELEVATION_RANGE, read_csv_table, write_csv_atomic
+from multilat.io import ELEVATION_RANGE, read_csv_table, write_csv_atomic, write_csv_columns_atomic
 from multilat.network.data import Observations, Points, ReferenceLengths
 from multilat.network.screening import screen_observations
 
@@ -57,6 +57,12 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     -------
     Observations
     """
+    if _large_file(path):
+        from multilat.network.fastio import plain_observations
+
+        fast = plain_observations(path, sigma_m)       # None unless plain: then the checks below
+        if fast is not None:
+            return fast
     tab = read_csv_table(path, required=OBS_REQUIRED, optional=OBS_OPTIONAL)
     st = _check_ids(tab, "station")
     tg = _check_ids(tab, "target")
@@ -87,6 +93,19 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
     return obs
+
+
+#: Regular files at least this large go through the vectorised reader first (:mod:`.fastio`), which
+#: takes the plain subset of the format and leaves any other file to the checks here.
+FAST_READ_ABOVE_BYTES = 1 << 20
+
+
+def _large_file(path) -> bool:
+    try:
+        p = Path(path)
+        return p.is_file() and p.stat().st_size >= FAST_READ_ABOVE_BYTES
+    except OSError:
+        return False
 
 
 def _model_sigma(d, stations, instrument):
@@ -156,20 +175,20 @@ def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) ->
                        result.offset_std_m[i], bool(result.offset_estimated[i]), *s_ax[i][::-1]]
                       for i, sid in enumerate(result.station_ids)])
     written.append(p)
+    # per-target and per-observation tables: written from the columns (millions of rows)
     p = out / "targets.csv"
-    write_csv_atomic(p, ["target", "x_m", "y_m", "z_m", "u_x_m", "u_y_m", "u_z_m",
-                         "ell95_a_m", "ell95_b_m", "ell95_c_m"],
-                     [[tid, *result.target_xyz_m[j],
-                       *np.sqrt(np.clip(np.diag(result.target_cov_m2[j]), 0, None)), *t_ax[j][::-1]]
-                      for j, tid in enumerate(result.target_ids)])
+    tx, tu = result.target_xyz_m, np.sqrt(np.clip(np.diagonal(result.target_cov_m2, axis1=1, axis2=2), 0, None))
+    write_csv_columns_atomic(p, {"target": (result.target_ids, np.arange(len(result.target_ids))),
+                                 "x_m": tx[:, 0], "y_m": tx[:, 1], "z_m": tx[:, 2], "u_x_m": tu[:, 0],
+                                 "u_y_m": tu[:, 1], "u_z_m": tu[:, 2], "ell95_a_m": t_ax[:, 2],
+                                 "ell95_b_m": t_ax[:, 1], "ell95_c_m": t_ax[:, 0]})
     written.append(p)
     o = result.obs
     p = out / "residuals.csv"
-    write_csv_atomic(p, ["station", "target", "distance_m", "sigma_m", "residual_m", "redundancy", "w",
-                         "mdb_m", "used"],
-                     [[o.station_ids[o.station_index[k]], o.target_ids[o.target_index[k]], o.distance_m[k],
-                       o.sigma_m[k], result.residuals_m[k], result.redundancy[k], result.w[k],
-                       result.mdb_m[k], bool(result.used[k])] for k in range(o.n_obs)])
+    write_csv_columns_atomic(p, {"station": (o.station_ids, o.station_index), "target": (o.target_ids, o.target_index),
+                                 "distance_m": o.distance_m, "sigma_m": o.sigma_m, "residual_m": result.residuals_m,
+                                 "redundancy": result.redundancy, "w": result.w, "mdb_m": result.mdb_m,
+                                 "used": np.asarray(result.used, bool)})
     written.append(p)
     if references is not None:
         p = out / "reference_lengths.csv"

@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.io import JsonRows
 from multilat.network import statistics as st
 from multilat.network.covariance import NetworkCovariance
 from multilat.network.data import Observations, ReferenceLengths
@@ -317,11 +318,11 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
     gt = res.global_test
     o = res.obs
     si, ti = o.station_index, o.target_index
-    observations = [{"station": o.station_ids[si[k]], "target": o.target_ids[ti[k]],
-                     "distance_m": float(o.distance_m[k]), "sigma_m": float(o.sigma_m[k]),
-                     "residual_m": float(res.residuals_m[k]), "redundancy": float(res.redundancy[k]),
-                     "w": float(res.w[k]), "mdb_m": float(res.mdb_m[k]), "rejected": not bool(res.used[k])}
-                    for k in range(o.n_obs)]
+    # one row per observation, written from the columns (no Python object per row)
+    observations = JsonRows({"station": (o.station_ids, si), "target": (o.target_ids, ti),
+                             "distance_m": o.distance_m, "sigma_m": o.sigma_m,
+                             "residual_m": res.residuals_m, "redundancy": res.redundancy,
+                             "w": res.w, "mdb_m": res.mdb_m, "rejected": ~np.asarray(res.used, bool)})
     doc = {
         "datum": res.datum.describe(),
         "cost": res.cost,

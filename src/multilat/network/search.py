@@ -42,7 +42,6 @@ from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
-from scipy import stats
 
 from multilat.errors import MultilatError
 from multilat.network.initial import distance_matrix, initial_values
@@ -114,7 +113,9 @@ def _cost(sol) -> float:
 
 def p_value(cost: float, dof: int) -> float:
     """χ² upper-tail probability of ``cost`` with ``dof`` degrees of freedom (1 when dof <= 0)."""
-    return float(stats.chi2.sf(cost, dof)) if dof > 0 else 1.0
+    from multilat.network.statistics import chi2_sf
+
+    return chi2_sf(cost, dof) if dof > 0 else 1.0
 
 
 def needs_search(sol, obs, *, p_min: float = P_MIN) -> bool:

@@ -11,9 +11,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
-__all__ = ["GlobalTest", "global_test", "w_statistics", "w_critical", "noncentrality",
+__all__ = ["GlobalTest", "global_test", "w_statistics", "w_critical", "noncentrality", "chi2_ppf", "chi2_sf", "norm_ppf",
            "minimal_detectable_bias_m", "confidence_ellipsoid"]
 
 
@@ -39,19 +38,43 @@ def global_test(weighted_sum_sq: float, dof: int, *, alpha: float = 0.05) -> Glo
     """χ² test of ``weighted_sum_sq`` (= vᵀPv) with ``dof`` degrees of freedom."""
     if dof <= 0 or not np.isfinite(weighted_sum_sq):
         return GlobalTest(None, None, None, None, alpha, dof)
-    crit = float(stats.chi2.ppf(1.0 - alpha, dof))
-    low = float(stats.chi2.ppf(alpha, dof))
+    crit = chi2_ppf(1.0 - alpha, dof)
+    low = chi2_ppf(alpha, dof)
     return GlobalTest(float(weighted_sum_sq), crit, low, bool(weighted_sum_sq <= crit), alpha, dof)
 
 
 def w_critical(alpha: float) -> float:
     """Two-sided critical value of the w-test (standard normal) for significance ``alpha``."""
-    return float(stats.norm.ppf(1.0 - alpha / 2.0))
+    return norm_ppf(1.0 - alpha / 2.0)
 
 
 def noncentrality(alpha: float, power: float = 0.80) -> float:
     """Baarda's non-centrality ``lambda0 = (z_{1-alpha/2} + z_{power})**2`` of a 1-D test."""
-    return float((stats.norm.ppf(1.0 - alpha / 2.0) + stats.norm.ppf(power)) ** 2)
+    return float((norm_ppf(1.0 - alpha / 2.0) + norm_ppf(power)) ** 2)
+
+
+# The quantiles come from scipy.special, the functions scipy.stats evaluates for them (the same
+# numbers: ``chi2.ppf(p, k) = 2 gammaincinv(k/2, p)``, ``chi2.sf(x, k) = chdtrc(k, x)``,
+# ``norm.ppf(p) = ndtri(p)``), imported on first use: importing scipy.stats costs ~0.4 s per command.
+def chi2_ppf(p: float, dof) -> float:
+    """Quantile ``p`` of the χ² distribution with ``dof`` degrees of freedom (0 < p < 1)."""
+    from scipy.special import gammaincinv
+
+    return float(2 * gammaincinv(dof / 2, p))
+
+
+def chi2_sf(x: float, dof) -> float:
+    """Upper tail probability ``P(χ²_dof > x)``."""
+    from scipy.special import chdtrc
+
+    return float(chdtrc(dof, x))
+
+
+def norm_ppf(p: float) -> float:
+    """Quantile ``p`` of the standard normal distribution."""
+    from scipy.special import ndtri
+
+    return float(ndtri(p))
 
 
 def w_statistics(residual_m, sigma_m, redundancy):
@@ -92,5 +115,5 @@ def confidence_ellipsoid(cov_m2, *, level: float = 0.95):
     axes : ndarray (..., 3, 3)      unit eigenvectors as columns
     """
     w, V = np.linalg.eigh(np.asarray(cov_m2, float))
-    k = stats.chi2.ppf(level, 3)
+    k = chi2_ppf(level, 3)
     return np.sqrt(np.clip(w, 0.0, None) * k), V

@@ -1,0 +1,77 @@
+"""Compile every numba kernel once, at install: ``python -m multilat.warmup`` (run by ``make install``).
+
+numba compiles a kernel on its first call and keeps the machine code on disk (``cache=True``: in the
+package's ``__pycache__`` when writable, else numba's user cache directory, or ``NUMBA_CACHE_DIR``).
+Without this step a new user's first ``adjust`` or ``propagate`` would spend ~15-60 s compiling; after
+it, the first command only loads the cached code (~0.3 s). Each step is a small real workload through
+the public entry points, so kernels reached by those paths are compiled whatever their number.
+Prints one line per step; exits 0 without numba (nothing to compile).
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+import warnings
+
+import numpy as np
+
+__all__ = ["main"]
+
+
+def _steps():
+    def adjust_large():
+        """The sparse solver, multilateration, and the statistics kernels (>= 10 000 distances)."""
+        from multilat.io import dumps_json
+        from multilat.network.adjust import adjust
+        from multilat.network.covariance import KERNELS_ABOVE_OBS
+        from multilat.network.data import Observations
+        from multilat.network.large import synthetic_network
+
+        t = KERNELS_ABOVE_OBS // 8 + 50
+        net = synthetic_network(20, t, 8, rng=1)
+        obs = Observations(tuple(f"S{i}" for i in range(20)), tuple(f"T{j}" for j in range(t)),
+                           net.station_index, net.target_index, net.distance_m, net.sigma_m)
+        res = adjust(obs, solver="sparse", snooping=False, rng=0)
+        res.covariance.hat_row(0)
+        from multilat.network.result import result_to_json
+
+        dumps_json(result_to_json(res))
+
+    def propagate_small():
+        """The batched Monte Carlo solver and the distance-model draws."""
+        from multilat.network.configs import small_volume
+        from multilat.network.propagate import problem_from_config, propagate
+
+        propagate(problem_from_config(small_volume(), sigma_m=4.7e-6), trials=2000, rng=1)
+
+    def normals():
+        """numba's bit-identical standard normal draws (used past a size threshold)."""
+        from multilat import distributions as D
+
+        D._NUMPY_NORMALS = D.NUMBA_AFTER
+        D._fast_std_normal(np.random.default_rng(0), 4096)
+
+    return [("adjust, sparse, 10 400 distances", adjust_large), ("propagate small-volume", propagate_small),
+            ("normal draws", normals)]
+
+
+def main(argv=None) -> int:
+    try:
+        import numba  # noqa: F401
+    except ImportError:
+        print("multilat warm-up: numba not installed, nothing to compile")
+        return 0
+    t_all = time.perf_counter()
+    for label, step in _steps():
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            step()
+        print(f"multilat warm-up: {label}: {time.perf_counter() - t0:.1f} s")
+    print(f"multilat warm-up: numba kernels compiled and cached in {time.perf_counter() - t_all:.1f} s")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
