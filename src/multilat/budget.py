@@ -97,7 +97,7 @@ def _params(inst: Instrument, head: str) -> _Params:
         ambiguity_m=float(adm.ambiguity_m(inst.adm.modulation_frequency_hz, n_g)),
         scr_db=inst.adm.signal_to_crosstalk_db,
         am_pm_m_per_db=inst.adm.am_pm_m_per_db,
-        toh_est_m=inst.heads[head].toh_m,
+        toh_est_m=inst.head(head).toh_m,
         tot_est_m=t.tot_m,
         b_const_m=t.b_m if t.constant_calibrated else 0.0,
         transit_correction=t.transit_correction,

@@ -15,10 +15,12 @@ from multilat.cli import checks
 from multilat.io import check_output_dir, staging_dir
 
 
-def parse_fixed_offsets(text: str, station_ids) -> float | dict:
-    """``--fix-offsets-um``: ``"X"`` (every station, µm) -> metres; ``"A=1234,B=-871"`` -> {id: metres}.
+def parse_fixed_offsets(text: str, station_ids, *, what: str = "station") -> float | dict:
+    """``--fix-offsets-um``: ``"X"`` (every head, µm) -> metres; ``"A=1234,B=-871"`` -> {head id: metres}.
 
-    Raises :class:`MultilatError` (one line) on a malformed value or an unknown station id.
+    ``station_ids`` are the ids that may be named (the head ids; a head is its station when the
+    observations name no heads). Raises :class:`MultilatError` (one line) on a malformed value or an
+    unknown id.
     """
     text = text.strip()
     if "=" not in text:
@@ -36,10 +38,10 @@ def parse_fixed_offsets(text: str, station_ids) -> float | dict:
         if not sep or not key:
             raise MultilatError(f"--fix-offsets-um: expected STATION=µm, got {item.strip()!r}")
         if key not in station_ids:
-            raise MultilatError(f"--fix-offsets-um: unknown station id {key!r} "
-                                f"(stations: {', '.join(station_ids)})")
+            raise MultilatError(f"--fix-offsets-um: unknown {what} id {key!r} "
+                                f"({what}s: {', '.join(station_ids)})")
         if key in out:
-            raise MultilatError(f"--fix-offsets-um: station {key!r} given twice")
+            raise MultilatError(f"--fix-offsets-um: {what} {key!r} given twice")
         try:
             v = float(val)
         except ValueError:
@@ -52,7 +54,9 @@ def parse_fixed_offsets(text: str, station_ids) -> float | dict:
 @app.command("adjust")
 def adjust_command(
     observations: Path = typer.Argument(..., help="Observations CSV: station,target,distance_m"
-                                                  "[,sigma_m][,azimuth_rad,elevation_rad]; or a raw "
+                                                  "[,sigma_m][,head][,azimuth_rad,elevation_rad] (head: "
+                                                  "the head on the station, default the station id; "
+                                                  "offsets and scales belong to heads); or a raw "
                                                   "readings file (optical_path_m or phase_rad, "
                                                   "frequency_hz), corrected first as by `multilat correct`."),
     references: Optional[Path] = typer.Option(None, "--references",
@@ -73,15 +77,16 @@ def adjust_command(
     cost: str = typer.Option("distance", "--cost",
                              help="distance (weighted, default) or squared (the paper's eq. 6, unweighted)."),
     fix_offsets_um: Optional[str] = typer.Option(None, "--fix-offsets-um",
-                                                 help="Hold station offsets fixed, µm: one value for "
-                                                      "every station (e.g. 0), or per station "
-                                                      "A=1234,B=-871 (the others stay estimated). "
+                                                 help="Hold head offsets fixed, µm: one value for "
+                                                      "every head (e.g. 0), or per head "
+                                                      "A=1234,B=-871 (the others stay estimated; a head "
+                                                      "is its station without a head column). "
                                                       "Default: estimate them all."),
     scales: bool = typer.Option(False, "--scales",
-                                help="Also estimate a scale per station; the network's scale then needs "
-                                     "a datum: --fixed-scale STATION or --scale-bar."),
+                                help="Also estimate a scale per head; the network's scale then needs "
+                                     "a datum: --fixed-scale HEAD or --scale-bar."),
     fixed_scale: Optional[str] = typer.Option(None, "--fixed-scale",
-                                              help="With --scales: hold this station's scale (the scale "
+                                              help="With --scales: hold this head's scale (the scale "
                                                    "datum); the others are estimated."),
     scale_bar: bool = typer.Option(False, "--scale-bar",
                                    help="With --scales: the one reference length of --references (with "
@@ -156,16 +161,17 @@ def adjust_command(
     if refs is not None:
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))
     pts = read_points(points) if points is not None else None
-    offsets = None if fix_offsets_um is None else parse_fixed_offsets(fix_offsets_um, obs.station_ids)
+    what = "station" if obs.station_heads is None else "head"
+    offsets = None if fix_offsets_um is None else parse_fixed_offsets(fix_offsets_um, obs.head_ids, what=what)
     if (fixed_scale is not None or scale_bar) and not scales:
         raise MultilatError("--fixed-scale and --scale-bar go with --scales")
     if scale_bar and refs is None:
         raise MultilatError("--scale-bar needs --references FILE (one reference length)")
     if fixed_scale is not None:
-        if fixed_scale not in obs.station_ids:
-            raise MultilatError(f"--fixed-scale: unknown station id {fixed_scale!r} "
-                                f"(stations: {', '.join(obs.station_ids)})")
-        scales = [sid for sid in obs.station_ids if sid != fixed_scale]
+        if fixed_scale not in obs.head_ids:
+            raise MultilatError(f"--fixed-scale: unknown {what} id {fixed_scale!r} "
+                                f"({what}s: {', '.join(obs.head_ids)})")
+        scales = [hid for hid in obs.head_ids if hid != fixed_scale]
     with progress() as p:
         p.add_task(f"adjusting {obs.n_obs:,} distances", total=None)
         res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,

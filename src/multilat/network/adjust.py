@@ -34,8 +34,21 @@ from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 __all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
 
 
+def _head_stations(key, obs: Observations, what: str) -> np.ndarray:
+    """Mask (s,) of the stations of head ``key`` (offsets and scales belong to heads; a head is its
+    station when the observations name no heads)."""
+    hos = obs.head_of_station
+    if key not in hos:
+        if key in obs.station_ids:
+            i = obs.station_ids.index(key)
+            raise MultilatError(f"{what}: {key!r} is a station of head {hos[i]!r}; offsets and scales belong "
+                                "to heads: name the head")
+        raise MultilatError(f"{what}: unknown {'station' if obs.station_heads is None else 'head'} id {key!r}")
+    return np.array([h == key for h in hos])
+
+
 def _fixed_offsets(offsets, obs: Observations):
-    """(offset_free (s,) bool, fixed values (s,)) from the ``offsets`` option."""
+    """(offset_free (s,) bool, fixed values (s,)) from the ``offsets`` option (keys: head ids)."""
     s = obs.n_stations
     free = np.ones(s, bool)
     val = np.zeros(s)
@@ -43,12 +56,10 @@ def _fixed_offsets(offsets, obs: Observations):
         return free, val
     if isinstance(offsets, Mapping):
         for k, v in offsets.items():
-            if k not in obs.station_ids:
-                raise MultilatError(f"offsets: unknown station id {k!r}")
-            i = obs.station_ids.index(k)
+            m = _head_stations(k, obs, "offsets")
             if not np.isfinite(v):
                 raise MultilatError(f"offsets: value for {k!r} must be finite")
-            free[i], val[i] = False, float(v)
+            free[m], val[m] = False, float(v)
         return free, val
     try:
         v = float(offsets)
@@ -67,9 +78,7 @@ def _scale_flags(scales, obs):
         return np.ones(s, bool)
     out = np.zeros(s, bool)
     for k in scales:
-        if k not in obs.station_ids:
-            raise MultilatError(f"scales: unknown station id {k!r}")
-        out[obs.station_ids.index(k)] = True
+        out |= _head_stations(k, obs, "scales")
     return out
 
 
@@ -106,10 +115,11 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         ``"distance"``: residuals in metres weighted by ``1/sigma``; ``"squared"``: the paper's
         eq. (6), unweighted squared-distance differences (covariance scaled by the a-posteriori
         variance; no global test or data snooping, which need known weights).
-    offsets : None, "estimate", float or mapping station -> metres
-        Estimate all offsets (default), fix all to one value, or fix the named ones.
-    scales : bool or iterable of station ids
-        Estimate a scale per station (all, or the named ones). Default: none. With every station's
+    offsets : None, "estimate", float or mapping head -> metres
+        Estimate all offsets (default), fix all to one value, or fix the named heads' ones (a head
+        is its station when ``obs`` names no heads; a head occupying several stations has one offset).
+    scales : bool or iterable of head ids
+        Estimate a scale per head (all, or the named ones). Default: none. With every station's
         scale estimated the network's scale is a 7th datum defect: give ``scale_bar``.
     scale_bar : ReferenceLengths with one row, optional
         A reference length (with its uncertainty ``u_m``) as the scale datum when every station's
@@ -191,8 +201,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     bar = None
     if scale_bar is not None:
         bar = scale_bar_datum(scale_bar, obs, sc_free, datum, cost)
-        sc_free = sc_free.copy()
-        sc_free[0] = False          # the internal minimal constraint on the scale; the bar fixes it
+        # the internal minimal constraint on the scale (of the first head); the bar fixes it
+        sc_free = sc_free & (obs.head_index != obs.head_index[0])
     check_scale_datum(obs, sc_free, datum)
     try:
         check_network(obs, datum, points, off_free, sc_free, warn=True)   # before any initial values

@@ -52,6 +52,10 @@ class Observations:
         A-priori standard uncertainty of each distance, metres, > 0.
     azimuth_rad, elevation_rad : ndarray, shape (m,), or None
         Pointing angles of the head for each observation when known (NaN where unknown).
+    station_heads : tuple of str, length s, or None
+        The measurement head that occupied each station (None: every station is its own head, head
+        id = station id). Offsets and scales belong to heads: a head that occupies several stations
+        (sequential multilateration) has one offset and one scale for all of them.
 
     Build with :meth:`from_labels` (ids per row); the constructor checks shapes, finiteness,
     positivity, index ranges and duplicate (station, target) pairs.
@@ -65,10 +69,17 @@ class Observations:
     sigma_m: np.ndarray
     azimuth_rad: np.ndarray | None = None
     elevation_rad: np.ndarray | None = None
+    station_heads: tuple[str, ...] | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__
         set_(self, "station_ids", _ids("station_ids", self.station_ids))
+        if self.station_heads is not None:
+            hs = _ids("station_heads", self.station_heads)
+            if len(hs) != len(self.station_ids):
+                raise MultilatError(f"station_heads: expected {len(self.station_ids)} head ids (one per "
+                                    f"station), got {len(hs)}")
+            set_(self, "station_heads", None if hs == self.station_ids else hs)
         set_(self, "target_ids", _ids("target_ids", self.target_ids))
         if len(set(self.station_ids)) != len(self.station_ids):
             raise MultilatError("station_ids: duplicate station id")
@@ -122,7 +133,7 @@ class Observations:
     # ---------------------------------------------------------------- construction
     @classmethod
     def from_labels(cls, station: Sequence[str], target: Sequence[str], distance_m, sigma_m, *,
-                    azimuth_rad=None, elevation_rad=None) -> "Observations":
+                    azimuth_rad=None, elevation_rad=None, head: Sequence[str] | None = None) -> "Observations":
         """Build from one station id and one target id per observation.
 
         Parameters
@@ -131,21 +142,55 @@ class Observations:
         distance_m : array_like, shape (m,), metres
         sigma_m : float or array_like, shape (m,), metres
         azimuth_rad, elevation_rad : array_like, shape (m,), optional
+        head : sequence of str, length m, optional
+            The head that measured each distance (default: the station id). All observations of a
+            station must name the same head.
         """
         station = _ids("station", station)
         target = _ids("target", target)
         if len(station) != len(target):
             raise MultilatError("station and target lists differ in length")
         sids = tuple(dict.fromkeys(station))
+        heads = None
+        if head is not None:
+            head = _ids("head", head)
+            if len(head) != len(station):
+                raise MultilatError("head and station lists differ in length")
+            hs: dict[str, str] = {}
+            for k, (s_, h_) in enumerate(zip(station, head)):
+                if hs.setdefault(s_, h_) != h_:
+                    raise MultilatError(f"row {k + 1}: station {s_!r} has two heads, {hs[s_]!r} and {h_!r}")
+            heads = tuple(hs[s_] for s_ in sids)
         tids = tuple(dict.fromkeys(target))
         sx, tx = _index_of(sids), _index_of(tids)
         m = len(station)
         sig = np.broadcast_to(np.asarray(sigma_m, dtype=float), (m,)).copy() if m else np.zeros(0)
         return cls(sids, tids, np.array([sx[s] for s in station], dtype=np.intp),
                    np.array([tx[t] for t in target], dtype=np.intp), np.asarray(distance_m, float),
-                   sig, azimuth_rad=azimuth_rad, elevation_rad=elevation_rad)
+                   sig, azimuth_rad=azimuth_rad, elevation_rad=elevation_rad, station_heads=heads)
 
     # ---------------------------------------------------------------- views
+    @property
+    def head_of_station(self) -> tuple[str, ...]:
+        """The head id of each station (s,) (the station id when no heads were given)."""
+        return self.station_ids if self.station_heads is None else self.station_heads
+
+    @property
+    def head_ids(self) -> tuple[str, ...]:
+        """Unique head ids in order of first appearance among the stations."""
+        return tuple(dict.fromkeys(self.head_of_station))
+
+    @property
+    def head_index(self) -> np.ndarray:
+        """Index into :attr:`head_ids` of each station (s,)."""
+        pos = {h: k for k, h in enumerate(self.head_ids)}
+        return np.array([pos[h] for h in self.head_of_station], dtype=np.intp)
+
+    @property
+    def shares_heads(self) -> bool:
+        """Whether some head occupies more than one station."""
+        return len(self.head_ids) < self.n_stations
+
     @property
     def n_obs(self) -> int:
         return int(self.distance_m.shape[0])
@@ -177,20 +222,21 @@ class Observations:
         t_new[t_present] = np.arange(t_present.size)
         az = None if self.azimuth_rad is None else self.azimuth_rad[keep]
         el = None if self.elevation_rad is None else self.elevation_rad[keep]
+        hs = None if self.station_heads is None else tuple(self.station_heads[i] for i in s_present)
         return Observations(tuple(self.station_ids[i] for i in s_present),
                             tuple(self.target_ids[j] for j in t_present), s_new[si], t_new[ti],
-                            self.distance_m[keep], self.sigma_m[keep], az, el)
+                            self.distance_m[keep], self.sigma_m[keep], az, el, hs)
 
     def with_sigma(self, sigma_m) -> "Observations":
         """A copy with other a-priori uncertainties (scalar or shape (m,))."""
         sig = np.broadcast_to(np.asarray(sigma_m, dtype=float), (self.n_obs,)).copy()
         return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
-                            self.distance_m, sig, self.azimuth_rad, self.elevation_rad)
+                            self.distance_m, sig, self.azimuth_rad, self.elevation_rad, self.station_heads)
 
     def with_distances(self, distance_m) -> "Observations":
         """A copy with other distances (same pattern), e.g. a simulated draw."""
         return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
-                            distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad)
+                            distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad, self.station_heads)
 
 
 @dataclass(frozen=True, eq=False)

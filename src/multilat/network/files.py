@@ -2,7 +2,10 @@
 
 Observations CSV (one row per measured distance)::
 
-    station,target,distance_m[,sigma_m][,azimuth_rad,elevation_rad]
+    station,target,distance_m[,sigma_m][,head][,azimuth_rad,elevation_rad]
+
+``head`` (optional): the measurement head on the station (default: the station id); one head per
+station, any number of stations per head (offsets and scales belong to heads).
 
 Reference lengths CSV::  ``target_a,target_b,length_m[,u_m]``
 Points CSV::             ``point,x_m,y_m,z_m``
@@ -26,7 +29,7 @@ from multilat.network.screening import screen_observations
 __all__ = ["read_observations", "read_reference_lengths", "read_points", "write_result_csvs"]
 
 OBS_REQUIRED = ("station", "target", "distance_m")
-OBS_OPTIONAL = ("sigma_m", "azimuth_rad", "elevation_rad")
+OBS_OPTIONAL = ("sigma_m", "head", "azimuth_rad", "elevation_rad")
 
 
 def _check_ids(tab, col):
@@ -50,8 +53,10 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     instrument : Instrument or preset name/path, optional
         When the file has no ``sigma_m`` column and ``sigma_m`` is not given, each distance's
         uncertainty comes from the distance model :func:`multilat.budget.distance_std_m` of this
-        instrument (default preset ``"seed2020"``), with the station id as head name when the
-        instrument has such a head (else head ``"A"``).
+        instrument (default preset ``"seed2020"``) for the row's head: the ``head`` column (which
+        the instrument must know: its own block, ``head_map`` or ``[heads.default]``; else
+        ``FILE:LINE: unknown head``), or without that column the station id when the instrument
+        resolves it (else head ``"A"``).
 
     Returns
     -------
@@ -67,6 +72,15 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
             raise tab.error(k, f"duplicate observation {key[0]}->{key[1]} (first at line "
                                f"{tab.line_numbers[seen[key]]}); average repeated measurements into one row")
         seen[key] = k
+    hd = None
+    if tab.has("head"):
+        hd = [h if h else s_ for h, s_ in zip(tab.column("head"), st)]
+        first: dict[str, int] = {}
+        for k, (s_, h) in enumerate(zip(st, hd)):
+            k0 = first.setdefault(s_, k)
+            if hd[k0] != h:
+                raise tab.error(k, f"station {s_!r} has head {h!r} here but {hd[k0]!r} at line "
+                                   f"{tab.line_numbers[k0]} (one head per station)")
     both = set(st) & set(tg)
     if both:
         v = sorted(both)[0]
@@ -89,13 +103,17 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
             raise MultilatError(f"sigma must be finite and > 0, got {sigma_m!r}")
         sig = np.full(d.shape, float(sigma_m))
     else:
-        sig = _model_sigma(d, st, instrument)
-    obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
+        sig = _model_sigma(d, st if hd is None else hd, instrument,
+                           where=None if hd is None else tab.error)
+    obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el, head=hd)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
     return obs
 
 
-def _model_sigma(d, stations, instrument):
+def _model_sigma(d, heads, instrument, *, where=None):
+    """Each distance's sigma from the instrument's distance model for its head. ``heads`` (m,) are
+    the head column (``where`` = the table's row error: an unknown head is ``FILE:LINE``) or, without
+    one, the station ids (a station the instrument does not resolve falls back to head ``A``)."""
     try:
         from multilat import budget, instrument as instr
     except ImportError:
@@ -104,14 +122,18 @@ def _model_sigma(d, stations, instrument):
     inst = instr.load_instrument("seed2020" if instrument is None else instrument) \
         if isinstance(instrument, (str, os.PathLike, type(None))) else instrument
     out = np.empty_like(d)
-    stations = np.asarray(stations)
-    for sid in dict.fromkeys(stations):
-        head = sid
-        try:
-            inst.head(head)
-        except Exception:
+    heads = np.asarray(heads, dtype=object)
+    for hid in dict.fromkeys(heads):
+        m = heads == hid
+        head = hid
+        if not inst.has_head(head):
+            if where is not None:
+                k = int(np.flatnonzero(m)[0])
+                try:
+                    inst.head(head)
+                except MultilatError as exc:
+                    raise where(k, f"column 'head': {exc}") from None
             head = "A"
-        m = stations == sid
         out[m] = budget.distance_std_m(inst, d[m], head=head)
     return out
 

@@ -15,7 +15,7 @@ from multilat.network.covariance import NetworkCovariance
 from multilat.network.data import Observations
 from multilat.network.datum import apply_rigid, datum_matrices, frame_321, rigid_fit
 from multilat.network.model import Q
-from multilat.network.problem import Params, Problem
+from multilat.network.problem import Params, Problem, head_mean
 from multilat.network.result import Start
 from multilat.network.solvability import check_structure, flat_geometry
 from multilat.network.solve import choose_backend, gauss_newton, make_backend, solve_reduced
@@ -125,8 +125,10 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
     s, t = sub.n_stations, sub.n_targets
     sx0 = start.station_xyz_m[smap].copy()
     tx0 = start.target_xyz_m[tmap].copy()
-    off0 = np.where(off_free, start.offset_m[smap], off_val)
-    sc0 = np.asarray(getattr(start, "scale", np.zeros(len(start.offset_m))), float)[smap].copy()
+    # heads that occupy several stations: one offset and scale each (the tie, problem.py); the
+    # initial values may have treated the stations independently, so start from their mean
+    off0 = head_mean(np.where(off_free, start.offset_m[smap], off_val), sub)
+    sc0 = head_mean(np.asarray(getattr(start, "scale", np.zeros(len(start.offset_m))), float)[smap], sub)
     gfree = np.ones((s, Q), bool)
     gfree[:, 3] = off_free
     gfree[:, 4] = sc_free

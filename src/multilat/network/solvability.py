@@ -75,7 +75,11 @@ def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets
     fixed_targets = np.zeros(t, bool) if fixed_targets is None else np.asarray(fixed_targets, bool)
     per_station = np.bincount(obs.station_index, minlength=s)
     per_target = np.bincount(obs.target_index, minlength=t)
-    need_s = 3 + np.asarray(offset_free, int) + np.asarray(scale_free, int)
+    # a head's offset and scale are unknowns of that station only when the head occupies no other
+    hi = obs.head_index
+    alone = (np.bincount(hi)[hi] == 1).astype(int)
+    need_s = 3 + alone * (np.asarray(offset_free, int) + np.asarray(scale_free, int))
+    lead = np.unique(hi, return_index=True)[1]
     for i in range(s):
         if per_station[i] < need_s[i] + 1:
             raise MultilatError(
@@ -98,10 +102,11 @@ def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets
         raise MultilatError(f"the network is disconnected into {ncomp} parts ({' | '.join(parts)}); "
                             "each part must be adjusted separately or linked by common targets")
     n_unknown = (3 * s - fixed_station_coords + 3 * int((~fixed_targets).sum())
-                 + int(np.sum(offset_free)) + int(np.sum(scale_free)) - datum_defect)
+                 + int(np.sum(np.asarray(offset_free)[lead])) + int(np.sum(np.asarray(scale_free)[lead]))
+                 - datum_defect)
     dof = m - n_unknown
     if dof < 0:
-        n_off = int(np.sum(offset_free))
+        n_off = int(np.sum(np.asarray(offset_free)[lead]))
         hint = ""
         if datum_defect == 6 and not np.any(scale_free):
             per_t = s - 3   # net equations per target seen by all stations
