@@ -314,3 +314,12 @@ def test_cli_adjust_with_heads(capsys):
     rc, out, err = run(["adjust", str(EX / "obs.csv"), "--fix-offsets-um", "S1=0"])
     assert rc != 0 and "error: --fix-offsets-um: unknown head id 'S1' (heads: T1, T2)" in err
     assert len(err.strip().splitlines()) == 1
+
+
+def test_demo_section_verdicts():
+    """The demo's computed verdicts on the shipped example and the quick coverage study."""
+    from multilat.report.sequential_demo import section
+
+    html = "".join(str(b) for b in section(seed=20200808, quick=True).blocks)
+    assert "within 3 u of the truth: yes" in html
+    assert ": consistent;" in html

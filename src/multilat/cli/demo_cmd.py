@@ -14,6 +14,7 @@ from multilat.io import write_text_atomic
 DEMO_SECTIONS = (
     "multilat.report.distance_demo",   # seed 000 §2-3: air index, ADM, budget
     "multilat.report.network_demo",    # seed 000 §4: self-calibrating multilateration
+    "multilat.report.sequential_demo",  # heads moved over several stations (issue 16)
     "multilat.report.campaign_demo",   # seed 000 §3.2, 4.2: raw readings -> corrected distances
     "multilat.report.propagate_demo",  # full Monte Carlo through the adjustment
     "multilat.report.lbb_demo",        # seed 003: laser ball bar
