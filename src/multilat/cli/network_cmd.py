@@ -62,7 +62,9 @@ def adjust_command(
     references: Optional[Path] = typer.Option(None, "--references",
                                               help="Reference lengths CSV: target_a,target_b,length_m[,u_m]."),
     points: Optional[Path] = typer.Option(None, "--points",
-                                          help="Points CSV: point,x_m,y_m,z_m (approximate or control)."),
+                                          help="Points CSV: point,x_m,y_m,z_m[,sx_m,sy_m,sz_m] (approximate "
+                                               "or control; rows with sx_m,sy_m,sz_m are weighted control "
+                                               "under --datum control)."),
     datum: str = typer.Option("free", "--datum",
                               help="free[:P1,P2,..] (inner constraints, default), 321:A,B,C "
                                    "(A origin, B on +x, C in xy-plane) or control[:P1,..] (--points fixed)."),
@@ -88,9 +90,10 @@ def adjust_command(
     fixed_scale: Optional[str] = typer.Option(None, "--fixed-scale",
                                               help="With --scales: hold this head's scale (the scale "
                                                    "datum); the others are estimated."),
-    scale_bar: bool = typer.Option(False, "--scale-bar",
-                                   help="With --scales: the one reference length of --references (with "
-                                        "its u_m) is the scale datum."),
+    scale_bar: bool = typer.Option(False, "--scale-bars", "--scale-bar",
+                                   help="Use the reference lengths of --references as observations (scale "
+                                        "bars, each weighted by its u_m > 0); with --scales they are the "
+                                        "scale datum."),
     snooping: bool = typer.Option(True, "--snooping/--no-snooping",
                                   help="Iteratively reject the worst w-test failure."),
     seed: int = typer.Option(0, "--seed", help="Seed for the initial-value search (if used)."),
@@ -163,10 +166,10 @@ def adjust_command(
     pts = read_points(points) if points is not None else None
     what = "station" if obs.station_heads is None else "head"
     offsets = None if fix_offsets_um is None else parse_fixed_offsets(fix_offsets_um, obs.head_ids, what=what)
-    if (fixed_scale is not None or scale_bar) and not scales:
-        raise MultilatError("--fixed-scale and --scale-bar go with --scales")
+    if fixed_scale is not None and not scales:
+        raise MultilatError("--fixed-scale goes with --scales")
     if scale_bar and refs is None:
-        raise MultilatError("--scale-bar needs --references FILE (one reference length)")
+        raise MultilatError("--scale-bars needs --references FILE (the bars' lengths with u_m)")
     if fixed_scale is not None:
         if fixed_scale not in obs.head_ids:
             raise MultilatError(f"--fixed-scale: unknown {what} id {fixed_scale!r} "
@@ -176,7 +179,7 @@ def adjust_command(
         p.add_task(f"adjusting {obs.n_obs:,} distances", total=None)
         res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
                      alpha_global=alpha_global, snooping=snooping, solver=solver, strict=strict,
-                     scale_bar=refs if scale_bar else None, rng=seed)
+                     scale_bars=refs if scale_bar else None, rng=seed)
     doc = result_to_json(res, refs)
     if corrected is not None:
         from multilat.campaign.correlated import correlated_json

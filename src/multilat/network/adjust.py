@@ -28,7 +28,8 @@ from multilat.network.problem import Params
 from multilat.network.result import (AdjustmentResult, InterpointDistance, Outlier, Start,
                                      build_result)
 from multilat.network.search import P_MIN, p_value
-from multilat.network.scale_datum import apply_scale_bar, check_scale_datum, scale_bar_datum
+from multilat.network.couplings import coupling_spec
+from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 
 __all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
@@ -87,8 +88,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
            points: Points | None = None, cost: str = "distance", offsets=None, scales=False,
            alpha: float = 0.001, power: float = 0.80, alpha_global: float = 0.05,
            snooping: bool = True, max_rejections: int | None = None, max_iter: int = 100,
-           solver: str = "auto", strict: bool = False, scale_bar: ReferenceLengths | None = None,
-           chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
+           solver: str = "auto", strict: bool = False, scale_bars: ReferenceLengths | None = None,
+           scale_bar: ReferenceLengths | None = None, chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
     """Adjust a self-calibrating multilateration network.
 
     Unknowns: station coordinates, target coordinates, one additive offset per station (estimated
@@ -121,10 +122,14 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     scales : bool or iterable of head ids
         Estimate a scale per head (all, or the named ones). Default: none. With every station's
         scale estimated the network's scale is a 7th datum defect: give ``scale_bar``.
-    scale_bar : ReferenceLengths with one row, optional
-        A reference length (with its uncertainty ``u_m``) as the scale datum when every station's
-        scale is estimated: the adjusted length equals it, and its uncertainty enters every
-        coordinate's covariance along the scale direction.
+    scale_bars : ReferenceLengths, optional
+        Reference lengths between points used as **observations** (scale bars), each weighted by its
+        standard uncertainty ``u_m`` (> 0): they take part in the adjustment (residuals, redundancy,
+        the global test) and are enough to be the scale datum when every head's scale is estimated
+        (one bar: its adjusted length is the reference, its uncertainty enters every coordinate's
+        covariance along the scale direction). ``scale_bar`` is the same (older name).
+    points : with ``sx_m, sy_m, sz_m`` (``Points.std_m``) under ``datum="control"``: the rows with
+        uncertainties are **weighted control** (their coordinates are observations), the others hard.
     strict : bool
         Refuse the network when a point is too weakly observed, instead of leaving it out
         (``excluded`` in the result, with a warning).
@@ -168,6 +173,15 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         if not (0 < v < 1):
             raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
     datum = parse_datum(datum)
+    if scale_bars is not None and scale_bar is not None:
+        raise MultilatError("give scale_bars or scale_bar (the same), not both")
+    bars = scale_bars if scale_bars is not None else scale_bar
+    if bars is not None and cost != "distance":
+        raise MultilatError("scale bars need the distance cost (weighted observations)")
+    if points is not None and points.std_m is not None and datum.kind != "control":
+        warnings.warn("points: the standard uncertainties (sx_m, sy_m, sz_m) make weighted control under "
+                      "--datum control only; here the points are approximate coordinates", UserWarning,
+                      stacklevel=2)
     off_free, off_val = _fixed_offsets(offsets, obs)
     sc_free = _scale_flags(scales, obs)
     if datum.kind == "control" and points is None:
@@ -198,14 +212,11 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         off_free, off_val, sc_free = off_free[smap], off_val[smap], sc_free[smap]
         if given is not None:
             given = Start(given.station_xyz_m[smap], given.target_xyz_m[tmap], given.offset_m[smap])
-    bar = None
-    if scale_bar is not None:
-        bar = scale_bar_datum(scale_bar, obs, sc_free, datum, cost)
-        # the internal minimal constraint on the scale (of the first head); the bar fixes it
-        sc_free = sc_free & (obs.head_index != obs.head_index[0])
-    check_scale_datum(obs, sc_free, datum)
+    cspec = coupling_spec(obs, bars=bars, points=points, control=datum.kind == "control")
+    n_bars = 0 if cspec is None else len(cspec.bars)
+    check_scale_datum(obs, sc_free, datum, bars=n_bars > 0)
     try:
-        check_network(obs, datum, points, off_free, sc_free, warn=True)   # before any initial values
+        check_network(obs, datum, points, off_free, sc_free, warn=True, couplings=cspec)   # before any initial values
     except MultilatError as exc:
         if not excluded:
             raise
@@ -238,7 +249,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         try:
             core = fit_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
                             sc_free, max_iter, solver, chunk_targets, warn=warn,
-                            partial_ok=first and search_ok)
+                            partial_ok=first and search_ok, couplings=cspec)
         except MultilatError as exc:
             # computed initial values can make a solvable network look degenerate (a collapsed
             # start): the search's restarts get their chance before the error is final
@@ -251,13 +262,13 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             # (not under control points: they give the frame and the start; a failing test there
             # is tested as inconsistent control just below)
             core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
-                                           max_iter, solver, chunk_targets, rng)
+                                           max_iter, solver, chunk_targets, rng, cspec)
             how["search"] = search.as_dict()
         if first and datum.kind == "control" and cost == "distance":
             # a failed global test under control may be the control coordinates, not the distances:
             # test them (against the free network) before data snooping blames the distances
             _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global,
-                           max_iter, solver, chunk_targets, datum)
+                           max_iter, solver, chunk_targets, datum, cspec)
         first = False
         # the next adjustment (after a rejection) starts from this solution
         gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
@@ -297,7 +308,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             break
         try:
             check_network(obs.subset(trial), datum, points, off_free[station_map(obs, trial)],
-                       sc_free[station_map(obs, trial)], warn=False)
+                       sc_free[station_map(obs, trial)], warn=False, couplings=cspec)
         except MultilatError as exc:
             # rejecting it would make the network unsolvable: keep it, report it as not rejected
             unlocated, reason = (k,), f"rejecting it would leave the network unsolvable ({exc})"
@@ -312,19 +323,36 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             "errors, a-priori sigma too small, or give approximate coordinates")
         notes.append(msg)
         warnings.warn(msg, UserWarning, stacklevel=2)
-    if bar is not None:
-        core = apply_scale_bar(core, bar, obs, used, datum, start, points, off_free, off_val, sc_free,
-                                max_iter, solver, chunk_targets)
-        how["scale_datum"] = {"kind": "reference length", "points": [bar[0], bar[1]], "length_m": bar[2],
-                              "u_m": bar[3]}
+    if n_bars and datum.kind != "control" and np.all(sc_free):
+        how["scale_datum"] = {"kind": "scale bars", "n_bars": n_bars,
+                              "points": [cspec.bars[0][0], cspec.bars[0][1]]}
     res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global,
                        reason=reason, snooped=do_snoop)
     groups = _w_failure_groups(core, used, crit) if cost == "distance" else ()
-    return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how)
+    bars_out, ctrl_out = coupling_results(core)
+    return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
+                   scale_bars=bars_out, weighted_control=ctrl_out)
+
+
+def coupling_results(core) -> tuple[tuple, tuple]:
+    """The scale bars' and weighted control points' residuals and redundancy numbers (JSON-ready)."""
+    c = core.get("coupled")
+    if c is None:
+        return (), ()
+    cp, res, red = c["couplings"], c["residual_m"], c["redundancy"]
+    k = cp.bar_a.size
+    bars = tuple({"target_a": a, "target_b": b, "length_m": float(cp.bar_length_m[q]), "u_m": float(cp.bar_sigma_m[q]),
+                  "adjusted_m": float(cp.bar_length_m[q] - res[q]), "residual_m": float(res[q]),
+                  "redundancy": float(red[q])} for q, (a, b) in enumerate(cp.bar_ids))
+    ctrl = tuple({"point": pid, "xyz_m": cp.prior_value_m[3 * q:3 * q + 3].tolist(),
+                  "std_m": cp.prior_sigma_m[3 * q:3 * q + 3].tolist(),
+                  "residual_m": res[k + 3 * q:k + 3 * q + 3].tolist(),
+                  "redundancy": red[k + 3 * q:k + 3 * q + 3].tolist()} for q, pid in enumerate(cp.prior_ids))
+    return bars, ctrl
 
 
 def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free, max_iter, solver,
-                    chunk_targets, rng):
+                    chunk_targets, rng, cspec=None):
     """:func:`multilat.network.search.find_minimum` from the first adjustment (converged or the
     lowest-cost point it reached); returns the best core and the search record. Raises the
     non-convergence error when no start converges."""
@@ -343,7 +371,8 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return wrap(fit_once(obs, datum, st_, start, obs, used, points, "distance", of,
-                                     ov, sc_free, max_iter, solver, chunk_targets, warn=False))
+                                     ov, sc_free, max_iter, solver, chunk_targets, warn=False,
+                                     couplings=cspec))
 
     def continuation(st_):
         """Offsets held at zero first (a better conditioned problem for weak, flat networks), then
@@ -457,7 +486,7 @@ def _last_redundancy(obs, used, trial, k, datum, points) -> str:
 
 
 def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global, max_iter,
-                   solver, chunk_targets, datum) -> None:
+                   solver, chunk_targets, datum, cspec=None) -> None:
     """Raise if the control coordinates are inconsistent with the distances.
 
     The adjustment with the control held fixed has ``Omega_c = v^T P v`` on ``dof_c``; the free
@@ -474,8 +503,10 @@ def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
+            bars_only = None if cspec is None or not cspec.bars else replace(cspec, control=())
             free = fit_once(obs, parse_datum("free"), guess, guess, obs, used, None, "distance",
-                                off_free, off_val, sc_free, max_iter, solver, chunk_targets, warn=False)
+                                off_free, off_val, sc_free, max_iter, solver, chunk_targets, warn=False,
+                                couplings=bars_only)
     except MultilatError:
         return            # not solvable without the control: nothing to compare; snooping goes on
     k = core["dof"] - free["dof"]

@@ -19,7 +19,7 @@ import numpy as np
 
 from multilat.network.model import Q, segment_sum, target_slots
 
-__all__ = ["NetworkCovariance"]
+__all__ = ["NetworkCovariance", "CoupledCovariance"]
 
 
 class NetworkCovariance:
@@ -201,3 +201,51 @@ class NetworkCovariance:
             hh = diagS - 2.0 * term2 + term3
             h[sl[seen]] = hh[seen]
         return h
+
+
+class CoupledCovariance(NetworkCovariance):
+    """The covariance when targets are coupled (scale bars, weighted control;
+    :mod:`multilat.network.solve.coupled`): the same Schur form with the targets' block inverse
+    ``N_tt^-1`` (3t, 3t) dense and ``X = N_tt^-1 N_tg``::
+
+        C V = [u ; N_tt^-1 V_t - X u],   u = Q_gg (V_g - X^T V_t)
+
+    Same interface and datum handling as :class:`NetworkCovariance`; per-target blocks and the hat
+    diagonal from the dense form (small networks).
+    """
+
+    def __init__(self, Qgg, coupled, Minv, Js_w, Jt_w, station_index, target_index, **kw):
+        self.X = coupled.X
+        self.Ntt_full_inv = coupled.Ntt_inv
+        super().__init__(Qgg, Minv, Js_w, Jt_w, station_index, target_index, **kw)
+
+    def _times(self, V):
+        V = np.asarray(V, float)
+        g = Q * self.s
+        Vg, Vt = V[:g], V[g:]
+        u = self.Qgg @ (Vg - self.X.T @ Vt)
+        return np.concatenate([u, self.Ntt_full_inv @ Vt - self.X @ u], axis=0) * self.factor
+
+    def target_blocks(self, chunk_targets: int = 20000):
+        g, t = Q * self.s, self.t
+        E = np.zeros((self.n, 3 * t))
+        E[g + np.arange(3 * t), np.arange(3 * t)] = 1.0
+        C = self.times(E)[g:]
+        out = C.reshape(t, 3, t, 3)[np.arange(t), :, np.arange(t), :]
+        return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+    def _rows(self):
+        cols = np.concatenate([Q * self.si[:, None] + np.arange(Q),
+                               Q * self.s + 3 * self.ti[:, None] + np.arange(3)], axis=1)
+        return cols, np.concatenate([self.Js_w, self.Jt_w], axis=1)
+
+    def hat_diagonal(self, chunk_targets: int = 20000):
+        cols, a = self._rows()
+        C = self._times(np.eye(self.n)) / self.factor
+        return np.einsum("mi,mij,mj->m", a, C[cols[:, :, None], cols[:, None, :]], a)
+
+    def quadratic(self, rows: np.ndarray) -> np.ndarray:
+        """``diag(E C_int E^T)`` for whitened rows ``E`` (q, n) in the internal frame (datum-free;
+        the redundancy of a coupling observation is ``1 -`` this)."""
+        rows = np.asarray(rows, float)
+        return np.einsum("qi,iq->q", rows, self._times(rows.T) / self.factor)

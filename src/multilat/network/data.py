@@ -308,10 +308,15 @@ class Points:
     ----------
     ids : tuple of str, length p (unique)
     xyz_m : ndarray, shape (p, 3), metres
+    std_m : ndarray, shape (p, 3), or None
+        Standard uncertainties of the coordinates, metres: a row with all three given (> 0) is a
+        **weighted** control point (its coordinates are observations), a row of NaN a hard one (held
+        fixed under ``datum="control"``). None: every point hard.
     """
 
     ids: tuple[str, ...]
     xyz_m: np.ndarray
+    std_m: np.ndarray | None = None
 
     def __post_init__(self):
         ids = _ids("point", self.ids)
@@ -323,6 +328,23 @@ class Points:
         object.__setattr__(self, "ids", ids)
         object.__setattr__(self, "xyz_m", x)
         object.__setattr__(self, "_row", _index_of(ids))
+        if self.std_m is not None:
+            sd = np.array(self.std_m, dtype=float).reshape(len(ids), 3)
+            given = ~np.isnan(sd)
+            for k in range(len(ids)):
+                if given[k].any() and not given[k].all():
+                    raise MultilatError(f"points: {ids[k]!r}: give all three standard uncertainties or none")
+                if given[k].all() and not np.all(np.isfinite(sd[k]) & (sd[k] > 0)):
+                    raise MultilatError(f"points: {ids[k]!r}: standard uncertainties must be finite and > 0, "
+                                        f"got {sd[k].tolist()}")
+            object.__setattr__(self, "std_m", sd if given.any() else None)
+
+    def std(self, ident: str) -> np.ndarray | None:
+        """Standard uncertainties (3,) of a weighted control point, None for a hard one or an unknown id."""
+        k = self._row.get(ident)
+        if k is None or self.std_m is None or np.isnan(self.std_m[k, 0]):
+            return None
+        return self.std_m[k]
 
     def get(self, ident: str) -> np.ndarray | None:
         """Coordinates (3,) of ``ident``, or None when not given (a dict look-up)."""

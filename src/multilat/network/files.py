@@ -157,9 +157,17 @@ def read_reference_lengths(path: str | os.PathLike) -> ReferenceLengths:
     return ReferenceLengths(tuple(a), tuple(b), L, u, path=str(tab.path), line_numbers=tab.line_numbers)
 
 
+POINT_STD = ("sx_m", "sy_m", "sz_m")
+
+
 def read_points(path: str | os.PathLike) -> Points:
-    """Read ``point,x_m,y_m,z_m`` (approximate or control coordinates, metres)."""
-    tab = read_csv_table(path, required=("point", "x_m", "y_m", "z_m"))
+    """Read ``point,x_m,y_m,z_m[,sx_m,sy_m,sz_m]`` (approximate or control coordinates, metres).
+
+    The optional standard uncertainties make a row a **weighted** control point under the control
+    datum (all three > 0 on the row); a row with them empty is hard control. A value <= 0, or a row
+    with only some of them, is ``FILE:LINE: ...``.
+    """
+    tab = read_csv_table(path, required=("point", "x_m", "y_m", "z_m"), optional=POINT_STD)
     ids = _check_ids(tab, "point")
     seen = {}
     for k, i in enumerate(ids):
@@ -167,7 +175,22 @@ def read_points(path: str | os.PathLike) -> Points:
             raise tab.error(k, f"duplicate point {i!r} (first at line {tab.line_numbers[seen[i]]})")
         seen[i] = k
     xyz = np.column_stack([tab.floats(c) for c in ("x_m", "y_m", "z_m")])
-    return Points(tuple(ids), xyz)
+    std = None
+    if any(tab.has(c) for c in POINT_STD):
+        if not all(tab.has(c) for c in POINT_STD):
+            raise MultilatError(f"{tab.path}: give all of sx_m, sy_m, sz_m columns, or none")
+        std = np.column_stack([tab.floats(c, required=False) for c in POINT_STD])
+        for k in range(len(ids)):
+            given = ~np.isnan(std[k])
+            if given.any() and not given.all():
+                raise tab.error(k, f"point {ids[k]!r}: give sx_m, sy_m and sz_m (weighted control) or none "
+                                   "(hard control)")
+            bad = np.flatnonzero(given & ~(std[k] > 0))
+            if bad.size:
+                c = POINT_STD[int(bad[0])]
+                raise tab.error(k, f"column '{c}': a control point's standard uncertainty must be > 0, "
+                                   f"got {float(std[k, bad[0]])!r}")
+    return Points(tuple(ids), xyz, std)
 
 
 def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) -> list[Path]:

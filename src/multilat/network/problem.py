@@ -66,12 +66,16 @@ class Problem:
     cost : "distance" (weighted by 1/sigma) or "squared" (the paper's eq. 6, unweighted)
     station_free : ndarray of bool (s, Q)   free station parameters (x, y, z, offset, scale)
     target_free : ndarray of bool (t,)      False for targets held fixed (control points)
+    couplings : Couplings or None           observations beside the distances that couple points
+        (scale bars, weighted control; :mod:`multilat.network.couplings`): solved by the dense back
+        end's coupled path
     """
 
     obs: Observations
     cost: str
     station_free: np.ndarray
     target_free: np.ndarray
+    couplings: object = None     # multilat.network.couplings.Couplings: scale bars, weighted control
 
     def __post_init__(self):
         if self.cost not in COSTS:
@@ -132,8 +136,13 @@ class Problem:
         return int(self.reduced_free.sum()) + 3 * int(self.target_free.sum())
 
     @property
+    def n_rows(self) -> int:
+        """Observations: the distances plus the couplings' rows (scale bars, control coordinates)."""
+        return self.obs.n_obs + (0 if self.couplings is None else self.couplings.n_rows)
+
+    @property
     def dof(self) -> int:
-        return self.obs.n_obs - self.n_free
+        return self.n_rows - self.n_free
 
     def with_free(self, station_free=None, target_free=None) -> "Problem":
         return replace(self, station_free=self.station_free if station_free is None else station_free,

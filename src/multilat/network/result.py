@@ -106,6 +106,10 @@ class AdjustmentResult:
     w_failure_groups : tuple of tuple of int  every failing w-test at the end, grouped: observations
         whose w-tests are perfectly correlated form one group (the data cannot tell them apart)
     initial : dict  how the initial values were found and what the minimum search tried
+    scale_bars : tuple of dict  reference lengths used as observations: ``target_a``, ``target_b``,
+        ``length_m``, ``u_m``, ``adjusted_m``, ``residual_m``, ``redundancy``
+    weighted_control : tuple of dict  control points observed with uncertainties: ``point``,
+        ``xyz_m``, ``std_m``, ``residual_m`` (3), ``redundancy`` (3)
     covariance : NetworkCovariance  any block of the full covariance in the datum
     """
 
@@ -146,6 +150,8 @@ class AdjustmentResult:
     warnings: tuple = ()
     w_failure_groups: tuple = ()
     initial: dict = field(default_factory=dict)
+    scale_bars: tuple = ()
+    weighted_control: tuple = ()
 
     @property
     def sigma0_unit(self) -> str:
@@ -351,6 +357,8 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         "warnings": list(res.warnings),
         "stations": stations,
         "heads": res.heads(),
+        "scale_bars": list(res.scale_bars),
+        "weighted_control": list(res.weighted_control),
         "targets": targets,
         "sigma0": res.sigma0,
         "sigma0_unit": res.sigma0_unit,

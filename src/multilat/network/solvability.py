@@ -53,7 +53,8 @@ def _components(obs: Observations) -> int:
 
 
 def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets=None,
-                    fixed_station_coords: int = 0, datum_defect: int = 6, warn: bool = True) -> int:
+                    fixed_station_coords: int = 0, datum_defect: int = 6, warn: bool = True,
+                    extra_obs: int = 0) -> int:
     """Raise :class:`MultilatError` if the observation pattern cannot determine the unknowns.
 
     Parameters
@@ -63,12 +64,13 @@ def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets
     fixed_targets : ndarray of bool (t,), optional   targets held fixed (control)
     fixed_station_coords : int   station coordinates held fixed (control)
     datum_defect : int   6 for a free network, 0 when control points fix the frame
+    extra_obs : int   observations beside the distances (scale bars)
 
     Returns
     -------
     dof : int  the redundancy ``m - unknowns`` (>= 0)
     """
-    s, t, m = obs.n_stations, obs.n_targets, obs.n_obs
+    s, t, m = obs.n_stations, obs.n_targets, obs.n_obs + int(extra_obs)
     if s < 3:
         raise MultilatError(f"a self-calibrating network needs at least 3 stations, got {s} "
                             f"({', '.join(obs.station_ids)})")
