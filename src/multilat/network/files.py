@@ -201,10 +201,11 @@ def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) ->
     (s_ax, _), (t_ax, _) = result.ellipsoids()
     p = out / "stations.csv"
     write_csv_atomic(p, ["station", "x_m", "y_m", "z_m", "offset_m", "u_x_m", "u_y_m", "u_z_m",
-                         "u_offset_m", "offset_estimated", "ell95_a_m", "ell95_b_m", "ell95_c_m"],
+                         "u_offset_m", "offset_estimated", "ell95_a_m", "ell95_b_m", "ell95_c_m", "head"],
                      [[sid, *result.station_xyz_m[i], result.offset_m[i],
                        *np.sqrt(np.clip(np.diag(result.station_cov_m2[i]), 0, None)),
-                       result.offset_std_m[i], bool(result.offset_estimated[i]), *s_ax[i][::-1]]
+                       result.offset_std_m[i], bool(result.offset_estimated[i]), *s_ax[i][::-1],
+                       result.obs.head_of_station[i]]
                       for i, sid in enumerate(result.station_ids)])
     written.append(p)
     p = out / "targets.csv"
