@@ -138,19 +138,7 @@ class NetworkCovariance:
     def target_blocks(self, chunk_targets: int = 20000):
         """3x3 covariance of every target (t, 3, 3) in the final datum, O(t s^2)."""
         s, t = self.s, self.t
-        slots = target_slots(self.si, self.ti, s, t)
-        Q4 = self.Qgg.reshape(s, Q, s, Q)
-        out = np.empty((t, 3, 3))
-        for lo in range(0, t, chunk_targets):
-            sl = slots[lo:lo + chunk_targets]
-            seen = sl >= 0
-            ix = np.where(seen, sl, 0)
-            A = self.Js_w[ix] * seen[..., None]           # (c, s, Q)
-            P = self.P[ix] * seen[..., None]              # (c, s, 3)
-            S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)
-            out[lo:lo + chunk_targets] = (self.Minv[lo:lo + chunk_targets]
-                                          + np.einsum("cai,cab,cbj->cij", P, S, P, optimize=True))
-        out *= self.factor
+        out = self._target_blocks_internal(chunk_targets) * self.factor
         out = np.einsum("ij,tjk,lk->til", self.R, out, self.R)
         if self.G is not None:
             rows = Q * s + np.arange(3 * t)
@@ -163,6 +151,23 @@ class NetworkCovariance:
             Xp = self.extra[Q * s:].reshape(t, 3, -1)
             out = out + np.einsum("tia,tja->tij", Xp, Xp)
         return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+    def _target_blocks_internal(self, chunk_targets: int = 20000):
+        """3x3 blocks of the internal covariance (solving frame, before the factor) (t, 3, 3)."""
+        s, t = self.s, self.t
+        slots = target_slots(self.si, self.ti, s, t)
+        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        out = np.empty((t, 3, 3))
+        for lo in range(0, t, chunk_targets):
+            sl = slots[lo:lo + chunk_targets]
+            seen = sl >= 0
+            ix = np.where(seen, sl, 0)
+            A = self.Js_w[ix] * seen[..., None]           # (c, s, Q)
+            P = self.P[ix] * seen[..., None]              # (c, s, 3)
+            S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)
+            out[lo:lo + chunk_targets] = (self.Minv[lo:lo + chunk_targets]
+                                          + np.einsum("cai,cab,cbj->cij", P, S, P, optimize=True))
+        return out
 
     def hat_row(self, k: int):
         """Row ``k`` of the whitened hat matrix ``A C A^T`` (m,) (datum-free; for the correlation
@@ -226,23 +231,26 @@ class CoupledCovariance(NetworkCovariance):
         u = self.Qgg @ (Vg - self.X.T @ Vt)
         return np.concatenate([u, self.Ntt_full_inv @ Vt - self.X @ u], axis=0) * self.factor
 
-    def target_blocks(self, chunk_targets: int = 20000):
-        g, t = Q * self.s, self.t
-        E = np.zeros((self.n, 3 * t))
-        E[g + np.arange(3 * t), np.arange(3 * t)] = 1.0
-        C = self.times(E)[g:]
-        out = C.reshape(t, 3, t, 3)[np.arange(t), :, np.arange(t), :]
-        return 0.5 * (out + np.swapaxes(out, 1, 2))
-
-    def _rows(self):
-        cols = np.concatenate([Q * self.si[:, None] + np.arange(Q),
-                               Q * self.s + 3 * self.ti[:, None] + np.arange(3)], axis=1)
-        return cols, np.concatenate([self.Js_w, self.Jt_w], axis=1)
+    def _target_blocks_internal(self, chunk_targets: int = 20000):
+        t = self.t
+        Xb = self.X.reshape(t, 3, -1)
+        XQ = (self.X @ self.Qgg).reshape(t, 3, -1)
+        D = self.Ntt_full_inv.reshape(t, 3, t, 3)[np.arange(t), :, np.arange(t), :]
+        return D + np.einsum("tiq,tjq->tij", XQ, Xb)
 
     def hat_diagonal(self, chunk_targets: int = 20000):
-        cols, a = self._rows()
-        C = self._times(np.eye(self.n)) / self.factor
-        return np.einsum("mi,mij,mj->m", a, C[cols[:, :, None], cols[:, None, :]], a)
+        """``a_k C a_k`` per distance from the blocks it touches: ``Q_gg`` (station), the target's
+        3x3 block and the station-target block ``-(Q_gg X^T)``; O(t s^2)."""
+        s = self.s
+        Ctt = self._target_blocks_internal()
+        QXt = (self.Qgg @ self.X.T).reshape(s, Q, self.t, 3)                # (5s, 3t) = -C_gt
+        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        i, j = self.si, self.ti
+        a, b = self.Js_w, self.Jt_w
+        hs = np.einsum("mq,mqr,mr->m", a, Q4[i, :, i, :], a)
+        ht = np.einsum("mc,mcd,md->m", b, Ctt[j], b)
+        hst = np.einsum("mq,mqc,mc->m", a, QXt[i, :, j, :], b)
+        return hs + ht - 2.0 * hst
 
     def quadratic(self, rows: np.ndarray) -> np.ndarray:
         """``diag(E C_int E^T)`` for whitened rows ``E`` (q, n) in the internal frame (datum-free;
