@@ -261,3 +261,20 @@ def test_cli_scale_bars_with_scales_on_the_sequential_example(tmp_path, capsys):
     assert doc["heads"]["T1"]["scale_estimated"] and doc["heads"]["T2"]["scale_estimated"]
     assert doc["scale_bars"][0]["residual_m"] == pytest.approx(0.0, abs=1e-12)     # one bar: zero redundancy
     assert doc["initial"]["scale_datum"]["kind"] == "scale bars"
+
+
+def test_weighted_control_on_stations_with_shared_heads():
+    """Weighted control on three stations (each 30 µm) of a sequential network whose heads occupy
+    several stations: the stations' coordinates, the head offsets and vᵀPv as the independent."""
+    net = sequential_network(np.random.default_rng([16, 4]))
+    sid = net.obs.station_ids
+    sd = np.full(3, 30e-6)
+    rng = np.random.default_rng(4)
+    ctrl = [(p, net.station_xyz_m[sid.index(p)] + rng.normal(0, sd), sd) for p in ("S1", "S4", "S6")]
+    pts = Points(tuple(p for p, _, _ in ctrl), np.vstack([x for _, x, _ in ctrl]), np.vstack([sd] * 3))
+    r = adjust(net.obs, initial=net, points=pts, datum="control", snooping=False)
+    ind = _independent(net.obs, net, control=ctrl, fix_321=False)
+    assert np.max(np.abs(r.station_xyz_m - np.array([ind["X"][s] for s in sid]))) < 1e-9
+    h = r.heads()
+    np.testing.assert_allclose([h["T1"]["offset_m"], h["T2"]["offset_m"]], ind["off"], atol=1e-9)
+    assert r.sigma0 ** 2 * r.dof == pytest.approx(ind["vtpv"], rel=1e-8)
