@@ -337,8 +337,10 @@ def test_from_distances_alone_reaches_the_truth_start_minimum():
         assert np.max(np.abs(a.offset_m - b.offset_m)) < 1e-9, k
 
 
+@pytest.mark.slow
 def test_raw_readings_with_heads_through_the_cli(tmp_path, capsys):
-    """A raw file with a head column (the sequential example's distances as vacuum optical paths in
+    """(slow: ~100 s on a loaded machine, 4 x 110 re-adjustments for G C Gᵀ; the default run has
+    test_raw_head_column and test_correlated_gain_names_offsets_by_head.) A raw file with a head column (the sequential example's distances as vacuum optical paths in
     standard air): `adjust RAW` ties the heads, and the correlated covariance (G C Gᵀ, by central
     differences of adjust with the offsets named by head) is computed."""
     from multilat import air
@@ -359,3 +361,47 @@ def test_raw_readings_with_heads_through_the_cli(tmp_path, capsys):
     doc = json.loads(out.out)
     assert doc["heads"]["T1"]["stations"] == ["S1", "S3", "S5", "S7"]
     assert "with_correlations" in doc
+    # scales per head with a scale bar as the scale datum: the bar enters every re-adjustment of G
+    truth = read_points(EX / "truth.csv")
+    bars = tmp_path / "bars.csv"
+    bars.write_text(f"target_a,target_b,length_m,u_m\nP1,P2,{np.linalg.norm(truth.get('P1') - truth.get('P2')):.9f},"
+                    "2e-6\n")
+    rc = main(["adjust", str(raw), "--instrument", str(inst), "--scales", "--references", str(bars),
+               "--scale-bars", "--json"])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    doc = json.loads(out.out)
+    assert doc["heads"]["T2"]["scale_estimated"] and "with_correlations" in doc
+
+
+def test_correlated_gain_names_offsets_by_head():
+    """G = ∂x/∂d (campaign.correlated, central differences of `adjust`, used for G C Gᵀ) re-adjusts
+    with the offsets named by head. Checked against the analytic linear gain of the tied model,
+    ``C Aᵀ P`` from the adjustment's own covariance (offsets are datum-invariant), on noise-free
+    distances (with residuals the exact gain has a second-order term ``Σ r_k ∂²f_k``, 0.01-0.3 % here
+    in the weak offset direction): held head T1's offset rows are zero, T2's offset rows agree to
+    1e-5 relative (the solver's rounding-floor stop, ~1e-4 σ, over a 2e-6 m difference)."""
+    from multilat.campaign.correlated import adjustment_gain
+
+    net = sequential_network(np.random.default_rng([16, 9]), n_stations=6, n_targets=10, gap=0.0)
+    o = net.obs
+    exact = np.linalg.norm(net.station_xyz_m[o.station_index] - net.target_xyz_m[o.target_index], axis=1)
+    obs = o.with_distances(exact + net.offset_m[o.station_index])
+    r = adjust(obs, initial=net, offsets={"T1": float(net.offset_m[0])}, snooping=False)
+    g = adjustment_gain(r, step_m=1e-6)
+    o = r.obs
+    s = o.n_stations
+    t1 = [i for i in range(s) if o.head_of_station[i] == "T1"]
+    t2 = [i for i in range(s) if o.head_of_station[i] == "T2"]
+    assert np.all(g[[4 * i + 3 for i in t1]] == 0.0)
+    for k in (0, 7, 23):
+        i, j = o.station_index[k], o.target_index[k]
+        d = r.station_xyz_m[i] - r.target_xyz_m[j]
+        u = d / np.linalg.norm(d)
+        a = np.zeros(5 * s + 3 * o.n_targets)
+        a[5 * i:5 * i + 3] = u
+        a[5 * i + 3] = 0.0 if i in t1 else 1.0
+        a[5 * s + 3 * j:5 * s + 3 * j + 3] = -u
+        v = r.covariance.times((a / o.sigma_m[k] ** 2)[:, None])[:, 0]
+        np.testing.assert_allclose(g[[4 * q + 3 for q in t2], k], v[[5 * q + 3 for q in t2]], rtol=1e-5)
+        assert abs(v[5 * t2[0] + 3]) > 1e-3          # a real response, not two zeros
