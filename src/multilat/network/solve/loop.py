@@ -69,12 +69,11 @@ def solve_reduced(N, b, free, problem: Problem, p: Params):
         N = T.T @ N @ T
         b = T.T @ b
     free = np.asarray(free, bool) & problem.lead_mask.ravel()
-    names = param_names(obs.station_ids, obs.head_of_station)
     Nf = N[np.ix_(free, free)]
     diag = np.diag(Nf)
     if not (np.all(np.isfinite(diag)) and np.all(diag > 0)):
         k = int(np.flatnonzero(~(diag > 0))[0]) if np.any(~(diag > 0)) else 0
-        name = np.array(names)[free][k]
+        name = np.array(param_names(obs.station_ids, obs.head_of_station))[free][k]
         raise MultilatError(f"near-degenerate geometry: {name} is not determined by the observations")
     d = np.sqrt(diag)
     Ns = Nf / np.outer(d, d)
@@ -87,7 +86,8 @@ def solve_reduced(N, b, free, problem: Problem, p: Params):
         nv = np.zeros(free.size)
         nv[free] = V[:, 0] / d
         raise MultilatError(diagnose_degeneracy(p.station_xyz_m, p.target_xyz_m, obs.station_ids,
-                                                obs.target_ids, nv, names,
+                                                obs.target_ids, nv,
+                                                param_names(obs.station_ids, obs.head_of_station),
                                                 condition=cond, sigma_m=float(np.median(obs.sigma_m)),
                                                 n_obs=obs.n_obs))
     Qf = ((V / ev) @ V.T) / np.outer(d, d)
