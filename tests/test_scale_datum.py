@@ -123,11 +123,15 @@ def test_scale_bar_and_fixed_scale_from_the_cli(capsys, tmp_path):
     assert rc == 0, out.err
     doc = json.loads(out.out)
     assert all("scale" in v for v in doc["stations"].values())
-    assert doc["initial"]["scale_datum"]["kind"] == "reference length"
+    assert doc["initial"]["scale_datum"]["kind"] == "scale bars"
     assert doc["reference_lengths"][0]["difference_m"] == pytest.approx(0.0, abs=1e-12)
-    # several reference lengths cannot all be the scale datum
-    rc = main(["adjust", str(OBS), "--scales", "--references", str(REF), "--scale-bar"])
-    assert rc == 2 and "one reference length fixes the scale" in capsys.readouterr().err
+    assert doc["scale_bars"][0]["redundancy"] == pytest.approx(0.0, abs=1e-9)     # one bar: the datum
+    # several reference lengths: all are scale-bar observations (issue 16), with redundancy
+    rc = main(["adjust", str(OBS), "--scales", "--references", str(REF), "--scale-bars", "--json"])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    doc = json.loads(out.out)
+    assert len(doc["scale_bars"]) == 9 and doc["initial"]["scale_datum"]["n_bars"] == 9
     # a held scale on one station is the scale datum too; the others are estimated
     rc = main(["adjust", str(OBS), "--scales", "--fixed-scale", "A", "--json"])
     out = capsys.readouterr()

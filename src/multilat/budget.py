@@ -97,7 +97,7 @@ def _params(inst: Instrument, head: str) -> _Params:
         ambiguity_m=float(adm.ambiguity_m(inst.adm.modulation_frequency_hz, n_g)),
         scr_db=inst.adm.signal_to_crosstalk_db,
         am_pm_m_per_db=inst.adm.am_pm_m_per_db,
-        toh_est_m=inst.heads[head].toh_m,
+        toh_est_m=inst.head(head).toh_m,
         tot_est_m=t.tot_m,
         b_const_m=t.b_m if t.constant_calibrated else 0.0,
         transit_correction=t.transit_correction,
@@ -414,7 +414,7 @@ def sample_distance_errors(inst: Instrument | str, distance_m, *, rng=None, head
         raise MultilatError(f"trials must be >= 1, got {trials!r}")
     L = np.broadcast_to(d, shape).ravel()
     size = L.size
-    names = [head] if head is not None else sorted(inst.heads)
+    names = [head] if head is not None else (sorted(inst.heads) or sorted(inst.head_map))
     which = np.zeros(size, dtype=int) if head is not None else gen.integers(0, len(names), size)
     out = np.empty(size)
     for k, name in enumerate(names):
@@ -431,7 +431,7 @@ def sample_distance_errors(inst: Instrument | str, distance_m, *, rng=None, head
 
 
 def _mechanical_u2(inst: Instrument, head: str) -> float:
-    key = (inst.model_dump_json(), head)
+    key = (inst.model_dump_json(), inst.head(head).model_dump_json())   # heads of one type share it
     if key not in _MECH_CACHE:
         b = distance_budget(inst, head=head, trials=20_000, rng=20200808)
         _MECH_CACHE[key] = b.components["head"] ** 2 + b.components["target"] ** 2

@@ -300,31 +300,53 @@ class BudgetConfig(_Model):
 
 
 class Instrument(_Model):
-    """A whole instrument: ADM, environment, heads, target, budget set-up."""
+    """A whole instrument: ADM, environment, heads, target, budget set-up.
+
+    Heads of one design are described once: ``[heads.default]`` applies to every head name not
+    listed under ``heads``; ``[head_types.X]`` blocks with a ``[head_map]`` table (``H1 = "X"``)
+    give named designs to named heads. :meth:`head` resolves a name: ``heads``, then ``head_map``,
+    then ``heads.default``.
+    """
 
     name: str = "custom"
     description: str = ""
     adm: ADMConfig
     environment: Environment = Environment()
     head_common: HeadCommon = HeadCommon()
-    heads: dict[str, HeadConfig]
+    heads: dict[str, HeadConfig] = {}
+    head_types: dict[str, HeadConfig] = {}
+    head_map: dict[str, str] = {}
     target: TargetConfig
     budget: BudgetConfig = BudgetConfig()
 
-    @field_validator("heads")
-    @classmethod
-    def _some(cls, v):
-        if not v:
-            raise ValueError("at least one head is required")
-        return v
+    @model_validator(mode="after")
+    def _some(self):
+        if not self.heads and not self.head_types:
+            raise ValueError("at least one head (or head type) is required")
+        for h, ty in self.head_map.items():
+            if ty not in self.head_types:
+                raise ValueError(f"head_map.{h}: unknown head type {ty!r}; head types: "
+                                 f"{', '.join(sorted(self.head_types)) or 'none'}")
+            if h in self.heads:
+                raise ValueError(f"head_map.{h}: head {h!r} also has its own block under heads")
+        return self
+
+    def has_head(self, name: str) -> bool:
+        """Whether :meth:`head` resolves ``name`` (own block, mapped type or the default head)."""
+        return name in self.heads or name in self.head_map or "default" in self.heads
 
     def head(self, name: str) -> HeadConfig:
-        """The head called ``name``; :class:`MultilatError` listing the heads if unknown."""
-        try:
+        """The head called ``name`` (its own block, its type in ``head_map``, or ``heads.default``);
+        :class:`MultilatError` listing the heads if unknown."""
+        if name in self.heads:
             return self.heads[name]
-        except KeyError:
-            raise MultilatError(f"unknown head {name!r} in instrument {self.name!r}; "
-                                f"heads: {', '.join(sorted(self.heads))}") from None
+        if name in self.head_map:
+            return self.head_types[self.head_map[name]]
+        if "default" in self.heads:
+            return self.heads["default"]
+        known = sorted(self.heads) + sorted(self.head_map)
+        raise MultilatError(f"unknown head {name!r} in instrument {self.name!r}; "
+                            f"heads: {', '.join(known)} (a [heads.default] block applies to any head)")
 
 
 def presets() -> list[str]:

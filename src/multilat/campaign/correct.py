@@ -110,6 +110,7 @@ class CorrectedObservations:
     formula: str
     extrapolated: np.ndarray
     notes: tuple[str, ...]
+    head_ids: tuple[str, ...] | None = None
 
     @property
     def correlation(self) -> np.ndarray:
@@ -128,7 +129,7 @@ def _make_observations(Observations, c: CorrectedObservations):
     both = c.azimuth_rad is not None and c.elevation_rad is not None
     return Observations.from_labels(c.station_ids, c.target_ids, c.distance_m, c.sigma_m,
                                     azimuth_rad=c.azimuth_rad if both else None,
-                                    elevation_rad=c.elevation_rad if both else None)
+                                    elevation_rad=c.elevation_rad if both else None, head=c.head_ids)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -151,7 +152,7 @@ def sensor_std_from_instrument(inst) -> dict:
 
 
 def _head_toh_m(inst, head: str):
-    return float(inst.heads[head].toh_m)
+    return float(inst.head(head).toh_m)
 
 
 def _target_tot_m(inst):
@@ -286,12 +287,15 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
     head_corr = np.zeros(m)
     tgt_corr = np.zeros(m)
     heads = _head_names(inst)
-    for i, s in enumerate(raw.station_ids):
-        if s not in heads:
-            raise MultilatError(f"{raw.where(i)}: station {s!r} is not a head of the instrument "
-                                f"{inst.name!r} (heads: {', '.join(heads)})")
+    row_heads = raw.heads
+    what = "station" if raw.head_ids is None else "head"
+    for i, s in enumerate(row_heads):
+        if not inst.has_head(s):
+            raise MultilatError(f"{raw.where(i)}: {what} {s!r} is not a head of the instrument "
+                                f"{inst.name!r} (heads: {', '.join(heads)}; give a head column, or a "
+                                "[heads.default] block in the instrument)")
     if raw.elevation_rad is not None:
-        toh = np.array([_head_toh_m(inst, s) for s in raw.station_ids])
+        toh = np.array([_head_toh_m(inst, s) for s in row_heads])
         d_h = np.asarray(gimbal.transit_offset_correction(d, toh, raw.elevation_rad), dtype=float)
         head_corr = d_h - d
         d = d_h
@@ -336,8 +340,8 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
     ustd_arr = np.array(ustd)
     cov_air = (jac * ustd_arr**2) @ jac.T
     sig_model = np.empty(m)
-    st = np.array(raw.station_ids, dtype=object)
-    for s in dict.fromkeys(raw.station_ids):
+    st = np.array(row_heads, dtype=object)
+    for s in dict.fromkeys(row_heads):
         rows = st == s
         sig_model[rows] = budget.distance_std_m(inst, d[rows], head=s)
     cov = cov_air + np.diag(sig_model**2)
@@ -350,7 +354,7 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
         head_transit_correction_m=head_corr, target_transit_correction_m=tgt_corr,
         environment={q: np.asarray(env[q]) for q in QUANTITIES}, gradient_c_per_m=grad,
         time_s=raw.time_s, azimuth_rad=raw.azimuth_rad, elevation_rad=raw.elevation_rad,
-        formula=formula, extrapolated=extrap, notes=tuple(notes))
+        formula=formula, extrapolated=extrap, notes=tuple(notes), head_ids=raw.head_ids)
 
 
 def correct_file(path: str | os.PathLike, *, environment: str | os.PathLike | EnvironmentLog | None = None,

@@ -95,10 +95,17 @@ def adjustment_gain(result, *, step_m: float = 1e-6) -> np.ndarray:
     if not (np.isfinite(step_m) and step_m > 0):
         raise MultilatError(f"step_m must be finite and > 0, got {step_m!r}")
     obs = result.obs
-    fixed = {sid: float(result.offset_m[i]) for i, sid in enumerate(result.station_ids)
-             if not result.offset_estimated[i]}
-    offsets = fixed or None          # stations not in the mapping keep their offset estimated
-    scales = [sid for i, sid in enumerate(result.station_ids) if result.scale_estimated[i]]
+    heads = result.heads()
+    fixed = {hid: h["offset_m"] for hid, h in heads.items() if not h["offset_estimated"]}
+    offsets = fixed or None          # heads not in the mapping keep their offset estimated
+    scales = [hid for hid, h in heads.items() if h["scale_estimated"]]
+    bars = None
+    if result.scale_bars:              # scale bars were observations: they are in every re-adjustment
+        from multilat.network.data import ReferenceLengths
+
+        sb = result.scale_bars
+        bars = ReferenceLengths(tuple(b["target_a"] for b in sb), tuple(b["target_b"] for b in sb),
+                                [b["length_m"] for b in sb], [b["u_m"] for b in sb])
     used = np.asarray(result.used, bool)
     keep = obs if used.all() else _subset(obs, used)
     cols = np.flatnonzero(used)
@@ -109,7 +116,8 @@ def adjustment_gain(result, *, step_m: float = 1e-6) -> np.ndarray:
             d = keep.distance_m.copy()
             d[k_sub] += sign * step_m
             r = adjust(dataclasses.replace(keep, distance_m=d), datum=result.datum, initial=result,
-                       cost=result.cost, offsets=offsets, scales=scales or False, snooping=False)
+                       cost=result.cost, offsets=offsets, scales=scales or False, snooping=False,
+                       scale_bars=bars)
             sides.append(_parameters(r))
         g[:, k] = (sides[0] - sides[1]) / (2 * step_m)
     return g
@@ -123,7 +131,7 @@ def _subset(obs, mask):
 
     return Observations(obs.station_ids, obs.target_ids, obs.station_index[mask], obs.target_index[mask],
                         obs.distance_m[mask], obs.sigma_m[mask], azimuth_rad=pick(obs.azimuth_rad),
-                        elevation_rad=pick(obs.elevation_rad))
+                        elevation_rad=pick(obs.elevation_rad), station_heads=obs.station_heads)
 
 
 def correlated_covariance(result, obs_covariance_m2, *, step_m: float = 1e-6,

@@ -8,7 +8,12 @@ A raw file holds one row per distance reading, before any correction (see ``docs
 Columns
 -------
 ``station, target`` (required)
-    Identifiers; ``station`` is a measurement head of the instrument (``A``..``D`` for ``seed2020``).
+    Identifiers of the station (a position of a head) and the target.
+``head`` (optional)
+    The measurement head of the instrument that stood on the station (default: the station id),
+    e.g. ``A``..``D`` for ``seed2020``, or any name when the instrument has a ``[heads.default]``
+    block or maps the name to a head type. One station, one head; one head, any number of stations
+    (its offset is then one unknown for all of them).
 ``optical_path_m``
     The distance computed *in vacuum* (group index ``n = 1``): ``L = (1/2)(Φ/2π + k) c/f``.
 ``phase_rad, frequency_hz[, k]``
@@ -53,7 +58,7 @@ SPEED_OF_LIGHT_M_S = adm.C_M_PER_S
 #: 1550 nm; a 3e-5 departure moves a 100 m coarse distance by 3 mm, well inside half an ambiguity).
 NOMINAL_GROUP_INDEX = 1.00027
 ENV_COLUMNS = ("temperature_c", "pressure_hpa", "humidity_pct", "co2_ppm")
-RAW_COLUMNS = ("station", "target", "time", "optical_path_m", "phase_rad", "frequency_hz", "k",
+RAW_COLUMNS = ("station", "target", "head", "time", "optical_path_m", "phase_rad", "frequency_hz", "k",
                "approx_distance_m", "elevation_rad", "target_elevation_rad", "azimuth_rad",
                *ENV_COLUMNS, "station_height_m", "target_height_m")
 
@@ -102,6 +107,8 @@ class RawObservations:
     environment : dict[str, ndarray (m,)] or None
         Per-row readings keyed by :data:`ENV_COLUMNS` (``co2_ppm`` may be absent).
     station_height_m, target_height_m : ndarray (m,) or None
+    head_ids : tuple of str, length m, or None
+        The head of each row (None: the station id).
     """
 
     path: str
@@ -119,10 +126,16 @@ class RawObservations:
     environment: dict | None
     station_height_m: np.ndarray | None
     target_height_m: np.ndarray | None
+    head_ids: tuple[str, ...] | None = None
 
     @property
     def size(self) -> int:
         return len(self.station_ids)
+
+    @property
+    def heads(self) -> tuple[str, ...]:
+        """The head of each row (the station id where no head column was given)."""
+        return self.station_ids if self.head_ids is None else self.head_ids
 
     def where(self, i: int) -> str:
         """``"FILE:LINE"`` of row ``i`` for error messages."""
@@ -176,6 +189,15 @@ def read_raw(path: str | os.PathLike) -> RawObservations:
     for i in range(m):
         if not stations[i] or not targets[i]:
             raise MultilatError(f"{where(i)}: empty station or target id")
+    heads = None
+    if t.has("head"):
+        heads = tuple(h if h else s_ for h, s_ in zip(t.column("head"), stations))
+        first: dict[str, int] = {}
+        for i, (s_, h) in enumerate(zip(stations, heads)):
+            k = first.setdefault(s_, i)
+            if heads[k] != h:
+                raise MultilatError(f"{where(i)}: station {s_!r} has head {h!r} here but {heads[k]!r} at "
+                                    f"line {t.line_numbers[k]} (one head per station)")
 
     has_opt, has_phase = t.has("optical_path_m"), t.has("phase_rad")
     if not (has_opt or has_phase):
@@ -246,7 +268,7 @@ def read_raw(path: str | os.PathLike) -> RawObservations:
         azimuth_rad=_opt_floats(t, "azimuth_rad"),
         environment=env,
         station_height_m=_opt_floats(t, "station_height_m"),
-        target_height_m=_opt_floats(t, "target_height_m"))
+        target_height_m=_opt_floats(t, "target_height_m"), head_ids=heads)
 
 
 def check_environment_ranges(env: dict, where) -> None:

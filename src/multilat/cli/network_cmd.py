@@ -15,10 +15,12 @@ from multilat.cli import checks, report_opt
 from multilat.io import check_output_dir, staging_dir
 
 
-def parse_fixed_offsets(text: str, station_ids) -> float | dict:
-    """``--fix-offsets-um``: ``"X"`` (every station, µm) -> metres; ``"A=1234,B=-871"`` -> {id: metres}.
+def parse_fixed_offsets(text: str, station_ids, *, what: str = "station") -> float | dict:
+    """``--fix-offsets-um``: ``"X"`` (every head, µm) -> metres; ``"A=1234,B=-871"`` -> {head id: metres}.
 
-    Raises :class:`MultilatError` (one line) on a malformed value or an unknown station id.
+    ``station_ids`` are the ids that may be named (the head ids; a head is its station when the
+    observations name no heads). Raises :class:`MultilatError` (one line) on a malformed value or an
+    unknown id.
     """
     text = text.strip()
     if "=" not in text:
@@ -36,10 +38,10 @@ def parse_fixed_offsets(text: str, station_ids) -> float | dict:
         if not sep or not key:
             raise MultilatError(f"--fix-offsets-um: expected STATION=µm, got {item.strip()!r}")
         if key not in station_ids:
-            raise MultilatError(f"--fix-offsets-um: unknown station id {key!r} "
-                                f"(stations: {', '.join(station_ids)})")
+            raise MultilatError(f"--fix-offsets-um: unknown {what} id {key!r} "
+                                f"({what}s: {', '.join(station_ids)})")
         if key in out:
-            raise MultilatError(f"--fix-offsets-um: station {key!r} given twice")
+            raise MultilatError(f"--fix-offsets-um: {what} {key!r} given twice")
         try:
             v = float(val)
         except ValueError:
@@ -52,13 +54,17 @@ def parse_fixed_offsets(text: str, station_ids) -> float | dict:
 @app.command("adjust")
 def adjust_command(
     observations: Path = typer.Argument(..., help="Observations CSV: station,target,distance_m"
-                                                  "[,sigma_m][,azimuth_rad,elevation_rad]; or a raw "
+                                                  "[,sigma_m][,head][,azimuth_rad,elevation_rad] (head: "
+                                                  "the head on the station, default the station id; "
+                                                  "offsets and scales belong to heads); or a raw "
                                                   "readings file (optical_path_m or phase_rad, "
                                                   "frequency_hz), corrected first as by `multilat correct`."),
     references: Optional[Path] = typer.Option(None, "--references",
                                               help="Reference lengths CSV: target_a,target_b,length_m[,u_m]."),
     points: Optional[Path] = typer.Option(None, "--points",
-                                          help="Points CSV: point,x_m,y_m,z_m (approximate or control)."),
+                                          help="Points CSV: point,x_m,y_m,z_m[,sx_m,sy_m,sz_m] (approximate "
+                                               "or control; rows with sx_m,sy_m,sz_m are weighted control "
+                                               "under --datum control)."),
     datum: str = typer.Option("free", "--datum",
                               help="free[:P1,P2,..] (inner constraints, default), 321:A,B,C "
                                    "(A origin, B on +x, C in xy-plane) or control[:P1,..] (--points fixed)."),
@@ -73,19 +79,21 @@ def adjust_command(
     cost: str = typer.Option("distance", "--cost",
                              help="distance (weighted, default) or squared (the paper's eq. 6, unweighted)."),
     fix_offsets_um: Optional[str] = typer.Option(None, "--fix-offsets-um",
-                                                 help="Hold station offsets fixed, µm: one value for "
-                                                      "every station (e.g. 0), or per station "
-                                                      "A=1234,B=-871 (the others stay estimated). "
+                                                 help="Hold head offsets fixed, µm: one value for "
+                                                      "every head (e.g. 0), or per head "
+                                                      "A=1234,B=-871 (the others stay estimated; a head "
+                                                      "is its station without a head column). "
                                                       "Default: estimate them all."),
     scales: bool = typer.Option(False, "--scales",
-                                help="Also estimate a scale per station; the network's scale then needs "
-                                     "a datum: --fixed-scale STATION or --scale-bar."),
+                                help="Also estimate a scale per head; the network's scale then needs "
+                                     "a datum: --fixed-scale HEAD or --scale-bar."),
     fixed_scale: Optional[str] = typer.Option(None, "--fixed-scale",
-                                              help="With --scales: hold this station's scale (the scale "
+                                              help="With --scales: hold this head's scale (the scale "
                                                    "datum); the others are estimated."),
-    scale_bar: bool = typer.Option(False, "--scale-bar",
-                                   help="With --scales: the one reference length of --references (with "
-                                        "its u_m) is the scale datum."),
+    scale_bar: bool = typer.Option(False, "--scale-bars", "--scale-bar",
+                                   help="Use the reference lengths of --references as observations (scale "
+                                        "bars, each weighted by its u_m > 0); with --scales they are the "
+                                        "scale datum."),
     snooping: bool = typer.Option(True, "--snooping/--no-snooping",
                                   help="Iteratively reject the worst w-test failure."),
     seed: int = typer.Option(0, "--seed", help="Seed for the initial-value search (if used)."),
@@ -168,21 +176,22 @@ def adjust_command(
     if refs is not None:
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))
     pts = read_points(points) if points is not None else None
-    offsets = None if fix_offsets_um is None else parse_fixed_offsets(fix_offsets_um, obs.station_ids)
-    if (fixed_scale is not None or scale_bar) and not scales:
-        raise MultilatError("--fixed-scale and --scale-bar go with --scales")
+    what = "station" if obs.station_heads is None else "head"
+    offsets = None if fix_offsets_um is None else parse_fixed_offsets(fix_offsets_um, obs.head_ids, what=what)
+    if fixed_scale is not None and not scales:
+        raise MultilatError("--fixed-scale goes with --scales")
     if scale_bar and refs is None:
-        raise MultilatError("--scale-bar needs --references FILE (one reference length)")
+        raise MultilatError("--scale-bars needs --references FILE (the bars' lengths with u_m)")
     if fixed_scale is not None:
-        if fixed_scale not in obs.station_ids:
-            raise MultilatError(f"--fixed-scale: unknown station id {fixed_scale!r} "
-                                f"(stations: {', '.join(obs.station_ids)})")
-        scales = [sid for sid in obs.station_ids if sid != fixed_scale]
+        if fixed_scale not in obs.head_ids:
+            raise MultilatError(f"--fixed-scale: unknown {what} id {fixed_scale!r} "
+                                f"({what}s: {', '.join(obs.head_ids)})")
+        scales = [hid for hid in obs.head_ids if hid != fixed_scale]
     with progress() as p:
         p.add_task(f"adjusting {obs.n_obs:,} distances", total=None)
         res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
                      alpha_global=alpha_global, snooping=snooping, solver=solver, strict=strict,
-                     scale_bar=refs if scale_bar else None, rng=seed)
+                     scale_bars=refs if scale_bar else None, rng=seed)
     doc = result_to_json(res, refs)
     if corrected is not None:
         from multilat.campaign.correlated import correlated_json

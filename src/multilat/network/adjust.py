@@ -28,14 +28,28 @@ from multilat.network.problem import Params
 from multilat.network.result import (AdjustmentResult, InterpointDistance, Outlier, Start,
                                      build_result)
 from multilat.network.search import P_MIN, p_value
-from multilat.network.scale_datum import apply_scale_bar, check_scale_datum, scale_bar_datum
+from multilat.network.couplings import coupling_spec
+from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 
 __all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
 
 
+def _head_stations(key, obs: Observations, what: str) -> np.ndarray:
+    """Mask (s,) of the stations of head ``key`` (offsets and scales belong to heads; a head is its
+    station when the observations name no heads)."""
+    hos = obs.head_of_station
+    if key not in hos:
+        if key in obs.station_ids:
+            i = obs.station_ids.index(key)
+            raise MultilatError(f"{what}: {key!r} is a station of head {hos[i]!r}; offsets and scales belong "
+                                "to heads: name the head")
+        raise MultilatError(f"{what}: unknown {'station' if obs.station_heads is None else 'head'} id {key!r}")
+    return np.array([h == key for h in hos])
+
+
 def _fixed_offsets(offsets, obs: Observations):
-    """(offset_free (s,) bool, fixed values (s,)) from the ``offsets`` option."""
+    """(offset_free (s,) bool, fixed values (s,)) from the ``offsets`` option (keys: head ids)."""
     s = obs.n_stations
     free = np.ones(s, bool)
     val = np.zeros(s)
@@ -43,12 +57,10 @@ def _fixed_offsets(offsets, obs: Observations):
         return free, val
     if isinstance(offsets, Mapping):
         for k, v in offsets.items():
-            if k not in obs.station_ids:
-                raise MultilatError(f"offsets: unknown station id {k!r}")
-            i = obs.station_ids.index(k)
+            m = _head_stations(k, obs, "offsets")
             if not np.isfinite(v):
                 raise MultilatError(f"offsets: value for {k!r} must be finite")
-            free[i], val[i] = False, float(v)
+            free[m], val[m] = False, float(v)
         return free, val
     try:
         v = float(offsets)
@@ -67,9 +79,7 @@ def _scale_flags(scales, obs):
         return np.ones(s, bool)
     out = np.zeros(s, bool)
     for k in scales:
-        if k not in obs.station_ids:
-            raise MultilatError(f"scales: unknown station id {k!r}")
-        out[obs.station_ids.index(k)] = True
+        out |= _head_stations(k, obs, "scales")
     return out
 
 
@@ -78,8 +88,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
            points: Points | None = None, cost: str = "distance", offsets=None, scales=False,
            alpha: float = 0.001, power: float = 0.80, alpha_global: float = 0.05,
            snooping: bool = True, max_rejections: int | None = None, max_iter: int = 100,
-           solver: str = "auto", strict: bool = False, scale_bar: ReferenceLengths | None = None,
-           chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
+           solver: str = "auto", strict: bool = False, scale_bars: ReferenceLengths | None = None,
+           scale_bar: ReferenceLengths | None = None, chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
     """Adjust a self-calibrating multilateration network.
 
     Unknowns: station coordinates, target coordinates, one additive offset per station (estimated
@@ -106,15 +116,20 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         ``"distance"``: residuals in metres weighted by ``1/sigma``; ``"squared"``: the paper's
         eq. (6), unweighted squared-distance differences (covariance scaled by the a-posteriori
         variance; no global test or data snooping, which need known weights).
-    offsets : None, "estimate", float or mapping station -> metres
-        Estimate all offsets (default), fix all to one value, or fix the named ones.
-    scales : bool or iterable of station ids
-        Estimate a scale per station (all, or the named ones). Default: none. With every station's
+    offsets : None, "estimate", float or mapping head -> metres
+        Estimate all offsets (default), fix all to one value, or fix the named heads' ones (a head
+        is its station when ``obs`` names no heads; a head occupying several stations has one offset).
+    scales : bool or iterable of head ids
+        Estimate a scale per head (all, or the named ones). Default: none. With every station's
         scale estimated the network's scale is a 7th datum defect: give ``scale_bar``.
-    scale_bar : ReferenceLengths with one row, optional
-        A reference length (with its uncertainty ``u_m``) as the scale datum when every station's
-        scale is estimated: the adjusted length equals it, and its uncertainty enters every
-        coordinate's covariance along the scale direction.
+    scale_bars : ReferenceLengths, optional
+        Reference lengths between points used as **observations** (scale bars), each weighted by its
+        standard uncertainty ``u_m`` (> 0): they take part in the adjustment (residuals, redundancy,
+        the global test) and are enough to be the scale datum when every head's scale is estimated
+        (one bar: its adjusted length is the reference, its uncertainty enters every coordinate's
+        covariance along the scale direction). ``scale_bar`` is the same (older name).
+    points : with ``sx_m, sy_m, sz_m`` (``Points.std_m``) under ``datum="control"``: the rows with
+        uncertainties are **weighted control** (their coordinates are observations), the others hard.
     strict : bool
         Refuse the network when a point is too weakly observed, instead of leaving it out
         (``excluded`` in the result, with a warning).
@@ -158,6 +173,15 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         if not (0 < v < 1):
             raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
     datum = parse_datum(datum)
+    if scale_bars is not None and scale_bar is not None:
+        raise MultilatError("give scale_bars or scale_bar (the same), not both")
+    bars = scale_bars if scale_bars is not None else scale_bar
+    if bars is not None and cost != "distance":
+        raise MultilatError("scale bars need the distance cost (weighted observations)")
+    if points is not None and points.std_m is not None and datum.kind != "control":
+        warnings.warn("points: the standard uncertainties (sx_m, sy_m, sz_m) make weighted control under "
+                      "--datum control only; here the points are approximate coordinates", UserWarning,
+                      stacklevel=2)
     off_free, off_val = _fixed_offsets(offsets, obs)
     sc_free = _scale_flags(scales, obs)
     if datum.kind == "control" and points is None:
@@ -188,14 +212,11 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         off_free, off_val, sc_free = off_free[smap], off_val[smap], sc_free[smap]
         if given is not None:
             given = Start(given.station_xyz_m[smap], given.target_xyz_m[tmap], given.offset_m[smap])
-    bar = None
-    if scale_bar is not None:
-        bar = scale_bar_datum(scale_bar, obs, sc_free, datum, cost)
-        sc_free = sc_free.copy()
-        sc_free[0] = False          # the internal minimal constraint on the scale; the bar fixes it
-    check_scale_datum(obs, sc_free, datum)
+    cspec = coupling_spec(obs, bars=bars, points=points, control=datum.kind == "control")
+    n_bars = 0 if cspec is None else len(cspec.bars)
+    check_scale_datum(obs, sc_free, datum, bars=n_bars > 0)
     try:
-        check_network(obs, datum, points, off_free, sc_free, warn=True)   # before any initial values
+        check_network(obs, datum, points, off_free, sc_free, warn=True, couplings=cspec)   # before any initial values
     except MultilatError as exc:
         if not excluded:
             raise
@@ -228,7 +249,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         try:
             core = fit_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
                             sc_free, max_iter, solver, chunk_targets, warn=warn,
-                            partial_ok=first and search_ok)
+                            partial_ok=first and search_ok, couplings=cspec)
         except MultilatError as exc:
             # computed initial values can make a solvable network look degenerate (a collapsed
             # start): the search's restarts get their chance before the error is final
@@ -241,13 +262,13 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             # (not under control points: they give the frame and the start; a failing test there
             # is tested as inconsistent control just below)
             core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
-                                           max_iter, solver, chunk_targets, rng)
+                                           max_iter, solver, chunk_targets, rng, cspec)
             how["search"] = search.as_dict()
         if first and datum.kind == "control" and cost == "distance":
             # a failed global test under control may be the control coordinates, not the distances:
             # test them (against the free network) before data snooping blames the distances
             _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global,
-                           max_iter, solver, chunk_targets, datum)
+                           max_iter, solver, chunk_targets, datum, cspec)
         first = False
         # the next adjustment (after a rejection) starts from this solution
         gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
@@ -283,7 +304,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             break
         try:
             check_network(obs.subset(trial), datum, points, off_free[station_map(obs, trial)],
-                       sc_free[station_map(obs, trial)], warn=False)
+                       sc_free[station_map(obs, trial)], warn=False, couplings=cspec)
         except MultilatError as exc:
             # rejecting it would make the network unsolvable: keep it, report it as not rejected
             unlocated, reason = (k,), f"rejecting it would leave the network unsolvable ({exc})"
@@ -298,19 +319,36 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             "errors, a-priori sigma too small, or give approximate coordinates")
         notes.append(msg)
         warnings.warn(msg, UserWarning, stacklevel=2)
-    if bar is not None:
-        core = apply_scale_bar(core, bar, obs, used, datum, start, points, off_free, off_val, sc_free,
-                                max_iter, solver, chunk_targets)
-        how["scale_datum"] = {"kind": "reference length", "points": [bar[0], bar[1]], "length_m": bar[2],
-                              "u_m": bar[3]}
+    if n_bars and datum.kind != "control" and np.all(sc_free):
+        how["scale_datum"] = {"kind": "scale bars", "n_bars": n_bars,
+                              "points": [cspec.bars[0][0], cspec.bars[0][1]]}
     res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global,
                        reason=reason, snooped=do_snoop)
     groups = _w_failure_groups(core, used, crit) if cost == "distance" else ()
-    return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how)
+    bars_out, ctrl_out = coupling_results(core)
+    return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
+                   scale_bars=bars_out, weighted_control=ctrl_out)
+
+
+def coupling_results(core) -> tuple[tuple, tuple]:
+    """The scale bars' and weighted control points' residuals and redundancy numbers (JSON-ready)."""
+    c = core.get("coupled")
+    if c is None:
+        return (), ()
+    cp, res, red = c["couplings"], c["residual_m"], c["redundancy"]
+    k = cp.bar_a.size
+    bars = tuple({"target_a": a, "target_b": b, "length_m": float(cp.bar_length_m[q]), "u_m": float(cp.bar_sigma_m[q]),
+                  "adjusted_m": float(cp.bar_length_m[q] - res[q]), "residual_m": float(res[q]),
+                  "redundancy": float(red[q])} for q, (a, b) in enumerate(cp.bar_ids))
+    ctrl = tuple({"point": pid, "xyz_m": cp.prior_value_m[3 * q:3 * q + 3].tolist(),
+                  "std_m": cp.prior_sigma_m[3 * q:3 * q + 3].tolist(),
+                  "residual_m": res[k + 3 * q:k + 3 * q + 3].tolist(),
+                  "redundancy": red[k + 3 * q:k + 3 * q + 3].tolist()} for q, pid in enumerate(cp.prior_ids))
+    return bars, ctrl
 
 
 def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free, max_iter, solver,
-                    chunk_targets, rng):
+                    chunk_targets, rng, cspec=None):
     """:func:`multilat.network.search.find_minimum` from the first adjustment (converged or the
     lowest-cost point it reached); returns the best core and the search record. Raises the
     non-convergence error when no start converges."""
@@ -329,7 +367,8 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             return wrap(fit_once(obs, datum, st_, start, obs, used, points, "distance", of,
-                                     ov, sc_free, max_iter, solver, chunk_targets, warn=False))
+                                     ov, sc_free, max_iter, solver, chunk_targets, warn=False,
+                                     couplings=cspec))
 
     def continuation(st_):
         """Offsets held at zero first (a better conditioned problem for weak, flat networks), then
@@ -440,7 +479,7 @@ def _last_redundancy(obs, used, trial, k, datum, points) -> str:
 
 
 def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global, max_iter,
-                   solver, chunk_targets, datum) -> None:
+                   solver, chunk_targets, datum, cspec=None) -> None:
     """Raise if the control coordinates are inconsistent with the distances.
 
     The adjustment with the control held fixed has ``Omega_c = v^T P v`` on ``dof_c``; the free
@@ -457,8 +496,10 @@ def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
+            bars_only = None if cspec is None or not cspec.bars else replace(cspec, control=())
             free = fit_once(obs, parse_datum("free"), guess, guess, obs, used, None, "distance",
-                                off_free, off_val, sc_free, max_iter, solver, chunk_targets, warn=False)
+                                off_free, off_val, sc_free, max_iter, solver, chunk_targets, warn=False,
+                                couplings=bars_only)
     except MultilatError:
         return            # not solvable without the control: nothing to compare; snooping goes on
     k = core["dof"] - free["dof"]

@@ -19,7 +19,7 @@ import numpy as np
 
 from multilat.network.model import Q, repeat_share, segment_sum, slot_gain, target_slots
 
-__all__ = ["NetworkCovariance", "KERNELS_ABOVE_OBS"]
+__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS"]
 
 #: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
 #: from the compiled kernels of :mod:`multilat.network._sparse_kernels` (numba, when installed); smaller
@@ -287,3 +287,59 @@ class NetworkCovariance:
             key = self.ti.astype(np.int64) * s + self.si
             h = h[slots.ravel()[key]] * repeat_share(slots, self.si, self.ti, self.Js_w, self.Jt_w)
         return h
+
+
+class CoupledCovariance(NetworkCovariance):
+    """The covariance when targets are coupled (scale bars, weighted control;
+    :mod:`multilat.network.solve.coupled`): the same Schur form with the targets' block inverse
+    ``N_tt^-1`` (3t, 3t) dense and ``X = N_tt^-1 N_tg``::
+
+        C V = [u ; N_tt^-1 V_t - X u],   u = Q_gg (V_g - X^T V_t)
+
+    Same interface and datum handling as :class:`NetworkCovariance`; per-target blocks and the hat
+    diagonal from the dense form (small networks).
+    """
+
+    def __init__(self, Qgg, coupled, Minv, Js_w, Jt_w, station_index, target_index, **kw):
+        self.X = coupled.X
+        self.Ntt_full_inv = coupled.Ntt_inv
+        super().__init__(Qgg, Minv, Js_w, Jt_w, station_index, target_index, **kw)
+
+    def _times(self, V):
+        V = np.asarray(V, float)
+        g = Q * self.s
+        Vg, Vt = V[:g], V[g:]
+        u = self.Qgg @ (Vg - self.X.T @ Vt)
+        return np.concatenate([u, self.Ntt_full_inv @ Vt - self.X @ u], axis=0) * self.factor
+
+    def _target_blocks_internal(self, chunk_targets: int = 20000, *, kernels=True):
+        t = self.t
+        Xb = self.X.reshape(t, 3, -1)
+        XQ = (self.X @ self.Qgg).reshape(t, 3, -1)
+        D = self.Ntt_full_inv.reshape(t, 3, t, 3)[np.arange(t), :, np.arange(t), :]
+        return D + np.einsum("tiq,tjq->tij", XQ, Xb)
+
+    def hat_row(self, k: int, **_):
+        """As :meth:`NetworkCovariance.hat_row` through the coupled product (the compiled kernels know
+        only independent targets)."""
+        return super().hat_row(k, kernels=False)
+
+    def hat_diagonal(self, chunk_targets: int = 20000, **_):
+        """``a_k C a_k`` per distance from the blocks it touches: ``Q_gg`` (station), the target's
+        3x3 block and the station-target block ``-(Q_gg X^T)``; O(t s^2)."""
+        s = self.s
+        Ctt = self._target_blocks_internal()
+        QXt = (self.Qgg @ self.X.T).reshape(s, Q, self.t, 3)                # (5s, 3t) = -C_gt
+        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        i, j = self.si, self.ti
+        a, b = self.Js_w, self.Jt_w
+        hs = np.einsum("mq,mqr,mr->m", a, Q4[i, :, i, :], a)
+        ht = np.einsum("mc,mcd,md->m", b, Ctt[j], b)
+        hst = np.einsum("mq,mqc,mc->m", a, QXt[i, :, j, :], b)
+        return hs + ht - 2.0 * hst
+
+    def quadratic(self, rows: np.ndarray) -> np.ndarray:
+        """``diag(E C_int E^T)`` for whitened rows ``E`` (q, n) in the internal frame (datum-free;
+        the redundancy of a coupling observation is ``1 -`` this)."""
+        rows = np.asarray(rows, float)
+        return np.einsum("qi,iq->q", rows, self._times(rows.T) / self.factor)

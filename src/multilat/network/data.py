@@ -53,6 +53,10 @@ class Observations:
         A-priori standard uncertainty of each distance, metres, > 0.
     azimuth_rad, elevation_rad : ndarray, shape (m,), or None
         Pointing angles of the head for each observation when known (NaN where unknown).
+    station_heads : tuple of str, length s, or None
+        The measurement head that occupied each station (None: every station is its own head, head
+        id = station id). Offsets and scales belong to heads: a head that occupies several stations
+        (sequential multilateration) has one offset and one scale for all of them.
 
     Build with :meth:`from_labels` (ids per row); the constructor checks shapes, finiteness,
     positivity and index ranges; repeated (station, target) pairs are allowed (repeated readings).
@@ -66,10 +70,17 @@ class Observations:
     sigma_m: np.ndarray
     azimuth_rad: np.ndarray | None = None
     elevation_rad: np.ndarray | None = None
+    station_heads: tuple[str, ...] | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__
         set_(self, "station_ids", _ids("station_ids", self.station_ids))
+        if self.station_heads is not None:
+            hs = _ids("station_heads", self.station_heads)
+            if len(hs) != len(self.station_ids):
+                raise MultilatError(f"station_heads: expected {len(self.station_ids)} head ids (one per "
+                                    f"station), got {len(hs)}")
+            set_(self, "station_heads", None if hs == self.station_ids else hs)
         set_(self, "target_ids", _ids("target_ids", self.target_ids))
         if len(set(self.station_ids)) != len(self.station_ids):
             raise MultilatError("station_ids: duplicate station id")
@@ -117,7 +128,7 @@ class Observations:
     # ---------------------------------------------------------------- construction
     @classmethod
     def from_labels(cls, station: Sequence[str], target: Sequence[str], distance_m, sigma_m, *,
-                    azimuth_rad=None, elevation_rad=None) -> "Observations":
+                    azimuth_rad=None, elevation_rad=None, head: Sequence[str] | None = None) -> "Observations":
         """Build from one station id and one target id per observation.
 
         Parameters
@@ -126,21 +137,55 @@ class Observations:
         distance_m : array_like, shape (m,), metres
         sigma_m : float or array_like, shape (m,), metres
         azimuth_rad, elevation_rad : array_like, shape (m,), optional
+        head : sequence of str, length m, optional
+            The head that measured each distance (default: the station id). All observations of a
+            station must name the same head.
         """
         station = _ids("station", station)
         target = _ids("target", target)
         if len(station) != len(target):
             raise MultilatError("station and target lists differ in length")
         sids = tuple(dict.fromkeys(station))
+        heads = None
+        if head is not None:
+            head = _ids("head", head)
+            if len(head) != len(station):
+                raise MultilatError("head and station lists differ in length")
+            hs: dict[str, str] = {}
+            for k, (s_, h_) in enumerate(zip(station, head)):
+                if hs.setdefault(s_, h_) != h_:
+                    raise MultilatError(f"row {k + 1}: station {s_!r} has two heads, {hs[s_]!r} and {h_!r}")
+            heads = tuple(hs[s_] for s_ in sids)
         tids = tuple(dict.fromkeys(target))
         sx, tx = _index_of(sids), _index_of(tids)
         m = len(station)
         sig = np.broadcast_to(np.asarray(sigma_m, dtype=float), (m,)).copy() if m else np.zeros(0)
         return cls(sids, tids, np.array([sx[s] for s in station], dtype=np.intp),
                    np.array([tx[t] for t in target], dtype=np.intp), np.asarray(distance_m, float),
-                   sig, azimuth_rad=azimuth_rad, elevation_rad=elevation_rad)
+                   sig, azimuth_rad=azimuth_rad, elevation_rad=elevation_rad, station_heads=heads)
 
     # ---------------------------------------------------------------- views
+    @property
+    def head_of_station(self) -> tuple[str, ...]:
+        """The head id of each station (s,) (the station id when no heads were given)."""
+        return self.station_ids if self.station_heads is None else self.station_heads
+
+    @property
+    def head_ids(self) -> tuple[str, ...]:
+        """Unique head ids in order of first appearance among the stations."""
+        return tuple(dict.fromkeys(self.head_of_station))
+
+    @property
+    def head_index(self) -> np.ndarray:
+        """Index into :attr:`head_ids` of each station (s,)."""
+        pos = {h: k for k, h in enumerate(self.head_ids)}
+        return np.array([pos[h] for h in self.head_of_station], dtype=np.intp)
+
+    @property
+    def shares_heads(self) -> bool:
+        """Whether some head occupies more than one station."""
+        return len(self.head_ids) < self.n_stations
+
     @property
     def n_obs(self) -> int:
         return int(self.distance_m.shape[0])
@@ -172,20 +217,21 @@ class Observations:
         t_new[t_present] = np.arange(t_present.size)
         az = None if self.azimuth_rad is None else self.azimuth_rad[keep]
         el = None if self.elevation_rad is None else self.elevation_rad[keep]
+        hs = None if self.station_heads is None else tuple(self.station_heads[i] for i in s_present)
         return Observations(tuple(self.station_ids[i] for i in s_present),
                             tuple(self.target_ids[j] for j in t_present), s_new[si], t_new[ti],
-                            self.distance_m[keep], self.sigma_m[keep], az, el)
+                            self.distance_m[keep], self.sigma_m[keep], az, el, hs)
 
     def with_sigma(self, sigma_m) -> "Observations":
         """A copy with other a-priori uncertainties (scalar or shape (m,))."""
         sig = np.broadcast_to(np.asarray(sigma_m, dtype=float), (self.n_obs,)).copy()
         return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
-                            self.distance_m, sig, self.azimuth_rad, self.elevation_rad)
+                            self.distance_m, sig, self.azimuth_rad, self.elevation_rad, self.station_heads)
 
     def with_distances(self, distance_m) -> "Observations":
         """A copy with other distances (same pattern), e.g. a simulated draw."""
         return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
-                            distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad)
+                            distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad, self.station_heads)
 
 
 @dataclass(frozen=True, eq=False)
@@ -257,10 +303,15 @@ class Points:
     ----------
     ids : tuple of str, length p (unique)
     xyz_m : ndarray, shape (p, 3), metres
+    std_m : ndarray, shape (p, 3), or None
+        Standard uncertainties of the coordinates, metres: a row with all three given (> 0) is a
+        **weighted** control point (its coordinates are observations), a row of NaN a hard one (held
+        fixed under ``datum="control"``). None: every point hard.
     """
 
     ids: tuple[str, ...]
     xyz_m: np.ndarray
+    std_m: np.ndarray | None = None
 
     def __post_init__(self):
         ids = _ids("point", self.ids)
@@ -272,6 +323,23 @@ class Points:
         object.__setattr__(self, "ids", ids)
         object.__setattr__(self, "xyz_m", x)
         object.__setattr__(self, "_row", _index_of(ids))
+        if self.std_m is not None:
+            sd = np.array(self.std_m, dtype=float).reshape(len(ids), 3)
+            given = ~np.isnan(sd)
+            for k in range(len(ids)):
+                if given[k].any() and not given[k].all():
+                    raise MultilatError(f"points: {ids[k]!r}: give all three standard uncertainties or none")
+                if given[k].all() and not np.all(np.isfinite(sd[k]) & (sd[k] > 0)):
+                    raise MultilatError(f"points: {ids[k]!r}: standard uncertainties must be finite and > 0, "
+                                        f"got {sd[k].tolist()}")
+            object.__setattr__(self, "std_m", sd if given.any() else None)
+
+    def std(self, ident: str) -> np.ndarray | None:
+        """Standard uncertainties (3,) of a weighted control point, None for a hard one or an unknown id."""
+        k = self._row.get(ident)
+        if k is None or self.std_m is None or np.isnan(self.std_m[k, 0]):
+            return None
+        return self.std_m[k]
 
     def get(self, ident: str) -> np.ndarray | None:
         """Coordinates (3,) of ``ident``, or None when not given (a dict look-up)."""

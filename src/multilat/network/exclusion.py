@@ -82,7 +82,9 @@ def exclude_weak_points(obs: Observations, *, offset_free: np.ndarray, scale_fre
     """
     s, t = obs.n_stations, obs.n_targets
     fixed = np.array([tid in set(fixed_targets) for tid in obs.target_ids], bool)
-    need_s = 3 + np.asarray(offset_free, int) + np.asarray(scale_free, int)
+    hi = obs.head_index          # a shared head's offset/scale are not one station's own unknowns
+    alone = (np.bincount(hi)[hi] == 1).astype(int)
+    need_s = 3 + alone * (np.asarray(offset_free, int) + np.asarray(scale_free, int))
     keep = np.ones(obs.n_obs, bool)
     out: list[Excluded] = []
     gone_s = np.zeros(s, bool)

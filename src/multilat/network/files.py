@@ -2,7 +2,10 @@
 
 Observations CSV (one row per measured distance)::
 
-    station,target,distance_m[,sigma_m][,azimuth_rad,elevation_rad]
+    station,target,distance_m[,sigma_m][,head][,azimuth_rad,elevation_rad]
+
+``head`` (optional): the measurement head on the station (default: the station id); one head per
+station, any number of stations per head (offsets and scales belong to heads).
 
 Reference lengths CSV::  ``target_a,target_b,length_m[,u_m]``
 Points CSV::             ``point,x_m,y_m,z_m``
@@ -26,7 +29,7 @@ from multilat.network.screening import screen_observations
 __all__ = ["read_observations", "read_reference_lengths", "read_points", "write_result_csvs"]
 
 OBS_REQUIRED = ("station", "target", "distance_m")
-OBS_OPTIONAL = ("sigma_m", "azimuth_rad", "elevation_rad")
+OBS_OPTIONAL = ("sigma_m", "head", "azimuth_rad", "elevation_rad")
 
 
 def _check_ids(tab, col):
@@ -50,8 +53,10 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     instrument : Instrument or preset name/path, optional
         When the file has no ``sigma_m`` column and ``sigma_m`` is not given, each distance's
         uncertainty comes from the distance model :func:`multilat.budget.distance_std_m` of this
-        instrument (default preset ``"seed2020"``), with the station id as head name when the
-        instrument has such a head (else head ``"A"``).
+        instrument (default preset ``"seed2020"``) for the row's head: the ``head`` column (which
+        the instrument must know: its own block, ``head_map`` or ``[heads.default]``; else
+        ``FILE:LINE: unknown head``), or without that column the station id when the instrument
+        resolves it (else head ``"A"``).
 
     Returns
     -------
@@ -67,6 +72,15 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     st = _check_ids(tab, "station")
     tg = _check_ids(tab, "target")
     d = tab.floats("distance_m", positive=True)
+    hd = None
+    if tab.has("head"):
+        hd = [h if h else s_ for h, s_ in zip(tab.column("head"), st)]
+        first: dict[str, int] = {}
+        for k, (s_, h) in enumerate(zip(st, hd)):
+            k0 = first.setdefault(s_, k)
+            if hd[k0] != h:
+                raise tab.error(k, f"station {s_!r} has head {h!r} here but {hd[k0]!r} at line "
+                                   f"{tab.line_numbers[k0]} (one head per station)")
     both = set(st) & set(tg)
     if both:
         v = sorted(both)[0]
@@ -89,8 +103,9 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
             raise MultilatError(f"sigma must be finite and > 0, got {sigma_m!r}")
         sig = np.full(d.shape, float(sigma_m))
     else:
-        sig = _model_sigma(d, st, instrument)
-    obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
+        sig = _model_sigma(d, st if hd is None else hd, instrument,
+                           where=None if hd is None else tab.error)
+    obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el, head=hd)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
     return obs
 
@@ -108,7 +123,10 @@ def _large_file(path) -> bool:
         return False
 
 
-def _model_sigma(d, stations, instrument):
+def _model_sigma(d, heads, instrument, *, where=None):
+    """Each distance's sigma from the instrument's distance model for its head. ``heads`` (m,) are
+    the head column (``where`` = the table's row error: an unknown head is ``FILE:LINE``) or, without
+    one, the station ids (a station the instrument does not resolve falls back to head ``A``)."""
     try:
         from multilat import budget, instrument as instr
     except ImportError:
@@ -117,14 +135,18 @@ def _model_sigma(d, stations, instrument):
     inst = instr.load_instrument("seed2020" if instrument is None else instrument) \
         if isinstance(instrument, (str, os.PathLike, type(None))) else instrument
     out = np.empty_like(d)
-    stations = np.asarray(stations)
-    for sid in dict.fromkeys(stations):
-        head = sid
-        try:
-            inst.head(head)
-        except Exception:
+    heads = np.asarray(heads, dtype=object)
+    for hid in dict.fromkeys(heads):
+        m = heads == hid
+        head = hid
+        if not inst.has_head(head):
+            if where is not None:
+                k = int(np.flatnonzero(m)[0])
+                try:
+                    inst.head(head)
+                except MultilatError as exc:
+                    raise where(k, f"column 'head': {exc}") from None
             head = "A"
-        m = stations == sid
         out[m] = budget.distance_std_m(inst, d[m], head=head)
     return out
 
@@ -148,9 +170,17 @@ def read_reference_lengths(path: str | os.PathLike) -> ReferenceLengths:
     return ReferenceLengths(tuple(a), tuple(b), L, u, path=str(tab.path), line_numbers=tab.line_numbers)
 
 
+POINT_STD = ("sx_m", "sy_m", "sz_m")
+
+
 def read_points(path: str | os.PathLike) -> Points:
-    """Read ``point,x_m,y_m,z_m`` (approximate or control coordinates, metres)."""
-    tab = read_csv_table(path, required=("point", "x_m", "y_m", "z_m"))
+    """Read ``point,x_m,y_m,z_m[,sx_m,sy_m,sz_m]`` (approximate or control coordinates, metres).
+
+    The optional standard uncertainties make a row a **weighted** control point under the control
+    datum (all three > 0 on the row); a row with them empty is hard control. A value <= 0, or a row
+    with only some of them, is ``FILE:LINE: ...``.
+    """
+    tab = read_csv_table(path, required=("point", "x_m", "y_m", "z_m"), optional=POINT_STD)
     ids = _check_ids(tab, "point")
     seen = {}
     for k, i in enumerate(ids):
@@ -158,7 +188,22 @@ def read_points(path: str | os.PathLike) -> Points:
             raise tab.error(k, f"duplicate point {i!r} (first at line {tab.line_numbers[seen[i]]})")
         seen[i] = k
     xyz = np.column_stack([tab.floats(c) for c in ("x_m", "y_m", "z_m")])
-    return Points(tuple(ids), xyz)
+    std = None
+    if any(tab.has(c) for c in POINT_STD):
+        if not all(tab.has(c) for c in POINT_STD):
+            raise MultilatError(f"{tab.path}: give all of sx_m, sy_m, sz_m columns, or none")
+        std = np.column_stack([tab.floats(c, required=False) for c in POINT_STD])
+        for k in range(len(ids)):
+            given = ~np.isnan(std[k])
+            if given.any() and not given.all():
+                raise tab.error(k, f"point {ids[k]!r}: give sx_m, sy_m and sz_m (weighted control) or none "
+                                   "(hard control)")
+            bad = np.flatnonzero(given & ~(std[k] > 0))
+            if bad.size:
+                c = POINT_STD[int(bad[0])]
+                raise tab.error(k, f"column '{c}': a control point's standard uncertainty must be > 0, "
+                                   f"got {float(std[k, bad[0]])!r}")
+    return Points(tuple(ids), xyz, std)
 
 
 def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) -> list[Path]:
@@ -169,10 +214,11 @@ def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) ->
     (s_ax, _), (t_ax, _) = result.ellipsoids()
     p = out / "stations.csv"
     write_csv_atomic(p, ["station", "x_m", "y_m", "z_m", "offset_m", "u_x_m", "u_y_m", "u_z_m",
-                         "u_offset_m", "offset_estimated", "ell95_a_m", "ell95_b_m", "ell95_c_m"],
+                         "u_offset_m", "offset_estimated", "ell95_a_m", "ell95_b_m", "ell95_c_m", "head"],
                      [[sid, *result.station_xyz_m[i], result.offset_m[i],
                        *np.sqrt(np.clip(np.diag(result.station_cov_m2[i]), 0, None)),
-                       result.offset_std_m[i], bool(result.offset_estimated[i]), *s_ax[i][::-1]]
+                       result.offset_std_m[i], bool(result.offset_estimated[i]), *s_ax[i][::-1],
+                       result.obs.head_of_station[i]]
                       for i, sid in enumerate(result.station_ids)])
     written.append(p)
     # per-target and per-observation tables: written from the columns (millions of rows)

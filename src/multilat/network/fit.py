@@ -11,11 +11,12 @@ import itertools
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.covariance import NetworkCovariance
+from multilat.network.couplings import flatten_params
+from multilat.network.covariance import CoupledCovariance, NetworkCovariance
 from multilat.network.data import Observations
 from multilat.network.datum import apply_rigid, datum_matrices, frame_321, rigid_fit
 from multilat.network.model import Q
-from multilat.network.problem import Params, Problem
+from multilat.network.problem import Params, Problem, head_mean
 from multilat.network.result import Start
 from multilat.network.solvability import check_structure, flat_geometry
 from multilat.network.solve import choose_backend, gauss_newton, make_backend, solve_reduced
@@ -77,7 +78,7 @@ def target_map(obs, used):
     return np.flatnonzero(np.bincount(obs.target_index[used], minlength=obs.n_targets) > 0)
 
 
-def check_network(sub, datum, points, off_free, sc_free, *, warn):
+def check_network(sub, datum, points, off_free, sc_free, *, warn, couplings=None):
     fixed_t = np.zeros(sub.n_targets, bool)
     fixed_sc = 0
     defect = 6
@@ -86,8 +87,11 @@ def check_network(sub, datum, points, off_free, sc_free, *, warn):
         fixed_t = np.array([t in ctrl for t in sub.target_ids])
         fixed_sc = 3 * sum(s in ctrl for s in sub.station_ids)
         defect = 0
+    # weighted control points count as fixed: their 3 unknowns come with 3 observations
+    c = None if couplings is None else couplings.resolve(sub)
     return check_structure(sub, offset_free=off_free, scale_free=sc_free, fixed_targets=fixed_t,
-                           fixed_station_coords=fixed_sc, datum_defect=defect, warn=warn)
+                           fixed_station_coords=fixed_sc, datum_defect=defect, warn=warn,
+                           extra_obs=0 if c is None else c.bar_a.size)
 
 
 def control_ids(sub, datum, points):
@@ -108,18 +112,22 @@ def control_ids(sub, datum, points):
 
 
 def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
-                 sc_free_all, max_iter, solver, chunk_targets, *, warn, partial_ok=False):
+                 sc_free_all, max_iter, solver, chunk_targets, *, warn, partial_ok=False, couplings=None):
     """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
-    ``ref_start`` gives the reference coordinates of the free datum. Returns a dict of arrays in
-    ``sub``'s order plus the maps back."""
+    ``ref_start`` gives the reference coordinates of the free datum; ``couplings`` (a
+    :class:`~multilat.network.couplings.CouplingSpec`) adds scale bars and weighted control.
+    Returns a dict of arrays in ``sub``'s order plus the maps back."""
     smap, tmap = station_map(obs, used), target_map(obs, used)
     off_free, off_val, sc_free = off_free_all[smap], off_val_all[smap], sc_free_all[smap]
-    check_network(sub, datum, points, off_free, sc_free, warn=False)
+    check_network(sub, datum, points, off_free, sc_free, warn=False, couplings=couplings)
+    cpl = None if couplings is None else couplings.resolve(sub)
     s, t = sub.n_stations, sub.n_targets
     sx0 = start.station_xyz_m[smap].copy()
     tx0 = start.target_xyz_m[tmap].copy()
-    off0 = np.where(off_free, start.offset_m[smap], off_val)
-    sc0 = np.asarray(getattr(start, "scale", np.zeros(len(start.offset_m))), float)[smap].copy()
+    # heads that occupy several stations: one offset and scale each (the tie, problem.py); the
+    # initial values may have treated the stations independently, so start from their mean
+    off0 = head_mean(np.where(off_free, start.offset_m[smap], off_val), sub)
+    sc0 = head_mean(np.asarray(getattr(start, "scale", np.zeros(len(start.offset_m))), float)[smap], sub)
     gfree = np.ones((s, Q), bool)
     gfree[:, 3] = off_free
     gfree[:, 4] = sc_free
@@ -135,11 +143,11 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
         for i, sid in enumerate(sub.station_ids):
             if sid in ctrl:
                 sx0[i] = points.get(sid)
-                gfree[i, :3] = False
+                gfree[i, :3] = points.std(sid) is not None     # weighted control: free, observed
         for j, tid in enumerate(sub.target_ids):
             if tid in ctrl:
                 tx0[j] = points.get(tid)
-                tfree[j] = False
+                tfree[j] = points.std(tid) is not None
         R0, t0 = np.eye(3), np.zeros(3)
     else:
         if datum.kind == "321":
@@ -152,7 +160,7 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
         gfree[a, :3] = False
         gfree[b, 1:3] = False
         gfree[c, 2] = False
-    pb = Problem(sub, cost, gfree, tfree)
+    pb = Problem(sub, cost, gfree, tfree, couplings=cpl)
     backend = make_backend(pb, choose_backend(pb, solver), chunk_targets=chunk_targets)
     p, conv = gauss_newton(pb, Params(sx0, tx0, off0, sc0), backend, max_iter=max_iter)
     if not conv.converged:
@@ -168,6 +176,9 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
     r_w, Js_w, Jt_w = whitened(pb, p)
     dof = pb.dof
     vtpv = float(r_w @ r_w)
+    if cpl is not None:
+        e_w, E_rows = cpl.whitened(flatten_params(p))
+        vtpv += float(e_w @ e_w)
     sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")
     factor = 1.0 if cost == "distance" else (sigma0 ** 2 if dof > 0 else float("nan"))
     # move to the requested datum
@@ -196,11 +207,22 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
             R, tr = rigid_fit(np.vstack([sx, tx])[sel], ref)
         sx, tx = apply_rigid(R, tr, sx), apply_rigid(R, tr, tx)
         G, E = datum_matrices(datum, sub.station_ids, sub.target_ids, sx, tx)
-    cov = NetworkCovariance(Qgg, fin.Ntt_inv, Js_w, Jt_w, sub.station_index, sub.target_index,
-                            factor=factor, R=R, G=G, E=E)
+    if fin.coupled is not None:
+        cov = CoupledCovariance(Qgg, fin.coupled, fin.Ntt_inv, Js_w, Jt_w, sub.station_index,
+                                sub.target_index, factor=factor, R=R, G=G, E=E)
+    else:
+        cov = NetworkCovariance(Qgg, fin.Ntt_inv, Js_w, Jt_w, sub.station_index, sub.target_index,
+                                factor=factor, R=R, G=G, E=E)
     h = cov.hat_diagonal(chunk_targets)
     red = np.clip(1.0 - h, 0.0, 1.0)
+    coupled = None
+    if cpl is not None:
+        # the couplings' own residuals and redundancy numbers (bars, then control coordinates)
+        free_full = np.concatenate([pb.station_free.ravel(), np.repeat(pb.target_free, 3)])
+        r_c = 1.0 - cov.quadratic(E_rows * free_full)
+        coupled = dict(couplings=cpl, residual_m=cpl.residuals(flatten_params(p)),
+                       redundancy=np.clip(r_c, 0.0, 1.0))
     return dict(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free,
                 chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
                 vtpv=vtpv, iterations=conv.iterations, cond=cond, cov=cov, convergence=conv,
-                solver=backend.name)
+                solver=backend.name, coupled=coupled)

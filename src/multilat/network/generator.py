@@ -52,7 +52,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.data import Observations
 
-__all__ = ["GeneratedNetwork", "random_network", "STATION_LAYOUTS", "TARGET_LAYOUTS"]
+__all__ = ["GeneratedNetwork", "random_network", "sequential_network", "STATION_LAYOUTS", "TARGET_LAYOUTS"]
 
 STATION_LAYOUTS = ("volume", "ring", "two-level")
 TARGET_LAYOUTS = ("volume", "clustered", "floor")
@@ -196,3 +196,39 @@ def random_network(rng=None, *, n_stations=(4, 10), n_targets=(12, 60), extent_m
     obs = Observations(tuple(f"S{i + 1}" for i in range(s)), tuple(f"T{j + 1}" for j in range(t)),
                        si, ti, d, np.full(si.size, float(sigma_m)))
     return GeneratedNetwork(H, T, o, obs, L, slay, tlay, gap)
+
+
+def sequential_network(rng=None, *, heads=("T1", "T2"), n_stations: int = 8, n_targets: int = 16,
+                       part_m=(1.6, 1.0, 0.6), radius_m: float = 2.8, offset_max_m: float = 2e-3,
+                       sigma_m: float = 5e-6, gap: float = 0.15) -> GeneratedNetwork:
+    """Sequential multilateration: ``len(heads)`` heads moved over ``n_stations`` stations around a part.
+
+    Targets uniform in the part's box ``part_m`` (centred on the origin in x, y; z from 0); stations
+    on a ring of radius ``radius_m`` (azimuths evenly spaced, jitter ``U(-0.2, 0.2)`` of the spacing),
+    heights alternating low ``U(0.4, 0.8)`` m and high ``U(1.4, 1.9)`` m (tripods at two heights: the
+    stations are off one plane); station ``i`` is occupied by head ``heads[i % len(heads)]``. One
+    offset per head ``U(-offset_max_m, offset_max_m)``; each station-target pair unseen with
+    probability ``gap`` (every target seen by >= 5 stations); gaussian noise ``sigma_m``.
+
+    Returns a :class:`GeneratedNetwork` whose ``offset_m`` is per station (the head's offset) and
+    whose ``obs.station_heads`` names the heads.
+    """
+    g = np.random.default_rng(rng)
+    s, t, nh = int(n_stations), int(n_targets), len(heads)
+    if nh < 1 or s < 4 or t < 5:
+        raise MultilatError("sequential_network: needs >= 1 head, >= 4 stations and >= 5 targets")
+    az = 2 * np.pi * (np.arange(s) + g.uniform(-0.2, 0.2, s)) / s
+    z = np.where(np.arange(s) % 2 == 0, g.uniform(0.4, 0.8, s), g.uniform(1.4, 1.9, s))
+    H = np.column_stack([radius_m * np.cos(az), radius_m * np.sin(az), z])
+    half = np.array(part_m, float) / 2
+    T = g.uniform([-half[0], -half[1], 0.0], [half[0], half[1], 2 * half[2]], (t, 3))
+    seen = _mask(g, s, t, gap, min(5, s))
+    head_off = g.uniform(-offset_max_m, offset_max_m, nh)
+    hi = np.arange(s) % nh
+    o = head_off[hi]
+    si, ti = np.nonzero(seen)
+    d = np.linalg.norm(H[si] - T[ti], axis=1) + o[si] + g.normal(0.0, sigma_m, si.size)
+    obs = Observations(tuple(f"S{i + 1}" for i in range(s)), tuple(f"P{j + 1}" for j in range(t)),
+                       si, ti, d, np.full(si.size, float(sigma_m)),
+                       station_heads=tuple(heads[k] for k in hi))
+    return GeneratedNetwork(H, T, o, obs, float(2 * radius_m), "sequential ring", "part", gap)

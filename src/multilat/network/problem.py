@@ -8,18 +8,29 @@ Parameter layout (see :mod:`multilat.network.model`)::
 ``Q = 5`` global parameters per station (index ``Q i + c``), then 3 per target. A parameter that is
 held (a fixed offset, an unestimated scale, a coordinate of the internal minimal constraint, a
 control point) keeps its value and its column is zero in every Jacobian.
+
+**Heads** (``obs.station_heads``): offsets and scales belong to heads, and a head may occupy several
+stations. The Jacobians, the back ends' assemblies and the covariance keep the per-station layout
+above; the tie is one linear map ``g = T g_r`` (:attr:`Problem.tie`) from the *reduced* unknowns
+``g_r`` — the same 5s layout in which only the first station of each head (its *lead*) carries the
+head's offset and scale — to the per-station globals: ``T`` copies the lead's offset/scale entry
+onto every other station of the head. :func:`multilat.network.solve.loop.solve_reduced` is the one
+place that applies it (``T^T N T``, ``T^T b``; returns ``T dg_r`` and ``T Q_r T^T``), so the datum,
+the covariance and the statistics see per-station globals whose tied entries are equal and fully
+correlated. With one station per head ``T`` is the identity and is never formed.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import cached_property
 
 import numpy as np
 
 from multilat.network.data import Observations
 from multilat.network.model import COSTS, Q
 
-__all__ = ["Problem", "Params", "param_names"]
+__all__ = ["Problem", "Params", "param_names", "head_mean"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -55,12 +66,16 @@ class Problem:
     cost : "distance" (weighted by 1/sigma) or "squared" (the paper's eq. 6, unweighted)
     station_free : ndarray of bool (s, Q)   free station parameters (x, y, z, offset, scale)
     target_free : ndarray of bool (t,)      False for targets held fixed (control points)
+    couplings : Couplings or None           observations beside the distances that couple points
+        (scale bars, weighted control; :mod:`multilat.network.couplings`): solved by the dense back
+        end's coupled path
     """
 
     obs: Observations
     cost: str
     station_free: np.ndarray
     target_free: np.ndarray
+    couplings: object = None     # multilat.network.couplings.Couplings: scale bars, weighted control
 
     def __post_init__(self):
         if self.cost not in COSTS:
@@ -82,22 +97,75 @@ class Problem:
         """The length that steps are measured against (the smallest a-priori sigma)."""
         return float(np.min(self.obs.sigma_m))
 
+    @cached_property
+    def lead_mask(self) -> np.ndarray:
+        """(s, Q) bool: False for the offset and scale entries of a station that is not the first
+        (lead) station of its head (those entries are copies of the lead's); all True without ties."""
+        o = self.obs
+        m = np.ones((o.n_stations, Q), bool)
+        if o.station_heads is not None:
+            hi = o.head_index
+            lead = np.zeros(o.n_stations, bool)
+            lead[np.unique(hi, return_index=True)[1]] = True
+            m[~lead, 3:] = False
+        return m
+
+    @property
+    def reduced_free(self) -> np.ndarray:
+        """(s, Q) bool: the free reduced unknowns (station coordinates, head offsets and scales
+        at their lead stations)."""
+        return self.station_free & self.lead_mask
+
+    @cached_property
+    def tie(self) -> np.ndarray | None:
+        """The tie map ``T`` (5s, 5s) with ``g = T g_r``, or None when every head has one station."""
+        o = self.obs
+        if o.station_heads is None or not o.shares_heads:
+            return None
+        s = o.n_stations
+        hi = o.head_index
+        lead_of_head = np.unique(hi, return_index=True)[1]
+        src = np.arange(Q * s).reshape(s, Q)
+        src[:, 3:] = Q * lead_of_head[hi][:, None] + np.arange(3, Q)
+        T = np.zeros((Q * s, Q * s))
+        T[np.arange(Q * s), src.ravel()] = 1.0
+        return T
+
     @property
     def n_free(self) -> int:
-        return int(self.station_free.sum()) + 3 * int(self.target_free.sum())
+        return int(self.reduced_free.sum()) + 3 * int(self.target_free.sum())
+
+    @property
+    def n_rows(self) -> int:
+        """Observations: the distances plus the couplings' rows (scale bars, control coordinates)."""
+        return self.obs.n_obs + (0 if self.couplings is None else self.couplings.n_rows)
 
     @property
     def dof(self) -> int:
-        return self.obs.n_obs - self.n_free
+        return self.n_rows - self.n_free
 
     def with_free(self, station_free=None, target_free=None) -> "Problem":
         return replace(self, station_free=self.station_free if station_free is None else station_free,
                        target_free=self.target_free if target_free is None else target_free)
 
 
-def param_names(station_ids) -> list[str]:
-    """Names of the global parameters in layout order (for messages)."""
+def param_names(station_ids, head_ids=None) -> list[str]:
+    """Names of the global parameters in layout order (for messages); ``head_ids`` (s,) names the
+    head of each station whose offset and scale they are (default: the station)."""
     names = []
-    for sid in station_ids:
-        names += [f"x of {sid}", f"y of {sid}", f"z of {sid}", f"offset of {sid}", f"scale of {sid}"]
+    heads = station_ids if head_ids is None else head_ids
+    for sid, hid in zip(station_ids, heads):
+        of = f"head {hid}" if hid != sid else sid
+        names += [f"x of {sid}", f"y of {sid}", f"z of {sid}", f"offset of {of}", f"scale of {of}"]
     return names
+
+
+def head_mean(values, obs: Observations) -> np.ndarray:
+    """Per-station ``values`` (s,) replaced by their mean over the stations of each head: the tied
+    start of an adjustment whose initial values treated the stations independently."""
+    v = np.asarray(values, float)
+    if obs.station_heads is None or not obs.shares_heads:
+        return v.copy()
+    hi = obs.head_index
+    mean = np.bincount(hi, weights=v) / np.bincount(hi)
+    return mean[hi]

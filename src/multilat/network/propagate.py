@@ -193,6 +193,9 @@ def problem_from_observations(obs, *, datum="free", pairs=None, references=None,
     res = adjustment
     if np.any(res.scale_estimated):
         raise MultilatError("propagation does not model per-station scales; adjust without scales")
+    if obs.shares_heads:
+        raise MultilatError("propagation does not model heads that occupy several stations yet (one offset "
+                            "per station in the batched solver)")
     station_ids = tuple(obs.station_ids)
     target_ids = tuple(obs.target_ids)
     dt = bt.TrialDatum.from_datum(datum, station_ids, target_ids)

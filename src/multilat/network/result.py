@@ -107,6 +107,10 @@ class AdjustmentResult:
     w_failure_groups : tuple of tuple of int  every failing w-test at the end, grouped: observations
         whose w-tests are perfectly correlated form one group (the data cannot tell them apart)
     initial : dict  how the initial values were found and what the minimum search tried
+    scale_bars : tuple of dict  reference lengths used as observations: ``target_a``, ``target_b``,
+        ``length_m``, ``u_m``, ``adjusted_m``, ``residual_m``, ``redundancy``
+    weighted_control : tuple of dict  control points observed with uncertainties: ``point``,
+        ``xyz_m``, ``std_m``, ``residual_m`` (3), ``redundancy`` (3)
     covariance : NetworkCovariance  any block of the full covariance in the datum
     """
 
@@ -147,6 +151,8 @@ class AdjustmentResult:
     warnings: tuple = ()
     w_failure_groups: tuple = ()
     initial: dict = field(default_factory=dict)
+    scale_bars: tuple = ()
+    weighted_control: tuple = ()
 
     @property
     def sigma0_unit(self) -> str:
@@ -227,6 +233,22 @@ class AdjustmentResult:
                     out[i, c] = C[o, Q * i + c] / np.sqrt(C[o, o] * v)
         return out
 
+    def heads(self) -> dict:
+        """Per head (``obs.head_ids``; a head is its station when no heads were given): ``offset_m``,
+        ``offset_std_m``, ``offset_estimated``, ``scale``, ``scale_std``, ``scale_estimated`` and the
+        ``stations`` it occupied. Its stations carry the same values (the tie of problem.py)."""
+        hos = self.obs.head_of_station
+        out = {}
+        for i, (sid, hid) in enumerate(zip(self.station_ids, hos)):
+            if hid in out:
+                out[hid]["stations"].append(sid)
+                continue
+            out[hid] = {"offset_m": float(self.offset_m[i]), "offset_std_m": float(self.offset_std_m[i]),
+                        "offset_estimated": bool(self.offset_estimated[i]), "scale": float(self.scale[i]),
+                        "scale_std": float(self.scale_std[i]), "scale_estimated": bool(self.scale_estimated[i]),
+                        "stations": [sid]}
+        return out
+
     def target_n_obs(self) -> np.ndarray:
         """Observations used per target (t,)."""
         return np.bincount(self.obs.target_index[self.used], minlength=self.obs.n_targets)
@@ -305,10 +327,12 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
     """The ``--json`` document of an adjustment, the same keys whichever back end ran."""
     stations = {}
     corr = res.offset_correlations()
+    o_heads = res.obs.head_of_station
     for i, sid in enumerate(res.station_ids):
         stations[sid] = {"xyz_m": res.station_xyz_m[i], "offset_m": res.offset_m[i],
                          "offset_u_m": res.offset_std_m[i], "offset_estimated": bool(res.offset_estimated[i]),
-                         "cov_m2": res.station_cov_m2[i], "offset_corr_xyz": corr[i, :3]}
+                         "cov_m2": res.station_cov_m2[i], "offset_corr_xyz": corr[i, :3],
+                         "head": o_heads[i]}
         if res.scale_estimated[i]:
             stations[sid]["scale"] = res.scale[i]
             stations[sid]["scale_u"] = res.scale_std[i]
@@ -333,6 +357,9 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         "excluded": [{"id": e.id, "kind": e.kind, "reason": e.reason, "n_obs": e.n_obs} for e in res.excluded],
         "warnings": list(res.warnings),
         "stations": stations,
+        "heads": res.heads(),
+        "scale_bars": list(res.scale_bars),
+        "weighted_control": list(res.weighted_control),
         "targets": targets,
         "sigma0": res.sigma0,
         "sigma0_unit": res.sigma0_unit,

@@ -53,7 +53,8 @@ def _components(obs: Observations) -> int:
 
 
 def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets=None,
-                    fixed_station_coords: int = 0, datum_defect: int = 6, warn: bool = True) -> int:
+                    fixed_station_coords: int = 0, datum_defect: int = 6, warn: bool = True,
+                    extra_obs: int = 0) -> int:
     """Raise :class:`MultilatError` if the observation pattern cannot determine the unknowns.
 
     Parameters
@@ -63,12 +64,13 @@ def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets
     fixed_targets : ndarray of bool (t,), optional   targets held fixed (control)
     fixed_station_coords : int   station coordinates held fixed (control)
     datum_defect : int   6 for a free network, 0 when control points fix the frame
+    extra_obs : int   observations beside the distances (scale bars)
 
     Returns
     -------
     dof : int  the redundancy ``m - unknowns`` (>= 0)
     """
-    s, t, m = obs.n_stations, obs.n_targets, obs.n_obs
+    s, t, m = obs.n_stations, obs.n_targets, obs.n_obs + int(extra_obs)
     if s < 3:
         raise MultilatError(f"a self-calibrating network needs at least 3 stations, got {s} "
                             f"({', '.join(obs.station_ids)})")
@@ -76,7 +78,11 @@ def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets
     pair = np.unique(obs.station_index.astype(np.int64) * t + obs.target_index)   # distinct pairs:
     per_station = np.bincount(pair // t, minlength=s)                        # repeated readings add
     per_target = np.bincount(pair % t, minlength=t)                          # no geometry
-    need_s = 3 + np.asarray(offset_free, int) + np.asarray(scale_free, int)
+    # a head's offset and scale are unknowns of that station only when the head occupies no other
+    hi = obs.head_index
+    alone = (np.bincount(hi)[hi] == 1).astype(int)
+    need_s = 3 + alone * (np.asarray(offset_free, int) + np.asarray(scale_free, int))
+    lead = np.unique(hi, return_index=True)[1]
     for i in range(s):
         if per_station[i] < need_s[i] + 1:
             raise MultilatError(
@@ -99,10 +105,11 @@ def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets
         raise MultilatError(f"the network is disconnected into {ncomp} parts ({' | '.join(parts)}); "
                             "each part must be adjusted separately or linked by common targets")
     n_unknown = (3 * s - fixed_station_coords + 3 * int((~fixed_targets).sum())
-                 + int(np.sum(offset_free)) + int(np.sum(scale_free)) - datum_defect)
+                 + int(np.sum(np.asarray(offset_free)[lead])) + int(np.sum(np.asarray(scale_free)[lead]))
+                 - datum_defect)
     dof = m - n_unknown
     if dof < 0:
-        n_off = int(np.sum(offset_free))
+        n_off = int(np.sum(np.asarray(offset_free)[lead]))
         hint = ""
         if datum_defect == 6 and not np.any(scale_free):
             per_t = s - 3   # net equations per target seen by all stations

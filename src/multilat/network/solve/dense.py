@@ -1,7 +1,8 @@
 """Dense (numpy) back end: the Schur-reduced normal equations assembled with numpy.
 
 General: every cost (``distance``, ``squared``), scales, fixed targets (control points). Memory and
-time ``O(t s^2)`` per assembly (chunks of targets bound the memory).
+time ``O(t s^2)`` per assembly (chunks of targets bound the memory). With couplings (scale bars,
+weighted control) the coupled path :mod:`.coupled` eliminates all targets at once.
 """
 
 from __future__ import annotations
@@ -25,6 +26,10 @@ class DenseBackend:
         self.chunk_targets = int(chunk_targets)
 
     def assemble(self, p: Params, damping: float = 0.0) -> Assembly:
+        if self.problem.couplings is not None:       # scale bars, weighted control: targets coupled
+            from multilat.network.solve.coupled import assemble_coupled
+
+            return assemble_coupled(self.problem, p, damping)
         o = self.problem.obs
         r_w, Js_w, Jt_w = whitened(self.problem, p)
         sys_ = reduced_normal_equations(r_w, Js_w, Jt_w, o.station_index, o.target_index, o.n_stations,

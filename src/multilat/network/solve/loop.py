@@ -57,13 +57,23 @@ def solve_reduced(N, b, free, problem: Problem, p: Params):
     Returns ``(dg (5s,), Qgg (5s, 5s), condition)``: the step, the inverse of the free block
     (zeros elsewhere) and the condition number of the unit-diagonal matrix. Raises
     :class:`MultilatError` naming the weak parameters when it is not below ``CONDITION_LIMIT``.
+
+    Heads that occupy several stations are tied here, the one place: with ``T = problem.tie``
+    (:mod:`multilat.network.problem`) the system solved is ``T^T N T dg_r = T^T b`` over the free
+    reduced unknowns (``free`` and the head leads), and the step and covariance returned are the
+    per-station ``T dg_r`` and ``T Q_r T^T``.
     """
     obs = problem.obs
+    T = problem.tie
+    if T is not None:
+        N = T.T @ N @ T
+        b = T.T @ b
+    free = np.asarray(free, bool) & problem.lead_mask.ravel()
     Nf = N[np.ix_(free, free)]
     diag = np.diag(Nf)
     if not (np.all(np.isfinite(diag)) and np.all(diag > 0)):
         k = int(np.flatnonzero(~(diag > 0))[0]) if np.any(~(diag > 0)) else 0
-        name = np.array(param_names(obs.station_ids))[free][k]
+        name = np.array(param_names(obs.station_ids, obs.head_of_station))[free][k]
         raise MultilatError(f"near-degenerate geometry: {name} is not determined by the observations")
     d = np.sqrt(diag)
     Ns = Nf / np.outer(d, d)
@@ -76,7 +86,8 @@ def solve_reduced(N, b, free, problem: Problem, p: Params):
         nv = np.zeros(free.size)
         nv[free] = V[:, 0] / d
         raise MultilatError(diagnose_degeneracy(p.station_xyz_m, p.target_xyz_m, obs.station_ids,
-                                                obs.target_ids, nv, param_names(obs.station_ids),
+                                                obs.target_ids, nv,
+                                                param_names(obs.station_ids, obs.head_of_station),
                                                 condition=cond, sigma_m=float(np.median(obs.sigma_m)),
                                                 n_obs=obs.n_obs))
     Qf = ((V / ev) @ V.T) / np.outer(d, d)
@@ -84,6 +95,9 @@ def solve_reduced(N, b, free, problem: Problem, p: Params):
     dg[free] = Qf @ b[free]
     Qgg = np.zeros((free.size, free.size))
     Qgg[np.ix_(free, free)] = Qf
+    if T is not None:
+        dg = T @ dg
+        Qgg = T @ Qgg @ T.T
     return dg, Qgg, cond
 
 

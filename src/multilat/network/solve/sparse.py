@@ -31,6 +31,8 @@ def supports(problem: Problem) -> str | None:
         return "estimated scales"
     if not problem.target_free.all():
         return "fixed control targets"
+    if problem.couplings is not None:
+        return "scale bars or weighted control points (they couple target blocks)"
     return None
 
 

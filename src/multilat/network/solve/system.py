@@ -30,6 +30,7 @@ class Assembly:
     Ntt_inv: np.ndarray
     vtpv: float
     back_substitute: Callable[[np.ndarray], np.ndarray]
+    coupled: object = None     # the coupled path's target elimination (solve.coupled.CoupledTargets)
 
 
 def whitened(problem: Problem, p: Params):
@@ -49,4 +50,9 @@ def weighted_cost(problem: Problem, p: Params) -> float:
     r, _, _ = residuals_and_jacobian(o.distance_m, p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale,
                                      o.station_index, o.target_index, cost=problem.cost)
     v = float(np.sum((r * problem.weight_sqrt) ** 2))
+    if problem.couplings is not None:
+        from multilat.network.couplings import flatten_params
+
+        c = problem.couplings
+        v += float(np.sum((c.residuals(flatten_params(p)) / c.sigma_m) ** 2))
     return v if np.isfinite(v) else np.inf

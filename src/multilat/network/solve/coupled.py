@@ -1,0 +1,105 @@
+"""The dense back end's coupled path: networks with observations that couple points (scale bars
+between two targets, weighted control; :mod:`multilat.network.couplings`).
+
+A scale bar couples two target blocks, so the targets are no longer eliminated one 3x3 block at a
+time: the whole normal matrix ``N`` (5s + 3t) is assembled (distances and couplings) and all free
+targets are eliminated at once::
+
+    N_red = N_gg - N_gt N_tt^-1 N_tg,    b_red = b_g - N_gt N_tt^-1 b_t,    dt = N_tt^-1 (b_t - N_tg dg)
+
+the same reduced system (5s) the loop, the tie of heads and the datum work on. Memory ``O((3t)^2)``:
+for networks of up to a few thousand targets (the sparse back end refuses couplings; ``auto`` picks
+this path). The covariance keeps this Schur form (:class:`multilat.network.covariance.CoupledCovariance`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+
+from multilat.errors import MultilatError
+from multilat.network.couplings import flatten_params
+from multilat.network.model import Q, inv3
+from multilat.network.problem import Params, Problem
+from multilat.network.solve.system import Assembly, whitened
+
+__all__ = ["CoupledTargets", "assemble_coupled", "MAX_COUPLED_PARAMS"]
+
+MAX_COUPLED_PARAMS = 12_000      # 5s + 3t above this: refused (the dense target block would be > 1 GB)
+
+
+@dataclass(frozen=True, eq=False)
+class CoupledTargets:
+    """All free targets eliminated at once: ``X = N_tt^-1 N_tg`` (3t, 5s) and ``N_tt^-1`` (3t, 3t),
+    zero rows/columns for held targets."""
+
+    X: np.ndarray
+    Ntt_inv: np.ndarray
+
+
+def distance_rows(problem: Problem, p: Params):
+    """Whitened residuals (m,), the sparse whitened Jacobian (m, 5s + 3t) of the distances and the
+    blocks ``Js_w``, ``Jt_w``."""
+    o = problem.obs
+    s, t = o.n_stations, o.n_targets
+    r_w, Js_w, Jt_w = whitened(problem, p)
+    cols = np.concatenate([Q * o.station_index[:, None] + np.arange(Q),
+                           Q * s + 3 * o.target_index[:, None] + np.arange(3)], axis=1)
+    vals = np.concatenate([Js_w, Jt_w], axis=1)
+    A = sp.csr_matrix((vals.ravel(), (np.repeat(np.arange(o.n_obs), Q + 3), cols.ravel())),
+                      shape=(o.n_obs, Q * s + 3 * t))
+    return r_w, A, Js_w, Jt_w
+
+
+def assemble_coupled(problem: Problem, p: Params, damping: float = 0.0) -> Assembly:
+    o = problem.obs
+    s, t = o.n_stations, o.n_targets
+    n = Q * s + 3 * t
+    if n > MAX_COUPLED_PARAMS:
+        raise MultilatError(f"scale bars or weighted control with {s} stations and {t} targets ({n} parameters): "
+                            f"the coupled solver handles up to {MAX_COUPLED_PARAMS} parameters")
+    r_w, A, _, _ = distance_rows(problem, p)
+    N = (A.T @ A).toarray()
+    b = A.T @ r_w
+    free = np.concatenate([problem.station_free.ravel(), np.repeat(problem.target_free, 3)])
+    e_w, E = problem.couplings.whitened(flatten_params(p))
+    E = E * free
+    N += E.T @ E
+    b = b + E.T @ e_w
+    if damping:
+        N[np.arange(n), np.arange(n)] *= 1.0 + damping
+    g = np.arange(Q * s)
+    tr = Q * s + np.flatnonzero(np.repeat(problem.target_free, 3))
+    Ntt_f = N[np.ix_(tr, tr)]
+    try:
+        fac = sla.cho_factor(Ntt_f)
+        X_f = sla.cho_solve(fac, N[np.ix_(tr, g)])
+        y = sla.cho_solve(fac, b[tr])
+        Ninv_f = sla.cho_solve(fac, np.eye(tr.size))
+    except (np.linalg.LinAlgError, ValueError):
+        raise MultilatError("near-degenerate geometry: the targets' normal matrix (with the scale bars and "
+                            "weighted control) is singular") from None
+    Ngt = N[np.ix_(g, tr)]
+    N_red = N[np.ix_(g, g)] - Ngt @ X_f
+    b_red = b[g] - Ngt @ y
+    X = np.zeros((3 * t, Q * s))
+    Ninv = np.zeros((3 * t, 3 * t))
+    X[tr - Q * s] = X_f
+    Ninv[np.ix_(tr - Q * s, tr - Q * s)] = Ninv_f
+    blocks = N[Q * s:, Q * s:].reshape(t, 3, t, 3)
+    Ntt = np.ascontiguousarray(blocks[np.arange(t), :, np.arange(t), :])
+    Ntt_inv = np.zeros_like(Ntt)
+    Ntt_inv[problem.target_free] = inv3(Ntt[problem.target_free])
+    tfree_rows = tr - Q * s
+
+    def back(dg):
+        dt = np.zeros(3 * t)
+        dt[tfree_rows] = y - X_f @ dg
+        return dt.reshape(t, 3)
+
+    return Assembly(N=0.5 * (N_red + N_red.T), b=b_red, Ntt=Ntt, Ntt_inv=Ntt_inv,
+                    vtpv=float(r_w @ r_w + e_w @ e_w), back_substitute=back,
+                    coupled=CoupledTargets(X, Ninv))
