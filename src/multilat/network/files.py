@@ -38,7 +38,7 @@ def _check_ids(tab, col):
 
 
 def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
-                      instrument=None) -> Observations:
+                      instrument=None, sigma_source: dict | None = None) -> Observations:
     """Read an observations CSV.
 
     Parameters
@@ -52,6 +52,8 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         uncertainty comes from the distance model :func:`multilat.budget.distance_std_m` of this
         instrument (default preset ``"seed2020"``), with the station id as head name when the
         instrument has such a head (else head ``"A"``).
+    sigma_source : dict, optional
+        Filled with where σ came from (:mod:`multilat.network.sigma_source`).
 
     Returns
     -------
@@ -80,6 +82,7 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         el = tab.floats("elevation_rad", required=False, within=ELEVATION_RANGE)
     if tab.has("sigma_m"):
         sig = tab.floats("sigma_m", positive=True)
+        _record(sigma_source, "column", path)
         if sigma_m is not None:
             import warnings
             warnings.warn(f"{path}: using the file's sigma_m column, ignoring the sigma option",
@@ -88,11 +91,20 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         if not (np.isfinite(sigma_m) and sigma_m > 0):
             raise MultilatError(f"sigma must be finite and > 0, got {sigma_m!r}")
         sig = np.full(d.shape, float(sigma_m))
+        _record(sigma_source, "option", sigma_m)
     else:
         sig = _model_sigma(d, st, instrument)
+        _record(sigma_source, "model", st, instrument)
     obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
     return obs
+
+
+def _record(out, kind, *args):
+    if out is not None:
+        from multilat.network import sigma_source as ss
+
+        out.update({"column": ss.file_column, "option": ss.option, "model": ss.distance_model}[kind](*args))
 
 
 def _model_sigma(d, stations, instrument):
