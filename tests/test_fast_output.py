@@ -128,7 +128,9 @@ def test_cli_json_equals_the_library_document(capsys, tmp_path):
     cap = capsys.readouterr()
     assert rc == 0, cap.err
     out = cap.out
-    res = adjust(read_observations(p), rng=1)
+    src = {}      # the CLI records where σ came from; so does the library when asked
+    res = adjust(read_observations(p, sigma_source=src), rng=1, sigma_source=src)
+    assert src["kind"] == "file column"
     assert _same_values(out, _old(result_to_json(res)))
 
 

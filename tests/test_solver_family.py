@@ -204,20 +204,22 @@ def test_statistics_equal_an_independent_dense_implementation(solver):
 
 
 def test_no_snooping_while_the_global_test_passes():
-    """Detection first: on a blunder-free network of 12 000 distances about α·m = 12 w-tests fail by
-    chance at α = 0.001; the global test passes, so none is rejected — each is listed in w_failures.
-    A 30σ blunder added to the same data fails the global test and is the one rejected."""
+    """Detection first (a fixed global test at α = 0.05): on a blunder-free network of 12 000 distances
+    about α·m = 12 w-tests fail by chance at α = 0.001; the global test passes, so none is rejected —
+    each is listed in w_failures. A 30σ blunder added to the same data fails the global test and is the
+    one rejected. (The default B-method would set α_global = 0.75 at these 5 944 dof: see
+    test_reliability.py.)"""
     net = synthetic_network(12, 2000, 6, size_m=10.0, rng=17)
     obs = Observations(tuple(f"S{i}" for i in range(12)), tuple(f"T{j}" for j in range(2000)),
                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
     start = Start(net.station_xyz_m, net.target_xyz_m, net.offset_m)
-    res = adjust(obs, initial=start, solver="sparse")
+    res = adjust(obs, initial=start, solver="sparse", alpha_global=0.05)
     n_fail = sum(len(g) for g in res.w_failure_groups)
     assert res.global_test.passed and res.outliers == () and res.used.all()
     assert 2 <= n_fail <= 30                                 # Poisson(12): 99.99 % inside
     d = net.distance_m.copy()
     d[123] += 30 * net.sigma_m[123]
-    bad = adjust(obs.with_distances(d), initial=start, solver="sparse")
+    bad = adjust(obs.with_distances(d), initial=start, solver="sparse", alpha_global=0.05)
     assert [f"{o.station}->{o.target}" for o in bad.outliers] == [obs.label(123)] and bad.global_test.passed
     assert bad.initial["search"]["tried"][0]["label"].startswith("not searched") and not bad.warnings
 

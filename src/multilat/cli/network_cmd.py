@@ -74,8 +74,22 @@ def adjust_command(
     instrument: Optional[str] = typer.Option(None, "--instrument",
                                              help="Instrument preset or TOML for the distance model's "
                                                   "uncertainties (default seed2020) when no sigma is given."),
-    alpha: float = typer.Option(0.001, "--alpha", help="Significance of the w-test (data snooping)."),
-    alpha_global: float = typer.Option(0.05, "--alpha-global", help="Significance of the global χ² test."),
+    alpha: float = typer.Option(0.001, "--alpha", help="alpha0: significance of each observation's test "
+                                "(w-test; τ-test with --variance-factor unknown)."),
+    alpha_global: Optional[float] = typer.Option(None, "--alpha-global",
+                                                 help="Significance of the global χ² test (with "
+                                                      "--test-method fixed; default there 0.05)."),
+    test_method: Optional[str] = typer.Option(None, "--test-method",
+                                              help="b-method (Baarda: the global test's α derived from --alpha "
+                                                   "and power 80 % for equal power; the default) or fixed (the "
+                                                   "default when --alpha-global is given)."),
+    variance_factor: str = typer.Option("known", "--variance-factor",
+                                        help="known (the a-priori σ are right: global χ² test, w-tests) or "
+                                             "unknown (σ0 estimated: Pope's τ-test, covariances scaled "
+                                             "by σ0²)."),
+    mdb_limit_sigma: float = typer.Option(10.0, "--mdb-limit-sigma",
+                                          help="Name observations and targets whose MDB exceeds this "
+                                               "multiple of σ (or with redundancy below 0.1)."),
     cost: str = typer.Option("distance", "--cost",
                              help="distance (weighted, default) or squared (the paper's eq. 6, unweighted)."),
     fix_offsets_um: Optional[str] = typer.Option(None, "--fix-offsets-um",
@@ -140,6 +154,9 @@ def adjust_command(
     checks.sigma_um(sigma_um)
     checks.seed(seed)
     report_opt.check_report_path(report, [observations, references, points, environment, heights])
+    if test_method is None:
+        test_method = "fixed" if alpha_global is not None else "b-method"
+    _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma)
     if solver not in ("auto", "dense", "sparse"):
         raise MultilatError(f"--solver must be auto, dense or sparse, got {solver!r}")
     if out is not None:
@@ -159,13 +176,15 @@ def adjust_command(
                                  instrument=instrument or "seed2020", formula=formula,
                                  heights=heights, extrapolate=extrapolate, max_gap_s=max_gap_s)
         obs = corrected.to_observations()
+        src = {"kind": "raw readings", "instrument": instrument or "seed2020", "defaulted": instrument is None}
     else:
         if environment is not None or heights is not None or extrapolate or max_gap_s is not None:
             raise MultilatError(f"{observations}: --environment/--heights/--extrapolate apply to raw "
                                 "readings (optical_path_m or phase_rad), but this is an observation "
                                 "file with distance_m")
+        src = {}
         obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
-                                instrument=instrument)
+                                instrument=instrument, sigma_source=src)
     averaged = None
     if average_repeats:
         from multilat.network.repeats import average_repeats as _average
@@ -190,8 +209,9 @@ def adjust_command(
     with progress() as p:
         p.add_task(f"adjusting {obs.n_obs:,} distances", total=None)
         res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
-                     alpha_global=alpha_global, snooping=snooping, solver=solver, strict=strict,
-                     scale_bars=refs if scale_bar else None, rng=seed)
+                     alpha_global=alpha_global, test_method=test_method, variance_factor=variance_factor,
+                     mdb_limit_sigma=mdb_limit_sigma, sigma_source=src, snooping=snooping, solver=solver,
+                     strict=strict, scale_bars=refs if scale_bar else None, rng=seed)
     doc = result_to_json(res, refs)
     if corrected is not None:
         from multilat.campaign.correlated import correlated_json
@@ -222,6 +242,22 @@ def adjust_command(
                       f"{wc['max_target_std_diagonal_m'] * 1e6:.1f} µm)", markup=False)
 
 
+def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma):
+    """The test options, before any work."""
+    if test_method not in ("b-method", "fixed"):
+        raise MultilatError(f"--test-method must be b-method or fixed, got {test_method!r}")
+    if variance_factor not in ("known", "unknown"):
+        raise MultilatError(f"--variance-factor must be known or unknown, got {variance_factor!r}")
+    if alpha_global is not None and test_method == "b-method":
+        raise MultilatError("--alpha-global goes with --test-method fixed (the B-method derives it from "
+                            "--alpha)")
+    for name, v in (("--alpha", alpha), ("--alpha-global", alpha_global)):
+        if v is not None and not (0 < v < 1):
+            raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
+    if not (np.isfinite(mdb_limit_sigma) and mdb_limit_sigma > 0):
+        raise MultilatError(f"--mdb-limit-sigma must be > 0, got {mdb_limit_sigma!r}")
+
+
 def _print_summary(res, doc, out):
     gt = res.global_test
     console.print(f"adjusted {res.obs.n_stations} stations, {res.obs.n_targets} targets from "
@@ -236,22 +272,17 @@ def _print_summary(res, doc, out):
     if res.cost == "squared":
         console.print(f"  σ0 = {res.sigma0:.4g} m² (unweighted squared-distance residuals, eq. 6), "
                       f"dof = {res.dof}; no global test for this cost")
-    elif gt.statistic is not None:
-        console.print(f"  σ0 = {res.sigma0:.3f} (ratio to the a-priori uncertainties), dof = {res.dof}; "
-                      f"global χ² test: {gt.statistic:.2f} "
-                      f"{'<=' if gt.passed else '>'} {gt.critical:.2f} (α = {gt.alpha:g}): "
-                      f"{'passed' if gt.passed else 'FAILED'}")
+        console.print("  data snooping not done for this cost")
     else:
-        console.print(f"  σ0 = {res.sigma0:.4g}, dof = {res.dof} (no global test without redundancy)")
-    if not res.snooping:
-        console.print("  data snooping not done for this cost" if res.cost == "squared"
-                      else "  data snooping not requested (--no-snooping)")
-    elif res.outliers:
-        console.print(f"  rejected by data snooping (α = {res.alpha:g}):")
-        for o in res.outliers:
-            console.print(f"    {o.station}->{o.target}: w = {o.w:+.1f}, residual {o.residual_m * 1e6:+.1f} µm")
-    else:
-        console.print(f"  no observation rejected by data snooping (α = {res.alpha:g})")
+        for line in test_lines(res):
+            console.print(line, markup=False)
+    if res.sigma_source:
+        from multilat.network.sigma_source import describe
+
+        console.print("  " + describe(res.sigma_source), markup=False)
+    if res.reliability is not None:
+        for line in reliability_lines(res):
+            console.print(line, markup=False)
     if res.w_failure_groups and res.global_test.passed and not res.outliers:
         n = sum(len(g) for g in res.w_failure_groups)
         console.print(f"  the global test passes: {n} w-test(s) above the critical value are not acted on "
@@ -293,3 +324,66 @@ def _print_summary(res, doc, out):
         console.print(t)
     if out is not None:
         console.print(f"results and figures written to {out}")
+
+
+def test_lines(res) -> list[str]:
+    """The summary's lines on the test procedure (detection, identification, adaptation)."""
+    gt, t = res.global_test, res.tests
+    out = []
+    if gt.statistic is None:
+        return [f"  σ0 = {res.sigma0:.4g}, dof = {res.dof} (no global test without redundancy)"]
+    how = ("B-method: α_global for equal power to the w-test" if t.get("method") == "b-method"
+           else "fixed α_global")
+    pw = "" if gt.power is None else f", power {gt.power:.2f} at λ0 = {gt.lambda0:.2f}"
+    if res.variance_factor == "unknown":
+        out.append(f"  σ0 = {res.sigma0:.3f} (estimated: variance factor unknown; covariances and MDBs "
+                   f"scaled by σ0²), dof = {res.dof}")
+        out.append(f"  global χ² test (information only, not a decision here): {gt.statistic:.2f} vs "
+                   f"{gt.critical:.2f} (α = {gt.alpha:.3g})")
+        out.append(f"  Pope's τ-test: α0 = {t['alpha0']:g} per observation, critical |τ| "
+                   f"{t['tau_critical']:.3f} (dof {res.dof})")
+    else:
+        out.append(f"  σ0 = {res.sigma0:.3f} (ratio to the a-priori uncertainties), dof = {res.dof}; "
+                   f"global χ² test: {gt.statistic:.2f} {'<=' if gt.passed else '>'} {gt.critical:.2f} "
+                   f"(α = {gt.alpha:.3g}, {how}{pw}): {'passed' if gt.passed else 'FAILED'}")
+        out.append(f"  w-test: α0 = {t['alpha0']:g}, critical |w| {t['w_critical']:.2f}, power "
+                   f"{t['power']:.2f}, λ0 = {t['lambda0']:.2f}")
+    if not res.snooping:
+        out.append("  data snooping not requested (--no-snooping)")
+        return out
+    steps = t.get("steps", [])
+    if steps and steps[0]["detection_passed"] and not res.outliers:
+        out.append("  detection passed: no data snooping")
+    if res.outliers:
+        out.append("  rejected, in order:")
+        for n, o in enumerate(res.outliers, 1):
+            stat = f"{o.test} = {o.statistic:+.2f} > {o.critical:.2f}" if o.statistic is not None else f"w = {o.w:+.2f}"
+            out.append(f"    {n}. {o.station}->{o.target}: {stat}, residual {o.residual_m * 1e6:+.1f} µm")
+    elif not (steps and steps[0]["detection_passed"]):
+        out.append("  no observation rejected")
+    return out
+
+
+def reliability_lines(res, limit: int = 8) -> list[str]:
+    """The summary's lines on internal and external reliability: the poorly controlled targets."""
+    rel = res.reliability
+    u = res.used
+    red = rel.redundancy[u]
+    out = [f"  reliability: redundancy {red.min():.3f}..{red.max():.3f}; MDB "
+           f"{np.nanmin(rel.mdb_m[u]) * 1e6:.1f}..{np.nanmax(rel.mdb_m[u]) * 1e6:.1f} µm "
+           f"({np.nanmin(rel.mdb_sigma[u]):.1f}..{np.nanmax(rel.mdb_sigma[u]):.1f} σ)"
+           + (f"; largest coordinate shift an undetected MDB would cause "
+              f"{np.nanmax(rel.shift_max_m[u]) * 1e6:.1f} µm" if rel.shifts_computed else "")]
+    if rel.poor_targets:
+        out.append(f"  poorly controlled (redundancy < {rel.r_min:g} or MDB > {rel.mdb_limit_sigma:g} σ): "
+                   f"{len(rel.poor_obs)} observation(s) at {len(rel.poor_targets)} target(s):")
+        for t in rel.poor_targets[:limit]:
+            sh = "" if t["shift_max_m"] is None else f", shift up to {t['shift_max_m'] * 1e6:.1f} µm"
+            out.append(f"    {t['id']}: {t['n_obs']} obs, redundancy min {t['redundancy_min']:.3f}, MDB up to "
+                       f"{t['mdb_max_m'] * 1e6:.1f} µm ({t['mdb_max_sigma']:.1f} σ){sh}")
+        if len(rel.poor_targets) > limit:
+            out.append(f"    ... {len(rel.poor_targets) - limit} more in the JSON (reliability.poor_targets)")
+    else:
+        out.append(f"  every observation controlled (redundancy >= {rel.r_min:g}, MDB <= "
+                   f"{rel.mdb_limit_sigma:g} σ)")
+    return out

@@ -86,10 +86,12 @@ def _scale_flags(scales, obs):
 # ====================================================================== public
 def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=None,
            points: Points | None = None, cost: str = "distance", offsets=None, scales=False,
-           alpha: float = 0.001, power: float = 0.80, alpha_global: float = 0.05,
-           snooping: bool = True, max_rejections: int | None = None, max_iter: int = 100,
-           solver: str = "auto", strict: bool = False, scale_bars: ReferenceLengths | None = None,
-           scale_bar: ReferenceLengths | None = None, chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
+           alpha: float = 0.001, power: float = 0.80, alpha_global: float | None = None,
+           test_method: str | None = None, variance_factor: str = "known", mdb_limit_sigma: float = 10.0,
+           r_min: float = 0.1, sigma_source: dict | None = None, snooping: bool = True,
+           max_rejections: int | None = None, max_iter: int = 100, solver: str = "auto", strict: bool = False,
+           scale_bars: ReferenceLengths | None = None, scale_bar: ReferenceLengths | None = None,
+           chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
     """Adjust a self-calibrating multilateration network.
 
     Unknowns: station coordinates, target coordinates, one additive offset per station (estimated
@@ -134,14 +136,31 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         Refuse the network when a point is too weakly observed, instead of leaving it out
         (``excluded`` in the result, with a warning).
     alpha : float
-        Significance of Baarda's w-test (two-sided) for data snooping; also the MDBs' alpha.
+        alpha0: significance of each one-observation test (Baarda's w-test, or Pope's τ-test with
+        ``variance_factor="unknown"``), two-sided; also the MDBs' alpha.
     power : float
-        Power of the test for the minimal detectable biases (Baarda: 0.80).
-    alpha_global : float
-        Significance of the global χ² test (one-sided, upper).
+        Power of the tests for the minimal detectable biases (Baarda: 0.80).
+    alpha_global : float, optional
+        Significance of the global χ² test (one-sided, upper); giving it means ``test_method="fixed"``
+        (whose default is 0.05).
+    test_method : "b-method", "fixed" or None
+        None: ``fixed`` when ``alpha_global`` is given, else ``b-method``. ``b-method``: Baarda's B-method, the global test's alpha derived from ``alpha`` and
+        ``power`` and the degrees of freedom so that it detects the same non-centrality as the w-test
+        (:func:`statistics.b_method_alpha_global`); ``fixed``: ``alpha_global`` as given.
+    variance_factor : "known" or "unknown"
+        ``known`` (default): the a-priori σ are right in scale; detection by the global χ² test,
+        identification by w-tests. ``unknown``: σ0 is estimated; identification by Pope's τ-test
+        (τ = w / σ̂0, Student-t based critical value), covariances and MDBs scaled by σ̂0².
+    mdb_limit_sigma, r_min : float
+        An observation is poorly controlled when its MDB exceeds ``mdb_limit_sigma`` times its σ or
+        its redundancy number is below ``r_min`` (:mod:`multilat.network.reliability`).
+    sigma_source : dict, optional
+        Where the σ of the observations came from (kept in the result and its JSON).
     snooping : bool
-        Iteratively reject the observation with the largest ``|w|`` above the critical value and
-        re-adjust, while the network stays solvable (at most ``max_rejections``).
+        Detection, identification, adaptation: while the detection test fails (the global test; the
+        largest τ with an unknown variance factor) reject the observation with the largest ``|w|``
+        above the critical value and re-adjust, while the network stays solvable (at most
+        ``max_rejections``).
     max_iter : int
         Iteration limit of the Gauss-Newton loop (the stopping rule is relative to sigma:
         :mod:`multilat.network.solve.convergence`).
@@ -169,9 +188,26 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         raise MultilatError("adjust: obs must be an Observations")
     if cost not in COSTS:
         raise MultilatError(f"cost must be one of {', '.join(COSTS)}, got {cost!r}")
+    if test_method is None:     # alpha_global given: a fixed global test; otherwise Baarda's B-method
+        test_method = "fixed" if alpha_global is not None else "b-method"
+    if test_method not in st.TEST_METHODS:
+        raise MultilatError(f"test_method must be one of {', '.join(st.TEST_METHODS)}, got {test_method!r}")
+    if variance_factor not in st.VARIANCE_FACTORS:
+        raise MultilatError(f"variance_factor must be known or unknown, got {variance_factor!r}")
+    if alpha_global is not None and test_method == "b-method":
+        raise MultilatError("alpha_global is derived by the B-method: give test_method='fixed' to set it")
+    if alpha_global is None and test_method == "fixed":
+        alpha_global = 0.05
     for name, v in (("alpha", alpha), ("power", power), ("alpha_global", alpha_global)):
-        if not (0 < v < 1):
+        if v is not None and not (0 < v < 1):
             raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
+    if not (np.isfinite(mdb_limit_sigma) and mdb_limit_sigma > 0):
+        raise MultilatError(f"mdb_limit_sigma must be > 0, got {mdb_limit_sigma!r}")
+    lam0 = st.noncentrality(alpha, power)
+
+    def alpha_g(dof):
+        """The global test's alpha for ``dof`` (B-method) or as given (fixed)."""
+        return st.b_method_alpha_global(dof, alpha0=alpha, power=power) if alpha_global is None else alpha_global
     datum = parse_datum(datum)
     if scale_bars is not None and scale_bar is not None:
         raise MultilatError("give scale_bars or scale_bar (the same), not both")
@@ -235,8 +271,10 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     do_snoop = snooping and cost == "distance"
     used = np.ones(obs.n_obs, bool)
     rejected: list[tuple[int, float]] = []
+    steps: list[dict] = []
     limit = obs.n_obs if max_rejections is None else int(max_rejections)
     crit = st.w_critical(alpha)
+    unknown = variance_factor == "unknown"
     warn = True
     guess = start
     unlocated: tuple = ()
@@ -267,7 +305,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         if first and datum.kind == "control" and cost == "distance":
             # a failed global test under control may be the control coordinates, not the distances:
             # test them (against the free network) before data snooping blames the distances
-            _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global,
+            _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core["dof"]),
                            max_iter, solver, chunk_targets, datum, cspec)
         first = False
         # the next adjustment (after a rejection) starts from this solution
@@ -277,16 +315,16 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         warn = False
         if not do_snoop or len(rejected) >= limit:
             break
+        w_sub = st.w_statistics(core["residual_w"], np.ones_like(core["residual_w"]), core["redundancy"])
+        k_sub = int(np.argmax(np.abs(w_sub)))
+        step = _detection_step(core, w_sub[k_sub], unknown, alpha, alpha_g, lam0, crit)
+        steps.append(step)
         # detection first: data snooping only while the global test fails (Baarda's DIA procedure;
         # with it passing, the w-tests' own false alarms at alpha over thousands of observations
-        # would reject good distances)
-        if st.global_test(core["vtpv"], core["dof"], alpha=alpha_global).passed is not False:
+        # would reject good distances). Variance factor unknown: Pope's τ-test of the largest |τ|.
+        if step["detection_passed"] is not False or not step["identified"]:
             break
-        w_sub = st.w_statistics(core["residual_w"], np.ones_like(core["residual_w"]), core["redundancy"])
-        order = np.argsort(-np.abs(w_sub))
-        k_sub = int(order[0])
-        if not abs(w_sub[k_sub]) > crit:
-            break
+        step["observation"] = int(np.flatnonzero(used)[k_sub])
         k = int(np.flatnonzero(used)[k_sub])
         # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
         # correlated with this one would show the same |w|: the data cannot tell which is wrong
@@ -309,7 +347,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             # rejecting it would make the network unsolvable: keep it, report it as not rejected
             unlocated, reason = (k,), f"rejecting it would leave the network unsolvable ({exc})"
             break
-        rejected.append((k, float(w_sub[k_sub])))
+        step["action"] = "rejected"
+        rejected.append((k, float(w_sub[k_sub]), step["statistic_k"], step["critical_k"], step["test_k"]))
         used = trial
     if search is not None and p_value(core["vtpv"], core["dof"]) < P_MIN:
         # still failing by far after data snooping: a possible false minimum, never passed as ordinary
@@ -322,12 +361,24 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     if n_bars and datum.kind != "control" and np.all(sc_free):
         how["scale_datum"] = {"kind": "scale bars", "n_bars": n_bars,
                               "points": [cspec.bars[0][0], cspec.bars[0][1]]}
-    res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global,
-                       reason=reason, snooped=do_snoop)
-    groups = _w_failure_groups(core, used, crit) if cost == "distance" else ()
+    if unlocated and steps:
+        steps[-1]["action"] = f"not rejected: {reason}"
+    s0 = core["sigma0"] if unknown and cost == "distance" and np.isfinite(core["sigma0"]) else 1.0
+    if s0 != 1.0:
+        core = dict(core, cov=_scaled_cov(core["cov"], s0 ** 2))
+    final_crit = st.tau_critical(alpha, core["dof"]) * s0 if unknown else crit
+    res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power,
+                       alpha_g(core["dof"]), reason=reason, snooped=do_snoop, sigma_scale=s0,
+                       mdb_limit_sigma=mdb_limit_sigma, r_min=r_min)
+    groups = _w_failure_groups(core, used, final_crit) if cost == "distance" else ()
+    tests = {"method": test_method, "variance_factor": variance_factor, "alpha0": alpha, "power": power,
+             "lambda0": lam0, "w_critical": crit,
+             "tau_critical": st.tau_critical(alpha, core["dof"]) if unknown else None,
+             "alpha_global": alpha_g(core["dof"]), "steps": steps}
     bars_out, ctrl_out = coupling_results(core)
     return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
-                   scale_bars=bars_out, weighted_control=ctrl_out)
+                   scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
+                   sigma_source=dict(sigma_source or {}))
 
 
 def coupling_results(core) -> tuple[tuple, tuple]:
@@ -345,6 +396,38 @@ def coupling_results(core) -> tuple[tuple, tuple]:
                   "residual_m": res[k + 3 * q:k + 3 * q + 3].tolist(),
                   "redundancy": red[k + 3 * q:k + 3 * q + 3].tolist()} for q, pid in enumerate(cp.prior_ids))
     return bars, ctrl
+
+
+def _detection_step(core, w_max, unknown, alpha, alpha_g, lam0, crit) -> dict:
+    """One round of detection and identification: the global test (variance factor known) or Pope's
+    τ-test of the largest |τ| (unknown), and whether the largest |w| (|τ|) exceeds its critical value."""
+    dof = core["dof"]
+    if unknown:
+        tau = float(w_max / core["sigma0"]) if core["sigma0"] > 0 else 0.0
+        tc = st.tau_critical(alpha, dof)
+        failed = bool(abs(tau) > tc) if np.isfinite(tc) else None
+        return {"dof": dof, "test": "tau-max", "statistic": abs(tau), "critical": tc, "alpha": alpha,
+                "sigma0": core["sigma0"], "detection_passed": None if failed is None else not failed,
+                "identified": bool(failed), "statistic_k": tau, "critical_k": tc, "test_k": "tau",
+                "action": "none"}
+    gt = st.global_test(core["vtpv"], dof, alpha=alpha_g(dof), lambda0=lam0)
+    return {"dof": dof, "test": "global chi2", "statistic": gt.statistic, "critical": gt.critical,
+            "alpha": gt.alpha, "power": gt.power, "sigma0": core["sigma0"],
+            "detection_passed": gt.passed, "identified": bool(abs(w_max) > crit),
+            "statistic_k": float(w_max), "critical_k": crit, "test_k": "w", "action": "none"}
+
+
+def _scaled_cov(cov, f: float):
+    """The covariance ``cov`` times ``f`` (σ̂0² with an unknown variance factor); a low-rank ``extra``
+    term (a reference length's own uncertainty) is not scaled."""
+    import copy
+
+    c = copy.copy(cov)
+    c.factor = cov.factor * f
+    if cov.G is not None:
+        c.CHt = cov.CHt * f
+        c.HCHt = cov.HCHt * f
+    return c
 
 
 def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free, max_iter, solver,
@@ -506,9 +589,7 @@ def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g
     if k <= 0:
         return
     stat = core["vtpv"] - free["vtpv"]
-    from scipy import stats
-
-    crit = float(stats.chi2.ppf(1.0 - alpha_global, k))
+    crit = st.chi2_ppf(1.0 - alpha_global, k)
     if not stat > crit:
         return
     ids = obs.station_ids + obs.target_ids

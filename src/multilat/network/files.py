@@ -41,7 +41,7 @@ def _check_ids(tab, col):
 
 
 def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
-                      instrument=None) -> Observations:
+                      instrument=None, sigma_source: dict | None = None) -> Observations:
     """Read an observations CSV.
 
     Parameters
@@ -57,6 +57,8 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         the instrument must know: its own block, ``head_map`` or ``[heads.default]``; else
         ``FILE:LINE: unknown head``), or without that column the station id when the instrument
         resolves it (else head ``"A"``).
+    sigma_source : dict, optional
+        Filled with where σ came from (:mod:`multilat.network.sigma_source`).
 
     Returns
     -------
@@ -67,6 +69,7 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
 
         fast = plain_observations(path, sigma_m)       # None unless plain: then the checks below
         if fast is not None:
+            _record(sigma_source, "column", path) if sigma_m is None else _record(sigma_source, "option", sigma_m)
             return fast
     tab = read_csv_table(path, required=OBS_REQUIRED, optional=OBS_OPTIONAL)
     st = _check_ids(tab, "station")
@@ -94,6 +97,7 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         el = tab.floats("elevation_rad", required=False, within=ELEVATION_RANGE)
     if tab.has("sigma_m"):
         sig = tab.floats("sigma_m", positive=True)
+        _record(sigma_source, "column", path)
         if sigma_m is not None:
             import warnings
             warnings.warn(f"{path}: using the file's sigma_m column, ignoring the sigma option",
@@ -102,9 +106,11 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         if not (np.isfinite(sigma_m) and sigma_m > 0):
             raise MultilatError(f"sigma must be finite and > 0, got {sigma_m!r}")
         sig = np.full(d.shape, float(sigma_m))
+        _record(sigma_source, "option", sigma_m)
     else:
         sig = _model_sigma(d, st if hd is None else hd, instrument,
                            where=None if hd is None else tab.error)
+        _record(sigma_source, "model", st, instrument, *(() if hd is None else (dict(zip(st, hd)),)))
     obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el, head=hd)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
     return obs
@@ -121,6 +127,13 @@ def _large_file(path) -> bool:
         return p.is_file() and p.stat().st_size >= FAST_READ_ABOVE_BYTES
     except OSError:
         return False
+
+
+def _record(out, kind, *args):
+    if out is not None:
+        from multilat.network import sigma_source as ss
+
+        out.update({"column": ss.file_column, "option": ss.option, "model": ss.distance_model}[kind](*args))
 
 
 def _model_sigma(d, heads, instrument, *, where=None):

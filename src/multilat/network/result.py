@@ -43,13 +43,17 @@ class Excluded:
 @dataclass(frozen=True)
 class Outlier:
     """An observation rejected by data snooping: ``w`` its normalised residual when rejected,
-    ``residual_m`` observed minus computed in the final adjustment (without it)."""
+    ``residual_m`` observed minus computed in the final adjustment (without it); ``statistic`` and
+    ``critical`` the test that rejected it (``test`` "w", or "tau" with an unknown variance factor)."""
 
     station: str
     target: str
     w: float
     residual_m: float
     mdb_m: float
+    statistic: float | None = None
+    critical: float | None = None
+    test: str = "w"
 
 
 @dataclass(frozen=True)
@@ -111,7 +115,15 @@ class AdjustmentResult:
         ``length_m``, ``u_m``, ``adjusted_m``, ``residual_m``, ``redundancy``
     weighted_control : tuple of dict  control points observed with uncertainties: ``point``,
         ``xyz_m``, ``std_m``, ``residual_m`` (3), ``redundancy`` (3)
-    covariance : NetworkCovariance  any block of the full covariance in the datum
+    covariance : NetworkCovariance  any block of the full covariance in the datum (scaled by σ̂0²
+        with an unknown variance factor)
+    tests : dict  the test procedure: method (b-method/fixed), variance factor (known/unknown),
+        alpha0, power, lambda0, critical values, the final alpha_global, and each round of
+        detection/identification (``steps``: statistic, critical, alpha, dof, power, verdict, action)
+    reliability : reliability.Reliability or None  internal and external reliability and the poorly
+        controlled observations and targets (distance cost)
+    sigma_source : dict  where the a-priori σ came from (file column, option, distance model)
+    variance_factor : str  "known" or "unknown" (σ̂0 then scales the covariances)
     """
 
     obs: Observations
@@ -153,6 +165,10 @@ class AdjustmentResult:
     initial: dict = field(default_factory=dict)
     scale_bars: tuple = ()
     weighted_control: tuple = ()
+    tests: dict = field(default_factory=dict)
+    reliability: object = None
+    sigma_source: dict = field(default_factory=dict)
+    variance_factor: str = "known"
 
     @property
     def sigma0_unit(self) -> str:
@@ -266,7 +282,7 @@ class AdjustmentResult:
 
 
 def build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global, *,
-                  reason="", snooped=True):
+                  reason="", snooped=True, sigma_scale=1.0, mdb_limit_sigma=10.0, r_min=0.1):
     s, t, m = obs.n_stations, obs.n_targets, obs.n_obs
     smap, tmap = core["smap"], core["tmap"]
     sx = np.full((s, 3), np.nan)
@@ -294,15 +310,23 @@ def build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power
     if cost == "distance":
         w = st.w_statistics(r_all, obs.sigma_m, red)
         w[~used] = 0.0
-        mdb = st.minimal_detectable_bias_m(obs.sigma_m, red, alpha=alpha, power=power)
-        gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global)
+        from multilat.network.reliability import reliability as _reliability
+
+        rel = _reliability(obs, used, red, obs.sigma_m, core["cov"], obs.station_ids, obs.target_ids,
+                           alpha=alpha, power=power, r_min=r_min, mdb_limit_sigma=mdb_limit_sigma,
+                           sigma_scale=sigma_scale)
+        mdb = st.minimal_detectable_bias_m(obs.sigma_m * sigma_scale, red, alpha=alpha, power=power)
+        gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global,
+                            lambda0=st.noncentrality(alpha, power))
     else:
         w = np.zeros(m)
         mdb = np.full(m, np.nan)
         gt = st.GlobalTest(None, None, None, None, alpha_global, core["dof"])
+        rel = None
     outliers = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
-                             wk, float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"))
-                     for k, wk in rejected)
+                             wk, float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"),
+                             *rest)
+                     for k, wk, *rest in rejected)
     unloc = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
                           float(w[k]), float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"))
                   for k in unlocated)
@@ -316,7 +340,8 @@ def build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power
         mdb_m=mdb, sigma0=core["sigma0"], dof=core["dof"], global_test=gt, outliers=outliers,
         unlocated=unloc, unlocated_reason=reason if unloc else "", snooping=bool(snooped),
         alpha=alpha, power=power, iterations=core["iterations"], condition=core["cond"], covariance=cov,
-        convergence=core["convergence"], solver=core["solver"])
+        convergence=core["convergence"], solver=core["solver"], reliability=rel,
+        variance_factor="unknown" if sigma_scale != 1.0 else "known")
 
 
 def _obs_label(obs: Observations, k: int) -> dict:
@@ -343,10 +368,16 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
     o = res.obs
     si, ti = o.station_index, o.target_index
     # one row per observation, written from the columns (no Python object per row)
-    observations = JsonRows({"station": (o.station_ids, si), "target": (o.target_ids, ti),
-                             "distance_m": o.distance_m, "sigma_m": o.sigma_m,
-                             "residual_m": res.residuals_m, "redundancy": res.redundancy,
-                             "w": res.w, "mdb_m": res.mdb_m, "rejected": ~np.asarray(res.used, bool)})
+    cols = {"station": (o.station_ids, si), "target": (o.target_ids, ti),
+            "distance_m": o.distance_m, "sigma_m": o.sigma_m,
+            "residual_m": res.residuals_m, "redundancy": res.redundancy,
+            "w": res.w, "mdb_m": res.mdb_m, "rejected": ~np.asarray(res.used, bool)}
+    rel = res.reliability
+    if rel is not None:
+        labels, index = np.unique(np.asarray(rel.shift_point, dtype=str), return_inverse=True)
+        cols.update(mdb_sigma=rel.mdb_sigma, bias_to_noise=rel.bnr, shift_max_m=rel.shift_max_m,
+                    shift_point=(tuple(str(x) for x in labels), index))
+    observations = JsonRows(cols)
     doc = {
         "datum": res.datum.describe(),
         "cost": res.cost,
@@ -365,11 +396,16 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         "sigma0_unit": res.sigma0_unit,
         "dof": res.dof,
         "global_test": {"statistic": gt.statistic, "critical": gt.critical, "passed": gt.passed,
-                        "alpha": gt.alpha},
+                        "alpha": gt.alpha, "dof": gt.dof, "power": gt.power, "lambda0": gt.lambda0,
+                        "decides": res.variance_factor == "known"},
         "alpha": res.alpha,
         "snooping": res.snooping,
-        "outliers": [{"station": x.station, "target": x.target, "w": x.w, "residual_m": x.residual_m}
-                     for x in res.outliers],
+        "tests": dict(res.tests),
+        "sigma_source": dict(res.sigma_source),
+        "variance_factor": res.variance_factor,
+        "outliers": [{"station": x.station, "target": x.target, "w": x.w, "residual_m": x.residual_m,
+                      "test": x.test, "statistic": x.statistic, "critical": x.critical, "order": n + 1}
+                     for n, x in enumerate(res.outliers)],
         "unlocated": [{"station": x.station, "target": x.target, "w": x.w, "residual_m": x.residual_m}
                       for x in res.unlocated],
         "unlocated_reason": res.unlocated_reason,
@@ -377,6 +413,13 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
                         "located": len(g) == 1} for g in res.w_failure_groups],
         "observations": observations,
         "initial": dict(res.initial),
+        "reliability": None if rel is None else {
+            "r_min": rel.r_min, "mdb_limit_sigma": rel.mdb_limit_sigma, "shifts_computed": rel.shifts_computed,
+            "poor_observations": [dict(_obs_label(o, k), redundancy=float(rel.redundancy[k]),
+                                       mdb_m=float(rel.mdb_m[k]), mdb_sigma=float(rel.mdb_sigma[k]),
+                                       shift_max_m=float(rel.shift_max_m[k]), shift_point=rel.shift_point[k])
+                                  for k in rel.poor_obs],
+            "poor_targets": [dict(t) for t in rel.poor_targets]},
         "reference_lengths": [],
         "iterations": res.iterations,
         "condition": res.condition,

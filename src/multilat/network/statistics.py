@@ -12,8 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["GlobalTest", "global_test", "w_statistics", "w_critical", "noncentrality", "chi2_ppf", "chi2_sf", "norm_ppf",
-           "minimal_detectable_bias_m", "confidence_ellipsoid"]
+__all__ = ["GlobalTest", "global_test", "w_statistics", "w_critical", "noncentrality", "chi2_ppf", "chi2_sf",
+           "norm_ppf", "minimal_detectable_bias_m", "confidence_ellipsoid", "b_method_alpha_global",
+           "test_power", "tau_critical", "bias_to_noise_ratio", "TEST_METHODS", "VARIANCE_FACTORS"]
+
+TEST_METHODS = ("b-method", "fixed")
+VARIANCE_FACTORS = ("known", "unknown")
 
 
 @dataclass(frozen=True)
@@ -32,15 +36,73 @@ class GlobalTest:
     passed: bool | None
     alpha: float
     dof: int
+    power: float | None = None
+    lambda0: float | None = None
 
 
-def global_test(weighted_sum_sq: float, dof: int, *, alpha: float = 0.05) -> GlobalTest:
-    """χ² test of ``weighted_sum_sq`` (= vᵀPv) with ``dof`` degrees of freedom."""
+def global_test(weighted_sum_sq: float, dof: int, *, alpha: float = 0.05,
+                lambda0: float | None = None) -> GlobalTest:
+    """χ² test of ``weighted_sum_sq`` (= vᵀPv) with ``dof`` degrees of freedom; with ``lambda0`` the
+    record carries the test's power against that non-centrality (:func:`test_power`)."""
+    pw = None if lambda0 is None or dof <= 0 else test_power(alpha, dof, lambda0)
     if dof <= 0 or not np.isfinite(weighted_sum_sq):
-        return GlobalTest(None, None, None, None, alpha, dof)
+        return GlobalTest(None, None, None, None, alpha, dof, pw, lambda0)
     crit = chi2_ppf(1.0 - alpha, dof)
     low = chi2_ppf(alpha, dof)
-    return GlobalTest(float(weighted_sum_sq), crit, low, bool(weighted_sum_sq <= crit), alpha, dof)
+    return GlobalTest(float(weighted_sum_sq), crit, low, bool(weighted_sum_sq <= crit), alpha, dof,
+                      pw, lambda0)
+
+
+def test_power(alpha: float, dof: int, lambda0: float) -> float:
+    """Power of the one-sided χ²(``dof``) test at significance ``alpha`` against a non-centrality
+    ``lambda0``: ``P(χ'²(dof, lambda0) > χ²_{1-alpha}(dof))``."""
+    from scipy.special import chndtr
+
+    crit = chi2_ppf(1.0 - alpha, dof)
+    return float(1.0 - chndtr(crit, dof, lambda0))
+
+
+def b_method_alpha_global(dof: int, *, alpha0: float = 0.001, power: float = 0.80) -> float:
+    """Baarda's B-method: the significance of the global (``dof``-dimensional) test that detects the
+    same non-centrality ``lambda0 = noncentrality(alpha0, power)`` as the 1-D w-test at ``alpha0``
+    with the same ``power`` (Baarda 1968; Teunissen, *Testing theory*, 2000/2006, §4.5; JAG3D).
+
+    The critical value is the ``1 - power`` quantile of the non-central χ'²(dof, lambda0); alpha is
+    the central χ²(dof) tail beyond it. ``dof == 1`` gives ``alpha0``; it grows with ``dof``
+    (about 0.04 at 10, 0.40 at 100).
+    """
+    if dof <= 0:
+        return float("nan")
+    lam = noncentrality(alpha0, power)
+    from scipy.special import chndtrix
+
+    crit = float(chndtrix(1.0 - power, dof, lam))       # the (1 - power) quantile of chi'2(dof, lam)
+    return chi2_sf(crit, dof)
+
+
+def tau_critical(alpha: float, dof: int) -> float:
+    """Two-sided critical value of Pope's τ-test (variance factor unknown, Pope 1976) for one
+    observation at significance ``alpha``: ``τ_c = sqrt(dof) t / sqrt(dof - 1 + t²)`` with
+    ``t = t_{1-alpha/2}(dof - 1)`` (Student t); ``τ = w / σ̂0`` is bounded by ``sqrt(dof)``.
+    NaN for ``dof < 2``."""
+    if dof < 2:
+        return float("nan")
+    from scipy.special import stdtrit
+
+    t = float(stdtrit(dof - 1, 1.0 - alpha / 2.0))
+    return float(np.sqrt(dof) * t / np.sqrt(dof - 1 + t * t))
+
+
+def bias_to_noise_ratio(redundancy, *, alpha: float, power: float = 0.80):
+    """Baarda's external reliability ``λ̄_k = sqrt(lambda0 (1 - r_k) / r_k)``: the largest effect of
+    an undetected bias of the size of observation k's MDB on any function of the unknowns, in units
+    of that function's standard deviation (inf where ``r_k`` is 0)."""
+    r = np.asarray(redundancy, float)
+    lam = noncentrality(alpha, power)
+    out = np.full_like(r, np.inf)
+    ok = r > 1e-9
+    out[ok] = np.sqrt(lam * np.clip(1.0 - r[ok], 0.0, None) / r[ok])
+    return out
 
 
 def w_critical(alpha: float) -> float:

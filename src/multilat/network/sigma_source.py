@@ -1,0 +1,71 @@
+"""Where the a-priori σ of the distances came from: one record for ``adjust``, ``propagate`` and
+``simulate`` (their summaries and JSON ``sigma_source``).
+
+Kinds: ``"file column"`` (the observations' ``sigma_m``), ``"--sigma-um"`` (one value for every
+distance, from the option or the Python argument), ``"distance model"`` (the instrument's distance
+model :func:`multilat.budget.distance_std_m`, per station with the head used; ``defaulted`` True when
+no instrument was named and the ``seed2020`` preset stood in), ``"raw readings"`` (corrected
+distances: the distance model and the air sensors).
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = ["file_column", "option", "distance_model", "describe"]
+
+DEFAULT_INSTRUMENT = "seed2020"
+
+
+def file_column(path) -> dict:
+    return {"kind": "file column", "file": str(path), "column": "sigma_m"}
+
+
+def option(sigma_m: float, what: str = "--sigma-um") -> dict:
+    return {"kind": what, "sigma_m": float(sigma_m)}
+
+
+def _instrument_name(instrument) -> tuple[str, bool]:
+    if instrument is None:
+        return DEFAULT_INSTRUMENT, True
+    if isinstance(instrument, (str, os.PathLike)):
+        return str(instrument), False
+    return str(getattr(instrument, "name", "custom")), False
+
+
+def distance_model(stations, instrument, *, heads: dict | None = None) -> dict:
+    """The record of σ from ``instrument``'s distance model for the station ids ``stations``:
+    the head used per station (``heads`` when the caller resolved them; else the station id when the
+    instrument has such a head, otherwise head ``"A"`` — the rule of the readers)."""
+    from multilat import instrument as _inst
+
+    name, defaulted = _instrument_name(instrument)
+    inst = instrument if not isinstance(instrument, (str, os.PathLike, type(None))) else _inst.load_instrument(name)
+    if heads is None:
+        have = set(getattr(inst, "heads", {}) or {})
+        heads = {sid: (sid if sid in have else "A") for sid in dict.fromkeys(stations)}
+    return {"kind": "distance model", "instrument": name, "defaulted": defaulted,
+            "heads": {str(k): str(v) for k, v in heads.items()}}
+
+
+def describe(src: dict) -> str:
+    """One line for a summary."""
+    if not src:
+        return "σ: source not recorded (given by the caller)"
+    k = src.get("kind")
+    if k == "file column":
+        return f"σ: from the file's sigma_m column ({src['file']})"
+    if k == "distance model":
+        hs = src.get("heads", {})
+        pairs = sorted(set(hs.values()))
+        how = ("the default instrument, no σ given (no sigma_m column, no --sigma-um)"
+               if src.get("defaulted") else "--instrument")
+        return (f"σ: distance model of instrument {src['instrument']!r} ({how}); heads used: "
+                + ", ".join(f"{s}→{h}" for s, h in list(hs.items())[:8]) + ("…" if len(hs) > 8 else "")
+                + ("" if len(pairs) > 1 or not hs else ""))
+    if k == "raw readings":
+        return (f"σ: raw readings corrected with instrument {src['instrument']!r}'s distance model and the "
+                "air sensors' uncertainties")
+    if "sigma_m" in src:
+        return f"σ: {src['sigma_m'] * 1e6:g} µm for every distance ({k})"
+    return f"σ: {k}"
