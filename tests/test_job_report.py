@@ -174,12 +174,13 @@ def test_report_names_the_sigma_source(reports, tmp_path):
     """The example's observations carry sigma_m (after comment lines): the report says so; without
     the column, the instrument's distance model; with --sigma-um, the option."""
     text = reports["adjust"][0].read_text(encoding="utf-8")
-    assert "the sigma_m column of" in text
+    assert "sigma_m column (" in text
     obs = EX / "network" / "small_volume_obs.csv"
     rows = [r.rsplit(",", 1)[0] for r in obs.read_text().splitlines() if not r.startswith("#")]
     f = tmp_path / "nosigma.csv"
     f.write_text("\n".join(rows) + "\n")
-    for extra, words in (([], "the distance model of the instrument"), (["--sigma-um", "5"], "--sigma-um 5 µm")):
+    for extra, words in (([], "distance model of instrument"), (["--sigma-um", "5"],
+                                                                            "5 µm for every distance (--sigma-um)")):
         rc, out, err = _run(["adjust", str(f), *extra, "--report", str(tmp_path / "r.html")])
         assert rc == 0, err
         assert words in (tmp_path / "r.html").read_text(encoding="utf-8")

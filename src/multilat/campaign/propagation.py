@@ -30,12 +30,14 @@ __all__ = ["campaign_problem", "read_campaign", "shifted_sensor_distances"]
 
 
 def read_campaign(path, *, sigma_m=None, instrument="seed2020", environment=None, heights=None,
-                  formula: str = "ciddor", extrapolate: bool = False, max_gap_s=None):
+                  formula: str = "ciddor", extrapolate: bool = False, max_gap_s=None,
+                  sigma_source: dict | None = None):
     """Observations of ``path`` as ``adjust`` reads them: ``(obs, corrected)``, ``corrected`` the
     :class:`multilat.campaign.correct.CorrectedObservations` of a raw file (else None).
 
     One-line errors: raw options on an observation file, ``sigma_m`` on raw readings, a raw file
-    without environment (from :func:`correct_raw`).
+    without environment (from :func:`correct_raw`). ``sigma_source`` (a dict) is filled with where
+    the distances' σ came from (:mod:`multilat.network.sigma_source`).
     """
     from multilat.campaign.raw import is_raw_file
 
@@ -50,6 +52,9 @@ def read_campaign(path, *, sigma_m=None, instrument="seed2020", environment=None
         corrected = correct_file(path, environment=environment, instrument=instrument or "seed2020",
                                  formula=formula, heights=heights, extrapolate=extrapolate,
                                  max_gap_s=max_gap_s)
+        if sigma_source is not None:
+            sigma_source.update({"kind": "raw readings", "instrument": str(getattr(instrument, "name", instrument)),
+                                 "note": "the distance model per reading and the air sensors"})
         return corrected.to_observations(), corrected
     if environment is not None or heights is not None or extrapolate or max_gap_s is not None:
         raise MultilatError(f"{path}: --environment/--heights/--extrapolate/--max-gap-s apply to raw "
@@ -57,7 +62,7 @@ def read_campaign(path, *, sigma_m=None, instrument="seed2020", environment=None
                             "with distance_m")
     from multilat.network.files import read_observations
 
-    return read_observations(path, sigma_m=sigma_m, instrument=instrument), None
+    return read_observations(path, sigma_m=sigma_m, instrument=instrument, sigma_source=sigma_source), None
 
 
 def _has_repeats(obs) -> bool:
@@ -67,7 +72,8 @@ def _has_repeats(obs) -> bool:
 
 def campaign_problem(path, *, datum: str = "free", references=None, instrument="seed2020",
                      sigma_m=None, environment=None, heights=None, formula: str = "ciddor",
-                     extrapolate: bool = False, max_gap_s=None, average: bool = False, pairs=None):
+                     extrapolate: bool = False, max_gap_s=None, average: bool = False, pairs=None,
+                     sigma_source: dict | None = None):
     """The :class:`multilat.network.propagate.Problem` of a campaign file (module docstring).
 
     Parameters
@@ -81,6 +87,8 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
         Raw readings only, as :func:`multilat.campaign.correct.correct_file`.
     average : bool
         Average the repeated readings of each pair (weighted means) instead of keeping them.
+    sigma_source : dict, optional
+        Filled with where the distances' σ came from (as ``adjust`` records it).
 
     Returns
     -------
@@ -94,7 +102,7 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
     inst = _inst.load_instrument(instrument) if isinstance(instrument, (str, os.PathLike)) else instrument
     obs, corrected = read_campaign(path, sigma_m=sigma_m, instrument=inst, environment=environment,
                                    heights=heights, formula=formula, extrapolate=extrapolate,
-                                   max_gap_s=max_gap_s)
+                                   max_gap_s=max_gap_s, sigma_source=sigma_source)
     if hasattr(references, "check_ids"):      # unknown ids named with the reference file (and its line)
         references.check_ids(tuple(obs.station_ids) + tuple(obs.target_ids))
     readings_obs = obs

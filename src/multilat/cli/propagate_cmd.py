@@ -19,12 +19,16 @@ BUILTIN = ("small-volume", "large-volume")
 def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_um: float | None,
                  references: Path | None, environment: Path | None = None, heights: Path | None = None,
                  formula: str = "ciddor", extrapolate: bool = False, max_gap_s: float | None = None,
-                 average_repeats: bool = False):
+                 average_repeats: bool = False, sigma_source: dict | None = None):
     """The propagation problem for ``source``: a built-in configuration name, or what ``adjust``
     reads (an observations CSV, or raw readings with their environment log; repeated readings kept
-    or averaged), :func:`multilat.campaign.propagation.campaign_problem`."""
+    or averaged), :func:`multilat.campaign.propagation.campaign_problem`. ``sigma_source`` (a dict) is
+    filled with where the weights' σ came from."""
     from multilat import instrument as _inst
     from multilat.network import propagate as pr
+    from multilat.network import sigma_source as ss
+
+    src = {} if sigma_source is None else sigma_source
 
     inst = _inst.load_instrument(instrument)
     if source in BUILTIN:
@@ -38,6 +42,8 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
             raise MultilatError("built-in configurations are not available (multilat.network.configs)") from None
         cfg = configs.small_volume() if source == "small-volume" else configs.large_volume()
         sigma = None if noise == "model" else (sigma_um * 1e-6 if sigma_um else 4.7e-6)
+        src.update(ss.distance_model(cfg.station_ids, inst) if sigma is None else
+                   ss.option(sigma, "--sigma-um" if sigma_um else "default 4.7 µm (the paper's σ)"))
         return pr.problem_from_config(cfg, sigma_m=sigma, instrument=inst if noise == "model" else None,
                                       datum=datum, source=source)
     from multilat.campaign.propagation import campaign_problem
@@ -49,7 +55,8 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
     problem, _ = campaign_problem(source, datum=datum, references=refs, instrument=inst,
                                   sigma_m=None if sigma_um is None else sigma_um * 1e-6,
                                   environment=environment, heights=heights, formula=formula,
-                                  extrapolate=extrapolate, max_gap_s=max_gap_s, average=average_repeats)
+                                  extrapolate=extrapolate, max_gap_s=max_gap_s, average=average_repeats,
+                                  sigma_source=src)
     return problem
 
 
@@ -111,10 +118,11 @@ def propagate_cmd(
         from multilat.io import check_output_dir
 
         check_output_dir(out, inputs=[source, references, environment, heights])
+    src: dict = {}
     problem = load_problem(source, datum=datum, noise=noise, instrument=instrument, sigma_um=sigma_um,
                            references=references, environment=environment, heights=heights,
                            formula=formula, extrapolate=extrapolate, max_gap_s=max_gap_s,
-                           average_repeats=average_repeats)
+                           average_repeats=average_repeats, sigma_source=src)
     total = None if adaptive else trials
     with map_from_options(workers=workers, scheduler=scheduler) as m, progress() as bar:
         task = bar.add_task("Monte Carlo", total=total)
@@ -124,6 +132,9 @@ def propagate_cmd(
     doc = res.to_dict()
     if problem.readings is not None:
         doc["readings"] = problem.readings.to_json()
+    doc["sigma_source"] = src
+    doc["noise_source"] = ({"kind": "distance model", "instrument": str(instrument)} if noise == "model"
+                           else {"kind": "gaussian", "sigma": "the weights' σ (sigma_source)"})
     if out is not None:
         from multilat.io import staging_dir
 
@@ -186,6 +197,12 @@ def _print(res, doc, out) -> None:
                   f"Gauss-Newton), noise={doc['noise']}, {doc['elapsed_s']:.1f} s")
     console.print(f"sigma0: nominal {doc['sigma0_nominal']:.3f}, trials' mean {doc['sigma0_mean']:.3f} "
                   f"(rms {doc['sigma0_rms']:.3f}; drawn errors alone {doc['sigma0_noise_only']:.3f})")
+    from multilat.network.sigma_source import describe
+
+    ns = doc["noise_source"]
+    console.print("  " + describe(doc["sigma_source"]) + (f"; errors drawn from the distance model of "
+                  f"{ns['instrument']!r}" if ns["kind"] == "distance model" else
+                  "; errors drawn gaussian with these σ"), markup=False)
     if doc["sigma0_nominal"] > 0:
         console.print("  trials are centred on the measured distances, so each carries the nominal residuals "
                       "as well: sigma0_trial^2 ~ sigma0_nominal^2 + (errors alone)^2")

@@ -21,8 +21,10 @@ def simulate_cmd(
     trials: int = typer.Option(50, "--trials", help="Number of simulations (the paper: 50)."),
     noise: str = typer.Option("gaussian", "--noise", help="gaussian (sigma, as the paper) or model "
                               "(each error drawn from the distance model, non-gaussian)."),
-    sigma_um: float = typer.Option(4.7, "--sigma-um", help="Gaussian standard deviation in um."),
-    instrument: str = typer.Option("seed2020", "--instrument", help="Instrument preset or TOML (--noise model)."),
+    sigma_um: Optional[float] = typer.Option(None, "--sigma-um",
+                                             help="Gaussian standard deviation in um (default 4.7, the paper's)."),
+    instrument: Optional[str] = typer.Option(None, "--instrument",
+                                             help="Instrument preset or TOML (--noise model; default seed2020)."),
     cost: str = typer.Option("distance", "--cost", help="distance (weighted) or squared (the paper's eq. 6)."),
     start: str = typer.Option("distances", "--start", help="distances (initial values from the distances "
                               "alone) or truth."),
@@ -37,12 +39,17 @@ def simulate_cmd(
     if noise not in NOISES:
         raise MultilatError(f"--noise must be one of {', '.join(NOISES)}, got {noise!r}")
     checks.sigma_um(sigma_um)
+    from multilat.network import sigma_source as ss
+
+    given_sigma = sigma_um is not None
+    sigma_um = 4.7 if sigma_um is None else sigma_um
+    inst_name = instrument or "seed2020"
     checks.count(trials, "--trials", hi=10**6)   # each trial is a whole adjustment
     checks.seed(seed)
     report_opt.check_report_path(report, [source])
     from multilat.instrument import load_instrument
 
-    load_instrument(instrument)          # a bad --instrument is an error even when --noise ignores it
+    load_instrument(inst_name)          # a bad --instrument is an error even when --noise ignores it
     if cost not in ("distance", "squared"):
         raise MultilatError(f"--cost must be distance or squared, got {cost!r}")
     if start not in ("distances", "truth"):
@@ -50,9 +57,14 @@ def simulate_cmd(
     cfg = load_config(source)
     with progress() as bar:
         task = bar.add_task(f"simulate {cfg.name}", total=trials)
-        res = simulate(cfg, trials=trials, noise=noise, sigma_m=sigma_um * 1e-6, instrument=instrument,
+        res = simulate(cfg, trials=trials, noise=noise, sigma_m=sigma_um * 1e-6, instrument=inst_name,
                        rng=seed, cost=cost, initial=start, callback=lambda n: bar.advance(task, n))
     s = res.summary()
+    if noise == "model":
+        src = ss.distance_model(res.station_ids, inst_name)
+        src["defaulted"] = instrument is None
+    else:
+        src = ss.option(sigma_um * 1e-6, "--sigma-um" if given_sigma else "default 4.7 µm (the paper's σ)")
     paper = res.paper
     doc = {
         "config": res.config, "trials": res.trials, "converged": int(len(res.interpoint_std_m)),
@@ -69,6 +81,7 @@ def simulate_cmd(
         "offset_rms_error_m": dict(zip(res.station_ids,
                                        np.sqrt(np.mean(res.offset_error_m ** 2, axis=0)).tolist())),
         "sigma0_mean": float(np.mean(res.sigma0)),
+        "sigma_source": src,
         "per_simulation_std_m": res.interpoint_std_m,
     }
     report_opt.write_report(report, "simulate", doc, result=res)
@@ -79,6 +92,7 @@ def simulate_cmd(
                   f"{doc['converged']} of {res.trials} simulations converged, noise={noise}"
                   + (f" {sigma_um:g} um" if noise == "gaussian" else " (distance model)")
                   + f", cost={cost}, {len(res.pairs)} interpoint pairs, mean sigma0={doc['sigma0_mean']:.2f}")
+    console.print(ss.describe(src) + " (the errors drawn and the weights)", markup=False)
     t = Table(title="Std of the interpoint-distance errors per simulation (um)")
     for c in ("", "min", "mean", "max", "+-se(mean)"):
         t.add_column(c, justify="right")

@@ -114,7 +114,12 @@ def _sigma_source(ctx: JobContext, doc: dict) -> list[str]:
     if inst is not None:
         out.append(f"instrument: {_opt_text(inst)}" + (" (TOML file, sha256 above)"
                                                        if os.path.isfile(str(inst)) else " (preset)"))
-    if o.get("sigma_um") is not None and ctx.command not in ("simulate",):
+    recorded = doc.get("sigma_source") if isinstance(doc, dict) else None
+    if recorded:        # the command's own record (adjust, propagate, simulate)
+        from multilat.network.sigma_source import describe
+
+        out.append(describe(recorded) + " (k = 1)")
+    elif o.get("sigma_um") is not None and ctx.command not in ("simulate",):
         out.append(f"σ of every distance: --sigma-um {o['sigma_um']:g} µm (k = 1)")
     elif ctx.command in ("adjust", "propagate"):
         src = o.get("observations") or o.get("source")
@@ -130,7 +135,7 @@ def _sigma_source(ctx: JobContext, doc: dict) -> list[str]:
             else:
                 out.append("σ of each distance: the distance model of the instrument (k = 1)")
     if ctx.command == "simulate":
-        out.append("noise: " + (f"gaussian, σ = {o.get('sigma_um'):g} µm" if o.get("noise") == "gaussian"
+        out.append("noise: " + ("gaussian, with the σ above" if o.get("noise") == "gaussian"
                                 else "each error drawn from the distance model of the instrument"))
     if ctx.command == "propagate":
         out.append(f"noise: {doc.get('noise')}")
