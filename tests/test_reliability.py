@@ -128,7 +128,7 @@ def _rates(n_networks, seed0):
     sqrt(r_k r_l)). On these ring networks a distance and the one from the opposite station to the
     same target are often correlated above 0.95: a blunder in either is then (rightly) not separable,
     and the larger |w| may be the other one's."""
-    rejected = tested = caught = 0
+    rejected = tested = caught = planted = 0
     for i in range(n_networks):
         net = synthetic_network(6, 40, 5, size_m=5.0, rng=seed0 + i)
         obs = _obs(net)
@@ -142,13 +142,17 @@ def _rates(n_networks, seed0):
             k = used[pos]
             rho = res.covariance.hat_row(int(pos)) / np.sqrt(red[k] * red[used])
             return red[k] >= 0.5 and np.max(np.abs(np.delete(rho, pos))) < 0.8
-        k = int(used[next(p for p in range(used.size) if identifiable(p))])
+        pos = next((p for p in range(used.size) if identifiable(p)), None)
+        if pos is None:          # no identifiable distance in this network: no blunder planted
+            continue
+        k = int(used[pos])
+        planted += 1
         d = obs.distance_m.copy()
         d[k] += 20 * obs.sigma_m[k]
         bad = adjust(obs.with_distances(d), initial=_start(net))
         caught += bool(bad.outliers) and (bad.outliers[0].station, bad.outliers[0].target) == (
             obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]])
-    return rejected, tested, caught
+    return rejected, tested, caught, planted
 
 
 def _check_rates(n, rejected, tested, caught, alpha0=0.001):
@@ -161,17 +165,17 @@ def _check_rates(n, rejected, tested, caught, alpha0=0.001):
 
 def test_false_alarm_rate_and_detection_b_method():
     n = 25
-    rejected, tested, caught = _rates(n, 100)
+    rejected, tested, caught, planted = _rates(n, 100)
     _check_rates(n, rejected, tested, caught)
-    assert caught >= n - 1
+    assert planted >= 0.8 * n and caught >= planted - 1
 
 
 @pytest.mark.slow
 def test_false_alarm_rate_and_detection_b_method_200_networks():
     n = 200
-    rejected, tested, caught = _rates(n, 1000)
+    rejected, tested, caught, planted = _rates(n, 1000)
     _check_rates(n, rejected, tested, caught)
-    assert caught >= 0.99 * n
+    assert planted >= 0.8 * n and caught >= 0.99 * planted
 
 
 def test_cli_options_and_one_line_errors(capsys, tmp_path):
