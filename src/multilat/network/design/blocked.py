@@ -143,21 +143,6 @@ def external_reliability_m(bc: BlockedCovariance, layout, mdb_m, *, offsets: boo
     return out
 
 
-def _length_u(layout, cov, pairs):
-    s = layout.n_stations
-    ids = layout.station_ids + layout.target_ids
-    pos = {p: k for k, p in enumerate(ids)}
-    xyz = np.vstack([layout.station_xyz_m, layout.target_xyz_m])
-    out = []
-    for a, b in pairs:
-        r = np.concatenate([Q * pos[p] + np.arange(3) if pos[p] < s else Q * s + 3 * (pos[p] - s) + np.arange(3)
-                            for p in (a, b)])
-        dv = xyz[pos[a]] - xyz[pos[b]]
-        g = np.concatenate([dv, -dv]) / np.linalg.norm(dv)
-        out.append(float(np.sqrt(max(g @ cov.block(r) @ g, 0.0))))
-    return out
-
-
 def blocked_criterion(name: str, layout, sigma_m, *, offsets=True, datum="free", lengths=(),
                       alpha=0.001, power=0.80, solver: str = "auto") -> float:
     """The design criterion ``name`` from :func:`blocked_covariance` (metres; inf when degenerate)."""
@@ -172,7 +157,9 @@ def blocked_criterion(name: str, layout, sigma_m, *, offsets=True, datum="free",
         tc = bc.target_cov_m2()
         return float(np.sqrt(np.trace(tc, axis1=1, axis2=2).mean()))
     if name == "length_u":
-        return float(max(_length_u(layout, bc.cov, lengths)))
+        from multilat.network.design.preanalysis import _length_u
+
+        return float(max(u for _, u in _length_u(layout, bc.cov, lengths)))
     if name == "max_mdb":
         return float(st.minimal_detectable_bias_m(bc.sigma_m, bc.redundancy(), alpha=alpha,
                                                   power=power).max())

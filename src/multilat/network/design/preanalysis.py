@@ -255,7 +255,9 @@ def _u95_max(cov3):
 
 
 def _length_u(layout: Layout, cov, pairs):
-    """Standard uncertainties (m) of the distances between point pairs (ids)."""
+    """``(length_m, standard uncertainty_m)`` of the distances between point pairs (ids); ``cov`` the
+    full covariance matrix, or an object whose ``block(rows)`` gives the block of those rows (the
+    blocked pre-analysis' covariance)."""
     s = layout.n_stations
     ids = layout.station_ids + layout.target_ids
     pos = {p: k for k, p in enumerate(ids)}
@@ -268,7 +270,8 @@ def _length_u(layout: Layout, cov, pairs):
         L = float(np.linalg.norm(dv))
         g = np.concatenate([dv / L, -dv / L])
         r = np.concatenate([ra, rb])
-        out.append((L, float(np.sqrt(max(g @ cov[np.ix_(r, r)] @ g, 0.0)))))
+        C = cov.block(r) if hasattr(cov, "block") else cov[np.ix_(r, r)]
+        out.append((L, float(np.sqrt(max(g @ C @ g, 0.0)))))
     return out
 
 
@@ -501,8 +504,7 @@ def preanalyse(layout: Layout, sigma, *, offsets: bool = True, datum="free", len
 
 def _preanalyse_blocked(layout, sig, d, si, ti, *, offsets, datum, lengths, alpha, power):
     """:func:`preanalyse` on the reduced system (:mod:`.blocked`): the same numbers, no full matrix."""
-    from multilat.network.design.blocked import (_length_u as blocked_length_u, blocked_covariance,
-                                                 external_reliability_m)
+    from multilat.network.design.blocked import blocked_covariance, external_reliability_m
 
     s, t = layout.n_stations, layout.n_targets
     bc = blocked_covariance(layout, sig, offsets=offsets, datum=datum)
@@ -512,8 +514,7 @@ def _preanalyse_blocked(layout, sig, d, si, ti, *, offsets, datum, lengths, alph
     mdb = st.minimal_detectable_bias_m(sig, red, alpha=alpha, power=power)
     ext = external_reliability_m(bc, layout, mdb, offsets=offsets)
     scov = np.stack([gcov[Q * i:Q * i + 3, Q * i:Q * i + 3] for i in range(s)])
-    lens = tuple((a, b, float(np.linalg.norm(_xyz(layout, a) - _xyz(layout, b))), u)
-                 for (a, b), u in zip(lengths, blocked_length_u(layout, bc.cov, lengths)))
+    lens = tuple((a, b, L, u) for (a, b), (L, u) in zip(lengths, _length_u(layout, bc.cov, lengths)))
     nfree = (4 if offsets else 3) * s + 3 * t
     return PreAnalysis(layout=layout, station_index=si, target_index=ti, distance_m=d, sigma_m=sig,
                        cov=None, global_cov=gcov, station_cov_m2=scov, target_cov_m2=tcov,
