@@ -42,7 +42,6 @@ import datetime as _dt
 import math
 import os
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 

@@ -14,7 +14,7 @@ import typer
 from rich.console import Console
 
 from multilat.errors import MultilatError, format_error, printable
-from multilat.io import dumps_json, to_jsonable, write_json
+from multilat.io import dumps_json, write_json
 
 app = typer.Typer(
     name="multilat",

@@ -259,7 +259,6 @@ def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_si
 
 
 def _print_summary(res, doc, out):
-    gt = res.global_test
     console.print(f"adjusted {res.obs.n_stations} stations, {res.obs.n_targets} targets from "
                   f"{int(res.used.sum())}/{res.obs.n_obs} distances ({res.cost} cost; {res.datum.describe()})",
                   markup=False)

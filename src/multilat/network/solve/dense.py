@@ -7,8 +7,6 @@ weighted control) the coupled path :mod:`.coupled` eliminates all targets at onc
 
 from __future__ import annotations
 
-import numpy as np
-
 from multilat.network.model import back_substitute, reduced_normal_equations
 from multilat.network.problem import Params, Problem
 from multilat.network.solve.system import Assembly, whitened
