@@ -154,9 +154,36 @@ class CriterionCfg(_Model):
         return self
 
 
+class ScaleBarCfg(_Model):
+    a: str
+    b: str
+    u_um: float
+
+    @field_validator("u_um")
+    @classmethod
+    def _u(cls, v):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError("must be > 0")
+        return v
+
+
+class ControlCfg(_Model):
+    point: str
+    s_um: list[float]
+
+    @field_validator("s_um")
+    @classmethod
+    def _s(cls, v):
+        if len(v) != 3 or not all(math.isfinite(x) and x > 0 for x in v):
+            raise ValueError("three standard uncertainties > 0 (x, y, z) in um")
+        return v
+
+
 class NetworkCfg(_Model):
     offsets: bool = True
-    datum: str = "free"
+    datum: str | None = None          # free, free:P,.., 321:A,B,C or control (default: control with
+    scale_bars: list[ScaleBarCfg] = []  # weighted control points, else free)
+    control: list[ControlCfg] = []
 
 
 class SearchCfg(_Model):
@@ -315,7 +342,10 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         SigmaModel(instrument=_inst.load_instrument(ic.preset or str(base / ic.file)),
                    max_distance_m=max(100.0, 2 * rmax if np.isfinite(rmax) else 100.0))
     c = cfg.criterion
-    kw = dict(offsets=cfg.network.offsets, datum=cfg.network.datum, lengths=tuple(c.lengths))
+    net = cfg.network
+    coupled = bool(net.scale_bars or net.control)
+    datum = net.datum if net.datum is not None else ("control" if net.control else "free")
+    kw = dict(offsets=net.offsets, datum=datum, lengths=tuple(c.lengths))
     skw = dict(kw, evaluation=cfg.search.evaluation)
     known = set(tid)
     fixed = evaluate if evaluate is not None else (_read_points(base, h.fixed) if h.fixed else None)
@@ -347,8 +377,21 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         lay = Layout(fixed.ids, fixed.xyz_m, tid, tx,
                      visibility(fixed.xyz_m, tx, min_range_m=rmin, max_range_m=rmax, hidden=hid,
                                 occluders=occ))
+        if coupled:
+            from multilat.network.design.couplings import preanalyse_coupled
+
+            if c.target_u95_m is not None:
+                raise MultilatError(f"{source}: criterion.target_u95_m (fewest targets) does not use scale "
+                                    "bars or control points yet: leave them out for that search")
+            pa = preanalyse_coupled(lay, sigma, scale_bars=[(b.a, b.b, b.u_um * 1e-6) for b in net.scale_bars],
+                                    control=[(k.point, *(v * 1e-6 for v in k.s_um)) for k in net.control],
+                                    **kw)
+            return DesignRun(c.name, None, pa, pa, sigma, None)
         pa = preanalyse(lay, sigma, **kw)
         return DesignRun(c.name, None, pa, pa, sigma, _select(c, pa, sigma, kw))
+    if coupled:
+        raise MultilatError(f"{source}: network.scale_bars / network.control are used in the pre-analysis of "
+                            "given heads (heads.fixed or --evaluate); the optimisation does not model them yet")
     s = cfg.search
     if h.file is not None:
         cand = _read_points(base, h.file)
