@@ -24,7 +24,7 @@ from multilat.errors import MultilatError
 from multilat.io import decode_text, read_input_bytes
 from multilat.network.data import Observations, Points
 
-__all__ = ["Network", "apply_offsets", "check_ids", "fmt_m", "read_text", "XmlNode", "parse_xml",
+__all__ = ["Network", "apply_offsets", "restore_offsets", "check_ids", "fmt_m", "read_text", "XmlNode", "parse_xml",
            "DISTANCE_DECIMALS", "SIGMA_DECIMALS", "read_result_dir"]
 
 #: decimals of metres written for coordinates and distances (1e-8 m = 0.01 µm)
@@ -187,6 +187,20 @@ def xml_float(path, node: XmlNode, name: str, *, positive: bool = False, require
 
 def xml_escape(s: str) -> str:
     return s.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;").replace('"', "&quot;")
+
+
+def restore_offsets(path, rows, offsets, notes: list) -> list:
+    """Add back the per-station offsets a writer subtracted (named in the file's header) to the rows
+    ``(line, station, target, distance_m, sigma_m)``; ``offsets`` None leaves them as read."""
+    if offsets is None:
+        return rows
+    stations = {r[1] for r in rows}
+    bad = [s for s in offsets if s not in stations]
+    if bad:
+        raise MultilatError(f"{path}: offsets line names {bad[0]!r}, a station with no distances")
+    notes.append("per-station offsets restored from the header: "
+                 + ", ".join(f"{k} {v * 1e6:.4f} um" for k, v in offsets.items()))
+    return [(ln, a, b, d + offsets.get(a, 0.0), sg) for ln, a, b, d, sg in rows]
 
 
 def build_network(path, rows, declared: dict, coords: dict, fixed, notes, fmt: str) -> Network:

@@ -43,7 +43,7 @@ from multilat.errors import MultilatError
 from multilat.io import write_text_atomic
 from multilat.network.data import Observations, Points
 from multilat.network.interop.common import (SIGMA_DECIMALS, Network, apply_offsets, build_network,
-                                              check_ids, fmt_m, read_text)
+                                              check_ids, fmt_m, read_text, restore_offsets)
 
 __all__ = ["jag3d_texts", "write_jag3d", "read_jag3d"]
 
@@ -164,12 +164,5 @@ def read_jag3d(points_path, obs_path, *, sigma_m: float | None = None) -> Networ
                 raise MultilatError(f"{obs_path}:{n}: distance {a}->{b} has no σ (give --sigma-um)")
             sig = sigma_m
         rows.append((n, a, b, d, sig))
-    if offsets is not None:
-        stations = {r[1] for r in rows}
-        bad = [s for s in offsets if s not in stations]
-        if bad:
-            raise MultilatError(f"{obs_path}: offsets line names {bad[0]!r}, a station with no distances")
-        rows = [(ln, a, b, d + offsets.get(a, 0.0), sg) for ln, a, b, d, sg in rows]
-        notes.append("per-station offsets restored from the header: "
-                     + ", ".join(f"{k} {v * 1e6:.4f} um" for k, v in offsets.items()))
+    rows = restore_offsets(obs_path, rows, offsets, notes)
     return build_network(obs_path, rows, declared, coords, (), notes, "JAG3D points")

@@ -36,7 +36,7 @@ from multilat.errors import MultilatError
 from multilat.io import write_text_atomic
 from multilat.network.data import Observations, Points
 from multilat.network.interop.common import (SIGMA_DECIMALS, Network, apply_offsets, build_network,
-                                              check_ids, fmt_m, read_text)
+                                              check_ids, fmt_m, read_text, restore_offsets)
 
 __all__ = ["starnet_text", "write_starnet", "read_starnet"]
 
@@ -234,12 +234,5 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
                                 "distances) only")
     if weighted:
         notes.append(f"{weighted} C line(s) with numeric σ read as approximate coordinates (σ ignored)")
-    if offsets is not None:
-        stations = {r[1] for r in rows}
-        bad = [s for s in offsets if s not in stations]
-        if bad:
-            raise MultilatError(f"{path}: offsets line names {bad[0]!r}, a station with no distances")
-        rows = [(ln, a, b, d + offsets.get(a, 0.0), sg) for ln, a, b, d, sg in rows]
-        notes.append("per-station offsets restored from the header: "
-                     + ", ".join(f"{k} {v * 1e6:.4f} um" for k, v in offsets.items()))
+    rows = restore_offsets(path, rows, offsets, notes)
     return build_network(path, rows, declared, coords, fixed, notes, "Star*Net (C line)")
