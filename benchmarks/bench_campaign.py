@@ -8,9 +8,10 @@ the obvious way to get the sensor-error Jacobian. Both give the same Jacobian (c
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
+
+from common import median_time
 
 
 def _setup(n_targets: int):
@@ -46,13 +47,7 @@ def _brute_jacobian(camp, inst):
     return np.column_stack(cols)
 
 
-def _median(fn, reps):
-    ts = []
-    for _ in range(reps):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts)), ts
+_median = median_time
 
 
 def run(quick: bool = False) -> list[dict]:

@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from common import load_avg as _load
+from common import load_avg as _load, median_time
 
 ROOT = Path(__file__).resolve().parent.parent
 SEED = 20200613
@@ -57,13 +57,7 @@ MAX_TARGETS = int(os.environ.get("BENCH_NETWORK_MAX_TARGETS", "200000"))
 
 
 
-def _median_time(f, reps):
-    ts = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        f()
-        ts.append(time.perf_counter() - t0)
-    return statistics.median(ts), ts
+_median_time = median_time
 
 
 def _small_network():

@@ -21,27 +21,20 @@ Quick mode: 20 000 trials, one repeat; full: 200 000 trials, median of 3.
 from __future__ import annotations
 
 import os
-import statistics
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
-from common import load_avg
+from common import load_avg, median_time
 
 ROOT = Path(__file__).resolve().parent.parent
 CLI = [sys.executable, "-c", "from multilat.cli import run; run()"]
 
 
 def _median(f, reps):
-    ts = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        f()
-        ts.append(time.perf_counter() - t0)
-    return statistics.median(ts)
+    return median_time(f, reps)[0]
 
 
 def _command(*args):

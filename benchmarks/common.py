@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import os
+import statistics
+import time
 
 
 def load_avg():
@@ -12,3 +14,13 @@ def load_avg():
         return os.getloadavg()[0]
     except OSError:  # pragma: no cover
         return None
+
+
+def median_time(fn, repeats: int):
+    """``(median wall time in s, the times)`` of ``repeats`` calls of ``fn``."""
+    ts = []
+    for _ in range(int(repeats)):
+        t0 = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t0)
+    return statistics.median(ts), ts
