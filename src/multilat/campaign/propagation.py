@@ -53,7 +53,8 @@ def read_campaign(path, *, sigma_m=None, instrument="seed2020", environment=None
                                  formula=formula, heights=heights, extrapolate=extrapolate,
                                  max_gap_s=max_gap_s)
         if sigma_source is not None:
-            sigma_source.update({"kind": "raw readings", "instrument": str(getattr(instrument, "name", instrument)),
+            sigma_source.update({"kind": "raw readings",
+                                 "instrument": str(getattr(instrument, "name", instrument or "seed2020")),
                                  "note": "the distance model per reading and the air sensors"})
         return corrected.to_observations(), corrected
     if environment is not None or heights is not None or extrapolate or max_gap_s is not None:

@@ -147,7 +147,7 @@ def adjust_command(
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
     ellipsoids and reference-length comparisons."""
     from multilat.network.adjust import adjust
-    from multilat.network.files import (read_observations, read_points, read_reference_lengths,
+    from multilat.network.files import (read_points, read_reference_lengths,
                                         write_result_csvs)
     from multilat.network.result import result_to_json
 
@@ -161,30 +161,15 @@ def adjust_command(
         raise MultilatError(f"--solver must be auto, dense or sparse, got {solver!r}")
     if out is not None:
         check_output_dir(out, inputs=[observations, references, points, environment, heights])
-    from multilat.campaign.raw import is_raw_file
+    from multilat.campaign.propagation import read_campaign
 
-    corrected = None
-    if is_raw_file(observations):
-        if sigma_um is not None:
-            raise MultilatError("--sigma-um does not apply to raw readings: each corrected distance "
-                                "gets its sigma_m from the distance model and the sensors")
-        if formula not in ("ciddor", "edlen"):
-            raise MultilatError(f"--formula must be ciddor or edlen, got {formula!r}")
-        from multilat.campaign.correct import correct_file
-
-        corrected = correct_file(observations, environment=environment,
-                                 instrument=instrument or "seed2020", formula=formula,
-                                 heights=heights, extrapolate=extrapolate, max_gap_s=max_gap_s)
-        obs = corrected.to_observations()
-        src = {"kind": "raw readings", "instrument": instrument or "seed2020", "defaulted": instrument is None}
-    else:
-        if environment is not None or heights is not None or extrapolate or max_gap_s is not None:
-            raise MultilatError(f"{observations}: --environment/--heights/--extrapolate apply to raw "
-                                "readings (optical_path_m or phase_rad), but this is an observation "
-                                "file with distance_m")
-        src = {}
-        obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
-                                instrument=instrument, sigma_source=src)
+    src: dict = {}
+    obs, corrected = read_campaign(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
+                                   instrument=instrument, environment=environment, heights=heights,
+                                   formula=formula, extrapolate=extrapolate, max_gap_s=max_gap_s,
+                                   sigma_source=src)
+    if corrected is not None:
+        src["defaulted"] = instrument is None
     averaged = None
     if average_repeats:
         from multilat.network.repeats import average_repeats as _average
