@@ -11,6 +11,10 @@ Rows (each beside its baseline, same run):
   alone on the same trials (:meth:`BatchedNetwork.solve` of gaussian distances, in-process), so the
   ratio says what the rest of the command costs next to the solve. Goal: >= 1e5 trials/s.
 * ``cli_propagate_gaussian``: the same command with ``--noise gaussian``. Goal: >= 1.5e5 trials/s.
+* ``solve_general_small_volume``: the general batched solver (:mod:`multilat.network.batched_coupled`:
+  heads over several stations, scale bars, control; numpy chord iterations) on the same network and
+  trials as the specialised batched solver (compiled), which is the baseline (ratio = batched time /
+  general time: below 1, the price of generality).
 * ``cli_propagate_model_dask2``: the model command with ``--workers 2`` (a local Dask cluster) against
   the in-process command of the row above (ratio = in-process time / Dask time). Goal: >= 1.8x.
 
@@ -84,6 +88,21 @@ def run(quick: bool = False) -> list[dict]:
     dist = d + rng.standard_normal((trials, d.size)) * 4.7e-6
     net.solve(dist[:100])
     t_solve = _median(lambda: net.solve(dist), reps)
+
+    from multilat.network.batched_coupled import CoupledBatchedNetwork
+
+    s = net.n_stations
+    gen = CoupledBatchedNetwork(net.station_index, net.target_index, net.sigma_m, np.arange(s),
+                                net.station_xyz_m, net.offset_m, np.zeros(s), net.target_xyz_m,
+                                np.zeros(s, bool), np.zeros(net.n_targets, bool), np.ones(s, bool),
+                                np.zeros(s, bool), datum=net.datum)
+    n_gen = trials // 10
+    gen.solve(dist[:100])
+    load = load_avg()
+    t_gen = _median(lambda: gen.solve(dist[:n_gen]), reps)
+    t_bat = _median(lambda: net.solve(dist[:n_gen]), reps)
+    rows.append(_row("solve_general_small_volume", t_gen, "specialised batched solver, same trials", t_bat,
+                     n_gen, load_avg_1min=load))
 
     _command("--trials", "2000")()                                    # warm caches once
     load = load_avg()

@@ -74,7 +74,8 @@ def _has_repeats(obs) -> bool:
 def campaign_problem(path, *, datum: str = "free", references=None, instrument="seed2020",
                      sigma_m=None, environment=None, heights=None, formula: str = "ciddor",
                      extrapolate: bool = False, max_gap_s=None, average: bool = False, pairs=None,
-                     sigma_source: dict | None = None):
+                     sigma_source: dict | None = None, scale_bars: bool = False, points=None,
+                     scales: bool = False):
     """The :class:`multilat.network.propagate.Problem` of a campaign file (module docstring).
 
     Parameters
@@ -90,6 +91,13 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
         Average the repeated readings of each pair (weighted means) instead of keeping them.
     sigma_source : dict, optional
         Filled with where the distances' σ came from (as ``adjust`` records it).
+    scale_bars : bool
+        The ``references`` are scale bars (observations with their ``u_m``, drawn in every trial).
+    points : Points, optional
+        Approximate coordinates, or control under ``datum="control"`` (weighted rows drawn in every
+        trial, hard rows held).
+    scales : bool
+        Estimate a scale per head (the scale datum: scale bars).
 
     Returns
     -------
@@ -121,8 +129,12 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
                       np.asarray(readings_obs.sigma_m, float), matrix=matrix, scatter=scatter)
     else:
         rd = None                 # one independent error per observation: the plain path
+    if scale_bars and references is None:
+        raise MultilatError("--scale-bars needs --references FILE (the bars' lengths with u_m)")
     prob = pr.problem_from_observations(obs, datum=datum, references=references, instrument=inst,
-                                        source=str(path), pairs=pairs)
+                                        source=str(path), pairs=pairs,
+                                        scale_bars=references if scale_bars else None, points=points,
+                                        scales=scales)
     return dataclasses.replace(prob, readings=rd), corrected
 
 

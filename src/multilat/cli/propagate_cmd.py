@@ -19,7 +19,8 @@ BUILTIN = ("small-volume", "large-volume")
 def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_um: float | None,
                  references: Path | None, environment: Path | None = None, heights: Path | None = None,
                  formula: str = "ciddor", extrapolate: bool = False, max_gap_s: float | None = None,
-                 average_repeats: bool = False, sigma_source: dict | None = None):
+                 average_repeats: bool = False, sigma_source: dict | None = None,
+                 points: Path | None = None, scale_bars: bool = False, scales: bool = False):
     """The propagation problem for ``source``: a built-in configuration name, or what ``adjust``
     reads (an observations CSV, or raw readings with their environment log; repeated readings kept
     or averaged), :func:`multilat.campaign.propagation.campaign_problem`. ``sigma_source`` (a dict) is
@@ -33,9 +34,10 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
     inst = _inst.load_instrument(instrument)
     if source in BUILTIN:
         if environment is not None or heights is not None or extrapolate or max_gap_s is not None \
-                or average_repeats:
-            raise MultilatError(f"--environment/--heights/--extrapolate/--max-gap-s/--average-repeats "
-                                f"apply to a campaign file, not to the built-in {source!r}")
+                or average_repeats or points is not None or scale_bars or scales:
+            raise MultilatError(f"--environment/--heights/--extrapolate/--max-gap-s/--average-repeats/"
+                                f"--points/--scale-bars/--scales apply to a campaign file, not to the "
+                                f"built-in {source!r}")
         try:
             from multilat.network import configs
         except ImportError:
@@ -47,7 +49,7 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
         return pr.problem_from_config(cfg, sigma_m=sigma, instrument=inst if noise == "model" else None,
                                       datum=datum, source=source)
     from multilat.campaign.propagation import campaign_problem
-    from multilat.network.files import read_reference_lengths
+    from multilat.network.files import read_points, read_reference_lengths
 
     if not Path(source).exists():
         raise MultilatError(f"{source}: no such file (and not a built-in: {', '.join(BUILTIN)})")
@@ -56,7 +58,8 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
                                   sigma_m=None if sigma_um is None else sigma_um * 1e-6,
                                   environment=environment, heights=heights, formula=formula,
                                   extrapolate=extrapolate, max_gap_s=max_gap_s, average=average_repeats,
-                                  sigma_source=src)
+                                  sigma_source=src, scale_bars=scale_bars, scales=scales,
+                                  points=read_points(points) if points is not None else None)
     return problem
 
 
@@ -72,8 +75,17 @@ def propagate_cmd(
     noise: str = typer.Option("model", "--noise", help="model (distance model, non-gaussian) or gaussian."),
     sigma_um: Optional[float] = typer.Option(None, "--sigma-um",
                                              help="Gaussian sigma / weights in um (default: file or 4.7)."),
-    datum: str = typer.Option("free", "--datum", help="free[:P,..] or 321:A,B,C (same in every trial)."),
+    datum: str = typer.Option("free", "--datum", help="free[:P,..], 321:A,B,C or control[:P,..] (--points; "
+                                                      "the same in every trial)."),
     references: Optional[Path] = typer.Option(None, "--references", help="Reference lengths CSV."),
+    scale_bars: bool = typer.Option(False, "--scale-bars", "--scale-bar",
+                                    help="The --references are scale bars: observations weighted by their "
+                                         "u_m, drawn from it in every trial (with --scales: the scale datum)."),
+    scales: bool = typer.Option(False, "--scales", help="Estimate a scale per head (needs --scale-bars)."),
+    points: Optional[Path] = typer.Option(None, "--points",
+                                          help="Points CSV: point,x_m,y_m,z_m[,sx_m,sy_m,sz_m]: approximate, or "
+                                               "control under --datum control (weighted rows drawn in every "
+                                               "trial, the others held)."),
     environment: Optional[Path] = typer.Option(None, "--environment", "-e",
                                                help="Raw readings only: environment log CSV; each trial "
                                                     "draws every sensor's error once (as `adjust RAW`)."),
@@ -107,7 +119,7 @@ def propagate_cmd(
     checks.sigma_um(sigma_um)
     checks.seed(seed)
     checks.trials(trials, lo=2)
-    report_opt.check_report_path(report, [source, references, environment, heights])
+    report_opt.check_report_path(report, [source, references, environment, heights, points])
     checks.count(chunk_size, "--chunk-size", hi=10**8)
     checks.count(workers, "--workers", hi=4096)
     if scheduler is not None:
@@ -117,12 +129,13 @@ def propagate_cmd(
     if out is not None:
         from multilat.io import check_output_dir
 
-        check_output_dir(out, inputs=[source, references, environment, heights])
+        check_output_dir(out, inputs=[source, references, environment, heights, points])
     src: dict = {}
     problem = load_problem(source, datum=datum, noise=noise, instrument=instrument, sigma_um=sigma_um,
                            references=references, environment=environment, heights=heights,
                            formula=formula, extrapolate=extrapolate, max_gap_s=max_gap_s,
-                           average_repeats=average_repeats, sigma_source=src)
+                           average_repeats=average_repeats, sigma_source=src, points=points,
+                           scale_bars=scale_bars, scales=scales)
     total = None if adaptive else trials
     with map_from_options(workers=workers, scheduler=scheduler) as m, progress() as bar:
         task = bar.add_task("Monte Carlo", total=total)
@@ -139,7 +152,7 @@ def propagate_cmd(
         from multilat.io import staging_dir
 
         # all or nothing: files go to a temporary directory beside OUT, moved in only on success
-        with staging_dir(out, inputs=[source, references, environment, heights]) as tmp:
+        with staging_dir(out, inputs=[source, references, environment, heights, points]) as tmp:
             write_outputs(res, doc, tmp, cloud_points=cloud_points)
     report_opt.write_report(report, "propagate", doc, result=res)
     if as_json:

@@ -113,10 +113,14 @@ class Problem:
         return 3 * i + np.arange(3) if k == "station" else 4 * s + 3 * i + np.arange(3)
 
 
-def _heads_for(station_ids, instrument, head: str | None):
-    """Each station's instrument head: the station id when it names a head, else ``head`` ("A")."""
-    names = set(getattr(instrument, "heads", {}) or {}) if instrument is not None else set()
-    return tuple(s if s in names else (head or "A") for s in station_ids)
+def _heads_for(head_names, instrument, head: str | None):
+    """Each station's instrument head: its head name (the station id without a head column) when the
+    instrument resolves it (own block, head type or ``[heads.default]``), else ``head`` ("A")."""
+    if instrument is None:
+        return tuple(head or "A" for _ in head_names)
+    has = getattr(instrument, "has_head", None)
+    names = set(getattr(instrument, "heads", {}) or {})
+    return tuple(n if (has(n) if has is not None else n in names) else (head or "A") for n in head_names)
 
 
 def _default_pairs(target_ids, limit=20):
@@ -179,32 +183,82 @@ def _pairs_and_refs(pairs, references, target_ids, station_ids):
 
 
 def problem_from_observations(obs, *, datum="free", pairs=None, references=None, instrument=None,
-                              head: str | None = None, source: str = "", adjustment=None) -> Problem:
+                              head: str | None = None, source: str = "", adjustment=None,
+                              scale_bars=None, points=None, scales=False) -> Problem:
     """A problem centred on the adjustment of measured observations.
 
     ``obs`` is :class:`multilat.network.data.Observations`; the nominal solution is
-    ``adjust(obs, datum=datum, snooping=False)`` (or ``adjustment`` if already computed), the weights
-    are ``obs.sigma_m`` and the nominal distances the measured ones.
+    ``adjust(obs, datum=datum, points=points, scale_bars=scale_bars, scales=scales, snooping=False)``
+    (or ``adjustment`` if already computed), the weights are ``obs.sigma_m`` and the nominal distances
+    the measured ones.
+
+    What the batched solver (:class:`multilat.network.batched.BatchedNetwork`: one offset per
+    station, distances only) cannot hold goes to :class:`multilat.network.batched_coupled.
+    CoupledBatchedNetwork`: heads occupying several stations, scale bars (``scale_bars``, each drawn
+    from its length and ``u_m`` in every trial), control points (``points`` under ``datum="control"``:
+    weighted ones drawn from their ``sx_m, sy_m, sz_m``, hard ones held) and per-head scales.
     """
+    from multilat.network.datum import parse_datum
+
+    dat = parse_datum(datum)
     if adjustment is None:
         from multilat.network.adjust import adjust
 
-        adjustment = adjust(obs, datum=datum, snooping=False)
+        adjustment = adjust(obs, datum=datum, points=points, scale_bars=scale_bars, scales=scales,
+                            snooping=False)
     res = adjustment
-    if np.any(res.scale_estimated):
-        raise MultilatError("propagation does not model per-station scales; adjust without scales")
-    if obs.shares_heads:
-        raise MultilatError("propagation does not model heads that occupy several stations yet (one offset "
-                            "per station in the batched solver)")
+    if res.excluded:
+        e = res.excluded[0]
+        raise MultilatError(f"propagation: the adjustment left out {e.kind} {e.id!r} ({e.reason}); remove "
+                            "it from the file so that every trial solves the same network")
+    obs = res.obs
     station_ids = tuple(obs.station_ids)
     target_ids = tuple(obs.target_ids)
-    dt = bt.TrialDatum.from_datum(datum, station_ids, target_ids)
-    net = bt.BatchedNetwork(obs.station_index, obs.target_index, obs.sigma_m, res.station_xyz_m,
-                            res.offset_m, res.target_xyz_m, datum=dt)
     pairs_, ref = _pairs_and_refs(pairs, references, target_ids, station_ids)
-    return Problem(station_ids, target_ids, net, np.asarray(obs.distance_m, float),
-                   _heads_for(station_ids, instrument, head), pairs_, ref, source,
-                   sigma0_nominal=float(res.sigma0))
+    heads = _heads_for(obs.head_of_station, instrument, head)
+    general = (obs.shares_heads or scale_bars is not None or dat.kind == "control"
+               or bool(np.any(res.scale_estimated)))
+    if general:
+        net = _coupled_network(obs, res, dat, scale_bars, points)
+    else:
+        dt = bt.TrialDatum.from_datum(datum, station_ids, target_ids)
+        net = bt.BatchedNetwork(obs.station_index, obs.target_index, obs.sigma_m, res.station_xyz_m,
+                                res.offset_m, res.target_xyz_m, datum=dt)
+    return Problem(station_ids, target_ids, net, np.asarray(obs.distance_m, float), heads, pairs_, ref,
+                   source, sigma0_nominal=float(res.sigma0))
+
+
+def _coupled_network(obs, res, dat, scale_bars, points):
+    """The general batched network of an adjustment (heads, scale bars, control, scales)."""
+    from multilat.network.batched_coupled import CoupledBatchedNetwork
+    from multilat.network.couplings import coupling_spec
+    from multilat.network.fit import control_ids
+
+    s = obs.n_stations
+    ids = tuple(obs.station_ids) + tuple(obs.target_ids)
+    pos = {p: k for k, p in enumerate(ids)}
+    hi = obs.head_index
+    first = np.unique(hi, return_index=True)[1]
+    held = np.zeros(len(ids), bool)
+    if dat.kind == "control":
+        for p in control_ids(obs, dat, points):
+            held[pos[p]] = points.std(p) is None
+        dt = None
+    else:
+        dt = bt.TrialDatum.from_datum(dat, obs.station_ids, obs.target_ids)
+    spec = coupling_spec(obs, bars=scale_bars, points=points, control=dat.kind == "control")
+    bars = () if spec is None else spec.bars
+    ctrl = () if spec is None else spec.control
+    return CoupledBatchedNetwork(
+        obs.station_index, obs.target_index, obs.sigma_m, hi, res.station_xyz_m, res.offset_m,
+        res.scale, res.target_xyz_m, held[:s], held[s:], np.asarray(res.offset_estimated, bool)[first],
+        np.asarray(res.scale_estimated, bool)[first],
+        bar_a=[pos[b[0]] for b in bars], bar_b=[pos[b[1]] for b in bars],
+        bar_length_m=[b[2] for b in bars], bar_sigma_m=[b[3] for b in bars],
+        control_point=[pos[c[0]] for c in ctrl for _ in range(3)],
+        control_axis=[a for _ in ctrl for a in range(3)],
+        control_value_m=[c[1][a] for c in ctrl for a in range(3)],
+        control_sigma_m=[c[2][a] for c in ctrl for a in range(3)], datum=dt)
 
 
 def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pairs=None,
@@ -271,10 +325,15 @@ def _draw_errors(spec: _ChunkSpec, n: int, rng: np.random.Generator) -> np.ndarr
 
 def _solve_block(spec: _ChunkSpec, entropy, spawn_key: tuple, b: int, n: int) -> dict:
     """Block ``b`` (``n`` trials): draw from the engine's block generator, solve, keep the deviations."""
-    e = _draw_errors(spec, n, block_generator(entropy, spawn_key, b))
+    g = block_generator(entropy, spawn_key, b)
+    e = _draw_errors(spec, n, g)
     d = spec.distance_m + e
     net = spec.network
-    sol = net.solve(d)
+    q = getattr(net, "n_couplings", 0)
+    if q:        # scale bars and weighted control: every trial draws their values too (after the distances)
+        sol = net.solve(d, couplings=net.coupling_value_m + g.standard_normal((n, q)) * net.coupling_sigma_m)
+    else:
+        sol = net.solve(d)
     ok = sol.converged
     x = bt.flatten(sol.station_xyz_m[ok], sol.offset_m[ok], sol.target_xyz_m[ok])
     x0 = bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m)

@@ -176,6 +176,7 @@ class PropagationResult:
             "n_failed": self.n_failed,
             "n_retried": self.n_retried,
             "noise": self.noise,
+            "solver": getattr(self.problem.network, "solver_name", "batched"),
             "seed_entropy": self.seed_entropy,
             "coverage": 0.95,
             "sigma0_mean": self.sigma0_mean,
