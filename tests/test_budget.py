@@ -44,15 +44,15 @@ def test_reproduces_paper_components(res):
 
 def test_reproduces_paper_combined(res):
     tot = res.samples[:, :3].sum(axis=1)
-    assert res.combined_std_m == pytest.approx(math.sqrt(np.mean(tot ** 2)), rel=1e-9)
+    assert res.error_rms_m == pytest.approx(math.sqrt(np.mean(tot ** 2)), rel=1e-9)
     tol = ROUND_HALF_WIDTH + 3 * _rms_se(tot)
-    assert abs(res.combined_std_m - 4.7e-6) <= tol, (res.combined_std_m, tol)
+    assert abs(res.error_rms_m - 4.7e-6) <= tol, (res.error_rms_m, tol)
     # additive groups: the combined mean square is the sum of the group mean squares plus the
     # cross terms of the means (groups independent); Monte Carlo covariance noise ~ 3/sqrt(N) relative
     ms = sum(res.components[g] ** 2 for g in PAPER_UM)
     means = [res.means[g] for g in PAPER_UM]
     cross = 2 * (means[0] * means[1] + means[0] * means[2] + means[1] * means[2])
-    assert res.combined_std_m ** 2 == pytest.approx(ms + cross, rel=3 * 4 / math.sqrt(res.trials))
+    assert res.error_rms_m ** 2 == pytest.approx(ms + cross, rel=3 * 4 / math.sqrt(res.trials))
     lo, hi = res.coverage_95_m
     assert lo < 0 < hi and res.trials == 26 * TRIALS
 
@@ -170,7 +170,7 @@ def test_bad_input(inst, call, word):
 def test_full_paper_run_rounds_to_paper():
     r = budget.distance_budget("seed2020", rng=1)  # 5.2 million trials as in the paper
     got = {g: round(r.components[g] * 1e6, 1) for g in PAPER_UM}
-    assert got == PAPER_UM and round(r.combined_std_m * 1e6, 1) == 4.7
+    assert got == PAPER_UM and round(r.error_rms_m * 1e6, 1) == 4.7
 
 
 # ------------------------------------------------------------------ CLI
@@ -183,7 +183,7 @@ def test_cli_json(capsys):
     assert d["trials"] == 26 * 4000
     assert len(d["coverage_95_m"]) == 2 and d["coverage_95_m"][0] < 0 < d["coverage_95_m"][1]
     # ~104 000 trials: well within 10 % of the paper
-    assert d["combined_std_m"] == pytest.approx(4.7e-6, rel=0.1)
+    assert d["error_rms_m"] == pytest.approx(4.7e-6, rel=0.1)
     assert d["components"]["target"] == pytest.approx(3.9e-6, rel=0.1)
 
 
@@ -234,7 +234,7 @@ def test_cli_air_is_labelled(capsys):
     d = json.loads(capsys.readouterr().out)
     assert d["include_air"] is True and d["components"]["air"] > 0
     # air adds in quadrature (independent group): combined^2 ~ sum of squares + mean cross terms
-    assert d["combined_std_m"] > 4.7e-6
+    assert d["error_rms_m"] > 4.7e-6
 
 
 def test_demo_section_quick():
@@ -256,7 +256,41 @@ def test_streamed_mode_matches_stratified(inst, res, monkeypatch):
     for j, g in enumerate(("telemetric", "head", "target")):
         tol = math.sqrt(2) * 3 * _rms_se(res.samples[:, j])
         assert s.components[g] == pytest.approx(res.components[g], abs=tol)
-    assert s.combined_std_m == pytest.approx(res.combined_std_m, abs=math.sqrt(2) * 3 * _rms_se(
+    assert s.error_rms_m == pytest.approx(res.error_rms_m, abs=math.sqrt(2) * 3 * _rms_se(
         res.samples[:, :3].sum(axis=1)))
     with pytest.raises(MultilatError, match="keep_samples"):
         budget.distance_budget(inst, trials=100, keep_samples=True)
+
+
+def test_mechanical_sigma_disk_cache_is_bit_identical(tmp_path, monkeypatch):
+    """The head's mechanical σ² read back from the on-disk cache is the very float computed; a corrupt
+    entry is recomputed; ``MULTILAT_CACHE_DIR=off`` writes nothing; another head type is another key."""
+    from multilat import budget
+    from multilat import instrument as instr
+
+    monkeypatch.setenv("MULTILAT_CACHE_DIR", str(tmp_path))
+    inst = instr.load_instrument("seed2020")
+    budget._MECH_CACHE.clear()
+    first = budget._mechanical_u2(inst, "A")
+    files = list((tmp_path / "budget").iterdir())
+    assert len(files) == 1
+    budget._MECH_CACHE.clear()
+
+    def boom(*a, **k):
+        raise AssertionError("recomputed although cached")
+
+    monkeypatch.setattr(budget, "distance_budget", boom)
+    assert budget._mechanical_u2(inst, "A") == first          # bit-identical, not recomputed
+    monkeypatch.undo()
+    monkeypatch.setenv("MULTILAT_CACHE_DIR", str(tmp_path))
+    files[0].write_text("not a number")
+    budget._MECH_CACHE.clear()
+    assert budget._mechanical_u2(inst, "A") == first          # corrupt entry: recomputed, same value
+    budget._MECH_CACHE.clear()
+    budget._mechanical_u2(inst, "B")
+    assert len(list((tmp_path / "budget").iterdir())) == 2    # heads B and A differ in the preset
+    monkeypatch.setenv("MULTILAT_CACHE_DIR", "off")
+    budget._MECH_CACHE.clear()
+    assert budget._mechanical_u2(inst, "A") == first
+    assert len(list((tmp_path / "budget").iterdir())) == 2
+    budget._MECH_CACHE.clear()

@@ -99,7 +99,7 @@ def test_long_ids_fold_instead_of_cutting_numbers(tmp_path, capsys, width80):
     for s in doc["stations"].values():
         for v in s["xyz_m"]:
             assert f"{v:.6f}" in table
-        u = s.get("offset_std_m", s.get("offset_u_m"))
+        u = s.get("offset_std_m", s.get("offset_std_m"))
         assert f"{s['offset_m'] * 1e6:+.1f}" in table and f"{u * 1e6:.1f}" in table
         # the last column (largest 95 % semi-axis) whole: a number with its decimal
         w = math.sqrt(7.814727903251178 * max(__import__("numpy").linalg.eigvalsh(s["cov_m2"])))

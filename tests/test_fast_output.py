@@ -131,7 +131,9 @@ def test_cli_json_equals_the_library_document(capsys, tmp_path):
     src = {}      # the CLI records where σ came from; so does the library when asked
     res = adjust(read_observations(p, sigma_source=src), rng=1, sigma_source=src)
     assert src["kind"] == "file column"
-    assert _same_values(out, _old(result_to_json(res)))
+    from multilat.vocabulary import stamp
+
+    assert _same_values(out, _old(stamp(result_to_json(res), "adjust")))
 
 
 # ----------------------------------------------------------------------------- statistics kernels
@@ -282,8 +284,8 @@ def test_result_tables_written_from_columns_equal_the_row_writer(tmp_path):
     res = replace(res, used=used)
     write_result_csvs(res, tmp_path)
     (_, _), (t_ax, _) = res.ellipsoids()
-    write_csv_atomic(tmp_path / "old_t.csv", ["target", "x_m", "y_m", "z_m", "u_x_m", "u_y_m", "u_z_m",
-                                              "ell95_a_m", "ell95_b_m", "ell95_c_m"],
+    write_csv_atomic(tmp_path / "old_t.csv", ["target", "x_m", "y_m", "z_m", "x_std_m", "y_std_m", "z_std_m",
+                                              "semi_axis_1_95_m", "semi_axis_2_95_m", "semi_axis_3_95_m"],
                      [[tid, *res.target_xyz_m[j], *np.sqrt(np.clip(np.diag(res.target_cov_m2[j]), 0, None)),
                        *t_ax[j][::-1]] for j, tid in enumerate(res.target_ids)])
     o = res.obs

@@ -210,7 +210,7 @@ def test_report_verdicts_are_computed_from_the_row(reports):
     path, doc, _ = reports["adjust"]
     text = path.read_text(encoding="utf-8")
     for c in doc["reference_lengths"]:
-        uc = math.hypot(c["u_m"], c["reference_u_m"])
+        uc = math.hypot(c["length_std_m"], c["reference_std_m"])
         row = re.search(rf"<td>{re.escape(c['target_a'])}-{re.escape(c['target_b'])}</td>(.*?)</tr>", text).group(1)
         assert row.endswith("<td>yes</td>" if abs(c["difference_m"]) <= 2 * uc else "<td>NO</td>")
 

@@ -87,9 +87,9 @@ def test_simulate_json_and_out(tmp_path, capsys):
     assert res["trials"] == 40 and res["method"] == "procedure"
     assert len(res["points"]) == res["n_points"] > 5
     p0 = res["points"][0]
-    assert len(p0["nominal_m"]) == 3 and len(p0["mean_error_m"]) == 3 and len(p0["std_m"]) == 3
-    assert res["max_std_m"] == pytest.approx(max(max(p["std_m"]) for p in res["points"]))
-    assert 1e-7 < res["max_std_m"] < 1e-4
+    assert len(p0["nominal_m"]) == 3 and len(p0["error_mean_m"]) == 3 and len(p0["std_m"]) == 3
+    assert res["std_max_m"] == pytest.approx(max(max(p["std_m"]) for p in res["points"]))
+    assert 1e-7 < res["std_max_m"] < 1e-4
     names = {f.name for f in out.iterdir()}
     assert {"points.csv", "sides.csv", "summary.json", "fig8_mean_error.png", "fig8_std.png",
             "fig9_cdf.png"} <= names
@@ -97,7 +97,7 @@ def test_simulate_json_and_out(tmp_path, capsys):
     # same seed, same numbers; direct method runs too
     assert main(["lbb", "simulate", "--grid", "3", "--trials", "40", "--seed", "3", "--json"]) == 0
     again = json.loads(capsys.readouterr().out)
-    assert again["points"][0]["mean_error_m"] == p0["mean_error_m"]
+    assert again["points"][0]["error_mean_m"] == p0["error_mean_m"]
     assert main(["lbb", "simulate", "--grid", "2", "--method", "direct", "--trials", "20", "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert d["method"] == "direct" and d["trials"] == 20
@@ -137,8 +137,8 @@ def test_compare_reference(tmp_path, capsys):
     assert (tmp_path / "c" / "fig7_comparison.png").is_file()
     # per-axis statistics, recomputed here from the per-point fields (an independent evaluation)
     d = np.array([p["difference_m"] for p in res["points"]])
-    m = np.array([p["sim_mean_error_m"] for p in res["points"]])
-    sd = np.array([p["sim_std_m"] for p in res["points"]])
+    m = np.array([p["error_mean_mc_m"] for p in res["points"]])
+    sd = np.array([p["std_mc_m"] for p in res["points"]])
     z = (d - m) / sd
     np.testing.assert_allclose([res["normalised_rms_per_axis"][a] for a in "xyz"], np.sqrt((z**2).mean(0)),
                                rtol=1e-12)

@@ -38,16 +38,16 @@ def test_json_has_the_contract_keys(capsys):
     assert doc["dof"] == 56 - (3 * 4 + 3 * 14 + 4 - 6)
     assert len(doc["reference_lengths"]) == 9
     for c in doc["reference_lengths"]:
-        assert set(c) >= {"target_a", "target_b", "length_m", "u_m", "reference_m", "difference_m"}
+        assert set(c) >= {"target_a", "target_b", "length_m", "length_std_m", "reference_m", "difference_m"}
         # synthetic network: the triplet lengths are true to the noise (k = 4 on the reported u)
-        assert abs(c["difference_m"]) < 4 * c["u_m"]
+        assert abs(c["difference_m"]) < 4 * c["length_std_m"]
     # 3-2-1 frame of the paper: B at origin, D on x, C in the xy-plane
     assert np.allclose(doc["stations"]["B"]["xyz_m"], 0, atol=1e-12)
     # the offsets of the synthetic truth (A 1.234, B -0.871, C 2.105, D 0.412 mm) within 4 u
     truth = {"A": 1.234e-3, "B": -0.871e-3, "C": 2.105e-3, "D": 0.412e-3}
     for sid, o in truth.items():
         st = doc["stations"][sid]
-        assert abs(st["offset_m"] - o) < 4 * st["offset_u_m"]
+        assert abs(st["offset_m"] - o) < 4 * st["offset_std_m"]
 
 
 def test_summary_and_out_files(capsys, tmp_path):
@@ -195,7 +195,7 @@ def test_control_datum_from_the_command_line(capsys):
         assert np.all(np.asarray(doc["stations"][sid]["cov_m2"]) == 0)
     assert doc["dof"] == 4 + 3          # 9 fixed coordinates instead of a 6-parameter datum
     for c in doc["reference_lengths"]:
-        assert abs(c["difference_m"]) < 4 * c["u_m"]
+        assert abs(c["difference_m"]) < 4 * c["length_std_m"]
 
 
 def test_from_distances_alone_same_invariants_as_from_points():
@@ -230,8 +230,8 @@ def test_adjust_reads_raw_readings_like_correct_then_adjust(capsys, tmp_path):
     wc = direct["with_correlations"]          # G C Gᵀ with the sensors' correlations (campaign.correlated)
     assert set(wc["stations"]) == set(direct["stations"]) and "with_correlations" not in twostep
     diag_max = max(np.sqrt(np.diag(t["cov_m2"])).max() for t in direct["targets"].values())
-    assert wc["max_target_std_diagonal_m"] == pytest.approx(diag_max, rel=1e-12)
-    assert all(v["offset_u_m"] > 0 for v in wc["stations"].values())
+    assert wc["target_std_diagonal_max_m"] == pytest.approx(diag_max, rel=1e-12)
+    assert all(v["offset_std_m"] > 0 for v in wc["stations"].values())
     assert direct["sigma0"] == pytest.approx(twostep["sigma0"], rel=1e-6)
     for sid, st in direct["stations"].items():
         assert st["offset_m"] == pytest.approx(twostep["stations"][sid]["offset_m"], abs=1e-9)
@@ -320,7 +320,7 @@ def test_fix_offsets_per_station(capsys):
     assert st["C"]["offset_estimated"] and st["D"]["offset_estimated"]
     # two offsets fixed at their true values: C and D still estimated, within 4 u of the truth
     for sid, o in (("C", 2.105e-3), ("D", 0.412e-3)):
-        assert abs(st[sid]["offset_m"] - o) < 4 * st[sid]["offset_u_m"]
+        assert abs(st[sid]["offset_m"] - o) < 4 * st[sid]["offset_std_m"]
     assert doc["dof"] == 4 + 2
     rc, out, err = _run(capsys, ["adjust", str(OBS), "--points", str(PTS), "--json", "--fix-offsets-um", "0"])
     assert rc == 0 and not any(v["offset_estimated"] for v in json.loads(out)["stations"].values())

@@ -232,7 +232,7 @@ def test_cli_json(capsys):
     assert "1-2" in labels and len(doc["points"]) == 4 + 14
     d12 = doc["distances"][labels.index("1-2")]
     assert abs(d12["reference_m"] - 0.150022) < 1e-9
-    assert d12["mc_std_m"] > 0 and d12["lin_std_m"] > 0
+    assert d12["std_mc_m"] > 0 and d12["std_lin_m"] > 0
 
 
 def test_cli_human_and_out(tmp_path, capsys):

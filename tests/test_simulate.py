@@ -196,7 +196,7 @@ def test_cli_model_noise_json(capsys):
     assert main(["simulate", "large-volume", "--trials", "2", "--noise", "model", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["noise"] == "model" and doc["sigma_m"] is None
-    assert set(doc["offset_rms_error_m"]) == {"A", "B", "C", "D"}
+    assert set(doc["offset_error_rms_m"]) == {"A", "B", "C", "D"}
     assert main(["simulate", "large-volume", "--trials", "1", "--noise", "model", "--instrument", "nope"]) == 2
     assert "unknown instrument preset" in capsys.readouterr().err
 
@@ -252,8 +252,8 @@ def test_shipped_example_configuration(capsys):
                  "--start", "truth", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["converged"] == 16 and len(doc["pairs"]) == 14 * 13 // 2
-    assert set(doc["offset_rms_error_m"]) == {"A", "B", "C", "D"}
-    assert 0.7 < doc["interpoint_std_m"]["mean"] / doc["predicted_rms_std_m"] < 1.3
+    assert set(doc["offset_error_rms_m"]) == {"A", "B", "C", "D"}
+    assert 0.7 < doc["interpoint_std_m"]["mean"] / doc["interpoint_std_lin_rms_m"] < 1.3
     assert main(["simulate", str(ex / "small_volume_truth.csv")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "small_volume_truth.csv:2: header lacks column kind" in err[0]

@@ -219,9 +219,9 @@ class DistanceBudget:
         Mean and standard deviation of each group's error (m).
     include_air : bool
         Whether the air group is part of the combined error (the seed's 4.7 um excludes it).
-    combined_std_m : float
+    error_rms_m : float
         Standard uncertainty (RMS) of the combined error (sum of the included groups), m.
-    combined_mean_m, combined_sd_m : float
+    error_mean_m, error_std_m : float
         Its mean and standard deviation (m).
     coverage_95_m : (float, float)
         Probabilistically symmetric 95 % coverage interval of the combined error (m).
@@ -240,9 +240,9 @@ class DistanceBudget:
     means: dict
     stds: dict
     include_air: bool
-    combined_std_m: float
-    combined_mean_m: float
-    combined_sd_m: float
+    error_rms_m: float
+    error_mean_m: float
+    error_std_m: float
     coverage_95_m: tuple
     coverage_shortest_m: tuple
     samples: np.ndarray | None = field(default=None, repr=False)
@@ -253,9 +253,9 @@ class DistanceBudget:
             "instrument": self.instrument, "head": self.head, "trials": self.trials,
             "trials_per_distance": self.trials_per_distance,
             "distances_m": [float(x) for x in self.distances_m],
-            "components": dict(self.components), "means_m": dict(self.means), "stds_m": dict(self.stds),
-            "include_air": self.include_air, "combined_std_m": self.combined_std_m,
-            "combined_mean_m": self.combined_mean_m, "combined_sd_m": self.combined_sd_m,
+            "components": dict(self.components), "component_error_mean_m": dict(self.means), "component_error_std_m": dict(self.stds),
+            "include_air": self.include_air, "error_rms_m": self.error_rms_m,
+            "error_mean_m": self.error_mean_m, "error_std_m": self.error_std_m,
             "coverage_95_m": list(self.coverage_95_m), "coverage_shortest_95_m": list(self.coverage_shortest_m),
         }
 
@@ -337,8 +337,8 @@ def distance_budget(inst: Instrument | str = "seed2020", *, head: str = "A", dis
     return DistanceBudget(
         instrument=inst.name, head=head, distances_m=d.copy(), trials_per_distance=n, trials=int(total.size),
         components=comps, means=means, stds=stds, include_air=air,
-        combined_std_m=float(np.sqrt(np.mean(total ** 2))),
-        combined_mean_m=float(summ.estimate), combined_sd_m=float(summ.std),
+        error_rms_m=float(np.sqrt(np.mean(total ** 2))),
+        error_mean_m=float(summ.estimate), error_std_m=float(summ.std),
         coverage_95_m=tuple(float(x) for x in summ.interval_symmetric),
         coverage_shortest_m=tuple(float(x) for x in summ.interval_shortest),
         samples=out if keep_samples else None,
@@ -377,7 +377,7 @@ def _streamed_budget(inst, head, p, d, n, inputs, cols, air, rng, coverage, prog
     return DistanceBudget(
         instrument=inst.name, head=head, distances_m=d.copy(), trials_per_distance=n, trials=int(res.trials),
         components=comps, means=means, stds=stds, include_air=air,
-        combined_std_m=float(math.hypot(est[4], sd[4])), combined_mean_m=float(est[4]), combined_sd_m=float(sd[4]),
+        error_rms_m=float(math.hypot(est[4], sd[4])), error_mean_m=float(est[4]), error_std_m=float(sd[4]),
         coverage_95_m=tuple(float(x) for x in np.asarray(res.interval_symmetric)[4]),
         coverage_shortest_m=tuple(float(x) for x in np.asarray(res.interval_shortest)[4]),
         samples=None,
@@ -431,11 +431,87 @@ def sample_distance_errors(inst: Instrument | str, distance_m, *, rng=None, head
 
 
 def _mechanical_u2(inst: Instrument, head: str) -> float:
+    """``u_head² + u_target²`` of ``head``: a seeded Monte Carlo of the budget (deterministic), kept in
+    memory and in the on-disk cache (:func:`_disk_cache`) so that every command after the first — and
+    every command after ``make install``, which computes the presets' heads — reads it back instead of
+    spending ~0.3 s per head on it. The disk key holds the instrument, the head and a hash of the
+    model's source code, so a change to the model or the instrument recomputes it; the value read back
+    is the very float computed (``repr`` round trip), so results are bit-identical either way."""
     key = (inst.model_dump_json(), inst.head(head).model_dump_json())   # heads of one type share it
     if key not in _MECH_CACHE:
-        b = distance_budget(inst, head=head, trials=20_000, rng=20200808)
-        _MECH_CACHE[key] = b.components["head"] ** 2 + b.components["target"] ** 2
+        disk = _disk_cache()
+        import hashlib
+
+        name = hashlib.sha256("\n".join((_model_hash(),) + key).encode()).hexdigest()[:32]
+        val = disk.get(name) if disk is not None else None
+        if val is None:
+            b = distance_budget(inst, head=head, trials=20_000, rng=20200808)
+            val = b.components["head"] ** 2 + b.components["target"] ** 2
+            if disk is not None:
+                disk.put(name, val)
+        _MECH_CACHE[key] = val
     return _MECH_CACHE[key]
+
+
+_MODEL_HASH: list = []
+
+
+def _model_hash() -> str:
+    """sha256 of the source of the modules that define the distance budget (this one, adm, gimbal,
+    air, distributions, montecarlo): the on-disk cache's version."""
+    if not _MODEL_HASH:
+        import hashlib
+        from pathlib import Path
+
+        h = hashlib.sha256()
+        here = Path(__file__).resolve().parent
+        for name in ("budget.py", "adm.py", "gimbal.py", "air.py", "distributions.py", "montecarlo.py"):
+            h.update((here / name).read_bytes())
+        _MODEL_HASH.append(h.hexdigest())
+    return _MODEL_HASH[0]
+
+
+class _DiskCache:
+    """One float per file in ``directory`` (written atomically; unreadable or corrupt entries are
+    recomputed, never trusted)."""
+
+    def __init__(self, directory):
+        self.dir = directory
+
+    def get(self, name: str):
+        try:
+            v = float((self.dir / name).read_text())
+        except (OSError, ValueError):
+            return None
+        return v if math.isfinite(v) and v >= 0 else None
+
+    def put(self, name: str, value: float) -> None:
+        import os
+        import tempfile
+
+        try:
+            self.dir.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=self.dir, prefix=".tmp-")
+            with os.fdopen(fd, "w") as f:
+                f.write(repr(float(value)))
+            os.replace(tmp, self.dir / name)
+        except OSError:
+            pass                      # a read-only home: the value is simply recomputed next time
+
+
+def _disk_cache():
+    """The budget cache directory: ``$MULTILAT_CACHE_DIR``, else ``$XDG_CACHE_HOME/multilat`` or
+    ``~/.cache/multilat``; ``MULTILAT_CACHE_DIR=off`` disables it."""
+    import os
+    from pathlib import Path
+
+    d = os.environ.get("MULTILAT_CACHE_DIR")
+    if d == "off":
+        return None
+    if not d:
+        base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+        d = os.path.join(base, "multilat")
+    return _DiskCache(Path(d) / "budget")
 
 
 def distance_std_m(inst: Instrument | str, distance_m, head: str = "A") -> np.ndarray:

@@ -344,7 +344,7 @@ class MCResult:
             "quantile_resolution": conv(self.quantile_resolution),
             "converged": self.converged,
             "tolerance": conv(self.tolerance),
-            "seed_entropy": self.seed_entropy,
+            "seed": self.seed_entropy,
             "n_rejected": self.n_rejected,
         }
 

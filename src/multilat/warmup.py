@@ -52,8 +52,18 @@ def _steps():
         D._NUMPY_NORMALS = D.NUMBA_AFTER
         D._fast_std_normal(np.random.default_rng(0), 4096)
 
+    def head_budgets():
+        """The distance model's mechanical σ of every head of the shipped instrument presets (a seeded
+        Monte Carlo each, kept in the on-disk budget cache: every later command reads it back)."""
+        from multilat import budget, instrument
+
+        for name in instrument.presets():
+            inst = instrument.load_instrument(name)
+            for head in inst.heads:
+                budget.distance_std_m(inst, [1.0], head=head)
+
     return [("adjust, sparse, 10 400 distances", adjust_large), ("propagate small-volume", propagate_small),
-            ("normal draws", normals)]
+            ("normal draws", normals), ("heads' budgets of the presets", head_budgets)]
 
 
 def main(argv=None) -> int:

@@ -105,7 +105,7 @@ def adjustment_gain(result, *, step_m: float = 1e-6) -> np.ndarray:
 
         sb = result.scale_bars
         bars = ReferenceLengths(tuple(b["target_a"] for b in sb), tuple(b["target_b"] for b in sb),
-                                [b["length_m"] for b in sb], [b["u_m"] for b in sb])
+                                [b["length_m"] for b in sb], [b["sigma_m"] for b in sb])
     used = np.asarray(result.used, bool)
     keep = obs if used.all() else _subset(obs, used)
     cols = np.flatnonzero(used)
@@ -180,11 +180,11 @@ def correlated_json(res, covariance_m2, refs=None) -> dict:
         "note": "covariance G C Gᵀ of the adjusted parameters with the full covariance C of the corrected "
                 "distances (environment sensors shared between observations); the main keys use the "
                 "diagonal weights' covariance",
-        "stations": {sid: {"offset_u_m": float(cc.offset_std_m[i]), "cov_m2": cc.station_cov_m2[i]}
+        "stations": {sid: {"offset_std_m": float(cc.offset_std_m[i]), "cov_m2": cc.station_cov_m2[i]}
                      for i, sid in enumerate(cc.station_ids)},
         "targets": {tid: {"cov_m2": cc.target_cov_m2[j]} for j, tid in enumerate(cc.target_ids)},
-        "max_target_std_m": float(tstd.max()),
-        "max_target_std_diagonal_m": float(tstd0.max()),
+        "target_std_max_m": float(tstd.max()),
+        "target_std_diagonal_max_m": float(tstd0.max()),
     }
     if refs is not None:
         xyz = {**dict(zip(res.station_ids, res.station_xyz_m)), **dict(zip(res.target_ids, res.target_xyz_m))}

@@ -55,7 +55,7 @@ def air_command(
     sens = {k: float(v) * 1e6 for k, v in air.sensitivities(temperature_c, p_pa, **kw).items()}
 
     if as_json:
-        emit_json({
+        emit_json(command="air", obj={
             "formula": formula,
             "inputs": {"temperature_c": temperature_c, "pressure_hpa": pressure_hpa,
                        "humidity_pct": humidity_pct, "dew_point_c": dew_point_c,

@@ -83,8 +83,17 @@ console = LiteralConsole(stderr=False, highlight=False, markup=False, emoji=Fals
 err_console = LiteralConsole(stderr=True, highlight=False, markup=False, emoji=False)
 
 
-def emit_json(obj) -> None:
-    """Print ``obj`` (dataclasses, numpy values allowed) as JSON on stdout."""
+def emit_json(obj, command: str) -> None:
+    """Print ``obj`` (dataclasses, numpy values allowed) as JSON on stdout, stamped with the schema of
+    ``command`` (:func:`multilat.vocabulary.stamp`: ``"schema": "multilat.<command>/<version>"``)."""
+    import dataclasses
+
+    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
+        obj = {f.name: getattr(obj, f.name) for f in dataclasses.fields(obj)}
+    if isinstance(obj, dict):
+        from multilat.vocabulary import stamp
+
+        obj = stamp(obj, command)
     sys.stdout.flush()
     buf = getattr(sys.stdout, "buffer", None)
     if buf is None:         # a text-only stream (some test harnesses)

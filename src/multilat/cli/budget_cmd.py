@@ -75,7 +75,7 @@ def budget_command(
                            "interval of the combined error")
         report_opt.write_report(report, "budget", d, result=res)
         if as_json:
-            emit_json(d)
+            emit_json(d, "budget")
             return
     t = Table(title=f"distance budget: {res.instrument}, head {res.head}, {res.trials:,} trials "
                     f"({res.distances_m.size} distances {res.distances_m[0]:g}-{res.distances_m[-1]:g} m), k = 1",
@@ -95,8 +95,8 @@ def budget_command(
         if paper:
             row.append(f"{PAPER_UM[g]:.1f}" if g in PAPER_UM else "-")
         t.add_row(*row)
-    row = ["combined" + (" (incl. air)" if res.include_air else ""), f"{res.combined_std_m * 1e6:.2f}",
-           f"{res.combined_mean_m * 1e6:+.2f}", f"{res.combined_sd_m * 1e6:.2f}"]
+    row = ["combined" + (" (incl. air)" if res.include_air else ""), f"{res.error_rms_m * 1e6:.2f}",
+           f"{res.error_mean_m * 1e6:+.2f}", f"{res.error_std_m * 1e6:.2f}"]
     if paper:
         row.append("- (excl. air: 4.7)" if res.include_air else f"{PAPER_UM['combined']:.1f}")
     t.add_row(*row)

@@ -75,7 +75,7 @@ def correct_cmd(
             write_observations(tmp["--out"], res)
     report_opt.write_report(report, "correct", res, result=(res, log))
     if as_json:
-        emit_json(res)
+        emit_json(res, "correct")
         return
     from rich.table import Table
 
@@ -117,7 +117,7 @@ def two_face_cmd(
         sig = sigma_um * 1e-6
     res = estimate_two_face(data, sigma_m=sig)
     if as_json:
-        emit_json(res)
+        emit_json(res, "two-face")
         return
     head = f" of head {res.head}" if res.head else ""
     console.print(f"transit offset{head}: Toh = {res.transit_offset_m * 1e6:.2f} ± "

@@ -27,7 +27,7 @@ def design_document(run) -> dict:
         "targets": {tid: {"xyz_m": b.target_xyz_m[j], "cov_m2": b.target_cov_m2[j],
                           "u95_max_m": b.u95_max_m[j], "seen_by": int(b.layout.visible[:, j].sum())}
                     for j, tid in enumerate(b.target_ids)},
-        "lengths": [{"a": a, "b": c, "length_m": L, "u_m": u} for a, c, L, u in b.lengths],
+        "lengths": [{"a": a, "b": c, "length_m": L, "length_std_m": u} for a, c, L, u in b.lengths],
         "reliability": {"redundancy_min": float(b.redundancy.min()), "mdb_max_m": float(b.mdb_m.max()),
                         "external_max_m": float(b.external_m.max())},
     }
@@ -54,9 +54,9 @@ def design_document(run) -> dict:
 def simulation_document(sim) -> dict:
     """The ``simulation`` block of the design JSON (:class:`~multilat.network.design.confirm.DesignSimulation`)."""
     doc = sim.summary()
-    doc["targets"] = {t: {"std_predicted_m": sim.predicted_std_m[j], "std_mc_m": sim.mc_std_m[j],
+    doc["targets"] = {t: {"std_lin_m": sim.predicted_std_m[j], "std_mc_m": sim.mc_std_m[j],
                           "std_mc_se_m": sim.mc_std_se_m[j], "z": sim.z[j],
-                          "u95_max_predicted_m": sim.predicted_u95_max_m[j],
+                          "u95_max_lin_m": sim.predicted_u95_max_m[j],
                           "u95_max_mc_m": sim.mc_u95_max_m[j],
                           "ellipsoid_coverage": sim.ellipsoid_coverage_pred[j]}
                       for j, t in enumerate(sim.target_ids)}
@@ -117,7 +117,7 @@ def design_cmd(
                                 max_range_m=np.inf if h.max_range_m is None else h.max_range_m)
     report_opt.write_report(report, "design", doc, result=run)
     if as_json:
-        emit_json(doc)
+        emit_json(doc, "design")
         return
     um = 1e6
     console.print(f"criterion {run.criterion}: {doc['criterion_m'] * um:.2f} µm"
@@ -145,9 +145,9 @@ def design_cmd(
     if sim is not None:
         sm = doc["simulation"]
         console.print(f"Monte Carlo ({sm['noise']}, {sm['trials']} trials): largest 95 % semi-axis "
-                      f"{sm['u95_max_mc_m'] * um:.2f} µm (predicted {sm['u95_max_predicted_m'] * um:.2f}); "
-                      f"target std MC/predicted {sm['std_ratio_mean']:.4f} on average, largest |z| "
-                      f"{sm['max_abs_z']:.2f} MC standard errors; predicted 95 % ellipsoids hold "
+                      f"{sm['u95_max_mc_m'] * um:.2f} µm (predicted {sm['u95_max_lin_m'] * um:.2f}); "
+                      f"target std MC/predicted {sm['ratio_mean']:.4f} on average, largest |z| "
+                      f"{sm['z_abs_max']:.2f} MC standard errors; predicted 95 % ellipsoids hold "
                       f"{sm['ellipsoid_coverage_mean'] * 100:.2f} % of the trials")
     if out is not None:
         console.print(f"wrote {out}/design.json and figures")

@@ -101,7 +101,7 @@ def export_command(
            "n_stations": obs.n_stations, "n_targets": obs.n_targets,
            "offsets_subtracted": offsets is not None}
     if as_json:
-        emit_json(doc)
+        emit_json(doc, "export")
         return
     console.print(f"{fmt}: {obs.n_obs} distances, {obs.n_stations} stations, {obs.n_targets} "
                   f"targets -> {', '.join(str(w) for w in written)}")
@@ -156,9 +156,12 @@ def import_command(
                              [[s, t, d, a, r, u, q, w] for s, t, d, a, r, u, q, w in
                               zip(g.station, g.target, g.observed_m, g.adjusted_m, g.residual_m,
                                   g.adjusted_std_m, g.redundancy, g.std_residual)])
+            from multilat.vocabulary import stamp
+
+            doc = stamp(doc, "import")
             write_json_atomic(tmp / "summary.json", doc)
         if as_json:
-            emit_json(doc)
+            emit_json(doc, "import")
         else:
             console.print(f"gama-local result: {doc['n_obs']} slope distances, {doc['n_points']} "
                           f"points, dof {g.dof}, sigma0 {g.sigma_aposteriori:.4f} -> {out}")
@@ -185,7 +188,7 @@ def import_command(
         write_csv_atomic(tmp / "points.csv", ["point", "x_m", "y_m", "z_m"],
                          [[i, *x] for i, x in zip(net.points.ids, net.points.xyz_m)])
     if as_json:
-        emit_json(doc)
+        emit_json(doc, "import")
         return
     console.print(f"{fmt}: {o.n_obs} distances, {o.n_stations} stations, {o.n_targets} targets, "
                   f"{len(net.points.ids)} points with coordinates -> {out}")

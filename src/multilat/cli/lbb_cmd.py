@@ -50,7 +50,7 @@ def trilaterate(
                     "z_squared_m2": float(res.z_squared_m2[i]), "reason": reason})
     n_bad = sum(not q["valid"] for q in pts)
     if json_out:
-        emit_json({"frame": "base: socket 1 origin, socket 2 on +x, socket 3 in xy (y > 0), z > 0",
+        emit_json(command="lbb-trilaterate", obj={"frame": "base: socket 1 origin, socket 2 on +x, socket 3 in xy (y > 0), z > 0",
                    "points": pts, "n_singular": n_bad})
         return 3 if n_bad else 0
     table = Table(title=f"{edges}: tool socket in the base frame")
@@ -122,7 +122,7 @@ def simulate(
             write_simulation(tmp, sim, cfg, marks_m=marks)
     report_opt.write_report(report, "lbb simulate", summary(sim), result=(sim, cfg))
     if json_out:
-        emit_json(summary(sim))
+        emit_json(summary(sim), "lbb-simulate")
         return
     table = Table(title=f"LBB {method}: {len(pts)} points, {sim.trials} per cloud (µm)")
     for c in ("x (mm)", "y (mm)", "z (mm)", "mean err x", "mean err y", "mean err z", "std x", "std y", "std z"):
@@ -178,8 +178,8 @@ def compare(
             write_comparison(tmp, comp)
     frac = float(np.mean(comp.inside_2sigma))
     doc = {"points": [{"point": pt, "difference_m": comp.difference_m[i],
-                       "sim_mean_error_m": comp.simulation.mean_error_m[i],
-                       "sim_std_m": comp.simulation.std_m[i], "inside_2sigma": comp.inside_2sigma[i]}
+                       "error_mean_mc_m": comp.simulation.mean_error_m[i],
+                       "std_mc_m": comp.simulation.std_m[i], "inside_2sigma": comp.inside_2sigma[i]}
                       for i, pt in enumerate(comp.points)],
            "fraction_inside_2sigma": frac,
            "fraction_inside_2sigma_per_axis": dict(zip("xyz", comp.inside_fraction_per_axis)),
@@ -187,7 +187,7 @@ def compare(
            "method": method, "trials": comp.simulation.trials}
     report_opt.write_report(report, "lbb compare", doc, result=comp)
     if json_out:
-        emit_json(doc)
+        emit_json(doc, "lbb-compare")
         return
     table = Table(title="LBB - reference (µm) and simulated 2σ")
     for c in ("point", "dx", "dy", "dz", "2σ x", "2σ y", "2σ z"):

@@ -197,7 +197,9 @@ def adjust_command(
                      alpha_global=alpha_global, test_method=test_method, variance_factor=variance_factor,
                      mdb_limit_sigma=mdb_limit_sigma, sigma_source=src, snooping=snooping, solver=solver,
                      strict=strict, scale_bars=refs if scale_bar else None, rng=seed)
-    doc = result_to_json(res, refs)
+    from multilat.vocabulary import stamp
+
+    doc = stamp(result_to_json(res, refs), "adjust")
     if corrected is not None:
         from multilat.campaign.correlated import correlated_json
 
@@ -216,15 +218,15 @@ def adjust_command(
             write_json_atomic(tmp / "result.json", doc)
     report_opt.write_report(report, "adjust", doc, result=res)
     if as_json:
-        emit_json(doc)
+        emit_json(doc, "adjust")
         return
     _print_summary(res, doc, out)
     if corrected is not None:
         wc = doc["with_correlations"]
-        offs = ", ".join(f"{sid} {v['offset_u_m'] * 1e6:.1f}" for sid, v in wc["stations"].items())
+        offs = ", ".join(f"{sid} {v['offset_std_m'] * 1e6:.1f}" for sid, v in wc["stations"].items())
         console.print(f"with the sensors' correlations (G C Gᵀ): u(offset) µm: {offs}; largest target "
-                      f"std {wc['max_target_std_m'] * 1e6:.1f} µm (diagonal weights only: "
-                      f"{wc['max_target_std_diagonal_m'] * 1e6:.1f} µm)", markup=False)
+                      f"std {wc['target_std_max_m'] * 1e6:.1f} µm (diagonal weights only: "
+                      f"{wc['target_std_diagonal_max_m'] * 1e6:.1f} µm)", markup=False)
 
 
 def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma):
@@ -303,7 +305,7 @@ def _print_summary(res, doc, out):
         for c in ("points", "adjusted (m)", "u (µm)", "reference (m)", "difference (µm)"):
             t.add_column(c, justify="right")
         for c in doc["reference_lengths"]:
-            t.add_row(f"{c['target_a']}-{c['target_b']}", f"{c['length_m']:.6f}", f"{c['u_m'] * 1e6:.1f}",
+            t.add_row(f"{c['target_a']}-{c['target_b']}", f"{c['length_m']:.6f}", f"{c['length_std_m'] * 1e6:.1f}",
                       f"{c['reference_m']:.6f}", f"{c['difference_m'] * 1e6:+.1f}")
         console.print(t)
     if out is not None:

@@ -142,7 +142,9 @@ def propagate_cmd(
         res = propagate(problem, trials=trials, rng=seed, noise=noise, instrument=instrument,
                         adaptive=adaptive, chunk_size=chunk_size, map=m,
                         progress=lambda n: bar.update(task, completed=n), keep_samples=out is not None or report is not None)
-    doc = res.to_dict()
+    from multilat.vocabulary import stamp
+
+    doc = stamp(res.to_dict(), "propagate")
     if problem.readings is not None:
         doc["readings"] = problem.readings.to_json()
     doc["sigma_source"] = src
@@ -156,7 +158,7 @@ def propagate_cmd(
             write_outputs(res, doc, tmp, cloud_points=cloud_points)
     report_opt.write_report(report, "propagate", doc, result=res)
     if as_json:
-        emit_json(doc)
+        emit_json(doc, "propagate")
         return
     _print(res, doc, out)
 
@@ -169,19 +171,19 @@ def write_outputs(res, doc, out: Path, *, cloud_points: str | None = None) -> No
     from multilat.report.propagate_figures import clouds_figure
 
     out = Path(out)
-    hdr = ["label", "nominal_m", "mc_mean_m", "mc_std_m", "mc_std_se_m", "lin_std_m", "ratio", "agrees",
+    hdr = ["label", "nominal_m", "mean_mc_m", "std_mc_m", "std_mc_se_m", "std_lin_m", "ratio", "agrees",
            "low_m", "high_m", "short_low_m", "short_high_m"]
 
     def rows(items):
         for r in items:
-            yield [r["label"], r["nominal_m"], r["mc_mean_m"], r["mc_std_m"], r["mc_std_se_m"], r["lin_std_m"],
+            yield [r["label"], r["nominal_m"], r["mean_mc_m"], r["std_mc_m"], r["std_mc_se_m"], r["std_lin_m"],
                    r["ratio"] if r["ratio"] is not None else "", r["agrees"], *r["interval_symmetric_m"],
                    *r["interval_shortest_m"]]
 
     write_csv_atomic(out / "parameters.csv", hdr, rows(doc["parameters"]))
     write_csv_atomic(out / "distances.csv", hdr, rows(doc["distances"]))
     write_csv_atomic(out / "points.csv",
-                     ["id", "a1_95_m", "a2_95_m", "a3_95_m", "coverage_mc_ellipsoid", "coverage_lin_ellipsoid"],
+                     ["id", "semi_axis_1_95_m", "semi_axis_2_95_m", "semi_axis_3_95_m", "ellipsoid_coverage_mc", "ellipsoid_coverage_lin"],
                      ([p["id"], *p["semi_axes_95_m"], p["ellipsoid_coverage_mc"], p["ellipsoid_coverage_lin"]]
                       for p in doc["points"]))
     fig = clouds_figure(res, points=[s.strip() for s in cloud_points.split(",") if s.strip()]
@@ -251,11 +253,11 @@ def _print(res, doc, out) -> None:
         t.add_column(c, justify="right")
     for r in [r for r in doc["parameters"] if r["label"].endswith(".offset")] + doc["distances"]:
         lo, hi = r["interval_symmetric_m"]
-        t.add_row(r["label"], _um(r["mc_std_m"]), _um(r["mc_std_se_m"]), _um(r["lin_std_m"]),
+        t.add_row(r["label"], _um(r["std_mc_m"]), _um(r["std_mc_se_m"]), _um(r["std_lin_m"]),
                   f"{r['ratio']:.3f}" if r["ratio"] else "-",
                   f"[{_um(lo - r['nominal_m'])}, {_um(hi - r['nominal_m'])}]", "yes" if r["agrees"] else "NO")
     console.print(t)
     console.print(f"{s['n_agree']}/{s['n_quantities']} standard deviations agree with the linear covariance "
-                  f"within 3 MC standard errors (ratio {s['std_ratio_min']:.3f}..{s['std_ratio_max']:.3f})")
+                  f"within 3 MC standard errors (ratio {s['ratio_min']:.3f}..{s['ratio_max']:.3f})")
     if out is not None:
         console.print(f"results and figure written to {out}")

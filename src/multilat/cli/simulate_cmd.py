@@ -72,13 +72,13 @@ def simulate_cmd(
         "sigma_m": None if noise == "model" else res.sigma_m, "cost": cost, "start": start, "seed": seed,
         "pairs": [list(p) for p in res.pairs],
         "interpoint_std_m": {k: s[k] for k in ("min", "mean", "max")},
-        "interpoint_std_sem_m": s["sem"], "interpoint_std_rms_m": s["rms"],
-        "predicted_rms_std_m": res.predicted_rms_std_m,
+        "interpoint_std_se_m": s["sem"], "interpoint_std_rms_m": s["rms"],
+        "interpoint_std_lin_rms_m": res.predicted_rms_std_m,
         "paper_m": None if paper is None else {"min": paper.min_m, "mean": paper.mean_m,
                                                "max": paper.max_m, "trials": paper.trials},
-        "pair_rms_error_m": {f"{a}-{b}": float(v) for (a, b), v in
+        "pair_error_rms_m": {f"{a}-{b}": float(v) for (a, b), v in
                              zip(res.pairs, np.sqrt(np.mean(res.errors_m ** 2, axis=0)))},
-        "offset_rms_error_m": dict(zip(res.station_ids,
+        "offset_error_rms_m": dict(zip(res.station_ids,
                                        np.sqrt(np.mean(res.offset_error_m ** 2, axis=0)).tolist())),
         "sigma0_mean": float(np.mean(res.sigma0)),
         "sigma_source": src,
@@ -86,7 +86,7 @@ def simulate_cmd(
     }
     report_opt.write_report(report, "simulate", doc, result=res)
     if as_json:
-        emit_json(doc)
+        emit_json(doc, "simulate")
         return
     console.print(f"Simulation of the self-calibrating adjustment ({res.config}): "
                   f"{doc['converged']} of {res.trials} simulations converged, noise={noise}"

@@ -17,14 +17,14 @@ __all__ = ["summary", "write_simulation", "Comparison", "compare_reference", "wr
 
 
 def summary(sim: LBBSimulation) -> dict:
-    """The JSON summary: ``points`` (``nominal_m``, ``mean_error_m``, ``std_m``, ``cov_m2``),
-    ``max_std_m``, ``max_mean_error_m``, ``trials``, ``method``, L0 statistics, seed entropy."""
-    pts = [{"nominal_m": sim.nominal_m[i], "mean_error_m": sim.mean_error_m[i], "std_m": sim.std_m[i],
+    """The JSON summary: ``points`` (``nominal_m``, ``error_mean_m``, ``std_m``, ``cov_m2``),
+    ``std_max_m``, ``error_mean_max_m``, ``trials``, ``method``, L0 statistics, seed entropy."""
+    pts = [{"nominal_m": sim.nominal_m[i], "error_mean_m": sim.mean_error_m[i], "std_m": sim.std_m[i],
             "cov_m2": sim.cov_m2[i]} for i in range(len(sim.nominal_m))]
     return {"method": sim.method, "trials": sim.trials, "n_points": len(pts),
-            "max_std_m": sim.max_std_m, "max_mean_error_m": float(np.max(sim.error_magnitude_m)),
-            "l0_mean_error_m": sim.l0_mean_error_m, "l0_std_m": sim.l0_std_m,
-            "seed_entropy": sim.seed_entropy, "points": pts}
+            "std_max_m": sim.max_std_m, "error_mean_max_m": float(np.max(sim.error_magnitude_m)),
+            "l0_error_mean_m": sim.l0_mean_error_m, "l0_std_m": sim.l0_std_m,
+            "seed": sim.seed_entropy, "points": pts}
 
 
 def _save(fig, path):
@@ -45,20 +45,20 @@ def write_simulation(out_dir, sim: LBBSimulation, cfg: LBBConfig, *, marks_m=Non
     rows = [[*(sim.nominal_m[i]), *(sim.mean_error_m[i]), *(sim.std_m[i]), sim.error_magnitude_m[i]]
             for i in range(len(sim.nominal_m))]
     p = out / "points.csv"
-    write_csv_atomic(p, ["x_m", "y_m", "z_m", "mean_error_x_m", "mean_error_y_m", "mean_error_z_m",
-                         "std_x_m", "std_y_m", "std_z_m", "mean_error_magnitude_m"], rows)
+    write_csv_atomic(p, ["x_m", "y_m", "z_m", "error_x_mean_m", "error_y_mean_m", "error_z_mean_m",
+                         "x_std_m", "y_std_m", "z_std_m", "error_magnitude_mean_m"], rows)
     files.append(p)
     names = ["l12", "l13", "l23", "l1", "l2", "l3"]
     rows = [[*(sim.nominal_m[i]), *(sim.nominal_edges_m[i]), *(sim.side_mean_error_m[i]), *(sim.side_std_m[i])]
             for i in range(len(sim.nominal_m))]
     p = out / "sides.csv"
     write_csv_atomic(p, ["x_m", "y_m", "z_m"] + [f"{n}_nominal_m" for n in names]
-                     + [f"{n}_mean_error_m" for n in names] + [f"{n}_std_m" for n in names], rows)
+                     + [f"{n}_error_mean_m" for n in names] + [f"{n}_std_m" for n in names], rows)
     files.append(p)
     p = out / "summary.json"
-    s = summary(sim)
-    s.pop("points")
-    write_json_atomic(p, s)
+    from multilat.vocabulary import stamp
+
+    write_json_atomic(p, stamp(summary(sim), "lbb-simulate"))      # the same document as --json
     files.append(p)
     b = base_xyz(cfg)
     for name, q in (("fig8_mean_error.png", "mean"), ("fig8_std.png", "std")):
@@ -135,8 +135,8 @@ def write_comparison(out_dir, comp: Comparison) -> list[Path]:
              *comp.inside_2sigma[i].astype(int)] for i in range(len(comp.points))]
     p = out / "comparison.csv"
     write_csv_atomic(p, ["point", "x_ref_m", "y_ref_m", "z_ref_m", "dx_m", "dy_m", "dz_m",
-                         "sim_mean_x_m", "sim_mean_y_m", "sim_mean_z_m", "sim_std_x_m", "sim_std_y_m",
-                         "sim_std_z_m", "inside_x", "inside_y", "inside_z"], rows)
+                         "error_x_mean_mc_m", "error_y_mean_mc_m", "error_z_mean_mc_m", "x_std_mc_m", "y_std_mc_m",
+                         "z_std_mc_m", "inside_x", "inside_y", "inside_z"], rows)
     f = out / "fig7_comparison.png"
     _save(F.reference_comparison(comp.points, comp.difference_m, s.mean_error_m, s.std_m), f)
     return [p, f]

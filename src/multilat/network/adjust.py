@@ -388,7 +388,7 @@ def coupling_results(core) -> tuple[tuple, tuple]:
         return (), ()
     cp, res, red = c["couplings"], c["residual_m"], c["redundancy"]
     k = cp.bar_a.size
-    bars = tuple({"target_a": a, "target_b": b, "length_m": float(cp.bar_length_m[q]), "u_m": float(cp.bar_sigma_m[q]),
+    bars = tuple({"target_a": a, "target_b": b, "length_m": float(cp.bar_length_m[q]), "sigma_m": float(cp.bar_sigma_m[q]),
                   "adjusted_m": float(cp.bar_length_m[q] - res[q]), "residual_m": float(res[q]),
                   "redundancy": float(red[q])} for q, (a, b) in enumerate(cp.bar_ids))
     ctrl = tuple({"point": pid, "xyz_m": cp.prior_value_m[3 * q:3 * q + 3].tolist(),

@@ -293,7 +293,7 @@ class CoupledBatchedNetwork:
     def _gradient(self, x, d, c):
         """Gradient ``J^T W r`` (n, P) and ``r^T W r`` (n,) of every trial."""
         p = self._pre
-        s, h, t, m = self.n_stations, self.n_heads, self.n_targets, self.n_obs
+        s, t, m = self.n_stations, self.n_targets, self.n_obs
         n = x.shape[0]
         H, o, k, T = self._split(x)
         si, ti = self.station_index, self.target_index
@@ -411,7 +411,7 @@ class CoupledBatchedNetwork:
         control), mapped to the per-station offsets of the layout.
         """
         p = self._pre
-        J, w, free = p["J0"], p["w_all"], p["free"]
+        J, w = p["J0"], p["w_all"]
         P = J.shape[1]
         q = p["Ninv"]
         if sigma_m is not None or cov_m2 is not None:

@@ -226,8 +226,8 @@ def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) ->
     written = []
     (s_ax, _), (t_ax, _) = result.ellipsoids()
     p = out / "stations.csv"
-    write_csv_atomic(p, ["station", "x_m", "y_m", "z_m", "offset_m", "u_x_m", "u_y_m", "u_z_m",
-                         "u_offset_m", "offset_estimated", "ell95_a_m", "ell95_b_m", "ell95_c_m", "head"],
+    write_csv_atomic(p, ["station", "x_m", "y_m", "z_m", "offset_m", "x_std_m", "y_std_m", "z_std_m",
+                         "offset_std_m", "offset_estimated", "semi_axis_1_95_m", "semi_axis_2_95_m", "semi_axis_3_95_m", "head"],
                      [[sid, *result.station_xyz_m[i], result.offset_m[i],
                        *np.sqrt(np.clip(np.diag(result.station_cov_m2[i]), 0, None)),
                        result.offset_std_m[i], bool(result.offset_estimated[i]), *s_ax[i][::-1],
@@ -238,9 +238,9 @@ def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) ->
     p = out / "targets.csv"
     tx, tu = result.target_xyz_m, np.sqrt(np.clip(np.diagonal(result.target_cov_m2, axis1=1, axis2=2), 0, None))
     write_csv_columns_atomic(p, {"target": (result.target_ids, np.arange(len(result.target_ids))),
-                                 "x_m": tx[:, 0], "y_m": tx[:, 1], "z_m": tx[:, 2], "u_x_m": tu[:, 0],
-                                 "u_y_m": tu[:, 1], "u_z_m": tu[:, 2], "ell95_a_m": t_ax[:, 2],
-                                 "ell95_b_m": t_ax[:, 1], "ell95_c_m": t_ax[:, 0]})
+                                 "x_m": tx[:, 0], "y_m": tx[:, 1], "z_m": tx[:, 2], "x_std_m": tu[:, 0],
+                                 "y_std_m": tu[:, 1], "z_std_m": tu[:, 2], "semi_axis_1_95_m": t_ax[:, 2],
+                                 "semi_axis_2_95_m": t_ax[:, 1], "semi_axis_3_95_m": t_ax[:, 0]})
     written.append(p)
     o = result.obs
     p = out / "residuals.csv"
@@ -251,7 +251,7 @@ def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) ->
     written.append(p)
     if references is not None:
         p = out / "reference_lengths.csv"
-        write_csv_atomic(p, ["target_a", "target_b", "length_m", "u_m", "reference_m", "reference_u_m",
+        write_csv_atomic(p, ["target_a", "target_b", "length_m", "length_std_m", "reference_m", "reference_std_m",
                              "difference_m"],
                          [[c.target_a, c.target_b, c.length_m, c.u_m, c.reference_m,
                            "" if c.reference_u_m is None else c.reference_u_m, c.difference_m]

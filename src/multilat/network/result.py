@@ -355,12 +355,12 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
     o_heads = res.obs.head_of_station
     for i, sid in enumerate(res.station_ids):
         stations[sid] = {"xyz_m": res.station_xyz_m[i], "offset_m": res.offset_m[i],
-                         "offset_u_m": res.offset_std_m[i], "offset_estimated": bool(res.offset_estimated[i]),
+                         "offset_std_m": res.offset_std_m[i], "offset_estimated": bool(res.offset_estimated[i]),
                          "cov_m2": res.station_cov_m2[i], "offset_corr_xyz": corr[i, :3],
                          "head": o_heads[i]}
         if res.scale_estimated[i]:
             stations[sid]["scale"] = res.scale[i]
-            stations[sid]["scale_u"] = res.scale_std[i]
+            stations[sid]["scale_std"] = res.scale_std[i]
     targets = {tid: {"xyz_m": res.target_xyz_m[j], "cov_m2": res.target_cov_m2[j],
                      "n_obs": int(n), "redundancy": float(r)}
                for j, (tid, n, r) in enumerate(zip(res.target_ids, res.target_n_obs(), res.target_redundancy()))}
@@ -426,7 +426,7 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
     }
     if refs is not None:
         doc["reference_lengths"] = [
-            {"target_a": c.target_a, "target_b": c.target_b, "length_m": c.length_m, "u_m": c.u_m,
-             "reference_m": c.reference_m, "reference_u_m": c.reference_u_m,
+            {"target_a": c.target_a, "target_b": c.target_b, "length_m": c.length_m, "length_std_m": c.u_m,
+             "reference_m": c.reference_m, "reference_std_m": c.reference_u_m,
              "difference_m": c.difference_m} for c in res.compare_references(refs)]
     return doc

@@ -76,7 +76,7 @@ def initial_from_distances(obs: Observations, rng):
         if not flat_geometry(raw.station_xyz_m, raw.target_xyz_m, sigma_m=float(np.median(sub.sigma_m)),
                              n_obs=sub.n_obs):
             break
-    how = {"method": f"distances: {raw.method}", "rms_residual_m": float(raw.rms_residual_m)}
+    how = {"method": f"distances: {raw.method}", "residual_rms_m": float(raw.rms_residual_m)}
     if raw.refinement is not None:
         how["refinement"] = raw.refinement.to_json()
     if attempt:

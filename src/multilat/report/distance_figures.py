@@ -64,7 +64,7 @@ def plot_budget(budget, *, fig=None, paper_um: dict | None = None):
     s = budget.samples * 1e6
     cols = [0, 1, 2, 3] if budget.include_air else [0, 1, 2]
     panels = [(GROUPS[j], s[:, j], budget.components[GROUPS[j]] * 1e6) for j in cols]
-    panels.append(("combined", s[:, cols].sum(axis=1), budget.combined_std_m * 1e6))
+    panels.append(("combined", s[:, cols].sum(axis=1), budget.error_rms_m * 1e6))
     ncol = 2 if len(panels) <= 4 else 3
     fig = fig or plt.figure(figsize=(4.6 * ncol, 7.0))
     axes = fig.subplots(2, ncol).ravel()

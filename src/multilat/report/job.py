@@ -153,7 +153,7 @@ def meta_section(ctx: JobContext, doc: dict) -> Section:
     rows = [("command", ctx.command_line or f"multilat {ctx.command}"),
             ("multilat version", ctx.version), ("date (UTC)", ctx.date_utc)]
     seed = ctx.options.get("seed")
-    ent = doc.get("seed_entropy", doc.get("seed"))
+    ent = doc.get("seed")
     if seed is not None:
         seed_text = f"{seed}"
     elif ent is not None:

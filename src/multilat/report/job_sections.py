@@ -83,7 +83,7 @@ def adjust(doc: dict, result=None, options=None) -> list[Section]:
     ], caption="Statistics")
     rows = []
     for sid, s in doc["stations"].items():
-        ku, _ = _get(s, "offset_std_m", "offset_u_m")
+        ku, _ = _get(s, "offset_std_m")
         rows.append((sid, *(_m(doc, "stations", sid, "xyz_m", i) for i in range(3)),
                      *(_um(doc, "stations", sid, "cov_m2", i, i, op="sqrt", digits=1) for i in range(3)),
                      _um(doc, "stations", sid, "offset_m", digits=1, sign=True),
@@ -144,8 +144,8 @@ def _reference_lengths(doc) -> Section:
     sec = Section("Interpoint distances against reference lengths")
     rows = []
     for i, c in enumerate(doc["reference_lengths"]):
-        ku, u = _get(c, "length_std_m", "u_m")
-        kr, ur = _get(c, "reference_std_m", "reference_u_m")
+        ku, u = _get(c, "length_std_m")
+        kr, ur = _get(c, "reference_std_m")
         comb = math.sqrt(u ** 2 + (ur or 0.0) ** 2)
         ok = abs(c["difference_m"]) <= K * comb
         rows.append((f"{c['target_a']}-{c['target_b']}", _m(doc, "reference_lengths", i, "length_m"),
@@ -220,8 +220,8 @@ def propagate(doc: dict, result=None, options=None) -> list[Section]:
             if group == "parameters" and not r["label"].endswith((".offset", ".scale")):
                 continue
             p_lo, p_hi = ptr(group, i, "interval_symmetric_m", 0), ptr(group, i, "interval_symmetric_m", 1)
-            rows.append((r["label"], _m(doc, group, i, "nominal_m"), _um(doc, group, i, "mc_std_m"),
-                         _um(doc, group, i, "mc_std_se_m", digits=3), _um(doc, group, i, "lin_std_m"),
+            rows.append((r["label"], _m(doc, group, i, "nominal_m"), _um(doc, group, i, "std_mc_m"),
+                         _um(doc, group, i, "std_mc_se_m", digits=3), _um(doc, group, i, "std_lin_m"),
                          Num(resolve(doc, p_lo), p_lo, 1.0, 6), Num(resolve(doc, p_hi), p_hi, 1.0, 6),
                          _verdict(r["agrees"])))
     sec.table(("quantity", "nominal (m)", "u MC (µm)", "s.e. (µm)", "u lin (µm)", "95 % low (m)",
@@ -252,7 +252,7 @@ def simulate(doc: dict, result=None, options=None) -> list[Section]:
     sec = Section("Simulation")
     s = doc["interpoint_std_m"]
     rows = [("multilat", *(_um(doc, "interpoint_std_m", k, digits=2) for k in ("min", "mean", "max")),
-             _um(doc, "interpoint_std_sem_m", digits=2))]
+             _um(doc, "interpoint_std_se_m", digits=2))]
     if doc.get("paper_m"):
         rows.append((f"paper ({doc['paper_m']['trials']} simulations)",
                      *(_um(doc, "paper_m", k, digits=1) for k in ("min", "mean", "max")), "-"))
@@ -260,17 +260,17 @@ def simulate(doc: dict, result=None, options=None) -> list[Section]:
               caption=f"Standard deviation of the interpoint-distance errors per simulation "
                       f"({doc['converged']} of {doc['trials']} simulations converged)")
     sec.paragraph(f"First-order prediction of the rms per-simulation std: "
-                  f"{doc['predicted_rms_std_m'] * UM:.2f} µm (Monte Carlo rms "
+                  f"{doc['interpoint_std_lin_rms_m'] * UM:.2f} µm (Monte Carlo rms "
                   f"{doc['interpoint_std_rms_m'] * UM:.2f} µm); "
                   f"the mean lies within 3 s.e. of the paper's: "
-                  + (_verdict(abs(s["mean"] - doc["paper_m"]["mean"]) <= 3 * doc["interpoint_std_sem_m"])
+                  + (_verdict(abs(s["mean"] - doc["paper_m"]["mean"]) <= 3 * doc["interpoint_std_se_m"])
                      if doc.get("paper_m") else "no paper value for this configuration"))
     sec.table(("pair", "rms error (µm)", f"U = {K:g} × rms (µm)"),
-              [(k, _um(doc, "pair_rms_error_m", k), _um(doc, "pair_rms_error_m", k, k=K))
-               for k in doc["pair_rms_error_m"]], caption="Interpoint distances: rms error over the simulations")
+              [(k, _um(doc, "pair_error_rms_m", k), _um(doc, "pair_error_rms_m", k, k=K))
+               for k in doc["pair_error_rms_m"]], caption="Interpoint distances: rms error over the simulations")
     sec.table(("station", "rms offset error (µm)", f"U = {K:g} × rms (µm)"),
-              [(k, _um(doc, "offset_rms_error_m", k), _um(doc, "offset_rms_error_m", k, k=K))
-               for k in doc["offset_rms_error_m"]], caption="Offsets: rms error over the simulations")
+              [(k, _um(doc, "offset_error_rms_m", k), _um(doc, "offset_error_rms_m", k, k=K))
+               for k in doc["offset_error_rms_m"]], caption="Offsets: rms error over the simulations")
     import matplotlib
 
     matplotlib.use("Agg")
@@ -315,8 +315,8 @@ def design(doc: dict, result=None, options=None) -> list[Section]:
                (tids[j] for j in keep)], caption="Targets")
     if doc.get("lengths"):
         sec.table(("a", "b", "length (m)", "u (µm)", f"U, k = {K:g} (µm)"),
-                  [(L["a"], L["b"], _m(doc, "lengths", i, "length_m"), _um(doc, "lengths", i, "u_m"),
-                    _um(doc, "lengths", i, "u_m", k=K)) for i, L in enumerate(doc["lengths"])],
+                  [(L["a"], L["b"], _m(doc, "lengths", i, "length_m"), _um(doc, "lengths", i, "length_std_m"),
+                    _um(doc, "lengths", i, "length_std_m", k=K)) for i, L in enumerate(doc["lengths"])],
                   caption="Predicted lengths")
     out = [sec]
     if result is not None:
@@ -337,10 +337,10 @@ def budget(doc: dict, result=None, options=None) -> list[Section]:
     for g in doc["components"]:
         label = g + (" (not in the combined)" if g == "air" and not doc.get("include_air") else "")
         rows.append((label, _um(doc, "components", g), _um(doc, "components", g, k=K),
-                     _um(doc, "means_m", g, sign=True), _um(doc, "stds_m", g)))
-    ku, _ = _get(doc, "combined_std_m", "combined_u_m")
+                     _um(doc, "component_error_mean_m", g, sign=True), _um(doc, "component_error_std_m", g)))
+    ku, _ = _get(doc, "error_rms_m")
     rows.append(("combined" + (" (incl. air)" if doc.get("include_air") else ""), _um(doc, ku), _um(doc, ku, k=K),
-                 _um(doc, "combined_mean_m", sign=True), _um(doc, "combined_sd_m")))
+                 _um(doc, "error_mean_m", sign=True), _um(doc, "error_std_m")))
     sec.table(("group", "u (µm)", f"U, k = {K:g} (µm)", "mean (µm)", "standard deviation (µm)"), rows,
               caption=f"{doc['instrument']}, head {doc['head']}, {doc['trials']:,} trials over "
                       f"{len(doc['distances_m'])} distances; u = sqrt(mean² + variance): an uncorrected bias "
@@ -388,9 +388,9 @@ def lbb_simulate(doc: dict, result=None, options=None) -> list[Section]:
     sec = Section("Monte Carlo over the work volume")
     sec.table(("quantity", "value"), [
         ("method", doc["method"]), ("draws per cloud", doc["trials"]), ("points", doc["n_points"]),
-        ("largest coordinate std (µm)", _um(doc, "max_std_m", digits=3)),
-        (f"largest U = {K:g} std (µm)", _um(doc, "max_std_m", digits=3, k=K)),
-        ("largest |mean error| (µm)", _um(doc, "max_mean_error_m", digits=3)),
+        ("largest coordinate std (µm)", _um(doc, "std_max_m", digits=3)),
+        (f"largest U = {K:g} std (µm)", _um(doc, "std_max_m", digits=3, k=K)),
+        ("largest |mean error| (µm)", _um(doc, "error_mean_max_m", digits=3)),
     ], caption="Summary")
     pts = doc["points"]
     keep = _worst(pts, lambda p: max(p["std_m"]), n=50)
@@ -398,7 +398,7 @@ def lbb_simulate(doc: dict, result=None, options=None) -> list[Section]:
                "U_x", "U_y", "U_z"),
               [(*(Num(resolve(doc, ptr("points", i, "nominal_m", c)), ptr("points", i, "nominal_m", c), 1e3, 1)
                   for c in range(3)),
-                *(_um(doc, "points", i, "mean_error_m", c, digits=3, sign=True) for c in range(3)),
+                *(_um(doc, "points", i, "error_mean_m", c, digits=3, sign=True) for c in range(3)),
                 *(_um(doc, "points", i, "std_m", c, digits=3) for c in range(3)),
                 *(_um(doc, "points", i, "std_m", c, digits=3, k=K) for c in range(3))) for i in keep],
               caption=f"Points (µm unless stated), the {len(keep)} with the largest std; U with k = {K:g}")
@@ -417,7 +417,7 @@ def lbb_compare(doc: dict, result=None, options=None) -> list[Section]:
     rows = []
     for i, p in enumerate(doc["points"]):
         rows.append((p["point"], *(_um(doc, "points", i, "difference_m", c, sign=True) for c in range(3)),
-                     *(_um(doc, "points", i, "sim_std_m", c, k=2.0) for c in range(3)),
+                     *(_um(doc, "points", i, "std_mc_m", c, k=2.0) for c in range(3)),
                      " ".join(_verdict(v) for v in p["inside_2sigma"])))
     sec.table(("point", "dx (µm)", "dy (µm)", "dz (µm)", "2σ x (µm)", "2σ y (µm)", "2σ z (µm)",
                "inside mean ± 2σ (x y z)"), rows,

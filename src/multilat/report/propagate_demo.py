@@ -51,8 +51,8 @@ def section(*, seed: int, quick: bool) -> Section:
     for r in res_m.rows():
         if r["label"].endswith(".offset") or "-" in r["label"]:
             lo, hi = r["interval_symmetric_m"]
-            tab.append((r["label"], f"{r['mc_std_m'] * 1e6:.2f}", f"{r['mc_std_se_m'] * 1e6:.2f}",
-                        f"{r['lin_std_m'] * 1e6:.2f}", f"{r['ratio']:.3f}",
+            tab.append((r["label"], f"{r['std_mc_m'] * 1e6:.2f}", f"{r['std_mc_se_m'] * 1e6:.2f}",
+                        f"{r['std_lin_m'] * 1e6:.2f}", f"{r['ratio']:.3f}",
                         f"[{(lo - r['nominal_m']) * 1e6:.1f}, {(hi - r['nominal_m']) * 1e6:.1f}]",
                         "yes" if r["agrees"] else "no"))
     sec.table(["quantity", "MC std (µm)", "MC s.e. (µm)", "linear std (µm)", "ratio", "95 % interval (µm)",
@@ -62,7 +62,7 @@ def section(*, seed: int, quick: bool) -> Section:
     sec.paragraph(
         f"Distance-model noise: {s['n_agree']} of {s['n_quantities']} standard deviations (coordinates, offsets, "
         f"triplet distances) agree with the linear covariance within 3 Monte Carlo standard errors (ratios "
-        f"{s['std_ratio_min']:.3f} to {s['std_ratio_max']:.3f}); the JCGM 102 95 % ellipsoids from the MC "
+        f"{s['ratio_min']:.3f} to {s['ratio_max']:.3f}); the JCGM 102 95 % ellipsoids from the MC "
         f"covariance hold {s['ellipsoid_coverage_mc_min']:.3f} or more of the trials. At micrometre noise over a "
         "metre the adjustment is linear to first order: the Monte Carlo confirms the GUM-style covariance rather "
         "than correcting it. The linear propagation uses the empirical std of the drawn distance errors; the "

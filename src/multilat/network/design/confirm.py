@@ -55,13 +55,13 @@ class DesignSimulation:
 
     def summary(self) -> dict:
         return {"noise": self.noise, "trials": self.trials, "n_failed": self.n_failed,
-                "max_abs_z": float(np.abs(self.z).max()), "mean_z": float(self.z.mean()),
-                "std_ratio_mean": float((self.mc_std_m / self.predicted_std_m).mean()),
-                "u95_max_predicted_m": float(self.predicted_u95_max_m.max()),
+                "z_abs_max": float(np.abs(self.z).max()), "z_mean": float(self.z.mean()),
+                "ratio_mean": float((self.mc_std_m / self.predicted_std_m).mean()),
+                "u95_max_lin_m": float(self.predicted_u95_max_m.max()),
                 "u95_max_mc_m": float(self.mc_u95_max_m.max()),
                 "ellipsoid_coverage_mean": float(np.mean(self.ellipsoid_coverage_pred)),
                 "input_std_ratio": self.input_std_ratio,
-                "max_abs_z_vs_linear_with_drawn_std": float(np.abs((self.mc_std_m - self.lin_std_m)
+                "z_drawn_abs_max": float(np.abs((self.mc_std_m - self.lin_std_m)
                                                                    / self.mc_std_se_m).max())}
 
 
