@@ -141,6 +141,10 @@ def adjust_command(
     strict: bool = typer.Option(False, "--strict",
                                 help="Refuse the network when a point is too weakly observed, instead "
                                      "of leaving it out with a warning."),
+    variance_components: Optional[str] = typer.Option(None, "--variance-components",
+                                                      help="Estimate one variance factor per group of "
+                                                           "distances, head or station (Förstner's iterated "
+                                                           "estimator), and adjust with the re-weighted σ."),
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
@@ -191,15 +195,34 @@ def adjust_command(
             raise MultilatError(f"--fixed-scale: unknown {what} id {fixed_scale!r} "
                                 f"({what}s: {', '.join(obs.head_ids)})")
         scales = [hid for hid in obs.head_ids if hid != fixed_scale]
+    vc = None
+    if variance_components is not None:
+        from multilat.network.variance_components import GROUPINGS
+
+        if variance_components not in GROUPINGS:
+            raise MultilatError(f"--variance-components must be one of {', '.join(GROUPINGS)}, "
+                                f"got {variance_components!r}")
+        if corrected is not None:
+            raise MultilatError("--variance-components applies to an observation file: raw readings get "
+                                "their σ from the distance model and the sensors")
+    options = dict(datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
+                   alpha_global=alpha_global, test_method=test_method, variance_factor=variance_factor,
+                   mdb_limit_sigma=mdb_limit_sigma, sigma_source=src, snooping=snooping, solver=solver,
+                   strict=strict, scale_bars=refs if scale_bar else None, rng=seed)
     with progress() as p:
         p.add_task(f"adjusting {obs.n_obs:,} distances", total=None)
-        res = adjust(obs, datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
-                     alpha_global=alpha_global, test_method=test_method, variance_factor=variance_factor,
-                     mdb_limit_sigma=mdb_limit_sigma, sigma_source=src, snooping=snooping, solver=solver,
-                     strict=strict, scale_bars=refs if scale_bar else None, rng=seed)
+        if variance_components is None:
+            res = adjust(obs, **options)
+        else:
+            from multilat.network.variance_components import estimate_variance_components
+
+            vc = estimate_variance_components(obs, grouping=variance_components, **options)
+            res = vc.result
     from multilat.vocabulary import stamp
 
     doc = stamp(result_to_json(res, refs), "adjust")
+    if vc is not None:
+        doc["variance_components"] = vc.to_json()
     if corrected is not None:
         from multilat.campaign.correlated import correlated_json
 
@@ -221,6 +244,11 @@ def adjust_command(
         emit_json(doc, "adjust")
         return
     _print_summary(res, doc, out)
+    if vc is not None:
+        console.print(f"variance components by {vc.grouping} (Förstner, {vc.iterations} iterations): "
+                      + "; ".join(f"{c.group} σ × {c.sigma_scale:.3f} (factor {c.variance_factor:.3f} ± "
+                                  f"{c.variance_factor_std:.3f}, r = {c.redundancy:.1f})" for c in vc.components),
+                      markup=False)
     if corrected is not None:
         wc = doc["with_correlations"]
         offs = ", ".join(f"{sid} {v['offset_std_m'] * 1e6:.1f}" for sid, v in wc["stations"].items())

@@ -408,7 +408,7 @@ def _ellipsoid_fraction(dev3, center, cov):
     region is the r-dimensional ellipsoid in its range with the ``chi2_r(0.95)`` quantile; NaN for
     a fixed point (r = 0).
     """
-    from scipy.stats import chi2
+    from multilat.network.statistics import chi2_ppf
 
     ev, vec = np.linalg.eigh(np.asarray(cov, float))
     if not np.all(np.isfinite(ev)) or ev.max() <= 0:
@@ -417,7 +417,7 @@ def _ellipsoid_fraction(dev3, center, cov):
     r = int(keep.sum())
     z = (dev3 - center) @ vec[:, keep]
     d2 = np.sum(z * z / ev[keep], axis=1)
-    q = chi2_3_95 if r == 3 else float(chi2.ppf(0.95, r))
+    q = chi2_3_95 if r == 3 else chi2_ppf(0.95, r)
     return float(np.mean(d2 <= q))
 
 
