@@ -299,6 +299,37 @@ class BudgetConfig(_Model):
         return np.round(self.distance_start_m + self.distance_step_m * np.arange(n), 12)
 
 
+class TrackerConfig(_Model):
+    """A laser tracker beside the heads, in its maker's MPE form (:class:`multilat.tracker.TrackerSpec`):
+    distance MPE ``adm_a_um + adm_b_um_per_m · L``, transverse MPE ``transverse_a_um +
+    transverse_b_um_per_m · L`` (angles: over the range), an optional constant angular MPE
+    ``angular_c_urad``, ``std_per_mpe`` (0.5: the MPE read as k = 2), and ``levelled`` (its vertical is
+    the world's: one orientation angle instead of three when angles are adjusted)."""
+
+    adm_a_um: float
+    adm_b_um_per_m: float
+    transverse_a_um: float
+    transverse_b_um_per_m: float
+    angular_c_urad: float = 0.0
+    std_per_mpe: float = 0.5
+    levelled: bool = False
+
+    @model_validator(mode="after")
+    def _spec(self):
+        try:
+            self.spec()
+        except MultilatError as exc:
+            raise ValueError(str(exc).replace("tracker specification: ", "")) from None
+        return self
+
+    def spec(self):
+        """The :class:`multilat.tracker.TrackerSpec` of this tracker."""
+        from multilat.tracker import TrackerSpec
+
+        return TrackerSpec(self.adm_a_um, self.adm_b_um_per_m, self.transverse_a_um, self.transverse_b_um_per_m,
+                           self.angular_c_urad, self.std_per_mpe)
+
+
 class Instrument(_Model):
     """A whole instrument: ADM, environment, heads, target, budget set-up.
 
@@ -316,6 +347,7 @@ class Instrument(_Model):
     heads: dict[str, HeadConfig] = {}
     head_types: dict[str, HeadConfig] = {}
     head_map: dict[str, str] = {}
+    trackers: dict[str, TrackerConfig] = {}
     target: TargetConfig
     budget: BudgetConfig = BudgetConfig()
 
@@ -329,10 +361,20 @@ class Instrument(_Model):
                                  f"{', '.join(sorted(self.head_types)) or 'none'}")
             if h in self.heads:
                 raise ValueError(f"head_map.{h}: head {h!r} also has its own block under heads")
+        for t in self.trackers:
+            if t in self.heads or t in self.head_map:
+                raise ValueError(f"trackers.{t}: {t!r} is also a head")
         return self
 
+    def is_tracker(self, name: str) -> bool:
+        """Whether ``name`` is one of the instrument's laser trackers (``[trackers.NAME]``)."""
+        return name in self.trackers
+
     def has_head(self, name: str) -> bool:
-        """Whether :meth:`head` resolves ``name`` (own block, mapped type or the default head)."""
+        """Whether :meth:`head` resolves ``name`` (own block, mapped type or the default head; a tracker
+        is not a head)."""
+        if name in self.trackers:
+            return False
         return name in self.heads or name in self.head_map or "default" in self.heads
 
     def head(self, name: str) -> HeadConfig:

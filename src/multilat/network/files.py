@@ -152,6 +152,9 @@ def _model_sigma(d, heads, instrument, *, where=None):
     for hid in dict.fromkeys(heads):
         m = heads == hid
         head = hid
+        if getattr(inst, "is_tracker", lambda _: False)(head):     # a laser tracker: its MPE form
+            out[m] = inst.trackers[head].spec().distance_sigma_m(d[m])
+            continue
         if not inst.has_head(head):
             if where is not None:
                 k = int(np.flatnonzero(m)[0])

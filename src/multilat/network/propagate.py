@@ -119,8 +119,10 @@ def _heads_for(head_names, instrument, head: str | None):
     if instrument is None:
         return tuple(head or "A" for _ in head_names)
     has = getattr(instrument, "has_head", None)
+    tracker = getattr(instrument, "is_tracker", lambda _: False)
     names = set(getattr(instrument, "heads", {}) or {})
-    return tuple(n if (has(n) if has is not None else n in names) else (head or "A") for n in head_names)
+    return tuple(n if (tracker(n) or (has(n) if has is not None else n in names)) else (head or "A")
+                 for n in head_names)
 
 
 def _default_pairs(target_ids, limit=20):
@@ -475,6 +477,10 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         from multilat import instrument as _instrument
 
         inst = _instrument.load_instrument(instrument) if isinstance(instrument, str) else instrument
+        for sid, hd in zip(problem.station_ids, problem.heads):
+            if getattr(inst, "is_tracker", lambda _: False)(hd):
+                raise MultilatError(f"--noise model: station {sid!r} is the laser tracker {hd!r}, which has no "
+                                    "error model to draw from here; use --noise gaussian (its σ from the MPE)")
     ss = resolve_seed(rng)
     entropy, key = ss.entropy, tuple(ss.spawn_key)
     net = problem.network
@@ -491,6 +497,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
     model = None
     if noise == "model":
         from multilat.distance_errors import error_model
+
 
         model = error_model(inst, problem.heads)
     spec = _ChunkSpec(net, problem.distance_m, problem.heads, pidx, noise, model, net.sigma_m, problem.readings)

@@ -42,10 +42,18 @@ def distance_model(stations, instrument, *, heads: dict | None = None) -> dict:
     name, defaulted = _instrument_name(instrument)
     inst = instrument if not isinstance(instrument, (str, os.PathLike, type(None))) else _inst.load_instrument(name)
     if heads is None:
-        have = set(getattr(inst, "heads", {}) or {})
-        heads = {sid: (sid if sid in have else "A") for sid in dict.fromkeys(stations)}
-    return {"kind": "distance model", "instrument": name, "defaulted": defaulted,
-            "heads": {str(k): str(v) for k, v in heads.items()}}
+        trk = set(getattr(inst, "trackers", {}) or {})
+        has = getattr(inst, "has_head", lambda n: n in (getattr(inst, "heads", {}) or {}))
+        heads = {sid: (sid if (sid in trk or has(sid)) else "A") for sid in dict.fromkeys(stations)}
+    trackers = getattr(inst, "trackers", {}) or {}
+    out = {"kind": "distance model", "instrument": name, "defaulted": defaulted,
+           "heads": {str(k): str(v) for k, v in heads.items() if v not in trackers}}
+    used = {str(k): str(v) for k, v in heads.items() if v in trackers}
+    if used:   # laser trackers: σ from the maker's MPE (a + b L) times std_per_mpe
+        out["trackers"] = {k: {"tracker": v, "adm_a_um": trackers[v].adm_a_um,
+                               "adm_b_um_per_m": trackers[v].adm_b_um_per_m,
+                               "std_per_mpe": trackers[v].std_per_mpe} for k, v in used.items()}
+    return out
 
 
 def describe(src: dict) -> str:
@@ -62,7 +70,9 @@ def describe(src: dict) -> str:
                if src.get("defaulted") else "--instrument")
         return (f"σ: distance model of instrument {src['instrument']!r} ({how}); heads used: "
                 + ", ".join(f"{s}→{h}" for s, h in list(hs.items())[:8]) + ("…" if len(hs) > 8 else "")
-                + ("" if len(pairs) > 1 or not hs else ""))
+                + ("" if len(pairs) > 1 or not hs else "")
+                + "".join(f"; {st}: tracker {t['tracker']} MPE ({t['adm_a_um']:g} µm + {t['adm_b_um_per_m']:g} µm/m"
+                          f" · L) × {t['std_per_mpe']:g}" for st, t in src.get("trackers", {}).items()))
     if k == "raw readings":
         return (f"σ: raw readings corrected with instrument {src['instrument']!r}'s distance model and the "
                 "air sensors' uncertainties")
