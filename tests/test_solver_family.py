@@ -103,14 +103,14 @@ def test_auto_switches_and_sparse_refuses_what_it_cannot_do(capsys, monkeypatch)
 
 
 def test_sparse_equals_dense_on_a_large_network():
-    """2 000 targets x 8 of 12 stations, from initial values 1 mm off: the same minimum (1e-9 m) and
+    """1 000 targets x 8 of 12 stations, from initial values 1 mm off: the same minimum (1e-9 m) and
     the same statistics from both back ends."""
-    net = synthetic_network(12, 2000, 8, rng=5)
-    obs = Observations(tuple(f"S{i}" for i in range(12)), tuple(f"T{j}" for j in range(2000)),
+    net = synthetic_network(12, 1000, 8, rng=5)
+    obs = Observations(tuple(f"S{i}" for i in range(12)), tuple(f"T{j}" for j in range(1000)),
                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
     rng = np.random.default_rng(6)
     start = Start(net.station_xyz_m + rng.normal(0, 1e-3, (12, 3)),
-                  net.target_xyz_m + rng.normal(0, 1e-3, (2000, 3)), net.offset_m + rng.normal(0, 1e-3, 12))
+                  net.target_xyz_m + rng.normal(0, 1e-3, (1000, 3)), net.offset_m + rng.normal(0, 1e-3, 12))
     d = adjust(obs, initial=start, solver="dense", snooping=False)
     s = adjust(obs, initial=start, solver="sparse", snooping=False)
     assert d.solver == "dense" and s.solver == "sparse"

@@ -76,7 +76,7 @@ class VarianceComponents:
 
     def to_json(self) -> dict:
         return {"grouping": self.grouping, "method": "Förstner iterated (Koch 1999 §3.6.4)",
-                "std_method": self.std_method,
+                "standard_error_method": self.std_method,
                 "iterations": self.iterations, "converged": self.converged,
                 "components": [c.to_json() for c in self.components]}
 
