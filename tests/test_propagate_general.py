@@ -206,10 +206,8 @@ def test_refusals_left():
         pr.problem_from_observations(obs, datum="control")
 
 
-def test_general_solver_equals_the_batched_solver_where_both_apply():
-    """A second method: on the seed's small volume (one head per station, no couplings) the general
-    solver's trials equal the specialised batched solver's (compiled, Schur over targets) to 1e-9 m —
-    both converge to each trial's least-squares minimum (steps below 1e-10 m) and apply the same datum."""
+def _small_volume_both():
+    """The small volume's problem, its batched network and the same network for the general solver."""
     from multilat.network.configs import small_volume
 
     pb = pr.problem_from_config(small_volume(), sigma_m=4.7e-6)
@@ -219,6 +217,14 @@ def test_general_solver_equals_the_batched_solver_where_both_apply():
                                 net.station_xyz_m, net.offset_m, np.zeros(s), net.target_xyz_m,
                                 np.zeros(s, bool), np.zeros(net.n_targets, bool), np.ones(s, bool),
                                 np.zeros(s, bool), datum=net.datum)
+    return pb, net, gen
+
+
+def test_general_solver_equals_the_batched_solver_where_both_apply():
+    """A second method: on the seed's small volume (one head per station, no couplings) the general
+    solver's trials equal the specialised batched solver's (compiled, Schur over targets) to 1e-9 m —
+    both converge to each trial's least-squares minimum (steps below 1e-10 m) and apply the same datum."""
+    pb, net, gen = _small_volume_both()
     d = pb.distance_m + np.random.default_rng(2).standard_normal((500, pb.distance_m.size)) * 4.7e-6
     a, b = gen.solve(d), net.solve(d)
     assert a.converged.all() and b.converged.all()
@@ -234,15 +240,7 @@ def test_far_trials_fall_back_to_gauss_newton():
     """Trials with 2 mm errors (sigma0 ~ 350, far from the nominal solution) are re-solved by full
     Gauss-Newton, and agree with the batched solver's full Gauss-Newton on the same trials within
     0.1 µm: 5e-5 of the perturbation (the two stop at steps below 1e-10 m on a cost this flat)."""
-    from multilat.network.configs import small_volume
-
-    pb = pr.problem_from_config(small_volume(), sigma_m=4.7e-6)
-    net = pb.network
-    s = net.n_stations
-    gen = CoupledBatchedNetwork(net.station_index, net.target_index, net.sigma_m, np.arange(s),
-                                net.station_xyz_m, net.offset_m, np.zeros(s), net.target_xyz_m,
-                                np.zeros(s, bool), np.zeros(net.n_targets, bool), np.ones(s, bool),
-                                np.zeros(s, bool), datum=net.datum)
+    pb, net, gen = _small_volume_both()
     d = pb.distance_m + np.random.default_rng(4).standard_normal((3, pb.distance_m.size)) * 2e-3
     a = gen.solve(d, max_iter=2)
     b = net.solve(d, method="gauss-newton", max_iter=30)

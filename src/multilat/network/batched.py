@@ -138,8 +138,26 @@ def numba_available() -> bool:
     return True
 
 
+class NetworkSizes:
+    """``n_stations``, ``n_targets``, ``n_obs`` of a batched network (station_xyz_m, target_xyz_m,
+    station_index): shared by :class:`BatchedNetwork` and the general
+    :class:`multilat.network.batched_coupled.CoupledBatchedNetwork`."""
+
+    @property
+    def n_stations(self) -> int:
+        return len(self.station_xyz_m)
+
+    @property
+    def n_targets(self) -> int:
+        return len(self.target_xyz_m)
+
+    @property
+    def n_obs(self) -> int:
+        return len(self.station_index)
+
+
 @dataclass(frozen=True)
-class BatchedNetwork:
+class BatchedNetwork(NetworkSizes):
     """A fixed network structure linearised at its nominal solution, ready to solve batches.
 
     Parameters
@@ -197,19 +215,7 @@ class BatchedNetwork:
             object.__setattr__(self, k, v)
         object.__setattr__(self, "_pre", self._precompute())
 
-    # -- sizes -----------------------------------------------------------------------------
-    @property
-    def n_stations(self) -> int:
-        return len(self.station_xyz_m)
-
-    @property
-    def n_targets(self) -> int:
-        return len(self.target_xyz_m)
-
-    @property
-    def n_obs(self) -> int:
-        return len(self.station_index)
-
+    # -- sizes: NetworkSizes ------------------------------------------------------------------
     @property
     def n_params(self) -> int:
         return 4 * self.n_stations + 3 * self.n_targets

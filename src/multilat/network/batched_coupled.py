@@ -33,14 +33,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.batched import BatchSolution
+from multilat.network.batched import BatchSolution, NetworkSizes
 from multilat.network.datum import helmert_basis
 
 __all__ = ["CoupledBatchedNetwork"]
 
 
 @dataclass(frozen=True, eq=False)
-class CoupledBatchedNetwork:
+class CoupledBatchedNetwork(NetworkSizes):
     """A network of heads, distances, scale bars and control, linearised at its nominal solution.
 
     Parameters
@@ -120,19 +120,7 @@ class CoupledBatchedNetwork:
     #: how propagate's JSON names this solver (``solver``)
     solver_name = "batched-coupled"
 
-    # -- sizes ---------------------------------------------------------------------------------
-    @property
-    def n_stations(self) -> int:
-        return len(self.station_xyz_m)
-
-    @property
-    def n_targets(self) -> int:
-        return len(self.target_xyz_m)
-
-    @property
-    def n_obs(self) -> int:
-        return len(self.station_index)
-
+    # -- sizes (n_stations, n_targets, n_obs: NetworkSizes) ----------------------------------------
     @property
     def n_heads(self) -> int:
         return int(self.head_index.max()) + 1 if self.head_index.size else 0
