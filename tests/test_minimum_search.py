@@ -150,13 +150,15 @@ def test_search_that_fails_warns():
     assert res.initial["search"]["cost"] <= res.initial["search"]["first_cost"]
 
 
-def test_acceptance_50_networks():
+def test_acceptance_30_networks():
+    """The first 30 networks of the 1000-network study (the slow test below): none silent or refused,
+    every one reaches the minimum of the solver started from the truth."""
     counts = {}
-    for k in range(50):
+    for k in range(30):
         out, _ = _outcome(_net(k))
         counts[out] = counts.get(out, 0) + 1
     assert counts.get("silent", 0) == 0 and counts.get("refused", 0) == 0, counts
-    assert counts["reached"] >= 0.995 * (50 - counts.get(None, 0)), counts
+    assert counts["reached"] >= 0.995 * (30 - counts.get(None, 0)), counts
 
 
 @pytest.mark.slow

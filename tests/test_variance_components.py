@@ -117,7 +117,7 @@ def test_helmert_rigorous_estimator_agrees_at_convergence():
 
 
 def test_group_without_redundancy_is_named():
-    net, obs, _ = _misset(1)
+    net, obs, _ = _misset(1, factor=1.0)
     g = np.zeros(obs.n_obs, int)
     g[0] = 1                                        # one observation alone: r < 1
     with pytest.raises(MultilatError, match="group 'lonely' has redundancy"):
