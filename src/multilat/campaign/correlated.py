@@ -131,7 +131,9 @@ def _subset(obs, mask):
 
     return Observations(obs.station_ids, obs.target_ids, obs.station_index[mask], obs.target_index[mask],
                         obs.distance_m[mask], obs.sigma_m[mask], azimuth_rad=pick(obs.azimuth_rad),
-                        elevation_rad=pick(obs.elevation_rad), station_heads=obs.station_heads)
+                        elevation_rad=pick(obs.elevation_rad), station_heads=obs.station_heads,
+                        sigma_azimuth_rad=pick(obs.sigma_azimuth_rad),
+                        sigma_elevation_rad=pick(obs.sigma_elevation_rad))
 
 
 def correlated_covariance(result, obs_covariance_m2, *, step_m: float = 1e-6,

@@ -294,6 +294,17 @@ def _print_summary(res, doc, out):
         from multilat.network.sigma_source import describe
 
         console.print("  " + describe(res.sigma_source), markup=False)
+    if res.angles:
+        ws = np.array([a["w"] for a in res.angles])
+        vt = sum((a["residual_rad"] / a["sigma_rad"]) ** 2 for a in res.angles)
+        console.print(f"  angles: {len(res.angles)} observations (σ from the file), vᵀPv {vt:.1f} of "
+                      f"{res.sigma0 ** 2 * res.dof:.1f}, largest |w| {np.max(np.abs(ws)):.2f} "
+                      f"({sum(not a['w_test_passed'] for a in res.angles)} failing; angles are tested, not "
+                      "rejected automatically)", markup=False)
+        for sid, o in res.orientations.items():
+            v, u = o["orientation_rad"], o["orientation_std_rad"]
+            console.print(f"  orientation of {sid}: " + ", ".join(
+                f"{n} {a:+.6f} rad (u {b * 1e6:.1f} µrad)" for n, a, b in zip("ωφκ", v, u)), markup=False)
     if res.reliability is not None:
         for line in reliability_lines(res):
             console.print(line, markup=False)

@@ -29,6 +29,7 @@ from multilat.network.result import (AdjustmentResult, InterpointDistance, Outli
                                      build_result)
 from multilat.network.search import P_MIN, p_value
 from multilat.network.couplings import coupling_spec
+from multilat.network.angle_rows import angle_results, largest_angle_w
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 
@@ -324,6 +325,9 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         # would reject good distances). Variance factor unknown: Pope's τ-test of the largest |τ|.
         if step["detection_passed"] is not False or not step["identified"]:
             break
+        if largest_angle_w(core, lam0) > abs(w_sub[k_sub]):   # angles are tested, not rejected (yet)
+            unlocated, reason = (), "an angle observation has the largest |w|: angles are not rejected automatically"
+            break
         step["observation"] = int(np.flatnonzero(used)[k_sub])
         k = int(np.flatnonzero(used)[k_sub])
         # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
@@ -376,9 +380,10 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
              "tau_critical": st.tau_critical(alpha, core["dof"]) if unknown else None,
              "alpha_global": alpha_g(core["dof"]), "steps": steps}
     bars_out, ctrl_out = coupling_results(core)
+    ang_out, orient = angle_results(core, lam0, final_crit)
     return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
                    scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
-                   sigma_source=dict(sigma_source or {}))
+                   sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient)
 
 
 def coupling_results(core) -> tuple[tuple, tuple]:

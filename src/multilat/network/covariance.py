@@ -306,18 +306,31 @@ class CoupledCovariance(NetworkCovariance):
         super().__init__(Qgg, Minv, Js_w, Jt_w, station_index, target_index, **kw)
 
     def _times(self, V):
+        """``C V`` in the internal frame. The eliminated block may hold the stations' orientation
+        unknowns after the targets (angle observations): ``V`` of the coordinate length (5s + 3t) is
+        padded with zeros for them and the product cut back to that length."""
         V = np.asarray(V, float)
         g = Q * self.s
         Vg, Vt = V[:g], V[g:]
+        pad = self.X.shape[0] - Vt.shape[0]
+        if pad:
+            Vt = np.concatenate([Vt, np.zeros((pad,) + Vt.shape[1:])], axis=0)
         u = self.Qgg @ (Vg - self.X.T @ Vt)
-        return np.concatenate([u, self.Ntt_full_inv @ Vt - self.X @ u], axis=0) * self.factor
+        out = np.concatenate([u, self.Ntt_full_inv @ Vt - self.X @ u], axis=0) * self.factor
+        return out[:V.shape[0]] if pad else out
 
     def _target_blocks_internal(self, chunk_targets: int = 20000, *, kernels=True):
         t = self.t
-        Xb = self.X.reshape(t, 3, -1)
-        XQ = (self.X @ self.Qgg).reshape(t, 3, -1)
-        D = self.Ntt_full_inv.reshape(t, 3, t, 3)[np.arange(t), :, np.arange(t), :]
+        Xt = self.X[:3 * t]
+        Xb = Xt.reshape(t, 3, -1)
+        XQ = (Xt @ self.Qgg).reshape(t, 3, -1)
+        D = self.Ntt_full_inv[:3 * t, :3 * t].reshape(t, 3, t, 3)[np.arange(t), :, np.arange(t), :]
         return D + np.einsum("tiq,tjq->tij", XQ, Xb)
+
+    def orientation_cov_internal(self) -> np.ndarray:
+        """Covariance (n_o, n_o) of the orientation unknowns in the internal frame (rad²)."""
+        Xo = self.X[3 * self.t:]
+        return (self.Ntt_full_inv[3 * self.t:, 3 * self.t:] + Xo @ self.Qgg @ Xo.T) * self.factor
 
     def hat_row(self, k: int, **_):
         """As :meth:`NetworkCovariance.hat_row` through the coupled product (the compiled kernels know
@@ -329,7 +342,7 @@ class CoupledCovariance(NetworkCovariance):
         3x3 block and the station-target block ``-(Q_gg X^T)``; O(t s^2)."""
         s = self.s
         Ctt = self._target_blocks_internal()
-        QXt = (self.Qgg @ self.X.T).reshape(s, Q, self.t, 3)                # (5s, 3t) = -C_gt
+        QXt = (self.Qgg @ self.X[:3 * self.t].T).reshape(s, Q, self.t, 3)   # (5s, 3t) = -C_gt
         Q4 = self.Qgg.reshape(s, Q, s, Q)
         i, j = self.si, self.ti
         a, b = self.Js_w, self.Jt_w

@@ -57,6 +57,10 @@ class Observations:
         The measurement head that occupied each station (None: every station is its own head, head
         id = station id). Offsets and scales belong to heads: a head that occupies several stations
         (sequential multilateration) has one offset and one scale for all of them.
+    sigma_azimuth_rad, sigma_elevation_rad : ndarray, shape (m,), or None
+        A-priori standard uncertainty of the row's azimuth / elevation when that angle is an
+        **observation** of the adjustment (NaN: the angle, if given, serves only for initial values).
+        A station with angle observations gets an orientation (:mod:`multilat.network.angle_rows`).
 
     Build with :meth:`from_labels` (ids per row); the constructor checks shapes, finiteness,
     positivity and index ranges; repeated (station, target) pairs are allowed (repeated readings).
@@ -71,6 +75,8 @@ class Observations:
     azimuth_rad: np.ndarray | None = None
     elevation_rad: np.ndarray | None = None
     station_heads: tuple[str, ...] | None = None
+    sigma_azimuth_rad: np.ndarray | None = None
+    sigma_elevation_rad: np.ndarray | None = None
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -122,13 +128,32 @@ class Observations:
                 if np.any(np.isinf(a)):
                     raise MultilatError(f"{name}: infinite angle")
                 set_(self, name, a)
+        for name, value in (("sigma_azimuth_rad", "azimuth_rad"), ("sigma_elevation_rad", "elevation_rad")):
+            v = getattr(self, name)
+            if v is None:
+                continue
+            a = np.array(v, dtype=float)
+            if a.shape != (m,):
+                raise MultilatError(f"{name}: expected shape ({m},), got {a.shape}")
+            bad = np.flatnonzero(~np.isnan(a) & ~(np.isfinite(a) & (a > 0)))
+            if bad.size:
+                k = int(bad[0])
+                raise MultilatError(f"{name} of observation {self.label(k)} must be > 0 (or empty: not an "
+                                    f"observation), got {a[k]!r}")
+            ang = getattr(self, value)
+            used = np.isfinite(a)
+            if used.any() and (ang is None or np.any(~np.isfinite(ang[used]))):
+                k = int(np.flatnonzero(used if ang is None else used & ~np.isfinite(ang))[0])
+                raise MultilatError(f"observation {self.label(k)}: {name} given without its {value}")
+            set_(self, name, a if used.any() else None)
         for a in (self.station_index, self.target_index, self.distance_m, self.sigma_m):
             a.flags.writeable = False
 
     # ---------------------------------------------------------------- construction
     @classmethod
     def from_labels(cls, station: Sequence[str], target: Sequence[str], distance_m, sigma_m, *,
-                    azimuth_rad=None, elevation_rad=None, head: Sequence[str] | None = None) -> "Observations":
+                    azimuth_rad=None, elevation_rad=None, head: Sequence[str] | None = None,
+                    sigma_azimuth_rad=None, sigma_elevation_rad=None) -> "Observations":
         """Build from one station id and one target id per observation.
 
         Parameters
@@ -162,7 +187,8 @@ class Observations:
         sig = np.broadcast_to(np.asarray(sigma_m, dtype=float), (m,)).copy() if m else np.zeros(0)
         return cls(sids, tids, np.array([sx[s] for s in station], dtype=np.intp),
                    np.array([tx[t] for t in target], dtype=np.intp), np.asarray(distance_m, float),
-                   sig, azimuth_rad=azimuth_rad, elevation_rad=elevation_rad, station_heads=heads)
+                   sig, azimuth_rad=azimuth_rad, elevation_rad=elevation_rad, station_heads=heads,
+                   sigma_azimuth_rad=sigma_azimuth_rad, sigma_elevation_rad=sigma_elevation_rad)
 
     # ---------------------------------------------------------------- views
     @property
@@ -218,20 +244,29 @@ class Observations:
         az = None if self.azimuth_rad is None else self.azimuth_rad[keep]
         el = None if self.elevation_rad is None else self.elevation_rad[keep]
         hs = None if self.station_heads is None else tuple(self.station_heads[i] for i in s_present)
+        saz = None if self.sigma_azimuth_rad is None else self.sigma_azimuth_rad[keep]
+        sel = None if self.sigma_elevation_rad is None else self.sigma_elevation_rad[keep]
         return Observations(tuple(self.station_ids[i] for i in s_present),
                             tuple(self.target_ids[j] for j in t_present), s_new[si], t_new[ti],
-                            self.distance_m[keep], self.sigma_m[keep], az, el, hs)
+                            self.distance_m[keep], self.sigma_m[keep], az, el, hs, saz, sel)
 
     def with_sigma(self, sigma_m) -> "Observations":
         """A copy with other a-priori uncertainties (scalar or shape (m,))."""
         sig = np.broadcast_to(np.asarray(sigma_m, dtype=float), (self.n_obs,)).copy()
         return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
-                            self.distance_m, sig, self.azimuth_rad, self.elevation_rad, self.station_heads)
+                            self.distance_m, sig, self.azimuth_rad, self.elevation_rad, self.station_heads,
+                            self.sigma_azimuth_rad, self.sigma_elevation_rad)
 
     def with_distances(self, distance_m) -> "Observations":
         """A copy with other distances (same pattern), e.g. a simulated draw."""
         return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
-                            distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad, self.station_heads)
+                            distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad, self.station_heads,
+                            self.sigma_azimuth_rad, self.sigma_elevation_rad)
+
+    @property
+    def has_angle_observations(self) -> bool:
+        """Whether any azimuth or elevation is an observation (has its σ)."""
+        return self.sigma_azimuth_rad is not None or self.sigma_elevation_rad is not None
 
 
 @dataclass(frozen=True, eq=False)

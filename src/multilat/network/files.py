@@ -29,7 +29,8 @@ from multilat.network.screening import screen_observations
 __all__ = ["read_observations", "read_reference_lengths", "read_points", "write_result_csvs"]
 
 OBS_REQUIRED = ("station", "target", "distance_m")
-OBS_OPTIONAL = ("sigma_m", "head", "azimuth_rad", "elevation_rad")
+OBS_OPTIONAL = ("sigma_m", "head", "azimuth_rad", "elevation_rad", "zenith_rad", "sigma_azimuth_rad",
+                "sigma_elevation_rad")
 
 
 def _check_ids(tab, col):
@@ -89,12 +90,32 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         v = sorted(both)[0]
         k = st.index(v)
         raise tab.error(k, f"id {v!r} is used both as a station and as a target")
-    az = el = None
-    if tab.has("azimuth_rad") != tab.has("elevation_rad"):
-        raise MultilatError(f"{path}: give both azimuth_rad and elevation_rad columns, or neither")
+    az = el = saz = sel = None
+    if tab.has("elevation_rad") and tab.has("zenith_rad"):
+        raise MultilatError(f"{path}: give elevation_rad or zenith_rad (zenith = π/2 − elevation), not both")
+    has_el = tab.has("elevation_rad") or tab.has("zenith_rad")
+    if tab.has("azimuth_rad") != has_el:
+        raise MultilatError(f"{path}: give both azimuth_rad and elevation_rad (or zenith_rad) columns, or neither")
     if tab.has("azimuth_rad"):
-        az = tab.floats("azimuth_rad", required=False)
-        el = tab.floats("elevation_rad", required=False, within=ELEVATION_RANGE)
+        az = tab.floats("azimuth_rad", required=False, within=(-2 * np.pi, 2 * np.pi, "±2π"))
+        if tab.has("zenith_rad"):
+            el = np.pi / 2 - tab.floats("zenith_rad", required=False, within=(0.0, np.pi, "[0, π]"))
+        else:
+            el = tab.floats("elevation_rad", required=False, within=ELEVATION_RANGE)
+    for name in ("sigma_azimuth_rad", "sigma_elevation_rad"):
+        if tab.has(name):
+            if az is None:
+                raise MultilatError(f"{path}: column {name} without the angle columns (azimuth_rad, "
+                                    "elevation_rad or zenith_rad)")
+            v = tab.floats(name, required=False, positive=True)
+            ang = az if name == "sigma_azimuth_rad" else el
+            miss = np.flatnonzero(np.isfinite(v) & ~np.isfinite(ang))
+            if miss.size:
+                raise tab.error(int(miss[0]), f"column '{name}': a σ for an empty angle")
+            if name == "sigma_azimuth_rad":
+                saz = v
+            else:
+                sel = v
     if tab.has("sigma_m"):
         sig = tab.floats("sigma_m", positive=True)
         _record(sigma_source, "column", path)
@@ -111,7 +132,8 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         sig = _model_sigma(d, st if hd is None else hd, instrument,
                            where=None if hd is None else tab.error)
         _record(sigma_source, "model", st, instrument, *(() if hd is None else (dict(zip(st, hd)),)))
-    obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el, head=hd)
+    obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el, head=hd,
+                                   sigma_azimuth_rad=saz, sigma_elevation_rad=sel)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
     return obs
 

@@ -121,6 +121,9 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
     off_free, off_val, sc_free = off_free_all[smap], off_val_all[smap], sc_free_all[smap]
     check_network(sub, datum, points, off_free, sc_free, warn=False, couplings=couplings)
     cpl = None if couplings is None else couplings.resolve(sub)
+    from multilat.network.angle_rows import angle_rows, initial_orientations
+
+    ang = angle_rows(sub)
     s, t = sub.n_stations, sub.n_targets
     sx0 = start.station_xyz_m[smap].copy()
     tx0 = start.target_xyz_m[tmap].copy()
@@ -160,9 +163,12 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
         gfree[a, :3] = False
         gfree[b, 1:3] = False
         gfree[c, 2] = False
-    pb = Problem(sub, cost, gfree, tfree, couplings=cpl)
+    if ang is not None and cost != "distance":
+        raise MultilatError("angle observations need the distance cost (weighted observations)")
+    o0 = None if ang is None else initial_orientations(sub, ang, sx0, tx0)
+    pb = Problem(sub, cost, gfree, tfree, couplings=cpl, angles=ang)
     backend = make_backend(pb, choose_backend(pb, solver), chunk_targets=chunk_targets)
-    p, conv = gauss_newton(pb, Params(sx0, tx0, off0, sc0), backend, max_iter=max_iter)
+    p, conv = gauss_newton(pb, Params(sx0, tx0, off0, sc0, o0), backend, max_iter=max_iter)
     if not conv.converged:
         if partial_ok:      # the lowest-cost point reached: a start for the minimum search
             return dict(partial=True, sx=p.station_xyz_m, tx=p.target_xyz_m, off=p.offset_m,
@@ -179,6 +185,9 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
     if cpl is not None:
         e_w, E_rows = cpl.whitened(flatten_params(p))
         vtpv += float(e_w @ e_w)
+    if ang is not None:
+        a_w, A_rows = ang.whitened(p.station_xyz_m, p.target_xyz_m, p.orientation_rad, s, t)
+        vtpv += float(a_w @ a_w)
     sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")
     factor = 1.0 if cost == "distance" else (sigma0 ** 2 if dof > 0 else float("nan"))
     # move to the requested datum
@@ -222,7 +231,18 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
         r_c = 1.0 - cov.quadratic(E_rows * free_full)
         coupled = dict(couplings=cpl, residual_m=cpl.residuals(flatten_params(p)),
                        redundancy=np.clip(r_c, 0.0, 1.0))
-    return dict(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free,
+    angles = None
+    if ang is not None:
+        from multilat.network.angle_rows import orientation_covariance, rotate_orientations
+
+        free_all = np.concatenate([pb.station_free.ravel(), np.repeat(pb.target_free, 3),
+                                   np.ones(ang.n_orientation, bool)])
+        r_a = np.clip(1.0 - cov.quadratic(A_rows * free_all), 0.0, 1.0)
+        o_cov = orientation_covariance(cov, ang, p.orientation_rad, R, G, E, s, t)
+        angles = dict(rows=ang, residual_rad=ang.residuals(p.station_xyz_m, p.target_xyz_m, p.orientation_rad),
+                      redundancy=r_a, orientation_rad=rotate_orientations(ang, p.orientation_rad, R),
+                      orientation_cov=o_cov, station_ids=sub.station_ids, target_ids=sub.target_ids)
+    return dict(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free, angles=angles,
                 chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
                 vtpv=vtpv, iterations=conv.iterations, cond=cond, cov=cov, convergence=conv,
                 solver=backend.name, coupled=coupled)

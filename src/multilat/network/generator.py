@@ -232,3 +232,56 @@ def sequential_network(rng=None, *, heads=("T1", "T2"), n_stations: int = 8, n_t
                        si, ti, d, np.full(si.size, float(sigma_m)),
                        station_heads=tuple(heads[k] for k in hi))
     return GeneratedNetwork(H, T, o, obs, float(2 * radius_m), "sequential ring", "part", gap)
+
+
+def mixed_network(rng=None, *, heads=("H1", "H2", "H3", "H4"), trackers=None, n_targets: int = 14,
+                  room_m=(4.0, 3.0, 1.2), head_sigma_m: float = 5e-6, offset_max_m: float = 2e-3):
+    """A mixed campaign: multilateration heads (distances) and laser trackers (distance and two angles
+    to every target), all seeing every target.
+
+    Heads on the corners of the ``room_m`` floor plan at alternating heights (0.5 / 1.6 m), trackers
+    ``trackers`` (default: AT1 and AT2 of ``examples/instruments/heads_and_trackers.toml``'s
+    specification, :class:`multilat.tracker.TrackerSpec`) near the middle of two opposite walls at
+    1.2 m, each with a small random tilt (``U(±0.02)`` rad) and a random heading; targets uniform in the
+    inner box of the room. Heads: one offset each ``U(±offset_max_m)``, gaussian noise ``head_sigma_m``;
+    trackers: offset 0, distance noise and angle noise of their specification's σ at each range.
+
+    Returns ``(GeneratedNetwork, orientation_rad (s, 3))`` — the orientations of the heads are zero
+    (they read no angles).
+    """
+    from multilat.network.angles import predicted_angles
+    from multilat.tracker import TrackerSpec
+
+    g = np.random.default_rng(rng)
+    if trackers is None:
+        spec = TrackerSpec(10.0, 0.3, 15.0, 6.0)
+        trackers = {"AT1": spec, "AT2": spec}
+    L, W, Z = (float(v) for v in room_m)
+    Hh = np.array([[0.0, 0.0, 0.5], [L, 0.0, 1.6], [L, W, 0.5], [0.0, W, 1.6]])[:len(heads)]
+    Ht = np.array([[L / 2, -0.3, 1.2], [L / 2, W + 0.3, 1.2]])[:len(trackers)]
+    H = np.vstack([Hh, Ht]) + g.uniform(-0.1, 0.1, (len(heads) + len(trackers), 3))
+    T = g.uniform([0.4, 0.4, 0.2], [L - 0.4, W - 0.4, 0.2 + Z], (int(n_targets), 3))
+    s, t = H.shape[0], T.shape[0]
+    ori = np.zeros((s, 3))
+    nh = len(heads)
+    ori[nh:, :2] = g.uniform(-0.02, 0.02, (s - nh, 2))
+    ori[nh:, 2] = g.uniform(-np.pi, np.pi, s - nh)
+    off = np.concatenate([g.uniform(-offset_max_m, offset_max_m, nh), np.zeros(s - nh)])
+    si, ti = np.meshgrid(np.arange(s), np.arange(t), indexing="ij")
+    si, ti = si.ravel(), ti.ravel()
+    rho = np.linalg.norm(H[si] - T[ti], axis=1)
+    specs = list(trackers.values())
+    sig = np.where(si < nh, head_sigma_m, 0.0)
+    sig_a = np.full(si.size, np.nan)
+    for q, sp in enumerate(specs):
+        k = si == nh + q
+        sig[k] = sp.distance_sigma_m(rho[k])
+        sig_a[k] = sp.angle_sigma_rad(rho[k])
+    d = rho + off[si] + g.normal(0.0, 1.0, si.size) * sig
+    az, el = predicted_angles(H, ori, T, si, ti)
+    tr = si >= nh
+    az = np.where(tr, az + g.normal(0.0, 1.0, si.size) * np.where(tr, sig_a, 0.0), np.nan)
+    el = np.where(tr, el + g.normal(0.0, 1.0, si.size) * np.where(tr, sig_a, 0.0), np.nan)
+    obs = Observations(tuple(heads) + tuple(trackers), tuple(f"P{j + 1}" for j in range(t)), si, ti, d, sig,
+                       az, el, None, sig_a, sig_a)
+    return GeneratedNetwork(H, T, off, obs, float(np.hypot(L, W)), "room corners and walls", "room", 0.0), ori

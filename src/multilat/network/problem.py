@@ -44,16 +44,24 @@ class Params:
     target_xyz_m: np.ndarray
     offset_m: np.ndarray
     scale: np.ndarray
+    orientation_rad: np.ndarray = None    # (n_o,) orientation unknowns of stations with angles
 
-    def step(self, dg: np.ndarray, dt: np.ndarray) -> "Params":
-        """These parameters plus a global step ``dg`` (5s,) and target steps ``dt`` (t, 3)."""
+    def __post_init__(self):
+        if self.orientation_rad is None:
+            object.__setattr__(self, "orientation_rad", np.zeros(0))
+
+    def step(self, dg: np.ndarray, dt: np.ndarray, do: np.ndarray | None = None) -> "Params":
+        """These parameters plus a global step ``dg`` (5s,), target steps ``dt`` (t, 3) and
+        orientation steps ``do`` (n_o,)."""
         d = dg.reshape(-1, Q)
         return Params(self.station_xyz_m + d[:, :3], self.target_xyz_m + dt,
-                      self.offset_m + d[:, 3], self.scale + d[:, 4])
+                      self.offset_m + d[:, 3], self.scale + d[:, 4],
+                      self.orientation_rad if do is None else self.orientation_rad + do)
 
     def is_finite(self) -> bool:
         return bool(np.isfinite(self.station_xyz_m).all() and np.isfinite(self.target_xyz_m).all()
-                    and np.isfinite(self.offset_m).all() and np.isfinite(self.scale).all())
+                    and np.isfinite(self.offset_m).all() and np.isfinite(self.scale).all()
+                    and np.isfinite(self.orientation_rad).all())
 
 
 @dataclass(frozen=True, eq=False)
@@ -69,6 +77,8 @@ class Problem:
     couplings : Couplings or None           observations beside the distances that couple points
         (scale bars, weighted control; :mod:`multilat.network.couplings`): solved by the dense back
         end's coupled path
+    angles : AngleRows or None              azimuth/elevation observations and the stations'
+        orientation unknowns (:mod:`multilat.network.angle_rows`): the dense coupled path
     """
 
     obs: Observations
@@ -76,6 +86,7 @@ class Problem:
     station_free: np.ndarray
     target_free: np.ndarray
     couplings: object = None     # multilat.network.couplings.Couplings: scale bars, weighted control
+    angles: object = None        # multilat.network.angle_rows.AngleRows: angle observations, orientations
 
     def __post_init__(self):
         if self.cost not in COSTS:
@@ -133,12 +144,15 @@ class Problem:
 
     @property
     def n_free(self) -> int:
-        return int(self.reduced_free.sum()) + 3 * int(self.target_free.sum())
+        return (int(self.reduced_free.sum()) + 3 * int(self.target_free.sum())
+                + (0 if self.angles is None else self.angles.n_orientation))
 
     @property
     def n_rows(self) -> int:
-        """Observations: the distances plus the couplings' rows (scale bars, control coordinates)."""
-        return self.obs.n_obs + (0 if self.couplings is None else self.couplings.n_rows)
+        """Observations: the distances plus the couplings' rows (scale bars, control coordinates) and
+        the angles."""
+        return (self.obs.n_obs + (0 if self.couplings is None else self.couplings.n_rows)
+                + (0 if self.angles is None else self.angles.n_rows))
 
     @property
     def dof(self) -> int:

@@ -202,6 +202,10 @@ def problem_from_observations(obs, *, datum="free", pairs=None, references=None,
     """
     from multilat.network.datum import parse_datum
 
+    if obs.has_angle_observations:
+        raise MultilatError("propagate: the Monte Carlo does not draw angle observations yet; adjust them with "
+                            "`multilat adjust` (linear covariance), or drop the sigma_azimuth_rad/"
+                            "sigma_elevation_rad columns to propagate the distances alone")
     dat = parse_datum(datum)
     if adjustment is None:
         from multilat.network.adjust import adjust

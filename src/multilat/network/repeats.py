@@ -58,8 +58,12 @@ def average_repeats(obs) -> Averaged:
     ``obs`` is :class:`multilat.network.data.Observations`; pointing angles are averaged (NaN-aware)
     with the same weights. Pairs read once are kept as they are.
     """
+    from multilat.errors import MultilatError
     from multilat.network.data import Observations
 
+    if obs.has_angle_observations:
+        raise MultilatError("--average-repeats: the angle observations (sigma_azimuth_rad/sigma_elevation_rad) "
+                            "are not averaged; keep the repeated readings as separate observations")
     si = np.asarray(obs.station_index, np.int64)
     ti = np.asarray(obs.target_index, np.int64)
     key = si * obs.n_targets + ti
@@ -93,5 +97,5 @@ def average_repeats(obs) -> Averaged:
     f = first[order]
     out = Observations(obs.station_ids, obs.target_ids, obs.station_index[f], obs.target_index[f], d,
                        1.0 / np.sqrt(wsum), azimuth_rad=mean_angle(obs.azimuth_rad),
-                       elevation_rad=mean_angle(obs.elevation_rad))
+                       elevation_rad=mean_angle(obs.elevation_rad), station_heads=obs.station_heads)
     return Averaged(out, a, count, std)

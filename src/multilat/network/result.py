@@ -165,6 +165,8 @@ class AdjustmentResult:
     initial: dict = field(default_factory=dict)
     scale_bars: tuple = ()
     weighted_control: tuple = ()
+    angles: tuple = ()
+    orientations: dict = field(default_factory=dict)
     tests: dict = field(default_factory=dict)
     reliability: object = None
     sigma_source: dict = field(default_factory=dict)
@@ -361,6 +363,8 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         if res.scale_estimated[i]:
             stations[sid]["scale"] = res.scale[i]
             stations[sid]["scale_std"] = res.scale_std[i]
+        if sid in res.orientations:
+            stations[sid].update(res.orientations[sid])
     targets = {tid: {"xyz_m": res.target_xyz_m[j], "cov_m2": res.target_cov_m2[j],
                      "n_obs": int(n), "redundancy": float(r)}
                for j, (tid, n, r) in enumerate(zip(res.target_ids, res.target_n_obs(), res.target_redundancy()))}
@@ -391,6 +395,7 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         "heads": res.heads(),
         "scale_bars": list(res.scale_bars),
         "weighted_control": list(res.weighted_control),
+        "angles": list(res.angles),
         "targets": targets,
         "sigma0": res.sigma0,
         "sigma0_unit": res.sigma0_unit,

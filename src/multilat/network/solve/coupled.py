@@ -57,22 +57,36 @@ def distance_rows(problem: Problem, p: Params):
 def assemble_coupled(problem: Problem, p: Params, damping: float = 0.0) -> Assembly:
     o = problem.obs
     s, t = o.n_stations, o.n_targets
-    n = Q * s + 3 * t
+    ang = problem.angles
+    n_o = 0 if ang is None else ang.n_orientation
+    n = Q * s + 3 * t + n_o
     if n > MAX_COUPLED_PARAMS:
-        raise MultilatError(f"scale bars or weighted control with {s} stations and {t} targets ({n} parameters): "
-                            f"the coupled solver handles up to {MAX_COUPLED_PARAMS} parameters")
+        raise MultilatError(f"scale bars, weighted control or angles with {s} stations and {t} targets ({n} "
+                            f"parameters): the coupled solver handles up to {MAX_COUPLED_PARAMS} parameters")
     r_w, A, _, _ = distance_rows(problem, p)
-    N = (A.T @ A).toarray()
-    b = A.T @ r_w
-    free = np.concatenate([problem.station_free.ravel(), np.repeat(problem.target_free, 3)])
-    e_w, E = problem.couplings.whitened(flatten_params(p))
-    E = E * free
-    N += E.T @ E
-    b = b + E.T @ e_w
+    N = np.zeros((n, n))
+    N[:Q * s + 3 * t, :Q * s + 3 * t] = (A.T @ A).toarray()
+    b = np.zeros(n)
+    b[:Q * s + 3 * t] = A.T @ r_w
+    free = np.concatenate([problem.station_free.ravel(), np.repeat(problem.target_free, 3), np.ones(n_o, bool)])
+    vtpv = float(r_w @ r_w)
+    if problem.couplings is not None:
+        e_w, E = problem.couplings.whitened(flatten_params(p))
+        E = E * free[:Q * s + 3 * t]
+        N[:Q * s + 3 * t, :Q * s + 3 * t] += E.T @ E
+        b[:Q * s + 3 * t] += E.T @ e_w
+        vtpv += float(e_w @ e_w)
+    if ang is not None:
+        a_w, E = ang.whitened(p.station_xyz_m, p.target_xyz_m, p.orientation_rad, s, t)
+        E = E * free
+        N += E.T @ E
+        b += E.T @ a_w
+        vtpv += float(a_w @ a_w)
     if damping:
         N[np.arange(n), np.arange(n)] *= 1.0 + damping
     g = np.arange(Q * s)
-    tr = Q * s + np.flatnonzero(np.repeat(problem.target_free, 3))
+    # eliminated with the targets: the free targets and the orientation unknowns
+    tr = Q * s + np.concatenate([np.flatnonzero(np.repeat(problem.target_free, 3)), 3 * t + np.arange(n_o)])
     Ntt_f = N[np.ix_(tr, tr)]
     try:
         fac = sla.cho_factor(Ntt_f)
@@ -80,26 +94,32 @@ def assemble_coupled(problem: Problem, p: Params, damping: float = 0.0) -> Assem
         y = sla.cho_solve(fac, b[tr])
         Ninv_f = sla.cho_solve(fac, np.eye(tr.size))
     except (np.linalg.LinAlgError, ValueError):
-        raise MultilatError("near-degenerate geometry: the targets' normal matrix (with the scale bars and "
-                            "weighted control) is singular") from None
+        raise MultilatError("near-degenerate geometry: the targets' normal matrix (with the scale bars, "
+                            "weighted control or the stations' orientations) is singular") from None
     Ngt = N[np.ix_(g, tr)]
     N_red = N[np.ix_(g, g)] - Ngt @ X_f
     b_red = b[g] - Ngt @ y
-    X = np.zeros((3 * t, Q * s))
-    Ninv = np.zeros((3 * t, 3 * t))
+    X = np.zeros((3 * t + n_o, Q * s))
+    Ninv = np.zeros((3 * t + n_o, 3 * t + n_o))
     X[tr - Q * s] = X_f
     Ninv[np.ix_(tr - Q * s, tr - Q * s)] = Ninv_f
-    blocks = N[Q * s:, Q * s:].reshape(t, 3, t, 3)
+    blocks = N[Q * s:Q * s + 3 * t, Q * s:Q * s + 3 * t].reshape(t, 3, t, 3)
     Ntt = np.ascontiguousarray(blocks[np.arange(t), :, np.arange(t), :])
     Ntt_inv = np.zeros_like(Ntt)
     Ntt_inv[problem.target_free] = inv3(Ntt[problem.target_free])
-    tfree_rows = tr - Q * s
+    rows = tr - Q * s
+
+    def solve_eliminated(dg):
+        out = np.zeros(3 * t + n_o)
+        out[rows] = y - X_f @ dg
+        return out
 
     def back(dg):
-        dt = np.zeros(3 * t)
-        dt[tfree_rows] = y - X_f @ dg
-        return dt.reshape(t, 3)
+        return solve_eliminated(dg)[:3 * t].reshape(t, 3)
 
-    return Assembly(N=0.5 * (N_red + N_red.T), b=b_red, Ntt=Ntt, Ntt_inv=Ntt_inv,
-                    vtpv=float(r_w @ r_w + e_w @ e_w), back_substitute=back,
-                    coupled=CoupledTargets(X, Ninv))
+    def back_orientation(dg):
+        return solve_eliminated(dg)[3 * t:]
+
+    return Assembly(N=0.5 * (N_red + N_red.T), b=b_red, Ntt=Ntt, Ntt_inv=Ntt_inv, vtpv=vtpv,
+                    back_substitute=back, coupled=CoupledTargets(X, Ninv),
+                    back_orientation=back_orientation if n_o else None)

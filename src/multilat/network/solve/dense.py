@@ -24,7 +24,8 @@ class DenseBackend:
         self.chunk_targets = int(chunk_targets)
 
     def assemble(self, p: Params, damping: float = 0.0) -> Assembly:
-        if self.problem.couplings is not None:       # scale bars, weighted control: targets coupled
+        if self.problem.couplings is not None or self.problem.angles is not None:
+            # scale bars, weighted control, angles (orientation unknowns): targets coupled
             from multilat.network.solve.coupled import assemble_coupled
 
             return assemble_coupled(self.problem, p, damping)

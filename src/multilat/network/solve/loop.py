@@ -113,10 +113,11 @@ def check_target_blocks(Ntt, problem: Problem) -> None:
                             "determined (its stations are (nearly) on one line through it)")
 
 
-def _step_length_m(dg, dt, scale_len):
+def _step_length_m(dg, dt, scale_len, do=None):
     d = dg.reshape(-1, 5)
+    rot = 0.0 if do is None else float(np.max(np.abs(do), initial=0.0)) * scale_len   # rad x length
     return max(float(np.max(np.abs(d[:, :4]))), float(np.max(np.abs(dt), initial=0.0)),
-               float(np.max(np.abs(d[:, 4]))) * scale_len)
+               float(np.max(np.abs(d[:, 4]))) * scale_len, rot)
 
 
 def gauss_newton(problem: Problem, start: Params, backend, *, max_iter: int = 100):
@@ -143,9 +144,10 @@ def gauss_newton(problem: Problem, start: Params, backend, *, max_iter: int = 10
             check_target_blocks(a.Ntt, problem)
             dg, _, _ = solve_reduced(a.N, a.b, free, problem, p)
             dt = a.back_substitute(dg)
-            q = p.step(dg, dt)
+            do = None if a.back_orientation is None else a.back_orientation(dg)
+            q = p.step(dg, dt, do)
             new_cost = weighted_cost(problem, q) if q.is_finite() else np.inf
-            step_sigma = _step_length_m(dg, dt, scale_len) / sig
+            step_sigma = _step_length_m(dg, dt, scale_len, do) / sig
             noise = 2.0 * np.sqrt(cost * m) * delta + m * delta * delta + 1e-12 * cost
             if new_cost <= cost or (step_sigma < 1.0 and new_cost <= cost + noise):
                 break

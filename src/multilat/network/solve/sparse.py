@@ -33,6 +33,8 @@ def supports(problem: Problem) -> str | None:
         return "fixed control targets"
     if problem.couplings is not None:
         return "scale bars or weighted control points (they couple target blocks)"
+    if problem.angles is not None:
+        return "angle observations (the stations' orientations)"
     return None
 
 

@@ -31,6 +31,7 @@ class Assembly:
     vtpv: float
     back_substitute: Callable[[np.ndarray], np.ndarray]
     coupled: object = None     # the coupled path's target elimination (solve.coupled.CoupledTargets)
+    back_orientation: Callable[[np.ndarray], np.ndarray] | None = None   # dg -> orientation step (angles)
 
 
 def whitened(problem: Problem, p: Params):
@@ -55,4 +56,7 @@ def weighted_cost(problem: Problem, p: Params) -> float:
 
         c = problem.couplings
         v += float(np.sum((c.residuals(flatten_params(p)) / c.sigma_m) ** 2))
+    if problem.angles is not None:
+        a = problem.angles
+        v += float(np.sum((a.residuals(p.station_xyz_m, p.target_xyz_m, p.orientation_rad) / a.sigma_rad) ** 2))
     return v if np.isfinite(v) else np.inf

@@ -1,0 +1,246 @@
+"""Angles as observations in the adjustment (issue 15, item 1 for unlevelled stations).
+
+Independent values, written here without multilat's solver or Jacobians:
+
+* a second implementation: every unknown in one vector (station and target coordinates, offsets, three
+  orientation angles per station with angles), whitened residuals of distances, azimuths (wrapped) and
+  elevations, scipy's MINPACK Levenberg-Marquardt with a finite-difference Jacobian, a 3-2-1 hold on
+  three stations. Datum-free quantities must agree: vᵀPv (1e-8 relative), offsets and interpoint
+  distances (1e-9 m: both at the float64 floor of MINPACK's stopping rule), the relative orientation of
+  two stations ``R_aᵀ R_b`` (1e-9);
+* the covariance: at multilat's solution the test builds the full Jacobian by central differences,
+  the null space of the datum defects from its SVD (so the orientations' share of a rigid rotation is
+  not taken from multilat), and the inner-constraint covariance ``S N⁺ Sᵀ`` over all points; targets'
+  3x3 blocks, orientations' standard uncertainties and the redundancy numbers (``diag R``) of distances
+  and angles must agree to 1e-6 relative (the finite-difference Jacobian's precision);
+* noise-free angles and distances: vᵀPv at the rounding floor and the true relative orientations.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.optimize import least_squares
+
+from multilat.cli import main
+from multilat.errors import MultilatError
+from multilat.network.adjust import adjust
+from multilat.network.angles import predicted_angles, rotation_matrix, wrap_angle
+from multilat.network.data import Observations
+from multilat.network.datum import helmert_basis
+from multilat.network.generator import random_network
+
+SIG_ANGLE = 20e-6
+
+
+def _mixed(seed=3, noise=True, trackers=(0, 1)):
+    net = random_network(np.random.default_rng([15, seed]), n_stations=(6, 6), n_targets=(15, 15))
+    o = net.obs
+    rng = np.random.default_rng(seed)
+    ori = rng.uniform(-0.2, 0.2, (o.n_stations, 3))
+    ori[:, 2] = rng.uniform(-3, 3, o.n_stations)
+    az, el = predicted_angles(net.station_xyz_m, ori, net.target_xyz_m, o.station_index, o.target_index)
+    tr = np.isin(o.station_index, trackers)
+    s = np.where(tr, SIG_ANGLE, np.nan)
+    d = o.distance_m
+    if noise:
+        az = az + rng.normal(0, SIG_ANGLE, az.size)
+        el = el + rng.normal(0, SIG_ANGLE, el.size)
+    else:
+        d = d - (d - np.linalg.norm(net.station_xyz_m[o.station_index] - net.target_xyz_m[o.target_index], axis=1)
+                 - net.offset_m[o.station_index])          # exact distances
+    obs = Observations(o.station_ids, o.target_ids, o.station_index, o.target_index, d, o.sigma_m, az, el,
+                       None, s, s)
+    return net, obs, ori
+
+
+def _model(obs, x, oriented):
+    """Whitened residuals of the full vector x = [H (3s), T (3t), offsets (s), orientations (3 per oriented)]."""
+    s, t = obs.n_stations, obs.n_targets
+    H = x[:3 * s].reshape(s, 3)
+    T = x[3 * s:3 * s + 3 * t].reshape(t, 3)
+    off = x[3 * s + 3 * t:4 * s + 3 * t]
+    O = np.zeros((s, 3))
+    O[oriented] = x[4 * s + 3 * t:].reshape(-1, 3)
+    si, ti = obs.station_index, obs.target_index
+    rd = (obs.distance_m - np.linalg.norm(H[si] - T[ti], axis=1) - off[si]) / obs.sigma_m
+    az, el = predicted_angles(H, O, T, si, ti)
+    ka = np.isfinite(obs.sigma_azimuth_rad)
+    ke = np.isfinite(obs.sigma_elevation_rad)
+    ra = wrap_angle(obs.azimuth_rad[ka] - az[ka]) / obs.sigma_azimuth_rad[ka]
+    re = (obs.elevation_rad[ke] - el[ke]) / obs.sigma_elevation_rad[ke]
+    return np.concatenate([rd, ra, re])
+
+
+def _jac(obs, x, oriented, h=1e-7):
+    J = np.empty((_model(obs, x, oriented).size, x.size))
+    for k in range(x.size):
+        e = np.zeros_like(x)
+        e[k] = h
+        J[:, k] = (_model(obs, x + e, oriented) - _model(obs, x - e, oriented)) / (2 * h)
+    return J
+
+
+def _pack(H, T, off, O, oriented):
+    return np.concatenate([H.ravel(), T.ravel(), off, O[oriented].ravel()])
+
+
+def _rel(Oa, Ob):
+    return rotation_matrix(Oa).T @ rotation_matrix(Ob)
+
+
+def test_mixed_network_equals_the_independent_solution():
+    net, obs, ori = _mixed()
+    res = adjust(obs, initial=net, snooping=False)
+    oriented = np.zeros(obs.n_stations, bool)
+    oriented[[0, 1]] = True
+    s, t = obs.n_stations, obs.n_targets
+    x0 = _pack(net.station_xyz_m, net.target_xyz_m, net.offset_m, ori, oriented)
+    held = np.zeros(x0.size, bool)
+    held[[0, 1, 2, 4, 5, 8]] = True               # 3-2-1 on stations 0, 1, 2 (a minimal constraint)
+
+    def fun(y):
+        x = x0.copy()
+        x[~held] = y
+        return _model(obs, x, oriented)
+
+    sol = least_squares(fun, x0[~held], method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=20000)
+    x = x0.copy()
+    x[~held] = sol.x
+    vtpv = float(sol.fun @ sol.fun)
+    assert res.sigma0 ** 2 * res.dof == pytest.approx(vtpv, rel=1e-8)
+    assert res.dof == obs.n_obs + 2 * int(np.isfinite(obs.sigma_azimuth_rad).sum()) - (4 * s + 3 * t + 6 - 6)
+    np.testing.assert_allclose(res.offset_m, x[3 * s + 3 * t:4 * s + 3 * t], atol=1e-9)
+    H, T = x[:3 * s].reshape(s, 3), x[3 * s:3 * s + 3 * t].reshape(t, 3)
+    for a, b in [(0, 5), (3, 9), (12, 14)]:
+        assert np.linalg.norm(res.target_xyz_m[a] - res.target_xyz_m[b]) == pytest.approx(
+            np.linalg.norm(T[a] - T[b]), abs=1e-9)
+    assert np.linalg.norm(res.station_xyz_m[0] - res.target_xyz_m[4]) == pytest.approx(
+        np.linalg.norm(H[0] - T[4]), abs=1e-9)
+    Om = np.array([res.orientations[sid]["orientation_rad"] for sid in ("S1", "S2")])
+    Oi = x[4 * s + 3 * t:].reshape(-1, 3)
+    np.testing.assert_allclose(_rel(Om[0], Om[1]), _rel(Oi[0], Oi[1]), atol=1e-9)
+
+
+def test_covariance_and_redundancy_equal_the_dense_inner_constraint_solution():
+    net, obs, _ = _mixed(seed=5)
+    res = adjust(obs, initial=net, snooping=False)
+    oriented = np.zeros(obs.n_stations, bool)
+    oriented[[0, 1]] = True
+    s, t = obs.n_stations, obs.n_targets
+    O = np.zeros((s, 3))
+    O[oriented] = [res.orientations[sid]["orientation_rad"] for sid in ("S1", "S2")]
+    x = _pack(res.station_xyz_m, res.target_xyz_m, res.offset_m, O, oriented)
+    J = _jac(obs, x, oriented)
+    # the datum defects from the Jacobian itself: its 6 smallest right singular vectors
+    _, sv, Vt = np.linalg.svd(J)
+    assert sv[-6] < 1e-6 * sv[0] < sv[-7]
+    G = Vt[-6:].T
+    E = np.zeros((x.size, 6))                      # inner constraints over all points' coordinates
+    E[:3 * (s + t)] = helmert_basis(np.vstack([res.station_xyz_m, res.target_xyz_m]))
+    N = J.T @ J
+    S = np.eye(x.size) - G @ np.linalg.solve(E.T @ G, E.T)
+    C = S @ np.linalg.pinv(N, rcond=1e-12) @ S.T
+    for j in (0, 7, 14):
+        blk = C[3 * s + 3 * j:3 * s + 3 * j + 3, 3 * s + 3 * j:3 * s + 3 * j + 3]
+        np.testing.assert_allclose(res.target_cov_m2[j], blk, rtol=1e-6, atol=1e-6 * np.abs(blk).max())
+    std_o = np.sqrt(np.diag(C)[4 * s + 3 * t:])
+    got = np.concatenate([res.orientations[sid]["orientation_std_rad"] for sid in ("S1", "S2")])
+    np.testing.assert_allclose(got, std_o, rtol=1e-6)
+    R = np.eye(J.shape[0]) - J @ np.linalg.pinv(N, rcond=1e-12) @ J.T
+    r = np.diag(R)
+    np.testing.assert_allclose(res.redundancy, r[:obs.n_obs], atol=1e-7)
+    np.testing.assert_allclose([a["redundancy"] for a in res.angles], r[obs.n_obs:], atol=1e-7)
+    assert float(np.sum(r)) == pytest.approx(res.dof, abs=1e-6)
+
+
+def test_noise_free_angles_and_distances_fit_exactly():
+    net, obs, ori = _mixed(seed=7, noise=False)
+    res = adjust(obs, snooping=False)                 # initial values from the distances alone
+    assert res.sigma0 < 1e-4
+    Om = np.array([res.orientations[sid]["orientation_rad"] for sid in ("S1", "S2")])
+    np.testing.assert_allclose(_rel(Om[0], Om[1]), _rel(ori[0], ori[1]), atol=1e-9)
+    assert max(abs(a["residual_rad"]) for a in res.angles) < 1e-10
+
+
+def test_angles_shrink_the_uncertainty_and_the_json_carries_them(tmp_path, capsys):
+    net, obs, _ = _mixed(seed=3)
+    plain = adjust(Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index,
+                                obs.distance_m, obs.sigma_m), initial=net, snooping=False)
+    mixed = adjust(obs, initial=net, snooping=False)
+    tr_plain = np.trace(plain.target_cov_m2, axis1=1, axis2=2)
+    tr_mixed = np.trace(mixed.target_cov_m2, axis1=1, axis2=2)
+    assert np.all(tr_mixed <= tr_plain * (1 + 1e-9))          # more observations never hurt
+    # the CLI: angle columns with their sigma
+    p = tmp_path / "mixed.csv"
+    rows = ["station,target,distance_m,sigma_m,azimuth_rad,elevation_rad,sigma_azimuth_rad,sigma_elevation_rad"]
+    for k in range(obs.n_obs):
+        sa = obs.sigma_azimuth_rad[k]
+        rows.append(f"{obs.station_ids[obs.station_index[k]]},{obs.target_ids[obs.target_index[k]]},"
+                    f"{float(obs.distance_m[k])!r},{float(obs.sigma_m[k])!r},{float(obs.azimuth_rad[k])!r},"
+                    f"{float(obs.elevation_rad[k])!r},{'' if np.isnan(sa) else repr(float(sa))},"
+                    f"{'' if np.isnan(sa) else repr(float(sa))}")
+    p.write_text("\n".join(rows) + "\n")
+    assert main(["adjust", str(p), "--json", "--no-snooping"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert len(doc["angles"]) == 2 * int(np.isfinite(obs.sigma_azimuth_rad).sum())
+    assert "orientation_std_rad" in doc["stations"]["S1"] and "orientation_rad" not in doc["stations"]["S3"]
+    assert doc["sigma0"] == pytest.approx(mixed.sigma0, rel=1e-6)
+
+
+def test_bad_angle_input_is_one_line(tmp_path, capsys):
+    net, obs, _ = _mixed(seed=3)
+    with pytest.raises(MultilatError, match="sigma_azimuth_rad of observation S1->T1 must be > 0"):
+        Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
+                     obs.sigma_m, obs.azimuth_rad, obs.elevation_rad, None,
+                     np.where(np.arange(obs.n_obs) == 0, -1.0, obs.sigma_azimuth_rad), None)
+    one = np.full(obs.n_obs, np.nan)
+    one[0] = SIG_ANGLE
+    bad = Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
+                       obs.sigma_m, obs.azimuth_rad, obs.elevation_rad, None, one, None)
+    with pytest.raises(MultilatError, match="needs at least 2 directions"):
+        adjust(bad, initial=net, snooping=False)
+    from multilat.network.angle_rows import angle_rows
+
+    with pytest.raises(MultilatError, match="levelled"):
+        angle_rows(obs, levelled=("S1",))
+    p = tmp_path / "bad.csv"
+    p.write_text("station,target,distance_m,sigma_m,azimuth_rad,elevation_rad,sigma_azimuth_rad\n"
+                 "A,1,1.0,1e-5,0.1,2.0,1e-5\n")
+    assert main(["adjust", str(p)]) == 2
+    err = capsys.readouterr().err
+    assert "bad.csv:2" in err and "elevation_rad" in err and err.count("\n") == 1
+
+
+def test_shipped_mixed_example_is_the_generator_output_and_recovers_the_truth(tmp_path, capsys):
+    from pathlib import Path
+    import importlib.util
+
+    ex = Path(__file__).resolve().parents[1] / "examples" / "network" / "mixed"
+    spec = importlib.util.spec_from_file_location("gen_mixed", ex / "generate.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    mod.main(tmp_path)
+    for f in ("obs.csv", "truth.csv", "offsets_truth.csv", "orientation_truth.csv"):
+        assert (tmp_path / f).read_text() == (ex / f).read_text(), f
+    from multilat.network.files import read_observations
+
+    obs = read_observations(ex / "obs.csv")
+    res = adjust(obs)
+    assert res.global_test.passed and not res.outliers
+    truth_off = dict(ln.split(",") for ln in (ex / "offsets_truth.csv").read_text().splitlines()[1:])
+    z = [(res.offset_m[i] - float(truth_off[sid])) / res.offset_std_m[i] for i, sid in enumerate(res.station_ids)]
+    assert np.max(np.abs(z)) < 4, z
+    rows = [ln.split(",") for ln in (ex / "orientation_truth.csv").read_text().splitlines()[1:]]
+    tru = {r[0]: np.array([float(v) for v in r[1:]]) for r in rows}
+    est = {k: np.array(v["orientation_rad"]) for k, v in res.orientations.items()}
+    D = _rel(est["AT1"], est["AT2"]).T @ _rel(tru["AT1"], tru["AT2"])
+    angle = np.arccos(np.clip((np.trace(D) - 1) / 2, -1, 1))
+    u = max(max(v["orientation_std_rad"]) for v in res.orientations.values())
+    assert angle < 6 * u, (angle, u)
+    # propagate refuses what it does not draw yet, in one line
+    assert main(["propagate", str(ex / "obs.csv"), "--trials", "100"]) == 2
+    err = capsys.readouterr().err
+    assert "does not draw angle observations yet" in err and err.count("\n") == 1
