@@ -142,9 +142,10 @@ def adjust_command(
                                 help="Refuse the network when a point is too weakly observed, instead "
                                      "of leaving it out with a warning."),
     variance_components: Optional[str] = typer.Option(None, "--variance-components",
-                                                      help="Estimate one variance factor per group of "
-                                                           "distances, head or station (Förstner's iterated "
-                                                           "estimator), and adjust with the re-weighted σ."),
+                                                      help="Estimate one variance factor per group, by head, "
+                                                           "station or kind (distances, angles; angles are "
+                                                           "always a group of their own), Förstner's iterated "
+                                                           "estimator, and adjust with the re-weighted σ."),
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Adjust a self-calibrating multilateration network: station and target coordinates and the

@@ -383,7 +383,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     ang_out, orient = angle_results(core, lam0, final_crit)
     return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
                    scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
-                   sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient)
+                   sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient,
+                   angle_design_w=None if core.get("angles") is None else core["angles"]["design_w"])
 
 
 def coupling_results(core) -> tuple[tuple, tuple]:

@@ -263,6 +263,12 @@ class Observations:
                             distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad, self.station_heads,
                             self.sigma_azimuth_rad, self.sigma_elevation_rad)
 
+    def with_angle_sigma(self, sigma_azimuth_rad, sigma_elevation_rad) -> "Observations":
+        """A copy with other a-priori uncertainties of the angle observations (NaN: not an observation)."""
+        return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
+                            self.distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad, self.station_heads,
+                            sigma_azimuth_rad, sigma_elevation_rad)
+
     @property
     def has_angle_observations(self) -> bool:
         """Whether any azimuth or elevation is an observation (has its σ)."""

@@ -241,7 +241,8 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
         o_cov = orientation_covariance(cov, ang, p.orientation_rad, R, G, E, s, t)
         angles = dict(rows=ang, residual_rad=ang.residuals(p.station_xyz_m, p.target_xyz_m, p.orientation_rad),
                       redundancy=r_a, orientation_rad=rotate_orientations(ang, p.orientation_rad, R),
-                      orientation_cov=o_cov, station_ids=sub.station_ids, target_ids=sub.target_ids)
+                      orientation_cov=o_cov, station_ids=sub.station_ids, target_ids=sub.target_ids,
+                      design_w=A_rows * free_all)
     return dict(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free, angles=angles,
                 chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
                 vtpv=vtpv, iterations=conv.iterations, cond=cond, cov=cov, convergence=conv,

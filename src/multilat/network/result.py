@@ -167,6 +167,7 @@ class AdjustmentResult:
     weighted_control: tuple = ()
     angles: tuple = ()
     orientations: dict = field(default_factory=dict)
+    angle_design_w: object = field(default=None, repr=False)   # (a, 5s+3t+n_o) whitened angle rows, internal frame
     tests: dict = field(default_factory=dict)
     reliability: object = None
     sigma_source: dict = field(default_factory=dict)

@@ -33,11 +33,12 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.data import Observations
+from multilat.network.model import Q
 
 __all__ = ["VarianceComponent", "VarianceComponents", "GROUPINGS", "observation_groups",
            "estimate_variance_components"]
 
-GROUPINGS = ("head", "station")
+GROUPINGS = ("head", "station", "kind")
 
 #: Largest number of distances for which the rigorous (Helmert) standard errors are computed.
 RIGOROUS_MAX_OBS = 5000
@@ -82,14 +83,54 @@ class VarianceComponents:
 
 
 def observation_groups(obs: Observations, grouping: str = "head") -> tuple[np.ndarray, tuple]:
-    """Group index of each observation (m,) and the group names: by ``head`` (the head of each
-    station; the station without a head column) or by ``station``."""
+    """Group index of each observation row and the group names. Rows: the distances (m), then the
+    angle observations in :func:`multilat.network.angle_rows.angle_rows` order. ``head`` / ``station``:
+    the distances by the head (or station) that measured them, the angles one more group
+    ``angles``; ``kind``: ``distances`` and ``angles``."""
+    from multilat.network.angle_rows import angle_rows
+
+    ar = angle_rows(obs)
+    a = 0 if ar is None else ar.n_rows
     if grouping == "head":
-        names = tuple(obs.head_ids)
-        return obs.head_index[obs.station_index], names
-    if grouping == "station":
-        return np.asarray(obs.station_index), tuple(obs.station_ids)
-    raise MultilatError(f"--variance-components: grouping must be one of {', '.join(GROUPINGS)}, got {grouping!r}")
+        gi, names = obs.head_index[obs.station_index], tuple(obs.head_ids)
+    elif grouping == "station":
+        gi, names = np.asarray(obs.station_index), tuple(obs.station_ids)
+    elif grouping == "kind":
+        gi, names = np.zeros(obs.n_obs, np.int64), ("distances",)
+    else:
+        raise MultilatError(f"--variance-components: grouping must be one of {', '.join(GROUPINGS)}, "
+                            f"got {grouping!r}")
+    if a:
+        gi, names = np.concatenate([gi, np.full(a, len(names))]), names + ("angles",)
+    return np.asarray(gi, np.int64), names
+
+
+def _rows(obs: Observations, res):
+    """Whitened residuals and redundancy numbers of every row (distances, then angles)."""
+    v = [res.residuals_m / obs.sigma_m]
+    r = [res.redundancy]
+    if res.angles:
+        v.append(np.array([q["residual_rad"] / q["sigma_rad"] for q in res.angles]))
+        r.append(np.array([q["redundancy"] for q in res.angles]))
+    return np.concatenate(v), np.concatenate(r)
+
+
+def _scaled(obs: Observations, gi, scale2, ar):
+    """``obs`` with each row's σ scaled by √(factor of its group)."""
+    m = obs.n_obs
+    f = np.sqrt(scale2[gi])
+    out = obs.with_sigma(obs.sigma_m * f[:m])
+    if ar is None:
+        return out
+    saz = None if obs.sigma_azimuth_rad is None else obs.sigma_azimuth_rad.copy()
+    sel = None if obs.sigma_elevation_rad is None else obs.sigma_elevation_rad.copy()
+    fa = f[m:]
+    az = ar.kind == 0
+    if saz is not None:
+        saz[ar.obs_index[az]] *= fa[az]
+    if sel is not None:
+        sel[ar.obs_index[~az]] *= fa[~az]
+    return out.with_angle_sigma(saz, sel)
 
 
 def estimate_variance_components(obs: Observations, *, grouping: str = "head", groups=None, names=None,
@@ -100,8 +141,10 @@ def estimate_variance_components(obs: Observations, *, grouping: str = "head", g
     Parameters
     ----------
     obs : Observations
-    grouping : "head" or "station"  (ignored when ``groups`` is given)
-    groups : ndarray of int (m,), optional  a group index per observation (``names`` their names)
+    grouping : "head", "station" or "kind"  (ignored when ``groups`` is given); see
+        :func:`observation_groups` (angle observations form their own group)
+    groups : ndarray of int, optional  a group index per row: the distances (m), then the angle
+        observations (``names`` the groups' names); of length m when there are no angles
     max_iter, tol : the iteration stops when every new factor is within ``1 ± tol``
     snooping : data snooping in the final adjustment (never during the estimation)
     adjust_options : passed to :func:`multilat.network.adjust.adjust` (datum, points, scale_bars, ...)
@@ -113,35 +156,39 @@ def estimate_variance_components(obs: Observations, *, grouping: str = "head", g
         or no convergence within ``max_iter`` — one line.
     """
     from multilat.network.adjust import adjust
+    from multilat.network.angle_rows import angle_rows
 
     if adjust_options.get("cost", "distance") != "distance":
         raise MultilatError("variance components need the distance cost (weighted observations)")
+    ar = angle_rows(obs)
+    n_rows = obs.n_obs + (0 if ar is None else ar.n_rows)
     if groups is None:
         gi, gnames = observation_groups(obs, grouping)
     else:
         gi = np.asarray(groups, np.int64)
-        if gi.shape != (obs.n_obs,) or gi.min() < 0:
-            raise MultilatError("groups must give a group index >= 0 for every observation")
+        if gi.shape != (n_rows,) or gi.min() < 0:
+            raise MultilatError(f"groups must give a group index >= 0 for every observation row ({n_rows}: "
+                                "the distances, then the angles)")
         gnames = tuple(names) if names is not None else tuple(str(g) for g in range(int(gi.max()) + 1))
         grouping = "custom"
     ng = len(gnames)
-    sigma0 = np.asarray(obs.sigma_m, float)
+    options = dict(adjust_options, variance_factor="known")
     scale2 = np.ones(ng)
-    start = adjust_options.pop("initial", None)
+    start = options.pop("initial", None)
     it = 0
     converged = False
     res = None
     while it < max_iter:
         it += 1
-        cur = obs.with_sigma(sigma0 * np.sqrt(scale2[gi]))
+        cur = _scaled(obs, gi, scale2, ar)
         with warnings.catch_warnings():   # wrong weights on the way make the global test fail: expected
             warnings.simplefilter("ignore", UserWarning)
-            res = adjust(cur, snooping=False, initial=start if res is None else res, **adjust_options)
+            res = adjust(cur, snooping=False, initial=start if res is None else res, **options)
         if res.excluded:
             raise MultilatError("variance components: the adjustment left points out; remove them first")
-        v_w = res.residuals_m / cur.sigma_m
+        v_w, r_all = _rows(cur, res)
         num = np.bincount(gi, weights=v_w * v_w, minlength=ng)
-        red = np.bincount(gi, weights=res.redundancy, minlength=ng)
+        red = np.bincount(gi, weights=r_all, minlength=ng)
         weak = np.flatnonzero(red < 1.0)
         if weak.size:
             g = int(weak[0])
@@ -155,10 +202,11 @@ def estimate_variance_components(obs: Observations, *, grouping: str = "head", g
     if not converged:
         raise MultilatError(f"variance components did not converge in {max_iter} iterations "
                             f"(last factors {', '.join(f'{x:.3g}' for x in f)})")
-    sig = sigma0 * np.sqrt(scale2[gi])
-    final = adjust(obs.with_sigma(sig), snooping=snooping, initial=res, **adjust_options)
+    final_obs = _scaled(obs, gi, scale2, ar)
+    final = adjust(final_obs, snooping=snooping, initial=res,
+                   **{k: v for k, v in adjust_options.items() if k != "initial"})
     n = np.bincount(gi, minlength=ng)
-    if obs.n_obs <= RIGOROUS_MAX_OBS:
+    if n_rows <= RIGOROUS_MAX_OBS:
         S = helmert_matrix(res, gi, ng)
         var = 2.0 * np.diag(np.linalg.inv(S))
         method = "helmert"
@@ -169,16 +217,37 @@ def estimate_variance_components(obs: Observations, *, grouping: str = "head", g
                                     float(scale2[g] * np.sqrt(var[g])), float(np.sqrt(scale2[g])))
                   for g in range(ng))
     final = replace(final, sigma_source=dict(final.sigma_source or {}, variance_components=grouping))
-    return VarianceComponents(grouping, comps, it, converged, final, sig, method)
+    return VarianceComponents(grouping, comps, it, converged, final, final_obs.sigma_m, method)
+
+
+def _hat(res) -> np.ndarray:
+    """The whitened hat matrix (m + a, m + a) of distances and angle rows (internal frame)."""
+    cov = res.covariance
+    m = res.obs.n_obs
+    A_a = res.angle_design_w
+    n = Q * cov.s + 3 * cov.t
+    A_d = np.zeros((m, n if A_a is None else A_a.shape[1]))
+    r = np.arange(m)
+    for c in range(Q):
+        A_d[r, Q * cov.si + c] = cov.Js_w[:, c]
+    for c in range(3):
+        A_d[r, Q * cov.s + 3 * cov.ti + c] = cov.Jt_w[:, c]
+    A = A_d if A_a is None else np.vstack([A_d, A_a])
+    return A @ cov._times(A.T) / cov.factor
 
 
 def helmert_matrix(res, gi, ng: int) -> np.ndarray:
     """Helmert's ``S_gk = Σ_{i∈g, j∈k} R_ij²`` (ng, ng) from the whitened hat matrix of ``res``
-    (``R = I - H``, one row of ``H`` per distance)."""
-    m = res.obs.n_obs
+    (``R = I - H``; rows: the distances, then the angles). Distances only: one hat row at a time."""
     S = np.zeros((ng, ng))
+    if res.angle_design_w is not None:
+        R = np.eye(gi.size) - _hat(res)
+        for g in range(ng):
+            for k in range(ng):
+                S[g, k] = float(np.sum(R[np.ix_(gi == g, gi == k)] ** 2))
+        return S
     cov = res.covariance
-    for k in range(m):
+    for k in range(res.obs.n_obs):
         r = -cov.hat_row(k)
         r[k] += 1.0
         S[gi[k]] += np.bincount(gi, weights=r * r, minlength=ng)

@@ -34,7 +34,7 @@ _N = _EX / "network"
 SAMPLES = {
     "adjust": [["adjust", f"{_N}/small_volume_obs.csv", "--references", f"{_N}/small_volume_refs.csv"],
                ["adjust", f"{_N}/sequential/obs.csv", "--variance-components", "head"],
-               ["adjust", f"{_N}/mixed/obs.csv"],
+               ["adjust", f"{_N}/mixed/obs.csv", "--variance-components", "kind"],
                ["adjust", f"{_EX}/campaign/raw.csv", "-e", f"{_EX}/campaign/environment.csv", "--heights",
                 f"{_EX}/campaign/heights.csv", "--average-repeats"]],
     "propagate": [["propagate", "small-volume", "--trials", "2000"],
