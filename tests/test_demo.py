@@ -22,10 +22,10 @@ def demo_html(tmp_path_factory):
 def test_demo_quick_writes_report_with_every_section(demo_html):
     html = demo_html.read_text()
     assert html.startswith("<!doctype html>") and html.rstrip().endswith("</html>")
-    assert len(DEMO_SECTIONS) == 6
+    assert len(DEMO_SECTIONS) == 7
     # what was run, the sources, one section per capability, the warnings
     assert html.count("<section>") == len(DEMO_SECTIONS) + 3
-    for words in ("budget", "self-calibrat", "sequential", "campaign", "Monte Carlo", "ball bar"):
+    for words in ("budget", "self-calibrat", "sequential", "campaign", "Monte Carlo", "ball bar", "encoder angles"):
         assert words.lower() in html.lower(), words
 
 

@@ -88,7 +88,7 @@ def test_scale_bars_as_scale_datum_with_per_head_scales():
     bars = ReferenceLengths(tuple(a for a, _ in pairs), tuple(b for _, b in pairs), L, np.full(3, 2e-6))
     res = adjust(net.obs, initial=net, scales=True, scale_bars=bars, snooping=False)
     prob = pr.problem_from_observations(net.obs, adjustment=res, scale_bars=bars, references=bars)
-    assert prob.network.n_couplings == 3 and prob.network.scale_free.all()
+    assert prob.network.n_extra == 3 and prob.network.scale_free.all()
     r = _check(res, prob)
     # the bars' lengths: MC spread of the adjusted bar vs the adjustment's u of that length
     for q, (a, b) in enumerate(pairs):
@@ -112,7 +112,7 @@ def test_weighted_and_hard_control():
                  np.vstack([np.full((2, 3), np.nan)] + [sd] * 3))
     res = adjust(net.obs, initial=net, points=pts, datum="control", snooping=False)
     prob = pr.problem_from_observations(net.obs, adjustment=res, datum="control", points=pts)
-    assert prob.network.datum is None and prob.network.n_couplings == 9
+    assert prob.network.datum is None and prob.network.n_extra == 9
     assert prob.network.target_held[:2].all() and not prob.network.target_held[2:].any()
     _check(res, prob)
 
@@ -132,8 +132,8 @@ def test_couplings_not_drawn_would_be_caught():
     g = np.random.default_rng(3)
     d = prob.distance_m + g.standard_normal((2000, nw.n_obs)) * nw.sigma_m
     held = nw.solve(d)                                              # couplings at their values
-    drawn = nw.solve(d, couplings=nw.coupling_value_m + g.standard_normal((2000, nw.n_couplings))
-                     * nw.coupling_sigma_m)
+    drawn = nw.solve(d, extra=nw.extra_value + g.standard_normal((2000, nw.n_extra))
+                     * nw.extra_sigma)
     lin = np.sqrt(np.diag(nw.linear_covariance()))[4 * nw.n_stations:]
     sd_held = held.target_xyz_m.reshape(2000, -1).std(axis=0, ddof=1)
     sd_drawn = drawn.target_xyz_m.reshape(2000, -1).std(axis=0, ddof=1)
@@ -246,3 +246,26 @@ def test_far_trials_fall_back_to_gauss_newton():
     b = net.solve(d, method="gauss-newton", max_iter=30)
     assert a.retried.all() and a.converged.all() and b.converged.all()
     assert np.max(np.abs(a.target_xyz_m - b.target_xyz_m)) < 1e-7
+
+
+def test_angles_are_drawn_and_match_the_adjustments_covariance():
+    """A mixed campaign (4 heads, 2 trackers with angles): the general solver's linear covariance equals
+    adjust's (with the angles and orientations, a second implementation) to 1e-8, and the Monte Carlo
+    (distances, angles drawn) agrees with it within 5 MC standard errors; without drawing the angles the
+    targets' spread falls below it."""
+    from multilat.network.generator import mixed_network
+
+    net, _ = mixed_network(np.random.default_rng([18, 1]))
+    res = adjust(net.obs, initial=net, snooping=False)
+    prob = pr.problem_from_observations(net.obs, adjustment=res)
+    nw = prob.network
+    assert nw.n_extra == len(res.angles) and nw.n_orientation == 6
+    r = _check(res, prob)
+    # mutation: the angles held at their values in every trial -> less spread than the linear covariance
+    g = np.random.default_rng(9)
+    d = prob.distance_m + g.standard_normal((2000, nw.n_obs)) * nw.sigma_m
+    held = nw.solve(d)
+    lin = np.sqrt(np.diag(nw.linear_covariance()))[4 * nw.n_stations:]
+    sd = held.target_xyz_m.reshape(2000, -1).std(axis=0, ddof=1)
+    assert np.median(sd / lin) < 1 - 5 * np.sqrt(1 / (2 * 1999))     # measured 0.88: 7.5 SE below
+    assert r.to_dict()["solver"] == "batched-coupled"

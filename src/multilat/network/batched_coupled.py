@@ -9,7 +9,11 @@ that :func:`multilat.network.adjust.adjust` solves, with the same model:
   station ``i``: offsets and scales belong to heads), weights ``1 / sigma_k**2``;
 * scale bars ``L_b = |X_a - X_b|`` between any two points, weights ``1 / u_b**2``;
 * weighted control ``c = X_pc`` (one row per coordinate), weights ``1 / s_pc**2``; hard control
-  points (no uncertainty) and fixed offsets/scales are held at their nominal values.
+  points (no uncertainty) and fixed offsets/scales are held at their nominal values;
+* angle observations (azimuth, elevation; :mod:`multilat.network.angle_rows`) of stations with an
+  orientation ``(ω, φ, κ)``, weights ``1 / σ²``; the orientations are unknowns of every trial (not
+  reported: the rigid datum fit of the coordinates does not need them, since the datum conditions
+  have no orientation rows).
 
 Each trial starts from the nominal solution (the adjustment of the measured values) and iterates a
 chord method: the exact gradient ``J(x)^T W r(x)`` of the trial, the normal matrix frozen at the
@@ -20,7 +24,9 @@ fails too. The datum is applied to every trial as in the batched solver
 (:class:`multilat.network.trial_datum.TrialDatum`: rigid fit onto the nominal points or 3-2-1); under
 a control datum the control observations place the network and nothing is moved.
 
-Unknowns (the ``P`` space): ``[station xyz (3s), head offsets (h), head scales (h), target xyz (3t)]``;
+Unknowns (the ``P`` space): ``[station xyz (3s), head offsets (h), head scales (h), target xyz (3t),
+orientations (3 per oriented station)]``; the "extra" observations of a trial are the bars' lengths,
+the control coordinates and the angles (``extra_value``, ``extra_sigma``: metres or radians);
 results are returned in the batched layout ``[station xyz (3s), offset per station (s), target xyz
 (3t)]`` (a head's offset repeated on each of its stations) so that :mod:`multilat.network.propagate`
 summarises both solvers the same way. Scales are estimated in every trial but not reported.
@@ -86,18 +92,27 @@ class CoupledBatchedNetwork(NetworkSizes):
     control_axis: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     control_value_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
     control_sigma_m: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    angle_station: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    angle_target: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    angle_kind: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    angle_value_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    angle_sigma_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    orientation_rad: np.ndarray = None      # (s, 3) nominal orientations (rows of oriented stations used)
     datum: object = None
     _pre: dict = field(default=None, repr=False)
 
     def __post_init__(self):
-        i64 = ("station_index", "target_index", "head_index", "bar_a", "bar_b", "control_point", "control_axis")
+        i64 = ("station_index", "target_index", "head_index", "bar_a", "bar_b", "control_point", "control_axis",
+               "angle_station", "angle_target", "angle_kind")
         for k in i64:
             object.__setattr__(self, k, np.asarray(getattr(self, k), np.int64).ravel())
         for k in ("sigma_m", "offset_m", "scale", "bar_length_m", "bar_sigma_m", "control_value_m",
-                  "control_sigma_m"):
+                  "control_sigma_m", "angle_value_rad", "angle_sigma_rad"):
             object.__setattr__(self, k, np.asarray(getattr(self, k), float).ravel())
         for k in ("station_xyz_m", "target_xyz_m"):
             object.__setattr__(self, k, np.asarray(getattr(self, k), float).reshape(-1, 3))
+        ori = np.zeros((len(self.station_xyz_m), 3)) if self.orientation_rad is None else self.orientation_rad
+        object.__setattr__(self, "orientation_rad", np.asarray(ori, float).reshape(-1, 3))
         for k in ("station_held", "target_held", "offset_free", "scale_free"):
             object.__setattr__(self, k, np.asarray(getattr(self, k), bool).ravel())
         s, t, m = self.n_stations, self.n_targets, self.n_obs
@@ -108,10 +123,10 @@ class CoupledBatchedNetwork(NetworkSizes):
             raise MultilatError("observation indices out of range")
         if self.offset_free.shape != (h,) or self.scale_free.shape != (h,):
             raise MultilatError("offset_free and scale_free need one entry per head")
-        sig = self.coupling_sigma_m
+        sig = self.extra_sigma
         if not (np.all(np.isfinite(self.sigma_m)) and np.all(self.sigma_m > 0)
                 and np.all(np.isfinite(sig)) and np.all(sig > 0)):
-            raise MultilatError("every sigma (distances, scale bars, control) must be finite and > 0")
+            raise MultilatError("every sigma (distances, scale bars, control, angles) must be finite and > 0")
         if m * (s + t) > 50_000_000:
             raise MultilatError(f"network too large for the batched Monte Carlo solver ({m} observations, "
                                 f"{t} targets)")
@@ -131,21 +146,34 @@ class CoupledBatchedNetwork(NetworkSizes):
         return 4 * self.n_stations + 3 * self.n_targets
 
     @property
-    def n_couplings(self) -> int:
-        return len(self.bar_a) + len(self.control_point)
+    def oriented(self) -> np.ndarray:
+        """(s,) stations with angle observations (an orientation each)."""
+        out = np.zeros(self.n_stations, bool)
+        out[self.angle_station] = True
+        return out
 
     @property
-    def coupling_sigma_m(self) -> np.ndarray:
-        return np.concatenate([self.bar_sigma_m, self.control_sigma_m])
+    def n_orientation(self) -> int:
+        return 3 * int(self.oriented.sum())
 
     @property
-    def coupling_value_m(self) -> np.ndarray:
-        """The couplings' observed values (bar lengths, control coordinates), metres."""
-        return np.concatenate([self.bar_length_m, self.control_value_m])
+    def n_extra(self) -> int:
+        """Observations beside the distances: scale bars, control coordinates, angles."""
+        return len(self.bar_a) + len(self.control_point) + len(self.angle_station)
+
+    @property
+    def extra_sigma(self) -> np.ndarray:
+        """Standard uncertainties of the extra observations (m for bars and control, rad for angles)."""
+        return np.concatenate([self.bar_sigma_m, self.control_sigma_m, self.angle_sigma_rad])
+
+    @property
+    def extra_value(self) -> np.ndarray:
+        """The extra observations' measured values (bar lengths, control coordinates, angles)."""
+        return np.concatenate([self.bar_length_m, self.control_value_m, self.angle_value_rad])
 
     @property
     def dof(self) -> int:
-        return self.n_obs + self.n_couplings - int(self._pre["free"].sum()) + (0 if self.datum is None else 6)
+        return self.n_obs + self.n_extra - int(self._pre["free"].sum()) + (0 if self.datum is None else 6)
 
     def nominal_distance_m(self) -> np.ndarray:
         x = self._pre["x0"][None]
@@ -155,8 +183,17 @@ class CoupledBatchedNetwork(NetworkSizes):
     def _split(self, x):
         s, h, t = self.n_stations, self.n_heads, self.n_targets
         n = x.shape[0]
+        e = 3 * s + 2 * h + 3 * t
         return (x[:, :3 * s].reshape(n, s, 3), x[:, 3 * s:3 * s + h], x[:, 3 * s + h:3 * s + 2 * h],
-                x[:, 3 * s + 2 * h:].reshape(n, t, 3))
+                x[:, 3 * s + 2 * h:e].reshape(n, t, 3))
+
+    def _orientations(self, x):
+        """(n, s, 3) orientations of every trial (zeros for stations without angles)."""
+        n = x.shape[0]
+        e = 3 * (self.n_stations + self.n_targets) + 2 * self.n_heads
+        O = np.zeros((n, self.n_stations, 3))
+        O[:, self.oriented] = x[:, e:].reshape(n, -1, 3)
+        return O
 
     def _x0(self) -> np.ndarray:
         hi = self.head_index
@@ -165,12 +202,13 @@ class CoupledBatchedNetwork(NetworkSizes):
         if not (np.allclose(self.offset_m, o_h[hi], rtol=0, atol=1e-12)
                 and np.allclose(self.scale, k_h[hi], rtol=0, atol=1e-15)):
             raise MultilatError("stations of one head must have the same nominal offset and scale")
-        return np.concatenate([self.station_xyz_m.ravel(), o_h, k_h, self.target_xyz_m.ravel()])
+        return np.concatenate([self.station_xyz_m.ravel(), o_h, k_h, self.target_xyz_m.ravel(),
+                               self.orientation_rad[self.oriented].ravel()])
 
     def _layout_map(self) -> np.ndarray:
         """``M`` (4s + 3t, P): the reported layout from the P space."""
         s, h, t = self.n_stations, self.n_heads, self.n_targets
-        M = np.zeros((4 * s + 3 * t, 3 * s + 2 * h + 3 * t))
+        M = np.zeros((4 * s + 3 * t, 3 * s + 2 * h + 3 * t + self.n_orientation))
         M[np.arange(3 * s), np.arange(3 * s)] = 1.0
         M[3 * s + np.arange(s), 3 * s + self.head_index] = 1.0
         M[4 * s + np.arange(3 * t), 3 * s + 2 * h + np.arange(3 * t)] = 1.0
@@ -195,6 +233,29 @@ class CoupledBatchedNetwork(NetworkSizes):
         L = np.sqrt(np.einsum("nbi,nbi->nb", dv, dv))
         return np.concatenate([L, X[:, self.control_point, self.control_axis]], axis=1)
 
+    def _angle_parts(self, x):
+        """Predicted angles (n, a) and their derivatives per trial: d/dT (n, a, 3) (= −d/dH) and
+        d/d(ω, φ, κ) (n, a, 3), as :func:`multilat.network.angles.angle_jacobian` row by row."""
+        from multilat.network.angles import rotation_derivatives, rotation_matrix
+
+        H, _, _, T = self._split(x)
+        O = self._orientations(x)[:, self.angle_station]                        # (n, a, 3)
+        R = rotation_matrix(O)                                                    # (n, a, 3, 3)
+        d = T[:, self.angle_target] - H[:, self.angle_station]                  # (n, a, 3)
+        v = np.einsum("naji,naj->nai", R, d)
+        vx, vy, vz = v[..., 0], v[..., 1], v[..., 2]
+        h2 = vx * vx + vy * vy
+        h = np.sqrt(h2)
+        n2 = h2 + vz * vz
+        az = self.angle_kind == 0
+        pred = np.where(az, np.arctan2(vy, vx), np.arctan2(vz, h))
+        dv = np.where(az[..., None], np.stack([-vy / h2, vx / h2, np.zeros_like(vx)], -1),
+                      np.stack([-vz * vx / (h * n2), -vz * vy / (h * n2), h / n2], -1))
+        dT = np.einsum("nak,najk->naj", dv, R)
+        dR = rotation_derivatives(O)                                              # (n, a, 3, 3, 3)
+        dO = np.einsum("nak,napjk,naj->nap", dv, dR, d)
+        return pred, dT, dO
+
     def _jacobian(self, x1) -> np.ndarray:
         """Jacobian of all model values (distances, then couplings) at one point x1 (P,), (m + q, P)."""
         s, h, t, m = self.n_stations, self.n_heads, self.n_targets, self.n_obs
@@ -205,7 +266,7 @@ class CoupledBatchedNetwork(NetworkSizes):
         diff = H[si] - T[ti]
         rho = np.linalg.norm(diff, axis=1)
         u = diff / rho[:, None]
-        J = np.zeros((m + self.n_couplings, P))
+        J = np.zeros((m + self.n_extra, P))
         r = np.arange(m)
         for c in range(3):
             J[r, 3 * si + c] = (1.0 + k[hs]) * u[:, c]
@@ -224,6 +285,16 @@ class CoupledBatchedNetwork(NetworkSizes):
                 J[rb, col[self.bar_b] + c] -= ub[:, c]
         if len(self.control_point):
             J[m + nb + np.arange(len(self.control_point)), col[self.control_point] + self.control_axis] = 1.0
+        a = len(self.angle_station)
+        if a:
+            _, dT, dO = self._angle_parts(x1[None])
+            ra = m + nb + len(self.control_point) + np.arange(a)
+            slot = np.cumsum(self.oriented) - 1
+            e = 3 * s + 2 * h + 3 * t
+            for c in range(3):
+                J[ra, 3 * self.angle_station + c] = -dT[0, :, c]
+                J[ra, 3 * s + 2 * h + 3 * self.angle_target + c] = dT[0, :, c]
+                J[ra, e + 3 * slot[self.angle_station] + c] = dO[0, :, c]
         return J
 
     # -- precomputation --------------------------------------------------------------------------
@@ -232,21 +303,23 @@ class CoupledBatchedNetwork(NetworkSizes):
         x0 = self._x0()
         P = x0.size
         free = np.concatenate([np.repeat(~self.station_held, 3), self.offset_free, self.scale_free,
-                               np.repeat(~self.target_held, 3)])
-        w_all = 1.0 / np.concatenate([self.sigma_m, self.coupling_sigma_m]) ** 2
+                               np.repeat(~self.target_held, 3), np.ones(self.n_orientation, bool)])
+        w_all = 1.0 / np.concatenate([self.sigma_m, self.extra_sigma]) ** 2
         J0 = self._jacobian(x0)
         N = J0.T @ (w_all[:, None] * J0)
         E = G = None
         pen = np.zeros((P, P))
         if self.datum is not None:
             EL = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)
+            # no orientation rows: the coordinates' block of the S-transformation needs none
+            e = 3 * s + 2 * h + 3 * t
             E = np.zeros((P, 6))
             E[:3 * s] = EL[:3 * s]
-            E[3 * s + 2 * h:] = EL[4 * s:]
+            E[3 * s + 2 * h:e] = EL[4 * s:]
             gp = helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m]))
             G = np.zeros((P, 6))
             G[:3 * s] = gp[:3 * s]
-            G[3 * s + 2 * h:] = gp[3 * s:]
+            G[3 * s + 2 * h:e] = gp[3 * s:]
             ef = E[free]
             c = np.trace(N[np.ix_(free, free)]) / free.sum() / max(np.trace(ef.T @ ef) / 6, 1e-300)
             pen = c * (E @ E.T)
@@ -268,10 +341,17 @@ class CoupledBatchedNetwork(NetworkSizes):
         b_pm = np.zeros((len(self.bar_a), s + t))
         b_pm[np.arange(len(self.bar_a)), self.bar_a] += 1.0
         b_pm[np.arange(len(self.bar_a)), self.bar_b] -= 1.0
+        a = len(self.angle_station)
+        ang_s = np.zeros((a, s + t))                       # angle row -> its station (stacked points)
+        ang_s[np.arange(a), self.angle_station] = 1.0
+        ang_t = np.zeros((a, s + t))                       # angle row -> its target
+        ang_t[np.arange(a), s + self.angle_target] = 1.0
+        ang_slot = np.zeros((a, int(self.oriented.sum())))   # angle row -> its station's orientation slot
+        ang_slot[np.arange(a), (np.cumsum(self.oriented) - 1)[self.angle_station]] = 1.0
         c_in = np.zeros((len(self.control_point), 3 * (s + t)))
         c_in[np.arange(len(self.control_point)), 3 * self.control_point + self.control_axis] = 1.0
         return dict(x0=x0, free=free, w_all=w_all, J0=J0, N=N, pen=pen, Ninv=Ninv, E=E, G=G,
-                    a_s=a_s, a_t=a_t, a_h=a_h, b_pm=b_pm, c_in=c_in,
+                    a_s=a_s, a_t=a_t, a_h=a_h, b_pm=b_pm, c_in=c_in, ang_s=ang_s, ang_t=ang_t, ang_slot=ang_slot,
                     scale_len=float(np.max(np.abs(self.nominal_distance_m_raw(x0)))))
 
     def nominal_distance_m_raw(self, x0) -> np.ndarray:
@@ -298,41 +378,53 @@ class CoupledBatchedNetwork(NetworkSizes):
         gX = np.concatenate([eut @ p["a_s"], -(eut @ p["a_t"])], axis=2).transpose(0, 2, 1)   # (n, s + t, 3)
         g_o = e @ p["a_h"]
         g_k = (e * rho) @ p["a_h"]
-        nb = len(self.bar_a)
-        if self.n_couplings:
+        nb, nc, na = len(self.bar_a), len(self.control_point), len(self.angle_station)
+        g_or = np.zeros((n, self.n_orientation))
+        if nb + nc:
             X = np.concatenate([H, T], axis=1)
-            rc = c - self._coupling_model(x)
-            ec = w[m:] * rc
+            rc = c[:, :nb + nc] - self._coupling_model(x)
+            ec = w[m:m + nb + nc] * rc
             vtpv = vtpv + np.einsum("nq,nq->n", ec, rc)
             if nb:
                 dv = X[:, self.bar_a] - X[:, self.bar_b]
                 ub = dv / np.sqrt(np.einsum("nbi,nbi->nb", dv, dv))[..., None]
                 gX = gX + np.einsum("nbc,bp->npc", ec[:, :nb, None] * ub, p["b_pm"])
-            if len(self.control_point):
+            if nc:
                 gX = gX + (ec[:, nb:] @ p["c_in"]).reshape(n, s + t, 3)
-        g = np.concatenate([gX[:, :s].reshape(n, 3 * s), g_o, g_k, gX[:, s:].reshape(n, 3 * t)], axis=1)
+        if na:
+            pred, dT, dO = self._angle_parts(x)
+            ra = c[:, nb + nc:] - pred
+            ra = np.where(self.angle_kind == 0, (ra + np.pi) % (2.0 * np.pi) - np.pi, ra)   # wrapped azimuths
+            ea = w[m + nb + nc:] * ra
+            vtpv = vtpv + np.einsum("na,na->n", ea, ra)
+            eT = ea[..., None] * dT                                                  # (n, a, 3)
+            gX = gX + np.einsum("nac,ap->npc", eT, p["ang_t"]) - np.einsum("nac,ap->npc", eT, p["ang_s"])
+            g_or = (np.einsum("nac,ak->nkc", ea[..., None] * dO, p["ang_slot"])).reshape(n, -1)
+        g = np.concatenate([gX[:, :s].reshape(n, 3 * s), g_o, g_k, gX[:, s:].reshape(n, 3 * t), g_or], axis=1)
         return g * p["free"], vtpv
 
     def _step_size(self, dx):
-        s, h = self.n_stations, self.n_heads
+        s, h, t = self.n_stations, self.n_heads, self.n_targets
         a = np.abs(dx)
         a[:, 3 * s + h:3 * s + 2 * h] *= self._pre["scale_len"]
+        a[:, 3 * s + 2 * h + 3 * t:] *= self._pre["scale_len"]                # orientations, rad x length
         return a.max(axis=1)
 
     # -- solving ---------------------------------------------------------------------------------
-    def solve(self, distance_m: np.ndarray, *, couplings: np.ndarray | None = None, tol_m: float = 1e-10,
+    def solve(self, distance_m: np.ndarray, *, extra: np.ndarray | None = None, tol_m: float = 1e-10,
               max_iter: int = 10, fallback: bool = True) -> BatchSolution:
-        """Solve ``n`` trials: distances (n, m) and the couplings' observed values (n, q) (default:
-        their nominal values). Returns the solutions in the datum, offsets per station."""
+        """Solve ``n`` trials: distances (n, m) and the extra observations' values (n, q: bar lengths,
+        control coordinates, angles; default their measured values). Returns the solutions in the
+        datum, offsets per station."""
         d = np.ascontiguousarray(distance_m, dtype=float)
         if d.ndim == 1:
             d = d[None]
         n = d.shape[0]
         if d.shape[1] != self.n_obs:
             raise MultilatError(f"distance_m must have shape (n, {self.n_obs}), got {np.shape(distance_m)}")
-        q = self.n_couplings
-        c = (np.broadcast_to(self.coupling_value_m, (n, q)) if couplings is None
-             else np.asarray(couplings, float).reshape(n, q))
+        q = self.n_extra
+        c = (np.broadcast_to(self.extra_value, (n, q)) if extra is None
+             else np.asarray(extra, float).reshape(n, q))
         p = self._pre
         x = np.broadcast_to(p["x0"], (n, p["x0"].size)).copy()
         iters = np.full(n, max_iter, np.int64)
@@ -409,7 +501,7 @@ class CoupledBatchedNetwork(NetworkSizes):
                 C[:m, :m] = np.asarray(cov_m2, float)
             else:
                 C[np.arange(m), np.arange(m)] = np.asarray(sigma_m, float) ** 2
-            C[np.arange(m, len(w)), np.arange(m, len(w))] = self.coupling_sigma_m ** 2
+            C[np.arange(m, len(w)), np.arange(m, len(w))] = self.extra_sigma ** 2
             jw = (J * w[:, None]).T
             q = q @ (jw @ C @ jw.T) @ q
         if self.datum is not None:

@@ -202,10 +202,6 @@ def problem_from_observations(obs, *, datum="free", pairs=None, references=None,
     """
     from multilat.network.datum import parse_datum
 
-    if obs.has_angle_observations:
-        raise MultilatError("propagate: the Monte Carlo does not draw angle observations yet; adjust them with "
-                            "`multilat adjust` (linear covariance), or drop the sigma_azimuth_rad/"
-                            "sigma_elevation_rad columns to propagate the distances alone")
     dat = parse_datum(datum)
     if adjustment is None:
         from multilat.network.adjust import adjust
@@ -223,7 +219,7 @@ def problem_from_observations(obs, *, datum="free", pairs=None, references=None,
     pairs_, ref = _pairs_and_refs(pairs, references, target_ids, station_ids)
     heads = _heads_for(obs.head_of_station, instrument, head)
     general = (obs.shares_heads or scale_bars is not None or dat.kind == "control"
-               or bool(np.any(res.scale_estimated)))
+               or bool(np.any(res.scale_estimated)) or obs.has_angle_observations)
     if general:
         net = _coupled_network(obs, res, dat, scale_bars, points)
     else:
@@ -255,6 +251,15 @@ def _coupled_network(obs, res, dat, scale_bars, points):
     spec = coupling_spec(obs, bars=scale_bars, points=points, control=dat.kind == "control")
     bars = () if spec is None else spec.bars
     ctrl = () if spec is None else spec.control
+    from multilat.network.angle_rows import angle_rows
+
+    ar = angle_rows(obs)
+    ori = np.zeros((s, 3))
+    for sid, o in res.orientations.items():
+        ori[obs.station_ids.index(sid)] = o["orientation_rad"]
+    ang = {} if ar is None else dict(angle_station=ar.station_index, angle_target=ar.target_index,
+                                     angle_kind=ar.kind, angle_value_rad=ar.value_rad, angle_sigma_rad=ar.sigma_rad,
+                                     orientation_rad=ori)
     return CoupledBatchedNetwork(
         obs.station_index, obs.target_index, obs.sigma_m, hi, res.station_xyz_m, res.offset_m,
         res.scale, res.target_xyz_m, held[:s], held[s:], np.asarray(res.offset_estimated, bool)[first],
@@ -264,7 +269,7 @@ def _coupled_network(obs, res, dat, scale_bars, points):
         control_point=[pos[c[0]] for c in ctrl for _ in range(3)],
         control_axis=[a for _ in ctrl for a in range(3)],
         control_value_m=[c[1][a] for c in ctrl for a in range(3)],
-        control_sigma_m=[c[2][a] for c in ctrl for a in range(3)], datum=dt)
+        control_sigma_m=[c[2][a] for c in ctrl for a in range(3)], datum=dt, **ang)
 
 
 def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pairs=None,
@@ -335,9 +340,9 @@ def _solve_block(spec: _ChunkSpec, entropy, spawn_key: tuple, b: int, n: int) ->
     e = _draw_errors(spec, n, g)
     d = spec.distance_m + e
     net = spec.network
-    q = getattr(net, "n_couplings", 0)
-    if q:        # scale bars and weighted control: every trial draws their values too (after the distances)
-        sol = net.solve(d, couplings=net.coupling_value_m + g.standard_normal((n, q)) * net.coupling_sigma_m)
+    q = getattr(net, "n_extra", 0)
+    if q:   # scale bars, weighted control, angles: every trial draws their values too (after the distances)
+        sol = net.solve(d, extra=net.extra_value + g.standard_normal((n, q)) * net.extra_sigma)
     else:
         sol = net.solve(d)
     ok = sol.converged

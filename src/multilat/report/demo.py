@@ -16,6 +16,7 @@ DEMO_SECTIONS = (
     "multilat.report.distance_demo",   # Guillory 2020 §2-3: air index, ADM, budget
     "multilat.report.network_demo",    # Guillory 2020 §4: self-calibrating multilateration
     "multilat.report.sequential_demo",  # heads moved over several stations (issue 16)
+    "multilat.report.angles_demo",      # angles as observations: encoder angles, trackers (issue 15)
     "multilat.report.campaign_demo",   # Guillory 2020 §3.2, 4.2: raw readings -> corrected distances
     "multilat.report.propagate_demo",  # full Monte Carlo through the adjustment
     "multilat.report.lbb_demo",        # Canning 2007: laser ball bar
