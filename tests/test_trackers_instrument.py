@@ -92,3 +92,26 @@ def test_tracker_named_like_a_head_is_refused(tmp_path):
     f.write_text(text)
     with pytest.raises(MultilatError, match="'AT1' is also a head"):
         load_instrument(f)
+
+
+def test_tracker_angles_get_their_sigma_from_the_specification(tmp_path):
+    """The mixed example without its σ columns, read with the instrument: the trackers' angles become
+    observations with σ = std_per_mpe · (a + b L) / L (closed form), equal to the shipped columns
+    (written from the same specification at the true range); the heads' rows have no angles."""
+    ex = Path(__file__).resolve().parents[1] / "examples" / "network" / "mixed" / "obs.csv"
+    lines = ex.read_text().splitlines()
+    hdr = lines[0].split(",")
+    keep = [i for i, c in enumerate(hdr) if c not in ("sigma_azimuth_rad", "sigma_elevation_rad")]
+    p = tmp_path / "no_sigma.csv"
+    p.write_text("\n".join(",".join(r.split(",")[i] for i in keep) for r in lines) + "\n")
+    src: dict = {}
+    obs = read_observations(p, instrument=load_instrument(INST), sigma_source=src)
+    ref = read_observations(ex)
+    tr = np.isfinite(ref.sigma_azimuth_rad)
+    L = obs.distance_m[tr]
+    np.testing.assert_allclose(obs.sigma_azimuth_rad[tr], 0.5 * (15.0 + 6.0 * L) * 1e-6 / L, rtol=1e-15)
+    # the generator took the true range, the reader the measured distance (µm apart over metres)
+    np.testing.assert_allclose(obs.sigma_elevation_rad[tr], ref.sigma_elevation_rad[tr], rtol=1e-5)
+    assert np.all(np.isnan(obs.sigma_azimuth_rad[~tr])) and "angles" in src
+    # without the instrument: the angles stay initial values only
+    assert read_observations(p).sigma_azimuth_rad is None

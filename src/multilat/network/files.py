@@ -132,6 +132,10 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         sig = _model_sigma(d, st if hd is None else hd, instrument,
                            where=None if hd is None else tab.error)
         _record(sigma_source, "model", st, instrument, *(() if hd is None else (dict(zip(st, hd)),)))
+    if az is not None and saz is None and sel is None and instrument is not None:
+        saz, sel = _tracker_angle_sigma(d, st if hd is None else hd, az, el, instrument)
+        if saz is not None and sigma_source is not None:
+            sigma_source["angles"] = "laser trackers' transverse MPE × std_per_mpe over the range (instrument)"
     obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el, head=hd,
                                    sigma_azimuth_rad=saz, sigma_elevation_rad=sel)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
@@ -156,6 +160,25 @@ def _record(out, kind, *args):
         from multilat.network import sigma_source as ss
 
         out.update({"column": ss.file_column, "option": ss.option, "model": ss.distance_model}[kind](*args))
+
+
+def _tracker_angle_sigma(d, heads, az, el, instrument):
+    """The angles' σ of the rows read by a laser tracker of ``instrument`` (its transverse MPE over
+    the range, :meth:`multilat.tracker.TrackerSpec.angle_sigma_rad`), when the file gives the angles but
+    no σ columns; (None, None) when no row is a tracker's. Other rows' angles stay initial values only."""
+    from multilat import instrument as instr
+
+    inst = instr.load_instrument(instrument) if isinstance(instrument, (str, os.PathLike)) else instrument
+    trk = getattr(inst, "trackers", {}) or {}
+    heads = np.asarray(heads, dtype=object)
+    if not any(h in trk for h in dict.fromkeys(heads)):
+        return None, None
+    saz = np.full(d.shape, np.nan)
+    for hid in dict.fromkeys(heads):
+        if hid in trk:
+            m = (heads == hid) & np.isfinite(az) & np.isfinite(el)
+            saz[m] = trk[hid].spec().angle_sigma_rad(d[m])
+    return saz, saz.copy()
 
 
 def _model_sigma(d, heads, instrument, *, where=None):
