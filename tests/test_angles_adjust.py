@@ -200,12 +200,15 @@ def test_bad_angle_input_is_one_line(tmp_path, capsys):
     one[0] = SIG_ANGLE
     bad = Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
                        obs.sigma_m, obs.azimuth_rad, obs.elevation_rad, None, one, None)
-    with pytest.raises(MultilatError, match="needs at least 2 directions"):
+    with pytest.raises(MultilatError, match="needs at least 2 direction"):
         adjust(bad, initial=net, snooping=False)
-    from multilat.network.angle_rows import angle_rows
-
-    with pytest.raises(MultilatError, match="levelled"):
-        angle_rows(obs, levelled=("S1",))
+    with pytest.raises(MultilatError, match="levelled: 'T1' is not a station"):
+        Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
+                     obs.sigma_m, levelled=("T1",))
+    with pytest.raises(MultilatError, match="datum 321 would tilt"):
+        adjust(Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
+                            obs.sigma_m, obs.azimuth_rad, obs.elevation_rad, None, obs.sigma_azimuth_rad,
+                            obs.sigma_elevation_rad, ("S1",)), initial=net, datum="321:S3,S4,S5", snooping=False)
     p = tmp_path / "bad.csv"
     p.write_text("station,target,distance_m,sigma_m,azimuth_rad,elevation_rad,sigma_azimuth_rad\n"
                  "A,1,1.0,1e-5,0.1,2.0,1e-5\n")
@@ -261,3 +264,100 @@ def test_encoder_angles_on_the_small_volume_predicted_and_by_monte_carlo():
     assert a["solver"] == "CoupledBatchedNetwork" and d["solver"] == "BatchedNetwork"
     assert a["target_std_lin_rms_m"] < d["target_std_lin_rms_m"]
     assert a["interpoint_std_lin_rms_m"] < d["interpoint_std_lin_rms_m"]
+
+
+def test_levelled_station_equals_the_independent_solution():
+    """Station S1 levelled (its vertical = the world's z: κ only) and S2 with three angles: 4 datum
+    defects. Against the full-vector solution (S1's ω, φ held at 0; a's xyz and b's y held): vᵀPv,
+    dof, offsets, interpoint distances and — datum-free now that the vertical is observed — height
+    differences, to 1e-9 m; the dense inner-constraint covariance (4-vector null space from the SVD)
+    for the targets' blocks and the orientations' σ."""
+    net, obs0, ori = _mixed(seed=11, noise=False)
+    ori = ori.copy()
+    ori[0, :2] = 0.0                                   # S1 stands on its level
+    o = obs0
+    az, el = predicted_angles(net.station_xyz_m, ori, net.target_xyz_m, o.station_index, o.target_index)
+    rng = np.random.default_rng(4)
+    tr = np.isfinite(o.sigma_azimuth_rad)
+    az = az + np.where(tr, rng.normal(0, SIG_ANGLE, az.size), 0.0)
+    el = el + np.where(tr, rng.normal(0, SIG_ANGLE, el.size), 0.0)
+    d = o.distance_m + rng.normal(0, 1, o.n_obs) * o.sigma_m
+    obs = Observations(o.station_ids, o.target_ids, o.station_index, o.target_index, d, o.sigma_m, az, el, None,
+                       o.sigma_azimuth_rad, o.sigma_elevation_rad, ("S1",))
+    res = adjust(obs, initial=net, snooping=False)
+    s, t = obs.n_stations, obs.n_targets
+    n_ang = int(np.isfinite(obs.sigma_azimuth_rad).sum()) * 2
+    assert res.dof == obs.n_obs + n_ang - (4 * s + 3 * t + 1 + 3) + 4
+    oriented = np.zeros(s, bool)
+    oriented[[0, 1]] = True
+    x0 = _pack(net.station_xyz_m, net.target_xyz_m, net.offset_m, ori, oriented)
+    held = np.zeros(x0.size, bool)
+    held[[0, 1, 2, 4]] = True                          # station 0 xyz, station 1 y
+    e = 4 * s + 3 * t
+    held[[e, e + 1]] = True                            # S1's omega, phi
+    sol = least_squares(lambda y: _model(obs, np.where(held, x0, 0) + _scatter(y, held), oriented),
+                        x0[~held], method="lm", xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=40000)
+    x = np.where(held, x0, 0) + _scatter(sol.x, held)
+    assert res.sigma0 ** 2 * res.dof == pytest.approx(float(sol.fun @ sol.fun), rel=1e-8)
+    np.testing.assert_allclose(res.offset_m, x[3 * s + 3 * t:4 * s + 3 * t], atol=1e-9)
+    T = x[3 * s:3 * s + 3 * t].reshape(t, 3)
+    for a, b in [(0, 5), (3, 9), (12, 14)]:
+        assert res.target_xyz_m[a, 2] - res.target_xyz_m[b, 2] == pytest.approx(T[a, 2] - T[b, 2], abs=1e-9)
+        assert np.linalg.norm(res.target_xyz_m[a] - res.target_xyz_m[b]) == pytest.approx(
+            np.linalg.norm(T[a] - T[b]), abs=1e-9)
+    assert res.orientations["S1"]["orientation_rad"][:2] == [0.0, 0.0]
+    assert res.orientations["S1"]["orientation_std_rad"][:2] == [0.0, 0.0]
+    # covariance: dense inner constraints over all points with the 4 defects
+    O = np.zeros((s, 3))
+    O[oriented] = [res.orientations[sid]["orientation_rad"] for sid in ("S1", "S2")]
+    xm = _pack(res.station_xyz_m, res.target_xyz_m, res.offset_m, O, oriented)
+    keep = np.ones(xm.size, bool)
+    keep[[e, e + 1]] = False                           # S1's held omega, phi are not unknowns
+    J = _jac(obs, xm, oriented)[:, keep]
+    _, sv, Vt = np.linalg.svd(J)
+    assert sv[-4] < 1e-6 * sv[0] < sv[-5]
+    G = Vt[-4:].T
+    E = np.zeros((keep.sum(), 4))
+    E[:3 * (s + t)] = helmert_basis(np.vstack([res.station_xyz_m, res.target_xyz_m]))[:, [0, 1, 2, 5]]
+    S = np.eye(keep.sum()) - G @ np.linalg.solve(E.T @ G, E.T)
+    C = S @ np.linalg.pinv(J.T @ J, rcond=1e-12) @ S.T
+    for j in (0, 7, 14):
+        blk = C[3 * s + 3 * j:3 * s + 3 * j + 3, 3 * s + 3 * j:3 * s + 3 * j + 3]
+        np.testing.assert_allclose(res.target_cov_m2[j], blk, rtol=1e-6, atol=1e-6 * np.abs(blk).max())
+    std_o = np.sqrt(np.diag(C)[e:])                    # S1's kappa, S2's omega, phi, kappa
+    got = [res.orientations["S1"]["orientation_std_rad"][2], *res.orientations["S2"]["orientation_std_rad"]]
+    np.testing.assert_allclose(got, std_o, rtol=1e-6)
+
+
+def _scatter(y, held):
+    out = np.zeros(held.size)
+    out[~held] = y
+    return out
+
+
+def test_cli_levelled_option(tmp_path, capsys):
+    net, obs, _ = _mixed(seed=3)
+    p = tmp_path / "mixed.csv"
+    rows = ["station,target,distance_m,sigma_m,azimuth_rad,elevation_rad,sigma_azimuth_rad,sigma_elevation_rad"]
+    for k in range(obs.n_obs):
+        sa = obs.sigma_azimuth_rad[k]
+        rows.append(f"{obs.station_ids[obs.station_index[k]]},{obs.target_ids[obs.target_index[k]]},"
+                    f"{float(obs.distance_m[k])!r},{float(obs.sigma_m[k])!r},{float(obs.azimuth_rad[k])!r},"
+                    f"{float(obs.elevation_rad[k])!r},{'' if np.isnan(sa) else repr(float(sa))},"
+                    f"{'' if np.isnan(sa) else repr(float(sa))}")
+    p.write_text("\n".join(rows) + "\n")
+    assert main(["adjust", str(p), "--json", "--no-snooping"]) == 0
+    free = json.loads(capsys.readouterr().out)
+    # one levelled station only defines which way is up (its vertical = the frame's z): same fit, same dof
+    assert main(["adjust", str(p), "--json", "--no-snooping", "--levelled", "S1"]) == 0
+    one = json.loads(capsys.readouterr().out)
+    assert one["dof"] == free["dof"] and one["sigma0"] == pytest.approx(free["sigma0"], rel=1e-8)
+    assert one["stations"]["S1"]["orientation_rad"][:2] == [0.0, 0.0]
+    # S1 and S2 are tilted differently (up to 0.2 rad): both levelled is a wrong model (their verticals
+    # disagree), which the global test must show
+    assert main(["adjust", str(p), "--json", "--no-snooping", "--levelled", "S1,S2"]) == 0
+    lev = json.loads(capsys.readouterr().out)
+    assert lev["dof"] == free["dof"] + 2               # 4 orientation unknowns fewer, 2 defects fewer
+    assert lev["sigma0"] > 10 * free["sigma0"] and not lev["global_test"]["passed"]
+    assert main(["adjust", str(p), "--levelled", "NOPE"]) == 2
+    assert "--levelled: unknown station 'NOPE'" in capsys.readouterr().err

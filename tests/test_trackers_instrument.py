@@ -50,7 +50,7 @@ def test_tracker_sigma_is_the_mpe_closed_form(tmp_path):
     # angles: the transverse MPE over the range, per the same specification
     spec = inst.trackers["AT1"].spec()
     np.testing.assert_allclose(spec.angle_sigma_rad(5.0), 0.5 * (15.0 + 6.0 * 5.0) * 1e-6 / 5.0)
-    assert inst.trackers["AT1"].levelled and not inst.trackers["AT2"].levelled
+    assert not inst.trackers["AT1"].levelled and not inst.trackers["AT2"].levelled
 
 
 def test_cli_adjust_with_trackers_and_heads(tmp_path, capsys):
@@ -72,7 +72,7 @@ def test_cli_adjust_with_trackers_and_heads(tmp_path, capsys):
 
 @pytest.mark.parametrize("edit,match", [
     ("adm_a_um = 10.0", "adm_a_um = -1.0"),
-    ("std_per_mpe = 0.5\nlevelled = true", "std_per_mpe = 2.0\nlevelled = true"),
+    ("std_per_mpe = 0.5\nlevelled = false", "std_per_mpe = 2.0\nlevelled = false"),
 ])
 def test_bad_tracker_spec_is_one_line(tmp_path, capsys, edit, match):
     text = INST.read_text().replace(edit, match, 1)

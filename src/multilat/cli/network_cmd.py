@@ -141,6 +141,11 @@ def adjust_command(
     strict: bool = typer.Option(False, "--strict",
                                 help="Refuse the network when a point is too weakly observed, instead "
                                      "of leaving it out with a warning."),
+    levelled: Optional[str] = typer.Option(None, "--levelled",
+                                           help="Stations on their own level (vertical axis = the world's z): "
+                                                "one orientation angle (κ) for their angle observations, "
+                                                "ID,ID,... (trackers with levelled = true in --instrument are "
+                                                "levelled too)."),
     variance_components: Optional[str] = typer.Option(None, "--variance-components",
                                                       help="Estimate one variance factor per group, by head, "
                                                            "station or kind (distances, angles; angles are "
@@ -181,6 +186,14 @@ def adjust_command(
 
         averaged = _average(obs)
         obs = averaged.obs
+    if levelled:
+        import dataclasses
+
+        ids = [x.strip() for x in levelled.split(",") if x.strip()]
+        for x in ids:
+            if x not in obs.station_ids:
+                raise MultilatError(f"--levelled: unknown station {x!r} (stations: {', '.join(obs.station_ids)})")
+        obs = dataclasses.replace(obs, levelled=tuple(dict.fromkeys(obs.levelled + tuple(ids))))
     refs = read_reference_lengths(references) if references is not None else None
     if refs is not None:
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))

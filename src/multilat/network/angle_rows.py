@@ -15,8 +15,12 @@ points together with the same rotation of every orientation leaves every observa
 datum defects, as for distances; angles fix no scale and no position). Residuals are observed −
 computed, azimuths wrapped to ``[-π, π)``.
 
-Levelled stations (one orientation unknown, the vertical known) change the datum (4 defects) and are
-not adjusted yet: refused in one line.
+A **levelled** station (``Observations.levelled``: a tracker on its level, its vertical axis the
+world's +z) has one orientation unknown, κ (ω = φ = 0 held). Its angles then observe the world's
+vertical, so the network's tilt is no longer a datum defect: 4 defects remain (3 translations and the
+rotation about z), and :mod:`multilat.network.fit` places the internal frame and the free datum with
+rotations about z only (the 3-2-1 datum, which would tilt the network, is refused with levelled
+stations).
 """
 
 from __future__ import annotations
@@ -45,6 +49,7 @@ class AngleRows:
     value_rad, sigma_rad (a,)
     station_index, target_index (a,)
     oriented (s,) bool   stations with an orientation (3 unknowns each, in station order)
+    levelled (s,) bool   oriented stations whose ω, φ are held at 0 (only κ estimated)
     """
 
     obs_index: np.ndarray
@@ -54,6 +59,21 @@ class AngleRows:
     station_index: np.ndarray
     target_index: np.ndarray
     oriented: np.ndarray
+    levelled: np.ndarray = None
+
+    def __post_init__(self):
+        if self.levelled is None:
+            object.__setattr__(self, "levelled", np.zeros_like(self.oriented))
+
+    @property
+    def orientation_free(self) -> np.ndarray:
+        """(n_o,) bool: False for the held ω, φ of levelled stations."""
+        lev = self.levelled[self.oriented]
+        return np.column_stack([~lev, ~lev, np.ones_like(lev)]).ravel()
+
+    @property
+    def any_levelled(self) -> bool:
+        return bool(np.any(self.levelled & self.oriented))
 
     @property
     def n_rows(self) -> int:
@@ -97,9 +117,9 @@ class AngleRows:
         return self.residuals(station_xyz_m, target_xyz_m, orientation_rad) * w, J * w[:, None]
 
 
-def angle_rows(obs: Observations, *, levelled=()) -> AngleRows | None:
-    """The angle observations of ``obs`` (None when it has none). ``levelled``: station ids declared
-    levelled (refused in one line: not adjusted yet)."""
+def angle_rows(obs: Observations) -> AngleRows | None:
+    """The angle observations of ``obs`` (None when it has none); ``obs.levelled`` stations get one
+    orientation unknown (κ)."""
     if not obs.has_angle_observations:
         return None
     parts = []
@@ -116,16 +136,14 @@ def angle_rows(obs: Observations, *, levelled=()) -> AngleRows | None:
     si = np.asarray(obs.station_index)[k]
     oriented = np.zeros(obs.n_stations, bool)
     oriented[si] = True
-    for sid in levelled:
-        if sid in obs.station_ids and oriented[obs.station_ids.index(sid)]:
-            raise MultilatError(f"station {sid!r} is levelled: levelled stations (one orientation angle, the "
-                                "vertical known) are not adjusted yet; give it three orientation angles")
+    levelled = np.array([sid in obs.levelled for sid in obs.station_ids], bool)
     for i in np.flatnonzero(oriented):
         n_i = int(np.sum(si == i))
-        if n_i < 2:
+        need = 1 if levelled[i] else 2
+        if n_i < need:
             raise MultilatError(f"station {obs.station_ids[i]!r} has {n_i} angle observation(s): its "
-                                "orientation (3 angles) needs at least 2 directions (4 angles)")
-    return AngleRows(k, kind, val, sig, si, np.asarray(obs.target_index)[k], oriented)
+                                f"orientation needs at least {need} direction(s)")
+    return AngleRows(k, kind, val, sig, si, np.asarray(obs.target_index)[k], oriented, levelled)
 
 
 def orientation_from_matrix(R) -> np.ndarray:
@@ -154,6 +172,10 @@ def initial_orientations(obs: Observations, rows: AngleRows, station_xyz_m, targ
         loc = np.stack([np.cos(el[k]) * np.cos(az[k]), np.cos(el[k]) * np.sin(az[k]), np.sin(el[k])], -1)
         d = T[obs.target_index[k]] - H[i]
         wld = d / np.linalg.norm(d, axis=1)[:, None]
+        if rows.levelled[i]:        # heading only: the horizontal directions' mean angle difference
+            dk = np.arctan2(wld[:, 1], wld[:, 0]) - np.arctan2(loc[:, 1], loc[:, 0])
+            out.append(np.array([0.0, 0.0, np.arctan2(np.mean(np.sin(dk)), np.mean(np.cos(dk)))]))
+            continue
         U, _, Vt = np.linalg.svd(wld.T @ loc)
         D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
         out.append(orientation_from_matrix(U @ D @ Vt))
@@ -179,7 +201,7 @@ def _skew(w) -> np.ndarray:
 
 
 def orientation_covariance(cov, rows: AngleRows, orientation_internal, R, G, E, n_stations: int,
-                           n_targets: int) -> np.ndarray:
+                           n_targets: int, rotation_axes=(0, 1, 2)) -> np.ndarray:
     """Covariance (n_o, n_o) of the orientation unknowns in the requested datum.
 
     ``cov`` is the adjustment's :class:`~multilat.network.covariance.CoupledCovariance` (internal frame),
@@ -188,7 +210,9 @@ def orientation_covariance(cov, rows: AngleRows, orientation_internal, R, G, E, 
     control datum: no S-transformation). The orientation rows of the rigid motions, which ``G`` lacks,
     are those of a small rotation ``w`` of everything: ``δR_i = [w]× R_i`` (``δ(ω, φ, κ)`` from the
     parametrisation's Jacobian), zero for translations; ``E`` has no orientation rows, so
-    ``S_ox = −G_o (EᵀG)⁻¹ Eᵀ`` and ``S_oo = I``.
+    ``S_ox = −G_o (EᵀG)⁻¹ Eᵀ`` and ``S_oo = I``. ``rotation_axes``: the world axes of ``G``'s rotation
+    columns after its 3 translations (``(2,)`` with levelled stations). Held ω, φ (levelled stations)
+    have zero variance.
     """
     s, t = n_stations, n_targets
     n = Q * s + 3 * t
@@ -220,17 +244,17 @@ def orientation_covariance(cov, rows: AngleRows, orientation_internal, R, G, E, 
     if G is None:
         return 0.5 * (C_oo + C_oo.T)
     Ro = rotation_matrix(P_new)                                             # (k, 3, 3)
-    G_o = np.zeros((n_o, 6))
-    for c in range(3):                                                      # rotations about x, y, z
-        w = np.eye(3)[c]
+    G_o = np.zeros((n_o, G.shape[1]))
+    for col, axis in enumerate(rotation_axes):                              # rotations about world axes
+        w = np.eye(3)[axis]
         for i in range(P_new.shape[0]):
             dR = (_skew(w) @ Ro[i]).reshape(9)
-            G_o[3 * i:3 * i + 3, 3 + c] = np.linalg.lstsq(J_new[i], dR, rcond=None)[0]
+            G_o[3 * i:3 * i + 3, 3 + col] = np.linalg.lstsq(J_new[i], dR, rcond=None)[0]
     K = np.linalg.inv(E.T @ G)
     # E' C_xx' E with C_xx' = Rx C_xx Rxᵀ: through the internal product with Rxᵀ E
     Et = np.array(E, float, copy=True)
-    E3 = Et[xyz].reshape(-1, 3, 6)
-    Et[xyz] = np.einsum("ba,pbk->pak", Rm, E3).reshape(-1, 6)              # Rᵀ on each xyz block
+    E3 = Et[xyz].reshape(-1, 3, E.shape[1])
+    Et[xyz] = np.einsum("ba,pbk->pak", Rm, E3).reshape(-1, E.shape[1])     # Rᵀ on each xyz block
     M6 = Et.T @ cov._times(Et)
     B = G_o @ K
     EC = E.T @ C_xo

@@ -61,6 +61,9 @@ class Observations:
         A-priori standard uncertainty of the row's azimuth / elevation when that angle is an
         **observation** of the adjustment (NaN: the angle, if given, serves only for initial values).
         A station with angle observations gets an orientation (:mod:`multilat.network.angle_rows`).
+    levelled : tuple of str
+        Stations whose vertical axis is the world's +z (a tracker on its level): one orientation angle
+        (κ) instead of three.
 
     Build with :meth:`from_labels` (ids per row); the constructor checks shapes, finiteness,
     positivity and index ranges; repeated (station, target) pairs are allowed (repeated readings).
@@ -77,6 +80,7 @@ class Observations:
     station_heads: tuple[str, ...] | None = None
     sigma_azimuth_rad: np.ndarray | None = None
     sigma_elevation_rad: np.ndarray | None = None
+    levelled: tuple = ()
 
     def __post_init__(self):
         set_ = object.__setattr__
@@ -146,6 +150,11 @@ class Observations:
                 k = int(np.flatnonzero(used if ang is None else used & ~np.isfinite(ang))[0])
                 raise MultilatError(f"observation {self.label(k)}: {name} given without its {value}")
             set_(self, name, a if used.any() else None)
+        lev = tuple(str(x) for x in (self.levelled or ()))
+        for x in lev:
+            if x not in self.station_ids:
+                raise MultilatError(f"levelled: {x!r} is not a station")
+        set_(self, "levelled", lev)
         for a in (self.station_index, self.target_index, self.distance_m, self.sigma_m):
             a.flags.writeable = False
 
@@ -153,7 +162,7 @@ class Observations:
     @classmethod
     def from_labels(cls, station: Sequence[str], target: Sequence[str], distance_m, sigma_m, *,
                     azimuth_rad=None, elevation_rad=None, head: Sequence[str] | None = None,
-                    sigma_azimuth_rad=None, sigma_elevation_rad=None) -> "Observations":
+                    sigma_azimuth_rad=None, sigma_elevation_rad=None, levelled=()) -> "Observations":
         """Build from one station id and one target id per observation.
 
         Parameters
@@ -188,7 +197,8 @@ class Observations:
         return cls(sids, tids, np.array([sx[s] for s in station], dtype=np.intp),
                    np.array([tx[t] for t in target], dtype=np.intp), np.asarray(distance_m, float),
                    sig, azimuth_rad=azimuth_rad, elevation_rad=elevation_rad, station_heads=heads,
-                   sigma_azimuth_rad=sigma_azimuth_rad, sigma_elevation_rad=sigma_elevation_rad)
+                   sigma_azimuth_rad=sigma_azimuth_rad, sigma_elevation_rad=sigma_elevation_rad,
+                   levelled=tuple(x for x in dict.fromkeys(levelled) if x in sids))
 
     # ---------------------------------------------------------------- views
     @property
@@ -248,26 +258,27 @@ class Observations:
         sel = None if self.sigma_elevation_rad is None else self.sigma_elevation_rad[keep]
         return Observations(tuple(self.station_ids[i] for i in s_present),
                             tuple(self.target_ids[j] for j in t_present), s_new[si], t_new[ti],
-                            self.distance_m[keep], self.sigma_m[keep], az, el, hs, saz, sel)
+                            self.distance_m[keep], self.sigma_m[keep], az, el, hs, saz, sel,
+                            tuple(x for x in self.levelled if x in {self.station_ids[i] for i in s_present}))
 
     def with_sigma(self, sigma_m) -> "Observations":
         """A copy with other a-priori uncertainties (scalar or shape (m,))."""
         sig = np.broadcast_to(np.asarray(sigma_m, dtype=float), (self.n_obs,)).copy()
         return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
                             self.distance_m, sig, self.azimuth_rad, self.elevation_rad, self.station_heads,
-                            self.sigma_azimuth_rad, self.sigma_elevation_rad)
+                            self.sigma_azimuth_rad, self.sigma_elevation_rad, self.levelled)
 
     def with_distances(self, distance_m) -> "Observations":
         """A copy with other distances (same pattern), e.g. a simulated draw."""
         return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
                             distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad, self.station_heads,
-                            self.sigma_azimuth_rad, self.sigma_elevation_rad)
+                            self.sigma_azimuth_rad, self.sigma_elevation_rad, self.levelled)
 
     def with_angle_sigma(self, sigma_azimuth_rad, sigma_elevation_rad) -> "Observations":
         """A copy with other a-priori uncertainties of the angle observations (NaN: not an observation)."""
         return Observations(self.station_ids, self.target_ids, self.station_index, self.target_index,
                             self.distance_m, self.sigma_m, self.azimuth_rad, self.elevation_rad, self.station_heads,
-                            sigma_azimuth_rad, sigma_elevation_rad)
+                            sigma_azimuth_rad, sigma_elevation_rad, self.levelled)
 
     @property
     def has_angle_observations(self) -> bool:

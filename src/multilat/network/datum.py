@@ -117,17 +117,25 @@ def helmert_basis(xyz_m) -> np.ndarray:
     return G.reshape(3 * p, 6)
 
 
-def rigid_fit(src_xyz_m, dst_xyz_m, *, allow_reflection: bool = False):
+def rigid_fit(src_xyz_m, dst_xyz_m, *, allow_reflection: bool = False, about_z: bool = False):
     """Rotation ``R`` (3, 3) and translation ``t`` (3,) minimising ``sum |R src + t - dst|**2``
     (Kabsch). Needs >= 3 non-collinear points.
 
     ``allow_reflection``: allow ``det R = -1`` (a mirror), for comparing networks known only from
-    distances (which cannot tell a network from its mirror image).
+    distances (which cannot tell a network from its mirror image). ``about_z``: rotations about the
+    vertical z only (networks whose vertical is observed: levelled stations).
     """
     a = np.asarray(src_xyz_m, float)
     b = np.asarray(dst_xyz_m, float)
     if a.shape != b.shape or a.ndim != 2 or a.shape[1] != 3:
         raise MultilatError("rigid_fit: expected two (p, 3) arrays")
+    if about_z:
+        ca, cb = a.mean(axis=0), b.mean(axis=0)
+        p, q = a[:, :2] - ca[:2], b[:, :2] - cb[:2]
+        th = np.arctan2(np.sum(p[:, 0] * q[:, 1] - p[:, 1] * q[:, 0]), np.sum(p[:, 0] * q[:, 0] + p[:, 1] * q[:, 1]))
+        c, s = np.cos(th), np.sin(th)
+        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return R, cb - R @ ca
     if a.shape[0] < 3:
         raise MultilatError(f"datum: need at least 3 points to fix the frame, got {a.shape[0]}")
     ca, cb = a.mean(axis=0), b.mean(axis=0)

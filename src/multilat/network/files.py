@@ -136,8 +136,16 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         saz, sel = _tracker_angle_sigma(d, st if hd is None else hd, az, el, instrument)
         if saz is not None and sigma_source is not None:
             sigma_source["angles"] = "laser trackers' transverse MPE × std_per_mpe over the range (instrument)"
+    lev = ()
+    if instrument is not None and az is not None:
+        from multilat import instrument as _instr
+
+        inst = _instr.load_instrument(instrument) if isinstance(instrument, (str, os.PathLike)) else instrument
+        trk = getattr(inst, "trackers", {}) or {}
+        names = st if hd is None else hd
+        lev = tuple(dict.fromkeys(s_ for s_, h in zip(st, names) if h in trk and trk[h].levelled))
     obs = Observations.from_labels(st, tg, d, sig, azimuth_rad=az, elevation_rad=el, head=hd,
-                                   sigma_azimuth_rad=saz, sigma_elevation_rad=sel)
+                                   sigma_azimuth_rad=saz, sigma_elevation_rad=sel, levelled=lev)
     screen_observations(obs, source=str(tab.path), line_numbers=tab.line_numbers)
     return obs
 

@@ -111,6 +111,32 @@ def control_ids(sub, datum, points):
     return set(ids)
 
 
+def _levelled_frame(sub, ang, sx0, tx0, a):
+    """The internal frame when the vertical is observed (levelled stations): rotate the start so that
+    the first levelled station's vertical axis (fitted to its directions) is +z, put station ``a`` at
+    the origin and the station farthest from it horizontally, ``b``, on the xz-plane (y = 0).
+    Returns ``(R0, t0, b)``: 4 coordinates to hold (a's x, y, z and b's y)."""
+    from multilat.network.angle_rows import AngleRows, initial_orientations
+    from multilat.network.angles import rotation_matrix
+
+    i = int(np.flatnonzero(ang.levelled & ang.oriented)[0])
+    one = AngleRows(ang.obs_index, ang.kind, ang.value_rad, ang.sigma_rad, ang.station_index, ang.target_index,
+                    np.arange(ang.oriented.size) == i)                       # fitted with 3 angles
+    v = rotation_matrix(initial_orientations(sub, one, sx0, tx0))[:, 2]     # its z axis in the start frame
+    ez = np.array([0.0, 0.0, 1.0])
+    k = np.cross(v, ez)
+    sn, cs = np.linalg.norm(k), float(v @ ez)
+    K = np.zeros((3, 3)) if sn < 1e-15 else np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]]) / sn
+    Rv = np.eye(3) + sn * K + (1 - cs) * (K @ K)
+    x = sx0 @ Rv.T
+    hd = np.linalg.norm((x - x[a])[:, :2], axis=1)
+    b = int(np.argmax(hd))
+    th = -np.arctan2(x[b, 1] - x[a, 1], x[b, 0] - x[a, 0])
+    Rz = np.array([[np.cos(th), -np.sin(th), 0.0], [np.sin(th), np.cos(th), 0.0], [0.0, 0.0, 1.0]])
+    R0 = Rz @ Rv
+    return R0, -R0 @ sx0[a], b
+
+
 def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
                  sc_free_all, max_iter, solver, chunk_targets, *, warn, partial_ok=False, couplings=None):
     """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
@@ -124,6 +150,7 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
     from multilat.network.angle_rows import angle_rows, initial_orientations
 
     ang = angle_rows(sub)
+    levelled = ang is not None and ang.any_levelled
     s, t = sub.n_stations, sub.n_targets
     sx0 = start.station_xyz_m[smap].copy()
     tx0 = start.target_xyz_m[tmap].copy()
@@ -157,12 +184,21 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
             for p in datum.points:
                 if p not in all_ids:
                     raise MultilatError(f"datum 321: unknown point id {p!r}")
+            if levelled:
+                raise MultilatError("datum 321 would tilt a network whose vertical is observed (levelled "
+                                    "stations): use the free or the control datum")
         a, b, c = pick_321_stations(sx0)
-        R0, t0 = frame_321(sx0[a], sx0[b], sx0[c])
-        sx0, tx0 = apply_rigid(R0, t0, sx0), apply_rigid(R0, t0, tx0)
-        gfree[a, :3] = False
-        gfree[b, 1:3] = False
-        gfree[c, 2] = False
+        if levelled:      # the vertical is observed: frame by a rotation about z only, 4 held coordinates
+            R0, t0, b = _levelled_frame(sub, ang, sx0, tx0, a)
+            sx0, tx0 = apply_rigid(R0, t0, sx0), apply_rigid(R0, t0, tx0)
+            gfree[a, :3] = False
+            gfree[b, 1] = False
+        else:
+            R0, t0 = frame_321(sx0[a], sx0[b], sx0[c])
+            sx0, tx0 = apply_rigid(R0, t0, sx0), apply_rigid(R0, t0, tx0)
+            gfree[a, :3] = False
+            gfree[b, 1:3] = False
+            gfree[c, 2] = False
     if ang is not None and cost != "distance":
         raise MultilatError("angle observations need the distance cost (weighted observations)")
     o0 = None if ang is None else initial_orientations(sub, ang, sx0, tx0)
@@ -213,9 +249,11 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
                     v = given.get(all_ids[k])
                     if v is not None:
                         ref[n] = v
-            R, tr = rigid_fit(np.vstack([sx, tx])[sel], ref)
+            R, tr = rigid_fit(np.vstack([sx, tx])[sel], ref, about_z=levelled)
         sx, tx = apply_rigid(R, tr, sx), apply_rigid(R, tr, tx)
         G, E = datum_matrices(datum, sub.station_ids, sub.target_ids, sx, tx)
+        if levelled:      # 4 defects: the translations and the rotation about z
+            G, E = G[:, [0, 1, 2, 5]], E[:, [0, 1, 2, 5]]
     if fin.coupled is not None:
         cov = CoupledCovariance(Qgg, fin.coupled, fin.Ntt_inv, Js_w, Jt_w, sub.station_index,
                                 sub.target_index, factor=factor, R=R, G=G, E=E)
@@ -235,10 +273,10 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
     if ang is not None:
         from multilat.network.angle_rows import orientation_covariance, rotate_orientations
 
-        free_all = np.concatenate([pb.station_free.ravel(), np.repeat(pb.target_free, 3),
-                                   np.ones(ang.n_orientation, bool)])
+        free_all = np.concatenate([pb.station_free.ravel(), np.repeat(pb.target_free, 3), ang.orientation_free])
         r_a = np.clip(1.0 - cov.quadratic(A_rows * free_all), 0.0, 1.0)
-        o_cov = orientation_covariance(cov, ang, p.orientation_rad, R, G, E, s, t)
+        o_cov = orientation_covariance(cov, ang, p.orientation_rad, R, G, E, s, t,
+                                       rotation_axes=(2,) if levelled else (0, 1, 2))
         angles = dict(rows=ang, residual_rad=ang.residuals(p.station_xyz_m, p.target_xyz_m, p.orientation_rad),
                       redundancy=r_a, orientation_rad=rotate_orientations(ang, p.orientation_rad, R),
                       orientation_cov=o_cov, station_ids=sub.station_ids, target_ids=sub.target_ids,

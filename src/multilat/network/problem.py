@@ -145,7 +145,7 @@ class Problem:
     @property
     def n_free(self) -> int:
         return (int(self.reduced_free.sum()) + 3 * int(self.target_free.sum())
-                + (0 if self.angles is None else self.angles.n_orientation))
+                + (0 if self.angles is None else int(self.angles.orientation_free.sum())))
 
     @property
     def n_rows(self) -> int:

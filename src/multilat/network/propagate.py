@@ -202,6 +202,9 @@ def problem_from_observations(obs, *, datum="free", pairs=None, references=None,
     """
     from multilat.network.datum import parse_datum
 
+    if obs.levelled and obs.has_angle_observations:
+        raise MultilatError(f"propagate: levelled stations ({', '.join(obs.levelled)}) fix the vertical, which "
+                            "the Monte Carlo's rigid datum fit does not model yet; adjust them with `multilat adjust`")
     dat = parse_datum(datum)
     if adjustment is None:
         from multilat.network.adjust import adjust

@@ -68,7 +68,8 @@ def assemble_coupled(problem: Problem, p: Params, damping: float = 0.0) -> Assem
     N[:Q * s + 3 * t, :Q * s + 3 * t] = (A.T @ A).toarray()
     b = np.zeros(n)
     b[:Q * s + 3 * t] = A.T @ r_w
-    free = np.concatenate([problem.station_free.ravel(), np.repeat(problem.target_free, 3), np.ones(n_o, bool)])
+    o_free = np.ones(0, bool) if ang is None else ang.orientation_free
+    free = np.concatenate([problem.station_free.ravel(), np.repeat(problem.target_free, 3), o_free])
     vtpv = float(r_w @ r_w)
     if problem.couplings is not None:
         e_w, E = problem.couplings.whitened(flatten_params(p))
@@ -86,7 +87,7 @@ def assemble_coupled(problem: Problem, p: Params, damping: float = 0.0) -> Assem
         N[np.arange(n), np.arange(n)] *= 1.0 + damping
     g = np.arange(Q * s)
     # eliminated with the targets: the free targets and the orientation unknowns
-    tr = Q * s + np.concatenate([np.flatnonzero(np.repeat(problem.target_free, 3)), 3 * t + np.arange(n_o)])
+    tr = Q * s + np.concatenate([np.flatnonzero(np.repeat(problem.target_free, 3)), 3 * t + np.flatnonzero(o_free)])
     Ntt_f = N[np.ix_(tr, tr)]
     try:
         fac = sla.cho_factor(Ntt_f)
