@@ -361,3 +361,14 @@ def test_cli_levelled_option(tmp_path, capsys):
     assert lev["sigma0"] > 10 * free["sigma0"] and not lev["global_test"]["passed"]
     assert main(["adjust", str(p), "--levelled", "NOPE"]) == 2
     assert "--levelled: unknown station 'NOPE'" in capsys.readouterr().err
+
+
+def test_angles_on_a_station_declared_distance_only_is_one_line(capsys):
+    from pathlib import Path
+
+    ex = Path(__file__).resolve().parents[1] / "examples" / "network" / "mixed" / "obs.csv"
+    assert main(["adjust", str(ex), "--distance-only", "H1,H2,AT1"]) == 2
+    err = capsys.readouterr().err
+    assert "station 'AT1' is declared distance-only" in err and "obs.csv" in err and err.count("\n") == 1
+    assert main(["adjust", str(ex), "--distance-only", "H1,H2", "--json"]) == 0
+    capsys.readouterr()

@@ -146,6 +146,10 @@ def adjust_command(
                                                 "one orientation angle (κ) for their angle observations, "
                                                 "ID,ID,... (trackers with levelled = true in --instrument are "
                                                 "levelled too)."),
+    distance_only: Optional[str] = typer.Option(None, "--distance-only",
+                                                help="Stations that read no angles (heads without encoders), "
+                                                     "ID,ID,...: an angle observation on one of them is an "
+                                                     "error in the file."),
     variance_components: Optional[str] = typer.Option(None, "--variance-components",
                                                       help="Estimate one variance factor per group, by head, "
                                                            "station or kind (distances, angles; angles are "
@@ -186,6 +190,17 @@ def adjust_command(
 
         averaged = _average(obs)
         obs = averaged.obs
+    if distance_only:
+        for x in (v.strip() for v in distance_only.split(",") if v.strip()):
+            if x not in obs.station_ids:
+                raise MultilatError(f"--distance-only: unknown station {x!r} (stations: {', '.join(obs.station_ids)})")
+            i = obs.station_ids.index(x)
+            for name in ("sigma_azimuth_rad", "sigma_elevation_rad"):
+                sig = getattr(obs, name)
+                k = np.flatnonzero((obs.station_index == i) & np.isfinite(sig)) if sig is not None else []
+                if len(k):
+                    raise MultilatError(f"{observations}: station {x!r} is declared distance-only (--distance-only) "
+                                        f"but observation {obs.label(int(k[0]))} has {name}")
     if levelled:
         import dataclasses
 
