@@ -238,11 +238,8 @@ def test_angles_eq7_without_refinement_within_basin(make):
 # ------------------------------------------------------------------------------- random networks
 
 
-def test_convergence_rate_on_200_random_networks():
-    """>= 99 % of 200 random well-conditioned networks (4-6 stations x 10-20 targets, gaps, offsets
-    ±5 mm, 5 um noise; definition in multilat.network.simulate.random_network) converge from
-    distances alone to the minimum the adjustment reaches from the truth (1e-8 m)."""
-    children = np.random.SeedSequence(20200808).spawn(200)
+def _convergence_failures(n):
+    children = np.random.SeedSequence(20200808).spawn(n)
     failures = []
     for k, child in enumerate(children):
         net = random_network(np.random.default_rng(child), n_stations=(4, 6), n_targets=(10, 20))
@@ -251,6 +248,21 @@ def test_convergence_rate_on_200_random_networks():
         r0 = adjust(net.obs, initial=_truth(net), snooping=False)
         if _datum_free_gap(r1, r0) > 1e-8:
             failures.append(k)
+    return failures
+
+
+def test_convergence_rate_on_60_random_networks():
+    """The first 60 of the 200 networks below: at most one fails to reach the minimum."""
+    failures = _convergence_failures(60)
+    assert len(failures) <= 1, failures
+
+
+@pytest.mark.slow
+def test_convergence_rate_on_200_random_networks():
+    """>= 99 % of 200 random well-conditioned networks (4-6 stations x 10-20 targets, gaps, offsets
+    ±5 mm, 5 um noise; definition in multilat.network.simulate.random_network) converge from
+    distances alone to the minimum the adjustment reaches from the truth (1e-8 m)."""
+    failures = _convergence_failures(200)
     assert len(failures) <= 2, failures
 
 
