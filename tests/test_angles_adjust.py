@@ -83,6 +83,18 @@ def _jac(obs, x, oriented, h=1e-7):
     return J
 
 
+def _write_csv(obs, p):
+    """The observations as a CSV with the angle columns (σ empty where an angle is no observation)."""
+    rows = ["station,target,distance_m,sigma_m,azimuth_rad,elevation_rad,sigma_azimuth_rad,sigma_elevation_rad"]
+    for k in range(obs.n_obs):
+        sa = obs.sigma_azimuth_rad[k]
+        rows.append(f"{obs.station_ids[obs.station_index[k]]},{obs.target_ids[obs.target_index[k]]},"
+                    f"{float(obs.distance_m[k])!r},{float(obs.sigma_m[k])!r},{float(obs.azimuth_rad[k])!r},"
+                    f"{float(obs.elevation_rad[k])!r},{'' if np.isnan(sa) else repr(float(sa))},"
+                    f"{'' if np.isnan(sa) else repr(float(sa))}")
+    p.write_text("\n".join(rows) + "\n")
+
+
 def _pack(H, T, off, O, oriented):
     return np.concatenate([H.ravel(), T.ravel(), off, O[oriented].ravel()])
 
@@ -175,14 +187,7 @@ def test_angles_shrink_the_uncertainty_and_the_json_carries_them(tmp_path, capsy
     assert np.all(tr_mixed <= tr_plain * (1 + 1e-9))          # more observations never hurt
     # the CLI: angle columns with their sigma
     p = tmp_path / "mixed.csv"
-    rows = ["station,target,distance_m,sigma_m,azimuth_rad,elevation_rad,sigma_azimuth_rad,sigma_elevation_rad"]
-    for k in range(obs.n_obs):
-        sa = obs.sigma_azimuth_rad[k]
-        rows.append(f"{obs.station_ids[obs.station_index[k]]},{obs.target_ids[obs.target_index[k]]},"
-                    f"{float(obs.distance_m[k])!r},{float(obs.sigma_m[k])!r},{float(obs.azimuth_rad[k])!r},"
-                    f"{float(obs.elevation_rad[k])!r},{'' if np.isnan(sa) else repr(float(sa))},"
-                    f"{'' if np.isnan(sa) else repr(float(sa))}")
-    p.write_text("\n".join(rows) + "\n")
+    _write_csv(obs, p)
     assert main(["adjust", str(p), "--json", "--no-snooping"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert len(doc["angles"]) == 2 * int(np.isfinite(obs.sigma_azimuth_rad).sum())
@@ -338,14 +343,7 @@ def _scatter(y, held):
 def test_cli_levelled_option(tmp_path, capsys):
     net, obs, _ = _mixed(seed=3)
     p = tmp_path / "mixed.csv"
-    rows = ["station,target,distance_m,sigma_m,azimuth_rad,elevation_rad,sigma_azimuth_rad,sigma_elevation_rad"]
-    for k in range(obs.n_obs):
-        sa = obs.sigma_azimuth_rad[k]
-        rows.append(f"{obs.station_ids[obs.station_index[k]]},{obs.target_ids[obs.target_index[k]]},"
-                    f"{float(obs.distance_m[k])!r},{float(obs.sigma_m[k])!r},{float(obs.azimuth_rad[k])!r},"
-                    f"{float(obs.elevation_rad[k])!r},{'' if np.isnan(sa) else repr(float(sa))},"
-                    f"{'' if np.isnan(sa) else repr(float(sa))}")
-    p.write_text("\n".join(rows) + "\n")
+    _write_csv(obs, p)
     assert main(["adjust", str(p), "--json", "--no-snooping"]) == 0
     free = json.loads(capsys.readouterr().out)
     # one levelled station only defines which way is up (its vertical = the frame's z): same fit, same dof
