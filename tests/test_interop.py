@@ -300,9 +300,9 @@ def test_unknown_point_names_file_and_line(net, tmp_path):
 
 
 @pytest.mark.parametrize("element, named", [
-    ('<direction to="1" val="12.3456" stdev="10"/>', "<direction> (horizontal directions)"),
+    ('<angle bs="1" fs="2" val="12.3456" stdev="10"/>', "<angle> (horizontal angles)"),
     ('<distance to="1" val="0.5" stdev="1"/>', "<distance> (horizontal distances)"),
-    ('<z-angle to="1" val="100" stdev="10"/>', "<z-angle> (zenith angles)"),
+    ('<azimuth to="1" val="100" stdev="10"/>', "<azimuth> (azimuths)"),
 ])
 def test_gama_unsupported_observation_refused_by_type(net, tmp_path, element, named):
     obs, pts, _ = net
@@ -316,14 +316,14 @@ def test_gama_unsupported_observation_refused_by_type(net, tmp_path, element, na
         read_gama_local(p)
 
 
-def test_gama_adjusted_output_with_directions_refused(tmp_path):
+def test_gama_adjusted_output_with_horizontal_distances_refused(tmp_path):
     text = GAMA_OUT.read_text()
-    text = text.replace("<slope-distance>", "<direction>", 1).replace("</slope-distance>",
-                                                                      "</direction>", 1)
+    text = text.replace("<slope-distance>", "<distance>", 1).replace("</slope-distance>", "</distance>", 1)
     p = tmp_path / "o.xml"
     p.write_text(text)
-    line = text[:text.index("<direction>")].count("\n") + 1
-    with pytest.raises(MultilatError, match=rf"o\.xml:{line}: <direction> observations are not supported"):
+    line = text[:text.index("<distance>")].count("\n") + 1
+    with pytest.raises(MultilatError, match=rf"o\.xml:{line}: <distance> observations are not supported: "
+                       "multilat reads slope distances, directions and zenith angles"):
         read_gama_adjustment(p)
 
 

@@ -47,11 +47,14 @@ def export_command(
                                       "points; starnet: none (Star*Net then needs a datum)."),
     sigma_um: Optional[float] = typer.Option(None, "--sigma-um", help="σ of every distance, µm, "
                                              "when the CSV has no sigma_m column."),
+    levelled: Optional[str] = typer.Option(None, "--levelled", help="Stations on their level (gama: "
+                                           "their angles become directions and zenith angles; "
+                                           "gama-local's angles need levelled stations): ID,ID,..."),
     as_json: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
 ) -> None:
     """Write the network for GNU Gama, JAG3D or Star*Net. What a format cannot carry (a per-station
     additive offset in Gama and Star*Net) is applied as a fixed correction or refused."""
-    from multilat.cli.network_cmd import parse_fixed_offsets
+    from multilat.cli.network_cmd import parse_fixed_offsets, with_levelled
     from multilat.network.files import read_observations, read_points
     from multilat.network.interop.common import read_result_dir
 
@@ -61,6 +64,10 @@ def export_command(
     if points is not None and result is not None:
         raise MultilatError("give --points or --result, not both")
     obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6)
+    obs = with_levelled(obs, levelled)
+    if obs.has_angle_observations and fmt != "gama":
+        raise MultilatError(f"{observations}: angle observations cannot be exported to {fmt} yet (gama "
+                            "takes them from levelled stations); drop the angle columns to export the distances")
     offsets = None
     pts = read_points(points) if points is not None else None
     if result is not None:
@@ -99,12 +106,18 @@ def export_command(
         write_starnet(out, obs, pts, offsets=offsets, fixed=fixed)
     doc = {"format": fmt, "files": [str(w) for w in written], "n_obs": obs.n_obs,
            "n_stations": obs.n_stations, "n_targets": obs.n_targets,
-           "offsets_subtracted": offsets is not None}
+           "n_angles": _n_angles(obs), "offsets_subtracted": offsets is not None}
     if as_json:
         emit_json(doc, "export")
         return
     console.print(f"{fmt}: {obs.n_obs} distances, {obs.n_stations} stations, {obs.n_targets} "
                   f"targets -> {', '.join(str(w) for w in written)}")
+
+
+def _n_angles(obs) -> int:
+    import numpy as np
+
+    return int(sum(np.isfinite(v).sum() for v in (obs.sigma_azimuth_rad, obs.sigma_elevation_rad) if v is not None))
 
 
 def _no_points():
@@ -133,6 +146,7 @@ def import_command(
     """Read a network (or gama-local's adjusted result) from GNU Gama, JAG3D or Star*Net files into
     multilat's CSVs (`multilat adjust OUT/distances.csv --points OUT/points.csv`)."""
     from multilat.io import staging_dir, write_csv_atomic, write_json_atomic
+    from multilat.network.files import write_observations
 
     if fmt not in IMPORT_FORMATS:
         raise MultilatError(f"import FORMAT must be one of {', '.join(IMPORT_FORMATS)}, got {fmt!r}")
@@ -156,6 +170,17 @@ def import_command(
                              [[s, t, d, a, r, u, q, w] for s, t, d, a, r, u, q, w in
                               zip(g.station, g.target, g.observed_m, g.adjusted_m, g.residual_m,
                                   g.adjusted_std_m, g.redundancy, g.std_residual)])
+            if g.angles is not None:
+                a = g.angles
+                write_csv_atomic(tmp / "angle_residuals.csv",
+                                 ["station", "target", "kind", "value_rad", "adjusted_rad", "residual_rad",
+                                  "adjusted_std_rad", "w_abs"],
+                                 [[s, t, k, v, ad, r, u, w] for s, t, k, v, ad, r, u, w in
+                                  zip(a.station, a.target, a.kind, a.observed_rad, a.adjusted_rad, a.residual_rad,
+                                      a.adjusted_std_rad, a.std_residual)])
+                doc["n_angles"] = len(a.kind)
+                doc["stations"] = {k: {"orientation_rad": v, "orientation_std_rad": g.orientation_std_rad.get(k)}
+                                   for k, v in g.orientation_rad.items()}
             from multilat.vocabulary import stamp
 
             doc = stamp(doc, "import")
@@ -180,11 +205,10 @@ def import_command(
         net = read_starnet(source, sigma_m=sig)
     o = net.obs
     doc = {"format": fmt, "n_obs": o.n_obs, "n_stations": o.n_stations, "n_targets": o.n_targets,
+           "n_angles": _n_angles(o), "levelled": list(o.levelled),
            "n_points": len(net.points.ids), "fixed": list(net.fixed), "notes": list(net.notes)}
     with staging_dir(out, inputs=[source, points_file]) as tmp:
-        write_csv_atomic(tmp / "distances.csv", ["station", "target", "distance_m", "sigma_m"],
-                         [[o.station_ids[o.station_index[k]], o.target_ids[o.target_index[k]],
-                           o.distance_m[k], o.sigma_m[k]] for k in range(o.n_obs)])
+        write_observations(tmp / "distances.csv", o)
         write_csv_atomic(tmp / "points.csv", ["point", "x_m", "y_m", "z_m"],
                          [[i, *x] for i, x in zip(net.points.ids, net.points.xyz_m)])
     if as_json:

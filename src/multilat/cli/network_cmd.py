@@ -15,6 +15,19 @@ from multilat.cli import checks, report_opt
 from multilat.io import check_output_dir, staging_dir
 
 
+def with_levelled(obs, levelled: str | None):
+    """``obs`` with the stations of ``--levelled ID,ID,...`` levelled too (one-line error for an unknown id)."""
+    if not levelled:
+        return obs
+    import dataclasses
+
+    ids = [x.strip() for x in levelled.split(",") if x.strip()]
+    for x in ids:
+        if x not in obs.station_ids:
+            raise MultilatError(f"--levelled: unknown station {x!r} (stations: {', '.join(obs.station_ids)})")
+    return dataclasses.replace(obs, levelled=tuple(dict.fromkeys(obs.levelled + tuple(ids))))
+
+
 def parse_fixed_offsets(text: str, station_ids, *, what: str = "station") -> float | dict:
     """``--fix-offsets-um``: ``"X"`` (every head, µm) -> metres; ``"A=1234,B=-871"`` -> {head id: metres}.
 
@@ -201,14 +214,7 @@ def adjust_command(
                 if len(k):
                     raise MultilatError(f"{observations}: station {x!r} is declared distance-only (--distance-only) "
                                         f"but observation {obs.label(int(k[0]))} has {name}")
-    if levelled:
-        import dataclasses
-
-        ids = [x.strip() for x in levelled.split(",") if x.strip()]
-        for x in ids:
-            if x not in obs.station_ids:
-                raise MultilatError(f"--levelled: unknown station {x!r} (stations: {', '.join(obs.station_ids)})")
-        obs = dataclasses.replace(obs, levelled=tuple(dict.fromkeys(obs.levelled + tuple(ids))))
+    obs = with_levelled(obs, levelled)
     refs = read_reference_lengths(references) if references is not None else None
     if refs is not None:
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))

@@ -295,7 +295,7 @@ def angle_results(core, lam0: float, crit: float) -> tuple[tuple, dict]:
                  "sigma_rad": float(rows.sigma_rad[q]), "residual_rad": float(a["residual_rad"][q]),
                  "redundancy": float(a["redundancy"][q]), "w": float(w[q]), "mdb_rad": float(mdb[q]),
                  "w_test_passed": bool(abs(w[q]) <= crit)} for q in range(rows.n_rows))
-    std = np.sqrt(np.clip(np.diag(a["orientation_cov"]), 0.0, None))
+    std = np.where(rows.orientation_free, np.sqrt(np.clip(np.diag(a["orientation_cov"]), 0.0, None)), 0.0)
     o = np.asarray(a["orientation_rad"]).reshape(-1, 3)
     orient = {sids[i]: {"orientation_rad": o[q].tolist(), "orientation_std_rad": std[3 * q:3 * q + 3].tolist(),
                         "parameters": ["omega", "phi", "kappa"]}

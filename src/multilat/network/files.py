@@ -26,7 +26,7 @@ from multilat.io import ELEVATION_RANGE, read_csv_table, write_csv_atomic, write
 from multilat.network.data import Observations, Points, ReferenceLengths
 from multilat.network.screening import screen_observations
 
-__all__ = ["read_observations", "read_reference_lengths", "read_points", "write_result_csvs"]
+__all__ = ["read_observations", "read_reference_lengths", "read_points", "write_result_csvs", "write_observations"]
 
 OBS_REQUIRED = ("station", "target", "distance_m")
 OBS_OPTIONAL = ("sigma_m", "head", "azimuth_rad", "elevation_rad", "zenith_rad", "sigma_azimuth_rad",
@@ -314,3 +314,29 @@ def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) ->
                           for c in result.compare_references(references)])
         written.append(p)
     return written
+
+
+def write_observations(path: str | os.PathLike, obs: Observations) -> None:
+    """Write ``obs`` as the observations CSV that :func:`read_observations` reads (whole or not at all):
+    ``station,target,distance_m,sigma_m``, then ``head`` when stations share heads, the angle columns
+    when the observations carry angles, and their σ columns when any angle is an observation (empty
+    cells where a value is absent). Levelled stations are not a column: give them to
+    ``adjust --levelled``."""
+    def cells(v):
+        return ["" if not np.isfinite(x) else float(x) for x in np.asarray(v, float)]
+
+    header = ["station", "target", "distance_m", "sigma_m"]
+    cols = [[obs.station_ids[i] for i in obs.station_index], [obs.target_ids[j] for j in obs.target_index],
+            cells(obs.distance_m), cells(obs.sigma_m)]
+    if obs.station_heads is not None:
+        header.append("head")
+        cols.append([obs.station_heads[i] for i in obs.station_index])
+    if obs.azimuth_rad is not None:
+        header += ["azimuth_rad", "elevation_rad"]
+        cols += [cells(obs.azimuth_rad), cells(obs.elevation_rad)]
+    if obs.has_angle_observations:
+        nan = np.full(obs.n_obs, np.nan)
+        header += ["sigma_azimuth_rad", "sigma_elevation_rad"]
+        cols += [cells(nan if obs.sigma_azimuth_rad is None else obs.sigma_azimuth_rad),
+                 cells(nan if obs.sigma_elevation_rad is None else obs.sigma_elevation_rad)]
+    write_csv_atomic(path, header, zip(*cols))

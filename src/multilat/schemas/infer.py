@@ -29,6 +29,7 @@ __all__ = ["SAMPLES", "run_sample", "infer", "merge"]
 
 _EX = Path(__file__).resolve().parents[3] / "examples"
 _N = _EX / "network"
+_INTEROP = Path(__file__).resolve().parents[3] / "tests" / "data" / "interop"
 
 #: command -> list of argument lists (paths relative to the repository's ``examples/``)
 SAMPLES = {
@@ -54,8 +55,9 @@ SAMPLES = {
     "lbb-compare": [["lbb", "compare", f"{_EX}/lbb/m60_edges.csv", f"{_EX}/lbb/m60_reference.csv"]],
     "export": [["export", "jag3d", f"{_N}/small_volume_obs.csv", "--points", f"{_N}/small_volume_points.csv",
                 "-o", "{tmp}/x.txt"]],
-    "import": [["import", "gama-adjusted", str(Path(__file__).resolve().parents[3] / "tests" / "data" / "interop"
-                                               / "small_volume_gama_out.xml"), "-o", "{tmp}/imp"]],
+    "import": [["import", "gama-adjusted", str(_INTEROP / "small_volume_gama_out.xml"), "-o", "{tmp}/imp"],
+               ["import", "gama-adjusted", str(_INTEROP / "levelled_mixed_gama_out.xml"), "-o", "{tmp}/imp2"],
+               ["import", "starnet", str(_INTEROP / "small_volume.dat"), "-o", "{tmp}/imp3"]],
 }
 
 

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -57,8 +57,8 @@ NAMESPACE = "http://www.gnu.org/software/gama/gama-local"
 OUT_NAMESPACE = "http://www.gnu.org/software/gama/gama-local-adjustment"
 _OFFSETS_TAG = "multilat-offsets-m:"
 #: gama-local's observation elements that multilat does not read (refused, named)
-_UNSUPPORTED = {"direction": "horizontal directions", "distance": "horizontal distances",
-                "angle": "horizontal angles", "z-angle": "zenith angles", "azimuth": "azimuths",
+_UNSUPPORTED = {"distance": "horizontal distances",
+                "angle": "horizontal angles", "azimuth": "azimuths",
                 "height-differences": "height differences", "dh": "height differences",
                 "coordinates": "observed coordinates", "vectors": "coordinate differences",
                 "vec": "coordinate differences", "cov-mat": "a covariance matrix of observations"}
@@ -98,6 +98,7 @@ def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=()
         flag = 'fix="XYZ"' if i in fixed else 'adj="XYZ"'
         out.append(f'<point id="{xml_escape(i)}" x="{fmt_m(x)}" y="{fmt_m(y)}" z="{fmt_m(z)}" {flag} />')
     d, sig = corrected.distance_m, corrected.sigma_m
+    sa, se = _angle_sigmas(obs)
     for si, sid in enumerate(obs.station_ids):
         ks = np.flatnonzero(obs.station_index == si)
         out.append(f'<obs from="{xml_escape(sid)}">')
@@ -105,9 +106,46 @@ def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=()
             tid = obs.target_ids[obs.target_index[k]]
             out.append(f'  <s-distance to="{xml_escape(tid)}" val="{fmt_m(d[k])}" '
                        f'stdev="{fmt_m(sig[k] * 1e3, 7)}" />')
+        for k in ks:
+            tid = xml_escape(obs.target_ids[obs.target_index[k]])
+            if np.isfinite(sa[k]):
+                out.append(f'  <direction to="{tid}" val="{_gon(obs.azimuth_rad[k] % (2 * math.pi))}" '
+                           f'stdev="{_cc(sa[k])}" />')
+            if np.isfinite(se[k]):
+                out.append(f'  <z-angle to="{tid}" val="{_gon(math.pi / 2 - obs.elevation_rad[k])}" '
+                           f'stdev="{_cc(se[k])}" />')
         out.append("</obs>")
     out += ["</points-observations>", "</network>", "</gama-local>", ""]
     return "\n".join(out)
+
+
+#: gons per radian; 1 gon = 10 000 cc (centesimal seconds), the units of gama-local's angles
+GON_PER_RAD = 200.0 / math.pi
+
+
+def _gon(a_rad: float) -> str:
+    return f"{float(a_rad) * GON_PER_RAD:.12f}"          # 1e-12 gon = 1.6e-14 rad
+
+
+def _cc(s_rad: float) -> str:
+    return f"{float(s_rad) * GON_PER_RAD * 1e4:.9f}"      # 1e-9 cc = 1.6e-15 rad
+
+
+def _angle_sigmas(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
+    """The σ of the azimuths and elevations that are observations (NaN elsewhere); an angle on a
+    station that is not levelled is refused: gama-local's directions and zenith angles are read
+    from a levelled instrument (one orientation unknown per station, the vertical known)."""
+    nan = np.full(obs.n_obs, np.nan)
+    sa = nan if obs.sigma_azimuth_rad is None else np.asarray(obs.sigma_azimuth_rad, float)
+    se = nan if obs.sigma_elevation_rad is None else np.asarray(obs.sigma_elevation_rad, float)
+    has = np.isfinite(sa) | np.isfinite(se)
+    for k in np.flatnonzero(has):
+        sid = obs.station_ids[obs.station_index[k]]
+        if sid not in obs.levelled:
+            raise MultilatError(f"gama: station {sid!r} reads angles (observation {obs.label(int(k))}) but is "
+                                "not levelled: gama-local's directions and zenith angles need a levelled "
+                                f"instrument (declare it with --levelled {sid}, or drop its angle columns)")
+    return sa, se
 
 
 def write_gama_local(path, obs: Observations, points: Points, **kw) -> None:
@@ -146,11 +184,19 @@ def _stdev_model(path, node):
 
 
 def read_gama_local(path) -> Network:
-    """Read a gama-local XML input: points and slope distances (metres; stdev mm -> m).
+    """Read a gama-local XML input: points, slope distances (metres; stdev mm -> m), directions and
+    zenith angles (gons or ``d-m-s``; stdev cc, or arc seconds with ``d-m-s`` values).
 
-    Refused with the element named: any other observation type (directions, horizontal distances,
-    angles, zenith angles, azimuths, height differences, observed coordinates and vectors,
-    covariance matrices), non-zero instrument/target heights. An observation to a point without a
+    Directions become azimuths (counter-clockwise: ``angles="right-handed"`` as they stand,
+    ``left-handed`` — clockwise seen from above, Gama's default — negated; the sense is physical,
+    whatever ``axes-xy`` says), zenith angles elevations ``pi/2 - z``; a station with either is
+    levelled (Gama's instruments are: one orientation per station, the vertical known). Each angle
+    joins the slope distance of the same station and target (multilat's observation row).
+
+    Refused with the element named: any other observation type (horizontal distances, angles,
+    azimuths, height differences, observed coordinates and vectors, covariance matrices), non-zero
+    instrument/target heights, a station's directions in two ``<obs>`` sets (two orientation
+    unknowns), an angle without a slope distance beside it. An observation to a point without a
     ``<point>`` element is an error ``FILE:LINE``."""
     root = parse_xml(path)
     if root.tag != "gama-local":
@@ -161,7 +207,11 @@ def read_gama_local(path) -> Network:
     if net is None:
         raise MultilatError(f"{path}:{root.line}: <gama-local> has no <network>")
     ex, ey = _axes(path, net, net.attrib.get("axes-xy"))
+    sense = net.attrib.get("angles", "left-handed").strip()
+    if sense not in ("left-handed", "right-handed"):
+        raise MultilatError(f"{path}:{net.line}: angles={sense!r} must be left-handed or right-handed")
     declared, coords, fixed, rows, notes = {}, {}, [], [], []
+    arows, dir_sets = [], {}
     offsets = None
     desc = net.child_text("description", "")
     for line in desc.splitlines():
@@ -169,6 +219,8 @@ def read_gama_local(path) -> Network:
             offsets = _parse_offsets(path, net.find("description"), line.strip()[len(_OFFSETS_TAG):])
     for po in net.findall("points-observations"):
         model = _stdev_model(path, po)
+        angle_sd = {"direction": xml_float(path, po, "direction-stdev", positive=True, required=False),
+                    "z-angle": xml_float(path, po, "zenith-angle-stdev", positive=True, required=False)}
         for el in po.children:
             if el.tag == "point":
                 _read_point(path, el, declared, coords, fixed, ex, ey)
@@ -176,6 +228,8 @@ def read_gama_local(path) -> Network:
                 for o in el.children:
                     if o.tag == "s-distance":
                         rows.append(_read_sdist(path, o, el.attrib.get("from"), model))
+                    elif o.tag in ("direction", "z-angle"):
+                        arows.append(_read_angle(path, o, el, angle_sd[o.tag], sense, dir_sets))
                     else:
                         _refuse(path, o)
             else:
@@ -188,7 +242,83 @@ def read_gama_local(path) -> Network:
         rows = [(ln, s, t, d + offsets.get(s, 0.0), sg) for ln, s, t, d, sg in rows]
         notes.append("per-station offsets restored from the description: "
                      + ", ".join(f"{s} {v * 1e6:.4f} um" for s, v in offsets.items()))
-    return build_network(path, rows, declared, coords, fixed, notes, "Gama")
+    network = build_network(path, rows, declared, coords, fixed, notes, "Gama")
+    return _with_angles(path, network, arows) if arows else network
+
+
+def _dms_or_gon(path, o, name):
+    """An angle attribute in radians and whether it was written in degrees (``d-m-s``)."""
+    text = (o.attrib.get(name) or "").strip()
+    body = text.lstrip("+-")
+    if "-" in body:
+        parts = body.split("-")
+        try:
+            d, m, sec = (float(v) for v in parts) if len(parts) == 3 else (math.nan,) * 3
+        except ValueError:
+            d = m = sec = math.nan
+        if not (math.isfinite(d) and 0 <= m < 60 and 0 <= sec < 60):
+            raise MultilatError(f"{path}:{o.line}: <{o.tag}> {name}={text!r} is not d-m-s")
+        return (-1.0 if text.startswith("-") else 1.0) * math.radians(d + m / 60 + sec / 3600), True
+    return xml_float(path, o, name) / GON_PER_RAD, False
+
+
+def _read_angle(path, o, obs_el, default_sd, sense, dir_sets):
+    """One ``<direction>`` or ``<z-angle>``: (line, station, target, kind, value_rad, sigma_rad)."""
+    s = (o.attrib.get("from") or obs_el.attrib.get("from") or "").strip()
+    t = o.attrib.get("to", "").strip()
+    if not s or not t:
+        raise MultilatError(f"{path}:{o.line}: <{o.tag}> needs from (or <obs from=>) and to")
+    for h in ("from_dh", "to_dh"):
+        v = xml_float(path, o, h, required=False)
+        if v:
+            raise MultilatError(f"{path}:{o.line}: <{o.tag}> {h}={v} is not supported "
+                                "(instrument and target heights are not in multilat's model)")
+    val, dms = _dms_or_gon(path, o, "val")
+    sd = xml_float(path, o, "stdev", positive=True, required=False)
+    if sd is None:
+        sd = default_sd
+    if sd is None:
+        raise MultilatError(f"{path}:{o.line}: <{o.tag}> {s}->{t} has no stdev and <points-observations> no "
+                            f"{'direction' if o.tag == 'direction' else 'zenith-angle'}-stdev")
+    sigma = math.radians(sd / 3600) if dms else sd / (GON_PER_RAD * 1e4)
+    if o.tag == "direction":
+        first = dir_sets.setdefault(s, obs_el.line)
+        if first != obs_el.line:
+            raise MultilatError(f"{path}:{o.line}: station {s!r} has directions in a second <obs> set (the first "
+                                f"at line {first}): two orientation unknowns; multilat has one per station")
+        az = val if sense == "right-handed" else -val
+        return (o.line, s, t, "azimuth", (az + math.pi) % (2 * math.pi) - math.pi, sigma)
+    if not 0.0 <= val <= math.pi:
+        raise MultilatError(f"{path}:{o.line}: <z-angle> {s}->{t} val is outside 0..200 gon")
+    return (o.line, s, t, "elevation", math.pi / 2 - val, sigma)
+
+
+def _with_angles(path, network: Network, arows) -> Network:
+    """The network's observations with the angles joined to the slope distances of their rows."""
+    obs = network.obs
+    row = {obs.label(k): k for k in range(obs.n_obs)}
+    n = obs.n_obs
+    val = {"azimuth": np.full(n, np.nan), "elevation": np.full(n, np.nan)}
+    sig = {"azimuth": np.full(n, np.nan), "elevation": np.full(n, np.nan)}
+    seen = {}
+    for line, s, t, kind, v, sg in arows:
+        k = row.get(f"{s}->{t}")
+        if k is None:
+            raise MultilatError(f"{path}:{line}: {'direction' if kind == 'azimuth' else 'zenith angle'} {s}->{t} "
+                                "has no slope distance: multilat's observation rows are distances with "
+                                "optional angles")
+        if (k, kind) in seen:
+            raise MultilatError(f"{path}:{line}: a second {kind} {s}->{t} (the first at line {seen[(k, kind)]})")
+        seen[(k, kind)] = line
+        val[kind][k], sig[kind][k] = v, sg
+    # an azimuth without an elevation (or the reverse) on a row: the other stays an empty cell
+    levelled = tuple(dict.fromkeys(s for _, s, _, _, _, _ in arows))
+    angles = Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
+                          obs.sigma_m, val["azimuth"], val["elevation"], obs.station_heads, sig["azimuth"],
+                          sig["elevation"], levelled)
+    note = (f"{int(np.isfinite(sig['azimuth']).sum())} directions and {int(np.isfinite(sig['elevation']).sum())} "
+            f"zenith angles read as azimuths and elevations; levelled stations: {', '.join(levelled)}")
+    return Network(angles, network.points, network.fixed, network.notes + (note,))
 
 
 def _parse_offsets(path, node, text):
@@ -208,8 +338,8 @@ def _refuse(path, el):
     what = _UNSUPPORTED.get(el.tag)
     if what is None:
         raise MultilatError(f"{path}:{el.line}: unknown element <{el.tag}> in a gama-local document")
-    raise MultilatError(f"{path}:{el.line}: <{el.tag}> ({what}) is not supported: multilat's model "
-                        "has slope distances (<s-distance>) only")
+    raise MultilatError(f"{path}:{el.line}: <{el.tag}> ({what}) is not supported: multilat reads slope "
+                        "distances (<s-distance>), directions and zenith angles")
 
 
 def _read_point(path, el, declared, coords, fixed, ex, ey):
@@ -260,6 +390,39 @@ def _read_sdist(path, o, obs_from, model):
 
 # ============================================================================ read output
 @dataclass(frozen=True, eq=False)
+class GamaAngles:
+    """gama-local's adjusted directions and zenith angles, in multilat's terms (radians).
+
+    kind : tuple of str  "azimuth" (a ``<direction>``, counter-clockwise under ``angles="right-handed"``)
+        or "zenith" (a ``<zenith-angle>``)
+    station, target : tuple of str
+    observed_rad, adjusted_rad : ndarray  the observed and adjusted values (gon -> rad)
+    adjusted_std_rad : ndarray  σ of the adjusted observation (cc -> rad)
+    residual_cofactor_rad2 : ndarray  Gama's ``qrr`` (cc² -> rad²)
+    control_percent, std_residual : ndarray  as for the distances
+    """
+
+    kind: tuple
+    station: tuple
+    target: tuple
+    observed_rad: np.ndarray
+    adjusted_rad: np.ndarray
+    adjusted_std_rad: np.ndarray
+    residual_cofactor_rad2: np.ndarray
+    control_percent: np.ndarray
+    std_residual: np.ndarray
+
+    @property
+    def residual_rad(self) -> np.ndarray:
+        """Observed minus adjusted, wrapped to ``[-pi, pi)``."""
+        return (self.observed_rad - self.adjusted_rad + np.pi) % (2 * np.pi) - np.pi
+
+    def redundancy_from_sigma(self, sigma_rad) -> np.ndarray:
+        """Redundancy numbers ``1 - (σ_adj/σ)²`` from each angle's a-priori σ (rad)."""
+        return 1.0 - (self.adjusted_std_rad / np.asarray(sigma_rad, float)) ** 2
+
+
+@dataclass(frozen=True, eq=False)
 class GamaAdjustment:
     """What multilat reads from gama-local's XML output (SI units; coordinates in multilat's axes).
 
@@ -300,6 +463,9 @@ class GamaAdjustment:
     adjusted_ids: tuple = ()
     covariance_m2: np.ndarray | None = None
     sigma_used: str = ""
+    angles: "GamaAngles | None" = None
+    orientation_rad: dict = field(default_factory=dict)
+    orientation_std_rad: dict = field(default_factory=dict)
 
     def interpoint_distance_std_m(self, a: str, b: str) -> float:
         """Standard deviation of the distance between adjusted points ``a`` and ``b`` from Gama's
@@ -352,7 +518,8 @@ def _num(path, node, tag, *, integer=False):
 def read_gama_adjustment(path) -> GamaAdjustment:
     """Read gama-local's adjusted XML output (``gama-local IN.xml --xml OUT.xml``).
 
-    Observation kinds other than ``<slope-distance>`` are refused with the kind named; an error
+    Slope distances, directions and zenith angles (:class:`GamaAngles`) are read, other observation
+    kinds are refused with the kind named; an error
     document (``<error>``) is reported with Gama's message."""
     root = parse_xml(path)
     if root.tag != "gama-local-adjustment":
@@ -390,13 +557,23 @@ def read_gama_adjustment(path) -> GamaAdjustment:
             if part == "fixed":
                 fixed.append(pid)
     adjusted_ids = tuple(i for i in ids if i not in fixed)
-    cov = _covariance(path, coords.find("cov-mat"), len(adjusted_ids), ex, ey)
+    orient, orient_std = _orientations(path, coords.find("orientation-shifts"))
+    cov, orient_var = _covariance(path, coords.find("cov-mat"), len(adjusted_ids), len(orient), ex, ey)
+    if orient_var is not None:
+        orient_std = {k: float(np.sqrt(v)) for k, v in zip(orient, orient_var)}
     obs_node = root.find("observations")
-    rows = []
+    rows, arows = [], []
     for o in (obs_node.children if obs_node is not None else []):
+        if o.tag in _ANGLE_KINDS:
+            arows.append((_ANGLE_KINDS[o.tag], o.child_text("from"), o.child_text("to"),
+                          _num(path, o, "obs") / GON_PER_RAD, _num(path, o, "adj") / GON_PER_RAD,
+                          _num(path, o, "stdev") / (GON_PER_RAD * 1e4),
+                          _num(path, o, "qrr") / (GON_PER_RAD * 1e4) ** 2, _num(path, o, "f"),
+                          _num(path, o, "std-residual") if o.find("std-residual") else math.nan))
+            continue
         if o.tag != "slope-distance":
             raise MultilatError(f"{path}:{o.line}: <{o.tag}> observations are not supported: "
-                                "multilat reads slope distances only")
+                                "multilat reads slope distances, directions and zenith angles")
         rows.append((o.child_text("from"), o.child_text("to"), _num(path, o, "obs"),
                      _num(path, o, "adj"), _num(path, o, "stdev") * 1e-3, _num(path, o, "qrr"), _num(path, o, "f"),
                      _num(path, o, "std-residual") if o.find("std-residual") else math.nan))
@@ -409,17 +586,38 @@ def read_gama_adjustment(path) -> GamaAdjustment:
                           _num(path, sd, "apriori"), _num(path, sd, "aposteriori"),
                           tuple(col[0]), tuple(col[1]), np.array(col[2]), np.array(col[3]),
                           np.array(col[4]), np.array(col[5]), np.array(col[6]), np.array(col[7]),
-                          adjusted_ids, cov, (sd.child_text("used", "") if sd is not None else ""))
+                          adjusted_ids, cov, (sd.child_text("used", "") if sd is not None else ""),
+                          _angles(arows), orient, orient_std)
 
 
-def _covariance(path, cm, n_points, ex, ey):
-    """The full covariance (m², multilat's axes) from ``<cov-mat>`` (mm², upper band by rows), or
-    None when Gama wrote only a band or it holds more than the adjusted x, y, z (orientations)."""
+_ANGLE_KINDS = {"direction": "azimuth", "zenith-angle": "zenith"}
+
+
+def _angles(rows) -> GamaAngles | None:
+    if not rows:
+        return None
+    c = list(zip(*rows))
+    return GamaAngles(tuple(c[0]), tuple(c[1]), tuple(c[2]), *(np.array(v, float) for v in c[3:]))
+
+
+def _orientations(path, node) -> tuple[dict, dict]:
+    """``<orientation-shifts>``: each station's adjusted orientation of its directions (gon -> rad);
+    its σ comes from the covariance (empty here)."""
+    out = {}
+    for o in (node.findall("orientation") if node is not None else []):
+        out[o.child_text("id")] = _num(path, o, "adj") / GON_PER_RAD
+    return out, {}
+
+
+def _covariance(path, cm, n_points, n_orient, ex, ey):
+    """The full covariance of the adjusted x, y, z (m², multilat's axes) from ``<cov-mat>`` (mm²,
+    upper band by rows) and the variances of the orientations that follow them (cc² -> rad²);
+    (None, None) when Gama wrote only a band."""
     if cm is None:
-        return None
+        return None, None
     dim, band = _num(path, cm, "dim", integer=True), _num(path, cm, "band", integer=True)
-    if dim != 3 * n_points or band < dim - 1:
-        return None
+    if dim != 3 * n_points + n_orient or band < dim - 1:
+        return None, None
     vals = []
     for f in cm.findall("flt"):
         try:
@@ -434,4 +632,5 @@ def _covariance(path, cm, n_points, ex, ey):
     C = C + np.triu(C, 1).T
     R = np.array([[ex[0], ey[0], 0.0], [ex[1], ey[1], 0.0], [0.0, 0.0, 1.0]])
     T = np.kron(np.eye(n_points), R)
-    return T @ C @ T.T * 1e-6
+    k = 3 * n_points
+    return T @ C[:k, :k] @ T.T * 1e-6, np.diag(C)[k:] / (GON_PER_RAD * 1e4) ** 2
