@@ -30,31 +30,9 @@ from multilat.network.adjust import adjust
 from multilat.network.angles import predicted_angles
 from multilat.network.data import Observations
 from multilat.network.datum import helmert_basis
-from multilat.network.generator import random_network
+from multilat.network.files import write_observations
 
-SIG_ANGLE = 20e-6
-
-
-def _mixed(seed=3, noise=True, trackers=(0, 1)):
-    net = random_network(np.random.default_rng([15, seed]), n_stations=(6, 6), n_targets=(15, 15))
-    o = net.obs
-    rng = np.random.default_rng(seed)
-    ori = rng.uniform(-0.2, 0.2, (o.n_stations, 3))
-    ori[:, 2] = rng.uniform(-3, 3, o.n_stations)
-    az, el = predicted_angles(net.station_xyz_m, ori, net.target_xyz_m, o.station_index, o.target_index)
-    tr = np.isin(o.station_index, trackers)
-    s = np.where(tr, SIG_ANGLE, np.nan)
-    d = o.distance_m
-    if noise:
-        az = az + rng.normal(0, SIG_ANGLE, az.size)
-        el = el + rng.normal(0, SIG_ANGLE, el.size)
-    else:
-        d = d - (d - np.linalg.norm(net.station_xyz_m[o.station_index] - net.target_xyz_m[o.target_index], axis=1)
-                 - net.offset_m[o.station_index])          # exact distances
-    obs = Observations(o.station_ids, o.target_ids, o.station_index, o.target_index, d, o.sigma_m, az, el,
-                       None, s, s)
-    return net, obs, ori
-
+from angle_networks import SIG_ANGLE, mixed_with_angles as _mixed
 
 def _rot(o):
     """Rz(kappa) Ry(phi) Rx(omega) for one orientation (omega, phi, kappa), written out (complex-safe)."""
@@ -122,15 +100,7 @@ def _inner_cov(J, G, E):
 
 
 def _write_csv(obs, p):
-    """The observations as a CSV with the angle columns (σ empty where an angle is no observation)."""
-    rows = ["station,target,distance_m,sigma_m,azimuth_rad,elevation_rad,sigma_azimuth_rad,sigma_elevation_rad"]
-    for k in range(obs.n_obs):
-        sa = obs.sigma_azimuth_rad[k]
-        rows.append(f"{obs.station_ids[obs.station_index[k]]},{obs.target_ids[obs.target_index[k]]},"
-                    f"{float(obs.distance_m[k])!r},{float(obs.sigma_m[k])!r},{float(obs.azimuth_rad[k])!r},"
-                    f"{float(obs.elevation_rad[k])!r},{'' if np.isnan(sa) else repr(float(sa))},"
-                    f"{'' if np.isnan(sa) else repr(float(sa))}")
-    p.write_text("\n".join(rows) + "\n")
+    write_observations(p, obs)
 
 
 def _pack(H, T, off, O, oriented):
@@ -244,8 +214,13 @@ def test_bad_angle_input_is_one_line(tmp_path, capsys):
     one[0] = SIG_ANGLE
     bad = Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
                        obs.sigma_m, obs.azimuth_rad, obs.elevation_rad, None, one, None)
-    with pytest.raises(MultilatError, match="needs at least 2 direction"):
+    with pytest.raises(MultilatError, match="station 'S1' has 1 angle observation.* needs at least 3, to 2 targets"):
         adjust(bad, initial=net, snooping=False)
+    elev_only = Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
+                             obs.sigma_m, obs.azimuth_rad, obs.elevation_rad, None, None, obs.sigma_elevation_rad,
+                             ("S1", "S2"))
+    with pytest.raises(MultilatError, match="levelled station 'S1' has no azimuth observation"):
+        adjust(elev_only, initial=net, snooping=False)
     with pytest.raises(MultilatError, match="levelled: 'T1' is not a station"):
         Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
                      obs.sigma_m, levelled=("T1",))

@@ -332,10 +332,10 @@ def _print_summary(res, doc, out):
     if res.angles:
         ws = np.array([a["w"] for a in res.angles])
         vt = sum((a["residual_rad"] / a["sigma_rad"]) ** 2 for a in res.angles)
-        console.print(f"  angles: {len(res.angles)} observations (σ from the file), vᵀPv {vt:.1f} of "
+        console.print(f"  angles: {len(res.angles)} observations, vᵀPv {vt:.1f} of "
                       f"{res.sigma0 ** 2 * res.dof:.1f}, largest |w| {np.max(np.abs(ws)):.2f} "
-                      f"({sum(not a['w_test_passed'] for a in res.angles)} failing; angles are tested, not "
-                      "rejected automatically)", markup=False)
+                      f"({sum(not a['w_test_passed'] for a in res.angles)} failing; "
+                      f"{len(res.angle_outliers)} rejected by data snooping)", markup=False)
         for sid, o in res.orientations.items():
             v, u = o["orientation_rad"], o["orientation_std_rad"]
             console.print(f"  orientation of {sid}: " + ", ".join(
@@ -412,14 +412,20 @@ def test_lines(res) -> list[str]:
         out.append("  data snooping not requested (--no-snooping)")
         return out
     steps = t.get("steps", [])
-    if steps and steps[0]["detection_passed"] and not res.outliers:
+    if steps and steps[0]["detection_passed"] and not res.outliers and not res.angle_outliers:
         out.append("  detection passed: no data snooping")
     if res.outliers:
-        out.append("  rejected, in order:")
+        out.append("  rejected distances, in order:")
         for n, o in enumerate(res.outliers, 1):
             stat = f"{o.test} = {o.statistic:+.2f} > {o.critical:.2f}" if o.statistic is not None else f"w = {o.w:+.2f}"
             out.append(f"    {n}. {o.station}->{o.target}: {stat}, residual {o.residual_m * 1e6:+.1f} µm")
-    elif not (steps and steps[0]["detection_passed"]):
+    if res.angle_outliers:
+        out.append("  rejected angles, in order:")
+        for a in res.angle_outliers:
+            out.append(f"    {a['order']}. {a['station']}->{a['target']} {a['kind']}: {a['test']} = "
+                       f"{a['statistic']:+.2f} > {a['critical']:.2f}, residual {a['residual_rad'] * 1e6:+.1f} µrad "
+                       f"(snooping round {a['step']})")
+    if not (res.outliers or res.angle_outliers) and not (steps and steps[0]["detection_passed"]):
         out.append("  no observation rejected")
     return out
 

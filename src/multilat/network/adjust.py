@@ -29,7 +29,7 @@ from multilat.network.result import (AdjustmentResult, InterpointDistance, Outli
                                      build_result)
 from multilat.network.search import P_MIN, p_value
 from multilat.network.couplings import coupling_spec
-from multilat.network.angle_rows import angle_results, largest_angle_w
+from multilat.network.angle_rows import angle_results, angle_w
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 
@@ -283,8 +283,10 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     first = True
     search_ok = cost == "distance" and datum.kind != "control"
     search = None
+    obs_w = obs                      # the observations with the rejected angles left out (σ NaN)
+    ang_rejected: list[dict] = []
     while True:
-        sub = obs if used.all() else obs.subset(used)
+        sub = obs_w if used.all() else obs_w.subset(used)
         try:
             core = fit_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
                             sc_free, max_iter, solver, chunk_targets, warn=warn,
@@ -314,20 +316,33 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         gs[core["smap"]], gt_[core["tmap"]], go[core["smap"]] = core["sx"], core["tx"], core["off"]
         guess = Start(gs, gt_, go)
         warn = False
-        if not do_snoop or len(rejected) >= limit:
+        if not do_snoop or len(rejected) + len(ang_rejected) >= limit:
             break
         w_sub = st.w_statistics(core["residual_w"], np.ones_like(core["residual_w"]), core["redundancy"])
         k_sub = int(np.argmax(np.abs(w_sub)))
-        step = _detection_step(core, w_sub[k_sub], unknown, alpha, alpha_g, lam0, crit)
+        w_ang = angle_w(core, lam0) if core.get("angles") is not None else np.zeros(0)
+        angle_first = w_ang.size > 0 and np.max(np.abs(w_ang)) > abs(w_sub[k_sub])
+        w_top = w_ang[int(np.argmax(np.abs(w_ang)))] if angle_first else w_sub[k_sub]
+        step = _detection_step(core, w_top, unknown, alpha, alpha_g, lam0, crit)
         steps.append(step)
         # detection first: data snooping only while the global test fails (Baarda's DIA procedure;
         # with it passing, the w-tests' own false alarms at alpha over thousands of observations
         # would reject good distances). Variance factor unknown: Pope's τ-test of the largest |τ|.
         if step["detection_passed"] is not False or not step["identified"]:
             break
-        if largest_angle_w(core, lam0) > abs(w_sub[k_sub]):   # angles are tested, not rejected (yet)
-            unlocated, reason = (), "an angle observation has the largest |w|: angles are not rejected automatically"
-            break
+        if angle_first:
+            # the largest |w| is an angle's: reject that angle (the row's distance and other angle stay)
+            k, kind, w_a, why = _angle_to_reject(core, lam0, obs_w, used)
+            step["angle"] = f"{obs.label(k)} {kind}"
+            if why:
+                unlocated, reason = (), why
+                break
+            step["action"] = "rejected"
+            ang_rejected.append({"row": k, "kind": kind, "w": w_a, "test": step["test_k"],
+                                 "statistic": step["statistic_k"], "critical": step["critical_k"],
+                                 "step": len(steps)})
+            obs_w = _without_angle(obs_w, k, kind)
+            continue
         step["observation"] = int(np.flatnonzero(used)[k_sub])
         k = int(np.flatnonzero(used)[k_sub])
         # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
@@ -381,10 +396,11 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
              "alpha_global": alpha_g(core["dof"]), "steps": steps}
     bars_out, ctrl_out = coupling_results(core)
     ang_out, orient = angle_results(core, lam0, final_crit)
-    return replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
+    res = replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
                    scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
                    sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient,
                    angle_design_w=None if core.get("angles") is None else core["angles"]["design_w"])
+    return replace(res, angle_outliers=_angle_outliers(obs, ang_rejected, res))
 
 
 def coupling_results(core) -> tuple[tuple, tuple]:
@@ -402,6 +418,52 @@ def coupling_results(core) -> tuple[tuple, tuple]:
                   "residual_m": res[k + 3 * q:k + 3 * q + 3].tolist(),
                   "redundancy": red[k + 3 * q:k + 3 * q + 3].tolist()} for q, pid in enumerate(cp.prior_ids))
     return bars, ctrl
+
+
+def _angle_to_reject(core, lam0, obs_w, used) -> tuple[int, str, float, str]:
+    """The angle with the largest |w|: its row in the observations, its kind, its w, and why it must
+    not be rejected ("" when it may): its station would keep too few directions for its orientation."""
+    from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
+
+    rows = core["angles"]["rows"]
+    w = angle_w(core, lam0)
+    q = int(np.argmax(np.abs(w)))
+    k = int(np.flatnonzero(used)[rows.obs_index[q]])
+    kind = KIND_NAMES[rows.kind[q]]
+    try:
+        angle_rows(_without_angle(obs_w, k, kind).subset(used))
+    except MultilatError as exc:
+        return k, kind, float(w[q]), f"rejecting it would leave its station's orientation unsolvable ({exc})"
+    return k, kind, float(w[q]), ""
+
+
+def _without_angle(obs, k: int, kind: str):
+    """``obs`` with the ``kind`` ("azimuth"/"elevation") angle of row ``k`` no longer an observation."""
+    sa = np.array(obs.sigma_azimuth_rad, float, copy=True) if obs.sigma_azimuth_rad is not None else None
+    se = np.array(obs.sigma_elevation_rad, float, copy=True) if obs.sigma_elevation_rad is not None else None
+    (sa if kind == "azimuth" else se)[k] = np.nan
+    return obs.with_angle_sigma(sa, se)
+
+
+def _angle_outliers(obs, rejected: list[dict], res) -> tuple:
+    """The rejected angles (JSON-ready, in order) with their residuals against the final solution."""
+    from multilat.network.angles import predicted_angles, wrap_angle
+
+    out = []
+    for n, r in enumerate(rejected):
+        k = r["row"]
+        sid, tid = obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]]
+        resid = float("nan")
+        if sid in res.orientations and sid in res.station_ids and tid in res.target_ids:
+            i, j = res.station_ids.index(sid), res.target_ids.index(tid)
+            az, el = predicted_angles(res.station_xyz_m[[i]], [res.orientations[sid]["orientation_rad"]],
+                                      res.target_xyz_m[[j]], [0], [0])
+            resid = float(wrap_angle(obs.azimuth_rad[k] - az[0]) if r["kind"] == "azimuth"
+                          else obs.elevation_rad[k] - el[0])
+        out.append({"station": sid, "target": tid, "kind": r["kind"], "w": r["w"], "residual_rad": resid,
+                    "test": r["test"], "statistic": r["statistic"], "critical": r["critical"],
+                    "step": r["step"], "order": n + 1})
+    return tuple(out)
 
 
 def _detection_step(core, w_max, unknown, alpha, alpha_g, lam0, crit) -> dict:

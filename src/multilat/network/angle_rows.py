@@ -35,7 +35,7 @@ from multilat.network.data import Observations
 from multilat.network.model import Q
 
 __all__ = ["AngleRows", "angle_rows", "orientation_from_matrix", "initial_orientations", "KIND_NAMES",
-           "angle_results", "largest_angle_w"]
+           "angle_results", "angle_w"]
 
 KIND_NAMES = ("azimuth", "elevation")
 
@@ -137,13 +137,22 @@ def angle_rows(obs: Observations) -> AngleRows | None:
     oriented = np.zeros(obs.n_stations, bool)
     oriented[si] = True
     levelled = np.array([sid in obs.levelled for sid in obs.station_ids], bool)
+    ti = np.asarray(obs.target_index)[k]
     for i in np.flatnonzero(oriented):
-        n_i = int(np.sum(si == i))
-        need = 1 if levelled[i] else 2
-        if n_i < need:
-            raise MultilatError(f"station {obs.station_ids[i]!r} has {n_i} angle observation(s): its "
-                                f"orientation needs at least {need} direction(s)")
-    return AngleRows(k, kind, val, sig, si, np.asarray(obs.target_index)[k], oriented, levelled)
+        on = si == i
+        sid = obs.station_ids[i]
+        if levelled[i]:
+            # the heading kappa is seen by azimuths only (elevations of a levelled station do not turn with it)
+            if not np.any(on & (kind == 0)):
+                raise MultilatError(f"levelled station {sid!r} has no azimuth observation: its heading (kappa) "
+                                    "needs at least one")
+        elif int(on.sum()) < 3 or np.unique(ti[on]).size < 2:
+            # three rotation angles: three angle observations, to two targets at least (the angles of
+            # one target leave the roll about its line of sight free)
+            raise MultilatError(f"station {sid!r} has {int(on.sum())} angle observation(s) to "
+                                f"{np.unique(ti[on]).size} target(s): its orientation (3 angles) needs at least "
+                                "3, to 2 targets")
+    return AngleRows(k, kind, val, sig, si, ti, oriented, levelled)
 
 
 def orientation_from_matrix(R) -> np.ndarray:
@@ -271,13 +280,10 @@ def _w_and_mdb(a: dict, lam0: float):
     return w, mdb
 
 
-def largest_angle_w(core, lam0: float) -> float:
-    """The largest |w| of the angle observations of an adjustment's core (0 without angles)."""
-    a = core.get("angles")
-    if a is None:
-        return 0.0
-    w, _ = _w_and_mdb(a, lam0)
-    return float(np.max(np.abs(w), initial=0.0))
+def angle_w(core, lam0: float) -> np.ndarray:
+    """Baarda's w of each angle observation of an adjustment's core (one per angle row)."""
+    w, _ = _w_and_mdb(core["angles"], lam0)
+    return w
 
 
 def angle_results(core, lam0: float, crit: float) -> tuple[tuple, dict]:

@@ -124,6 +124,10 @@ class AdjustmentResult:
         controlled observations and targets (distance cost)
     sigma_source : dict  where the a-priori σ came from (file column, option, distance model)
     variance_factor : str  "known" or "unknown" (σ̂0 then scales the covariances)
+    angles : tuple of dict  each angle observation used (station, target, kind, value, σ, residual,
+        redundancy, w, MDB, verdict); orientations : dict  station -> (ω, φ, κ) and their σ
+    angle_outliers : tuple of dict  angles rejected by data snooping, in order (station, target, kind,
+        w when rejected, residual_rad against the final solution, test, statistic, critical, step)
     """
 
     obs: Observations
@@ -167,6 +171,7 @@ class AdjustmentResult:
     weighted_control: tuple = ()
     angles: tuple = ()
     orientations: dict = field(default_factory=dict)
+    angle_outliers: tuple = ()
     angle_design_w: object = field(default=None, repr=False)   # (a, 5s+3t+n_o) whitened angle rows, internal frame
     tests: dict = field(default_factory=dict)
     reliability: object = None
@@ -397,6 +402,7 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         "scale_bars": list(res.scale_bars),
         "weighted_control": list(res.weighted_control),
         "angles": list(res.angles),
+        "angle_outliers": list(res.angle_outliers),
         "targets": targets,
         "sigma0": res.sigma0,
         "sigma0_unit": res.sigma0_unit,

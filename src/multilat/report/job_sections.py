@@ -42,6 +42,11 @@ def _um(doc, *path, digits=2, k=1.0, op="", sign=False):
     return Num(resolve(doc, p), p, UM, digits, k, op, sign)
 
 
+def _urad(doc, *path, digits=1):
+    p = ptr(*path)
+    return Num(resolve(doc, p), p, UM, digits, 1.0, "", True)       # rad -> µrad, the same factor as m -> µm
+
+
 def _m(doc, *path, digits=6):
     p = ptr(*path)
     return Num(resolve(doc, p), p, 1.0, digits)
@@ -124,13 +129,18 @@ def _adjust_reliability(doc) -> Section:
                       "distance is not checked by the others; 1: fully checked).")
     if not doc.get("snooping"):
         sec.paragraph("Data snooping was not done.")
-    elif doc.get("outliers"):
+    if doc.get("snooping") and doc.get("outliers"):
         sec.table(("station", "target", "w", "residual (µm)"),
                   [(o["station"], o["target"], _plain(doc, "outliers", i, "w", digits=2),
                     _um(doc, "outliers", i, "residual_m", digits=1, sign=True))
                    for i, o in enumerate(doc["outliers"])],
                   caption=f"Rejected by data snooping (α = {doc['alpha']:g})")
-    else:
+    if doc.get("angle_outliers"):
+        sec.table(("station", "target", "kind", "w", "residual (µrad)"),
+                  [(o["station"], o["target"], o["kind"], _plain(doc, "angle_outliers", i, "w", digits=2),
+                    _urad(doc, "angle_outliers", i, "residual_rad")) for i, o in enumerate(doc["angle_outliers"])],
+                  caption=f"Angles rejected by data snooping (α = {doc['alpha']:g})")
+    if doc.get("snooping") and not doc.get("outliers") and not doc.get("angle_outliers"):
         sec.paragraph(f"No observation rejected by data snooping (α = {doc['alpha']:g}).")
     if doc.get("unlocated"):
         sec.paragraph("w-test failure that could not be located: " + ", ".join(

@@ -29,13 +29,15 @@ __all__ = ["SAMPLES", "run_sample", "infer", "merge"]
 
 _EX = Path(__file__).resolve().parents[3] / "examples"
 _N = _EX / "network"
-_INTEROP = Path(__file__).resolve().parents[3] / "tests" / "data" / "interop"
+_TESTDATA = Path(__file__).resolve().parents[3] / "tests" / "data"
+_INTEROP = _TESTDATA / "interop"
 
 #: command -> list of argument lists (paths relative to the repository's ``examples/``)
 SAMPLES = {
     "adjust": [["adjust", f"{_N}/small_volume_obs.csv", "--references", f"{_N}/small_volume_refs.csv"],
                ["adjust", f"{_N}/sequential/obs.csv", "--variance-components", "head"],
                ["adjust", f"{_N}/mixed/obs.csv", "--variance-components", "kind"],
+               ["adjust", str(_TESTDATA / "angles" / "mixed_azimuth_blunder.csv")],
                ["adjust", f"{_EX}/campaign/raw.csv", "-e", f"{_EX}/campaign/environment.csv", "--heights",
                 f"{_EX}/campaign/heights.csv", "--average-repeats"]],
     "propagate": [["propagate", "small-volume", "--trials", "2000"],
