@@ -75,7 +75,7 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
                      sigma_m=None, environment=None, heights=None, formula: str = "ciddor",
                      extrapolate: bool = False, max_gap_s=None, average: bool = False, pairs=None,
                      sigma_source: dict | None = None, scale_bars: bool = False, points=None,
-                     scales: bool = False):
+                     scales: bool = False, levelled=()):
     """The :class:`multilat.network.propagate.Problem` of a campaign file (module docstring).
 
     Parameters
@@ -98,6 +98,9 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
         trial, hard rows held).
     scales : bool
         Estimate a scale per head (the scale datum: scale bars).
+    levelled : sequence of str
+        Stations on their level besides those the instrument's trackers declare (their angles observe
+        the vertical; the trials' datum then turns about z only).
 
     Returns
     -------
@@ -119,6 +122,8 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
     if average:
         av = average_repeats(obs)
         obs, matrix, scatter = av.obs, av.matrix, av.scatter_json()
+    if levelled:
+        obs = dataclasses.replace(obs, levelled=tuple(dict.fromkeys(tuple(obs.levelled) + tuple(levelled))))
     if corrected is not None:
         rd = Readings(np.asarray(readings_obs.station_index), np.asarray(corrected.distance_m, float),
                       np.asarray(corrected.sigma_model_m, float), air_jacobian_m=corrected.air_jacobian_m,

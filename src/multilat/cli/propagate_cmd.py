@@ -20,7 +20,8 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
                  references: Path | None, environment: Path | None = None, heights: Path | None = None,
                  formula: str = "ciddor", extrapolate: bool = False, max_gap_s: float | None = None,
                  average_repeats: bool = False, sigma_source: dict | None = None,
-                 points: Path | None = None, scale_bars: bool = False, scales: bool = False):
+                 points: Path | None = None, scale_bars: bool = False, scales: bool = False,
+                 levelled: str | None = None):
     """The propagation problem for ``source``: a built-in configuration name, or what ``adjust``
     reads (an observations CSV, or raw readings with their environment log; repeated readings kept
     or averaged), :func:`multilat.campaign.propagation.campaign_problem`. ``sigma_source`` (a dict) is
@@ -34,9 +35,9 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
     inst = _inst.load_instrument(instrument)
     if source in BUILTIN:
         if environment is not None or heights is not None or extrapolate or max_gap_s is not None \
-                or average_repeats or points is not None or scale_bars or scales:
+                or average_repeats or points is not None or scale_bars or scales or levelled:
             raise MultilatError(f"--environment/--heights/--extrapolate/--max-gap-s/--average-repeats/"
-                                f"--points/--scale-bars/--scales apply to a campaign file, not to the "
+                                f"--points/--scale-bars/--scales/--levelled apply to a campaign file, not to the "
                                 f"built-in {source!r}")
         try:
             from multilat.network import configs
@@ -59,7 +60,8 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
                                   environment=environment, heights=heights, formula=formula,
                                   extrapolate=extrapolate, max_gap_s=max_gap_s, average=average_repeats,
                                   sigma_source=src, scale_bars=scale_bars, scales=scales,
-                                  points=read_points(points) if points is not None else None)
+                                  points=read_points(points) if points is not None else None,
+                                  levelled=tuple(x.strip() for x in (levelled or "").split(",") if x.strip()))
     return problem
 
 
@@ -82,6 +84,8 @@ def propagate_cmd(
                                     help="The --references are scale bars: observations weighted by their "
                                          "u_m, drawn from it in every trial (with --scales: the scale datum)."),
     scales: bool = typer.Option(False, "--scales", help="Estimate a scale per head (needs --scale-bars)."),
+    levelled: Optional[str] = typer.Option(None, "--levelled", help="Stations on their level (κ only; their "
+                                           "angles observe the vertical), ID,ID,... as in `adjust`."),
     points: Optional[Path] = typer.Option(None, "--points",
                                           help="Points CSV: point,x_m,y_m,z_m[,sx_m,sy_m,sz_m]: approximate, or "
                                                "control under --datum control (weighted rows drawn in every "
@@ -135,7 +139,7 @@ def propagate_cmd(
                            references=references, environment=environment, heights=heights,
                            formula=formula, extrapolate=extrapolate, max_gap_s=max_gap_s,
                            average_repeats=average_repeats, sigma_source=src, points=points,
-                           scale_bars=scale_bars, scales=scales)
+                           scale_bars=scale_bars, scales=scales, levelled=levelled)
     total = None if adaptive else trials
     with map_from_options(workers=workers, scheduler=scheduler) as m, progress() as bar:
         task = bar.add_task("Monte Carlo", total=total)

@@ -98,6 +98,7 @@ class CoupledBatchedNetwork(NetworkSizes):
     angle_value_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
     angle_sigma_rad: np.ndarray = field(default_factory=lambda: np.zeros(0))
     orientation_rad: np.ndarray = None      # (s, 3) nominal orientations (rows of oriented stations used)
+    orientation_levelled: np.ndarray = None  # (s,) bool: levelled stations (ω, φ held at 0, κ estimated)
     datum: object = None
     _pre: dict = field(default=None, repr=False)
 
@@ -113,6 +114,8 @@ class CoupledBatchedNetwork(NetworkSizes):
             object.__setattr__(self, k, np.asarray(getattr(self, k), float).reshape(-1, 3))
         ori = np.zeros((len(self.station_xyz_m), 3)) if self.orientation_rad is None else self.orientation_rad
         object.__setattr__(self, "orientation_rad", np.asarray(ori, float).reshape(-1, 3))
+        lev = np.zeros(len(self.station_xyz_m), bool) if self.orientation_levelled is None else self.orientation_levelled
+        object.__setattr__(self, "orientation_levelled", np.asarray(lev, bool).reshape(-1))
         for k in ("station_held", "target_held", "offset_free", "scale_free"):
             object.__setattr__(self, k, np.asarray(getattr(self, k), bool).ravel())
         s, t, m = self.n_stations, self.n_targets, self.n_obs
@@ -173,7 +176,8 @@ class CoupledBatchedNetwork(NetworkSizes):
 
     @property
     def dof(self) -> int:
-        return self.n_obs + self.n_extra - int(self._pre["free"].sum()) + (0 if self.datum is None else 6)
+        return self.n_obs + self.n_extra - int(self._pre["free"].sum()) + (0 if self.datum is None else
+                                                                            self.datum.n_defect)
 
     def nominal_distance_m(self) -> np.ndarray:
         x = self._pre["x0"][None]
@@ -302,8 +306,10 @@ class CoupledBatchedNetwork(NetworkSizes):
         s, h, t, m = self.n_stations, self.n_heads, self.n_targets, self.n_obs
         x0 = self._x0()
         P = x0.size
+        lev = self.orientation_levelled[self.oriented]
         free = np.concatenate([np.repeat(~self.station_held, 3), self.offset_free, self.scale_free,
-                               np.repeat(~self.target_held, 3), np.ones(self.n_orientation, bool)])
+                               np.repeat(~self.target_held, 3),
+                               np.column_stack([~lev, ~lev, np.ones_like(lev)]).ravel()])
         w_all = 1.0 / np.concatenate([self.sigma_m, self.extra_sigma]) ** 2
         J0 = self._jacobian(x0)
         N = J0.T @ (w_all[:, None] * J0)
@@ -313,15 +319,18 @@ class CoupledBatchedNetwork(NetworkSizes):
             EL = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)
             # no orientation rows: the coordinates' block of the S-transformation needs none
             e = 3 * s + 2 * h + 3 * t
-            E = np.zeros((P, 6))
+            nd = EL.shape[1]
+            E = np.zeros((P, nd))
             E[:3 * s] = EL[:3 * s]
             E[3 * s + 2 * h:e] = EL[4 * s:]
             gp = helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m]))
-            G = np.zeros((P, 6))
+            if nd == 4:
+                gp = gp[:, [0, 1, 2, 5]]
+            G = np.zeros((P, nd))
             G[:3 * s] = gp[:3 * s]
             G[3 * s + 2 * h:e] = gp[3 * s:]
             ef = E[free]
-            c = np.trace(N[np.ix_(free, free)]) / free.sum() / max(np.trace(ef.T @ ef) / 6, 1e-300)
+            c = np.trace(N[np.ix_(free, free)]) / free.sum() / max(np.trace(ef.T @ ef) / nd, 1e-300)
             pen = c * (E @ E.T)
         Nf = (N + pen)[np.ix_(free, free)]
         try:

@@ -235,7 +235,8 @@ def sequential_network(rng=None, *, heads=("T1", "T2"), n_stations: int = 8, n_t
 
 
 def mixed_network(rng=None, *, heads=("H1", "H2", "H3", "H4"), trackers=None, n_targets: int = 14,
-                  room_m=(4.0, 3.0, 1.2), head_sigma_m: float = 5e-6, offset_max_m: float = 2e-3):
+                  room_m=(4.0, 3.0, 1.2), head_sigma_m: float = 5e-6, offset_max_m: float = 2e-3,
+                  levelled: bool = False):
     """A mixed campaign: multilateration heads (distances) and laser trackers (distance and two angles
     to every target), all seeing every target.
 
@@ -245,6 +246,9 @@ def mixed_network(rng=None, *, heads=("H1", "H2", "H3", "H4"), trackers=None, n_
     1.2 m, each with a small random tilt (``U(±0.02)`` rad) and a random heading; targets uniform in the
     inner box of the room. Heads: one offset each ``U(±offset_max_m)``, gaussian noise ``head_sigma_m``;
     trackers: offset 0, distance noise and angle noise of their specification's σ at each range.
+
+    ``levelled``: the trackers stand on their level (no tilt; ``obs.levelled`` names them); the random
+    draws are the same as without it.
 
     Returns ``(GeneratedNetwork, orientation_rad (s, 3))`` — the orientations of the heads are zero
     (they read no angles).
@@ -266,6 +270,8 @@ def mixed_network(rng=None, *, heads=("H1", "H2", "H3", "H4"), trackers=None, n_
     nh = len(heads)
     ori[nh:, :2] = g.uniform(-0.02, 0.02, (s - nh, 2))
     ori[nh:, 2] = g.uniform(-np.pi, np.pi, s - nh)
+    if levelled:
+        ori[nh:, :2] = 0.0
     off = np.concatenate([g.uniform(-offset_max_m, offset_max_m, nh), np.zeros(s - nh)])
     si, ti = np.meshgrid(np.arange(s), np.arange(t), indexing="ij")
     si, ti = si.ravel(), ti.ravel()
@@ -283,5 +289,5 @@ def mixed_network(rng=None, *, heads=("H1", "H2", "H3", "H4"), trackers=None, n_
     az = np.where(tr, az + g.normal(0.0, 1.0, si.size) * np.where(tr, sig_a, 0.0), np.nan)
     el = np.where(tr, el + g.normal(0.0, 1.0, si.size) * np.where(tr, sig_a, 0.0), np.nan)
     obs = Observations(tuple(heads) + tuple(trackers), tuple(f"P{j + 1}" for j in range(t)), si, ti, d, sig,
-                       az, el, None, sig_a, sig_a)
+                       az, el, None, sig_a, sig_a, tuple(trackers) if levelled else ())
     return GeneratedNetwork(H, T, off, obs, float(np.hypot(L, W)), "room corners and walls", "room", 0.0), ori

@@ -202,9 +202,6 @@ def problem_from_observations(obs, *, datum="free", pairs=None, references=None,
     """
     from multilat.network.datum import parse_datum
 
-    if obs.levelled and obs.has_angle_observations:
-        raise MultilatError(f"propagate: levelled stations ({', '.join(obs.levelled)}) fix the vertical, which "
-                            "the Monte Carlo's rigid datum fit does not model yet; adjust them with `multilat adjust`")
     dat = parse_datum(datum)
     if adjustment is None:
         from multilat.network.adjust import adjust
@@ -249,20 +246,22 @@ def _coupled_network(obs, res, dat, scale_bars, points):
         for p in control_ids(obs, dat, points):
             held[pos[p]] = points.std(p) is None
         dt = None
-    else:
-        dt = bt.TrialDatum.from_datum(dat, obs.station_ids, obs.target_ids)
-    spec = coupling_spec(obs, bars=scale_bars, points=points, control=dat.kind == "control")
-    bars = () if spec is None else spec.bars
-    ctrl = () if spec is None else spec.control
     from multilat.network.angle_rows import angle_rows
 
     ar = angle_rows(obs)
+    if dat.kind != "control":
+        # levelled stations observe the vertical: the trials' datum fit turns about z only
+        dt = bt.TrialDatum.from_datum(dat, obs.station_ids, obs.target_ids,
+                                      about_z=ar is not None and ar.any_levelled)
+    spec = coupling_spec(obs, bars=scale_bars, points=points, control=dat.kind == "control")
+    bars = () if spec is None else spec.bars
+    ctrl = () if spec is None else spec.control
     ori = np.zeros((s, 3))
     for sid, o in res.orientations.items():
         ori[obs.station_ids.index(sid)] = o["orientation_rad"]
     ang = {} if ar is None else dict(angle_station=ar.station_index, angle_target=ar.target_index,
                                      angle_kind=ar.kind, angle_value_rad=ar.value_rad, angle_sigma_rad=ar.sigma_rad,
-                                     orientation_rad=ori)
+                                     orientation_rad=ori, orientation_levelled=ar.levelled)
     return CoupledBatchedNetwork(
         obs.station_index, obs.target_index, obs.sigma_m, hi, res.station_xyz_m, res.offset_m,
         res.scale, res.target_xyz_m, held[:s], held[s:], np.asarray(res.offset_estimated, bool)[first],

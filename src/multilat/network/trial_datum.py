@@ -12,6 +12,9 @@ from multilat.network.datum import RIGID_FIT_ITERATIONS, frame_axes, helmert_bas
 
 __all__ = ["TrialDatum"]
 
+#: columns of the Helmert basis kept when the vertical is observed: 3 translations, rotation about z
+_ABOUT_Z = (0, 1, 2, 5)
+
 
 def _rotation_from_vector(omega: np.ndarray) -> np.ndarray:
     """Rodrigues: rotation matrices (n, 3, 3) from rotation vectors (n, 3) in radians."""
@@ -50,13 +53,20 @@ class TrialDatum:
 
     kind: str
     points: object = "all"
+    about_z: bool = False          # levelled stations observe the vertical: translations and a turn about z
+
+    @property
+    def n_defect(self) -> int:
+        """Datum defects it fixes: 6, or 4 about z (the vertical observed by levelled stations)."""
+        return 4 if self.about_z else 6
 
     @classmethod
-    def from_datum(cls, datum, station_ids, target_ids) -> "TrialDatum":
+    def from_datum(cls, datum, station_ids, target_ids, *, about_z: bool = False) -> "TrialDatum":
         """The index form of a :class:`multilat.network.datum.Datum` (or its text, e.g.
         ``"321:B,D,C"``) for the network ``station_ids``/``target_ids``: the one datum definition,
         applied to every trial. The control datum is refused (it fixes points that a Monte Carlo
-        must perturb too)."""
+        must perturb too). ``about_z``: the vertical is observed (levelled stations): the free datum
+        fits translations and a rotation about z only; 321 is refused (it would tilt the network)."""
         d = parse_datum(datum)
         station_ids, target_ids = list(station_ids), list(target_ids)
 
@@ -68,7 +78,10 @@ class TrialDatum:
             raise MultilatError(f"datum point {p!r} is neither a station nor a target")
 
         if d.kind == "free":
-            return cls.inner("all" if d.points is None else [ref(p) for p in d.points])
+            inner = cls.inner("all" if d.points is None else [ref(p) for p in d.points])
+            return cls(inner.kind, inner.points, about_z) if about_z else inner
+        if d.kind == "321" and about_z:
+            raise MultilatError("datum 321 would tilt a network whose vertical is observed (levelled stations)")
         if d.kind == "321":
             return cls.three_two_one(*[ref(p) for p in d.points])
         raise MultilatError("propagation supports the free and 321 datums (a control datum fixes points "
@@ -129,7 +142,8 @@ class TrialDatum:
         return m
 
     def constraint_matrix(self, station_xyz_m: np.ndarray, target_xyz_m: np.ndarray) -> np.ndarray:
-        """Linear datum conditions ``E^T dx = 0`` at the nominal point, shape (4s + 3t, 6)."""
+        """Linear datum conditions ``E^T dx = 0`` at the nominal point, shape (4s + 3t, 6), or
+        (4s + 3t, 4) about z (translations and the rotation about z)."""
         h0 = np.asarray(station_xyz_m, float)
         t0 = np.asarray(target_xyz_m, float)
         s, t = len(h0), len(t0)
@@ -140,7 +154,7 @@ class TrialDatum:
             g = helmert_basis(np.concatenate([h0, t0])).reshape(s + t, 3, 6) * mask[:, None, None]
             e[: 3 * s] = g[:s].reshape(3 * s, 6)
             e[4 * s:] = g[s:].reshape(3 * t, 6)
-            return e
+            return e[:, list(_ABOUT_Z)] if self.about_z else e
         a, b, c = self._stacked(s, t)
         x0 = np.concatenate([h0, t0])
         ex, ey, ez = frame_axes(x0[a], x0[b], x0[c])
@@ -186,7 +200,11 @@ class TrialDatum:
         x0 = np.concatenate([h0, t0])[mask]                     # (q, 3)
         c0 = x0.mean(axis=0)
         g = helmert_basis(x0)                                   # about the nominal centroid
-        proj = (g @ np.linalg.inv(g.T @ g)).reshape(-1, 3, 6)   # (q, 3, 6)
+        cols = list(_ABOUT_Z) if self.about_z else list(range(6))
+        gk = g[:, cols]
+        proj = np.zeros_like(g)                                 # about z: no rotation about x and y
+        proj[:, cols] = gk @ np.linalg.inv(gk.T @ gk)
+        proj = proj.reshape(-1, 3, 6)                           # (q, 3, 6)
         if engine == "numba":
             from multilat.network import _batched_numba as nb
             pts = np.ascontiguousarray(np.concatenate([h, tg], axis=1))
