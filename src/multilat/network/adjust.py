@@ -30,6 +30,7 @@ from multilat.network.result import (AdjustmentResult, InterpointDistance, Outli
 from multilat.network.search import P_MIN, p_value
 from multilat.network.couplings import coupling_spec
 from multilat.network.angle_rows import angle_results, angle_w
+from multilat.network.snooping import LINEAR_W_MAX, LinearRounds
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 
@@ -92,7 +93,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
            r_min: float = 0.1, sigma_source: dict | None = None, snooping: bool = True,
            max_rejections: int | None = None, max_iter: int = 100, solver: str = "auto", strict: bool = False,
            scale_bars: ReferenceLengths | None = None, scale_bar: ReferenceLengths | None = None,
-           chunk_targets: int = 20000, rng=None) -> AdjustmentResult:
+           chunk_targets: int = 20000, rng=0) -> AdjustmentResult:
     """Adjust a self-calibrating multilateration network.
 
     Unknowns: station coordinates, target coordinates, one additive offset per station (estimated
@@ -171,7 +172,9 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     chunk_targets : int
         Targets per chunk in the normal-equation assembly.
     rng : numpy Generator, int or None
-        Passed to ``initial_values`` (if used).
+        Seed of the initial values from distances and of the minimum search (if used). The free
+        datum is fitted onto the initial values, so the default 0 gives the same coordinates on
+        every run; None draws fresh entropy.
 
     Returns
     -------
@@ -285,90 +288,63 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     search = None
     obs_w = obs                      # the observations with the rejected angles left out (σ NaN)
     ang_rejected: list[dict] = []
+    lin = None                       # rounds downdated since the last adjustment (large networks)
+    refit = True
     while True:
-        sub = obs_w if used.all() else obs_w.subset(used)
-        try:
-            core = fit_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
-                            sc_free, max_iter, solver, chunk_targets, warn=warn,
-                            partial_ok=first and search_ok, couplings=cspec)
-        except MultilatError as exc:
-            # computed initial values can make a solvable network look degenerate (a collapsed
-            # start): the search's restarts get their chance before the error is final
-            if not (first and search_ok and how["method"].startswith("distances")
-                    and "near-degenerate" in str(exc)):
-                raise
-            core = _start_as_partial(obs, start, exc)
-        if first and search_ok:
-            # a converged result failing the global test by far may be a wrong minimum: search
-            # (not under control points: they give the frame and the start; a failing test there
-            # is tested as inconsistent control just below)
-            core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
-                                           max_iter, solver, chunk_targets, rng, cspec)
-            how["search"] = search.as_dict()
-        if first and datum.kind == "control" and cost == "distance":
-            # a failed global test under control may be the control coordinates, not the distances:
-            # test them (against the free network) before data snooping blames the distances
-            _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core["dof"]),
-                           max_iter, solver, chunk_targets, datum, cspec)
-        first = False
-        # the next adjustment (after a rejection) starts from this solution
-        gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
-        gs[core["smap"]], gt_[core["tmap"]], go[core["smap"]] = core["sx"], core["tx"], core["off"]
-        guess = Start(gs, gt_, go)
-        warn = False
-        if not do_snoop or len(rejected) + len(ang_rejected) >= limit:
-            break
-        w_sub = st.w_statistics(core["residual_w"], np.ones_like(core["residual_w"]), core["redundancy"])
-        k_sub = int(np.argmax(np.abs(w_sub)))
-        w_ang = angle_w(core, lam0) if core.get("angles") is not None else np.zeros(0)
-        angle_first = w_ang.size > 0 and np.max(np.abs(w_ang)) > abs(w_sub[k_sub])
-        w_top = w_ang[int(np.argmax(np.abs(w_ang)))] if angle_first else w_sub[k_sub]
-        step = _detection_step(core, w_top, unknown, alpha, alpha_g, lam0, crit)
-        steps.append(step)
-        # detection first: data snooping only while the global test fails (Baarda's DIA procedure;
-        # with it passing, the w-tests' own false alarms at alpha over thousands of observations
-        # would reject good distances). Variance factor unknown: Pope's τ-test of the largest |τ|.
-        if step["detection_passed"] is not False or not step["identified"]:
-            break
-        if angle_first:
-            # the largest |w| is an angle's: reject that angle (the row's distance and other angle stay)
-            k, kind, w_a, why = _angle_to_reject(core, lam0, obs_w, used)
-            step["angle"] = f"{obs.label(k)} {kind}"
-            if why:
-                unlocated, reason = (), why
-                break
-            step["action"] = "rejected"
-            ang_rejected.append({"row": k, "kind": kind, "w": w_a, "test": step["test_k"],
-                                 "statistic": step["statistic_k"], "critical": step["critical_k"],
-                                 "step": len(steps)})
-            obs_w = _without_angle(obs_w, k, kind)
+        if refit:
+            sub = obs_w if used.all() else obs_w.subset(used)
+            try:
+                core = fit_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
+                                sc_free, max_iter, solver, chunk_targets, warn=warn,
+                                partial_ok=first and search_ok, couplings=cspec)
+            except MultilatError as exc:
+                # computed initial values can make a solvable network look degenerate (a collapsed
+                # start): the search's restarts get their chance before the error is final
+                if not (first and search_ok and how["method"].startswith("distances")
+                        and "near-degenerate" in str(exc)):
+                    raise
+                core = _start_as_partial(obs, start, exc)
+            if first and search_ok:
+                # a converged result failing the global test by far may be a wrong minimum: search
+                # (not under control points: they give the frame and the start; a failing test there
+                # is tested as inconsistent control just below)
+                core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
+                                               max_iter, solver, chunk_targets, rng, cspec)
+                how["search"] = search.as_dict()
+            if first and datum.kind == "control" and cost == "distance":
+                # a failed global test under control may be the control coordinates, not the distances:
+                # test them (against the free network) before data snooping blames the distances
+                _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core["dof"]),
+                               max_iter, solver, chunk_targets, datum, cspec)
+            first = False
+            # the next adjustment (after a rejection) starts from this solution
+            gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
+            gs[core["smap"]], gt_[core["tmap"]], go[core["smap"]] = core["sx"], core["tx"], core["off"]
+            guess = Start(gs, gt_, go)
+            warn = False
+            refit = False
+            lin = (LinearRounds(core, np.flatnonzero(used), sub.station_index, sub.target_index,
+                                sub.n_stations, sub.n_targets)
+                   if do_snoop and not core.get("partial") and LinearRounds.applies(core, sub, datum) else None)
+        n_steps = len(steps)
+        go_on = _snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop,
+                                unknown, alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec)
+        if lin is not None and lin.pending and go_on[0] == "stop":
+            # the procedure would stop on downdated statistics: adjust again and decide on exact ones
+            del steps[n_steps:]
+            refit = True
             continue
-        step["observation"] = int(np.flatnonzero(used)[k_sub])
-        k = int(np.flatnonzero(used)[k_sub])
-        # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
-        # correlated with this one would show the same |w|: the data cannot tell which is wrong
-        twins = core["cov"].perfectly_correlated(k_sub, core["redundancy"])
-        twins = twins[twins != k_sub]
-        if twins.size:
-            unlocated = tuple(int(np.flatnonzero(used)[q]) for q in np.concatenate([[k_sub], twins]))
-            reason = "perfectly correlated w-tests: the data cannot tell which observation is wrong"
+        action, payload = go_on
+        if action == "stop":
+            unlocated, reason = payload
             break
-        trial = used.copy()
-        trial[k] = False
-        why = _last_redundancy(obs, used, trial, k, datum, points)
-        if why:
-            unlocated, reason = (k,), why
-            break
-        try:
-            check_network(obs.subset(trial), datum, points, off_free[station_map(obs, trial)],
-                       sc_free[station_map(obs, trial)], warn=False, couplings=cspec)
-        except MultilatError as exc:
-            # rejecting it would make the network unsolvable: keep it, report it as not rejected
-            unlocated, reason = (k,), f"rejecting it would leave the network unsolvable ({exc})"
-            break
-        step["action"] = "rejected"
-        rejected.append((k, float(w_sub[k_sub]), step["statistic_k"], step["critical_k"], step["test_k"]))
-        used = trial
+        if action == "angle":
+            obs_w = payload
+            refit = True
+        else:                          # a distance rejected
+            used = payload
+            # a gross error moves the solution far enough for the curvature to matter: adjust again
+            refit = lin is None or lin.full or abs(rejected[-1][1]) > LINEAR_W_MAX
     if search is not None and p_value(core["vtpv"], core["dof"]) < P_MIN:
         # still failing by far after data snooping: a possible false minimum, never passed as ordinary
         msg = search.warning or (
@@ -418,6 +394,71 @@ def coupling_results(core) -> tuple[tuple, tuple]:
                   "residual_m": res[k + 3 * q:k + 3 * q + 3].tolist(),
                   "redundancy": red[k + 3 * q:k + 3 * q + 3].tolist()} for q, pid in enumerate(cp.prior_ids))
     return bars, ctrl
+
+
+def _snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop, unknown,
+                    alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec):
+    """One round of detection, identification and adaptation on the last adjustment ``core`` (or its
+    downdate ``lin``). Appends the round to ``steps`` and a rejection to ``rejected`` /
+    ``ang_rejected``. Returns ``("stop", (unlocated, reason))``, ``("distance", new used mask)`` or
+    ``("angle", observations without the rejected angle)``."""
+    if not do_snoop or len(rejected) + len(ang_rejected) >= limit:
+        return "stop", ((), "")
+    state = core if lin is None else lin.stats()
+    to_global = np.flatnonzero(used) if lin is None else lin.gidx
+    w_sub = st.w_statistics(state["residual_w"], np.ones_like(state["residual_w"]), state["redundancy"])
+    k_sub = int(np.argmax(np.abs(w_sub)))
+    w_ang = angle_w(core, lam0) if core.get("angles") is not None else np.zeros(0)
+    angle_first = w_ang.size > 0 and np.max(np.abs(w_ang)) > abs(w_sub[k_sub])
+    w_top = w_ang[int(np.argmax(np.abs(w_ang)))] if angle_first else w_sub[k_sub]
+    step = _detection_step(state, w_top, unknown, alpha, alpha_g, lam0, crit)
+    steps.append(step)
+    # detection first: data snooping only while the global test fails (Baarda's DIA procedure;
+    # with it passing, the w-tests' own false alarms at alpha over thousands of observations
+    # would reject good distances). Variance factor unknown: Pope's τ-test of the largest |τ|.
+    if step["detection_passed"] is not False or not step["identified"]:
+        return "stop", ((), "")
+    if angle_first:
+        # the largest |w| is an angle's: reject that angle (the row's distance and other angle stay)
+        k, kind, w_a, why = _angle_to_reject(core, lam0, obs_w, used)
+        step["angle"] = f"{obs.label(k)} {kind}"
+        if why:
+            return "stop", ((), why)
+        step["action"] = "rejected"
+        ang_rejected.append({"row": k, "kind": kind, "w": w_a, "test": step["test_k"],
+                             "statistic": step["statistic_k"], "critical": step["critical_k"],
+                             "step": len(steps)})
+        return "angle", _without_angle(obs_w, k, kind)
+    k = int(to_global[k_sub])
+    step["observation"] = k
+    # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
+    # correlated with this one would show the same |w|: the data cannot tell which is wrong
+    if lin is None:
+        twins = core["cov"].perfectly_correlated(k_sub, core["redundancy"])
+        twins = twins[twins != k_sub]
+    else:
+        c = lin.hat_row(k_sub)
+        twins = lin.twins(k_sub, c)
+    if twins.size:
+        return "stop", (tuple(int(to_global[q]) for q in np.concatenate([[k_sub], twins])),
+                        "perfectly correlated w-tests: the data cannot tell which observation is wrong")
+    trial = used.copy()
+    trial[k] = False
+    why = _last_redundancy(obs, used, trial, k, datum, points)
+    if why:
+        return "stop", ((k,), why)
+    if lin is None or not lin.keeps_structure(k_sub):
+        try:
+            check_network(obs.subset(trial), datum, points, off_free[station_map(obs, trial)],
+                          sc_free[station_map(obs, trial)], warn=False, couplings=cspec)
+        except MultilatError as exc:
+            # rejecting it would make the network unsolvable: keep it, report it as not rejected
+            return "stop", ((k,), f"rejecting it would leave the network unsolvable ({exc})")
+    step["action"] = "rejected"
+    rejected.append((k, float(w_sub[k_sub]), step["statistic_k"], step["critical_k"], step["test_k"]))
+    if lin is not None:
+        lin.reject(k_sub, c)
+    return "distance", trial
 
 
 def _angle_to_reject(core, lam0, obs_w, used) -> tuple[int, str, float, str]:
