@@ -230,6 +230,24 @@ def _sym3_eig_min_mid_max(a00, a01, a02, a11, a12, a22):
 
 
 @njit(parallel=True, cache=True)
+def degenerate_blocks(N, rel_tol, bad):
+    """``bad[j]`` for each symmetric 3x3 block ``N[j]``: not ``lambda_min > rel_tol * lambda_max``
+    (closed-form eigenvalues: absolute error ~1e-16 lambda_max, far below a tolerance of 1e-10;
+    a non-finite block is bad)."""
+    for j in prange(N.shape[0]):
+        a = N[j]
+        ok = True
+        for x in range(3):
+            for y in range(3):
+                if not np.isfinite(a[x, y]):
+                    ok = False
+        if ok:
+            e0, _, e2 = _sym3_eig_min_mid_max(a[0, 0], a[0, 1], a[0, 2], a[1, 1], a[1, 2], a[2, 2])
+            ok = e0 > rel_tol * e2
+        bad[j] = not ok
+
+
+@njit(parallel=True, cache=True)
 def multilaterate(h, o, d, w, si, tptr, side, iterations, flat_tol, x_out, rms_out, status):
     """Each target from known stations ``h`` (s, 3) and offsets ``o`` (s,), one target per loop.
 

@@ -22,7 +22,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["Observations", "ReferenceLengths", "Points"]
+__all__ = ["Observations", "ReferenceLengths", "Points", "distinct_pair_codes"]
 
 
 def _ids(name: str, values) -> tuple[str, ...]:
@@ -35,6 +35,19 @@ def _ids(name: str, values) -> tuple[str, ...]:
 
 def _index_of(ids: Sequence[str]) -> dict[str, int]:
     return {s: i for i, s in enumerate(ids)}
+
+
+def distinct_pair_codes(station_index, target_index, n_targets: int) -> np.ndarray:
+    """The distinct (station, target) pairs as sorted codes ``station * n_targets + target`` (int64):
+    repeated readings of a pair appear once. Sort-based (numpy 2's hashing ``np.unique`` is ~10x slower
+    on millions of codes)."""
+    code = np.sort(np.asarray(station_index, np.int64) * int(n_targets) + np.asarray(target_index, np.int64))
+    if code.size < 2:
+        return code
+    keep = np.empty(code.size, bool)
+    keep[0] = True
+    np.not_equal(code[1:], code[:-1], out=keep[1:])
+    return code[keep]
 
 
 @dataclass(frozen=True, eq=False)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.data import Observations
+from multilat.network.data import Observations, distinct_pair_codes
 from multilat.network.result import Excluded
 
 __all__ = ["exclude_weak_points", "zero_redundancy_warnings"]
@@ -30,7 +30,7 @@ def _distinct_counts(obs: Observations, keep: np.ndarray) -> tuple[np.ndarray, n
     """Distinct stations per target (t,) and distinct targets per station (s,) over the kept
     observations: repeated readings of one pair add no geometry."""
     s, t = obs.n_stations, obs.n_targets
-    pair = np.unique(obs.station_index[keep].astype(np.int64) * t + obs.target_index[keep])
+    pair = distinct_pair_codes(obs.station_index[keep], obs.target_index[keep], t)
     return np.bincount(pair % t, minlength=t), np.bincount(pair // t, minlength=s)
 
 

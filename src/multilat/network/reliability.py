@@ -127,8 +127,11 @@ def reliability(res_obs, used, redundancy, sigma_m, cov, station_ids, target_ids
     pk = pk[np.argsort(-np.nan_to_num(mdb_sig[pk], posinf=1e300))]
     targets = []
     ti = res_obs.target_index
+    u_idx = np.flatnonzero(used)
+    by_t = u_idx[np.argsort(ti[u_idx], kind="stable")]           # used observations grouped by target
+    bounds = np.searchsorted(ti[by_t], np.arange(res_obs.n_targets + 1))
     for j in dict.fromkeys(int(ti[k]) for k in pk):
-        mine = np.flatnonzero(used & (ti == j))
+        mine = by_t[bounds[j]:bounds[j + 1]]
         targets.append({"id": target_ids[j], "n_obs": int(mine.size),
                         "redundancy_min": float(red[mine].min()),
                         "mdb_max_m": float(np.max(mdb[mine])), "mdb_max_sigma": float(np.max(mdb_sig[mine])),

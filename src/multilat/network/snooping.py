@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.network import statistics as st
+from multilat.network.data import distinct_pair_codes
 
 __all__ = ["LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX"]
 
@@ -75,8 +76,7 @@ class LinearRounds:
             return False
         if datum.kind == "control":
             return False
-        pair = sub.station_index.astype(np.int64) * sub.n_targets + sub.target_index
-        return np.unique(pair).size == pair.size
+        return distinct_pair_codes(sub.station_index, sub.target_index, sub.n_targets).size == sub.n_obs
 
     @property
     def pending(self) -> int:

@@ -101,12 +101,23 @@ def solve_reduced(N, b, free, problem: Problem, p: Params):
     return dg, Qgg, cond
 
 
+#: from this many free targets the blocks' eigenvalue test runs compiled (closed form, parallel)
+KERNEL_MIN_TARGETS = 2000
+
+
 def check_target_blocks(Ntt, problem: Problem) -> None:
     """Raise naming the first free target whose 3x3 normal block is (nearly) singular."""
     tf = problem.target_free
-    with np.errstate(invalid="ignore"):
-        ev = np.linalg.eigvalsh(np.where(np.isfinite(Ntt[tf]), Ntt[tf], 0.0))
-    bad = ~(ev[:, 0] > 1e-10 * ev[:, 2])
+    blocks = Ntt[tf]
+    if blocks.shape[0] >= KERNEL_MIN_TARGETS:
+        from multilat.network._sparse_kernels import degenerate_blocks
+
+        bad = np.empty(blocks.shape[0], bool)
+        degenerate_blocks(np.ascontiguousarray(blocks, float), 1e-10, bad)
+    else:
+        with np.errstate(invalid="ignore"):
+            ev = np.linalg.eigvalsh(np.where(np.isfinite(blocks), blocks, 0.0))
+        bad = ~(ev[:, 0] > 1e-10 * ev[:, 2])
     if np.any(bad):
         j = int(np.flatnonzero(tf)[np.flatnonzero(bad)[0]])
         raise MultilatError(f"near-degenerate geometry: target {problem.obs.target_ids[j]!r} is not "
