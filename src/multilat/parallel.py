@@ -120,6 +120,9 @@ def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory
             # anew, which halves the throughput of this workload. Our workers keep their heap.
             environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
             environ.update(MALLOC_TRIM_THRESHOLD_=str(MALLOC_THRESHOLD), MALLOC_MMAP_THRESHOLD_=str(MALLOC_THRESHOLD))
+            # one thread per worker process: numba's parallel kernels (the distance model's draw) and
+            # BLAS would otherwise start a thread per core in every worker, N workers x N threads
+            environ.update(NUMBA_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
             with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
                 cluster = distributed.LocalCluster(
                     n_workers=workers,

@@ -608,7 +608,6 @@ def _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep
     iv_sym, iv_short = np.empty((k, 2)), np.empty((k, 2))
     pids = problem.station_ids + problem.target_ids
     pc_mc = np.empty((len(pids), 3, 3))
-    d3s = []
 
     def put(cols, y):
         r = summarize(y, 0.95)
@@ -617,19 +616,6 @@ def _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep
         kurt[cols] = _kurtosis(y, r.estimate)
         return r
 
-    for q, pid in enumerate(pids):                       # every coordinate, point by point
-        rows = problem.param_rows(pid)
-        d3 = dev[:, rows].astype(np.float64)
-        pc_mc[q] = put(rows, d3).cov
-        d3s.append(rows)
-    s = len(problem.station_ids)
-    rest = np.concatenate([3 * s + np.arange(s), np.arange(net.n_params, k)])   # offsets, distances
-    for c0 in range(0, len(rest), 8):
-        cols = rest[c0:c0 + 8]
-        put(cols, dev[:, cols].astype(np.float64))
-    iv_sym += x0[:, None]
-    iv_short += x0[:, None]
-    se = std * np.sqrt(np.maximum(kurt - 1.0, 0.0) / (4.0 * n))
     if noise == "model" or obs_cov is not None:
         # the linear sandwich uses the input errors' empirical std over all trials drawn, so that the
         # comparison tests the propagation, not the distance model's own (MC-estimated) std
@@ -645,10 +631,20 @@ def _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep
     lin_std, pc_lin = _linear(problem, noise_std, obs_cov)
     cov_mc_frac = np.empty(len(pids))
     cov_lin_frac = np.empty(len(pids))
-    for q, rows in enumerate(d3s):
-        d3 = dev[:, rows].astype(np.float64)
+    for q, pid in enumerate(pids):                       # every coordinate, point by point
+        rows = problem.param_rows(pid)
+        d3 = dev[:, rows].astype(np.float64)             # one float64 copy per point
+        pc_mc[q] = put(rows, d3).cov
         cov_mc_frac[q] = _ellipsoid_fraction(d3, mean_dev[rows], pc_mc[q])
         cov_lin_frac[q] = _ellipsoid_fraction(d3, np.zeros(3), pc_lin[q])
+    s = len(problem.station_ids)
+    rest = np.concatenate([3 * s + np.arange(s), np.arange(net.n_params, k)])   # offsets, distances
+    for c0 in range(0, len(rest), 8):
+        cols = rest[c0:c0 + 8]
+        put(cols, dev[:, cols].astype(np.float64))
+    iv_sym += x0[:, None]
+    iv_short += x0[:, None]
+    se = std * np.sqrt(np.maximum(kurt - 1.0, 0.0) / (4.0 * n))
     return PropagationResult(
         problem=problem, labels=_labels(problem), nominal=x0, mc_mean=x0 + mean_dev, mc_std=std,
         mc_std_se=se, lin_std=lin_std, interval_symmetric=iv_sym, interval_shortest=iv_short,
