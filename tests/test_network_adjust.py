@@ -179,7 +179,7 @@ def test_snooping_keeps_a_targets_last_redundancy():
     would leave it with 3 (determined, no redundancy). Its 4 w-tests are perfectly correlated even
     with 6 stations (the target's 3 coordinates absorb 3 of the 4 residual directions), so the
     fault is reported as not locatable and nothing is removed (the rule 'keep >= 4 distances per
-    free target' in adjust._last_redundancy is the safety net behind this)."""
+    free target' in snooping._last_redundancy is the safety net behind this)."""
     tr = random_network(41, n_stations=6, n_targets=20)
     keep = (tr.obs.target_index != 0) | (tr.obs.station_index < 4)
     obs = tr.obs.subset(keep)

@@ -29,8 +29,8 @@ from multilat.network.result import (AdjustmentResult, InterpointDistance, Outli
                                      build_result)
 from multilat.network.search import P_MIN, p_value
 from multilat.network.couplings import coupling_spec
-from multilat.network.angle_rows import angle_results, angle_w
-from multilat.network.snooping import LINEAR_W_MAX, LinearRounds
+from multilat.network.angle_rows import angle_results
+from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, snooping_round
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 
@@ -327,7 +327,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                                 sub.n_stations, sub.n_targets)
                    if do_snoop and not core.get("partial") and LinearRounds.applies(core, sub, datum) else None)
         n_steps = len(steps)
-        go_on = _snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop,
+        go_on = snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop,
                                 unknown, alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec)
         if lin is not None and lin.pending and go_on[0] == "stop":
             # the procedure would stop on downdated statistics: adjust again and decide on exact ones
@@ -376,7 +376,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                    scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
                    sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient,
                    angle_design_w=None if core.get("angles") is None else core["angles"]["design_w"])
-    return replace(res, angle_outliers=_angle_outliers(obs, ang_rejected, res))
+    return replace(res, angle_outliers=angle_outliers(obs, ang_rejected, res))
 
 
 def coupling_results(core) -> tuple[tuple, tuple]:
@@ -394,136 +394,6 @@ def coupling_results(core) -> tuple[tuple, tuple]:
                   "residual_m": res[k + 3 * q:k + 3 * q + 3].tolist(),
                   "redundancy": red[k + 3 * q:k + 3 * q + 3].tolist()} for q, pid in enumerate(cp.prior_ids))
     return bars, ctrl
-
-
-def _snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop, unknown,
-                    alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec):
-    """One round of detection, identification and adaptation on the last adjustment ``core`` (or its
-    downdate ``lin``). Appends the round to ``steps`` and a rejection to ``rejected`` /
-    ``ang_rejected``. Returns ``("stop", (unlocated, reason))``, ``("distance", new used mask)`` or
-    ``("angle", observations without the rejected angle)``."""
-    if not do_snoop or len(rejected) + len(ang_rejected) >= limit:
-        return "stop", ((), "")
-    state = core if lin is None else lin.stats()
-    to_global = np.flatnonzero(used) if lin is None else lin.gidx
-    w_sub = st.w_statistics(state["residual_w"], np.ones_like(state["residual_w"]), state["redundancy"])
-    k_sub = int(np.argmax(np.abs(w_sub)))
-    w_ang = angle_w(core, lam0) if core.get("angles") is not None else np.zeros(0)
-    angle_first = w_ang.size > 0 and np.max(np.abs(w_ang)) > abs(w_sub[k_sub])
-    w_top = w_ang[int(np.argmax(np.abs(w_ang)))] if angle_first else w_sub[k_sub]
-    step = _detection_step(state, w_top, unknown, alpha, alpha_g, lam0, crit)
-    steps.append(step)
-    # detection first: data snooping only while the global test fails (Baarda's DIA procedure;
-    # with it passing, the w-tests' own false alarms at alpha over thousands of observations
-    # would reject good distances). Variance factor unknown: Pope's τ-test of the largest |τ|.
-    if step["detection_passed"] is not False or not step["identified"]:
-        return "stop", ((), "")
-    if angle_first:
-        # the largest |w| is an angle's: reject that angle (the row's distance and other angle stay)
-        k, kind, w_a, why = _angle_to_reject(core, lam0, obs_w, used)
-        step["angle"] = f"{obs.label(k)} {kind}"
-        if why:
-            return "stop", ((), why)
-        step["action"] = "rejected"
-        ang_rejected.append({"row": k, "kind": kind, "w": w_a, "test": step["test_k"],
-                             "statistic": step["statistic_k"], "critical": step["critical_k"],
-                             "step": len(steps)})
-        return "angle", _without_angle(obs_w, k, kind)
-    k = int(to_global[k_sub])
-    step["observation"] = k
-    # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
-    # correlated with this one would show the same |w|: the data cannot tell which is wrong
-    if lin is None:
-        twins = core["cov"].perfectly_correlated(k_sub, core["redundancy"])
-        twins = twins[twins != k_sub]
-    else:
-        c = lin.hat_row(k_sub)
-        twins = lin.twins(k_sub, c)
-    if twins.size:
-        return "stop", (tuple(int(to_global[q]) for q in np.concatenate([[k_sub], twins])),
-                        "perfectly correlated w-tests: the data cannot tell which observation is wrong")
-    trial = used.copy()
-    trial[k] = False
-    why = _last_redundancy(obs, used, trial, k, datum, points)
-    if why:
-        return "stop", ((k,), why)
-    if lin is None or not lin.keeps_structure(k_sub):
-        try:
-            check_network(obs.subset(trial), datum, points, off_free[station_map(obs, trial)],
-                          sc_free[station_map(obs, trial)], warn=False, couplings=cspec)
-        except MultilatError as exc:
-            # rejecting it would make the network unsolvable: keep it, report it as not rejected
-            return "stop", ((k,), f"rejecting it would leave the network unsolvable ({exc})")
-    step["action"] = "rejected"
-    rejected.append((k, float(w_sub[k_sub]), step["statistic_k"], step["critical_k"], step["test_k"]))
-    if lin is not None:
-        lin.reject(k_sub, c)
-    return "distance", trial
-
-
-def _angle_to_reject(core, lam0, obs_w, used) -> tuple[int, str, float, str]:
-    """The angle with the largest |w|: its row in the observations, its kind, its w, and why it must
-    not be rejected ("" when it may): its station would keep too few directions for its orientation."""
-    from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
-
-    rows = core["angles"]["rows"]
-    w = angle_w(core, lam0)
-    q = int(np.argmax(np.abs(w)))
-    k = int(np.flatnonzero(used)[rows.obs_index[q]])
-    kind = KIND_NAMES[rows.kind[q]]
-    try:
-        angle_rows(_without_angle(obs_w, k, kind).subset(used))
-    except MultilatError as exc:
-        return k, kind, float(w[q]), f"rejecting it would leave its station's orientation unsolvable ({exc})"
-    return k, kind, float(w[q]), ""
-
-
-def _without_angle(obs, k: int, kind: str):
-    """``obs`` with the ``kind`` ("azimuth"/"elevation") angle of row ``k`` no longer an observation."""
-    sa = np.array(obs.sigma_azimuth_rad, float, copy=True) if obs.sigma_azimuth_rad is not None else None
-    se = np.array(obs.sigma_elevation_rad, float, copy=True) if obs.sigma_elevation_rad is not None else None
-    (sa if kind == "azimuth" else se)[k] = np.nan
-    return obs.with_angle_sigma(sa, se)
-
-
-def _angle_outliers(obs, rejected: list[dict], res) -> tuple:
-    """The rejected angles (JSON-ready, in order) with their residuals against the final solution."""
-    from multilat.network.angles import predicted_angles, wrap_angle
-
-    out = []
-    for n, r in enumerate(rejected):
-        k = r["row"]
-        sid, tid = obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]]
-        resid = float("nan")
-        if sid in res.orientations and sid in res.station_ids and tid in res.target_ids:
-            i, j = res.station_ids.index(sid), res.target_ids.index(tid)
-            az, el = predicted_angles(res.station_xyz_m[[i]], [res.orientations[sid]["orientation_rad"]],
-                                      res.target_xyz_m[[j]], [0], [0])
-            resid = float(wrap_angle(obs.azimuth_rad[k] - az[0]) if r["kind"] == "azimuth"
-                          else obs.elevation_rad[k] - el[0])
-        out.append({"station": sid, "target": tid, "kind": r["kind"], "w": r["w"], "residual_rad": resid,
-                    "test": r["test"], "statistic": r["statistic"], "critical": r["critical"],
-                    "step": r["step"], "order": n + 1})
-    return tuple(out)
-
-
-def _detection_step(core, w_max, unknown, alpha, alpha_g, lam0, crit) -> dict:
-    """One round of detection and identification: the global test (variance factor known) or Pope's
-    τ-test of the largest |τ| (unknown), and whether the largest |w| (|τ|) exceeds its critical value."""
-    dof = core["dof"]
-    if unknown:
-        tau = float(w_max / core["sigma0"]) if core["sigma0"] > 0 else 0.0
-        tc = st.tau_critical(alpha, dof)
-        failed = bool(abs(tau) > tc) if np.isfinite(tc) else None
-        return {"dof": dof, "test": "tau-max", "statistic": abs(tau), "critical": tc, "alpha": alpha,
-                "sigma0": core["sigma0"], "detection_passed": None if failed is None else not failed,
-                "identified": bool(failed), "statistic_k": tau, "critical_k": tc, "test_k": "tau",
-                "action": "none"}
-    gt = st.global_test(core["vtpv"], dof, alpha=alpha_g(dof), lambda0=lam0)
-    return {"dof": dof, "test": "global chi2", "statistic": gt.statistic, "critical": gt.critical,
-            "alpha": gt.alpha, "power": gt.power, "sigma0": core["sigma0"],
-            "detection_passed": gt.passed, "identified": bool(abs(w_max) > crit),
-            "statistic_k": float(w_max), "critical_k": crit, "test_k": "w", "action": "none"}
 
 
 def _scaled_cov(cov, f: float):
@@ -653,21 +523,6 @@ def _w_failure_groups(core, used, crit, limit: int = 50) -> tuple:
         seen.update(members)
         groups.append(tuple(int(idx[q]) for q in members))
     return tuple(groups)
-
-
-def _last_redundancy(obs, used, trial, k, datum, points) -> str:
-    """Why rejecting observation ``k`` must not happen (it takes a point's last redundancy), or ""."""
-    j = int(obs.target_index[k])
-    tid = obs.target_ids[j]
-    before = int(np.sum(obs.target_index[used] == j))
-    after = int(np.sum(obs.target_index[trial] == j))
-    fixed = datum.kind == "control" and tid in control_ids(obs.subset(used), datum, points)
-    need = 1 if fixed else 4          # a control target: any distance checks it; a free one: 3 + 1
-    if before >= need > after:
-        what = "control point" if fixed else "target"
-        return (f"rejecting it would leave {what} {tid!r} with {after} observation(s), without "
-                "redundancy")
-    return ""
 
 
 def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global, max_iter,
