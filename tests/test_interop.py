@@ -25,7 +25,8 @@ from multilat.errors import MultilatError
 from multilat.network.adjust import adjust
 from multilat.network.data import Points
 from multilat.network.files import read_observations, read_points
-from multilat.network.interop.gama import (gama_local_text, read_gama_adjustment, read_gama_local,
+from multilat.network.interop.gama_adjusted import read_gama_adjustment
+from multilat.network.interop.gama import (gama_local_text, read_gama_local,
                                            write_gama_local)
 from multilat.network.interop.jag3d import read_jag3d, write_jag3d
 from multilat.network.interop.starnet import read_starnet, starnet_text, write_starnet

@@ -35,7 +35,8 @@ from multilat.network.adjust import adjust
 from multilat.network.angles import predicted_angles
 from multilat.network.data import Observations, Points
 from multilat.network.generator import random_network
-from multilat.network.interop.gama import gama_local_text, read_gama_adjustment, write_gama_local
+from multilat.network.interop.gama import gama_local_text, write_gama_local
+from multilat.network.interop.gama_adjusted import read_gama_adjustment
 
 STORED = Path(__file__).resolve().parent / "data" / "interop" / "levelled_mixed_gama_out.xml"
 SIG_ANGLE = 20e-6

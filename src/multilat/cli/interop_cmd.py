@@ -155,7 +155,7 @@ def import_command(
     if (points_file is not None) != (fmt == "jag3d"):
         raise MultilatError("--points-file goes with jag3d (and jag3d needs it)")
     if fmt == "gama-adjusted":
-        from multilat.network.interop.gama import read_gama_adjustment
+        from multilat.network.interop.gama_adjusted import read_gama_adjustment
 
         g = read_gama_adjustment(source)
         doc = {"format": fmt, "dof": g.dof, "defect": g.defect, "sigma0": g.sigma_aposteriori,
