@@ -58,16 +58,22 @@ def _no_search(monkeypatch):
     monkeypatch.setattr(adjust_module, "_search_minimum", _NoSearch())
 
 
-def _both(obs, monkeypatch, **kw):
-    """The downdated rounds forced on (threshold 0) and the exact path; asserts that downdates happened."""
-    downdates = []
+@pytest.fixture
+def downdates(monkeypatch):
+    """The positions every :meth:`LinearRounds.reject` downdated, in order."""
+    seen = []
     orig = snooping.LinearRounds.reject
 
     def spy(self, k, c):
-        downdates.append(k)
+        seen.append(k)
         return orig(self, k, c)
 
     monkeypatch.setattr(snooping.LinearRounds, "reject", spy)
+    return seen
+
+
+def _both(obs, monkeypatch, downdates, **kw):
+    """The downdated rounds forced on (threshold 0) and the exact path; asserts that downdates happened."""
     monkeypatch.setattr(snooping, "LINEAR_MIN_OBS", 0)
     lin = adjust(obs, **kw)
     assert downdates
@@ -90,35 +96,27 @@ def _same(lin, ref):
         assert a["statistic_k"] == pytest.approx(b["statistic_k"], rel=1e-7)
 
 
-def test_downdated_rounds_equal_the_exact_rounds(monkeypatch):
+def test_downdated_rounds_equal_the_exact_rounds(monkeypatch, downdates):
     obs, planted, truth = _blundered()
-    lin, ref = _both(obs, monkeypatch, initial=truth)
+    lin, ref = _both(obs, monkeypatch, downdates, initial=truth)
     _same(lin, ref)
     assert set(planted) <= {int(k) for k in np.flatnonzero(~np.asarray(ref.used, bool))}
 
 
-def test_with_an_unknown_variance_factor_and_refits_every_few_rounds(monkeypatch):
+def test_with_an_unknown_variance_factor_and_refits_every_few_rounds(monkeypatch, downdates):
     """Pope's τ-test (σ̂0 from the downdated vᵀPv), and a memory cap of 4 stored hat rows (an
     adjustment after every 4 rejections)."""
     obs, _, truth = _blundered(n_blunders=9, seed=8, size_sigma=(4.5, 9))     # marginal: |w| <= 10
     monkeypatch.setattr(snooping, "ROW_MEMORY_BYTES", 1)
-    lin, ref = _both(obs, monkeypatch, variance_factor="unknown", initial=truth)
+    lin, ref = _both(obs, monkeypatch, downdates, variance_factor="unknown", initial=truth)
     assert len(ref.outliers) >= 5
     _same(lin, ref)
 
 
-def test_large_networks_use_the_downdate_and_small_ones_do_not(monkeypatch):
-    calls = []
-    orig = snooping.LinearRounds.reject
-
-    def spy(self, k, c):
-        calls.append(k)
-        return orig(self, k, c)
-
-    monkeypatch.setattr(snooping.LinearRounds, "reject", spy)
+def test_large_networks_use_the_downdate_and_small_ones_do_not(monkeypatch, downdates):
     obs, _, truth = _blundered()
     adjust(obs, initial=truth)
-    assert not calls                                   # 1 200 distances: below LINEAR_MIN_OBS
+    assert not downdates                               # 1 200 distances: below LINEAR_MIN_OBS
     monkeypatch.setattr(snooping, "LINEAR_MIN_OBS", 1000)
     res = adjust(obs, initial=truth)
-    assert len(calls) == len(res.outliers) > 0
+    assert len(downdates) == len(res.outliers) > 0
