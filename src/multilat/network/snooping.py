@@ -34,7 +34,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
-from multilat.network.angle_rows import angle_w
+from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
 from multilat.network.data import distinct_pair_codes
 from multilat.network.fit import check_network, control_ids, station_map
 
@@ -177,7 +177,7 @@ def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, l
         return "stop", ((), "")
     if angle_first:
         # the largest |w| is an angle's: reject that angle (the row's distance and other angle stay)
-        k, kind, w_a, why = _angle_to_reject(core, lam0, obs_w, used)
+        k, kind, w_a, why = _angle_to_reject(core, w_ang, obs_w, used)
         step["angle"] = f"{obs.label(k)} {kind}"
         if why:
             return "stop", ((), why)
@@ -218,13 +218,11 @@ def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, l
     return "distance", trial
 
 
-def _angle_to_reject(core, lam0, obs_w, used) -> tuple[int, str, float, str]:
-    """The angle with the largest |w|: its row in the observations, its kind, its w, and why it must
-    not be rejected ("" when it may): its station would keep too few directions for its orientation."""
-    from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
-
+def _angle_to_reject(core, w, obs_w, used) -> tuple[int, str, float, str]:
+    """The angle with the largest |w| (``w`` per angle row of ``core``): its row in the observations,
+    its kind, its w, and why it must not be rejected ("" when it may): its station would keep too few
+    angles for its orientation."""
     rows = core["angles"]["rows"]
-    w = angle_w(core, lam0)
     q = int(np.argmax(np.abs(w)))
     k = int(np.flatnonzero(used)[rows.obs_index[q]])
     kind = KIND_NAMES[rows.kind[q]]
