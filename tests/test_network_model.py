@@ -91,3 +91,19 @@ def test_schur_step_equals_dense_normal_equations():
     tol = 10 * kappa ** 2 * np.finfo(float).eps
     assert tol < 1e-5
     np.testing.assert_allclose(np.concatenate([dg, dt.ravel()]), full, rtol=0, atol=tol * np.abs(x).max())
+
+
+@pytest.mark.parametrize("cost", ["distance", "squared"])
+def test_residuals_alone_equal_those_with_the_jacobian(cost):
+    """``residuals`` (the cost of a trial step, no Jacobian) gives the very numbers of
+    ``residuals_and_jacobian``: bit for bit."""
+    from multilat.network.model import residuals, residuals_and_jacobian
+
+    r = np.random.default_rng(3)
+    H, T = r.normal(size=(5, 3)) * 3, r.normal(size=(40, 3)) * 3
+    si, ti = r.integers(0, 5, 200), r.integers(0, 40, 200)
+    off, sc = r.normal(size=5) * 1e-3, r.normal(size=5) * 1e-6
+    d = np.linalg.norm(H[si] - T[ti], axis=1) + r.normal(size=200) * 1e-5
+    a = residuals(d, H, T, off, sc, si, ti, cost=cost)
+    b, _, _ = residuals_and_jacobian(d, H, T, off, sc, si, ti, cost=cost)
+    assert np.array_equal(a, b)

@@ -35,9 +35,9 @@ import numpy as np
 Q = 5  # global parameters per station: x, y, z, offset, scale
 COSTS = ("distance", "squared")
 
-__all__ = ["Q", "COSTS", "segment_sum", "geometric_distance_m", "predicted_distance_m", "residuals_and_jacobian",
-           "dense_jacobian", "target_slots", "slot_gain", "repeat_share", "ReducedSystem", "reduced_normal_equations",
-           "back_substitute", "inv3"]
+__all__ = ["Q", "COSTS", "segment_sum", "geometric_distance_m", "predicted_distance_m", "residuals",
+           "residuals_and_jacobian", "dense_jacobian", "target_slots", "slot_gain", "repeat_share",
+           "ReducedSystem", "reduced_normal_equations", "back_substitute", "inv3"]
 
 
 def segment_sum(index, values, n):
@@ -83,6 +83,25 @@ def predicted_distance_m(station_xyz_m, target_xyz_m, offset_m, scale, station_i
     return (1.0 + scale[station_index]) * rho + offset_m[station_index]
 
 
+def _residual(distance_m, rho, k1, o, cost):
+    """``observed - computed`` from the geometric distances ``rho`` and each observation's ``1 + k``
+    and offset ``o`` (m, or m**2 for the squared cost)."""
+    if cost == "distance":
+        return distance_m - (k1 * rho + o)
+    if cost == "squared":
+        a = distance_m - o
+        c = k1 * rho
+        return a * a - c * c
+    raise ValueError(f"cost must be one of {COSTS}, got {cost!r}")
+
+
+def residuals(distance_m, station_xyz_m, target_xyz_m, offset_m, scale, station_index, target_index, *,
+              cost="distance"):
+    """The residuals of :func:`residuals_and_jacobian` without the Jacobian (for the cost of a trial step)."""
+    rho, _ = geometric_distance_m(station_xyz_m, target_xyz_m, station_index, target_index)
+    return _residual(distance_m, rho, 1.0 + scale[station_index], offset_m[station_index], cost)
+
+
 def residuals_and_jacobian(distance_m, station_xyz_m, target_xyz_m, offset_m, scale,
                            station_index, target_index, *, cost="distance"):
     """Residuals and the analytic Jacobian blocks of each observation.
@@ -110,16 +129,14 @@ def residuals_and_jacobian(distance_m, station_xyz_m, target_xyz_m, offset_m, sc
     o = offset_m[station_index]
     m = rho.shape[0]
     Js = np.empty((m, Q))
+    r = _residual(distance_m, rho, k1, o, cost)
     if cost == "distance":
-        r = distance_m - (k1 * rho + o)
         Js[:, :3] = k1[:, None] * u
         Js[:, 3] = 1.0
         Js[:, 4] = rho
         Jt = -Js[:, :3]
     elif cost == "squared":
         a = distance_m - o
-        c = k1 * rho
-        r = a * a - c * c
         g = 2.0 * k1 * k1 * rho
         Js[:, :3] = g[:, None] * u
         Js[:, 3] = 2.0 * a          # d/do of (c^2 - a^2)

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multilat.network.model import residuals_and_jacobian
+from multilat.network.model import residuals, residuals_and_jacobian
 from multilat.network.problem import Params, Problem
 
 __all__ = ["Assembly", "whitened", "weighted_cost"]
@@ -48,8 +48,8 @@ def whitened(problem: Problem, p: Params):
 def weighted_cost(problem: Problem, p: Params) -> float:
     """``sum (w r)^2`` at ``p`` (inf when not finite)."""
     o = problem.obs
-    r, _, _ = residuals_and_jacobian(o.distance_m, p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale,
-                                     o.station_index, o.target_index, cost=problem.cost)
+    r = residuals(o.distance_m, p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale,
+                  o.station_index, o.target_index, cost=problem.cost)
     v = float(np.sum((r * problem.weight_sqrt) ** 2))
     if problem.couplings is not None:
         from multilat.network.couplings import flatten_params
