@@ -35,9 +35,16 @@ from multilat.network.data import Observations
 from multilat.network.model import Q
 
 __all__ = ["AngleRows", "angle_rows", "orientation_from_matrix", "initial_orientations", "KIND_NAMES",
-           "angle_results", "angle_w"]
+           "angle_results", "angle_w", "orientation_free_mask"]
 
 KIND_NAMES = ("azimuth", "elevation")
+
+
+def orientation_free_mask(levelled) -> np.ndarray:
+    """(3 n,) bool over the orientation unknowns (ω, φ, κ) of ``n`` oriented stations: False for the
+    held ω, φ of the levelled ones (``levelled`` (n,) bool)."""
+    lev = np.asarray(levelled, bool)
+    return np.column_stack([~lev, ~lev, np.ones_like(lev)]).ravel()
 
 
 @dataclass(frozen=True, eq=False)
@@ -68,8 +75,7 @@ class AngleRows:
     @property
     def orientation_free(self) -> np.ndarray:
         """(n_o,) bool: False for the held ω, φ of levelled stations."""
-        lev = self.levelled[self.oriented]
-        return np.column_stack([~lev, ~lev, np.ones_like(lev)]).ravel()
+        return orientation_free_mask(self.levelled[self.oriented])
 
     @property
     def any_levelled(self) -> bool:

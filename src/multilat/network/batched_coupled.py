@@ -40,7 +40,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.batched import BatchSolution, NetworkSizes
-from multilat.network.datum import helmert_basis
+from multilat.network.datum import ABOUT_Z_COLUMNS, helmert_basis
 
 __all__ = ["CoupledBatchedNetwork"]
 
@@ -306,10 +306,11 @@ class CoupledBatchedNetwork(NetworkSizes):
         s, h, t, m = self.n_stations, self.n_heads, self.n_targets, self.n_obs
         x0 = self._x0()
         P = x0.size
-        lev = self.orientation_levelled[self.oriented]
+        from multilat.network.angle_rows import orientation_free_mask
+
         free = np.concatenate([np.repeat(~self.station_held, 3), self.offset_free, self.scale_free,
                                np.repeat(~self.target_held, 3),
-                               np.column_stack([~lev, ~lev, np.ones_like(lev)]).ravel()])
+                               orientation_free_mask(self.orientation_levelled[self.oriented])])
         w_all = 1.0 / np.concatenate([self.sigma_m, self.extra_sigma]) ** 2
         J0 = self._jacobian(x0)
         N = J0.T @ (w_all[:, None] * J0)
@@ -325,7 +326,7 @@ class CoupledBatchedNetwork(NetworkSizes):
             E[3 * s + 2 * h:e] = EL[4 * s:]
             gp = helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m]))
             if nd == 4:
-                gp = gp[:, [0, 1, 2, 5]]
+                gp = gp[:, ABOUT_Z_COLUMNS]
             G = np.zeros((P, nd))
             G[:3 * s] = gp[:3 * s]
             G[3 * s + 2 * h:e] = gp[3 * s:]

@@ -36,7 +36,11 @@ from multilat.errors import MultilatError
 from multilat.network.model import Q
 
 __all__ = ["Datum", "parse_datum", "helmert_basis", "rigid_fit", "frame_321", "frame_axes", "apply_rigid",
-           "datum_matrices", "RIGID_FIT_ITERATIONS"]
+           "datum_matrices", "RIGID_FIT_ITERATIONS", "ABOUT_Z_COLUMNS"]
+
+#: the columns of :func:`helmert_basis` left when the vertical is observed (levelled stations): the
+#: three translations and the rotation about z
+ABOUT_Z_COLUMNS = [0, 1, 2, 5]
 
 #: Gauss-Newton iterations of the per-trial rigid fit (batched solver, numpy and numba alike)
 RIGID_FIT_ITERATIONS = 4

@@ -14,7 +14,7 @@ from multilat.errors import MultilatError
 from multilat.network.couplings import flatten_params
 from multilat.network.covariance import CoupledCovariance, NetworkCovariance
 from multilat.network.data import Observations
-from multilat.network.datum import apply_rigid, datum_matrices, frame_321, rigid_fit
+from multilat.network.datum import ABOUT_Z_COLUMNS, apply_rigid, datum_matrices, frame_321, rigid_fit
 from multilat.network.model import Q
 from multilat.network.problem import Params, Problem, head_mean
 from multilat.network.result import Start
@@ -253,7 +253,7 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
         sx, tx = apply_rigid(R, tr, sx), apply_rigid(R, tr, tx)
         G, E = datum_matrices(datum, sub.station_ids, sub.target_ids, sx, tx)
         if levelled:      # 4 defects: the translations and the rotation about z
-            G, E = G[:, [0, 1, 2, 5]], E[:, [0, 1, 2, 5]]
+            G, E = G[:, ABOUT_Z_COLUMNS], E[:, ABOUT_Z_COLUMNS]
     if fin.coupled is not None:
         cov = CoupledCovariance(Qgg, fin.coupled, fin.Ntt_inv, Js_w, Jt_w, sub.station_index,
                                 sub.target_index, factor=factor, R=R, G=G, E=E)

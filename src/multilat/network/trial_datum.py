@@ -8,12 +8,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.datum import RIGID_FIT_ITERATIONS, frame_axes, helmert_basis, parse_datum
+from multilat.network.datum import ABOUT_Z_COLUMNS, RIGID_FIT_ITERATIONS, frame_axes, helmert_basis, parse_datum
 
 __all__ = ["TrialDatum"]
-
-#: columns of the Helmert basis kept when the vertical is observed: 3 translations, rotation about z
-_ABOUT_Z = (0, 1, 2, 5)
 
 
 def _rotation_from_vector(omega: np.ndarray) -> np.ndarray:
@@ -154,7 +151,7 @@ class TrialDatum:
             g = helmert_basis(np.concatenate([h0, t0])).reshape(s + t, 3, 6) * mask[:, None, None]
             e[: 3 * s] = g[:s].reshape(3 * s, 6)
             e[4 * s:] = g[s:].reshape(3 * t, 6)
-            return e[:, list(_ABOUT_Z)] if self.about_z else e
+            return e[:, ABOUT_Z_COLUMNS] if self.about_z else e
         a, b, c = self._stacked(s, t)
         x0 = np.concatenate([h0, t0])
         ex, ey, ez = frame_axes(x0[a], x0[b], x0[c])
@@ -200,7 +197,7 @@ class TrialDatum:
         x0 = np.concatenate([h0, t0])[mask]                     # (q, 3)
         c0 = x0.mean(axis=0)
         g = helmert_basis(x0)                                   # about the nominal centroid
-        cols = list(_ABOUT_Z) if self.about_z else list(range(6))
+        cols = ABOUT_Z_COLUMNS if self.about_z else list(range(6))
         gk = g[:, cols]
         proj = np.zeros_like(g)                                 # about z: no rotation about x and y
         proj[:, cols] = gk @ np.linalg.inv(gk.T @ gk)
