@@ -19,6 +19,7 @@ import pytest
 
 from multilat import io as mio
 from multilat.io import JsonRows, dumps_json, to_jsonable
+from multilat.rows_text import column_tokens
 from multilat.network import covariance as C
 from multilat.network.adjust import Start, adjust
 from multilat.network.data import Observations
@@ -205,6 +206,41 @@ def test_sparse_statistics_with_kernels_equal_numpy_and_dense(kernels_always):
     assert s.w_failure_groups == d.w_failure_groups
 
 
+def test_residual_kernel_equals_numpy(kernels_always):
+    """The trial-step residuals from the compiled kernel against the numpy path, on random geometry
+    with scales and offsets: the same operations in the same order (bit for bit with numpy 2.4 on
+    x86-64, whose einsum sums (x0² + x2²) + x1²); the bound allows a platform whose einsum sums in
+    another order: 2 ulp of the distance."""
+    from multilat.network import model
+
+    rng = np.random.default_rng(4)
+    s, t, m = 9, 5000, 40001
+    h, tg = rng.normal(size=(s, 3)) * 10, rng.normal(size=(t, 3)) * 10
+    off, sc = rng.normal(size=s) * 1e-3, rng.normal(size=s) * 1e-5
+    si, ti, d = rng.integers(0, s, m), rng.integers(0, t, m), rng.uniform(1, 30, m)
+    a = model.residuals(d, h, tg, off, sc, si, ti)
+    C.KERNELS_ABOVE_OBS = 10**12
+    b = model.residuals(d, h, tg, off, sc, si, ti)
+    assert np.all(np.abs(a - b) <= 2 * np.spacing(d))
+
+
+def test_hat_rows_of_combinations_equal_numpy_and_the_dense_hat_matrix(kernels_always):
+    """``design_times(internal_times(g))`` for a combination ``g`` of design rows (the downdated
+    snooping rounds' hat rows) from the kernels, from numpy, and as the same combination of the
+    dense hat matrix's rows (``hat_row``)."""
+    net, obs = _network()
+    res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False,
+                 solver="sparse")
+    cov = res.covariance
+    g = 0.7 * cov.design_row(3) - 1.3 * cov.design_row(50) + 0.2 * cov.design_row(obs.n_obs - 1)
+    row_k = cov.design_times(cov.internal_times(g))
+    ref = 0.7 * cov.hat_row(3) - 1.3 * cov.hat_row(50) + 0.2 * cov.hat_row(obs.n_obs - 1)
+    np.testing.assert_allclose(row_k, ref, rtol=1e-11, atol=1e-13)
+    C.KERNELS_ABOVE_OBS = 10**12
+    row_n = cov.design_times(cov.internal_times(g))
+    np.testing.assert_allclose(row_k, row_n, rtol=1e-12, atol=1e-13)
+
+
 # ----------------------------------------------------------------------------- quantiles, reader
 def test_quantiles_without_scipy_stats_are_bit_identical():
     from scipy import stats
@@ -321,6 +357,8 @@ def test_float_tokens_parse_to_the_same_floats():
     rng = np.random.default_rng(1)
     v = np.concatenate([rng.normal(size=2000) * 10.0 ** rng.integers(-320, 300, 2000),
                         [0.0, -0.0, np.nan, np.inf, -np.inf, 5e-324, 1e-5, 1e16, 0.1 + 0.2]])
-    tok = mio._float_tokens(mio._orjson(), v)
-    assert [repr(float(t)) for t in tok] == [repr(x) for x in v.tolist()]
+    t = column_tokens(v, mio._orjson(), "csv")
+    b = t.buf.tobytes()
+    tok = [b[s:s + n] for s, n in zip(t.start.tolist(), t.length.tolist())]
+    assert [repr(float(x)) for x in tok] == [repr(x) for x in v.tolist()]
     assert tok[-7:-4] == [b"nan", b"inf", b"-inf"]

@@ -104,10 +104,10 @@ def test_downdated_rounds_equal_the_exact_rounds(monkeypatch, downdates):
 
 
 def test_with_an_unknown_variance_factor_and_refits_every_few_rounds(monkeypatch, downdates):
-    """Pope's τ-test (σ̂0 from the downdated vᵀPv), and a memory cap of 4 stored hat rows (an
-    adjustment after every 4 rejections)."""
+    """Pope's τ-test (σ̂0 from the downdated vᵀPv), and a cap of 4 downdates (an adjustment after
+    every 4 rejections)."""
     obs, _, truth = _blundered(n_blunders=9, seed=8, size_sigma=(4.5, 9))     # marginal: |w| <= 10
-    monkeypatch.setattr(snooping, "ROW_MEMORY_BYTES", 1)
+    monkeypatch.setattr(snooping, "MAX_DOWNDATES", 4)
     lin, ref = _both(obs, monkeypatch, downdates, variance_factor="unknown", initial=truth)
     assert len(ref.outliers) >= 5
     _same(lin, ref)
@@ -149,3 +149,18 @@ def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch
     assert lin.unlocated == ref.unlocated
     np.testing.assert_allclose(lin.target_xyz_m, ref.target_xyz_m, atol=1e-9, rtol=0)
 
+
+
+def test_downdated_rounds_through_the_compiled_kernels(monkeypatch, downdates):
+    """The same agreement with the hat rows, covariance products and residuals from the compiled
+    kernels (what networks above 10 000 distances run), several downdates between adjustments."""
+    from multilat.network import _sparse_kernels as K
+    from multilat.network import covariance as C
+
+    if not K.HAVE_NUMBA:
+        pytest.skip("numba not installed")
+    monkeypatch.setattr(C, "KERNELS_ABOVE_OBS", 0)
+    obs, planted, truth = _blundered(n_blunders=9, seed=8, size_sigma=(4.5, 9))
+    lin, ref = _both(obs, monkeypatch, downdates, variance_factor="unknown", initial=truth)
+    assert len(downdates) >= 3
+    _same(lin, ref)

@@ -29,13 +29,7 @@ import numpy as np
 from multilat.distributions import Constant, Normal, Uniform
 from multilat.errors import MultilatError
 
-try:  # pragma: no cover - numba is in the project's default install
-    from numba import njit, prange
-except ImportError:  # pragma: no cover
-    def njit(*a, **k):
-        return (lambda f: f) if not (len(a) == 1 and callable(a[0])) else a[0]
-
-    prange = range
+from multilat._numba import njit, prange
 
 __all__ = ["INPUTS", "ErrorModel", "error_model", "draw_errors", "errors_of_inputs"]
 

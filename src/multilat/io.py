@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.rows_text import (CHUNK_ROWS, KERNEL_MIN_ROWS, JsonKeyedRows, JsonRows, assemble, column_tokens,
+                                encode_labels)
 
 #: The range of an elevation angle, for :meth:`CsvTable.floats` ``within=``.
 ELEVATION_RANGE = (-np.pi / 2, np.pi / 2, "±π/2 rad")
@@ -290,72 +292,44 @@ def write_csv_atomic(path: str | os.PathLike, header: Sequence[str], rows) -> No
     write_text_atomic(path, buf.getvalue())
 
 
-def write_csv_columns_atomic(path: str | os.PathLike, columns: dict, *, chunk: int = 1 << 16) -> None:
+def write_csv_columns_atomic(path: str | os.PathLike, columns: dict, *, chunk: int = CHUNK_ROWS) -> None:
     """The CSV :func:`write_csv_atomic` writes for the rows of ``columns`` (header = its keys), built
-    from the columns (no Python list per row): a column is a float/int/bool array (m,) or
-    ``(labels, index)`` (strings ``labels[index[k]]``). The same values: booleans ``True``/``False``,
-    strings quoted by the csv module when needed, integers in decimal, floats in their shortest
-    round-trip text (orjson's, e.g. ``0.00001`` where ``repr`` writes ``1e-05``; ``repr`` itself for
-    ``nan``/``inf`` and when orjson is missing)."""
+    from the columns (no Python list per row; :mod:`multilat.rows_text`): a column is a
+    float/int/bool array (m,) or ``(labels, index)`` (strings ``labels[index[k]]``). The same values:
+    booleans ``True``/``False``, strings quoted by the csv module when needed, integers in decimal,
+    floats in their shortest round-trip text (orjson's, e.g. ``0.00001`` where ``repr`` writes
+    ``1e-05``; ``repr`` itself for ``nan``/``inf`` and when orjson is missing)."""
     orjson = _orjson()
     names = list(columns)
-    cols = []
     n = None
+    labels = {}
     for name in names:
         col = columns[name]
+        size = len(col[1]) if isinstance(col, tuple) else np.asarray(col).shape[0]
         if isinstance(col, tuple):
-            enc = np.array([_csv_field(str(lab)).encode() for lab in col[0]] + [b""], dtype=object)[:-1]
-            cols.append(("label", enc, np.asarray(col[1], np.intp)))
-            size = len(col[1])
-        else:
-            col = np.asarray(col)
-            cols.append(("bool" if col.dtype.kind == "b" else "int" if col.dtype.kind in "iu" else "float",
-                         None, col))
-            size = col.shape[0]
+            labels[name] = encode_labels(col[0], "csv", orjson)
         if n is not None and size != n:
             raise ValueError(f"column {name!r}: {size} rows, expected {n}")
         n = size
     n = n or 0
     head = _io.StringIO()
     csv.writer(head, lineterminator="\n").writerow(names)
-    tf = np.array([b"False", b"True"], dtype=object)
-    k = len(cols)
+    parts: list = []
+    for c in range(len(names)):
+        parts += [c, b"," if c < len(names) - 1 else b"\n"]
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         fh.write(head.getvalue().encode("utf-8"))
         for lo in range(0, n, chunk):
             hi = min(n, lo + chunk)
-            parts: list = [None] * ((hi - lo) * 2 * k)
-            for c, (kind, enc, col) in enumerate(cols):
-                if kind == "label":
-                    tok = enc[col[lo:hi]].tolist()
-                elif kind == "bool":
-                    tok = tf[col[lo:hi].astype(np.intp)].tolist()
-                elif kind == "int":
-                    tok = [str(v).encode() for v in col[lo:hi].tolist()]
+            toks = []
+            for name in names:
+                col = columns[name]
+                if isinstance(col, tuple):
+                    toks.append(column_tokens((col[0], np.asarray(col[1])[lo:hi]), orjson, "csv",
+                                              labels=labels[name]))
                 else:
-                    tok = _float_tokens(orjson, col[lo:hi].astype(np.float64))
-                parts[2 * c::2 * k] = tok
-                parts[2 * c + 1::2 * k] = [b","] * (hi - lo) if c < k - 1 else [b"\n"] * (hi - lo)
-            fh.write(b"".join(parts))
-
-
-def _float_tokens(orjson, vals: np.ndarray) -> list[bytes]:
-    """Shortest round-trip text of each float (bytes); ``repr`` for non-finite values."""
-    if orjson is None:
-        return [repr(v).encode() for v in vals.tolist()]
-    tok = orjson.dumps(vals, option=orjson.OPT_SERIALIZE_NUMPY)[1:-1].split(b",") if vals.size else []
-    for i in np.flatnonzero(~np.isfinite(vals)).tolist():
-        tok[i] = repr(float(vals[i])).encode()
-    return tok
-
-
-def _csv_field(text: str) -> str:
-    """``text`` as the csv module writes it in a row of several fields (quoted when needed)."""
-    if not any(ch in text for ch in ',"\r\n'):
-        return text
-    buf = _io.StringIO()
-    csv.writer(buf, lineterminator="\n").writerow([text, ""])
-    return buf.getvalue()[:-2]
+                    toks.append(column_tokens(np.asarray(col)[lo:hi], orjson, "csv"))
+            fh.write(assemble(parts, toks, hi - lo, compiled=None if n >= KERNEL_MIN_ROWS else False))
 
 
 def _fmt(v):
@@ -372,7 +346,9 @@ def to_jsonable(obj):
         return {f.name: to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
     if isinstance(obj, dict):
         return {str(k): to_jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple, JsonRows)):
+    if isinstance(obj, (JsonRows, JsonKeyedRows)):
+        return to_jsonable(obj.to_python())
+    if isinstance(obj, (list, tuple)):
         return [to_jsonable(v) for v in obj]
     if isinstance(obj, np.ndarray):
         return to_jsonable(obj.tolist())
@@ -394,121 +370,6 @@ def to_jsonable(obj):
 # arrays are converted exactly as ``float()`` / ``int()`` / ``tolist()`` convert them, dataclasses are
 # objects of all their fields, paths are strings. Long per-row tables (:class:`JsonRows`) are written
 # from their columns in chunks, without one Python object per row.
-
-class JsonRows:
-    """A table written to JSON as a list of objects, one per row, from its columns.
-
-    ``columns`` maps each key to a float/int/bool array (m,) or to ``(labels, index)``: a sequence
-    of strings and an integer array (m,) into it (``labels[index[k]]``). As a Python sequence a
-    :class:`JsonRows` gives the row dicts (``float``/``int``/``bool``/``str`` values); the JSON writer
-    never builds them.
-    """
-
-    def __init__(self, columns: dict):
-        self.columns = {}
-        n = None
-        for name, col in columns.items():
-            if isinstance(col, tuple):
-                labels, index = col
-                col = (tuple(labels), np.asarray(index, dtype=np.intp))
-                size = col[1].shape[0]
-            else:
-                col = np.asarray(col)
-                if col.ndim != 1 or col.dtype.kind not in "fiub":
-                    raise ValueError(f"JsonRows column {name!r}: a 1-D numeric or bool array or (labels, index)")
-                size = col.shape[0]
-            if n is not None and size != n:
-                raise ValueError(f"JsonRows column {name!r}: {size} rows, expected {n}")
-            n = size
-            self.columns[str(name)] = col
-        self.n = 0 if n is None else int(n)
-
-    def __len__(self) -> int:
-        return self.n
-
-    def _row(self, k: int) -> dict:
-        out = {}
-        for name, col in self.columns.items():
-            if isinstance(col, tuple):
-                out[name] = col[0][col[1][k]]
-            else:
-                out[name] = col[k].item()
-        return out
-
-    def __getitem__(self, k):
-        if isinstance(k, slice):
-            return [self._row(i) for i in range(*k.indices(self.n))]
-        k = int(k)
-        if k < 0:
-            k += self.n
-        if not 0 <= k < self.n:
-            raise IndexError("JsonRows index out of range")
-        return self._row(k)
-
-    def __iter__(self):
-        return (self._row(k) for k in range(self.n))
-
-    # ---- writer side (orjson)
-    def _pieces(self, orjson, lo: int, hi: int, fixed: list[bytes]) -> list[list[bytes]]:
-        """Per column, the rows' text ``fixed[c] + value`` as one list (labels and booleans, whose
-        few distinct texts are joined once) or two (``fixed[c]`` repeated, then the number tokens)."""
-        out = []
-        nr = hi - lo
-        for c, col in enumerate(self.columns.values()):
-            if isinstance(col, tuple):
-                enc = self._label_tokens(orjson, col[0], fixed[c])
-                out.append([enc[col[1][lo:hi]].tolist()])
-            elif col.dtype.kind == "b":
-                tf = np.array([fixed[c] + b"false", fixed[c] + b"true"], dtype=object)
-                out.append([tf[col[lo:hi].astype(np.intp)].tolist()])
-            else:
-                vals = col[lo:hi].astype(np.float64) if col.dtype.kind == "f" else col[lo:hi].tolist()
-                text = orjson.dumps(vals, option=orjson.OPT_SERIALIZE_NUMPY)
-                out.append([[fixed[c]] * nr, text[1:-1].split(b",")])
-        return out
-
-    def _label_tokens(self, orjson, labels, prefix: bytes):
-        """``prefix + JSON string`` of every label (object array), encoded once per table and prefix."""
-        cache = self.__dict__.setdefault("_enc", {})
-        key = (id(labels), prefix)
-        if key not in cache:
-            # one call for all labels: in JSON text the three bytes '","' only occur between strings
-            enc = orjson.dumps(list(labels))[2:-2].split(b'","') if labels else []
-            cache[key] = np.array([prefix + b'"' + e + b'"' for e in enc] + [b""], dtype=object)[:-1]
-        return cache[key]
-
-    def write(self, orjson, write, indent: int | None, chunk: int = 1 << 16) -> None:
-        """Write the JSON list through ``write(bytes)``; ``indent``: the column of the line holding the
-        list (orjson's two-space style) or None (compact)."""
-        if self.n == 0:
-            write(b"[]")
-            return
-        names = [orjson.dumps(nm) for nm in self.columns]
-        if indent is None:
-            fixed = [b"{" + names[0] + b":"] + [b"," + nm + b":" for nm in names[1:]]
-            end, close = b"}", b"]"
-        else:
-            i1, i2 = b"\n" + b" " * (indent + 2), b"\n" + b" " * (indent + 4)
-            fixed = [i1 + b"{" + i2 + names[0] + b": "] + [b"," + i2 + nm + b": " for nm in names[1:]]
-            end, close = i1 + b"}", b"\n" + b" " * indent + b"]"
-        write(b"[")
-        for lo in range(0, self.n, chunk):
-            hi = min(self.n, lo + chunk)
-            nr = hi - lo
-            cols = self._pieces(orjson, lo, hi, fixed)
-            stride = sum(len(c) for c in cols) + 1
-            parts: list = [None] * (nr * stride)
-            at = 0
-            for c in cols:
-                for lst in c:
-                    parts[at::stride] = lst
-                    at += 1
-            parts[at::stride] = [end + b","] * nr
-            if hi == self.n:
-                parts[-1] = end
-            write(b"".join(parts))
-        write(close)
-
 
 def _orjson():
     try:
@@ -548,11 +409,11 @@ def write_json(obj, fh, *, indent: bool = True) -> None:
         text = json.dumps(to_jsonable(obj), indent=2 if indent else None) + "\n"
         fh.write(text.encode("utf-8"))
         return
-    tables: list[JsonRows] = []
+    tables: list = []
     mark = f"\x00jsonrows:{os.getpid()}:{id(tables)}:"
 
     def default(o):
-        if isinstance(o, JsonRows):
+        if isinstance(o, (JsonRows, JsonKeyedRows)):
             tables.append(o)
             return f"{mark}{len(tables) - 1}"
         return _json_default(o)

@@ -33,7 +33,9 @@ def _steps():
         obs = Observations(tuple(f"S{i}" for i in range(20)), tuple(f"T{j}" for j in range(t)),
                            net.station_index, net.target_index, net.distance_m, net.sigma_m)
         res = adjust(obs, solver="sparse", snooping=False, rng=0)
-        res.covariance.hat_row(0)
+        cov = res.covariance
+        cov.hat_row(0)
+        cov.design_times(cov.internal_times(cov.design_row(0)))      # the downdated snooping rounds
         from multilat.network.result import result_to_json
 
         dumps_json(result_to_json(res))

@@ -12,21 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-try:  # pragma: no cover - depends on the environment
-    from numba import get_num_threads, njit, prange
-    HAVE_NUMBA = True
-except Exception:  # pragma: no cover
-    HAVE_NUMBA = False
-
-    def njit(*args, **kwargs):
-        if args and callable(args[0]):
-            return args[0]
-        return lambda f: f
-
-    prange = range
-
-    def get_num_threads():
-        return 1
+from multilat._numba import HAVE_NUMBA, get_num_threads, njit, prange  # noqa: F401
 
 
 @njit(cache=True)
@@ -554,3 +540,34 @@ def cov_times(Qgg, Minv, Js_w, P, si, ti, order, tptr, vg, vt, out_g, out_t):
         out_t[l, 0] = v0
         out_t[l, 1] = v1
         out_t[l, 2] = v2
+
+
+@njit(parallel=True, cache=True)
+def distance_residuals(h, tg, off, scale, si, ti, d, out):
+    """``out[k] = d[k] - ((1 + scale[i]) |h_i - tg_j| + off[i])`` (i = si[k], j = ti[k]): the residuals
+    of :func:`multilat.network.model.residuals` (cost "distance") with the same operations in the
+    same order, without the (m, 3) differences."""
+    for k in prange(si.shape[0]):
+        i = si[k]
+        j = ti[k]
+        dx = h[i, 0] - tg[j, 0]
+        dy = h[i, 1] - tg[j, 1]
+        dz = h[i, 2] - tg[j, 2]
+        # numpy's einsum("mi,mi->m") sums the squares as (x0² + x2²) + x1² (numpy 2.4, x86-64):
+        # the same order keeps the residuals bit-identical to the numpy path
+        rho = np.sqrt((dx * dx + dz * dz) + dy * dy)
+        out[k] = d[k] - ((1.0 + scale[i]) * rho + off[i])
+
+
+@njit(parallel=True, cache=True)
+def design_times(Js_w, Jt_w, si, ti, xg, xt, out):
+    """``out[k] = Js_w[k] . xg[si[k]] + Jt_w[k] . xt[ti[k]]``: the whitened design times a
+    parameter-space vector (station part ``xg`` (s, Q), target part ``xt`` (t, 3))."""
+    nq = Js_w.shape[1]
+    for k in prange(si.shape[0]):
+        i = si[k]
+        j = ti[k]
+        acc = 0.0
+        for q in range(nq):
+            acc += Js_w[k, q] * xg[i, q]
+        out[k] = acc + (Jt_w[k, 0] * xt[j, 0] + Jt_w[k, 1] * xt[j, 1] + Jt_w[k, 2] * xt[j, 2])

@@ -292,6 +292,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     refit = True
     while True:
         if refit:
+            # the last adjustment and its downdates go before the next is built (peak memory)
+            core = lin = None
             sub = obs_w if used.all() else obs_w.subset(used)
             try:
                 core = fit_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
@@ -464,7 +466,7 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
     if not core.get("partial") and _one_gross_error(core):
         # one observation carries most of the excess: a gross error, for data snooping, not a wrong
         # minimum (which spreads its misfit over many distances); the search is not run
-        res = find_minimum(obs, solve, first, rng=gen, max_rounds=0)
+        res = _without_core(find_minimum(obs, solve, first, rng=gen, max_rounds=0))
         return core, replace(res, warning=None, candidates=(Candidate(
             "not searched: one observation carries most of the excess (a gross error)", None, None,
             False),))
@@ -478,7 +480,17 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
             raise best["error"]
         conv = best["convergence"]
         raise_unconverged(obs, Params(best["sx"], best["tx"], best["off"], np.zeros(obs.n_stations)), conv)
-    return best, res
+    return best, _without_core(res)
+
+
+def _without_core(res):
+    """The search record without its solution's adjustment (the caller holds that one as ``core``;
+    the record, kept to the end of :func:`adjust`, would otherwise keep the first adjustment's
+    arrays alive through every later one: ~300 MB at 1.6 M distances)."""
+    from types import SimpleNamespace
+
+    sol = SimpleNamespace(**{k: v for k, v in vars(res.solution).items() if k != "core"})
+    return replace(res, solution=sol)
 
 
 def _start_as_partial(obs: Observations, start: Start, error: MultilatError) -> dict:
@@ -499,7 +511,7 @@ def _one_gross_error(core) -> bool:
     ``w_k^2`` (its contribution to vtpv when rejected) the global test no longer fails by far. A single
     blunder does; a wrong minimum spreads its misfit over many distances and does not."""
     red = core["redundancy"]
-    w = st.w_statistics(core["residual_w"], np.ones_like(core["residual_w"]), red)
+    w = st.w_statistics(core["residual_w"], None, red)
     w2 = float(np.max(w ** 2, initial=0.0))
     return core["dof"] > 1 and p_value(core["vtpv"] - w2, core["dof"] - 1) >= P_MIN
 
@@ -509,7 +521,7 @@ def _w_failure_groups(core, used, crit, limit: int = 50) -> tuple:
     a group of several is a fault the data cannot locate. Indices into the full observations; at
     most ``limit`` groups, largest |w| first."""
     red = core["redundancy"]
-    w = st.w_statistics(core["residual_w"], np.ones_like(core["residual_w"]), red)
+    w = st.w_statistics(core["residual_w"], None, red)
     fail = np.flatnonzero(np.abs(w) > crit)
     fail = fail[np.argsort(-np.abs(w[fail]))]
     idx = np.flatnonzero(used)

@@ -231,15 +231,48 @@ class NetworkCovariance:
             out = np.empty(si.shape[0])
             K.hat_row(int(k), Qgg, Minv, Js, Jt, P, si, ti, order, tptr, out)
             return out
-        a = np.zeros(self.n)
-        i, j = self.si[k], self.ti[k]
-        a[Q * i:Q * i + Q] = self.Js_w[k]
-        a[Q * self.s + 3 * j:Q * self.s + 3 * j + 3] = self.Jt_w[k]
-        v = self._times(a[:, None])[:, 0] / self.factor
+        v = self._times(self.design_row(k)[:, None])[:, 0] / self.factor
         vg = v[:Q * self.s].reshape(self.s, Q)
         vt = v[Q * self.s:].reshape(self.t, 3)
         return (np.einsum("mq,mq->m", self.Js_w, vg[self.si])
                 + np.einsum("mi,mi->m", self.Jt_w, vt[self.ti]))
+
+    def internal_times(self, g) -> np.ndarray:
+        """The internal covariance (solving frame, datum-free, without ``factor``) times one
+        parameter-space vector ``g`` (n,) -> (n,): ``C a_k`` for the design row ``a_k`` of
+        observation ``k`` is the solution's response to it."""
+        g = np.asarray(g, float)
+        K = _kernels(self.si.shape[0])
+        if K is None:
+            return self._times(g[:, None])[:, 0] / self.factor
+        Qgg, Minv, Js, _, P, si, ti, order, tptr = self._kernel_args()
+        og, ot = np.empty(Q * self.s), np.empty((self.t, 3))
+        K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, g[:Q * self.s].copy(),
+                    g[Q * self.s:].reshape(self.t, 3).copy(), og, ot)
+        return np.concatenate([og, ot.ravel()])
+
+    def design_times(self, x) -> np.ndarray:
+        """The whitened design times a parameter-space vector ``x`` (n,) -> (m,): ``A x``, so that
+        ``design_times(internal_times(g))`` is the hat-matrix row of the combination ``g`` of design
+        rows (:meth:`hat_row` for ``g = a_k``)."""
+        x = np.asarray(x, float)
+        xg = x[:Q * self.s].reshape(self.s, Q)
+        xt = x[Q * self.s:].reshape(self.t, 3)
+        K = _kernels(self.si.shape[0])
+        if K is None:
+            return np.einsum("mq,mq->m", self.Js_w, xg[self.si]) + np.einsum("mi,mi->m", self.Jt_w, xt[self.ti])
+        _, _, Js, Jt, _, si, ti, _, _ = self._kernel_args()
+        out = np.empty(si.shape[0])
+        K.design_times(Js, Jt, si, ti, np.ascontiguousarray(xg), np.ascontiguousarray(xt), out)
+        return out
+
+    def design_row(self, k: int) -> np.ndarray:
+        """Row ``k`` of the whitened design as a parameter-space vector (n,) (station and target parts)."""
+        a = np.zeros(self.n)
+        i, j = int(self.si[k]), int(self.ti[k])
+        a[Q * i:Q * i + Q] = self.Js_w[k]
+        a[Q * self.s + 3 * j:Q * self.s + 3 * j + 3] = self.Jt_w[k]
+        return a
 
     def perfectly_correlated(self, k: int, redundancy, tol: float = 1e-6) -> np.ndarray:
         """Observations ``l`` whose w-test is perfectly correlated with ``k``'s: ``|rho_kl| > 1 - tol``,

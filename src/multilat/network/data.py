@@ -41,7 +41,8 @@ def distinct_pair_codes(station_index, target_index, n_targets: int) -> np.ndarr
     """The distinct (station, target) pairs as sorted codes ``station * n_targets + target`` (int64):
     repeated readings of a pair appear once. Sort-based (numpy 2's hashing ``np.unique`` is ~10x slower
     on millions of codes)."""
-    code = np.sort(np.asarray(station_index, np.int64) * int(n_targets) + np.asarray(target_index, np.int64))
+    code = np.asarray(station_index, np.int64) * int(n_targets) + np.asarray(target_index, np.int64)
+    code.sort(kind="stable")          # radix/timsort: ~2x numpy's default on files in target or station order
     if code.size < 2:
         return code
     keep = np.empty(code.size, bool)
@@ -250,6 +251,16 @@ class Observations:
     def label(self, k: int) -> str:
         """``'station->target'`` of observation ``k`` (for messages)."""
         return f"{self.station_ids[self.station_index[k]]}->{self.target_ids[self.target_index[k]]}"
+
+    def distinct_pairs(self) -> np.ndarray:
+        """:func:`distinct_pair_codes` of these observations, computed once per object (the structure
+        checks, the exclusions and the snooping rounds all read it)."""
+        got = self.__dict__.get("_distinct_pairs")
+        if got is None:
+            got = distinct_pair_codes(self.station_index, self.target_index, self.n_targets)
+            got.setflags(write=False)
+            object.__setattr__(self, "_distinct_pairs", got)
+        return got
 
     def subset(self, keep) -> "Observations":
         """The observations selected by the boolean mask or index array ``keep``; ids keep their

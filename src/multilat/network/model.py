@@ -97,7 +97,18 @@ def _residual(distance_m, rho, k1, o, cost):
 
 def residuals(distance_m, station_xyz_m, target_xyz_m, offset_m, scale, station_index, target_index, *,
               cost="distance"):
-    """The residuals of :func:`residuals_and_jacobian` without the Jacobian (for the cost of a trial step)."""
+    """The residuals of :func:`residuals_and_jacobian` without the Jacobian (for the cost of a trial step);
+    compiled for large networks (the same operations, bit for bit: ``tests/test_fast_output.py``)."""
+    if cost == "distance":
+        from multilat.network.covariance import _kernels     # lazy: covariance imports this module
+
+        K = _kernels(len(station_index))
+        if K is not None:
+            out = np.empty(len(station_index))
+            K.distance_residuals(np.ascontiguousarray(station_xyz_m, float), np.ascontiguousarray(target_xyz_m, float),
+                                 np.asarray(offset_m, float), np.asarray(scale, float), station_index,
+                                 target_index, np.asarray(distance_m, float), out)
+            return out
     rho, _ = geometric_distance_m(station_xyz_m, target_xyz_m, station_index, target_index)
     return _residual(distance_m, rho, 1.0 + scale[station_index], offset_m[station_index], cost)
 

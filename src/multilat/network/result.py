@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.io import JsonRows
+from multilat.io import JsonKeyedRows, JsonRows
 from multilat.network import statistics as st
 from multilat.network.covariance import NetworkCovariance
 from multilat.network.data import Observations, ReferenceLengths
@@ -371,9 +371,10 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
             stations[sid]["scale_std"] = res.scale_std[i]
         if sid in res.orientations:
             stations[sid].update(res.orientations[sid])
-    targets = {tid: {"xyz_m": res.target_xyz_m[j], "cov_m2": res.target_cov_m2[j],
-                     "n_obs": int(n), "redundancy": float(r)}
-               for j, (tid, n, r) in enumerate(zip(res.target_ids, res.target_n_obs(), res.target_redundancy()))}
+    # one object per target, written from the columns (no Python object per target)
+    targets = JsonKeyedRows(res.target_ids, {"xyz_m": res.target_xyz_m, "cov_m2": res.target_cov_m2,
+                                             "n_obs": np.asarray(res.target_n_obs(), np.int64),
+                                             "redundancy": np.asarray(res.target_redundancy(), float)})
     gt = res.global_test
     o = res.obs
     si, ti = o.station_index, o.target_index

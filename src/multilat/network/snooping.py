@@ -16,13 +16,17 @@ diag H``). Leaving out observation ``k``, with ``c = H e_k`` (one row of the hat
     v'   = v + c v_k / r_k            (the solution moves by -Q a_k v_k / r_k)
     r'   = r - c² / r_k
     vᵀPv' = vᵀPv - v_k² / r_k,   dof' = dof - 1
-    H'   = H + c cᵀ / r_k             (the next round's hat row: the stored c's)
+    H'   = H + c cᵀ / r_k             (the next round's hat row)
+
+A downdate's ``c`` is kept as its generator ``g`` (``c = A C g``; ``g`` a combination of the rejected
+observations' design rows: the stations' part and the few targets touched), so a round costs two
+passes over the observations (``C g``, then ``A (C g)``) and no memory of the network's size.
 
 exact for the linearised model (Cook & Weisberg 1982, *Residuals and Influence in Regression*, §2.2;
 the w-test's correlation ``rho_kl = -H_kl / sqrt(r_k r_l)`` as in Baarda's procedure). The network's
 curvature changes the downdated vᵀPv by about 1e-8 relative after a marginal rejection (a move of
 about one σ; ``tests/test_snooping_rounds.py``). The adjustment
-is re-run after a bounded number of downdates (memory: one hat row of ``m`` floats each), after the
+is re-run after :data:`MAX_DOWNDATES` downdates (the linearisation's drift), after the
 rejection of a gross error (|w| > :data:`LINEAR_W_MAX`: its removal moves the solution far enough
 for the curvature to show, 1e-6 relative in vᵀPv at 50σ) and whenever the procedure would stop, so the decision to stop and every reported number come from a
 full adjustment; only the statistics recorded for the intermediate rounds are the downdated ones.
@@ -35,7 +39,6 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
-from multilat.network.data import distinct_pair_codes
 from multilat.network.fit import check_network, control_ids, station_map
 
 __all__ = ["LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers"]
@@ -47,8 +50,9 @@ LINEAR_MIN_OBS = 20_000
 #: followed by a new adjustment; the downdate serves the marginal rejections (|w| a little above the
 #: critical value: the w-tests' false alarms on large networks), where the model is linear to ~1e-8
 LINEAR_W_MAX = 10.0
-#: memory for the stored hat rows (bytes): the number of downdates before the next adjustment
-ROW_MEMORY_BYTES = 256 * 2 ** 20
+#: downdates before the next adjustment (each marginal rejection moves the linearisation by ~1e-8
+#: relative in vᵀPv; nothing of the network's size is kept per downdate)
+MAX_DOWNDATES = 64
 
 
 class LinearRounds:
@@ -68,8 +72,11 @@ class LinearRounds:
         self.ti = np.asarray(target_index)
         m = self.v.size
         self.alive = np.ones(m, bool)
-        self.rows: list[tuple[np.ndarray, float]] = []
-        self.cap = int(max(4, min(64, ROW_MEMORY_BYTES // (8 * max(m, 1)))))
+        # each downdate's hat row c_r = A C g_r kept as its generator g_r, a combination of design rows:
+        # (station part (Q s,), targets touched (p,), their parts (p, 3), r_k)
+        self.gens: list[tuple[np.ndarray, np.ndarray, np.ndarray, float]] = []
+        self._last: tuple | None = None
+        self.cap = MAX_DOWNDATES
         inc = np.zeros((n_stations, n_targets), bool)
         inc[self.si, self.ti] = True
         self.incidence = inc
@@ -82,16 +89,16 @@ class LinearRounds:
             return False
         if datum.kind == "control":
             return False
-        return distinct_pair_codes(sub.station_index, sub.target_index, sub.n_targets).size == sub.n_obs
+        return sub.distinct_pairs().size == sub.n_obs
 
     @property
     def pending(self) -> int:
         """Rejections since the last adjustment."""
-        return len(self.rows)
+        return len(self.gens)
 
     @property
     def full(self) -> bool:
-        return len(self.rows) >= self.cap
+        return len(self.gens) >= self.cap
 
     def stats(self) -> dict:
         """What the detection step reads: residual_w, redundancy (0 for the left-out), vtpv, dof, sigma0."""
@@ -100,14 +107,39 @@ class LinearRounds:
                 "sigma0": sigma0}
 
     def w(self) -> np.ndarray:
-        return st.w_statistics(self.v, np.ones_like(self.v), self.red)
+        return st.w_statistics(self.v, None, self.red)
 
     def hat_row(self, k: int) -> np.ndarray:
-        """Row ``k`` of the current hat matrix (the last adjustment's plus the stored downdates)."""
-        c = np.array(self.cov.hat_row(int(k)), float, copy=True)
-        for row, rho in self.rows:
-            c += row * (row[k] / rho)
+        """Row ``k`` of the current hat matrix (the last adjustment's plus the downdates)::
+
+            H' e_k = H e_k + sum_r c_r c_r[k] / r_r = A C g,   g = a_k + sum_r g_r (g_r . C a_k) / r_r
+
+        (``c_r = A C g_r``, ``C`` symmetric): two passes over the observations whatever the number of
+        downdates, and nothing of length ``m`` kept between rounds."""
+        cov = self.cov
+        k = int(k)
+        i, j = int(self.si[k]), int(self.ti[k])
+        nq = cov.Js_w.shape[1]
+        gs = np.zeros(nq * cov.s)
+        gs[nq * i:nq * i + nq] = cov.Js_w[k]
+        tj, tv = np.array([j]), np.asarray(cov.Jt_w[k], float).reshape(1, 3).copy()
+        if not self.gens:
+            c = np.array(cov.hat_row(k), float, copy=True)
+        else:
+            a = cov.design_row(k)
+            y = cov.internal_times(a)
+            yg, yt = y[:nq * cov.s], y[nq * cov.s:].reshape(cov.t, 3)
+            g = a
+            gt = g[nq * cov.s:].reshape(cov.t, 3)
+            for rg, rj, rv, rho in self.gens:
+                beta = (float(rg @ yg) + float(np.sum(rv * yt[rj]))) / rho
+                g[:nq * cov.s] += beta * rg
+                np.add.at(gt, rj, beta * rv)
+            tj = np.unique(np.concatenate([tj] + [rj for _, rj, _, _ in self.gens]))
+            gs, tv = g[:nq * cov.s].copy(), gt[tj].copy()
+            c = cov.design_times(cov.internal_times(g))
         c[~self.alive] = 0.0
+        self._last = (k, gs, tj, tv)
         return c
 
     def twins(self, k: int, c: np.ndarray, tol: float = 1e-6) -> np.ndarray:
@@ -149,7 +181,11 @@ class LinearRounds:
         self.v[k] = 0.0
         self.red[k] = 0.0
         self.incidence[self.si[k], self.ti[k]] = False
-        self.rows.append((c, rho))
+        if self._last is None or self._last[0] != k:
+            self.hat_row(k)                       # the generator of c (normally made just before)
+        _, gs, tj, tv = self._last
+        self.gens.append((gs, tj, tv, rho))
+        self._last = None
 
 
 # ---------------------------------------------------------------- one round of the procedure
@@ -163,7 +199,7 @@ def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, l
         return "stop", ((), "")
     state = core if lin is None else lin.stats()
     to_global = np.flatnonzero(used) if lin is None else lin.gidx
-    w_sub = st.w_statistics(state["residual_w"], np.ones_like(state["residual_w"]), state["redundancy"])
+    w_sub = st.w_statistics(state["residual_w"], None, state["redundancy"])
     k_sub = int(np.argmax(np.abs(w_sub)))
     w_ang = angle_w(core, lam0) if core.get("angles") is not None else np.zeros(0)
     angle_first = w_ang.size > 0 and np.max(np.abs(w_ang)) > abs(w_sub[k_sub])

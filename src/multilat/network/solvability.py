@@ -27,7 +27,7 @@ import warnings
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.data import Observations, distinct_pair_codes
+from multilat.network.data import Observations
 
 __all__ = ["check_structure", "count_unknowns", "diagnose_degeneracy", "flat_geometry",
            "resolvable_spread_m", "CONDITION_LIMIT"]
@@ -75,7 +75,7 @@ def check_structure(obs: Observations, *, offset_free, scale_free, fixed_targets
         raise MultilatError(f"a self-calibrating network needs at least 3 stations, got {s} "
                             f"({', '.join(obs.station_ids)})")
     fixed_targets = np.zeros(t, bool) if fixed_targets is None else np.asarray(fixed_targets, bool)
-    pair = distinct_pair_codes(obs.station_index, obs.target_index, t)              # distinct pairs:
+    pair = obs.distinct_pairs()              # distinct pairs:
     per_station = np.bincount(pair // t, minlength=s)                        # repeated readings add
     per_target = np.bincount(pair % t, minlength=t)                          # no geometry
     # a head's offset and scale are unknowns of that station only when the head occupies no other

@@ -140,16 +140,17 @@ def norm_ppf(p: float) -> float:
 
 
 def w_statistics(residual_m, sigma_m, redundancy):
-    """Baarda's normalised residuals ``w_k = v_k / (sigma_k sqrt(r_k))`` (a-priori variance factor).
+    """Baarda's normalised residuals ``w_k = v_k / (sigma_k sqrt(r_k))`` (a-priori variance factor;
+    ``sigma_m`` None: residuals already whitened, sigma 1).
 
     Observations with ``r_k <= 1e-9`` (uncontrolled: a fault in them does not show in the residuals)
     get ``w = 0``.
     """
     r = np.asarray(redundancy, float)
     ok = r > 1e-9
-    out = np.zeros_like(r)
-    out[ok] = np.asarray(residual_m)[ok] / (np.asarray(sigma_m)[ok] * np.sqrt(r[ok]))
-    return out
+    root = np.sqrt(np.where(ok, r, 1.0))          # whole arrays, no masked copies (10^6 rows per round)
+    den = root if sigma_m is None else np.asarray(sigma_m, float) * root
+    return np.where(ok, np.asarray(residual_m, float) / den, 0.0)
 
 
 def minimal_detectable_bias_m(sigma_m, redundancy, *, alpha: float, power: float = 0.80):
