@@ -38,3 +38,39 @@ def test_top_view_labels_do_not_overlap():
         for b in names[i + 1:]:
             assert not boxes[a].overlaps(boxes[b]), (a, b)
     plt.close(ax.figure)
+
+
+def test_large_networks_draw_densities_and_subsamples(monkeypatch):
+    """Above LARGE_PLOT_POINTS the residual figure is a 2-D histogram: its cells hold every used
+    observation once (the counts sum to their number); the rejected ones stay crosses at their own
+    residuals; the 3-D view draws every k-th target and says so. The threshold is lowered here to
+    test on a small network."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from multilat.network.data import Observations
+    from multilat.network.large import synthetic_network
+    from multilat.network.result import Start
+    from multilat.report import network_figures as NF
+
+    net = synthetic_network(8, 300, 6, rng=3)
+    d = net.distance_m.copy()
+    d[5] += 200e-6                                                  # one blunder: rejected
+    obs = Observations(tuple(f"S{i}" for i in range(8)), tuple(f"T{j}" for j in range(300)),
+                       net.station_index, net.target_index, d, net.sigma_m)
+    res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m))
+    assert not res.used[5]
+    monkeypatch.setattr(NF, "LARGE_PLOT_POINTS", 100)
+    ax = NF.plot_residuals(res)
+    (mesh,) = ax.collections
+    assert int(mesh.get_array().sum()) == int(res.used.sum())
+    (cross,) = ax.lines[:1]
+    assert np.allclose(cross.get_ydata(), res.residuals_m[~res.used] * 1e6)
+    plt.close(ax.figure)
+    ax = NF.plot_3d(res)
+    assert "1 target in 3 shown: 100 of 300" in ax.get_title()
+    scatters = [c for c in ax.collections if hasattr(c, "_offsets3d")]        # heads, then targets
+    assert [len(c._offsets3d[0]) for c in scatters] == [8, 100]
+    plt.close(ax.figure)

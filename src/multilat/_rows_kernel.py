@@ -4,17 +4,18 @@ strings instead)."""
 
 from __future__ import annotations
 
-from multilat._numba import HAVE_NUMBA, njit  # noqa: F401
+from multilat._numba import HAVE_NUMBA, njit, prange  # noqa: F401
 
 
-@njit(cache=True)
-def assemble_rows(kind, ref, cbuf, cstart, clen, tbuf, tstart, tlen, out):
-    """Write the rows into ``out`` (uint8, exactly their size). Row ``r`` is the parts ``p`` in order:
-    ``kind[p] == 0``: constant ``ref[p]`` (``cbuf[cstart:cstart + clen]``); else token ``r`` of
-    column ``ref[p]`` (``tbuf[tstart[c, r]:tstart[c, r] + tlen[c, r]]``). Returns the bytes written."""
+@njit(parallel=True, cache=True)
+def assemble_rows(kind, ref, cbuf, cstart, clen, tbuf, tstart, tlen, row_at, out):
+    """Write the rows into ``out`` (uint8, exactly their size), row ``r`` from ``row_at[r]``. Row ``r``
+    is the parts ``p`` in order: ``kind[p] == 0``: constant ``ref[p]`` (``cbuf[cstart:cstart +
+    clen]``); else token ``r`` of column ``ref[p]`` (``tbuf[tstart[c, r]:tstart[c, r] + tlen[c, r]]``).
+    Rows are independent (parallel over rows; the bytes do not depend on the threads)."""
     n = tstart.shape[1]
-    pos = 0
-    for r in range(n):
+    for r in prange(n):
+        pos = row_at[r]
         for p in range(kind.shape[0]):
             j = ref[p]
             if kind[p] == 0:
@@ -28,4 +29,3 @@ def assemble_rows(kind, ref, cbuf, cstart, clen, tbuf, tstart, tlen, out):
                 for b in range(ln):
                     out[pos + b] = tbuf[s + b]
             pos += ln
-    return pos

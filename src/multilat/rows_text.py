@@ -215,9 +215,13 @@ def assemble(parts: Sequence[bytes | int], tokens: Sequence[Tokens], n: int, *,
         bufs.append(t.buf)
         at += t.buf.size
     tbuf = np.concatenate(bufs) if bufs else np.zeros(0, np.uint8)
-    size = int(c.length.sum()) * n + sum(int(tlen[r].sum()) for r in ref[kind == 1].tolist())
-    out_arr = np.empty(size, np.uint8)
-    kern(kind, ref, c.buf, c.start, c.length, tbuf, tstart, tlen, out_arr)
+    row_len = np.full(n, int(c.length.sum()), np.int64)
+    for r in ref[kind == 1].tolist():                  # a column used twice counts twice
+        row_len += tlen[r]
+    row_at = np.zeros(n, np.int64)
+    np.cumsum(row_len[:-1], out=row_at[1:])
+    out_arr = np.empty(int(row_at[-1] + row_len[-1]), np.uint8)
+    kern(kind, ref, c.buf, c.start, c.length, tbuf, tstart, tlen, row_at, out_arr)
     return out_arr.tobytes()
 
 

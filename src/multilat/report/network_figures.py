@@ -27,13 +27,21 @@ def _plt():
     return plt
 
 
+#: above this many points a figure draws densities or a subsample, not one marker per point (a
+#: million markers take seconds to draw and merge into one blot)
+LARGE_PLOT_POINTS = 20_000
+
+
 def plot_residuals(result, ax=None):
     """Residuals (µm) of every observation against the target position, one marker per head;
-    rejected observations as crosses."""
+    rejected observations as crosses. Above :data:`LARGE_PLOT_POINTS` used observations: their
+    density (observations per cell, log colour scale, all heads), rejected ones still as crosses."""
     plt = _plt()
     if ax is None:
         _, ax = plt.subplots(figsize=(7, 3.5))
     o = result.obs
+    if int(np.count_nonzero(result.used)) > LARGE_PLOT_POINTS:
+        return _residual_density(result, ax)
     markers = "os^vD<>ph*"
     for i, sid in enumerate(o.station_ids):
         m = (o.station_index == i) & result.used
@@ -51,6 +59,39 @@ def plot_residuals(result, ax=None):
         ax.set_xticklabels(o.target_ids, rotation=90 if t > 14 else 0, fontsize=8)
     ax.set_title(f"residuals per target and head (σ0 = {result.sigma0:.3g}, dof {result.dof})")
     ax.legend(fontsize=7, ncol=min(o.n_stations + 1, 6), loc="best")
+    return ax
+
+
+def _residual_density(result, ax):
+    """The residual figure of a large network: a 2-D histogram of (target position, residual)."""
+    from matplotlib.colors import LogNorm
+
+    o = result.obs
+    used = np.asarray(result.used, bool)
+    x = o.target_index[used] + 1.0
+    y = result.residuals_m[used] * 1e6
+    ok = np.isfinite(y)
+    x, y = x[ok], y[ok]
+    t = o.n_targets
+    counts, xe, ye = np.histogram2d(x, y, bins=(min(t, 400), 120),
+                                    range=((0.5, t + 0.5), (float(y.min()), float(y.max()) or 1.0)))
+    mesh = ax.pcolormesh(xe, ye, np.ma.masked_equal(counts.T, 0), norm=LogNorm(vmin=1), cmap="viridis",
+                         rasterized=True)
+    ax.figure.colorbar(mesh, ax=ax, label="observations per cell")
+    bad = ~used
+    if bad.any():
+        ax.plot(o.target_index[bad] + 1, result.residuals_m[bad] * 1e6, "rx", ms=5,
+                label=f"rejected ({int(bad.sum())})")
+        ax.legend(fontsize=7, loc="upper right")
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    from matplotlib.ticker import MaxNLocator, StrMethodFormatter
+
+    ax.xaxis.set_major_locator(MaxNLocator(6, integer=True))
+    ax.xaxis.set_major_formatter(StrMethodFormatter("{x:,.0f}"))
+    ax.set_xlabel("target position")
+    ax.set_ylabel("residual (measured - adjusted), µm")
+    ax.set_title(f"residuals of {int(ok.sum()):,} observations, all heads (σ0 = {result.sigma0:.3g}, "
+                 f"dof {result.dof})", fontsize=9)
     return ax
 
 
@@ -135,8 +176,9 @@ def plot_top_view(result, ax=None, *, magnify=None):
                (result.target_xyz_m, result.target_cov_m2, "o", "C0", "targets"))
     for (xyz, cov, style, col, name), mag in zip(classes, mags):
         xyz = np.asarray(xyz, float)
-        ax.plot(xyz[:, 0], xyz[:, 1], style, color=col, ms=6 if style == "^" else 4,
-                label=f"{name}: 95 % ellipses ×{mag:g}")
+        many = len(xyz) > LARGE_PLOT_POINTS
+        ax.plot(xyz[:, 0], xyz[:, 1], style, color=col, ms=6 if style == "^" else (1 if many else 4),
+                label=f"{name}: 95 % ellipses ×{mag:g}", rasterized=many)
         for p, c in zip(xyz, cov):
             if len(xyz) > 2000:      # too many to draw one by one
                 break
@@ -227,9 +269,10 @@ def plot_3d(result, ax=None, *, magnify: float | None = None):
     k = np.sqrt(stats.chi2.ppf(0.95, 3))
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 13), np.linspace(0, np.pi, 7))
     sphere = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)], axis=-1)
+    step = -(-len(result.target_xyz_m) // LARGE_PLOT_POINTS)       # every step-th target when many
     for (xyz, cov, style, col), mag in zip(((result.station_xyz_m, result.station_cov_m2, "^", "C3"),
-                                            (result.target_xyz_m, result.target_cov_m2, "o", "C0")), mags):
-        ax.scatter(xyz[:, 0], xyz[:, 1], xyz[:, 2], marker=style, color=col, s=18)
+                                            (result.target_xyz_m[::step], result.target_cov_m2, "o", "C0")), mags):
+        ax.scatter(xyz[:, 0], xyz[:, 1], xyz[:, 2], marker=style, color=col, s=18 if step == 1 else 2)
         if len(xyz) > 300:
             continue
         for p, c in zip(xyz, cov):
@@ -240,7 +283,9 @@ def plot_3d(result, ax=None, *, magnify: float | None = None):
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_zlabel("z (m)")
-    ax.set_title(f"95 % ellipsoids: heads (▲) ×{mags[0]:g}, targets (●) ×{mags[1]:g}")
+    n_t = len(result.target_xyz_m)
+    shown = "" if step == 1 else f"\n(1 target in {step} shown: {len(range(0, n_t, step)):,} of {n_t:,})"
+    ax.set_title(f"95 % ellipsoids: heads (▲) ×{mags[0]:g}, targets (●) ×{mags[1]:g}{shown}")
     return ax
 
 
