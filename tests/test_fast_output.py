@@ -362,3 +362,36 @@ def test_float_tokens_parse_to_the_same_floats():
     tok = [b[s:s + n] for s, n in zip(t.start.tolist(), t.length.tolist())]
     assert [repr(float(x)) for x in tok] == [repr(x) for x in v.tolist()]
     assert tok[-7:-4] == [b"nan", b"inf", b"-inf"]
+
+
+def test_decimal_reader_is_correctly_rounded_and_leaves_the_rest_to_numpy():
+    """The large-file reader's compiled decimal parser against Python's float() and numpy's cast,
+    bit for bit, on 40 000 numbers written in eight formats over 20 decades (the formats of real
+    files: fixed, repr, exponent) and on edge cases; what it does not take (too many digits, huge
+    exponents, nan, junk) is left to numpy (``fast`` False)."""
+    from multilat import _text_kernels as K
+
+    if not K.HAVE_NUMBA:
+        pytest.skip("numba not installed")
+    rng = np.random.default_rng(0)
+    x = rng.uniform(0, 30, 40_000) * 10.0 ** rng.integers(-12, 8, 40_000)
+    fmts = ["%.9f", "%r", "%.3e", "%g", "%.17g", "%.15f", "%.1f", "%E"]
+    strs = [repr(float(v)) if fmts[i % 8] == "%r" else fmts[i % 8] % v for i, v in enumerate(x)]
+    edge = ["5e-06", "1.", ".5", "+1.5", "-0", "1e22", "1e-22", "000012.5", "1e+05", "1E-5"]
+    slow = ["1e23", "1e-23", "9007199254740993", "1e", "1.5.2", "nan", "inf", "12a", "",
+            "12345678901234567890", "2.2250738585072014e-308", "-", "."]
+    strs += edge + slow
+    b = ",".join(strs).encode()
+    buf = np.frombuffer(b, np.uint8)
+    commas = np.flatnonzero(buf == 44)
+    starts = np.concatenate([[0], commas + 1]).astype(np.int64)
+    ends = np.concatenate([commas, [len(buf)]]).astype(np.int64)
+    out, fast = np.empty(len(strs)), np.empty(len(strs), bool)
+    K.parse_decimals(buf, starts, ends, K._POW10, out, fast)
+    assert not fast[-len(slow):].any() and fast[-len(slow) - len(edge):-len(slow)].all()
+    assert fast.sum() > 0.7 * len(x)
+    got = out[fast]
+    ref = np.array([float(s) for s, f in zip(strs, fast) if f])
+    assert np.array_equal(got.view(np.uint64), ref.view(np.uint64))
+    cast = np.array([s.encode() for s, f in zip(strs, fast) if f]).astype(np.float64)
+    assert np.array_equal(got.view(np.uint64), cast.view(np.uint64))

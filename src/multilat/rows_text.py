@@ -6,7 +6,7 @@ separators, indentation) and one *token* per column: a number's shortest round-t
 one call per column), a label's quoted text (encoded once per distinct label), a boolean, or a row
 of a multi-dimensional array as a nested list. :func:`column_tokens` makes a column's tokens (one
 byte buffer, each row's start and length) and :func:`assemble` lays the rows out: in one compiled
-pass (numba, :mod:`multilat._rows_kernel`) for tables of :data:`KERNEL_MIN_ROWS` rows or more, else
+pass (numba, :mod:`multilat._text_kernels`) for tables of :data:`KERNEL_MIN_ROWS` rows or more, else
 by joining Python byte strings. Both give the same bytes (``tests/test_rows_text.py``).
 
 :class:`JsonRows` (a list of objects) and :class:`JsonKeyedRows` (an object of objects, keyed by a
@@ -159,7 +159,7 @@ def _kernel():
     if os.environ.get("MULTILAT_NO_NUMBA"):
         return None
     try:
-        from multilat._rows_kernel import HAVE_NUMBA, assemble_rows
+        from multilat._text_kernels import HAVE_NUMBA, assemble_rows
     except ImportError:     # pragma: no cover - depends on the environment
         return None
     return assemble_rows if HAVE_NUMBA else None

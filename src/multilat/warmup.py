@@ -64,7 +64,14 @@ def _steps():
             for head in inst.heads:
                 budget.distance_std_m(inst, [1.0], head=head)
 
-    return [("adjust, sparse, 10 400 distances", adjust_large), ("propagate small-volume", propagate_small),
+    def text():
+        """The large-file reader's decimal parser (read-only and writable buffers: two signatures)."""
+        from multilat import _text_kernels as K
+
+        for buf in (np.frombuffer(b"1.5,2e-3", np.uint8), np.frombuffer(b"1.5,2e-3", np.uint8).copy()):
+            K.parse_decimals(buf, np.array([0, 4]), np.array([3, 8]), K._POW10, np.empty(2), np.empty(2, bool))
+
+    return [("adjust, sparse, 10 400 distances", adjust_large), ("decimal reader", text), ("propagate small-volume", propagate_small),
             ("normal draws", normals), ("heads' budgets of the presets", head_budgets)]
 
 

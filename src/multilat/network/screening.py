@@ -91,7 +91,10 @@ def suspect_rows(obs) -> list[tuple[int, str]]:
 
 def _group_medians(values, groups, n_groups):
     """Median of ``values`` per group id in ``[0, n_groups)`` (NaN for empty groups), vectorised."""
-    order = np.lexsort((values, groups))
+    # the order of np.lexsort((values, groups)) (by group, then value, ties by position) from two
+    # sorts: numpy's lexsort is ~2x slower on millions of rows
+    order = np.argsort(values, kind="stable")
+    order = order[np.argsort(groups[order], kind="stable")]
     v, g = values[order], groups[order]
     counts = np.bincount(g, minlength=n_groups)
     start = np.concatenate([[0], np.cumsum(counts)[:-1]])
