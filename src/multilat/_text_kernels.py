@@ -59,25 +59,23 @@ def parse_decimals(buf, starts, ends, pow10, out, fast):
         frac = 0            # digits after the point
         seen = 0            # digits seen at all
         bad = False
-        while p < e and 48 <= buf[p] <= 57:
-            seen += 1
-            if mant != 0 or buf[p] != 48:
-                nd += 1
-                if nd > 19:
-                    bad = True
-                mant = mant * np.uint64(10) + np.uint64(buf[p] - 48)
-            p += 1
-        if p < e and buf[p] == 46:                            # .
-            p += 1
-            while p < e and 48 <= buf[p] <= 57:
+        in_frac = False
+        while p < e:                                          # digits, one '.', digits
+            ch = buf[p]
+            if 48 <= ch <= 57:
                 seen += 1
-                frac += 1
-                if mant != 0 or buf[p] != 48:
+                if in_frac:
+                    frac += 1
+                if mant != 0 or ch != 48:
                     nd += 1
                     if nd > 19:
                         bad = True
-                    mant = mant * np.uint64(10) + np.uint64(buf[p] - 48)
-                p += 1
+                    mant = mant * np.uint64(10) + np.uint64(ch - 48)
+            elif ch == 46 and not in_frac:
+                in_frac = True
+            else:
+                break
+            p += 1
         if seen == 0 or bad:
             continue
         ex = 0
