@@ -308,7 +308,7 @@ def test_result_tables_written_from_columns_equal_the_row_writer(tmp_path):
     """targets.csv and residuals.csv from the columns: byte for byte the text of the row-by-row csv
     writer they replace (written here as it was), with an id that needs quoting and a rejected row."""
     from multilat.io import write_csv_atomic
-    from multilat.network.files import write_result_csvs
+    from multilat.network.files import write_result_tables
 
     net, obs = _network(t=25, rng=8)
     tids = tuple(f'T{j}' if j != 4 else 'T,"4"' for j in range(25))
@@ -318,7 +318,7 @@ def test_result_tables_written_from_columns_equal_the_row_writer(tmp_path):
     used[3] = False
     from dataclasses import replace
     res = replace(res, used=used)
-    write_result_csvs(res, tmp_path)
+    write_result_tables(res, tmp_path)
     (_, _), (t_ax, _) = res.ellipsoids()
     write_csv_atomic(tmp_path / "old_t.csv", ["target", "x_m", "y_m", "z_m", "x_std_m", "y_std_m", "z_std_m",
                                               "semi_axis_1_95_m", "semi_axis_2_95_m", "semi_axis_3_95_m"],

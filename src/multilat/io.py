@@ -89,6 +89,7 @@ def _umask() -> int:
 OUTPUT_NAMES = frozenset({
     "stations.csv", "targets.csv", "residuals.csv", "reference_lengths.csv", "result.json",
     "residuals.png", "top_view.png", "view_3d.png",                                  # adjust
+    "stations.parquet", "targets.parquet", "residuals.parquet", "reference_lengths.parquet",
     "summary.json", "parameters.csv", "distances.csv", "points.csv", "clouds.png",   # propagate
     "sides.csv", "fig8_mean_error.png", "fig8_std.png", "fig9_cdf.png",              # lbb simulate
     "comparison.csv", "fig7_comparison.png", "report.html",                          # lbb compare, demo
@@ -330,6 +331,72 @@ def write_csv_columns_atomic(path: str | os.PathLike, columns: dict, *, chunk: i
                 else:
                     toks.append(column_tokens(np.asarray(col)[lo:hi], orjson, "csv"))
             fh.write(assemble(parts, toks, hi - lo, compiled=None if n >= KERNEL_MIN_ROWS else False))
+
+
+def write_parquet_columns_atomic(path: str | os.PathLike, columns: dict) -> None:
+    """The table of ``columns`` (as :func:`write_csv_columns_atomic`; also lists with None for
+    empty cells) as a Parquet file, whole or not at all: floats float64, integers int64, booleans,
+    labels as dictionary-encoded strings, None as null. Needs pyarrow (``pip install
+    'multilat[parquet]'``): without it a :class:`MultilatError` saying so."""
+    try:
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+    except ImportError:
+        raise MultilatError("Parquet tables need pyarrow: pip install 'multilat[parquet]' "
+                            "(or write CSV tables)") from None
+    labels = {name: pa.array([str(x) for x in col[0]], pa.string())
+              for name, col in columns.items() if isinstance(col, tuple)}
+
+    def arrays(lo, hi):
+        out = {}
+        for name, col in columns.items():
+            if isinstance(col, tuple):
+                idx = pa.array(np.asarray(col[1][lo:hi], np.int32))
+                out[name] = pa.DictionaryArray.from_arrays(idx, labels[name])
+            elif isinstance(col, list):
+                out[name] = pa.array(col[lo:hi])
+            else:
+                out[name] = pa.array(np.asarray(col)[lo:hi])
+        return pa.table(out)
+
+    n = 0
+    for col in columns.values():
+        n = len(col[1]) if isinstance(col, tuple) else len(col)
+        break
+    first = arrays(0, min(n, PARQUET_ROW_GROUP))
+    with atomic_path(path) as tmp, pq.ParquetWriter(str(tmp), first.schema) as w:
+        w.write_table(first)
+        for lo in range(PARQUET_ROW_GROUP, n, PARQUET_ROW_GROUP):    # row groups: bounded memory
+            w.write_table(arrays(lo, min(n, lo + PARQUET_ROW_GROUP)))
+    del first
+    pa.default_memory_pool().release_unused()          # Arrow's allocator keeps freed pages otherwise
+
+
+#: rows per Parquet row group (and per conversion to Arrow: the memory the writer needs)
+PARQUET_ROW_GROUP = 1 << 18
+
+
+#: formats of the per-point tables of ``adjust --out``
+TABLE_FORMATS = ("csv", "parquet")
+
+
+def write_table_atomic(path: str | os.PathLike, columns: dict, fmt: str = "csv") -> Path:
+    """Write the table of ``columns`` as ``path`` with the suffix of ``fmt`` (:data:`TABLE_FORMATS`),
+    whole or not at all; returns the path written. CSV: :func:`write_csv_columns_atomic` for arrays
+    and labels; columns given as lists (small tables: None an empty cell) through the row writer."""
+    path = Path(path).with_suffix("." + fmt)
+    if fmt == "parquet":
+        write_parquet_columns_atomic(path, columns)
+    elif fmt != "csv":
+        raise MultilatError(f"table format must be one of {', '.join(TABLE_FORMATS)}, got {fmt!r}")
+    elif any(isinstance(c, list) for c in columns.values()):
+        cols = [c if isinstance(c, list) else (list(np.asarray(c[0], object)[np.asarray(c[1])])
+                                                if isinstance(c, tuple) else np.asarray(c).tolist())
+                for c in columns.values()]
+        write_csv_atomic(path, list(columns), (["" if v is None else v for v in row] for row in zip(*cols)))
+    else:
+        write_csv_columns_atomic(path, columns)
+    return path
 
 
 def _fmt(v):

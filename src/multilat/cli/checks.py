@@ -66,6 +66,22 @@ def quantity(value: float | None, option: str, *, lo: float, hi: float, unit: st
     return value
 
 
+def table_format(fmt: str, out) -> str:
+    """``--tables``: csv or parquet, only with ``--out``; parquet only where pyarrow is installed."""
+    from multilat.io import TABLE_FORMATS
+
+    if fmt not in TABLE_FORMATS:
+        raise MultilatError(f"--tables must be one of {', '.join(TABLE_FORMATS)}, got {fmt!r}")
+    if fmt != "csv" and out is None:
+        raise MultilatError("--tables applies to the files of --out: give --out DIR")
+    if fmt == "parquet":
+        from importlib.util import find_spec
+
+        if find_spec("pyarrow") is None:           # found, not imported: ~150 MB until the tables are written
+            raise MultilatError("--tables parquet needs pyarrow: pip install 'multilat[parquet]'")
+    return fmt
+
+
 def sigma_um(value: float | None, option: str = "--sigma-um") -> float | None:
     """A distance's standard uncertainty in µm, within :data:`SIGMA_UM_RANGE`."""
     return quantity(value, option, lo=SIGMA_UM_RANGE[0], hi=SIGMA_UM_RANGE[1], unit="µm")

@@ -127,6 +127,10 @@ def adjust_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a summary."),
     out: Optional[Path] = typer.Option(None, "--out",
                                        help="Directory for result CSVs and figures (written atomically)."),
+    tables: str = typer.Option("csv", "--tables",
+                               help="With --out: the per-point tables (stations, targets, residuals, "
+                                    "reference lengths) as csv or parquet (needs pyarrow: pip install "
+                                    "'multilat[parquet]'; compact and fast for 10^5-10^6 rows)."),
     environment: Optional[Path] = typer.Option(None, "--environment", "-e",
                                                help="Raw readings only: environment log CSV "
                                                     "(as `multilat correct --environment`)."),
@@ -174,10 +178,10 @@ def adjust_command(
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
     ellipsoids and reference-length comparisons."""
     from multilat.network.adjust import adjust
-    from multilat.network.files import (read_points, read_reference_lengths,
-                                        write_result_csvs)
+    from multilat.network.files import read_points, read_reference_lengths, write_result_tables
     from multilat.network.result import result_to_json
 
+    checks.table_format(tables, out)
     checks.sigma_um(sigma_um)
     checks.seed(seed)
     report_opt.check_report_path(report, [observations, references, points, environment, heights])
@@ -269,7 +273,7 @@ def adjust_command(
         from multilat.report.network_figures import save_figures
 
         with staging_dir(out, inputs=[observations, references, points, environment, heights]) as tmp:
-            write_result_csvs(res, tmp, references=refs)
+            write_result_tables(res, tmp, references=refs, fmt=tables)
             save_figures(res, tmp)
             from multilat.io import write_json_atomic
 

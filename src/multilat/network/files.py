@@ -22,11 +22,11 @@ from pathlib import Path
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.io import ELEVATION_RANGE, read_csv_table, write_csv_atomic, write_csv_columns_atomic
+from multilat.io import ELEVATION_RANGE, read_csv_table, write_csv_atomic, write_table_atomic
 from multilat.network.data import Observations, Points, ReferenceLengths
 from multilat.network.screening import screen_observations
 
-__all__ = ["read_observations", "read_reference_lengths", "read_points", "write_result_csvs", "write_observations"]
+__all__ = ["read_observations", "read_reference_lengths", "read_points", "write_result_tables", "result_tables", "write_observations"]
 
 OBS_REQUIRED = ("station", "target", "distance_m")
 OBS_OPTIONAL = ("sigma_m", "head", "azimuth_rad", "elevation_rad", "zenith_rad", "sigma_azimuth_rad",
@@ -275,45 +275,49 @@ def read_points(path: str | os.PathLike) -> Points:
     return Points(tuple(ids), xyz, std)
 
 
-def write_result_csvs(result, out_dir: str | os.PathLike, *, references=None) -> list[Path]:
-    """Write ``stations.csv``, ``targets.csv``, ``residuals.csv`` (and ``reference_lengths.csv``)
-    into ``out_dir``, each file atomically. Returns the paths written."""
-    out = Path(out_dir)
-    written = []
+def result_tables(result, *, references=None) -> dict[str, dict]:
+    """The per-point tables of an adjustment, each a dict of columns (arrays, ``(labels, index)``, or
+    lists for the small ones): ``stations``, ``targets``, ``residuals`` and, with ``references``,
+    ``reference_lengths`` (an empty reference σ is None). One definition for every table format."""
     (s_ax, _), (t_ax, _) = result.ellipsoids()
-    p = out / "stations.csv"
-    write_csv_atomic(p, ["station", "x_m", "y_m", "z_m", "offset_m", "x_std_m", "y_std_m", "z_std_m",
-                         "offset_std_m", "offset_estimated", "semi_axis_1_95_m", "semi_axis_2_95_m", "semi_axis_3_95_m", "head"],
-                     [[sid, *result.station_xyz_m[i], result.offset_m[i],
-                       *np.sqrt(np.clip(np.diag(result.station_cov_m2[i]), 0, None)),
-                       result.offset_std_m[i], bool(result.offset_estimated[i]), *s_ax[i][::-1],
-                       result.obs.head_of_station[i]]
-                      for i, sid in enumerate(result.station_ids)])
-    written.append(p)
-    # per-target and per-observation tables: written from the columns (millions of rows)
-    p = out / "targets.csv"
+    su = np.sqrt(np.clip(np.diagonal(result.station_cov_m2, axis1=1, axis2=2), 0, None))
+    sx = result.station_xyz_m
+    tables = {"stations": {
+        "station": list(result.station_ids), "x_m": sx[:, 0].tolist(), "y_m": sx[:, 1].tolist(),
+        "z_m": sx[:, 2].tolist(), "offset_m": np.asarray(result.offset_m, float).tolist(),
+        "x_std_m": su[:, 0].tolist(), "y_std_m": su[:, 1].tolist(), "z_std_m": su[:, 2].tolist(),
+        "offset_std_m": np.asarray(result.offset_std_m, float).tolist(),
+        "offset_estimated": [bool(x) for x in result.offset_estimated],
+        "semi_axis_1_95_m": [float(a[2]) for a in s_ax], "semi_axis_2_95_m": [float(a[1]) for a in s_ax],
+        "semi_axis_3_95_m": [float(a[0]) for a in s_ax], "head": list(result.obs.head_of_station)}}
+    # per-target and per-observation tables: from the columns (millions of rows)
     tx, tu = result.target_xyz_m, np.sqrt(np.clip(np.diagonal(result.target_cov_m2, axis1=1, axis2=2), 0, None))
-    write_csv_columns_atomic(p, {"target": (result.target_ids, np.arange(len(result.target_ids))),
-                                 "x_m": tx[:, 0], "y_m": tx[:, 1], "z_m": tx[:, 2], "x_std_m": tu[:, 0],
-                                 "y_std_m": tu[:, 1], "z_std_m": tu[:, 2], "semi_axis_1_95_m": t_ax[:, 2],
-                                 "semi_axis_2_95_m": t_ax[:, 1], "semi_axis_3_95_m": t_ax[:, 0]})
-    written.append(p)
+    tables["targets"] = {"target": (result.target_ids, np.arange(len(result.target_ids))),
+                         "x_m": tx[:, 0], "y_m": tx[:, 1], "z_m": tx[:, 2], "x_std_m": tu[:, 0],
+                         "y_std_m": tu[:, 1], "z_std_m": tu[:, 2], "semi_axis_1_95_m": t_ax[:, 2],
+                         "semi_axis_2_95_m": t_ax[:, 1], "semi_axis_3_95_m": t_ax[:, 0]}
     o = result.obs
-    p = out / "residuals.csv"
-    write_csv_columns_atomic(p, {"station": (o.station_ids, o.station_index), "target": (o.target_ids, o.target_index),
-                                 "distance_m": o.distance_m, "sigma_m": o.sigma_m, "residual_m": result.residuals_m,
-                                 "redundancy": result.redundancy, "w": result.w, "mdb_m": result.mdb_m,
-                                 "used": np.asarray(result.used, bool)})
-    written.append(p)
+    tables["residuals"] = {"station": (o.station_ids, o.station_index), "target": (o.target_ids, o.target_index),
+                           "distance_m": o.distance_m, "sigma_m": o.sigma_m, "residual_m": result.residuals_m,
+                           "redundancy": result.redundancy, "w": result.w, "mdb_m": result.mdb_m,
+                           "used": np.asarray(result.used, bool)}
     if references is not None:
-        p = out / "reference_lengths.csv"
-        write_csv_atomic(p, ["target_a", "target_b", "length_m", "length_std_m", "reference_m", "reference_std_m",
-                             "difference_m"],
-                         [[c.target_a, c.target_b, c.length_m, c.u_m, c.reference_m,
-                           "" if c.reference_u_m is None else c.reference_u_m, c.difference_m]
-                          for c in result.compare_references(references)])
-        written.append(p)
-    return written
+        cmp = result.compare_references(references)
+        tables["reference_lengths"] = {
+            "target_a": [c.target_a for c in cmp], "target_b": [c.target_b for c in cmp],
+            "length_m": [float(c.length_m) for c in cmp], "length_std_m": [float(c.u_m) for c in cmp],
+            "reference_m": [float(c.reference_m) for c in cmp],
+            "reference_std_m": [None if c.reference_u_m is None else float(c.reference_u_m) for c in cmp],
+            "difference_m": [float(c.difference_m) for c in cmp]}
+    return tables
+
+
+def write_result_tables(result, out_dir: str | os.PathLike, *, references=None, fmt: str = "csv") -> list[Path]:
+    """Write the tables of :func:`result_tables` into ``out_dir`` as ``stations.csv``, ``targets.csv``,
+    ``residuals.csv`` (and ``reference_lengths.csv``), or ``.parquet`` with ``fmt="parquet"``, each
+    file atomically. Returns the paths written."""
+    out = Path(out_dir)
+    return [write_table_atomic(out / name, cols, fmt) for name, cols in result_tables(result, references=references).items()]
 
 
 def write_observations(path: str | os.PathLike, obs: Observations) -> None:
