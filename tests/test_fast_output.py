@@ -224,6 +224,39 @@ def test_residual_kernel_equals_numpy(kernels_always):
     assert np.all(np.abs(a - b) <= 2 * np.spacing(d))
 
 
+def test_whitened_jacobian_and_target_gains_kernels_equal_numpy(kernels_always):
+    """The fused whitened residuals/Jacobian (distance cost) and the covariance's per-observation
+    gains ``P`` from the kernels against the numpy path, with held parameters (an offset, a station's
+    coordinates, a control target) and scales: 2 ulp (bit for bit with numpy 2.4 on x86-64)."""
+    from multilat.network.problem import Params, Problem
+    from multilat.network.solve.system import whitened
+
+    net, obs = _network(t=300, s=7, rng=12)
+    rng = np.random.default_rng(3)
+    s, t = obs.n_stations, obs.n_targets
+    sf = np.ones((s, 5), bool)
+    sf[2, 3] = False
+    sf[0, :3] = False
+    sf[:, 4] = rng.random(s) < 0.5
+    tf = np.ones(t, bool)
+    tf[[5, 40]] = False
+    pb = Problem(obs, "distance", sf, tf)
+    p = Params(net.station_xyz_m + rng.normal(0, 1e-3, (s, 3)), net.target_xyz_m + rng.normal(0, 1e-3, (t, 3)),
+               net.offset_m + 1e-4, rng.normal(0, 1e-5, s))
+    got = whitened(pb, p)
+    C.KERNELS_ABOVE_OBS = 10**12
+    ref = whitened(pb, p)
+    for a, b in zip(got, ref):
+        assert a.shape == b.shape
+        assert np.all(np.abs(a - b) <= 2 * np.spacing(np.abs(b))), np.abs(a - b).max()
+    assert np.all(got[2][tf[obs.target_index] == False] == 0) and np.all(got[1][:, 3][obs.station_index == 2] == 0)  # noqa: E712
+    Minv = rng.normal(size=(t, 3, 3))
+    C.KERNELS_ABOVE_OBS = 0
+    P_k = C.NetworkCovariance(np.eye(5 * s), Minv, got[1], got[2], obs.station_index, obs.target_index).P
+    P_n = np.einsum("mij,mj->mi", Minv[obs.target_index], got[2])
+    assert np.all(np.abs(P_k - P_n) <= 2 * np.spacing(np.abs(P_n)))
+
+
 def test_hat_rows_of_combinations_equal_numpy_and_the_dense_hat_matrix(kernels_always):
     """``design_times(internal_times(g))`` for a combination ``g`` of design rows (the downdated
     snooping rounds' hat rows) from the kernels, from numpy, and as the same combination of the

@@ -571,3 +571,48 @@ def design_times(Js_w, Jt_w, si, ti, xg, xt, out):
         for q in range(nq):
             acc += Js_w[k, q] * xg[i, q]
         out[k] = acc + (Jt_w[k, 0] * xt[j, 0] + Jt_w[k, 1] * xt[j, 1] + Jt_w[k, 2] * xt[j, 2])
+
+
+@njit(parallel=True, cache=True)
+def whitened_distances(h, tg, off, scale, si, ti, d, sigma, sfree, tfree, r_w, Js_w, Jt_w):
+    """The whitened residuals and Jacobian blocks of the distance cost
+    (:func:`multilat.network.solve.system.whitened` over
+    :func:`multilat.network.model.residuals_and_jacobian`) in one pass, the same operations in the
+    same order: ``w = 1/sigma``, ``u = (h_i - tg_j)/rho``, ``r = d - ((1 + k_i) rho + o_i)``,
+    ``J_s = [(1 + k_i) u, 1, rho]``, ``J_t = -(1 + k_i) u``, each times ``w`` then times its free flag
+    (0 or 1: a held parameter's column is zero)."""
+    for k in prange(si.shape[0]):
+        i = si[k]
+        j = ti[k]
+        dx = h[i, 0] - tg[j, 0]
+        dy = h[i, 1] - tg[j, 1]
+        dz = h[i, 2] - tg[j, 2]
+        rho = np.sqrt((dx * dx + dz * dz) + dy * dy)      # einsum's order (see distance_residuals)
+        k1 = 1.0 + scale[i]
+        w = 1.0 / sigma[k]
+        r_w[k] = (d[k] - (k1 * rho + off[i])) * w
+        tf = 1.0 if tfree[j] else 0.0
+        js0 = k1 * (dx / rho)
+        js1 = k1 * (dy / rho)
+        js2 = k1 * (dz / rho)
+        Js_w[k, 0] = (js0 * w) * (1.0 if sfree[i, 0] else 0.0)
+        Js_w[k, 1] = (js1 * w) * (1.0 if sfree[i, 1] else 0.0)
+        Js_w[k, 2] = (js2 * w) * (1.0 if sfree[i, 2] else 0.0)
+        Js_w[k, 3] = (1.0 * w) * (1.0 if sfree[i, 3] else 0.0)
+        Js_w[k, 4] = (rho * w) * (1.0 if sfree[i, 4] else 0.0)
+        Jt_w[k, 0] = (-js0 * w) * tf
+        Jt_w[k, 1] = (-js1 * w) * tf
+        Jt_w[k, 2] = (-js2 * w) * tf
+
+
+@njit(parallel=True, cache=True)
+def target_gains(Minv, Jt_w, ti, out):
+    """``out[m] = Minv[ti[m]] @ Jt_w[m]`` (the covariance's ``P``), each component summed as numpy's
+    einsum("mij,mj->mi") sums it here, (x0 + x2) + x1, without the (m, 3, 3) gather."""
+    for m in prange(ti.shape[0]):
+        j = ti[m]
+        b0 = Jt_w[m, 0]
+        b1 = Jt_w[m, 1]
+        b2 = Jt_w[m, 2]
+        for a in range(3):
+            out[m, a] = (Minv[j, a, 0] * b0 + Minv[j, a, 2] * b2) + Minv[j, a, 1] * b1
