@@ -28,7 +28,9 @@ def _steps():
         from multilat.network.data import Observations
         from multilat.network.large import synthetic_network
 
-        t = KERNELS_ABOVE_OBS // 8 + 50
+        from multilat.network.solve.loop import KERNEL_MIN_TARGETS
+
+        t = max(KERNELS_ABOVE_OBS // 8, KERNEL_MIN_TARGETS) + 50     # every size-gated kernel runs
         net = synthetic_network(20, t, 8, rng=1)
         obs = Observations(tuple(f"S{i}" for i in range(20)), tuple(f"T{j}" for j in range(t)),
                            net.station_index, net.target_index, net.distance_m, net.sigma_m)
@@ -69,7 +71,8 @@ def _steps():
         from multilat import _text_kernels as K
 
         for buf in (np.frombuffer(b"1.5,2e-3", np.uint8), np.frombuffer(b"1.5,2e-3", np.uint8).copy()):
-            K.parse_decimals(buf, np.array([0, 4]), np.array([3, 8]), K._POW10, np.empty(2), np.empty(2, bool))
+            K.parse_decimals(buf, np.array([0, 4], np.int64), np.array([3, 8], np.int64), K._POW10,
+                             np.empty(2), np.empty(2, bool))
 
     return [("adjust, sparse, 10 400 distances", adjust_large), ("decimal reader", text), ("propagate small-volume", propagate_small),
             ("normal draws", normals), ("heads' budgets of the presets", head_budgets)]

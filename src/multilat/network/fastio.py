@@ -108,7 +108,9 @@ def _floats(buf, starts, ends, width):
     else:
         v = np.empty(len(starts))
         fast = np.empty(len(starts), bool)
-        K.parse_decimals(buf, np.asarray(starts, np.int64), np.asarray(ends, np.int64), K._POW10, v, fast)
+        # contiguous int64 bounds: the signature the warm-up compiles (a column of the comma table is strided)
+        K.parse_decimals(buf, np.ascontiguousarray(starts, np.int64), np.ascontiguousarray(ends, np.int64),
+                         K._POW10, v, fast)
         slow = np.flatnonzero(~fast)
         if slow.size:
             v[slow] = _cast(_fields(buf, starts[slow], ends[slow], width))
