@@ -74,3 +74,28 @@ def test_large_networks_draw_densities_and_subsamples(monkeypatch):
     scatters = [c for c in ax.collections if hasattr(c, "_offsets3d")]        # heads, then targets
     assert [len(c._offsets3d[0]) for c in scatters] == [8, 100]
     plt.close(ax.figure)
+
+
+def test_density_of_equal_residuals(monkeypatch):
+    """A hostile case for the density: every residual the same (exact distances, zeroed residuals):
+    a band around the value, every observation counted, no error."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from dataclasses import replace
+
+    from multilat.network.data import Observations
+    from multilat.network.large import synthetic_network
+    from multilat.network.result import Start
+    from multilat.report import network_figures as NF
+
+    net = synthetic_network(6, 60, 5, rng=9)
+    obs = Observations(tuple(f"S{i}" for i in range(6)), tuple(f"T{j}" for j in range(60)),
+                       net.station_index, net.target_index, net.distance_m, net.sigma_m)
+    res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False)
+    res = replace(res, residuals_m=np.zeros_like(res.residuals_m))
+    monkeypatch.setattr(NF, "LARGE_PLOT_POINTS", 10)
+    ax = NF.plot_residuals(res)
+    assert int(ax.collections[0].get_array().sum()) == int(res.used.sum())
+    plt.close(ax.figure)

@@ -21,8 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.rows_text import (CHUNK_ROWS, KERNEL_MIN_ROWS, JsonKeyedRows, JsonRows, assemble, column_tokens,
-                                encode_labels)
+from multilat.rows_text import CHUNK_ROWS, JsonKeyedRows, JsonRows, assemble, column_tokens, encode_labels
 
 #: The range of an elevation angle, for :meth:`CsvTable.floats` ``within=``.
 ELEVATION_RANGE = (-np.pi / 2, np.pi / 2, "±π/2 rad")
@@ -330,7 +329,7 @@ def write_csv_columns_atomic(path: str | os.PathLike, columns: dict, *, chunk: i
                                               labels=labels[name]))
                 else:
                     toks.append(column_tokens(np.asarray(col)[lo:hi], orjson, "csv"))
-            fh.write(assemble(parts, toks, hi - lo, compiled=None if n >= KERNEL_MIN_ROWS else False))
+            fh.write(assemble(parts, toks, hi - lo))
 
 
 def write_parquet_columns_atomic(path: str | os.PathLike, columns: dict) -> None:

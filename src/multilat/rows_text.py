@@ -299,7 +299,7 @@ class _ColumnTable:
             toks = self._tokens(orjson, lo, hi, nested_at)
             if key is not None:
                 toks.append(column_tokens((key[0], key[1][lo:hi]), orjson, labels=self._labels["\x00key"]))
-            text = assemble(parts, toks, hi - lo, compiled=None if self.n >= KERNEL_MIN_ROWS else False)
+            text = assemble(parts, toks, hi - lo)
             write(text[:-1] if hi == self.n else text)    # no comma after the last row
         write(end)
 

@@ -73,8 +73,10 @@ def _residual_density(result, ax):
     ok = np.isfinite(y)
     x, y = x[ok], y[ok]
     t = o.n_targets
-    counts, xe, ye = np.histogram2d(x, y, bins=(min(t, 400), 120),
-                                    range=((0.5, t + 0.5), (float(y.min()), float(y.max()) or 1.0)))
+    lo, hi = (float(y.min()), float(y.max())) if y.size else (-1.0, 1.0)
+    if not hi > lo:                                   # all residuals equal: a band around them
+        lo, hi = lo - 1.0, hi + 1.0
+    counts, xe, ye = np.histogram2d(x, y, bins=(min(t, 400), 120), range=((0.5, t + 0.5), (lo, hi)))
     mesh = ax.pcolormesh(xe, ye, np.ma.masked_equal(counts.T, 0), norm=LogNorm(vmin=1), cmap="viridis",
                          rasterized=True)
     ax.figure.colorbar(mesh, ax=ax, label="observations per cell")
