@@ -122,13 +122,22 @@ def test_large_networks_use_the_downdate_and_small_ones_do_not(monkeypatch, down
     assert len(downdates) == len(res.outliers) > 0
 
 
-@pytest.mark.parametrize("seed", range(6))
-def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch, seed):
+@pytest.mark.parametrize("seed,kernels", [(s, False) for s in range(6)] + [(s, True) for s in (6, 7, 8)])
+def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch, downdates, seed, kernels):
     """Networks not designed for the check: 10 stations, 200 targets each seen by 4, 5 or 6 random
     stations (at 4 the w-tests of a target's distances are perfectly correlated: nothing may be
     rejected there), 5 blunders of 5-40 σ. The downdated and the exact path end alike: the same
-    rejections, the same reason when they stop, coordinates to 1e-9 m."""
+    rejections, the same reason when they stop, coordinates to 1e-9 m. Three more seeds through the
+    compiled kernels (hat rows, covariance and design products, residuals) on both paths."""
     from types import SimpleNamespace
+
+    if kernels:
+        from multilat.network import _sparse_kernels as K
+        from multilat.network import covariance as C
+
+        if not K.HAVE_NUMBA:
+            pytest.skip("numba not installed")
+        monkeypatch.setattr(C, "KERNELS_ABOVE_OBS", 0)
 
     net = synthetic_network(10, 200, [4, 5, 6][seed % 3], rng=seed)
     d = net.distance_m.copy()
@@ -148,6 +157,8 @@ def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch
     assert lin.unlocated_reason == ref.unlocated_reason
     assert lin.unlocated == ref.unlocated
     np.testing.assert_allclose(lin.target_xyz_m, ref.target_xyz_m, atol=1e-9, rtol=0)
+    if kernels and seed % 3:          # 5 and 6 stations per target: rejections, so downdates (4: none)
+        assert downdates
 
 
 
