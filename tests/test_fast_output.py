@@ -257,6 +257,26 @@ def test_whitened_jacobian_and_target_gains_kernels_equal_numpy(kernels_always):
     assert np.all(np.abs(P_k - P_n) <= 2 * np.spacing(np.abs(P_n)))
 
 
+def test_covariance_product_over_the_touched_targets_only_is_the_full_sum(kernels_always):
+    """``cov_times`` summing only over the observations of the targets a vector touches (the snooping
+    rounds' design rows and generators) gives the bits of the sum over all observations; a vector
+    without target part sums over none."""
+    from multilat.network import _sparse_kernels as K
+
+    net, obs = _network(t=200, s=8, rng=6)
+    res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False,
+                 solver="sparse")
+    cov = res.covariance
+    Qgg, Minv, Js, _, P, si, ti, order, tptr = cov._kernel_args()
+    for g in (cov.design_row(3) + 0.5 * cov.design_row(150) - 2.0 * cov.design_row(151),
+              np.concatenate([cov.design_row(9)[:5 * cov.s], np.zeros(3 * cov.t)])):
+        got = cov.internal_times(g)
+        og, ot = np.empty(5 * cov.s), np.empty((cov.t, 3))
+        K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, g[:5 * cov.s].copy(),
+                    g[5 * cov.s:].reshape(cov.t, 3).copy(), og, ot, False, np.zeros(0, np.int64))
+        assert np.array_equal(got, np.concatenate([og, ot.ravel()]))
+
+
 def test_hat_rows_of_combinations_equal_numpy_and_the_dense_hat_matrix(kernels_always):
     """``design_times(internal_times(g))`` for a combination ``g`` of design rows (the downdated
     snooping rounds' hat rows) from the kernels, from numpy, and as the same combination of the

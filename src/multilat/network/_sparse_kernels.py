@@ -503,16 +503,19 @@ def hat_row(k, Qgg, Minv, Js_w, Jt_w, P, si, ti, order, tptr, out):
 
 
 @njit(parallel=True, cache=True)
-def cov_times(Qgg, Minv, Js_w, P, si, ti, order, tptr, vg, vt, out_g, out_t):
+def cov_times(Qgg, Minv, Js_w, P, si, ti, order, tptr, vg, vt, out_g, out_t, sparse, touched):
     """Internal covariance (no factor) times one vector ``[vg (Qs,), vt (t, 3)]`` into ``out_g``,
     ``out_t``: ``u = Qgg (vg - sum_m A_m (P_m . vt_j(m)))``, ``out_t_l = Minv_l vt_l - sum_{m in l}
-    P_m (A_m . u_station(m))`` (:meth:`NetworkCovariance._times` for one column)."""
+    P_m (A_m . u_station(m))`` (:meth:`NetworkCovariance._times` for one column). ``sparse``: the
+    sum over m visits only ``touched``, the observations of the targets where ``vt`` is not zero,
+    ascending (the others add nothing; the same terms in the same order: the same result)."""
     nq = Js_w.shape[1]
     ns = Qgg.shape[0] // nq
     t = tptr.shape[0] - 1
-    m_all = si.shape[0]
+    n_sum = touched.shape[0] if sparse else si.shape[0]
     acc = vg.copy()
-    for m in range(m_all):
+    for mm in range(n_sum):
+        m = touched[mm] if sparse else mm
         j = ti[m]
         pv = P[m, 0] * vt[j, 0] + P[m, 1] * vt[j, 1] + P[m, 2] * vt[j, 2]
         if pv != 0.0:

@@ -97,7 +97,7 @@ class NetworkCovariance:
             for c in range(V.shape[1]):
                 col = np.ascontiguousarray(V[:, c])
                 K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, col[:Qn * s].copy(),
-                            col[Qn * s:].reshape(self.t, 3).copy(), og, ot)
+                            col[Qn * s:].reshape(self.t, 3).copy(), og, ot, False, np.zeros(0, np.int64))
                 out[:Qn * s, c] = og
                 out[Qn * s:, c] = ot.ravel()
             return out * self.factor
@@ -253,8 +253,12 @@ class NetworkCovariance:
             return self._times(g[:, None])[:, 0] / self.factor
         Qgg, Minv, Js, _, P, si, ti, order, tptr = self._kernel_args()
         og, ot = np.empty(Q * self.s), np.empty((self.t, 3))
-        K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, g[:Q * self.s].copy(),
-                    g[Q * self.s:].reshape(self.t, 3).copy(), og, ot)
+        gt = g[Q * self.s:].reshape(self.t, 3)
+        nz = np.flatnonzero(np.any(gt != 0.0, axis=1))
+        sparse = nz.size <= self.t // 8        # a few targets (a design row, a downdate's generator)
+        touched = (np.sort(np.concatenate([order[tptr[j]:tptr[j + 1]] for j in nz] + [np.zeros(0, np.int64)]))
+                   .astype(np.int64) if sparse else np.zeros(0, np.int64))
+        K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, g[:Q * self.s].copy(), gt.copy(), og, ot, sparse, touched)
         return np.concatenate([og, ot.ravel()])
 
     def design_times(self, x) -> np.ndarray:
