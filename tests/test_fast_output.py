@@ -319,6 +319,21 @@ def test_adjust_does_not_import_scipy_stats():
     assert out.stdout.strip() == "False"
 
 
+def test_small_adjust_does_not_load_numba(tmp_path):
+    """A small network's whole ``adjust --json`` (dense back end, no kernels) never imports numba
+    (~0.2 s of a 0.6 s command); a large one does (the kernels)."""
+    import subprocess
+    import sys
+
+    ex = Path(__file__).resolve().parents[1] / "examples" / "network" / "small_volume_obs.csv"
+    code = ("import sys, io, contextlib\nfrom multilat.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            f"    rc = main(['adjust', {str(ex)!r}, '--json'])\n"
+            "print(rc, 'numba' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["0", "False"], out.stdout + out.stderr[-300:]
+
+
 def _big_file(path, rows=40_000, bad_line=None):
     rng = np.random.default_rng(9)
     t = rows // 8

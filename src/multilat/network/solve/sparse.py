@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat.network import _sparse_kernels as K
 from multilat.network.model import Q, inv3, segment_sum
 from multilat.network.problem import Params, Problem
 from multilat.network.solve.system import Assembly
@@ -38,8 +37,16 @@ def supports(problem: Problem) -> str | None:
     return None
 
 
+def _kernels():
+    """The compiled kernels (imported when a sparse back end is built: numba takes ~0.2 s to load,
+    which a small network's adjustment, on the dense back end, does not pay)."""
+    from multilat.network import _sparse_kernels as K
+
+    return K
+
+
 def _nchunks() -> int:
-    return max(1, 4 * K.get_num_threads())
+    return max(1, 4 * _kernels().get_num_threads())
 
 
 class SparseBackend:
@@ -65,6 +72,7 @@ class SparseBackend:
         s = o.n_stations
         self.idx4 = (Q * np.arange(s)[:, None] + np.arange(4)).ravel()   # [x, y, z, o] of each station
         self.nch = _nchunks()
+        self.K = _kernels()
 
     def assemble(self, p: Params, damping: float = 0.0) -> Assembly:
         o = self.problem.obs
@@ -75,7 +83,7 @@ class SparseBackend:
         u = np.empty((m, 3))
         ninv = np.empty((t, 3, 3))
         gt = np.empty((t, 3))
-        sm, gp, vtpv, _ = K.assemble(h, off, tg, self.d, self.w, self.si, self.tptr, u, ninv, gt,
+        sm, gp, vtpv, _ = self.K.assemble(h, off, tg, self.d, self.w, self.si, self.tptr, u, ninv, gt,
                                      self.nch, self.maxk, float(damping))
         if damping:
             a2 = np.concatenate([u * u, np.ones((m, 1))], axis=1) * self.w[:, None]
@@ -88,7 +96,7 @@ class SparseBackend:
 
         def back(dg):
             dt = np.empty((t, 3))
-            K.back_substitute(np.ascontiguousarray(dg[idx4]), gt, ninv, u, w, si, tptr, dt)
+            self.K.back_substitute(np.ascontiguousarray(dg[idx4]), gt, ninv, u, w, si, tptr, dt)
             return dt
 
         with np.errstate(divide="ignore", invalid="ignore"):
