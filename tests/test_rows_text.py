@@ -18,7 +18,7 @@ import pytest
 
 from multilat import rows_text as RT
 from multilat.io import dumps_json, write_csv_columns_atomic
-from multilat.rows_text import JsonKeyedRows, JsonRows, assemble, column_tokens
+from multilat.rows_text import JsonKeyedRows, JsonRows, assemble, column_tokens, element_tokens, nested_template
 
 LABELS = ("A", 'q"uote', "back\\slash", 'a",', "comma,", "µ-Ω", "tab\there", "nl\nx", "", "ctl\x01")
 
@@ -36,6 +36,8 @@ def _table(n, rng):
         "flag": rng.random(n) < 0.5,
         "xyz_m": rng.normal(size=(n, 3)),
         "cov_m2": rng.normal(size=(n, 3, 3)),
+        "empty": np.zeros((n, 2, 0)),
+        "one": rng.normal(size=(n, 1, 1, 2)),
     }
 
 
@@ -81,8 +83,10 @@ def test_compiled_and_joined_assembly_give_the_same_bytes():
     rng = np.random.default_rng(3)
     n = 2500
     cols = _table(n, rng)
-    toks = [column_tokens(c, orjson, indent=6) for c in cols.values()]
-    parts = [b"<", 0, b"|", 1, 2, b"", 3, b"|\n", 4, 5, b"#", 1]        # a column used twice
+    toks = [column_tokens(c, orjson) for c in cols.values() if isinstance(c, tuple) or c.ndim == 1]
+    toks += element_tokens(cols["cov_m2"], orjson)                        # 9 element columns: 4..12
+    nested = [p if isinstance(p, bytes) else p + 4 for p in nested_template((3, 3), 6)]
+    parts = [b"<", 0, b"|", 1, 2, b"", 3, b"|\n", *nested, b"#", 1]     # column 1 used twice
     assert assemble(parts, toks, n, compiled=True) == assemble(parts, toks, n, compiled=False)
     assert assemble(parts, toks, 0, compiled=True) == b""
     # constants only
@@ -92,7 +96,7 @@ def test_compiled_and_joined_assembly_give_the_same_bytes():
 def test_csv_columns_equal_the_csv_module(tmp_path):
     rng = np.random.default_rng(11)
     n = RT.KERNEL_MIN_ROWS + 17                                   # the compiled assembly
-    cols = {k: v for k, v in _table(n, rng).items() if k not in ("xyz_m", "cov_m2")}
+    cols = {k: v for k, v in _table(n, rng).items() if isinstance(v, tuple) or v.ndim == 1}
     write_csv_columns_atomic(tmp_path / "t.csv", cols)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")

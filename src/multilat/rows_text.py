@@ -3,9 +3,10 @@ written without one Python object per row.
 
 A table's text repeats, row after row, the same sequence of *parts*: constant bytes (keys,
 separators, indentation) and one *token* per column: a number's shortest round-trip text (orjson's,
-one call per column), a label's quoted text (encoded once per distinct label), a boolean, or a row
-of a multi-dimensional array as a nested list. :func:`column_tokens` makes a column's tokens (one
-byte buffer, each row's start and length) and :func:`assemble` lays the rows out: in one compiled
+one call per column), a label's quoted text (encoded once per distinct label) or a boolean. A
+column of arrays (m, d1, ...) is a token per element (:func:`element_tokens`) inside the brackets,
+commas and indentation of :func:`nested_template`. :func:`column_tokens` makes a column's tokens
+(one byte buffer, each row's start and length) and :func:`assemble` lays the rows out: in one compiled
 pass (numba, :mod:`multilat._text_kernels`) for tables of :data:`KERNEL_MIN_ROWS` rows or more, else
 by joining Python byte strings. Both give the same bytes (``tests/test_rows_text.py``).
 
@@ -24,7 +25,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["Tokens", "column_tokens", "assemble", "JsonRows", "JsonKeyedRows", "KERNEL_MIN_ROWS"]
+__all__ = ["Tokens", "column_tokens", "element_tokens", "nested_template", "assemble", "JsonRows",
+           "JsonKeyedRows", "KERNEL_MIN_ROWS"]
 
 #: tables with at least this many rows are assembled by the compiled kernel (when numba is installed;
 #: smaller ones do not pay for loading it)
@@ -32,7 +34,7 @@ KERNEL_MIN_ROWS = 10_000
 #: rows per chunk of text (bounded memory: the chunk's tokens and text)
 CHUNK_ROWS = 1 << 14
 
-_OPEN, _CLOSE, _COMMA = ord("["), ord("]"), ord(",")
+_COMMA = ord(",")
 
 
 class Tokens(NamedTuple):
@@ -65,16 +67,6 @@ def _flat(text: bytes) -> Tokens:
     return Tokens(buf, start, end - start)
 
 
-def _nested(text: bytes) -> Tokens:
-    """The elements of a JSON list of lists of numbers (each element its whole bracketed text)."""
-    buf = np.frombuffer(text, np.uint8)
-    is_open, is_close = buf == _OPEN, buf == _CLOSE
-    depth = np.cumsum(is_open.astype(np.int32) - is_close, dtype=np.int32)    # after each byte
-    opens = np.flatnonzero(is_open & (depth == 2))
-    closes = np.flatnonzero(is_close & (depth == 1))
-    return Tokens(buf, opens.astype(np.int64), (closes + 1 - opens).astype(np.int64))
-
-
 def _label_texts(labels: Sequence[str], flavour: str, orjson) -> list[bytes]:
     """Each label as written: a JSON string, or a CSV field (quoted by the csv module when needed)."""
     if flavour == "csv":
@@ -97,39 +89,26 @@ def _csv_field(text: str) -> str:
     return buf.getvalue()[:-2]
 
 
-def column_tokens(col, orjson, flavour: str = "json", *, indent: int | None = None,
-                  labels: list[bytes] | None = None) -> Tokens:
+def column_tokens(col, orjson, flavour: str = "json", *, labels: list[bytes] | None = None) -> Tokens:
     """The tokens of one column's rows.
 
-    ``col``: a float/int/bool array (m,), an array (m, ...) of floats (each row a nested JSON list;
-    JSON only), or ``(labels, index)`` (strings ``labels[index[k]]``; ``labels`` pre-encoded by
-    :func:`encode_labels` may be passed as ``labels=``). ``flavour``: ``"json"`` (non-finite floats
-    are ``null``, booleans ``true``/``false``) or ``"csv"`` (``nan``/``inf``/``-inf`` as ``repr``
-    writes them, ``True``/``False``). ``indent``: for nested rows in indented JSON, the column of the
-    line holding the value (orjson's two-space style), None for compact text. ``orjson`` None: the
-    numbers' ``repr`` (CSV without orjson)."""
+    ``col``: a float/int/bool array (m,) or ``(labels, index)`` (strings ``labels[index[k]]``;
+    ``labels`` pre-encoded by :func:`encode_labels` may be passed as ``labels=``). ``flavour``:
+    ``"json"`` (non-finite floats are ``null``, booleans ``true``/``false``) or ``"csv"``
+    (``nan``/``inf``/``-inf`` as ``repr`` writes them, ``True``/``False``). ``orjson`` None: the
+    numbers' ``repr`` (CSV without orjson). Arrays (m, ...) are written by :func:`element_tokens`."""
     if isinstance(col, tuple):
         enc = labels if labels is not None else encode_labels(col[0], flavour, orjson)
         index = np.asarray(col[1], np.intp)
         return Tokens(enc.buf, enc.start[index], enc.length[index])
     col = np.asarray(col)
+    if col.ndim != 1:
+        raise ValueError("column_tokens takes a column (m,); an array (m, ...) goes to element_tokens")
     if col.dtype.kind == "b":
         words = [b"false", b"true"] if flavour == "json" else [b"False", b"True"]
         enc = _from_list(words)
         index = col.astype(np.intp)
         return Tokens(enc.buf, enc.start[index], enc.length[index])
-    if col.ndim > 1:
-        if flavour != "json":
-            raise ValueError("a nested column is written to JSON only")
-        vals = np.ascontiguousarray(col, dtype=np.float64)
-        opt = orjson.OPT_SERIALIZE_NUMPY
-        if indent is not None:
-            text = orjson.dumps(vals, option=opt | orjson.OPT_INDENT_2)
-            # the rows sit at depth 1 (two spaces) in this text, at ``indent`` in the document
-            text = text.replace(b"\n  ", b"\n" + b" " * indent)
-        else:
-            text = orjson.dumps(vals, option=opt)
-        return _nested(text)
     if col.dtype.kind in "iu":
         if orjson is None or col.dtype.kind == "u":
             return _from_list([str(v).encode() for v in col.tolist()])
@@ -147,6 +126,44 @@ def column_tokens(col, orjson, flavour: str = "json", *, indent: int | None = No
         length[bad] = extra.length
         tok = Tokens(np.concatenate([tok.buf, extra.buf]), start, length)
     return tok
+
+
+def element_tokens(arr, orjson) -> list[Tokens]:
+    """The tokens of every element of an array (m, d1, d2, ...) of numbers (JSON), one
+    :class:`Tokens` (m rows) per element in C order: one orjson call for the whole array."""
+    vals = np.ascontiguousarray(arr, dtype=np.float64)
+    e = int(np.prod(vals.shape[1:], dtype=np.int64))
+    if e == 0:
+        return []
+    tok = _flat(orjson.dumps(vals.reshape(-1), option=orjson.OPT_SERIALIZE_NUMPY))
+    return [Tokens(tok.buf, tok.start[k::e], tok.length[k::e]) for k in range(e)]
+
+
+def nested_template(shape: tuple, indent: int | None) -> list:
+    """The parts of one row's nested JSON list of ``shape`` (the array's shape without its first
+    axis): constant bytes (brackets, commas, orjson's two-space indentation when ``indent`` is the
+    column of the line holding the value, None for compact text) and the element numbers 0, 1, ...
+    in C order, as :func:`assemble` lays them out with :func:`element_tokens`."""
+    count = iter(range(int(np.prod(shape, dtype=np.int64)) if shape else 1))
+
+    def rec(dims, depth):
+        if not dims:
+            return [next(count)]
+        if dims[0] == 0:
+            return [b"[]"]
+        out: list = [b"["]
+        for i in range(dims[0]):
+            if i:
+                out.append(b",")
+            if indent is not None:
+                out.append(b"\n" + b" " * (indent + 2 * (depth + 1)))
+            out += rec(dims[1:], depth + 1)
+        if indent is not None:
+            out.append(b"\n" + b" " * (indent + 2 * depth))
+        out.append(b"]")
+        return out
+
+    return rec(tuple(shape), 0)
 
 
 def encode_labels(labels: Sequence[str], flavour: str, orjson) -> Tokens:
@@ -262,15 +279,18 @@ class _ColumnTable:
                 out[name] = col[k].item()
         return out
 
-    def _tokens(self, orjson, lo: int, hi: int, indent: int | None) -> list[Tokens]:
+    def _tokens(self, orjson, lo: int, hi: int) -> list[Tokens]:
+        """Every column's tokens of rows [lo, hi): one per row, or one per element (arrays)."""
         toks = []
         for name, col in self.columns.items():
             if isinstance(col, tuple):
                 if name not in self._labels:
                     self._labels[name] = encode_labels(col[0], "json", orjson)
                 toks.append(column_tokens((col[0], col[1][lo:hi]), orjson, labels=self._labels[name]))
+            elif col.ndim > 1:
+                toks += element_tokens(col[lo:hi], orjson)
             else:
-                toks.append(column_tokens(col[lo:hi], orjson, indent=indent))
+                toks.append(column_tokens(col[lo:hi], orjson))
         return toks
 
     def _write(self, orjson, write, indent: int | None, key: tuple | None, chunk: int) -> None:
@@ -279,24 +299,33 @@ class _ColumnTable:
             write(opening + closing)
             return
         names = [orjson.dumps(nm) for nm in self.columns]
-        kcol = len(names)                                 # the key's tokens follow the columns'
         if indent is None:
             i1 = i2 = b""
             kv, end = b":", closing
         else:
             i1, i2 = b"\n" + b" " * (indent + 2), b"\n" + b" " * (indent + 4)
             kv, end = b": ", b"\n" + b" " * indent + closing
+        # each column's parts with the tokens' numbers in the order _tokens makes them
+        col_parts, at = [], 0
+        for col in self.columns.values():
+            if not isinstance(col, tuple) and col.ndim > 1:
+                tpl = nested_template(col.shape[1:], None if indent is None else indent + 4)
+                col_parts.append([p if isinstance(p, bytes) else p + at for p in tpl])
+                at += int(np.prod(col.shape[1:], dtype=np.int64))
+            else:
+                col_parts.append([at])
+                at += 1
+        kcol = at                                          # the key's tokens follow the columns'
         parts: list = [i1, kcol, kv + b"{"] if key is not None else [i1 + b"{"]
         for c, nm in enumerate(names):
-            parts += [(b"," if c else b"") + i2 + nm + kv, c]
+            parts += [(b"," if c else b"") + i2 + nm + kv, *col_parts[c]]
         parts.append((i1 if names else b"") + b"},")
-        nested_at = None if indent is None else indent + 4
         if key is not None and "\x00key" not in self._labels:
             self._labels["\x00key"] = encode_labels(key[0], "json", orjson)
         write(opening)
         for lo in range(0, self.n, chunk):
             hi = min(self.n, lo + chunk)
-            toks = self._tokens(orjson, lo, hi, nested_at)
+            toks = self._tokens(orjson, lo, hi)
             if key is not None:
                 toks.append(column_tokens((key[0], key[1][lo:hi]), orjson, labels=self._labels["\x00key"]))
             text = assemble(parts, toks, hi - lo)
