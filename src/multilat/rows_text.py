@@ -89,7 +89,7 @@ def _csv_field(text: str) -> str:
     return buf.getvalue()[:-2]
 
 
-def column_tokens(col, orjson, flavour: str = "json", *, labels: list[bytes] | None = None) -> Tokens:
+def column_tokens(col, orjson, flavour: str = "json", *, labels: Tokens | None = None) -> Tokens:
     """The tokens of one column's rows.
 
     ``col``: a float/int/bool array (m,) or ``(labels, index)`` (strings ``labels[index[k]]``;
@@ -171,15 +171,14 @@ def encode_labels(labels: Sequence[str], flavour: str, orjson) -> Tokens:
     return _from_list(_label_texts(labels, flavour, orjson))
 
 
-def _kernel():
-    """The compiled assembly kernel, or None (numba not installed, or ``MULTILAT_NO_NUMBA`` set)."""
+def text_kernels():
+    """The compiled text kernels (:mod:`multilat._text_kernels`), or None: numba not installed, or
+    ``MULTILAT_NO_NUMBA`` set (checked before numba is imported)."""
     if os.environ.get("MULTILAT_NO_NUMBA"):
         return None
-    try:
-        from multilat._text_kernels import HAVE_NUMBA, assemble_rows
-    except ImportError:     # pragma: no cover - depends on the environment
-        return None
-    return assemble_rows if HAVE_NUMBA else None
+    from multilat import _text_kernels as K
+
+    return K if K.HAVE_NUMBA else None
 
 
 def assemble(parts: Sequence[bytes | int], tokens: Sequence[Tokens], n: int, *,
@@ -193,7 +192,8 @@ def assemble(parts: Sequence[bytes | int], tokens: Sequence[Tokens], n: int, *,
             merged[-1] += p
         else:
             merged.append(p)
-    kern = _kernel() if (compiled is None and n >= KERNEL_MIN_ROWS) or compiled else None
+    K = text_kernels() if (compiled is None and n >= KERNEL_MIN_ROWS) or compiled else None
+    kern = None if K is None else K.assemble_rows
     if compiled and kern is None:
         raise RuntimeError("the compiled row assembly needs numba")
     if n == 0:

@@ -102,7 +102,9 @@ def _floats(buf, starts, ends, width):
     ln = ends - starts
     if ln.size and (ln.max() > width or ln.min() <= 0):
         raise _NotPlain
-    K = _text_kernels()
+    from multilat.rows_text import text_kernels
+
+    K = text_kernels()
     if K is None:
         v = _cast(_fields(buf, starts, ends, width))
     else:
@@ -117,15 +119,6 @@ def _floats(buf, starts, ends, width):
     if not np.all(np.isfinite(v) & (v > 0)):
         raise _NotPlain
     return v
-
-
-def _text_kernels():
-    """The compiled text kernels, or None (numba missing or ``MULTILAT_NO_NUMBA`` set)."""
-    if os.environ.get("MULTILAT_NO_NUMBA"):
-        return None
-    from multilat import _text_kernels as K
-
-    return K if K.HAVE_NUMBA else None
 
 
 _HEADER = ["station", "target", "distance_m"]

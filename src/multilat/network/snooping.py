@@ -118,28 +118,23 @@ class LinearRounds:
         downdates, and nothing of length ``m`` kept between rounds."""
         cov = self.cov
         k = int(k)
-        i, j = int(self.si[k]), int(self.ti[k])
-        nq = cov.Js_w.shape[1]
-        gs = np.zeros(nq * cov.s)
-        gs[nq * i:nq * i + nq] = cov.Js_w[k]
-        tj, tv = np.array([j]), np.asarray(cov.Jt_w[k], float).reshape(1, 3).copy()
+        ns = cov.Js_w.shape[1] * cov.s                 # station parameters, then 3 per target
+        g = cov.design_row(k)
+        gt = g[ns:].reshape(cov.t, 3)
+        tj = np.array([int(self.ti[k])])
         if not self.gens:
             c = np.array(cov.hat_row(k), float, copy=True)
         else:
-            a = cov.design_row(k)
-            y = cov.internal_times(a)
-            yg, yt = y[:nq * cov.s], y[nq * cov.s:].reshape(cov.t, 3)
-            g = a
-            gt = g[nq * cov.s:].reshape(cov.t, 3)
-            for rg, rj, rv, rho in self.gens:
-                beta = (float(rg @ yg) + float(np.sum(rv * yt[rj]))) / rho
-                g[:nq * cov.s] += beta * rg
+            y = cov.internal_times(g)
+            yg, yt = y[:ns], y[ns:].reshape(cov.t, 3)
+            betas = [(float(rg @ yg) + float(np.sum(rv * yt[rj]))) / rho for rg, rj, rv, rho in self.gens]
+            for beta, (rg, rj, rv, _) in zip(betas, self.gens):
+                g[:ns] += beta * rg
                 np.add.at(gt, rj, beta * rv)
             tj = np.unique(np.concatenate([tj] + [rj for _, rj, _, _ in self.gens]))
-            gs, tv = g[:nq * cov.s].copy(), gt[tj].copy()
             c = cov.design_times(cov.internal_times(g))
         c[~self.alive] = 0.0
-        self._last = (k, gs, tj, tv)
+        self._last = (k, g[:ns].copy(), tj, gt[tj].copy())
         return c
 
     def twins(self, k: int, c: np.ndarray, tol: float = 1e-6) -> np.ndarray:
