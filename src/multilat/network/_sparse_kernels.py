@@ -37,6 +37,32 @@ def _inv3(a00, a01, a02, a11, a12, a22, out):
     return det
 
 
+@njit(cache=True, inline="always")
+def _sub_outer(scc, r0, c0, cc, x0, x1, x2, y0, y1, y2):
+    """``scc[r0 + a, c0 + q] -= (cc * x_a) * y_q`` for ``x = (x0, x1, x2, 1)``, ``y = (y0, y1, y2, 1)``: the
+    4x4 block of one observation pair, unrolled (the products in the order of the loop it replaces)."""
+    c = cc * x0
+    scc[r0, c0] -= c * y0
+    scc[r0, c0 + 1] -= c * y1
+    scc[r0, c0 + 2] -= c * y2
+    scc[r0, c0 + 3] -= c
+    c = cc * x1
+    scc[r0 + 1, c0] -= c * y0
+    scc[r0 + 1, c0 + 1] -= c * y1
+    scc[r0 + 1, c0 + 2] -= c * y2
+    scc[r0 + 1, c0 + 3] -= c
+    c = cc * x2
+    scc[r0 + 2, c0] -= c * y0
+    scc[r0 + 2, c0 + 1] -= c * y1
+    scc[r0 + 2, c0 + 2] -= c * y2
+    scc[r0 + 2, c0 + 3] -= c
+    c = cc
+    scc[r0 + 3, c0] -= c * y0
+    scc[r0 + 3, c0 + 1] -= c * y1
+    scc[r0 + 3, c0 + 2] -= c * y2
+    scc[r0 + 3, c0 + 3] -= c
+
+
 @njit(parallel=True, cache=True)
 def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
     """Full Gauss-Newton assembly at the current point.
@@ -60,18 +86,19 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
         scc = sc[c]
         gcc = gc[c]
         v = np.empty((maxk, 3))
-        av = np.empty(4)
-        bv = np.empty(4)
+        vacc = 0.0
+        dmin = np.inf
         for j in range(c * step, min(t, (c + 1) * step)):
             k0 = tptr[j]
             k1 = tptr[j + 1]
             n00 = n01 = n02 = n11 = n12 = n22 = 0.0
             g0 = g1 = g2 = 0.0
+            tx = tg[j, 0]; ty = tg[j, 1]; tz = tg[j, 2]
             for k in range(k0, k1):
                 i = si[k]
-                dx = h[i, 0] - tg[j, 0]
-                dy = h[i, 1] - tg[j, 1]
-                dz = h[i, 2] - tg[j, 2]
+                dx = h[i, 0] - tx
+                dy = h[i, 1] - ty
+                dz = h[i, 2] - tz
                 rho = np.sqrt(dx * dx + dy * dy + dz * dz)
                 ux = dx / rho
                 uy = dy / rho
@@ -82,7 +109,7 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
                 r = d[k] - rho - o[i]
                 wk = w[k]
                 e = wk * r
-                vc[c] += e * r
+                vacc += e * r
                 n00 += wk * ux * ux
                 n01 += wk * ux * uy
                 n02 += wk * ux * uz
@@ -92,15 +119,12 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
                 g0 -= e * ux
                 g1 -= e * uy
                 g2 -= e * uz
-                av[0] = ux
-                av[1] = uy
-                av[2] = uz
-                av[3] = 1.0
                 b = 4 * i
-                for a in range(4):
-                    gcc[b + a] += e * av[a]
-                    for q in range(4):
-                        scc[b + a, b + q] += wk * av[a] * av[q]
+                gcc[b] += e * ux
+                gcc[b + 1] += e * uy
+                gcc[b + 2] += e * uz
+                gcc[b + 3] += e
+                _sub_outer(scc, b, b, -wk, ux, uy, uz, ux, uy, uz)
             if damping != 0.0:
                 n00 *= 1.0 + damping
                 n11 *= 1.0 + damping
@@ -109,8 +133,8 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
             det = _inv3(n00, n01, n02, n11, n12, n22, nj)
             tr = n00 + n11 + n22
             rel = det / (tr * tr * tr)
-            if rel < dc[c]:
-                dc[c] = rel
+            if rel < dmin:
+                dmin = rel
             gt[j, 0] = g0
             gt[j, 1] = g1
             gt[j, 2] = g2
@@ -125,56 +149,47 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
                 i = si[k]
                 b = 4 * i
                 wk = w[k]
-                sk = wk * (u[k, 0] * y0 + u[k, 1] * y1 + u[k, 2] * y2)
-                av[0] = u[k, 0]
-                av[1] = u[k, 1]
-                av[2] = u[k, 2]
-                av[3] = 1.0
-                for a in range(4):
-                    gcc[b + a] += sk * av[a]
+                ux = u[k, 0]; uy = u[k, 1]; uz = u[k, 2]
+                sk = wk * (ux * y0 + uy * y1 + uz * y2)
+                gcc[b] += sk * ux
+                gcc[b + 1] += sk * uy
+                gcc[b + 2] += sk * uz
+                gcc[b + 3] += sk
                 for l in range(k, k1):
                     il = si[l]
                     ll = l - k0
-                    cc = wk * (u[k, 0] * v[ll, 0] + u[k, 1] * v[ll, 1] + u[k, 2] * v[ll, 2])
-                    bv[0] = u[l, 0]
-                    bv[1] = u[l, 1]
-                    bv[2] = u[l, 2]
-                    bv[3] = 1.0
-                    # accumulate into the upper block triangle only (symmetrised by the caller)
+                    cc = wk * (ux * v[ll, 0] + uy * v[ll, 1] + uz * v[ll, 2])
+                    lx = u[l, 0]; ly = u[l, 1]; lz = u[l, 2]
                     if i == il and l > k:
-                        # repeated readings of one pair (or two of one station): the diagonal
-                        # block gets both orders (k, l) and (l, k), as it is used as it stands
                         for a in range(4):
+                            xa = ux if a == 0 else (uy if a == 1 else (uz if a == 2 else 1.0))
+                            ya = lx if a == 0 else (ly if a == 1 else (lz if a == 2 else 1.0))
                             for q in range(4):
-                                scc[b + a, b + q] -= cc * (av[a] * bv[q] + bv[a] * av[q])
+                                xq = ux if q == 0 else (uy if q == 1 else (uz if q == 2 else 1.0))
+                                yq = lx if q == 0 else (ly if q == 1 else (lz if q == 2 else 1.0))
+                                scc[b + a, b + q] -= cc * (xa * yq + ya * xq)
                     elif i <= il:
-                        bl = 4 * il
-                        for a in range(4):
-                            ca = cc * av[a]
-                            for q in range(4):
-                                scc[b + a, bl + q] -= ca * bv[q]
+                        _sub_outer(scc, b, 4 * il, cc, ux, uy, uz, lx, ly, lz)
                     else:
-                        bl = 4 * il
-                        for a in range(4):
-                            ca = cc * bv[a]
-                            for q in range(4):
-                                scc[bl + a, b + q] -= ca * av[q]
+                        _sub_outer(scc, 4 * il, b, cc, lx, ly, lz, ux, uy, uz)
+        vc[c] = vacc
+        dc[c] = dmin
     sm = np.zeros((p, p))
     gp = np.zeros(p)
     vt = 0.0
-    dmin = np.inf
+    dmn = np.inf
     for c in range(nchunks):
         sm += sc[c]
         gp += gc[c]
         vt += vc[c]
-        dmin = min(dmin, dc[c])
+        dmn = min(dmn, dc[c])
     # upper block triangle -> full symmetric matrix (diagonal blocks are complete and symmetric)
     full = sm + sm.T
     for i in range(s):
         for a in range(4):
             for q in range(4):
                 full[4 * i + a, 4 * i + q] = 0.5 * (sm[4 * i + a, 4 * i + q] + sm[4 * i + q, 4 * i + a])
-    return full, gp, vt, dmin
+    return full, gp, vt, dmn
 
 
 @njit(parallel=True, cache=True)
