@@ -198,3 +198,29 @@ def test_cli_options_and_one_line_errors(capsys, tmp_path):
         assert main(["adjust", str(p), *args]) == 2
         err = capsys.readouterr().err
         assert words in err and err.count("\n") == 1, err
+
+
+def test_confidence_ellipsoid_closed_form_and_unlocated_points():
+    # a covariance R diag(d) R^T has semi-axes sqrt(chi2_3(0.95) d) (ascending) along R's columns;
+    # a point with a non-finite covariance gets NaN, the others are unchanged
+    rng = np.random.default_rng(3)
+    R, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    d = np.array([4e-12, 1e-12, 9e-12])
+    cov = np.stack([R @ np.diag(d) @ R.T, np.full((3, 3), np.nan), np.diag(d)])
+    ax, V = st.confidence_ellipsoid(cov)
+    k = stats.chi2.ppf(0.95, 3)
+    for j in (0, 2):
+        np.testing.assert_allclose(ax[j], np.sqrt(k * np.sort(d)), rtol=1e-9)
+    np.testing.assert_allclose(np.abs(V[0][:, 2] @ R[:, 2]), 1.0, rtol=1e-9)   # the 9e-12 axis
+    assert np.isnan(ax[1]).all() and np.isnan(V[1]).all()
+    both, _ = st.confidence_ellipsoid(cov[[0, 2]])
+    np.testing.assert_array_equal(both, ax[[0, 2]])
+
+
+def test_result_ellipsoids_computed_once_per_level():
+    net = synthetic_network(4, 12, 4, size_m=5.0, rng=5)
+    res = adjust(_obs(net), initial=_start(net))
+    assert res.ellipsoids() is res.ellipsoids()
+    (sa, _), (ta, _) = res.ellipsoids(level=0.99)
+    np.testing.assert_allclose(ta, st.confidence_ellipsoid(res.target_cov_m2, level=0.99)[0], rtol=0)
+    assert (ta > res.ellipsoids()[1][0]).all()

@@ -123,3 +123,16 @@ def test_keyed_rows_as_a_mapping_and_bad_tables():
     with pytest.raises(ValueError, match="numeric"):
         JsonRows({"x": np.array(["s"])})
     assert dumps_json({"t": JsonKeyedRows((), {})}, indent=False) == b'{"t":{}}\n'
+
+
+@pytest.mark.parametrize("labels", [["T1", "T2", "é-3", "", "a b"], ["T1", 'q"t', "c,d"], ["a\nb", "x"],
+                                    ["nul\x00in", "y"], [], ["only"]])
+def test_csv_label_fields_equal_the_csv_module(labels):
+    # the fast path (no label needs quoting: one join and split) and the per-label path give the
+    # field the csv module writes in a row of several fields
+    def field(x):
+        buf = io.StringIO()
+        csv.writer(buf, lineterminator="\n").writerow([x, ""])
+        return buf.getvalue()[:-2].encode()
+
+    assert RT._label_texts(labels, "csv", None) == [field(x) for x in labels]

@@ -70,7 +70,12 @@ def _flat(text: bytes) -> Tokens:
 def _label_texts(labels: Sequence[str], flavour: str, orjson) -> list[bytes]:
     """Each label as written: a JSON string, or a CSV field (quoted by the csv module when needed)."""
     if flavour == "csv":
-        return [_csv_field(str(x)).encode() for x in labels]
+        texts = [str(x) for x in labels]
+        joined = "\x00".join(texts)
+        if not any(ch in joined for ch in ',"\r\n\x00'):
+            # no label needs quoting: each field is the label itself (one encode, one split)
+            return joined.encode().split(b"\x00") if texts else []
+        return [_csv_field(x).encode() for x in texts]
     if not labels:
         return []
     text = orjson.dumps(list(labels))

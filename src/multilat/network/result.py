@@ -237,9 +237,14 @@ class AdjustmentResult:
 
     def ellipsoids(self, *, level: float = 0.95):
         """Confidence ellipsoids of stations and targets: ``(semi_axes_m, axes)`` each a pair of
-        arrays ((s, 3), (s, 3, 3)) and ((t, 3), (t, 3, 3)); see :func:`statistics.confidence_ellipsoid`."""
-        return (st.confidence_ellipsoid(self.station_cov_m2, level=level),
-                st.confidence_ellipsoid(self.target_cov_m2, level=level))
+        arrays ((s, 3), (s, 3, 3)) and ((t, 3), (t, 3, 3)); see :func:`statistics.confidence_ellipsoid`.
+        Computed once per level (the tables, the JSON and the figures of a million targets share
+        them; the result is immutable)."""
+        memo = self.__dict__.setdefault("_ellipsoids", {})
+        if level not in memo:
+            memo[level] = (st.confidence_ellipsoid(self.station_cov_m2, level=level),
+                           st.confidence_ellipsoid(self.target_cov_m2, level=level))
+        return memo[level]
 
     def offset_correlations(self) -> np.ndarray:
         """Correlation of each station's offset with its own x, y, z and offset (s, 4):

@@ -176,7 +176,17 @@ def confidence_ellipsoid(cov_m2, *, level: float = 0.95):
     -------
     semi_axes_m : ndarray (..., 3)  ascending, ``sqrt(chi2_3(level) * eigenvalue)``
     axes : ndarray (..., 3, 3)      unit eigenvectors as columns
+
+    A covariance with a non-finite entry (a point the network does not locate) has NaN semi-axes
+    and axes.
     """
-    w, V = np.linalg.eigh(np.asarray(cov_m2, float))
+    c = np.asarray(cov_m2, float)
     k = chi2_ppf(level, 3)
+    ok = np.isfinite(c).all(axis=(-2, -1))
+    if ok.all():
+        w, V = np.linalg.eigh(c)
+    else:
+        w, V = np.full(c.shape[:-1], np.nan), np.full(c.shape, np.nan)
+        if ok.any():
+            w[ok], V[ok] = np.linalg.eigh(c[ok])
     return np.sqrt(np.clip(w, 0.0, None) * k), V

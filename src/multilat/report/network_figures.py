@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from multilat.network.statistics import chi2_ppf
+
 __all__ = ["plot_residuals", "plot_top_view", "plot_3d", "save_figures", "auto_magnify",
            "class_magnifications", "place_labels"]
 
@@ -116,16 +118,11 @@ def _nice(x: float) -> float:
     return float(max(m for m in (1, 2, 5) if m * dec <= x * (1 + 1e-12)) * dec)
 
 
-def _semi_axes_95(cov) -> np.ndarray:
-    """Largest 95 % semi-axis of each 3x3 covariance (NaN where it is not finite)."""
-    from scipy import stats
-
-    c = np.asarray(cov, float).reshape(-1, 3, 3)
-    out = np.full(len(c), np.nan)
-    ok = np.isfinite(c).all(axis=(1, 2))
-    if ok.any():
-        out[ok] = np.sqrt(stats.chi2.ppf(0.95, 3) * np.clip(np.linalg.eigvalsh(c[ok])[:, -1], 0, None))
-    return out
+def _largest_semi_axes(result) -> tuple[float, float]:
+    """The largest 95 % semi-axis of the stations and of the targets (0 for an empty class; NaN
+    ellipsoids, of points not located, are skipped)."""
+    (sa, _), (ta, _) = result.ellipsoids()
+    return tuple(float(np.nanmax(a[:, 2], initial=0.0)) if len(a) else 0.0 for a in (sa, ta))
 
 
 def class_magnifications(result, *, share: float = 0.06) -> tuple[float, float]:
@@ -134,10 +131,7 @@ def class_magnifications(result, *, share: float = 0.06) -> tuple[float, float]:
     not vanish beside them."""
     pts = np.vstack([result.station_xyz_m, result.target_xyz_m])
     span = float(np.ptp(pts, axis=0).max()) or 1.0
-    out = []
-    for cov in (result.station_cov_m2, result.target_cov_m2):
-        big = float(np.nanmax(_semi_axes_95(cov), initial=0.0)) if len(cov) else 0.0
-        out.append(1.0 if not big > 0 else _nice(share * span / big))
+    out = [1.0 if not big > 0 else _nice(share * span / big) for big in _largest_semi_axes(result)]
     return out[0], out[1]
 
 
@@ -168,12 +162,11 @@ def plot_top_view(result, ax=None, *, magnify=None):
     true size."""
     plt = _plt()
     from matplotlib.patches import Ellipse
-    from scipy import stats
 
     if ax is None:
         _, ax = plt.subplots(figsize=(6, 6))
     mags = _as_pair(magnify, result)
-    k = np.sqrt(stats.chi2.ppf(0.95, 3))
+    k = np.sqrt(chi2_ppf(0.95, 3))
     classes = ((result.station_xyz_m, result.station_cov_m2, "^", "C3", "heads"),
                (result.target_xyz_m, result.target_cov_m2, "o", "C0", "targets"))
     for (xyz, cov, style, col, name), mag in zip(classes, mags):
@@ -195,8 +188,7 @@ def plot_top_view(result, ax=None, *, magnify=None):
         place_labels(ax, np.vstack([result.station_xyz_m, result.target_xyz_m])[:, :2], names,
                      colors=["darkred"] * len(result.station_ids) + ["k"] * len(result.target_ids))
     ax.apply_aspect()
-    for row, ((xyz, cov, _s, col, name), mag) in enumerate(zip(classes, mags)):
-        big = float(np.nanmax(_semi_axes_95(cov), initial=0.0)) if len(cov) else 0.0
+    for row, ((xyz, cov, _s, col, name), mag, big) in enumerate(zip(classes, mags, _largest_semi_axes(result))):
         if big > 0:
             _scale_bar(ax, mag, _nice(big), col, f"{name} scale", row)
     ax.legend(fontsize=7, loc="upper right")
@@ -262,13 +254,12 @@ def place_labels(ax, xy, names, *, fontsize: float = 7, colors=None) -> list:
 def plot_3d(result, ax=None, *, magnify: float | None = None):
     """3-D view of heads and targets with their 95 % confidence ellipsoids (wireframes), magnified."""
     plt = _plt()
-    from scipy import stats
 
     if ax is None:
         fig = plt.figure(figsize=(6.5, 6))
         ax = fig.add_subplot(projection="3d")
     mags = _as_pair(magnify, result)
-    k = np.sqrt(stats.chi2.ppf(0.95, 3))
+    k = np.sqrt(chi2_ppf(0.95, 3))
     u, v = np.meshgrid(np.linspace(0, 2 * np.pi, 13), np.linspace(0, np.pi, 7))
     sphere = np.stack([np.cos(u) * np.sin(v), np.sin(u) * np.sin(v), np.cos(v)], axis=-1)
     step = -(-len(result.target_xyz_m) // LARGE_PLOT_POINTS)       # every step-th target when many
