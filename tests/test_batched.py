@@ -180,3 +180,90 @@ def test_bad_input():
                        np.array([[0.3, 0.3, 0.3], [0.5, 0.2, 0.1]]))
     with pytest.raises(MultilatError):
         Datum.three_two_one(0, 0, 1)
+
+
+def _frozen_by_hand(net, d, tol_m=1e-10, max_iter=10):
+    """The frozen iteration of one trial written out in plain Python floats, in the numba kernel's
+    order of operations: every station's and target's sums over its observations in observation order
+    (from 0.0), each row of the frozen inverse summed over its columns in order, no fused multiply-add.
+    Returns (h, o, t, iterations, last step, vtpv)."""
+    import math
+
+    p = net._pre
+    si, ti = net.station_index.tolist(), net.target_index.tolist()
+    w, u0, ninv0, s0inv = p["w"].tolist(), p["u0"].tolist(), p["ninv0"].tolist(), p["s0inv"].tolist()
+    s, t, d = net.n_stations, net.n_targets, d.tolist()
+    h, o, tg = net.station_xyz_m.tolist(), net.offset_m.tolist(), net.target_xyz_m.tolist()
+    iters, last = max_iter, math.inf
+    for it in range(max_iter):
+        gh = [[0.0] * 4 for _ in range(s)]
+        gt = [[0.0] * 3 for _ in range(t)]
+        for k, (i, j) in enumerate(zip(si, ti)):
+            dx, dy, dz = (h[i][c] - tg[j][c] for c in range(3))
+            rho = math.sqrt(dx * dx + dy * dy + dz * dz)
+            e = w[k] * (d[k] - rho - o[i]) / rho
+            for c, v in enumerate((dx, dy, dz, rho)):
+                gh[i][c] += e * v
+            for c, v in enumerate((dx, dy, dz)):
+                gt[j][c] -= e * v
+        yt = [[ninv0[j][a][0] * gt[j][0] + ninv0[j][a][1] * gt[j][1] + ninv0[j][a][2] * gt[j][2]
+               for a in range(3)] for j in range(t)]
+        for k, (i, j) in enumerate(zip(si, ti)):
+            sk = w[k] * (u0[k][0] * yt[j][0] + u0[k][1] * yt[j][1] + u0[k][2] * yt[j][2])
+            for c in range(3):
+                gh[i][c] += sk * u0[k][c]
+            gh[i][3] += sk
+        g = [gh[b // 4][b % 4] for b in range(4 * s)]
+        dxp = []
+        for a in range(4 * s):
+            acc = 0.0
+            for b in range(4 * s):
+                acc += s0inv[a][b] * g[b]
+            dxp.append(acc)
+        step = 0.0
+        for i in range(s):
+            for a in range(3):
+                h[i][a] += dxp[4 * i + a]
+                step = max(step, abs(dxp[4 * i + a]))
+            o[i] += dxp[4 * i + 3]
+            step = max(step, abs(dxp[4 * i + 3]))
+        for k, (i, j) in enumerate(zip(si, ti)):
+            q = w[k] * (u0[k][0] * dxp[4 * i] + u0[k][1] * dxp[4 * i + 1] + u0[k][2] * dxp[4 * i + 2]
+                        + dxp[4 * i + 3])
+            for c in range(3):
+                gt[j][c] += q * u0[k][c]
+        for j in range(t):
+            for a in range(3):
+                v = ninv0[j][a][0] * gt[j][0] + ninv0[j][a][1] * gt[j][1] + ninv0[j][a][2] * gt[j][2]
+                tg[j][a] += v
+                step = max(step, abs(v))
+        last = step
+        if step < tol_m:
+            iters = it + 1
+            break
+    acc = 0.0
+    for k, (i, j) in enumerate(zip(si, ti)):
+        dx, dy, dz = (h[i][c] - tg[j][c] for c in range(3))
+        res = d[k] - math.sqrt(dx * dx + dy * dy + dz * dz) - o[i]
+        acc += w[k] * res * res
+    return h, o, tg, iters, last, acc
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba not installed")
+def test_numba_frozen_kernel_gives_the_bits_of_the_iteration_written_out():
+    """The compiled frozen kernel (sums kept in registers, rows of the inverse four at a time) performs
+    exactly the additions of the iteration written out: equal bits, not merely close values; also with
+    the observations shuffled (a station's observations not consecutive)."""
+    base = small_network()
+    perm = np.random.default_rng(3).permutation(base.n_obs)
+    shuffled = BatchedNetwork(base.station_index[perm], base.target_index[perm], base.sigma_m[perm],
+                              base.station_xyz_m, base.offset_m, base.target_xyz_m)
+    for net in (base, shuffled):
+        d = noisy(net, 4)
+        d[1] = net.nominal_distance_m() + np.random.default_rng(9).normal(0, 2e-4, net.n_obs)   # more iterations
+        h, o, tg, iters, last, vtpv = net._iterate(d, "frozen", "numba", 1e-10, 10)
+        for r in range(len(d)):
+            hh, oo, tt, it, ls, v = _frozen_by_hand(net, d[r])
+            assert np.array_equal(h[r], hh) and np.array_equal(o[r], oo) and np.array_equal(tg[r], tt)
+            assert (iters[r], last[r], vtpv[r]) == (it, ls, v)
+        assert iters.max() > iters.min()

@@ -367,3 +367,81 @@ def test_demo_section_quick():
     html = "".join(sec.blocks)
     assert html.count("<table>") == 2 and "<img" in html
     assert "6.6" in html                      # the paper's mean beside ours
+
+
+def test_ellipsoid_fraction_is_the_row_sum_formula():
+    """``_ellipsoid_fraction`` adds the columns of z^2 / ev left to right instead of np.sum(axis=1) over
+    rows of 3 (slow in numpy): the same bits (numpy sums a row shorter than its pairwise block in
+    order), for full and rank-deficient covariances and both memory layouts of the samples."""
+    from multilat.network.propagate_summary import _ellipsoid_fraction
+    from multilat.network.statistics import chi2_ppf
+
+    def by_row_sums(dev3, center, cov):
+        ev, vec = np.linalg.eigh(cov)
+        keep = ev > 1e-9 * ev.max()
+        z = (dev3 - center) @ vec[:, keep]
+        d2 = np.sum(z * z / ev[keep], axis=1)
+        return float(np.mean(d2 <= (chi2_3_95 if keep.sum() == 3 else chi2_ppf(0.95, int(keep.sum())))))
+
+    rng = np.random.default_rng(5)
+    w = rng.standard_normal((100_000, 3)) * [1.0, 1e-3, 3.0]
+    for ww in (w, np.asfortranarray(w)):
+        np.testing.assert_array_equal(np.sum(ww, axis=1), (ww[:, 0] + ww[:, 1]) + ww[:, 2])
+    a = rng.standard_normal((3, 3)) * 1e-5
+    for cov in (a @ a.T, np.diag([2e-10, 1e-10, 0.0]), np.diag([1e-10, 0.0, 0.0])):
+        x = rng.multivariate_normal(np.zeros(3), cov, 50_000) * 1.3
+        for dev3 in (x, np.asfortranarray(x)):
+            for center in (np.zeros(3), x.mean(axis=0)):
+                assert _ellipsoid_fraction(dev3, center, cov) == by_row_sums(dev3, center, cov)
+
+
+def test_block_deviations_are_the_flattened_differences(small_problem, monkeypatch):
+    """A block's float32 samples are float32(flatten(solution) - flatten(nominal)) and the pairs'
+    distance deviations, computed here the plain way from the same draws; with trials dropped too."""
+    from multilat.montecarlo import block_generator, resolve_seed
+
+    orig = bt.BatchedNetwork.solve
+
+    def flaky(self, d, **kw):
+        sol = orig(self, d, **kw)
+        conv = sol.converged.copy()
+        conv[::7] = False
+        return bt.BatchSolution(sol.station_xyz_m, sol.offset_m, sol.target_xyz_m, conv, sol.iterations,
+                                sol.last_step_m, sol.sigma0)
+
+    net = small_problem.network
+    for solve in (orig, flaky):
+        monkeypatch.setattr(bt.BatchedNetwork, "solve", solve)
+        r = propagate(small_problem, trials=1000, rng=11, noise="gaussian")
+        ss = resolve_seed(11)
+        g = block_generator(ss.entropy, tuple(ss.spawn_key), 0)
+        d = small_problem.distance_m + g.standard_normal((1000, net.n_obs)) * net.sigma_m
+        sol = solve(net, d)
+        ok = sol.converged
+        x = bt.flatten(sol.station_xyz_m[ok], sol.offset_m[ok], sol.target_xyz_m[ok])
+        x0 = bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m)
+        pts = np.concatenate([sol.station_xyz_m[ok], sol.target_xyz_m[ok]], axis=1)
+        p0 = np.concatenate([net.station_xyz_m, net.target_xyz_m])
+        ids = small_problem.station_ids + small_problem.target_ids
+        pa = [ids.index(a) for a, _ in small_problem.pairs]
+        pb = [ids.index(b) for _, b in small_problem.pairs]
+        dd = np.linalg.norm(pts[:, pa] - pts[:, pb], axis=2) - np.linalg.norm(p0[pa] - p0[pb], axis=1)
+        want = np.concatenate([x - x0, dd], axis=1).astype(np.float32)
+        assert r.samples.dtype == np.float32 and np.array_equal(r.samples, want)
+        assert r.trials == int(ok.sum())
+
+
+def test_summaries_in_two_threads_are_those_computed_in_order(small_problem, monkeypatch):
+    """From 50 000 trials the column statistics run in two threads: the same numbers as in order."""
+    from multilat.network import propagate_summary as ps
+
+    in_threads = ps._in_two_threads
+    seen = []
+    monkeypatch.setattr(ps, "_in_two_threads", lambda tasks, n: (seen.append(n), in_threads(tasks, n)))
+    a = propagate(small_problem, trials=50_000, rng=3, noise="gaussian", keep_samples=False)
+    assert seen == [50_000]                                     # the threaded path was taken
+    monkeypatch.setattr(ps, "_in_two_threads", lambda tasks, n: in_threads(tasks, 0))
+    b = propagate(small_problem, trials=50_000, rng=3, noise="gaussian", keep_samples=False)
+    for name in ("mc_mean", "mc_std", "mc_std_se", "interval_symmetric", "interval_shortest", "point_cov_mc",
+                 "ellipsoid_coverage_mc", "ellipsoid_coverage_lin", "lin_std"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name

@@ -65,6 +65,26 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
     return problem
 
 
+def keep_freed_memory() -> None:
+    """Let the C library's allocator keep freed memory for reuse (glibc ``mallopt``; this process only).
+
+    Every block of trials allocates and frees a few MB of arrays. With glibc's defaults (arrays above
+    128 kB mapped and unmapped one by one until its adaptive threshold catches up, the heap trimmed
+    whenever a few hundred kB are free) each block writes to fresh pages: ~80 000 page faults, ~0.2 s
+    of a 200 000-trial run. Mapping only above 32 MB and trimming only above 256 MB free keeps those
+    pages for the next block. Only the time changes, never a number; nothing happens where the C
+    library has no ``mallopt`` (macOS, Windows).
+    """
+    try:
+        import ctypes
+
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError, TypeError):
+        return
+    mallopt(-3, 32 << 20)     # M_MMAP_THRESHOLD
+    mallopt(-1, 256 << 20)    # M_TRIM_THRESHOLD
+
+
 @app.command("propagate")
 def propagate_cmd(
     source: str = typer.Argument(..., help="What `adjust` reads (observations CSV, or raw readings with "
@@ -134,6 +154,7 @@ def propagate_cmd(
         from multilat.io import check_output_dir
 
         check_output_dir(out, inputs=[source, references, environment, heights, points])
+    keep_freed_memory()
     src: dict = {}
     problem = load_problem(source, datum=datum, noise=noise, instrument=instrument, sigma_um=sigma_um,
                            references=references, environment=environment, heights=heights,

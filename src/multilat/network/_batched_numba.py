@@ -16,62 +16,118 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
     n, m = d.shape
     s = h.shape[1]
     t = tg.shape[1]
+    p = 4 * s
     iters = np.full(n, max_iter, np.int64)
     last = np.full(n, np.inf)
     vtpv = np.empty(n)
     for r in prange(n):
-        gh = np.empty((s, 4))
+        gh = np.empty(p)            # station rows [x, y, z, offset] of station i at 4 i .. 4 i + 3
         gt = np.empty((t, 3))
         yt = np.empty((t, 3))
-        dxp = np.empty((s, 4))
+        dxp = np.empty(p)
         for it in range(max_iter):
             gh[:] = 0.0
             gt[:] = 0.0
+            # a station's sums stay in registers over its run of observations (stored when the
+            # station changes): the same additions, in the same order, as adding into gh each time
+            cur = si[0]
+            a0 = gh[4 * cur]
+            a1 = gh[4 * cur + 1]
+            a2 = gh[4 * cur + 2]
+            a3 = gh[4 * cur + 3]
             for k in range(m):
                 i = si[k]
+                if i != cur:
+                    gh[4 * cur] = a0
+                    gh[4 * cur + 1] = a1
+                    gh[4 * cur + 2] = a2
+                    gh[4 * cur + 3] = a3
+                    cur = i
+                    a0 = gh[4 * i]
+                    a1 = gh[4 * i + 1]
+                    a2 = gh[4 * i + 2]
+                    a3 = gh[4 * i + 3]
                 j = ti[k]
                 dx = h[r, i, 0] - tg[r, j, 0]
                 dy = h[r, i, 1] - tg[r, j, 1]
                 dz = h[r, i, 2] - tg[r, j, 2]
                 rho = np.sqrt(dx * dx + dy * dy + dz * dz)
                 e = w[k] * (d[r, k] - rho - o[r, i]) / rho
-                gh[i, 0] += e * dx
-                gh[i, 1] += e * dy
-                gh[i, 2] += e * dz
-                gh[i, 3] += e * rho
+                a0 += e * dx
+                a1 += e * dy
+                a2 += e * dz
+                a3 += e * rho
                 gt[j, 0] -= e * dx
                 gt[j, 1] -= e * dy
                 gt[j, 2] -= e * dz
+            gh[4 * cur] = a0
+            gh[4 * cur + 1] = a1
+            gh[4 * cur + 2] = a2
+            gh[4 * cur + 3] = a3
             for j in range(t):
                 for a in range(3):
                     yt[j, a] = ninv0[j, a, 0] * gt[j, 0] + ninv0[j, a, 1] * gt[j, 1] + ninv0[j, a, 2] * gt[j, 2]
+            cur = si[0]
+            a0 = gh[4 * cur]
+            a1 = gh[4 * cur + 1]
+            a2 = gh[4 * cur + 2]
+            a3 = gh[4 * cur + 3]
             for k in range(m):
                 i = si[k]
+                if i != cur:
+                    gh[4 * cur] = a0
+                    gh[4 * cur + 1] = a1
+                    gh[4 * cur + 2] = a2
+                    gh[4 * cur + 3] = a3
+                    cur = i
+                    a0 = gh[4 * i]
+                    a1 = gh[4 * i + 1]
+                    a2 = gh[4 * i + 2]
+                    a3 = gh[4 * i + 3]
                 j = ti[k]
                 sk = w[k] * (u0[k, 0] * yt[j, 0] + u0[k, 1] * yt[j, 1] + u0[k, 2] * yt[j, 2])
-                gh[i, 0] += sk * u0[k, 0]
-                gh[i, 1] += sk * u0[k, 1]
-                gh[i, 2] += sk * u0[k, 2]
-                gh[i, 3] += sk
+                a0 += sk * u0[k, 0]
+                a1 += sk * u0[k, 1]
+                a2 += sk * u0[k, 2]
+                a3 += sk
+            gh[4 * cur] = a0
+            gh[4 * cur + 1] = a1
+            gh[4 * cur + 2] = a2
+            gh[4 * cur + 3] = a3
+            # dxp = s0inv @ gh, each row summed over b in order; four rows at a time (independent
+            # sums side by side instead of one long chain of dependent additions; p = 4 s rows)
+            a = 0
+            while a + 4 <= p:
+                c0 = 0.0
+                c1 = 0.0
+                c2 = 0.0
+                c3 = 0.0
+                for b in range(p):
+                    g = gh[b]
+                    c0 += s0inv[a, b] * g
+                    c1 += s0inv[a + 1, b] * g
+                    c2 += s0inv[a + 2, b] * g
+                    c3 += s0inv[a + 3, b] * g
+                dxp[a] = c0
+                dxp[a + 1] = c1
+                dxp[a + 2] = c2
+                dxp[a + 3] = c3
+                a += 4
             step = 0.0
             nan = False
-            for a in range(4 * s):
-                acc = 0.0
-                for b in range(4 * s):
-                    acc += s0inv[a, b] * gh[b // 4, b % 4]
-                dxp[a // 4, a % 4] = acc
             for i in range(s):
                 for a in range(3):
-                    h[r, i, a] += dxp[i, a]
-                    step = max(step, abs(dxp[i, a]))
-                    nan = nan or not np.isfinite(dxp[i, a])
-                o[r, i] += dxp[i, 3]
-                step = max(step, abs(dxp[i, 3]))
-                nan = nan or not np.isfinite(dxp[i, 3])
+                    h[r, i, a] += dxp[4 * i + a]
+                    step = max(step, abs(dxp[4 * i + a]))
+                    nan = nan or not np.isfinite(dxp[4 * i + a])
+                o[r, i] += dxp[4 * i + 3]
+                step = max(step, abs(dxp[4 * i + 3]))
+                nan = nan or not np.isfinite(dxp[4 * i + 3])
             for k in range(m):
                 i = si[k]
                 j = ti[k]
-                q = w[k] * (u0[k, 0] * dxp[i, 0] + u0[k, 1] * dxp[i, 1] + u0[k, 2] * dxp[i, 2] + dxp[i, 3])
+                q = w[k] * (u0[k, 0] * dxp[4 * i] + u0[k, 1] * dxp[4 * i + 1] + u0[k, 2] * dxp[4 * i + 2]
+                            + dxp[4 * i + 3])
                 gt[j, 0] += q * u0[k, 0]
                 gt[j, 1] += q * u0[k, 1]
                 gt[j, 2] += q * u0[k, 2]

@@ -33,7 +33,6 @@ fail to converge are dropped and counted (``n_failed``).
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -42,9 +41,10 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.montecarlo import (AdaptiveRule, resolve_map, block_generator, block_trials, chunk_ranges,
-                                 resolve_seed, summarize)
+                                 resolve_seed)
 from multilat.network import batched as bt
 from multilat.network.propagate_result import PropagationResult, chi2_3_95
+from multilat.network.propagate_summary import linear_std, summarise
 
 __all__ = ["BLOCK", "Problem", "problem_from_observations", "problem_from_truth", "problem_from_config",
            "propagate", "PropagationResult", "chi2_3_95"]
@@ -348,21 +348,30 @@ def _solve_block(spec: _ChunkSpec, entropy, spawn_key: tuple, b: int, n: int) ->
     else:
         sol = net.solve(d)
     ok = sol.converged
-    x = bt.flatten(sol.station_xyz_m[ok], sol.offset_m[ok], sol.target_xyz_m[ok])
+    h, o, t = sol.station_xyz_m, sol.offset_m, sol.target_xyz_m
+    if not ok.all():
+        h, o, t = h[ok], o[ok], t[ok]
+    # deviations from the nominal (flatten layout, then the pairs), each written once as float32
     x0 = bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m)
-    pts = np.concatenate([sol.station_xyz_m[ok], sol.target_xyz_m[ok]], axis=1)
-    p0 = np.concatenate([net.station_xyz_m, net.target_xyz_m])
+    nk, c1, c2 = len(h), 3 * h.shape[1], 3 * h.shape[1] + o.shape[1]
+    c3 = c2 + 3 * t.shape[1]
+    dev = np.empty((nk, c3 + len(spec.pair_index)), np.float32)
+    dev[:, :c1] = h.reshape(nk, c1) - x0[:c1]
+    dev[:, c1:c2] = o - x0[c1:c2]
+    dev[:, c2:c3] = t.reshape(nk, c3 - c2) - x0[c2:c3]
     if len(spec.pair_index):
+        pts = np.concatenate([h, t], axis=1)
+        p0 = np.concatenate([net.station_xyz_m, net.target_xyz_m])
         pa, pb = spec.pair_index[:, 0], spec.pair_index[:, 1]
         dist = np.linalg.norm(pts[:, pa] - pts[:, pb], axis=2)
         dist0 = np.linalg.norm(p0[pa] - p0[pb], axis=1)
-        ddev = dist - dist0
-    else:
-        ddev = np.zeros((int(ok.sum()), 0))
-    dev = np.concatenate([x - x0, ddev], axis=1)
-    return dict(dev=dev.astype(np.float32), n=n, n_failed=int((~ok).sum()),
+        dev[:, c3:] = dist - dist0
+    # the drawn errors' sums: the empirical input std of the linear comparison (model noise, readings)
+    sums = spec.noise == "model" or spec.readings is not None
+    return dict(dev=dev, n=n, n_failed=int((~ok).sum()),
                 n_retried=int(sol.retried.sum()) if sol.retried is not None else 0,
-                sigma0=sol.sigma0[ok], e_sum=e.sum(axis=0), e2_sum=(e * e).sum(axis=0))
+                sigma0=sol.sigma0[ok], e_sum=e.sum(axis=0) if sums else None,
+                e2_sum=(e * e).sum(axis=0) if sums else None)
 
 
 def _run_chunk(args) -> list:
@@ -370,14 +379,6 @@ def _run_chunk(args) -> list:
     Module-level so process pools and Dask can pickle it."""
     spec, entropy, spawn_key, start, stop, trials = args
     return [_solve_block(spec, entropy, spawn_key, b, block_trials(b, trials, BLOCK)) for b in range(start, stop)]
-
-
-def _labels(problem: Problem):
-    lab = [f"{s}.{c}" for s in problem.station_ids for c in "xyz"]
-    lab += [f"{s}.offset" for s in problem.station_ids]
-    lab += [f"{t}.{c}" for t in problem.target_ids for c in "xyz"]
-    lab += [f"{a}-{b}" for a, b in problem.pairs]
-    return tuple(lab)
 
 
 def _noise_std(problem: Problem, noise: str, instrument) -> np.ndarray:
@@ -393,45 +394,6 @@ def _noise_std(problem: Problem, noise: str, instrument) -> np.ndarray:
         if sel.any():
             out[sel] = budget.distance_std_m(instrument, problem.distance_m[sel], head=hd)
     return out
-
-
-def _linear(problem: Problem, noise_std, obs_cov=None):
-    """Linear std of every reported quantity and the 3x3 covariance of each point (``obs_cov``: the
-    observations' full covariance, correlated readings)."""
-    net = problem.network
-    q = net.linear_covariance(sigma_m=noise_std) if obs_cov is None else net.linear_covariance(cov_m2=obs_cov)
-    std = list(np.sqrt(np.clip(np.diag(q), 0, None)))
-    for a, b in problem.pairs:
-        ra, rb = problem.param_rows(a), problem.param_rows(b)
-        dv = problem.point_xyz(a) - problem.point_xyz(b)
-        g = dv / np.linalg.norm(dv)
-        rows = np.concatenate([ra, rb])
-        c = q[np.ix_(rows, rows)]
-        gg = np.concatenate([g, -g])
-        std.append(math.sqrt(max(gg @ c @ gg, 0.0)))
-    pids = problem.station_ids + problem.target_ids
-    pc = np.array([q[np.ix_(problem.param_rows(p), problem.param_rows(p))] for p in pids])
-    return np.array(std), pc
-
-
-def _ellipsoid_fraction(dev3, center, cov):
-    """Fraction of rows of dev3 (n, 3) inside the 95 % ellipsoid of (center, cov).
-
-    Full rank: ``chi2_3(0.95)``. A datum-fixed coordinate (3-2-1) leaves a rank-r covariance: the
-    region is the r-dimensional ellipsoid in its range with the ``chi2_r(0.95)`` quantile; NaN for
-    a fixed point (r = 0).
-    """
-    from multilat.network.statistics import chi2_ppf
-
-    ev, vec = np.linalg.eigh(np.asarray(cov, float))
-    if not np.all(np.isfinite(ev)) or ev.max() <= 0:
-        return float("nan")
-    keep = ev > 1e-9 * ev.max()
-    r = int(keep.sum())
-    z = (dev3 - center) @ vec[:, keep]
-    d2 = np.sum(z * z / ev[keep], axis=1)
-    q = chi2_3_95 if r == 3 else chi2_ppf(0.95, r)
-    return float(np.mean(d2 <= q))
 
 
 def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str = "model",
@@ -536,7 +498,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         rule = AdaptiveRule(0.95, ndigits, max_trials, block=BLOCK)
         # the criterion watches the quantities that vary: not those held by the datum (3-2-1), whose
         # samples are rounding noise (same rule as PropagationResult.fixed)
-        lin0, _ = _linear(problem, noise_std, obs_cov)
+        lin0, _ = linear_std(problem, noise_std, obs_cov)
         watch = lin0 > 1e-9 * np.max(lin0)
         if batches_per_round is None:
             batches_per_round = 1 if map is None else 4
@@ -572,84 +534,4 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         adaptive_info = {"converged": rule.converged, "batches": rule.h, "batch_trials": rule.batch_trials,
                          "tolerance_m_min": None if tol is None else float(np.min(tol)),
                          "n_fixed_by_datum": int((~watch).sum())}
-    return _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done, obs_cov)
-
-
-def _kurtosis(y: np.ndarray, mean: np.ndarray) -> np.ndarray:
-    """Sample kurtosis m4 / m2^2 per column (3 where a column is constant)."""
-    c2 = y - mean
-    c2 *= c2
-    m2 = np.mean(c2, axis=0)
-    c2 *= c2
-    m4 = np.mean(c2, axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(m2 > 0, m4 / np.where(m2 > 0, m2, 1.0) ** 2, 3.0)
-
-
-def _summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done, obs_cov=None):
-    """Statistics of all blocks' deviations (the engine's :func:`summarize`: JCGM 101 §7.6-7.7)."""
-    net = problem.network
-    # float32 deviations kept once; statistics point by point / column block by column block in float64
-    dev = np.concatenate([b["dev"] for b in blocks]) if blocks else np.zeros((0, k), np.float32)
-    for b in blocks:
-        b["dev"] = None
-    n_failed = int(sum(b["n_failed"] for b in blocks))
-    n_retried = int(sum(b["n_retried"] for b in blocks))
-    n = dev.shape[0]
-    if n < 2:
-        raise MultilatError(f"only {n} of {done} trials converged: the network is too weak for a "
-                            "Monte Carlo from its nominal solution")
-    sig0_all = np.concatenate([b["sigma0"] for b in blocks])
-    sig0 = float(np.mean(sig0_all))
-    sig0_rms = float(np.sqrt(np.mean(sig0_all**2)))
-    x0 = np.concatenate([bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m),
-                         [np.linalg.norm(problem.point_xyz(a) - problem.point_xyz(b)) for a, b in problem.pairs]])
-    mean_dev, std, kurt = np.empty(k), np.empty(k), np.empty(k)
-    iv_sym, iv_short = np.empty((k, 2)), np.empty((k, 2))
-    pids = problem.station_ids + problem.target_ids
-    pc_mc = np.empty((len(pids), 3, 3))
-
-    def put(cols, y):
-        r = summarize(y, 0.95)
-        mean_dev[cols], std[cols] = r.estimate, r.std
-        iv_sym[cols], iv_short[cols] = r.interval_symmetric, r.interval_shortest
-        kurt[cols] = _kurtosis(y, r.estimate)
-        return r
-
-    if noise == "model" or obs_cov is not None:
-        # the linear sandwich uses the input errors' empirical std over all trials drawn, so that the
-        # comparison tests the propagation, not the distance model's own (MC-estimated) std
-        n_all = sum(b["n"] for b in blocks)
-        es = sum(b["e_sum"] for b in blocks)
-        e2 = sum(b["e2_sum"] for b in blocks)
-        emp_std = np.sqrt(np.maximum(e2 / n_all - (es / n_all) ** 2, 0.0) * n_all / (n_all - 1))
-        input_std_ratio = float(np.mean(emp_std / noise_std))
-        if obs_cov is None:       # correlated readings: the analytic covariance (its diagonal alone
-            noise_std = emp_std   # would drop the sensors' correlations)
-    else:
-        input_std_ratio = 1.0
-    lin_std, pc_lin = _linear(problem, noise_std, obs_cov)
-    cov_mc_frac = np.empty(len(pids))
-    cov_lin_frac = np.empty(len(pids))
-    for q, pid in enumerate(pids):                       # every coordinate, point by point
-        rows = problem.param_rows(pid)
-        d3 = dev[:, rows].astype(np.float64)             # one float64 copy per point
-        pc_mc[q] = put(rows, d3).cov
-        cov_mc_frac[q] = _ellipsoid_fraction(d3, mean_dev[rows], pc_mc[q])
-        cov_lin_frac[q] = _ellipsoid_fraction(d3, np.zeros(3), pc_lin[q])
-    s = len(problem.station_ids)
-    rest = np.concatenate([3 * s + np.arange(s), np.arange(net.n_params, k)])   # offsets, distances
-    for c0 in range(0, len(rest), 8):
-        cols = rest[c0:c0 + 8]
-        put(cols, dev[:, cols].astype(np.float64))
-    iv_sym += x0[:, None]
-    iv_short += x0[:, None]
-    se = std * np.sqrt(np.maximum(kurt - 1.0, 0.0) / (4.0 * n))
-    return PropagationResult(
-        problem=problem, labels=_labels(problem), nominal=x0, mc_mean=x0 + mean_dev, mc_std=std,
-        mc_std_se=se, lin_std=lin_std, interval_symmetric=iv_sym, interval_shortest=iv_short,
-        point_ids=pids, point_cov_mc=pc_mc, point_cov_lin=pc_lin, ellipsoid_coverage_mc=cov_mc_frac,
-        ellipsoid_coverage_lin=cov_lin_frac, trials=n, n_failed=n_failed, sigma0_mean=sig0, noise=noise,
-        seed_entropy=int(ss.entropy), adaptive=adaptive_info, elapsed_s=time.perf_counter() - t0,
-        input_std_m=noise_std, input_std_ratio=input_std_ratio, n_retried=n_retried,
-        samples=dev if keep_samples else None, sigma0_rms=sig0_rms)
+    return summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done, obs_cov)
