@@ -224,3 +224,18 @@ def test_result_ellipsoids_computed_once_per_level():
     (sa, _), (ta, _) = res.ellipsoids(level=0.99)
     np.testing.assert_allclose(ta, st.confidence_ellipsoid(res.target_cov_m2, level=0.99)[0], rtol=0)
     assert (ta > res.ellipsoids()[1][0]).all()
+
+
+def test_final_residuals_in_slices_are_the_whole_array_formula(monkeypatch):
+    # build_result computes the residuals slice by slice (bounded memory at 10^6 distances): the same
+    # bits as the formula over the whole arrays, whatever the slice
+    from multilat.network import result as R
+
+    net = synthetic_network(5, 40, 4, size_m=5.0, rng=9)
+    obs = _obs(net)
+    monkeypatch.setattr(R, "RESIDUAL_SLICE", 7)
+    res = adjust(obs, initial=_start(net), snooping=False)
+    si, ti = obs.station_index, obs.target_index
+    want = obs.distance_m - ((1 + res.scale[si]) * np.linalg.norm(res.station_xyz_m[si] - res.target_xyz_m[ti], axis=1)
+                             + res.offset_m[si])
+    assert np.array_equal(res.residuals_m, want)
