@@ -254,7 +254,7 @@ class NetworkCovariance:
         Qgg, Minv, Js, _, P, si, ti, order, tptr = self._kernel_args()
         og, ot = np.empty(Q * self.s), np.empty((self.t, 3))
         gt = g[Q * self.s:].reshape(self.t, 3)
-        nz = np.flatnonzero(np.any(gt != 0.0, axis=1))
+        nz = np.unique(np.flatnonzero(gt) // 3)             # targets with a non-zero part (few, usually)
         sparse = nz.size <= self.t // 8        # a few targets (a design row, a downdate's generator)
         touched = (np.sort(np.concatenate([order[tptr[j]:tptr[j + 1]] for j in nz] + [np.zeros(0, np.int64)]))
                    .astype(np.int64) if sparse else np.zeros(0, np.int64))

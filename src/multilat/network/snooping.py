@@ -316,8 +316,9 @@ def _last_redundancy(obs, used, trial, k, datum, points) -> str:
     """Why rejecting observation ``k`` must not happen (it takes a point's last redundancy), or ""."""
     j = int(obs.target_index[k])
     tid = obs.target_ids[j]
-    before = int(np.sum(obs.target_index[used] == j))
-    after = int(np.sum(obs.target_index[trial] == j))
+    of_j = obs.target_index == j
+    before = int(np.count_nonzero(of_j & used))
+    after = int(np.count_nonzero(of_j & trial))
     fixed = datum.kind == "control" and tid in control_ids(obs.subset(used), datum, points)
     need = 1 if fixed else 4          # a control target: any distance checks it; a free one: 3 + 1
     if before >= need > after:
