@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 
@@ -38,8 +39,13 @@ def test_dask_local_cluster_two_workers_identical():
     ref_exact = run_mc(eq3_error_m, INPUTS, trials=TRIALS, rng=2024)
     ref_hist = run_mc(eq3_error_m, INPUTS, trials=TRIALS, rng=2024, quantiles="histogram")
     seen = []
+    keys = ("NUMBA_NUM_THREADS", "OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MALLOC_TRIM_THRESHOLD_",
+            "MALLOC_MMAP_THRESHOLD_", "PYTHONHASHSEED")
+    before = {k: os.environ.get(k) for k in keys}
     with dask_map(workers=2) as m:
         assert m.n_workers == 2
+        # the workers' variables stay theirs: the nanny sets them here before spawning and leaves them
+        assert {k: os.environ.get(k) for k in keys} == before
         r_exact = run_mc(eq3_error_m, INPUTS, trials=TRIALS, rng=2024, chunk_size=BLOCK, map=m,
                          progress=lambda d, t: seen.append(d))
         r_hist = run_mc(eq3_error_m, INPUTS, trials=TRIALS, rng=2024, chunk_size=2 * BLOCK, map=m,
@@ -52,6 +58,9 @@ def test_dask_local_cluster_two_workers_identical():
     assert np.array_equal(r_hist._hist_counts, ref_hist._hist_counts)
     assert seen[-1] == TRIALS and seen == sorted(seen)
     assert r_lambda.trials == 2 * BLOCK
+    assert {k: os.environ.get(k) for k in keys} == before
+    numba = pytest.importorskip("numba")
+    assert numba.njit(lambda x: x + 1.0)(1.0) == 2.0      # numba still compiles in this process
 
 
 def three_outputs(rf, crosstalk, ampm, noise):

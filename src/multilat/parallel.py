@@ -31,6 +31,7 @@ module-level functions for process pools; Dask also accepts lambdas and closures
 from __future__ import annotations
 
 import contextlib
+import os
 from collections.abc import Callable, Iterable, Iterator
 
 from multilat.errors import MultilatError
@@ -103,6 +104,7 @@ def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory
     except ImportError:  # pragma: no cover - dask is installed in the dev environment
         raise MultilatError("Dask is not installed: pip install 'multilat[dask]'") from None
     cluster = None
+    saved = None
     try:
         if scheduler is not None:
             address = probe_scheduler(scheduler)
@@ -123,15 +125,23 @@ def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory
             # one thread per worker process: numba's parallel kernels (the distance model's draw) and
             # BLAS would otherwise start a thread per core in every worker, N workers x N threads
             environ.update(NUMBA_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-            with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
-                cluster = distributed.LocalCluster(
-                    n_workers=workers,
-                    threads_per_worker=1,
-                    processes=True,
-                    dashboard_address=None,
-                    memory_limit=memory_limit,
-                    silence_logs=40,  # logging.ERROR
-                )
+            # the nanny sets these variables in *this* process's os.environ before spawning a worker and
+            # leaves them there: NUMBA_NUM_THREADS=1 would make numba's next compilation here raise
+            # ("cannot set NUMBA_NUM_THREADS ... once the threads have been launched"). Put them back
+            # once the workers are spawned (a respawned worker gets them from the nanny again).
+            saved = {k: os.environ.get(k) for k in (*environ, "PYTHONHASHSEED")}
+            try:
+                with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+                    cluster = distributed.LocalCluster(
+                        n_workers=workers,
+                        threads_per_worker=1,
+                        processes=True,
+                        dashboard_address=None,
+                        memory_limit=memory_limit,
+                        silence_logs=40,  # logging.ERROR
+                    )
+            finally:
+                _restore_environ(saved)
             client = distributed.Client(cluster)
         try:
             yield DaskMap(client)
@@ -140,6 +150,8 @@ def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory
     finally:
         if cluster is not None:
             cluster.close()
+        if saved is not None:
+            _restore_environ(saved)      # again: a worker respawned meanwhile set them once more
 
 
 def parse_scheduler_address(text: str) -> tuple[str, str, int]:
@@ -196,6 +208,15 @@ def probe_scheduler(text: str, timeout_s: float | None = None) -> str:
     finally:
         sock.close()
     return f"{scheme}://{host if ':' not in host else '[' + host + ']'}:{port}"
+
+
+def _restore_environ(saved: dict) -> None:
+    """Set the variables of ``saved`` back to their values (None: unset)."""
+    for key, value in saved.items():
+        if value is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = value
 
 
 @contextlib.contextmanager
