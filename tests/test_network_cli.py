@@ -356,3 +356,26 @@ def test_sparse_solver_reads_any_column_order(capsys, tmp_path):
     assert rc == 0, err
     doc = json.loads(out)
     assert doc["solver"] == "sparse" and doc["sigma0"] == pytest.approx(ref["sigma0"], rel=1e-9)
+
+
+def test_large_documents_are_written_compact(capsys, tmp_path, monkeypatch):
+    """Above ``io.INDENT_MAX_ROWS`` observations the adjust document (stdout and --out's result.json) is
+    one line: the same JSON value as the indented document of a small network, whitespace aside."""
+    import multilat.io as mio
+
+    rc, indented, err = _run(capsys, ["adjust", str(OBS), "--json"])
+    assert rc == 0, err
+    assert indented.count("\n") > 100
+    monkeypatch.setattr(mio, "INDENT_MAX_ROWS", 10)           # the example has 56 distances
+    rc, compact, err = _run(capsys, ["adjust", str(OBS), "--json", "--out", str(tmp_path / "o")])
+    assert rc == 0, err
+    assert compact.count("\n") == 1 and compact.endswith("}\n")
+    filed = (tmp_path / "o" / "result.json").read_text(encoding="utf-8")
+    assert filed.count("\n") == 1
+    a, b, c = json.loads(indented), json.loads(compact), json.loads(filed)
+    for d in (a, b, c):
+        d.pop("elapsed_s", None)
+    assert a == b == c
+    monkeypatch.setattr(mio, "INDENT_MAX_ROWS", 56)           # the limit itself is still indented
+    rc, out, err = _run(capsys, ["adjust", str(OBS), "--json"])
+    assert rc == 0 and out.count("\n") > 100

@@ -83,9 +83,10 @@ console = LiteralConsole(stderr=False, highlight=False, markup=False, emoji=Fals
 err_console = LiteralConsole(stderr=True, highlight=False, markup=False, emoji=False)
 
 
-def emit_json(obj, command: str) -> None:
+def emit_json(obj, command: str, *, indent: bool = True) -> None:
     """Print ``obj`` (dataclasses, numpy values allowed) as JSON on stdout, stamped with the schema of
-    ``command`` (:func:`multilat.vocabulary.stamp`: ``"schema": "multilat.<command>/<version>"``)."""
+    ``command`` (:func:`multilat.vocabulary.stamp`: ``"schema": "multilat.<command>/<version>"``);
+    two-space indented unless ``indent=False``."""
     import dataclasses
 
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
@@ -97,9 +98,9 @@ def emit_json(obj, command: str) -> None:
     sys.stdout.flush()
     buf = getattr(sys.stdout, "buffer", None)
     if buf is None:         # a text-only stream (some test harnesses)
-        sys.stdout.write(dumps_json(obj).decode("utf-8"))
+        sys.stdout.write(dumps_json(obj, indent=indent).decode("utf-8"))
     else:
-        write_json(obj, buf)
+        write_json(obj, buf, indent=indent)
         buf.flush()
     sys.stdout.flush()
 

@@ -269,6 +269,9 @@ def adjust_command(
         doc["with_correlations"] = correlated_json(res, c, refs)
     if averaged is not None:
         doc["repeats"] = averaged.scatter_json()
+    from multilat.io import INDENT_MAX_ROWS
+
+    indent = res.obs.n_obs <= INDENT_MAX_ROWS          # 10^5-10^6 observations: compact
     if out is not None:
         from multilat.report.network_figures import save_figures
 
@@ -277,10 +280,10 @@ def adjust_command(
             save_figures(res, tmp)
             from multilat.io import write_json_atomic
 
-            write_json_atomic(tmp / "result.json", doc)
+            write_json_atomic(tmp / "result.json", doc, indent=indent)
     report_opt.write_report(report, "adjust", doc, result=res)
     if as_json:
-        emit_json(doc, "adjust")
+        emit_json(doc, "adjust", indent=indent)
         return
     _print_summary(res, doc, out)
     if vc is not None:
