@@ -11,6 +11,20 @@ import numpy as np
 from numba import njit, prange
 
 
+@njit(cache=True, inline="always")
+def _load4(v, i):  # pragma: no cover - jit
+    """Station ``i``'s four sums ``v[4 i : 4 i + 4]``."""
+    return v[4 * i], v[4 * i + 1], v[4 * i + 2], v[4 * i + 3]
+
+
+@njit(cache=True, inline="always")
+def _store4(v, i, a0, a1, a2, a3):  # pragma: no cover - jit
+    v[4 * i] = a0
+    v[4 * i + 1] = a1
+    v[4 * i + 2] = a2
+    v[4 * i + 3] = a3
+
+
 @njit(parallel=True, cache=True, fastmath=False)
 def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pragma: no cover - jit
     n, m = d.shape
@@ -31,22 +45,13 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
             # a station's sums stay in registers over its run of observations (stored when the
             # station changes): the same additions, in the same order, as adding into gh each time
             cur = si[0]
-            a0 = gh[4 * cur]
-            a1 = gh[4 * cur + 1]
-            a2 = gh[4 * cur + 2]
-            a3 = gh[4 * cur + 3]
+            a0, a1, a2, a3 = _load4(gh, cur)
             for k in range(m):
                 i = si[k]
                 if i != cur:
-                    gh[4 * cur] = a0
-                    gh[4 * cur + 1] = a1
-                    gh[4 * cur + 2] = a2
-                    gh[4 * cur + 3] = a3
+                    _store4(gh, cur, a0, a1, a2, a3)
                     cur = i
-                    a0 = gh[4 * i]
-                    a1 = gh[4 * i + 1]
-                    a2 = gh[4 * i + 2]
-                    a3 = gh[4 * i + 3]
+                    a0, a1, a2, a3 = _load4(gh, i)
                 j = ti[k]
                 dx = h[r, i, 0] - tg[r, j, 0]
                 dy = h[r, i, 1] - tg[r, j, 1]
@@ -60,40 +65,25 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
                 gt[j, 0] -= e * dx
                 gt[j, 1] -= e * dy
                 gt[j, 2] -= e * dz
-            gh[4 * cur] = a0
-            gh[4 * cur + 1] = a1
-            gh[4 * cur + 2] = a2
-            gh[4 * cur + 3] = a3
+            _store4(gh, cur, a0, a1, a2, a3)
             for j in range(t):
                 for a in range(3):
                     yt[j, a] = ninv0[j, a, 0] * gt[j, 0] + ninv0[j, a, 1] * gt[j, 1] + ninv0[j, a, 2] * gt[j, 2]
             cur = si[0]
-            a0 = gh[4 * cur]
-            a1 = gh[4 * cur + 1]
-            a2 = gh[4 * cur + 2]
-            a3 = gh[4 * cur + 3]
+            a0, a1, a2, a3 = _load4(gh, cur)
             for k in range(m):
                 i = si[k]
                 if i != cur:
-                    gh[4 * cur] = a0
-                    gh[4 * cur + 1] = a1
-                    gh[4 * cur + 2] = a2
-                    gh[4 * cur + 3] = a3
+                    _store4(gh, cur, a0, a1, a2, a3)
                     cur = i
-                    a0 = gh[4 * i]
-                    a1 = gh[4 * i + 1]
-                    a2 = gh[4 * i + 2]
-                    a3 = gh[4 * i + 3]
+                    a0, a1, a2, a3 = _load4(gh, i)
                 j = ti[k]
                 sk = w[k] * (u0[k, 0] * yt[j, 0] + u0[k, 1] * yt[j, 1] + u0[k, 2] * yt[j, 2])
                 a0 += sk * u0[k, 0]
                 a1 += sk * u0[k, 1]
                 a2 += sk * u0[k, 2]
                 a3 += sk
-            gh[4 * cur] = a0
-            gh[4 * cur + 1] = a1
-            gh[4 * cur + 2] = a2
-            gh[4 * cur + 3] = a3
+            _store4(gh, cur, a0, a1, a2, a3)
             # dxp = s0inv @ gh, each row summed over b in order; four rows at a time (independent
             # sums side by side instead of one long chain of dependent additions; p = 4 s rows)
             a = 0
