@@ -137,17 +137,22 @@ def test_identical_in_a_process_pool(small_problem):
     _assert_same_run(a, b)
 
 
-def test_failed_trials_are_counted_and_dropped(small_problem, monkeypatch):
+def _failing_every(step: int):
+    """The batched solve with every ``step``-th trial marked as not converged."""
     orig = bt.BatchedNetwork.solve
 
     def flaky(self, d, **kw):
         sol = orig(self, d, **kw)
         conv = sol.converged.copy()
-        conv[::10] = False
+        conv[::step] = False
         return bt.BatchSolution(sol.station_xyz_m, sol.offset_m, sol.target_xyz_m, conv, sol.iterations,
                                 sol.last_step_m, sol.sigma0)
 
-    monkeypatch.setattr(bt.BatchedNetwork, "solve", flaky)
+    return flaky
+
+
+def test_failed_trials_are_counted_and_dropped(small_problem, monkeypatch):
+    monkeypatch.setattr(bt.BatchedNetwork, "solve", _failing_every(10))
     r = propagate(small_problem, trials=2000, rng=1, noise="gaussian", chunk_size=1000)
     assert r.n_failed == 200 and r.trials == 1800
     assert r.samples.shape[0] == 1800
@@ -400,17 +405,8 @@ def test_block_deviations_are_the_flattened_differences(small_problem, monkeypat
     distance deviations, computed here the plain way from the same draws; with trials dropped too."""
     from multilat.montecarlo import block_generator, resolve_seed
 
-    orig = bt.BatchedNetwork.solve
-
-    def flaky(self, d, **kw):
-        sol = orig(self, d, **kw)
-        conv = sol.converged.copy()
-        conv[::7] = False
-        return bt.BatchSolution(sol.station_xyz_m, sol.offset_m, sol.target_xyz_m, conv, sol.iterations,
-                                sol.last_step_m, sol.sigma0)
-
     net = small_problem.network
-    for solve in (orig, flaky):
+    for solve in (bt.BatchedNetwork.solve, _failing_every(7)):
         monkeypatch.setattr(bt.BatchedNetwork, "solve", solve)
         r = propagate(small_problem, trials=1000, rng=11, noise="gaussian")
         ss = resolve_seed(11)
