@@ -239,3 +239,21 @@ def test_final_residuals_in_slices_are_the_whole_array_formula(monkeypatch):
     want = obs.distance_m - ((1 + res.scale[si]) * np.linalg.norm(res.station_xyz_m[si] - res.target_xyz_m[ti], axis=1)
                              + res.offset_m[si])
     assert np.array_equal(res.residuals_m, want)
+
+
+def test_correlated_with_is_the_ratio_formula():
+    # |c_l| / sqrt(r_k r_l) > 1 - tol computed in place: the indices of the plain expression, with zero
+    # denominators (correlated when c_l != 0), zero rows and NaN
+    from multilat.network.covariance import correlated_with
+
+    rng = np.random.default_rng(8)
+    c = rng.normal(size=5000) * 0.4
+    red = rng.uniform(0.0, 1.0, 5000)
+    red[::97] = 0.0
+    c[::89] = 0.0
+    c[5], red[7] = np.nan, np.nan
+    for k in (0, 3, 97):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            want = np.flatnonzero(np.abs(c) / np.sqrt(red[k] * red) > 1.0 - 1e-6)
+        got = correlated_with(c.copy(), red, k, 1e-6)
+        assert np.array_equal(got, want) and got.size > 0

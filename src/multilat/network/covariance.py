@@ -19,7 +19,7 @@ import numpy as np
 
 from multilat.network.model import Q, repeat_share, segment_sum, slot_gain, target_slots
 
-__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS"]
+__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS", "correlated_with"]
 
 #: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
 #: from the compiled kernels of :mod:`multilat.network._sparse_kernels` (numba, when installed); smaller
@@ -34,6 +34,18 @@ def _kernels(m: int):
     from multilat.network import _sparse_kernels as K
 
     return K if K.HAVE_NUMBA else None
+
+
+def correlated_with(c: np.ndarray, red: np.ndarray, k: int, tol: float) -> np.ndarray:
+    """Indices ``l`` with ``|c_l| / sqrt(r_k r_l) > 1 - tol`` (``c`` row ``k`` of the hat matrix, overwritten;
+    a zero denominator counts when ``c_l != 0``): the arithmetic of ``abs(c) / sqrt(r_k * r)``, in place
+    (two passes' worth of temporaries less over 10^6 observations)."""
+    q = np.abs(c, out=c)
+    den = np.multiply(red[k], red)
+    np.sqrt(den, out=den)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(q, den, out=q)
+    return np.flatnonzero(q > 1.0 - tol)
 
 
 class NetworkCovariance:
@@ -289,9 +301,7 @@ class NetworkCovariance:
         ``rho_kl = -hat_kl / sqrt(r_k r_l)`` (``k`` itself included when ``r_k > 0``). A zero denominator
         counts as correlated when ``hat_kl != 0`` (an infinite ``rho``), not when ``hat_kl`` is 0 too."""
         red = np.asarray(redundancy, float)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            q = np.abs(self.hat_row(int(k))) / np.sqrt(red[k] * red)
-        return np.flatnonzero(q > 1.0 - tol)
+        return correlated_with(self.hat_row(int(k)), red, int(k), tol)
 
     def hat_diagonal(self, chunk_targets: int = 20000, *, kernels=True):
         """Diagonal of the whitened hat matrix ``A C A^T`` per observation (m,) (datum-free).
