@@ -257,3 +257,19 @@ def test_correlated_with_is_the_ratio_formula():
             want = np.flatnonzero(np.abs(c) / np.sqrt(red[k] * red) > 1.0 - 1e-6)
         got = correlated_with(c.copy(), red, k, 1e-6)
         assert np.array_equal(got, want) and got.size > 0
+
+
+def test_w_statistics_in_place_are_the_plain_expression():
+    rng = np.random.default_rng(12)
+    v = rng.normal(size=3000) * 1e-5
+    r = rng.uniform(0.0, 1.0, 3000)
+    r[::50] = 0.0
+    r[1::77] = 1e-10
+    sigma = rng.uniform(1e-6, 1e-5, 3000)
+    ok = r > 1e-9
+    for s in (sigma, 5e-6, None):
+        den = np.sqrt(np.where(ok, r, 1.0)) * (1.0 if s is None else np.asarray(s, float))
+        want = np.where(ok, v / den, 0.0)
+        got = st.w_statistics(v, s, r)
+        assert np.array_equal(got, want) and got.shape == v.shape
+    assert (st.w_statistics(v, None, r)[~ok] == 0.0).all() and (~ok).sum() > 50   # uncontrolled: w = 0

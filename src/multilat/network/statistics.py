@@ -148,9 +148,15 @@ def w_statistics(residual_m, sigma_m, redundancy):
     """
     r = np.asarray(redundancy, float)
     ok = r > 1e-9
-    root = np.sqrt(np.where(ok, r, 1.0))          # whole arrays, no masked copies (10^6 rows per round)
-    den = root if sigma_m is None else np.asarray(sigma_m, float) * root
-    return np.where(ok, np.asarray(residual_m, float) / den, 0.0)
+    # one array of the network's size, worked in place (10^6 rows per snooping round, and the w-tests
+    # at the end run at the adjustment's peak memory): v / (sigma sqrt(r)), 0 where not controlled
+    w = np.where(ok, r, 1.0)
+    np.sqrt(w, out=w)
+    if sigma_m is not None:
+        np.multiply(np.asarray(sigma_m, float), w, out=w)
+    np.divide(np.asarray(residual_m, float), w, out=w)
+    w[~ok] = 0.0
+    return w
 
 
 def minimal_detectable_bias_m(sigma_m, redundancy, *, alpha: float, power: float = 0.80):
