@@ -244,8 +244,6 @@ def test_final_residuals_in_slices_are_the_whole_array_formula(monkeypatch):
 def test_correlated_with_is_the_ratio_formula():
     # |c_l| / sqrt(r_k r_l) > 1 - tol computed in place: the indices of the plain expression, with zero
     # denominators (correlated when c_l != 0), zero rows and NaN
-    from multilat.network.covariance import correlated_with
-
     rng = np.random.default_rng(8)
     c = rng.normal(size=5000) * 0.4
     red = rng.uniform(0.0, 1.0, 5000)
@@ -255,7 +253,7 @@ def test_correlated_with_is_the_ratio_formula():
     for k in (0, 3, 97):
         with np.errstate(divide="ignore", invalid="ignore"):
             want = np.flatnonzero(np.abs(c) / np.sqrt(red[k] * red) > 1.0 - 1e-6)
-        got = correlated_with(c.copy(), red, k, 1e-6)
+        got = st.correlated_with(c.copy(), red, k, 1e-6)
         assert np.array_equal(got, want) and got.size > 0
 
 

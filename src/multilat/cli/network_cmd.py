@@ -269,7 +269,7 @@ def adjust_command(
         doc["with_correlations"] = correlated_json(res, c, refs)
     if averaged is not None:
         doc["repeats"] = averaged.scatter_json()
-    from multilat.io import INDENT_MAX_ROWS
+    from multilat.io import INDENT_MAX_ROWS, write_json_atomic
 
     indent = res.obs.n_obs <= INDENT_MAX_ROWS          # 10^5-10^6 observations: compact
     if out is not None:
@@ -278,8 +278,6 @@ def adjust_command(
         with staging_dir(out, inputs=[observations, references, points, environment, heights]) as tmp:
             write_result_tables(res, tmp, references=refs, fmt=tables)
             save_figures(res, tmp)
-            from multilat.io import write_json_atomic
-
             write_json_atomic(tmp / "result.json", doc, indent=indent)
     report_opt.write_report(report, "adjust", doc, result=res)
     if as_json:

@@ -18,8 +18,9 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.network.model import Q, repeat_share, segment_sum, slot_gain, target_slots
+from multilat.network.statistics import correlated_with
 
-__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS", "correlated_with"]
+__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS"]
 
 #: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
 #: from the compiled kernels of :mod:`multilat.network._sparse_kernels` (numba, when installed); smaller
@@ -34,18 +35,6 @@ def _kernels(m: int):
     from multilat.network import _sparse_kernels as K
 
     return K if K.HAVE_NUMBA else None
-
-
-def correlated_with(c: np.ndarray, red: np.ndarray, k: int, tol: float) -> np.ndarray:
-    """Indices ``l`` with ``|c_l| / sqrt(r_k r_l) > 1 - tol`` (``c`` row ``k`` of the hat matrix, overwritten;
-    a zero denominator counts when ``c_l != 0``): the arithmetic of ``abs(c) / sqrt(r_k * r)``, in place
-    (two passes' worth of temporaries less over 10^6 observations)."""
-    q = np.abs(c, out=c)
-    den = np.multiply(red[k], red)
-    np.sqrt(den, out=den)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        np.divide(q, den, out=q)
-    return np.flatnonzero(q > 1.0 - tol)
 
 
 class NetworkCovariance:

@@ -39,7 +39,6 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
-from multilat.network.covariance import correlated_with
 from multilat.network.fit import check_network, control_ids, station_map
 
 __all__ = ["LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers"]
@@ -141,7 +140,7 @@ class LinearRounds:
     def twins(self, k: int, c: np.ndarray, tol: float = 1e-6) -> np.ndarray:
         """Observations other than ``k`` whose w-test is perfectly correlated with ``k``'s (as
         :meth:`multilat.network.covariance.NetworkCovariance.perfectly_correlated`)."""
-        out = correlated_with(np.abs(c), self.red, k, tol)     # c itself is kept for the downdate
+        out = st.correlated_with(np.abs(c), self.red, k, tol)     # c itself is kept for the downdate
         out = out[self.alive[out]]
         return out[out != k]
 

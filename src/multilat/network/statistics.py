@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["GlobalTest", "global_test", "w_statistics", "w_critical", "noncentrality", "chi2_ppf", "chi2_sf",
-           "norm_ppf", "minimal_detectable_bias_m", "confidence_ellipsoid", "b_method_alpha_global",
+           "norm_ppf", "correlated_with", "minimal_detectable_bias_m", "confidence_ellipsoid", "b_method_alpha_global",
            "test_power", "tau_critical", "bias_to_noise_ratio", "TEST_METHODS", "VARIANCE_FACTORS"]
 
 TEST_METHODS = ("b-method", "fixed")
@@ -157,6 +157,18 @@ def w_statistics(residual_m, sigma_m, redundancy):
     np.divide(np.asarray(residual_m, float), w, out=w)
     w[~ok] = 0.0
     return w
+
+
+def correlated_with(c: np.ndarray, red: np.ndarray, k: int, tol: float) -> np.ndarray:
+    """Indices ``l`` with ``|c_l| / sqrt(r_k r_l) > 1 - tol`` (``c`` row ``k`` of the hat matrix, overwritten;
+    a zero denominator counts when ``c_l != 0``): the arithmetic of ``abs(c) / sqrt(r_k * r)``, in place
+    (two passes' worth of temporaries less over 10^6 observations)."""
+    q = np.abs(c, out=c)
+    den = np.multiply(red[k], red)
+    np.sqrt(den, out=den)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(q, den, out=q)
+    return np.flatnonzero(q > 1.0 - tol)
 
 
 def minimal_detectable_bias_m(sigma_m, redundancy, *, alpha: float, power: float = 0.80):
