@@ -12,7 +12,7 @@ import pytest
 from multilat.distributions import Arcsine, Normal, Uniform
 from multilat.errors import MultilatError
 from multilat.montecarlo import BLOCK, run_mc
-from multilat.parallel import dask_map, map_from_options, process_map
+from multilat.parallel import dask_map, map_from_options, process_map, thread_map
 
 
 def eq3_error_m(rf, crosstalk, ampm, noise):
@@ -106,3 +106,56 @@ def test_option_errors():
     with pytest.raises(MultilatError, match="workers"):
         with process_map(0):
             pass
+
+
+def _slow_square(x):
+    import time
+
+    time.sleep(0.002 * (x % 3))        # items finish out of order
+    return x * x
+
+
+def test_thread_map_keeps_order_and_falls_back():
+    items = list(range(23))
+    assert list(thread_map(_slow_square, items, threads=2)) == [x * x for x in items]
+    assert list(thread_map(_slow_square, items, threads=1)) == [x * x for x in items]
+    assert list(thread_map(_slow_square, [4], threads=2)) == [16]
+    assert list(thread_map(_slow_square, [], threads=2)) == []
+    assert list(thread_map(_slow_square, iter(items[:5]))) == [x * x for x in items[:5]]
+
+
+def test_thread_map_pool_threads_run_one_numba_thread():
+    """Item 0 runs in the caller with numba's threads; the pool's threads (when numba's threading layer
+    is thread-safe) each with one, so two items do not start a thread per core each."""
+    numba = pytest.importorskip("numba")
+    from multilat.parallel import _thread_safe_layer
+
+    from multilat.distance_errors import draw_errors, error_model   # runs a parallel kernel: the
+    from multilat import instrument                                 # threading layer becomes known
+    model = error_model(instrument.load_instrument("seed2020"), ("A",))
+    draw_errors(model, np.zeros(3, np.int64), np.ones(3), 4, np.random.default_rng(0))
+    seen = list(thread_map(lambda _: numba.get_num_threads(), range(6), threads=2))
+    assert seen[0] == numba.get_num_threads()
+    assert set(seen[1:]) == ({1} if _thread_safe_layer() else {numba.get_num_threads()})
+
+
+def test_thread_map_error_stops_the_rest():
+    """An item's error reaches the caller; the items not yet started are cancelled."""
+    import threading
+
+    started = []
+    lock = threading.Lock()
+
+    def work(x):
+        with lock:
+            started.append(x)
+        if x == 1:
+            raise ValueError("item 1")
+        import time
+
+        time.sleep(0.01)
+        return x
+
+    with pytest.raises(ValueError, match="item 1"):
+        list(thread_map(work, range(200), threads=2))
+    assert len(started) < 200

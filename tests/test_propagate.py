@@ -97,6 +97,20 @@ def test_identical_for_any_chunk_size(small_problem):
     np.testing.assert_array_equal(short.samples, runs[0].samples[:2000])
 
 
+def test_in_process_threads_identical_to_one_thread(small_problem):
+    """The default in-process run shares the blocks among threads (multilat.parallel.thread_map, one
+    numba thread each, the draw kernel and the solver then run serially inside a block); the builtin
+    map runs them one after the other with numba's threads inside each block: the same bits, for both
+    noises, with a partial last block."""
+    import builtins
+
+    for noise in ("model", "gaussian"):
+        a = propagate(small_problem, trials=5500, rng=21, noise=noise)
+        b = propagate(small_problem, trials=5500, rng=21, noise=noise, map=builtins.map)
+        _assert_same_run(a, b)
+        np.testing.assert_array_equal(a.samples, b.samples)
+
+
 def test_identical_whatever_the_map(small_problem):
     """A thread pool that runs chunks concurrently gives the same numbers as the in-process run."""
     a = propagate(small_problem, trials=4000, rng=11, noise="gaussian", chunk_size=1000)

@@ -181,7 +181,7 @@ def _one_error(L, x, c9, transit):
     return tele + head + target
 
 
-@njit(cache=True, parallel=True)
+@njit(cache=True, parallel=True, nogil=True)
 def _kernel(seed, first_row, n, distance_m, head_row, kind, p0, p1, const, transit, out):
     m = distance_m.shape[0]
     for t in prange(n):

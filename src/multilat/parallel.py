@@ -36,7 +36,7 @@ from collections.abc import Callable, Iterable, Iterator
 
 from multilat.errors import MultilatError
 
-__all__ = ["DaskMap", "dask_map", "process_map", "map_from_options", "parse_scheduler_address",
+__all__ = ["DaskMap", "dask_map", "process_map", "thread_map", "map_from_options", "parse_scheduler_address",
            "probe_scheduler"]
 
 #: Seconds to wait for a TCP connection to a scheduler and for its Dask handshake.
@@ -217,6 +217,60 @@ def _restore_environ(saved: dict) -> None:
             os.environ.pop(key, None)
         else:
             os.environ[key] = value
+
+
+def _thread_safe_layer() -> bool:
+    """True when numba's threading layer (known once a parallel kernel has run) accepts parallel
+    kernels launched from several threads at once: OpenMP or TBB, not workqueue (which aborts)."""
+    try:
+        import numba
+
+        return numba.threading_layer() in ("omp", "tbb")
+    except Exception:          # numba missing, or no parallel kernel has run yet
+        return False
+
+
+def _one_numba_thread() -> None:
+    from multilat._numba import HAVE_NUMBA
+
+    if HAVE_NUMBA:
+        import numba
+
+        numba.set_num_threads(1)      # thread-local: this pool thread's parallel kernels run serially
+
+
+def thread_map(func: Callable, iterable: Iterable, threads: int | None = None) -> Iterator:
+    """Ordered, lazy ``map`` over a pool of threads, for items whose work releases the GIL (numba
+    kernels compiled ``nogil``, numpy's random draws, sorts and reductions).
+
+    The first item runs in the calling thread, where numba's parallel kernels keep their own threads
+    (numba loads its cached kernels there, and its threading layer becomes known). The others run in
+    ``threads`` pool threads (default: numba's thread count, the cores), each with one numba thread,
+    so the cores are shared by items instead of inside each one. Without numba, with a thread-unsafe
+    threading layer (workqueue), one thread, or a single item: the builtin ``map``. Results come in
+    input order; they do not depend on the threads when each item seeds its own generator.
+    """
+    from multilat._numba import HAVE_NUMBA, get_num_threads
+
+    items = list(iterable)
+    if threads is None:
+        threads = get_num_threads() if HAVE_NUMBA else 1
+    if not items:
+        return
+    yield func(items[0])
+    if threads < 2 or len(items) < 2 or not _thread_safe_layer():
+        yield from map(func, items[1:])
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    pool = ThreadPoolExecutor(min(threads, len(items) - 1), initializer=_one_numba_thread)
+    try:
+        futures = [pool.submit(func, it) for it in items[1:]]
+        for i, f in enumerate(futures):
+            yield f.result()
+            futures[i] = None          # release each result once read
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)   # an error or an interrupt: nothing more starts
 
 
 @contextlib.contextmanager

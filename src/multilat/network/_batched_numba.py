@@ -25,7 +25,7 @@ def _store4(v, i, a0, a1, a2, a3):  # pragma: no cover - jit
     v[4 * i + 3] = a3
 
 
-@njit(parallel=True, cache=True, fastmath=False)
+@njit(parallel=True, cache=True, fastmath=False, nogil=True)
 def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pragma: no cover - jit
     n, m = d.shape
     s = h.shape[1]
@@ -146,7 +146,7 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
     return iters, last, vtpv
 
 
-@njit(parallel=True, cache=True)
+@njit(parallel=True, cache=True, nogil=True)
 def apply_inner(pts, idx, x0c, proj, c0, iterations):  # pragma: no cover - jit
     """Rigid least-squares fit of ``pts[:, idx]`` onto ``x0c + c0`` per trial, in place.
 

@@ -423,10 +423,11 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         numerical tolerance of its standard uncertainty (``ndigits`` significant digits), or
         ``max_trials`` is reached. Quantities held by the datum (3-2-1) are not watched.
     chunk_size : int
-        Trials per unit of parallel work, rounded up to whole blocks. Only distributes the work: the
-        numbers do not depend on it.
+        Trials per unit of work handed to ``map``, rounded up to whole blocks. Only distributes the
+        work: the numbers do not depend on it.
     map : callable or object with ``.map``, optional
-        Ordered map for the chunks (:func:`multilat.parallel.map_from_options`); default in-process.
+        Ordered map for the chunks (:func:`multilat.parallel.map_from_options`). Default: in-process,
+        block by block in numba's threads (:func:`multilat.parallel.thread_map`; one thread per core).
     progress : callable(int), optional
         Called with the number of trials finished after each chunk (each batch when adaptive).
     keep_samples : bool
@@ -479,11 +480,16 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
     if limit * k * 4 > max_memory_bytes:   # float32 samples (statistics are computed per column block)
         raise MultilatError(f"{limit} trials x {k} outputs would need {limit * k * 4 / 2**30:.1f} GiB of "
                             "samples; use fewer trials")
-    mapper = resolve_map(map)
+    if map is None:     # in-process: the blocks shared by threads (the kernels release the GIL)
+        from multilat.parallel import thread_map
+
+        mapper, unit = thread_map, BLOCK
+    else:
+        mapper, unit = resolve_map(map), chunk_size
 
     def items(trials_, first_block=0):
         return [(spec, entropy, key, c0, c1, trials_)
-                for c0, c1 in chunk_ranges(trials_, chunk_size, BLOCK, first_block=first_block)]
+                for c0, c1 in chunk_ranges(trials_, unit, BLOCK, first_block=first_block)]
 
     blocks = []          # per-block results, in block order
     done = 0
