@@ -18,6 +18,9 @@ Rows (each beside its baseline, same run):
 * ``cli_propagate_model_dask2``: the model command with ``--workers 2`` (a local Dask cluster) against
   the in-process command of the row above (ratio = in-process time / Dask time). Goal: >= 1.8x.
 
+With ``BENCH_BASELINE_SRC=/path/to/old/src`` the model and gaussian commands also run on that tree,
+interleaved with the current one (rows gain ``before_median_s`` and ``before_over_after``).
+
 Each row records the 1-minute load average before it ran (the machine is shared: compare ratios).
 Quick mode: 20 000 trials, one repeat; full: 200 000 trials, median of 3.
 """
@@ -41,13 +44,42 @@ def _median(f, reps):
     return median_time(f, reps)[0]
 
 
-def _command(*args):
+#: With ``BENCH_BASELINE_SRC=/path/to/old/src`` the two in-process commands also run on that source
+#: tree, interleaved with the current one (A B A B ...: the shared machine's drifts hit both alike);
+#: the rows then record ``before_median_s`` and ``before_over_after``.
+BASE_SRC = os.environ.get("BENCH_BASELINE_SRC")
+
+
+def _command(*args, src=None):
     env = dict(os.environ, OPENBLAS_NUM_THREADS="1")
+    if src:
+        pp = os.environ.get("PYTHONPATH")
+        env["PYTHONPATH"] = src if not pp else src + os.pathsep + pp
 
     def run():
         subprocess.run([*CLI, "propagate", "small-volume", *args, "--json"], check=True, env=env,
                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     return run
+
+
+def _interleaved(args, reps):
+    """Median wall time of the command (current tree) and, with BENCH_BASELINE_SRC, of the baseline
+    tree's, run alternately; extra keys for the row."""
+    import time
+
+    now, before = [], []
+    cmds = [(_command(*args), now)] + ([(_command(*args, src=BASE_SRC), before)] if BASE_SRC else [])
+    for _ in range(reps):
+        for f, out in cmds:
+            t0 = time.perf_counter()
+            f()
+            out.append(time.perf_counter() - t0)
+    med = float(np.median(now))
+    if not before:
+        return med, {}
+    mb = float(np.median(before))
+    return med, {"before_median_s": mb, "before_over_after": mb / med, "before_src": BASE_SRC,
+                 "runs_s": now, "before_runs_s": before}
 
 
 def _row(name, t, baseline, tb, trials, **extra):
@@ -105,14 +137,16 @@ def run(quick: bool = False) -> list[dict]:
                      n_gen, load_avg_1min=load))
 
     _command("--trials", "2000")()                                    # warm caches once
+    if BASE_SRC:
+        _command("--trials", "2000", src=BASE_SRC)()
     load = load_avg()
-    t_model = _median(_command("--trials", str(trials)), reps)
+    t_model, ex = _interleaved(("--trials", str(trials)), reps)
     rows.append(_row("cli_propagate_model", t_model, "batched solver alone (in-process)", t_solve, trials,
-                     load_avg_1min=load, goal_trials_per_s=1e5))
+                     load_avg_1min=load, goal_trials_per_s=1e5, **ex))
     load = load_avg()
-    t_gauss = _median(_command("--trials", str(trials), "--noise", "gaussian"), reps)
+    t_gauss, ex = _interleaved(("--trials", str(trials), "--noise", "gaussian"), reps)
     rows.append(_row("cli_propagate_gaussian", t_gauss, "batched solver alone (in-process)", t_solve, trials,
-                     load_avg_1min=load, goal_trials_per_s=1.5e5))
+                     load_avg_1min=load, goal_trials_per_s=1.5e5, **ex))
     load = load_avg()
     t_dask = _median(_command("--trials", str(trials), "--workers", "2"), reps)
     rows.append(_row("cli_propagate_model_dask2", t_dask, "the same command in-process", t_model, trials,
