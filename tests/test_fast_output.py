@@ -140,7 +140,7 @@ def test_cli_json_equals_the_library_document(capsys, tmp_path):
 # ----------------------------------------------------------------------------- statistics kernels
 @pytest.fixture
 def kernels_always(monkeypatch):
-    from multilat.network import _sparse_kernels as K
+    from multilat.network import _covariance_kernels as K
 
     if not K.HAVE_NUMBA:
         pytest.skip("numba not installed: the numpy path is the only one")
@@ -261,7 +261,7 @@ def test_covariance_product_over_the_touched_targets_only_is_the_full_sum(kernel
     """``cov_times`` summing only over the observations of the targets a vector touches (the snooping
     rounds' design rows and generators) gives the bits of the sum over all observations; a vector
     without target part sums over none."""
-    from multilat.network import _sparse_kernels as K
+    from multilat.network import _covariance_kernels as K
 
     net, obs = _network(t=200, s=8, rng=6)
     res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False,

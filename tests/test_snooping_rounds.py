@@ -132,7 +132,7 @@ def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch
     from types import SimpleNamespace
 
     if kernels:
-        from multilat.network import _sparse_kernels as K
+        from multilat.network import _covariance_kernels as K
         from multilat.network import covariance as C
 
         if not K.HAVE_NUMBA:
@@ -165,7 +165,7 @@ def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch
 def test_downdated_rounds_through_the_compiled_kernels(monkeypatch, downdates):
     """The same agreement with the hat rows, covariance products and residuals from the compiled
     kernels (what networks above 10 000 distances run), several downdates between adjustments."""
-    from multilat.network import _sparse_kernels as K
+    from multilat.network import _covariance_kernels as K
     from multilat.network import covariance as C
 
     if not K.HAVE_NUMBA:

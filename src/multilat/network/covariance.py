@@ -23,7 +23,7 @@ from multilat.network.statistics import correlated_with
 __all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS"]
 
 #: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
-#: from the compiled kernels of :mod:`multilat.network._sparse_kernels` (numba, when installed); smaller
+#: from the compiled kernels of :mod:`multilat.network._covariance_kernels` (numba, when installed); smaller
 #: ones from the numpy code below (no compile/load cost; the tests compare the two to 1e-12).
 KERNELS_ABOVE_OBS = 10_000
 
@@ -32,7 +32,7 @@ def _kernels(m: int):
     """The compiled kernels module for a network of ``m`` observations, or None (numpy path)."""
     if m < KERNELS_ABOVE_OBS:
         return None
-    from multilat.network import _sparse_kernels as K
+    from multilat.network import _covariance_kernels as K
 
     return K if K.HAVE_NUMBA else None
 

@@ -102,8 +102,9 @@ def residuals(distance_m, station_xyz_m, target_xyz_m, offset_m, scale, station_
     if cost == "distance":
         from multilat.network.covariance import _kernels     # lazy: covariance imports this module
 
-        K = _kernels(len(station_index))
-        if K is not None:
+        if _kernels(len(station_index)) is not None:     # the same size rule as the statistics
+            from multilat.network import _sparse_kernels as K
+
             out = np.empty(len(station_index))
             K.distance_residuals(np.ascontiguousarray(station_xyz_m, float), np.ascontiguousarray(target_xyz_m, float),
                                  np.asarray(offset_m, float), np.asarray(scale, float), station_index,

@@ -41,8 +41,9 @@ def whitened(problem: Problem, p: Params):
     if problem.cost == "distance":
         from multilat.network.covariance import _kernels
 
-        K = _kernels(o.n_obs)
-        if K is not None:
+        if _kernels(o.n_obs) is not None:     # the same size rule as the statistics
+            from multilat.network import _sparse_kernels as K
+
             m = o.n_obs
             r_w, Js_w, Jt_w = np.empty(m), np.empty((m, 5)), np.empty((m, 3))
             c = np.ascontiguousarray
