@@ -17,6 +17,8 @@ Rows (each beside its baseline, same run):
   general time: below 1, the price of generality).
 * ``cli_propagate_model_dask2``: the model command with ``--workers 2`` (a local Dask cluster) against
   the in-process command of the row above (ratio = in-process time / Dask time). Goal: >= 1.8x.
+* ``cli_propagate_model_dask2_over_dask1``: ``--workers 2`` against ``--workers 1`` (Dask's scaling
+  with its worker count), 5x the trials in full mode, one run each.
 
 With ``BENCH_BASELINE_SRC=/path/to/old/src`` the model and gaussian commands also run on that tree,
 interleaved with the current one (rows gain ``before_median_s`` and ``before_over_after``).
@@ -151,6 +153,15 @@ def run(quick: bool = False) -> list[dict]:
     t_dask = _median(_command("--trials", str(trials), "--workers", "2"), reps)
     rows.append(_row("cli_propagate_model_dask2", t_dask, "the same command in-process", t_model, trials,
                      load_avg_1min=load, goal_speedup=1.8))
+    # Dask's own scaling: 2 worker processes over 1 (the in-process run above already uses both cores,
+    # so no number of processes on 2 cores can beat it by 1.8x); a longer run, where the cluster start
+    # (~2 s) counts less
+    n_dask = trials if quick else 5 * trials
+    load = load_avg()
+    t_d2 = _median(_command("--trials", str(n_dask), "--workers", "2"), 1)
+    t_d1 = _median(_command("--trials", str(n_dask), "--workers", "1"), 1)
+    rows.append(_row("cli_propagate_model_dask2_over_dask1", t_d2, "the same command, one Dask worker", t_d1,
+                     n_dask, load_avg_1min=load))
     return rows
 
 
