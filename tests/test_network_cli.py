@@ -152,6 +152,33 @@ def test_interrupted_out_leaves_no_half_files(tmp_path, monkeypatch, capsys):
     assert not out_dir.exists() and list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("signal_exc, rc, said", [(KeyboardInterrupt, 130, "interrupted"),
+                                                   ("terminated", 143, "terminated")])
+def test_signal_wrapped_by_numba_is_still_the_signal(tmp_path, monkeypatch, capsys, signal_exc, rc, said):
+    """A signal that lands while numba unpickles or runs a compiled function surfaces as a SystemError
+    ("... returned a result with an exception set") caused by the signal's exception (seen with Ctrl-C
+    2 s into `propagate`): still an interruption (130) or a termination (143), not an internal error;
+    --out left uncreated."""
+    import multilat.report.network_figures as nf
+    from multilat.cli.app import Terminated
+
+    sig = Terminated if signal_exc == "terminated" else signal_exc
+
+    def boom(res, out_dir):
+        try:
+            raise sig()
+        except BaseException as e:
+            raise SystemError("CPUDispatcher(<function solve_frozen>) returned a result with an exception "
+                              "set") from e
+
+    monkeypatch.setattr(nf, "save_figures", boom)
+    out_dir = tmp_path / "res"
+    assert main(["adjust", str(OBS), "--points", str(PTS), "--out", str(out_dir)]) == rc
+    err = capsys.readouterr().err
+    assert said in err and "internal error" not in err
+    assert not out_dir.exists() and list(tmp_path.iterdir()) == []
+
+
 def test_angles_read_and_figures_take_axes(tmp_path):
     import matplotlib
 

@@ -146,6 +146,19 @@ def _on_sigterm(signum, frame):
     raise Terminated()
 
 
+def _signal_behind(exc: BaseException):
+    """The KeyboardInterrupt or :class:`Terminated` behind ``exc``, if any: a signal that arrives while
+    numba loads or runs a compiled function can surface as a ``SystemError`` ("returned a result with an
+    exception set") whose cause is the signal's exception."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, (KeyboardInterrupt, Terminated)):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def _error(message: str) -> None:
     err_console.print(f"error: {message}", soft_wrap=True)
 
@@ -204,6 +217,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     except Exception as exc:  # noqa: BLE001  the last guard: one line, never a traceback
         import numpy as np
+
+        sig = _signal_behind(exc)
+        if isinstance(sig, KeyboardInterrupt):
+            _error("interrupted")
+            return 130
+        if isinstance(sig, Terminated):
+            _error("terminated (SIGTERM); no output written")
+            return 143
 
         if isinstance(exc, (np.linalg.LinAlgError, FloatingPointError, OverflowError)):
             _error(f"numerical failure ({format_error(exc)}): the problem is singular or overflows for "
