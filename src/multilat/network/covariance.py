@@ -28,13 +28,24 @@ __all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS"]
 KERNELS_ABOVE_OBS = 10_000
 
 
-def _kernels(m: int):
-    """The compiled kernels module for a network of ``m`` observations, or None (numpy path)."""
+def compiled_for(m: int) -> bool:
+    """Whether a network of ``m`` observations runs the compiled kernels (its statistics here, its
+    residuals and Jacobian in :mod:`multilat.network.model` and the solve's system): at least
+    :data:`KERNELS_ABOVE_OBS` observations and numba installed (not imported below the size)."""
     if m < KERNELS_ABOVE_OBS:
+        return False
+    from multilat._numba import HAVE_NUMBA
+
+    return HAVE_NUMBA
+
+
+def _kernels(m: int):
+    """The compiled statistics kernels for a network of ``m`` observations, or None (numpy path)."""
+    if not compiled_for(m):
         return None
     from multilat.network import _covariance_kernels as K
 
-    return K if K.HAVE_NUMBA else None
+    return K
 
 
 class NetworkCovariance:

@@ -100,9 +100,9 @@ def residuals(distance_m, station_xyz_m, target_xyz_m, offset_m, scale, station_
     """The residuals of :func:`residuals_and_jacobian` without the Jacobian (for the cost of a trial step);
     compiled for large networks (the same operations, bit for bit: ``tests/test_fast_output.py``)."""
     if cost == "distance":
-        from multilat.network.covariance import _kernels     # lazy: covariance imports this module
+        from multilat.network.covariance import compiled_for     # lazy: covariance imports this module
 
-        if _kernels(len(station_index)) is not None:     # the same size rule as the statistics
+        if compiled_for(len(station_index)):
             from multilat.network import _sparse_kernels as K
 
             out = np.empty(len(station_index))

@@ -39,9 +39,9 @@ def whitened(problem: Problem, p: Params):
     compiled pass for large networks and the distance cost: the same numbers, tested)."""
     o = problem.obs
     if problem.cost == "distance":
-        from multilat.network.covariance import _kernels
+        from multilat.network.covariance import compiled_for
 
-        if _kernels(o.n_obs) is not None:     # the same size rule as the statistics
+        if compiled_for(o.n_obs):
             from multilat.network import _sparse_kernels as K
 
             m = o.n_obs
