@@ -137,6 +137,29 @@ def test_stations_collinear_with_a_target():
             adjust(_obs(H, T, np.zeros(5), pairs), initial=Start(H, T, np.zeros(5)))
 
 
+@pytest.mark.parametrize("solver, compiled", [("dense", False), ("sparse", False), ("sparse", True)])
+def test_stations_collinear_with_a_target_on_every_back_end(monkeypatch, solver, compiled):
+    """The same target named by the dense and the sparse back end, and with the blocks' compiled
+    eigenvalue test (above loop.KERNEL_MIN_TARGETS free targets; lowered here). The cases run one after
+    the other in one process: the sparse assembly's singular block (a zero determinant) once left a
+    ZeroDivisionError pending in numba's parallel region, and the next compiled call failed with
+    "SystemError: ... returned a result with an exception set" (fixed by IEEE division,
+    multilat._numba.njit)."""
+    from multilat.network.solve import loop
+
+    if compiled:
+        monkeypatch.setattr(loop, "KERNEL_MIN_TARGETS", 0)
+    rng = np.random.default_rng(3)
+    H = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 2, 1], [0.5, 1, 2]], float)
+    T = rng.uniform(0.3, 1.8, (14, 3))
+    T[0] = [5.0, 0, 0]
+    pairs = [(i, j) for j in range(1, 14) for i in range(5)] + [(0, 0), (1, 0), (2, 0)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with pytest.raises(MultilatError, match="target 'T0' is not determined"):
+            adjust(_obs(H, T, np.zeros(5), pairs), initial=Start(H, T, np.zeros(5)), solver=solver)
+
+
 def _ring_network(h_m, *, s=5, t=15, sigma=5e-6, seed=1):
     """5 stations on a 1.2 m ring lifted off its plane by an RMS of ``h_m``, 15 targets in a box."""
     rng = np.random.default_rng(seed)

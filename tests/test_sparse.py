@@ -79,12 +79,24 @@ def test_python_and_numba_kernels_agree():
     outs = []
     for f in (K.assemble, K.assemble.py_func):
         u = np.empty((len(w), 3))
+        nblk = np.empty((t, 3, 3))
         ninv = np.empty((t, 3, 3))
         gt = np.empty((t, 3))
-        sm, gp, vt, dmin = f(h, o, tg, net.distance_m, w, net.station_index, tptr, u, ninv, gt, 2, 4, 1e-3)
-        outs.append((sm, gp, vt, ninv, gt))
+        sm, gp, vt, dmin = f(h, o, tg, net.distance_m, w, net.station_index, tptr, u, nblk, ninv, gt, 2, 4,
+                             1e-3)
+        outs.append((sm, gp, vt, nblk, ninv, gt))
     for a, b in zip(*outs):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
+    # the blocks: sum over the target's observations of w u u^T, the diagonal damped by 1 + 1e-3, from
+    # the station -> target directions computed here; their inverses: the kernel's ninv
+    d = h[net.station_index] - tg[net.target_index]
+    uu = d / np.linalg.norm(d, axis=1)[:, None]
+    want = np.zeros((t, 3, 3))
+    np.add.at(want, net.target_index, w[:, None, None] * uu[:, :, None] * uu[:, None, :])
+    want[:, np.arange(3), np.arange(3)] *= 1.0 + 1e-3
+    np.testing.assert_allclose(outs[0][3], want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
+    np.testing.assert_allclose(np.einsum("tij,tjk->tik", outs[0][3], outs[0][4]), np.broadcast_to(np.eye(3), (t, 3, 3)),
+                               atol=1e-9)
 
 
 def test_fast_reader_matches_the_strict_reader(tmp_path):

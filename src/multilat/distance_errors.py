@@ -18,6 +18,9 @@ check that the two agree in distribution (moments, quantiles) within Monte Carlo
 
 The air group is not included (as in :func:`~multilat.budget.sample_distance_errors`).
 Without numba the same loop runs as plain Python (slow; for tests of the formulas only).
+
+IEEE division (``multilat._numba.njit``: ``error_model="numpy"``): a zero divisor gives inf or nan, never an
+exception out of a parallel region.
 """
 
 from __future__ import annotations

@@ -3,12 +3,15 @@
 Same arithmetic as ``BatchedNetwork._step(method="frozen")``: exact gradient of each trial, frozen
 Schur-reduced normal matrix of the nominal solution; one pass over the observations per iteration,
 trials in parallel (``prange``). The tests compare it with the numpy path.
+
+IEEE division (``multilat._numba.njit``: ``error_model="numpy"``): a zero divisor gives inf or nan, never an
+exception out of a parallel region.
 """
 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit, prange
+from multilat._numba import njit, prange
 
 
 @njit(cache=True, inline="always")

@@ -5,6 +5,9 @@ grouped by target, as in :mod:`multilat.network._sparse_kernels` (the solve).
 
 Compiled with numba when it is installed; otherwise the same functions run as plain Python (slow,
 but identical arithmetic). The tests compare them with the numpy path of ``covariance`` to 1e-12.
+
+IEEE division (``multilat._numba.njit``: ``error_model="numpy"``): a zero divisor gives inf or nan, never an
+exception out of a parallel region.
 """
 
 from __future__ import annotations

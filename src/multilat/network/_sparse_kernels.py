@@ -6,6 +6,9 @@ but identical arithmetic — the tests run a tiny network both ways).
 
 Notation: observation ``k`` of target ``j`` (``tptr[j] <= k < tptr[j+1]``) from station ``i = si[k]``;
 ``u_k`` unit vector target -> station; station/offset row ``a_k = [u_k, 1]``; weight ``w_k``.
+
+IEEE division (``multilat._numba.njit``: ``error_model="numpy"``): a zero divisor gives inf or nan, never an
+exception out of a parallel region.
 """
 
 from __future__ import annotations
@@ -64,13 +67,14 @@ def _sub_outer(scc, r0, c0, cc, x0, x1, x2, y0, y1, y2):
 
 
 @njit(parallel=True, cache=True)
-def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
+def assemble(h, o, tg, d, w, si, tptr, u, nblk, ninv, gt, nchunks, maxk, damping):
     """Full Gauss-Newton assembly at the current point.
 
     ``damping``: Levenberg-Marquardt factor applied to the diagonal of every target block
     (``N_jj[a, a] *= 1 + damping``) before its inverse; the caller damps the station diagonal.
 
-    Writes ``u`` (m, 3), ``ninv`` (t, 3, 3), ``gt`` (t, 3) = ``-sum w r u`` per target; returns the
+    Writes ``u`` (m, 3), the target blocks ``nblk`` (t, 3, 3) (damped) and their inverses ``ninv``,
+    ``gt`` (t, 3) = ``-sum w r u`` per target; returns the
     reduced system ``S`` (4s, 4s) (no datum), the reduced gradient ``gp`` (4s,), ``vtpv``, and the
     smallest target-block determinant relative to its trace cubed (conditioning check).
     """
@@ -129,6 +133,16 @@ def assemble(h, o, tg, d, w, si, tptr, u, ninv, gt, nchunks, maxk, damping):
                 n00 *= 1.0 + damping
                 n11 *= 1.0 + damping
                 n22 *= 1.0 + damping
+            bj = nblk[j]
+            bj[0, 0] = n00
+            bj[0, 1] = n01
+            bj[0, 2] = n02
+            bj[1, 0] = n01
+            bj[1, 1] = n11
+            bj[1, 2] = n12
+            bj[2, 0] = n02
+            bj[2, 1] = n12
+            bj[2, 2] = n22
             nj = ninv[j]
             det = _inv3(n00, n01, n02, n11, n12, n22, nj)
             tr = n00 + n11 + n22

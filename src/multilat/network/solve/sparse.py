@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat.network.model import Q, inv3, segment_sum
+from multilat.network.model import Q, segment_sum
 from multilat.network.problem import Params, Problem
 from multilat.network.solve.system import Assembly
 
@@ -81,9 +81,10 @@ class SparseBackend:
         off = np.ascontiguousarray(p.offset_m, dtype=float)
         tg = np.ascontiguousarray(p.target_xyz_m, dtype=float)
         u = np.empty((m, 3))
+        Ntt = np.empty((t, 3, 3))
         ninv = np.empty((t, 3, 3))
         gt = np.empty((t, 3))
-        sm, gp, vtpv, _ = self.K.assemble(h, off, tg, self.d, self.w, self.si, self.tptr, u, ninv, gt,
+        sm, gp, vtpv, _ = self.K.assemble(h, off, tg, self.d, self.w, self.si, self.tptr, u, Ntt, ninv, gt,
                                      self.nch, self.maxk, float(damping))
         if damping:
             a2 = np.concatenate([u * u, np.ones((m, 1))], axis=1) * self.w[:, None]
@@ -99,6 +100,4 @@ class SparseBackend:
             self.K.back_substitute(np.ascontiguousarray(dg[idx4]), gt, ninv, u, w, si, tptr, dt)
             return dt
 
-        with np.errstate(divide="ignore", invalid="ignore"):
-            Ntt = inv3(ninv)
         return Assembly(N=N, b=b, Ntt=Ntt, Ntt_inv=ninv, vtpv=float(vtpv), back_substitute=back)
