@@ -124,24 +124,12 @@ def test_disconnected_network():
         adjust(_obs(H, T, off, pairs), initial=Start(H, T, off))
 
 
-def test_stations_collinear_with_a_target():
-    # three stations only see target T0, and they lie on one line through it: T0 undetermined
-    rng = np.random.default_rng(3)
-    H = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [1, 2, 1], [0.5, 1, 2]], float)
-    T = rng.uniform(0.3, 1.8, (14, 3))
-    T[0] = [5.0, 0, 0]
-    pairs = [(i, j) for j in range(1, 14) for i in range(5)] + [(0, 0), (1, 0), (2, 0)]
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        with pytest.raises(MultilatError, match="target 'T0' is not determined"):
-            adjust(_obs(H, T, np.zeros(5), pairs), initial=Start(H, T, np.zeros(5)))
-
-
 @pytest.mark.parametrize("solver, compiled", [("dense", False), ("sparse", False), ("sparse", True)])
 def test_stations_collinear_with_a_target_on_every_back_end(monkeypatch, solver, compiled):
-    """The same target named by the dense and the sparse back end, and with the blocks' compiled
-    eigenvalue test (above loop.KERNEL_MIN_TARGETS free targets; lowered here). The cases run one after
-    the other in one process: the sparse assembly's singular block (a zero determinant) once left a
+    """Three stations only see target T0, and they lie on one line through it: T0 is undetermined,
+    named by the dense and the sparse back end, and with the blocks' compiled eigenvalue test (above
+    loop.KERNEL_MIN_TARGETS free targets; lowered here). The cases run one after the other in one
+    process: the sparse assembly's singular block (a zero determinant) once left a
     ZeroDivisionError pending in numba's parallel region, and the next compiled call failed with
     "SystemError: ... returned a result with an exception set" (fixed by IEEE division,
     multilat._numba.njit)."""
