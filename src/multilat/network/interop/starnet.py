@@ -13,7 +13,8 @@ STAR*NET Input Data Types and Inline Options"): one record per line, ``#`` start
     D A-1  0.77560520 0.0000047000                   (From-To  slope distance  std error)
 
 ``.ORDER EN`` puts easting before northing on ``C`` lines: multilat's x, y, z (east, north, up).
-The reader also takes ``.ORDER NE`` (Star*Net's default), ``.UNITS FeetUS/FeetInt``,
+The reader also takes ``.ORDER NE`` (Star*Net's default), ``.UNITS FeetUS/FeetInt`` (any other
+linear unit, e.g. ``Furlongs``, is refused by name; the angular ``DMS``/``Gons`` have no effect),
 ``.MULTIPLIER``, ``.SEP``, ``.DATA OFF/ON`` and ``.END`` (the rest of the file is not read); ``C`` lines with three numeric σ are read as
 approximate coordinates (their σ ignored, a note). Other data types (``A``, ``V``, ``B``, ``M``,
 ``BM``, ``DV``, ``DB``/``DN``/``DM``/``DE``, ``L``, ``G``, ``T``, ``SS``, ``E``, ``P``, ...), 2D
@@ -52,6 +53,12 @@ _CODES = {"A": "horizontal angles", "V": "vertical observations", "B": "bearings
           "TE": "traverses", "SS": "sideshots", "E": "elevations", "EH": "elevations",
           "P": "geodetic positions", "PH": "geodetic positions", "CH": "coordinates with "
           "ellipsoid heights", "I": "instrument setups", "F": "fixed-direction lines"}
+#: .UNITS words: linear units (metres per unit) and angular units (no effect on slope distances);
+#: any other word is refused by name
+_LINEAR_UNITS = {"M": 1.0, "METERS": 1.0, "METRES": 1.0, "METER": 1.0, "METRE": 1.0,
+                 "FEETUS": _US_FOOT, "US": _US_FOOT, "USFEET": _US_FOOT,
+                 "FEETINT": 0.3048, "INT": 0.3048, "FEET": 0.3048, "IFEET": 0.3048, "INTFEET": 0.3048}
+_ANGULAR_UNITS = ("DMS", "GONS", "GON")
 #: inline options read (full names; Star*Net accepts any unambiguous abbreviation)
 _INLINE_READ = ("UNITS", "ORDER", "3D", "2D", "3REDUCE", "LEVEL", "DELTA", "SEPARATOR",
                 "MULTIPLIER", "DATA", "END")
@@ -154,12 +161,12 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
                 break
             elif opt == "UNITS":
                 for a in args:
-                    if a.startswith("M"):
-                        unit = 1.0
-                    elif a in ("FEETUS", "US", "USFEET"):
-                        unit = _US_FOOT
-                    elif a in ("FEETINT", "INT", "FEET", "IFEET", "INTFEET"):
-                        unit = 0.3048
+                    if a in _LINEAR_UNITS:
+                        unit = _LINEAR_UNITS[a]
+                    elif a not in _ANGULAR_UNITS:
+                        raise MultilatError(f"{path}:{n}: .UNITS {a.title()} is not a unit multilat's reader knows "
+                                            "(linear: Meters, FeetUS, FeetInt; angular, no effect on distances: "
+                                            "DMS, Gons)")
             elif opt == "ORDER":
                 for a in args:
                     if a in ("EN", "NE"):
