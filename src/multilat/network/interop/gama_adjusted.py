@@ -232,8 +232,10 @@ def read_gama_adjustment(path) -> GamaAdjustment:
                             f"<{root.tag}>")
     err = root.find("error")
     if err is not None:
-        msg = re.sub(r"\s+", " ", err.child_text("description", "") or "")
-        raise MultilatError(f"{path}:{err.line}: gama-local reported an error: {msg}")
+        msg = re.sub(r"\s+", " ", " ".join(d.text.strip() for d in err.findall("description")))
+        where = err.child_text("lineNumber")
+        raise MultilatError(f"{path}:{err.line}: gama-local reported an error: {msg}"
+                            + (f" (line {where} of its input)" if where else ""))
     gp = root.find("network-general-parameters")
     ex, ey, az_sign, kappa_sign, kappa_x, y_sign = _frame(path, gp, root)
     summ = root.find("network-processing-summary")
@@ -292,7 +294,7 @@ def _points(path, coords, ex, ey):
                 if v is None:
                     raise MultilatError(f"{path}:{p.line}: point {pid!r} has no {c} (a 3D network "
                                         "is expected)")
-                vals.append(_float(path, v, f"{c} of {pid!r}"))
+                vals.append(_float(path, v, f"<{v.tag}> of point {pid!r}"))
             ids.append(pid)
             xyz.append(_to_enu(vals, ex, ey))
             if part == "fixed":
