@@ -2,7 +2,8 @@
 ``error:`` line naming FILE:LINE and the culprit, exit 2, nothing written.
 
 - NaN (or inf) in gama-local's adjusted output (coordinates, covariance, observations): was read.
-- Star*Net ``.UNITS Furlongs`` (any unit the reader does not know): was read as metres.
+- Star*Net ``.UNITS Furlongs`` (any unit the reader does not know): was read as metres; ``.ORDER``
+  words it does not know were skipped.
 - gama-local's set-wide instrument height ``<obs from_dh="1.500">`` over slope distances: was dropped.
 """
 
@@ -59,3 +60,11 @@ def test_gama_set_wide_instrument_height_is_refused(ws, tmp_path):
     (ws / "net.xml").write_text(bad)
     line = _nth_line(bad, 'from_dh="1.500"')
     ws.fails(["import", "gama", "{d}/net.xml", "-o", "{d}/imp"], f"net.xml:{line}:", "from_dh=1.5")
+
+
+def test_starnet_unknown_order_is_refused_by_name(ws):
+    """An ``.ORDER`` word the reader does not know was skipped (the coordinates then read in the order
+    before it)."""
+    bad = (DATA / "small_volume.dat").read_text().replace(".ORDER EN", ".ORDER ENZ")
+    (ws / "net.dat").write_text(bad)
+    ws.fails(["import", "starnet", "{d}/net.dat", "-o", "{d}/imp"], ".ORDER ENZ")

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -130,10 +131,61 @@ def _num(path, n, tok, what):
     return v
 
 
+@dataclass
+class _Options:
+    """The inline options in force while reading (Star*Net's defaults)."""
+
+    unit: float = 1.0
+    mult: float = 1.0
+    order_en: bool = False
+    sep: str = "-"
+    delta: bool = False
+    data_on: bool = True
+
+
+def _inline_option(path, n, tok, st: _Options) -> bool:
+    """Apply the inline option of line ``n`` to ``st`` (refusing what the reader does not model);
+    True at ``.END``."""
+    opt = _option(path, n, tok[0])
+    args = [a.upper() for a in tok[1:]]
+    if opt == "DATA":
+        st.data_on = not args or args[0] != "OFF"
+    elif not st.data_on:
+        return False
+    elif opt == "END":
+        return True
+    elif opt == "UNITS":
+        for a in args:
+            if a in _LINEAR_UNITS:
+                st.unit = _LINEAR_UNITS[a]
+            elif a not in _ANGULAR_UNITS:
+                raise MultilatError(f"{path}:{n}: .UNITS {a.title()} is not a unit multilat's reader knows "
+                                    "(linear: Meters, FeetUS, FeetInt; angular, no effect on distances: DMS, Gons)")
+    elif opt == "ORDER":
+        for a in args:
+            if a in ("EN", "NE"):
+                st.order_en = a == "EN"
+            elif a not in ("ATFROMTO", "FROMATTO"):
+                raise MultilatError(f"{path}:{n}: .ORDER {a} is not an order multilat's reader knows (EN, NE; "
+                                    "AtFromTo/FromAtTo, no effect on distances)")
+    elif opt in ("2D", "3REDUCE", "LEVEL"):
+        raise MultilatError(f"{path}:{n}: .{opt} mode is not supported: multilat reads 3D "
+                            "slope distances (.3D)")
+    elif opt == "DELTA":
+        st.delta = bool(args) and args[0] == "ON"
+    elif opt == "SEPARATOR":
+        if len(tok) != 2 or len(tok[1]) != 1:
+            raise MultilatError(f"{path}:{n}: .SEP needs one character")
+        st.sep = tok[1]
+    elif opt == "MULTIPLIER":
+        st.mult = _num(path, n, tok[1], ".MULTIPLIER") if len(tok) > 1 else 1.0
+    return False
+
+
 def read_starnet(path, *, sigma_m: float | None = None) -> Network:
     """Read a Star*Net ``.dat``: ``C`` (coordinates) and ``D`` (slope distances) lines. ``sigma_m``:
     σ for ``D`` lines without a standard error (or with ``&``, the default)."""
-    unit, mult, order_en, sep, delta, data_on = 1.0, 1.0, False, "-", False, True
+    st = _Options()
     declared, coords, fixed, rows, notes, offsets = {}, {}, [], [], [], None
     weighted = 0
     for n, raw in enumerate(read_text(path).splitlines(), 1):
@@ -151,42 +203,13 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
             continue
         tok = line.split()
         if tok[0].startswith("."):
-            opt = _option(path, n, tok[0])
-            args = [a.upper() for a in tok[1:]]
-            if opt == "DATA":
-                data_on = not args or args[0] != "OFF"
-            elif not data_on:
-                continue
-            elif opt == "END":
+            if _inline_option(path, n, tok, st):
                 break
-            elif opt == "UNITS":
-                for a in args:
-                    if a in _LINEAR_UNITS:
-                        unit = _LINEAR_UNITS[a]
-                    elif a not in _ANGULAR_UNITS:
-                        raise MultilatError(f"{path}:{n}: .UNITS {a.title()} is not a unit multilat's reader knows "
-                                            "(linear: Meters, FeetUS, FeetInt; angular, no effect on distances: "
-                                            "DMS, Gons)")
-            elif opt == "ORDER":
-                for a in args:
-                    if a in ("EN", "NE"):
-                        order_en = a == "EN"
-            elif opt in ("2D", "3REDUCE", "LEVEL"):
-                raise MultilatError(f"{path}:{n}: .{opt} mode is not supported: multilat reads 3D "
-                                    "slope distances (.3D)")
-            elif opt == "DELTA":
-                delta = bool(args) and args[0] == "ON"
-            elif opt == "SEPARATOR":
-                if len(tok) != 2 or len(tok[1]) != 1:
-                    raise MultilatError(f"{path}:{n}: .SEP needs one character")
-                sep = tok[1]
-            elif opt == "MULTIPLIER":
-                mult = _num(path, n, tok[1], ".MULTIPLIER") if len(tok) > 1 else 1.0
             continue
-        if not data_on:
+        if not st.data_on:
             continue
         code = tok[0].upper()
-        f = unit * mult
+        f = st.unit * st.mult
         if code == "C":
             if len(tok) < 5:
                 raise MultilatError(f"{path}:{n}: C line needs Station and three coordinates (3D)")
@@ -196,7 +219,7 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
                                     f"{declared[pid]})")
             declared[pid] = n
             c = [_num(path, n, t, "coordinate") * f for t in tok[2:5]]
-            coords[pid] = (c[0], c[1], c[2]) if order_en else (c[1], c[0], c[2])
+            coords[pid] = (c[0], c[1], c[2]) if st.order_en else (c[1], c[0], c[2])
             flags = tok[5:]
             if flags and all(t == "!" for t in flags):
                 fixed.append(pid)
@@ -206,12 +229,12 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
             elif any(t not in ("*", "&") for t in flags):
                 weighted += 1
         elif code == "D":
-            if delta:
+            if st.delta:
                 raise MultilatError(f"{path}:{n}: D line under .DELTA ON is a horizontal distance: "
                                     "not supported (multilat reads slope distances)")
-            if len(tok) < 3 or tok[1].count(sep) != 1:
-                raise MultilatError(f"{path}:{n}: D line needs From{sep}To and a distance")
-            a, b = tok[1].split(sep)
+            if len(tok) < 3 or tok[1].count(st.sep) != 1:
+                raise MultilatError(f"{path}:{n}: D line needs From{st.sep}To and a distance")
+            a, b = tok[1].split(st.sep)
             d = _num(path, n, tok[2], "distance") * f
             rest = tok[3:]
             hihts = [t for t in rest if "/" in t]
