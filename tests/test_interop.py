@@ -3,10 +3,9 @@ JAG3D flat files, Star*Net .dat.
 
 Independent values: the round trips compare with the CSV inputs themselves (to the printed
 precision, 1e-8 m for distances and coordinates, 1e-10 m for σ); the Gama output is gama-local's
-own adjustment (GNU Gama 1.18b, a separate least-squares program) of our export, compared with
-our adjustment; when ``gama-local`` is on PATH the export is adjusted again live. The schema test
-checks the export against the elements, attributes and enumerations of Gama's
-``gama-local.xsd`` v0.91 (written out here from the schema).
+own adjustment (GNU Gama 1.18b and 2.24, a separate least-squares program) of our export, compared
+with our adjustment; when ``gama-local`` is on PATH the export is adjusted again live. The export
+against Gama's schema: tests/test_interop_gama_schema.py.
 """
 
 import itertools
@@ -14,7 +13,6 @@ import re
 import json
 import shutil
 import subprocess
-import xml.etree.ElementTree as ET
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +32,10 @@ from multilat.network.interop.starnet import read_starnet, starnet_text, write_s
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 OBS = EX / "small_volume_obs.csv"
 PTS = EX / "small_volume_points.csv"
-GAMA_OUT = Path(__file__).resolve().parent / "data" / "interop" / "small_volume_gama_out.xml"
+DATA = Path(__file__).resolve().parent / "data" / "interop"
+GAMA_OUT = DATA / "small_volume_gama_out.xml"                  # gama-local 1.18b, the former export
+GAMA_OUT_224 = DATA / "small_volume_gama224_out.xml"          # gama-local 2.24, the current export
+GAMA_OUT_POST = DATA / "small_volume_gama224_aposteriori_out.xml"  # the same, sigma-apr 10, aposteriori
 
 D_TOL = 1e-8     # the formats' printed precision of distances and coordinates (8 decimals of m)
 S_TOL = 1e-10    # printed precision of σ (10 decimals of m; Gama: 7 decimals of mm)
@@ -150,64 +151,6 @@ def test_jag3d_reader_follows_jag3d_field_rules(tmp_path):
         read_jag3d(tmp_path / "p.txt", tmp_path / "o.txt")
 
 
-# ------------------------------------------------------------------------------ Gama's schema
-#: gama-local.xsd v0.91 (GNU Gama sources, xml/gama-local.xsd): the elements and attributes the
-#: export uses, with their enumerations (None: any xs:double / string)
-XSD = {
-    "gama-local": {},
-    "network": {"axes-xy": {"ne", "sw", "es", "wn", "en", "nw", "se", "ws"},
-                "angles": {"left-handed", "right-handed"}, "epoch": float},
-    "description": {},
-    "parameters": {"sigma-apr": float, "conf-pr": float, "tol-abs": float,
-                   "sigma-act": {"aposteriori", "apriori"},
-                   "update-constrained-coordinates": {"yes", "no"}, "cov-band": int,
-                   "algorithm": {"gso", "svd", "cholesky", "envelope"}},
-    "points-observations": {},
-    "point": {"id": str, "x": float, "y": float, "z": float,
-              "fix": {"xy", "XY", "z", "Z", "xyz", "XYZ", "XYz", "xyZ"},
-              "adj": {"xy", "XY", "z", "Z", "xyz", "XYZ", "XYz", "xyZ"}},
-    "obs": {"from": str, "orientation": float, "from_dh": str},
-    "s-distance": {"from": str, "to": str, "val": float, "stdev": float, "from_dh": float,
-                   "to_dh": float},
-}
-CHILDREN = {"gama-local": {"network"}, "network": {"description", "parameters", "points-observations"},
-            "points-observations": {"point", "obs"}, "obs": {"s-distance"}}
-REQUIRED = {"point": {"id"}, "s-distance": {"to", "val"}}
-
-
-def test_gama_export_follows_gama_local_xsd(net):
-    obs, pts, res = net
-    text = gama_local_text(obs, pts, offsets=_offsets(res), fixed=("B",))
-    root = ET.fromstring(text)
-    ns = "{http://www.gnu.org/software/gama/gama-local}"
-    assert root.tag == ns + "gama-local"
-
-    def walk(el):
-        tag = el.tag.removeprefix(ns)
-        assert tag in XSD, tag
-        for a, v in el.attrib.items():
-            allowed = XSD[tag].get(a)
-            assert allowed is not None, (tag, a)
-            if isinstance(allowed, set):
-                assert v in allowed, (tag, a, v)
-            elif allowed is float:
-                float(v)
-            elif allowed is int:
-                assert int(v) >= -1
-        assert REQUIRED.get(tag, set()) <= set(el.attrib), (tag, el.attrib)
-        for c in el:
-            assert c.tag.removeprefix(ns) in CHILDREN.get(tag, set()), (tag, c.tag)
-            walk(c)
-
-    walk(root)
-    sd = root.findall(f".//{ns}s-distance")
-    assert len(sd) == obs.n_obs
-    pt = {p.get("id"): p for p in root.iter(ns + "point")}
-    assert pt["B"].get("fix") == "XYZ" and pt["A"].get("adj") == "XYZ"
-    # stdev in mm (the manual: standard deviations of distances in millimetres)
-    assert float(sd[0].get("stdev")) == pytest.approx(obs.sigma_m[0] * 1e3)
-
-
 # ------------------------------------------------------------------------------ Gama's adjustment
 def _compare_with_gama(g, obs, pts, res):
     """gama-local's result (offsets fixed at ours) against our adjustment: datum-free quantities."""
@@ -235,12 +178,62 @@ def _compare_with_gama(g, obs, pts, res):
     return dmax
 
 
-def test_gama_adjusted_output_equals_our_adjustment(net):
-    """gama-local 1.18b's own adjustment of our export (tests/data/interop, made by
-    `multilat export gama OBS --result DIR` then `gama-local X --xml OUT`)."""
+@pytest.mark.parametrize("stored", [GAMA_OUT, GAMA_OUT_224], ids=["1.18b", "2.24"])
+def test_gama_adjusted_output_equals_our_adjustment(net, stored):
+    """gama-local's own adjustment of our export (tests/data/interop, made by
+    `multilat export gama OBS --result DIR` then `gama-local X --xml OUT`): 1.18b with the former
+    export (update-constrained-coordinates="yes"), 2.24 with the current one."""
     obs, pts, res = net
-    g = read_gama_adjustment(GAMA_OUT)
+    g = read_gama_adjustment(stored)
     _compare_with_gama(g, obs, pts, res)
+
+
+def test_redundancy_from_sigma_honours_sigma_act_and_sigma_apr(net):
+    """The same export adjusted by gama-local 2.24 with its defaults sigma-apr="10" and
+    sigma-act="aposteriori" (σ_adj scaled by σ0/σ_apr = 0.848): the redundancy numbers from σ_adj and
+    the inputs' σ equal those from Gama's printed f (3 decimals of a percent: |Δr| <= 2(1-f/100)·5e-6,
+    tolerance 1.1e-5) and ours; read as a-priori σ they were up to 0.28 off (1 - 0.848² of 1 - r)."""
+    obs, pts, res = net
+    g = read_gama_adjustment(GAMA_OUT_POST)
+    assert g.sigma_used == "aposteriori" and g.sigma_apriori == 10.0
+    assert g.sigma_ratio == pytest.approx(10.0 / 8.4778742, rel=1e-12)
+    fixed = adjust(obs, points=pts, offsets=_offsets(res))
+    key = {fixed.obs.label(k): k for k in range(fixed.obs.n_obs)}
+    idx = [key[f"{s}->{t}"] for s, t in zip(g.station, g.target)]
+    r = g.redundancy_from_sigma(fixed.obs.sigma_m[idx])
+    assert np.abs(r - g.redundancy).max() < 1.1e-5
+    assert np.abs(r - fixed.redundancy[idx]).max() < 1e-6      # σ_adj printed with 8 digits
+    apriori_reading = 1 - (g.adjusted_std_m / fixed.obs.sigma_m[idx]) ** 2
+    assert np.abs(apriori_reading - g.redundancy).max() > 0.1
+
+
+def test_gama_local_2_24_on_the_mixed_example_exported_with_levelled_trackers():
+    """examples/network/mixed exported with `--levelled AT1,AT2 --result DIR` (DIR: `adjust --levelled
+    AT1,AT2`) and adjusted by gama-local 2.24 (tests/data/interop/mixed_levelled_*). Its trackers are
+    tilted by ~0.01 rad, so the levelled model misfits (σ0 366 in both programs): a check that both
+    find the same least-squares minimum of the same model, offsets fixed at the file's values and no
+    data snooping. dof exactly; σ0 to 1e-6 (8 digits printed; seen 1.2e-7); target distances to
+    1 µm (Gama stops when its linearisation test passes, residuals ~366 σ: seen 0.28 µm); the
+    difference of the two orientations to 2e-7 rad (seen 5.5e-8)."""
+    from multilat.cli.network_cmd import with_levelled
+
+    text = (DATA / "mixed_levelled_export.xml").read_text()
+    off = {k: float(v) for k, v in re.findall(r"(\w+)=([-0-9.]+)", text.split("multilat-offsets-m:")[1].splitlines()[0])}
+    imp = read_gama_local(DATA / "mixed_levelled_export.xml")
+    obs = with_levelled(read_observations(EX / "mixed" / "obs.csv"), "AT1,AT2")
+    np.testing.assert_allclose(imp.obs.distance_m, obs.distance_m, atol=1e-8)
+    with pytest.warns(UserWarning, match="sigma0 366"):          # the misfit is named, as it should be
+        res = adjust(obs, points=imp.points, snooping=False, offsets=off)
+    g = read_gama_adjustment(DATA / "mixed_levelled_gama224_out.xml")
+    assert g.dof == res.dof == 82
+    assert g.sigma_aposteriori == pytest.approx(res.sigma0, rel=1e-6)
+    P = g.points().as_dict()
+    dmax = max(abs(np.linalg.norm(P[a] - P[b]) - np.linalg.norm(res.xyz(a) - res.xyz(b)))
+               for a, b in itertools.combinations(res.target_ids, 2))
+    assert dmax < 1e-6, dmax
+    k1, k2 = (res.orientations[s]["orientation_rad"][2] for s in ("AT1", "AT2"))
+    dk = (g.orientation_rad["AT1"] - g.orientation_rad["AT2"]) - (k1 - k2)
+    assert abs((dk + np.pi) % (2 * np.pi) - np.pi) < 2e-7
 
 
 @pytest.mark.skipif(shutil.which("gama-local") is None, reason="gama-local not installed "

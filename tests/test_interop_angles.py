@@ -218,8 +218,8 @@ def test_left_handed_directions_read_as_the_same_azimuths(mixed, tmp_path):
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda t: t.replace('<direction to="T1"', '<direction to="T1" from_dh="0.1"', 1),
-     r"<direction> from_dh=0.1 is not supported"),
+    (lambda t: t.replace('<z-angle to="T1"', '<z-angle to="T1" from_dh="0.1"', 1),
+     r"<z-angle> S1->T1 from_dh=0.1 is not supported"),
     (lambda t: t.replace('stdev="12.732395447" />', "/>", 1), r"<direction> S1->T1 has no stdev"),
     (lambda t: t.replace('<z-angle to="T1" val="', '<z-angle to="T1" val="2', 1), r"outside 0\.\.200 gon"),
     (lambda t: t.replace('<s-distance to="T1" val', '<s-distance to="T1" vol', 1)

@@ -1,7 +1,8 @@
 """GNU Gama: the ``gama-local`` XML input (write and read) and its adjusted XML output (read).
 
 Input format (GNU Gama manual, ch. 2 "XML input data format for gama-local"; schema
-``xml/gama-local.xsd`` v0.91 of the Gama sources)::
+``xml/gama-local.xsd`` of the Gama 2.24 sources, its version 1.01 plus the ``angular`` attribute
+of 1.02)::
 
     <gama-local xmlns="http://www.gnu.org/software/gama/gama-local">
     <network axes-xy="en" angles="right-handed">
@@ -17,10 +18,11 @@ Input format (GNU Gama manual, ch. 2 "XML input data format for gama-local"; sch
 Distances and coordinates are in metres, standard deviations of distances in **millimetres**.
 ``adj="XYZ"`` (capitals: *constrained*) makes every point a datum point of Gama's free network
 (the regularisation over constrained coordinates, as multilat's free datum over all points);
-``fix="XYZ"`` holds a point fixed. ``update-constrained-coordinates="yes"`` lets gama-local move
-the constrained points between its linearisation iterations (without it, gama-local 1.18b keeps
-them at the approximate values and does not converge from a start a few mm off);
-``cov-band="-1"``: the full covariance of the adjusted coordinates in the XML output (its default
+``fix="XYZ"`` holds a point fixed. gama-local moves the constrained points between its linearisation
+iterations (the default since 2.09; ``update-constrained-coordinates``, which switched it on
+before, was removed from the format in 2.10 and makes current gama-local refuse the file, so the
+export does not write it; gama-local before 2.09 keeps the constrained points at their approximate
+values, docs/interop.md); ``cov-band="-1"``: the full covariance of the adjusted coordinates in the XML output (its default
 there is a band of 1). ``axes-xy="en"``: Gama's x is east, y north, z up, the same
 right-handed axes as multilat's x, y, z; on import any ``axes-xy`` is turned to those axes.
 
@@ -56,6 +58,35 @@ _UNSUPPORTED = {"distance": "horizontal distances",
                 "coordinates": "observed coordinates", "vectors": "coordinate differences",
                 "vec": "coordinate differences", "cov-mat": "a covariance matrix of observations"}
 _AXES = {"n": (0.0, 1.0), "s": (0.0, -1.0), "e": (1.0, 0.0), "w": (-1.0, 0.0)}
+_READ = "read"
+_PROCESSING = "gama-local's processing or output setting: no effect on the network read"
+_EXTERN = "an external tag Gama copies to its output: no effect"
+#: every attribute of the elements the reader reads (xml/gama-local.xsd of Gama 2.24, the names
+#: kept in tests/data/interop/gama-local-xsd-2.24.json) and what the reader does with it: "read"
+#: (applied, or refused by value in the element's reader), or why it has no effect on the network;
+#: any other attribute is refused by name (:func:`_check_attributes`); the elements of
+#: :data:`_UNSUPPORTED` are refused whole
+ATTRIBUTES = {
+    "gama-local": {},
+    "network": {"axes-xy": _READ, "angles": _READ,
+                "epoch": "the epoch of the observations: a label, no effect on the network read"},
+    "description": {},
+    "parameters": {**{a: _PROCESSING for a in (
+        "sigma-apr", "conf-pr", "tol-abs", "sigma-act", "algorithm", "language", "encoding", "angular", "angles",
+        "latitude", "ellipsoid", "cov-band")},
+        "update-constrained-coordinates": _PROCESSING + " (gama-local before 2.10; current gama-local refuses it)"},
+    "points-observations": {"distance-stdev": _READ, "direction-stdev": _READ, "zenith-angle-stdev": _READ,
+                            "angle-stdev": "the default σ of <angle>, which is refused",
+                            "azimuth-stdev": "the default σ of <azimuth>, which is refused"},
+    "point": {"id": _READ, "x": _READ, "y": _READ, "z": _READ, "fix": _READ, "adj": _READ},
+    "obs": {"from": _READ, "from_dh": _READ,
+            "orientation": "Gama's approximate orientation of the set (a start value): no effect on the network"},
+    "s-distance": {**{a: _READ for a in ("from", "to", "val", "stdev", "from_dh", "to_dh")}, "extern": _EXTERN},
+    "z-angle": {**{a: _READ for a in ("from", "to", "val", "stdev", "from_dh", "to_dh")}, "extern": _EXTERN},
+    "direction": {**{a: _READ for a in ("to", "val", "stdev")}, "extern": _EXTERN,
+                  "from_dh": "Gama ignores heights on directions (a horizontal angle): no effect",
+                  "to_dh": "Gama ignores heights on directions (a horizontal angle): no effect"},
+}
 
 
 # ============================================================================ write
@@ -83,7 +114,7 @@ def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=()
            '<network axes-xy="en" angles="right-handed">',
            f"<description>\n{xml_escape(desc)}\n</description>",
            '<parameters sigma-apr="1" conf-pr="0.95" tol-abs="1000" sigma-act="apriori" '
-           'update-constrained-coordinates="yes" algorithm="svd" cov-band="-1" />',
+           'algorithm="svd" cov-band="-1" />',
            "<points-observations>"]
     fixed = set(fixed)
     for i in ids:
@@ -186,25 +217,27 @@ def read_gama_local(path) -> Network:
     levelled (Gama's instruments are: one orientation per station, the vertical known). Each angle
     joins the slope distance of the same station and target (multilat's observation row).
 
+    Every element and attribute of gama-local's input format is read or refused (:data:`ATTRIBUTES`).
     Refused with the element named: any other observation type (horizontal distances, angles,
     azimuths, height differences, observed coordinates and vectors, covariance matrices), non-zero
-    instrument/target heights, a station's directions in two ``<obs>`` sets (two orientation
-    unknowns), an angle without a slope distance beside it. An observation to a point without a
-    ``<point>`` element is an error ``FILE:LINE``."""
+    instrument/target heights on a distance or zenith angle (its own ``from_dh``/``to_dh`` or its set's
+    ``<obs from_dh>``; on a direction they are read and ignored, as gama-local ignores them), 2D or
+    height-only points (``fix``/``adj``), an attribute or element the format does not have there, a
+    station's directions in two ``<obs>`` sets (two orientation unknowns), an angle without a slope
+    distance beside it. An observation to a point without a ``<point>`` element is an error
+    ``FILE:LINE``."""
     root = parse_xml(path)
     if root.tag != "gama-local":
         raise MultilatError(f"{path}:{root.line}: expected a <gama-local> document, found <{root.tag}>"
                             + (" (the adjusted output: import it with --adjusted)"
                                if root.tag == "gama-local-adjustment" else ""))
-    net = root.find("network")
-    if net is None:
-        raise MultilatError(f"{path}:{root.line}: <gama-local> has no <network>")
+    net = _network(path, root)
     ex, ey = _axes(path, net, net.attrib.get("axes-xy"))
     sense = net.attrib.get("angles", "left-handed").strip()
     if sense not in ("left-handed", "right-handed"):
         raise MultilatError(f"{path}:{net.line}: angles={sense!r} must be left-handed or right-handed")
     declared, coords, fixed, rows, notes = {}, {}, [], [], []
-    arows, dir_sets = [], {}
+    arows, dir_sets, dir_heights = [], {}, 0
     offsets = None
     desc = net.child_text("description", "")
     for line in desc.splitlines():
@@ -215,18 +248,25 @@ def read_gama_local(path) -> Network:
         angle_sd = {"direction": xml_float(path, po, "direction-stdev", positive=True, required=False),
                     "z-angle": xml_float(path, po, "zenith-angle-stdev", positive=True, required=False)}
         for el in po.children:
+            if el.tag not in ("point", "obs"):
+                _refuse(path, el)
+            _check_attributes(path, el)
             if el.tag == "point":
                 _read_point(path, el, declared, coords, fixed, ex, ey)
-            elif el.tag == "obs":
-                for o in el.children:
-                    if o.tag == "s-distance":
-                        rows.append(_read_sdist(path, o, el.attrib.get("from"), model))
-                    elif o.tag in ("direction", "z-angle"):
-                        arows.append(_read_angle(path, o, el, angle_sd[o.tag], sense, dir_sets))
-                    else:
-                        _refuse(path, o)
-            else:
-                _refuse(path, el)
+                continue
+            xml_float(path, el, "orientation", required=False)
+            for o in el.children:
+                if o.tag not in ("s-distance", "direction", "z-angle"):
+                    _refuse(path, o)
+                _check_attributes(path, o)
+                if o.tag == "s-distance":
+                    rows.append(_read_sdist(path, o, el, model))
+                else:
+                    arows.append(_read_angle(path, o, el, angle_sd[o.tag], sense, dir_sets))
+                    dir_heights += o.tag == "direction" and _direction_heights(path, o, el)
+    if dir_heights:
+        notes.append(f"instrument/target heights on {dir_heights} direction(s) ignored, as gama-local ignores "
+                     "them on directions")
     if offsets is not None:
         unknown = [s for s in offsets if s not in {r[1] for r in rows}]
         if unknown:
@@ -237,6 +277,33 @@ def read_gama_local(path) -> Network:
                      + ", ".join(f"{s} {v * 1e6:.4f} um" for s, v in offsets.items()))
     network = build_network(path, rows, declared, coords, fixed, notes, "Gama")
     return _with_angles(path, network, arows) if arows else network
+
+
+def _network(path, root):
+    """The one ``<network>`` of the document, its children and their attributes checked: an element
+    or attribute that gama-local's input format does not have there is refused by name."""
+    _check_attributes(path, root)
+    nets = root.findall("network")
+    for el in root.children:
+        if el.tag != "network":
+            raise MultilatError(f"{path}:{el.line}: unknown element <{el.tag}> in <gama-local> (gama-local's "
+                                "input holds one <network>)")
+    if not nets:
+        raise MultilatError(f"{path}:{root.line}: <gama-local> has no <network>")
+    if len(nets) > 1:
+        raise MultilatError(f"{path}:{nets[1].line}: a second <network> in <gama-local>")
+    _check_attributes(path, nets[0])
+    for el in nets[0].children:
+        if el.tag not in ("description", "parameters", "points-observations"):
+            raise MultilatError(f"{path}:{el.line}: unknown element <{el.tag}> in <network> (gama-local's "
+                                "input has <description>, <parameters> and <points-observations> there)")
+        _check_attributes(path, el)
+    return nets[0]
+
+
+def _direction_heights(path, o, obs_el) -> bool:
+    """Whether a direction carries a non-zero height (its own, or its set's ``from_dh``)."""
+    return any(xml_float(path, n, h, required=False) for n, h in ((o, "from_dh"), (o, "to_dh"), (obs_el, "from_dh")))
 
 
 def _dms_or_gon(path, o, name):
@@ -261,11 +328,11 @@ def _read_angle(path, o, obs_el, default_sd, sense, dir_sets):
     t = o.attrib.get("to", "").strip()
     if not s or not t:
         raise MultilatError(f"{path}:{o.line}: <{o.tag}> needs from (or <obs from=>) and to")
-    for h in ("from_dh", "to_dh"):
-        v = xml_float(path, o, h, required=False)
-        if v:
-            raise MultilatError(f"{path}:{o.line}: <{o.tag}> {h}={v} is not supported "
-                                "(instrument and target heights are not in multilat's model)")
+    if o.tag == "direction":
+        for h in ("from_dh", "to_dh"):          # read (a number) and ignored, as gama-local does
+            xml_float(path, o, h, required=False)
+    else:
+        _refuse_heights(path, o, obs_el, f"{s}->{t}")
     val, dms = _dms_or_gon(path, o, "val")
     sd = xml_float(path, o, "stdev", positive=True, required=False)
     if sd is None:
@@ -349,6 +416,10 @@ def _read_point(path, el, declared, coords, fixed, ex, ey):
     elif any(v is not None for v in xyz):
         raise MultilatError(f"{path}:{el.line}: point {pid!r} has some of x, y, z but not all (a 2D "
                             "or height-only point): multilat's network is 3D")
+    adj = el.attrib.get("adj", "")
+    if adj and adj.lower() != "xyz":
+        raise MultilatError(f"{path}:{el.line}: point {pid!r} adj={adj!r} (a 2D or height-only unknown) is not "
+                            "supported: multilat's points are 3D (adj=\"xyz\" or \"XYZ\")")
     flag = el.attrib.get("fix", "")
     if flag and pid not in coords:
         raise MultilatError(f"{path}:{el.line}: fixed point {pid!r} needs x, y and z")
@@ -359,17 +430,41 @@ def _read_point(path, el, declared, coords, fixed, ex, ey):
         fixed.append(pid)
 
 
-def _read_sdist(path, o, obs_from, model):
-    s = (o.attrib.get("from") or obs_from or "").strip()
+def _refuse_heights(path, o, obs_el, label):
+    """Refuse a non-zero instrument or target height of a distance or zenith angle: its own
+    ``from_dh``/``to_dh``, or the set-wide ``<obs from_dh>`` that gama-local applies to it when
+    it has none of its own (Gama 2.24 ``gkfparser.cpp``: ``obs_from_dh`` is each observation's
+    default instrument height)."""
+    for h in ("from_dh", "to_dh"):
+        v = xml_float(path, o, h, required=False)
+        if v:
+            raise MultilatError(f"{path}:{o.line}: <{o.tag}> {label} {h}={v} is not supported "
+                                "(instrument and target heights are not in multilat's model)")
+    if o.attrib.get("from_dh") is None:
+        v = xml_float(path, obs_el, "from_dh", required=False)
+        if v:
+            raise MultilatError(f"{path}:{obs_el.line}: <obs> from_dh={v} (the set's instrument height) applies "
+                                f"to <{o.tag}> {label} at line {o.line}: not supported (instrument and target "
+                                "heights are not in multilat's model)")
+
+
+def _check_attributes(path, el):
+    """Refuse an attribute that gama-local's input format does not have on this element
+    (:data:`ATTRIBUTES`)."""
+    known = ATTRIBUTES.get(el.tag, {})
+    for name in el.attrib:
+        if name not in known:
+            raise MultilatError(f"{path}:{el.line}: <{el.tag}> attribute {name}= is not in gama-local's input "
+                                "format (xml/gama-local.xsd): not read")
+
+
+def _read_sdist(path, o, obs_el, model):
+    s = (o.attrib.get("from") or obs_el.attrib.get("from") or "").strip()
     t = o.attrib.get("to", "").strip()
     if not s or not t:
         raise MultilatError(f"{path}:{o.line}: <s-distance> needs from (or <obs from=>) and to")
     d = xml_float(path, o, "val", positive=True)
-    for h in ("from_dh", "to_dh"):
-        v = xml_float(path, o, h, required=False)
-        if v:
-            raise MultilatError(f"{path}:{o.line}: <s-distance> {h}={v} is not supported "
-                                "(instrument and target heights are not in multilat's model)")
+    _refuse_heights(path, o, obs_el, f"{s}->{t}")
     sd = xml_float(path, o, "stdev", positive=True, required=False)
     if sd is None:
         if model is None:

@@ -13,7 +13,8 @@ STAR*NET Input Data Types and Inline Options"): one record per line, ``#`` start
     D A-1  0.77560520 0.0000047000                   (From-To  slope distance  std error)
 
 ``.ORDER EN`` puts easting before northing on ``C`` lines: multilat's x, y, z (east, north, up).
-The reader also takes ``.ORDER NE`` (Star*Net's default), ``.UNITS FeetUS/FeetInt``,
+The reader also takes ``.ORDER NE`` (Star*Net's default), ``.UNITS FeetUS/FeetInt`` (any other
+linear unit, e.g. ``Furlongs``, is refused by name; the angular ``DMS``/``Gons`` have no effect),
 ``.MULTIPLIER``, ``.SEP``, ``.DATA OFF/ON`` and ``.END`` (the rest of the file is not read); ``C`` lines with three numeric σ are read as
 approximate coordinates (their σ ignored, a note). Other data types (``A``, ``V``, ``B``, ``M``,
 ``BM``, ``DV``, ``DB``/``DN``/``DM``/``DE``, ``L``, ``G``, ``T``, ``SS``, ``E``, ``P``, ...), 2D
@@ -29,6 +30,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -52,6 +54,12 @@ _CODES = {"A": "horizontal angles", "V": "vertical observations", "B": "bearings
           "TE": "traverses", "SS": "sideshots", "E": "elevations", "EH": "elevations",
           "P": "geodetic positions", "PH": "geodetic positions", "CH": "coordinates with "
           "ellipsoid heights", "I": "instrument setups", "F": "fixed-direction lines"}
+#: .UNITS words: linear units (metres per unit) and angular units (no effect on slope distances);
+#: any other word is refused by name
+_LINEAR_UNITS = {"M": 1.0, "METERS": 1.0, "METRES": 1.0, "METER": 1.0, "METRE": 1.0,
+                 "FEETUS": _US_FOOT, "US": _US_FOOT, "USFEET": _US_FOOT,
+                 "FEETINT": 0.3048, "INT": 0.3048, "FEET": 0.3048, "IFEET": 0.3048, "INTFEET": 0.3048}
+_ANGULAR_UNITS = ("DMS", "GONS", "GON")
 #: inline options read (full names; Star*Net accepts any unambiguous abbreviation)
 _INLINE_READ = ("UNITS", "ORDER", "3D", "2D", "3REDUCE", "LEVEL", "DELTA", "SEPARATOR",
                 "MULTIPLIER", "DATA", "END")
@@ -123,10 +131,61 @@ def _num(path, n, tok, what):
     return v
 
 
+@dataclass
+class _Options:
+    """The inline options in force while reading (Star*Net's defaults)."""
+
+    unit: float = 1.0
+    mult: float = 1.0
+    order_en: bool = False
+    sep: str = "-"
+    delta: bool = False
+    data_on: bool = True
+
+
+def _inline_option(path, n, tok, st: _Options) -> bool:
+    """Apply the inline option of line ``n`` to ``st`` (refusing what the reader does not model);
+    True at ``.END``."""
+    opt = _option(path, n, tok[0])
+    args = [a.upper() for a in tok[1:]]
+    if opt == "DATA":
+        st.data_on = not args or args[0] != "OFF"
+    elif not st.data_on:
+        return False
+    elif opt == "END":
+        return True
+    elif opt == "UNITS":
+        for a in args:
+            if a in _LINEAR_UNITS:
+                st.unit = _LINEAR_UNITS[a]
+            elif a not in _ANGULAR_UNITS:
+                raise MultilatError(f"{path}:{n}: .UNITS {a.title()} is not a unit multilat's reader knows "
+                                    "(linear: Meters, FeetUS, FeetInt; angular, no effect on distances: DMS, Gons)")
+    elif opt == "ORDER":
+        for a in args:
+            if a in ("EN", "NE"):
+                st.order_en = a == "EN"
+            elif a not in ("ATFROMTO", "FROMATTO"):
+                raise MultilatError(f"{path}:{n}: .ORDER {a} is not an order multilat's reader knows (EN, NE; "
+                                    "AtFromTo/FromAtTo, no effect on distances)")
+    elif opt in ("2D", "3REDUCE", "LEVEL"):
+        raise MultilatError(f"{path}:{n}: .{opt} mode is not supported: multilat reads 3D "
+                            "slope distances (.3D)")
+    elif opt == "DELTA":
+        st.delta = bool(args) and args[0] == "ON"
+    elif opt == "SEPARATOR":
+        if len(tok) != 2 or len(tok[1]) != 1:
+            raise MultilatError(f"{path}:{n}: .SEP needs one character")
+        st.sep = tok[1]
+    elif opt == "MULTIPLIER":
+        st.mult = _num(path, n, tok[1], ".MULTIPLIER") if len(tok) > 1 else 1.0
+    return False
+
+
 def read_starnet(path, *, sigma_m: float | None = None) -> Network:
     """Read a Star*Net ``.dat``: ``C`` (coordinates) and ``D`` (slope distances) lines. ``sigma_m``:
     σ for ``D`` lines without a standard error (or with ``&``, the default)."""
-    unit, mult, order_en, sep, delta, data_on = 1.0, 1.0, False, "-", False, True
+    st = _Options()
     declared, coords, fixed, rows, notes, offsets = {}, {}, [], [], [], None
     weighted = 0
     for n, raw in enumerate(read_text(path).splitlines(), 1):
@@ -144,42 +203,13 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
             continue
         tok = line.split()
         if tok[0].startswith("."):
-            opt = _option(path, n, tok[0])
-            args = [a.upper() for a in tok[1:]]
-            if opt == "DATA":
-                data_on = not args or args[0] != "OFF"
-            elif not data_on:
-                continue
-            elif opt == "END":
+            if _inline_option(path, n, tok, st):
                 break
-            elif opt == "UNITS":
-                for a in args:
-                    if a.startswith("M"):
-                        unit = 1.0
-                    elif a in ("FEETUS", "US", "USFEET"):
-                        unit = _US_FOOT
-                    elif a in ("FEETINT", "INT", "FEET", "IFEET", "INTFEET"):
-                        unit = 0.3048
-            elif opt == "ORDER":
-                for a in args:
-                    if a in ("EN", "NE"):
-                        order_en = a == "EN"
-            elif opt in ("2D", "3REDUCE", "LEVEL"):
-                raise MultilatError(f"{path}:{n}: .{opt} mode is not supported: multilat reads 3D "
-                                    "slope distances (.3D)")
-            elif opt == "DELTA":
-                delta = bool(args) and args[0] == "ON"
-            elif opt == "SEPARATOR":
-                if len(tok) != 2 or len(tok[1]) != 1:
-                    raise MultilatError(f"{path}:{n}: .SEP needs one character")
-                sep = tok[1]
-            elif opt == "MULTIPLIER":
-                mult = _num(path, n, tok[1], ".MULTIPLIER") if len(tok) > 1 else 1.0
             continue
-        if not data_on:
+        if not st.data_on:
             continue
         code = tok[0].upper()
-        f = unit * mult
+        f = st.unit * st.mult
         if code == "C":
             if len(tok) < 5:
                 raise MultilatError(f"{path}:{n}: C line needs Station and three coordinates (3D)")
@@ -189,7 +219,7 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
                                     f"{declared[pid]})")
             declared[pid] = n
             c = [_num(path, n, t, "coordinate") * f for t in tok[2:5]]
-            coords[pid] = (c[0], c[1], c[2]) if order_en else (c[1], c[0], c[2])
+            coords[pid] = (c[0], c[1], c[2]) if st.order_en else (c[1], c[0], c[2])
             flags = tok[5:]
             if flags and all(t == "!" for t in flags):
                 fixed.append(pid)
@@ -199,12 +229,12 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
             elif any(t not in ("*", "&") for t in flags):
                 weighted += 1
         elif code == "D":
-            if delta:
+            if st.delta:
                 raise MultilatError(f"{path}:{n}: D line under .DELTA ON is a horizontal distance: "
                                     "not supported (multilat reads slope distances)")
-            if len(tok) < 3 or tok[1].count(sep) != 1:
-                raise MultilatError(f"{path}:{n}: D line needs From{sep}To and a distance")
-            a, b = tok[1].split(sep)
+            if len(tok) < 3 or tok[1].count(st.sep) != 1:
+                raise MultilatError(f"{path}:{n}: D line needs From{st.sep}To and a distance")
+            a, b = tok[1].split(st.sep)
             d = _num(path, n, tok[2], "distance") * f
             rest = tok[3:]
             hihts = [t for t in rest if "/" in t]
