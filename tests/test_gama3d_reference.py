@@ -46,8 +46,8 @@ NETWORKS = {
                     "(<coordinates>) not modelled",
     "heights": None,
     "traverse": None,
-    "direction_sets": "issue 26: several direction sets on one station not modelled (the reader "
-                      "keys orientations by station: 4 sets read as 2, covariance dropped)",
+    "direction_sets": "issue 26: several direction sets on one station not modelled (refused by "
+                      "FILE:LINE, test_several_direction_sets_are_refused_not_misread)",
     "angles_hdist": "issue 26: <angle> and <distance> (horizontal) not modelled",
     "height_differences": "issue 26: <dh> not modelled",
     "vectors": "issue 26: <vec> not modelled",
@@ -299,3 +299,11 @@ def test_the_stored_data_stay_small():
     assert total < 2_000_000
     assert set(NETWORKS) == {f.name[:-8] for f in DATA.glob("*_out.xml")}
     assert not re.search(r"<error", "".join((DATA / f"{n}_out.xml").read_text() for n in NETWORKS))
+
+
+def test_several_direction_sets_are_refused_not_misread():
+    """Three direction sets on S1: the reader once kept the last orientation per station (4 sets read
+    as 2, the covariance dropped) without a word; it must refuse by FILE:LINE naming the station."""
+    path = DATA / "direction_sets_out.xml"
+    with pytest.raises(MultilatError, match=r"direction_sets_out\.xml:\d+: station 'S1' has a second orientation"):
+        read_gama_adjustment(path)

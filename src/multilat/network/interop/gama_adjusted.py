@@ -313,9 +313,20 @@ def _angles(rows, ratio) -> GamaAngles | None:
 
 
 def _orientations(path, node) -> dict:
-    """``<orientation-shifts>``: each station's adjusted orientation as Gama prints it (gon -> rad)."""
-    return {o.child_text("id"): _num(path, o, "adj") / GON_PER_RAD
-            for o in (node.findall("orientation") if node is not None else [])}
+    """``<orientation-shifts>``: each station's adjusted orientation as Gama prints it (gon -> rad).
+
+    A station with several direction sets (several orientations) is refused by ``FILE:LINE``, as
+    ``import gama`` refuses it: multilat has one orientation per station, and keying them by
+    station would keep the last and misalign the covariance's orientation rows."""
+    out, first = {}, {}
+    for o in (node.findall("orientation") if node is not None else []):
+        sid = o.child_text("id")
+        if sid in out:
+            raise MultilatError(f"{path}:{o.line}: station {sid!r} has a second orientation (the first at line "
+                                f"{first[sid]}): several direction sets on one station; multilat has one per "
+                                "station")
+        out[sid], first[sid] = _num(path, o, "adj") / GON_PER_RAD, o.line
+    return out
 
 
 def _covariance(path, cm, n_points, n_orient, ex, ey, y_sign):
