@@ -16,8 +16,9 @@ matrix is the top-left block of its inverse (the minimum-trace covariance over t
 **Results** (:class:`GeneralResult`): adjusted parameters and point coordinates, the cofactor
 matrix ``Q`` of the free parameters (a-priori σ0 = 1: covariance ``Q``, or ``sigma0**2 Q`` a
 posteriori), σ0 = sqrt(vᵀPv / dof), dof = observations - free parameters + defect, residuals per
-row (observed - adjusted, SI), redundancy numbers ``r_i = 1 - (J Q J^T)_ii / C_ii``, and the record
-of iterations. Non-convergence is a one-line :class:`~multilat.errors.MultilatError`.
+row (observed - adjusted, SI), redundancy numbers ``r_i = 1 - (J_w Q J_w^T)_ii`` of the whitened rows
+(for a correlated block: its rows decorrelated by the Cholesky factor in the block's row order, as
+gama-local does; they sum to dof), and the record of iterations. Non-convergence is a one-line :class:`~multilat.errors.MultilatError`.
 """
 
 from __future__ import annotations
@@ -135,6 +136,21 @@ class System:
                 out[sl] = scipy.linalg.solve_triangular(L, a[sl], lower=True)
         return out
 
+    def linearise(self, x: np.ndarray, mask: np.ndarray):
+        """At parameters ``x``: whitened residuals and Jacobian, the determinability analysis, the
+        constrained Gauss-Newton step and the cofactor matrix (undetermined parameters named)."""
+        r, jac = self.evaluate(x)
+        rw, jw = self.whiten(r), self.whiten(jac)
+        det = analyse(jw, mask)
+        if det.undetermined.size:
+            raise MultilatError(_undetermined_line(self, det))
+        dx, q = _step(jw, rw, det)
+        return r, rw, jw, det, dx, q
+
+    def redundancy(self, jw: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Redundancy numbers ``1 - diag(J_w Q J_w^T)`` of the whitened rows."""
+        return 1.0 - np.einsum("ij,jk,ik->i", jw, q, jw)
+
     def datum_mask(self, datum: str) -> np.ndarray:
         """(n_free,) bool: the free coordinates of the datum points (inner constraints)."""
         pts = self.network.points
@@ -194,16 +210,11 @@ def adjust(network: Network, *, options: AdjustOptions | None = None) -> General
         raise MultilatError(f"point {pts.ids[i]!r} has no approximate coordinates (compute them with "
                             "approximate())")
     x = system.layout.initial()
-    mask = system.datum_mask("fixed" if opt.datum == "fixed" else opt.datum)
+    mask = system.datum_mask(opt.datum)
     free = system.layout.free
     record = []
     for _ in range(opt.max_iterations):
-        r, jac = system.evaluate(x)
-        rw, jw = system.whiten(r), system.whiten(jac)
-        det = analyse(jw, mask)
-        if det.undetermined.size:
-            raise MultilatError(_undetermined_line(system, det))
-        dx, _ = _step(jw, rw, det)
+        _, rw, _, _, dx, _ = system.linearise(x, mask)
         x[free] += dx
         record.append((float(np.abs(dx).max(initial=0.0)), float(rw @ rw)))
         if record[-1][0] < opt.step_tolerance:
@@ -215,21 +226,14 @@ def adjust(network: Network, *, options: AdjustOptions | None = None) -> General
 
 
 def _result(system: System, x, mask, record) -> GeneralResult:
-    r, jac = system.evaluate(x)
-    rw, jw = system.whiten(r), system.whiten(jac)
-    det = analyse(jw, mask)
-    if det.undetermined.size:
-        raise MultilatError(_undetermined_line(system, det))
-    _, Q = _step(jw, rw, det)
+    r, rw, jw, det, _, Q = system.linearise(x, mask)
     dof = system.n_rows - system.n_free + det.defect
     vtpv = float(rw @ rw)
     sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")
-    h = np.einsum("ij,jk,ik->i", jac, Q, jac)
-    c = np.concatenate([np.diag(b.covariance) for b in system.blocks])
     lay = system.layout
     names = np.array(lay.names)
     return GeneralResult(
         ids=system.network.points.ids, xyz_m=x[lay.point_cols].copy(), parameters=x.copy(),
         names=tuple(lay.names), free_names=tuple(names[lay.free]), cofactor=Q, sigma0=sigma0, dof=int(dof),
-        defect=det.defect, residuals=r, redundancy=1.0 - h / c, block_rows=system.rows, iterations=record,
+        defect=det.defect, residuals=r, redundancy=system.redundancy(jw, Q), block_rows=system.rows, iterations=record,
         determinability=det)

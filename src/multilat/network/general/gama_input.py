@@ -254,16 +254,22 @@ class _Reader:
                 if not pid:
                     raise MultilatError(f"{p}:{v.line}: <vec> needs {k}=")
                 self.refs.append((v.line, pid))
-            rows.append(dict(line=v.line, ref=ref, value=self.axes @ [xml_float(p, v, a) for a in ("dx", "dy", "dz")]))
-        cov = self.cov_mat(el, 3 * len(rows))
+            raw = [xml_float(p, v, a) for a in ("dx", "dy", "dz")]
+            rows += [dict(line=v.line, ref=ref, axis=a, value=sg * raw[c]) for c, (a, sg) in enumerate(self._turn())]
+        cov = self.cov_mat(el, len(rows))
         if rows and cov is None:
             raise MultilatError(f"{p}:{el.line}: <vectors> without <cov-mat>")
         if rows:
-            t = np.kron(np.eye(len(rows)), self.axes)
-            self.extra_blocks.append(("coordinate_difference", rows, t @ cov @ t.T))
+            sg = np.tile([sg for _, sg in self._turn()], len(rows) // 3)
+            self.extra_blocks.append(("coordinate_difference", rows, cov * np.outer(sg, sg)))
+
+    def _turn(self):
+        """Per file component x, y, z: multilat's axis and its sign (the file's order is kept)."""
+        return [(int(np.argmax(np.abs(self.axes[:, c]))), float(self.axes[np.argmax(np.abs(self.axes[:, c])), c]))
+                for c in range(3)]
 
     def coordinates(self, el):
-        p, rows, turns = self.path, [], []
+        p, rows = self.path, []
         for q in el.children:
             _check(p, q)
             if q.tag == "cov-mat":
@@ -277,21 +283,16 @@ class _Reader:
                                     + (f" (got {sorted(extra)[0]}=)" if extra else ""))
             self.refs.append((q.line, pid))
             raw = [xml_float(p, q, c, required=False) for c in "xyz"]
-            if (raw[0] is None) != (raw[1] is None):
-                raise MultilatError(f"{p}:{q.line}: observed point {pid!r} has one of x, y without the other")
-            if raw[0] is not None:
-                xy = self.axes[:2, :2] @ np.array(raw[:2])
-                rows += [dict(line=q.line, point=pid, axis=a, value=xy[a]) for a in (0, 1)]
-                turns.append(self.axes[:2, :2])
-            if raw[2] is not None:
-                rows.append(dict(line=q.line, point=pid, axis=2, value=raw[2]))
-                turns.append(np.eye(1))
+            for c in range(3):
+                if raw[c] is not None:
+                    a, sg = self._turn()[c]
+                    rows.append(dict(line=q.line, point=pid, axis=a, value=sg * raw[c], sign=sg))
         cov = self.cov_mat(el, len(rows))
         if rows and cov is None:
             raise MultilatError(f"{p}:{el.line}: <coordinates> without <cov-mat>")
         if rows:
-            t = _block_diag(turns)
-            self.extra_blocks.append(("observed_coordinates", rows, t @ cov @ t.T))
+            sg = np.array([r["sign"] for r in rows])
+            self.extra_blocks.append(("observed_coordinates", rows, cov * np.outer(sg, sg)))
 
     # ------------------------------------------------------------------ network
     def network(self) -> Network:
@@ -319,20 +320,10 @@ class _Reader:
             names["set"] = tuple(dict.fromkeys(r["set"] for r in rows))
             index["set"] = np.array([names["set"].index(r["set"]) for r in rows])
         if kind == "coordinate_difference":
-            value = np.concatenate([r["value"] for r in rows])
-        else:
-            value = np.array([r["value"] for r in rows], float)
+            index["axis"] = np.array([r["axis"] for r in rows])
+        value = np.array([r["value"] for r in rows], float)
         sigma = np.sqrt(np.diag(cov)) if cov is not None else np.array([r["sigma"] for r in rows])
         return Block(kind, value, sigma, cov, index, data, labels, names)
-
-
-def _block_diag(mats):
-    n = sum(m.shape[0] for m in mats)
-    out, k = np.zeros((n, n)), 0
-    for m in mats:
-        out[k:k + m.shape[0], k:k + m.shape[0]] = m
-        k += m.shape[0]
-    return out
 
 
 def read_gama_input(path) -> Network:

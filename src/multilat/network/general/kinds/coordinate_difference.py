@@ -1,15 +1,17 @@
 """Coordinate-difference vector (a GNSS baseline, a tracker's point-to-point vector in the world
-frame).
+frame), one row per observed component.
 
-Model (metres), three rows per observation in the order dx, dy, dz::
+Model (metres)::
 
-    (dx, dy, dz) = P_to - P_from
+    d_a = P_to[a] - P_from[a]        a = 0, 1, 2: x (east), y (north), z (up)
 
-in multilat's frame (x east, y north, z up). Each vector's 3 x 3 covariance, and any correlation
-between vectors, is the block's ``cov`` (rows ordered vector by vector). Residual: observed minus
-computed. Partials ``-1`` (from) and ``+1`` (to) on the matching coordinate.
+in multilat's frame. A vector is three rows with the same ``from`` and ``to``; its 3 x 3
+covariance, and any correlation between vectors, is the block's ``cov``. The rows may come in any
+order of components (a reader keeps its file's order, which fixes the Cholesky decorrelation and so
+the redundancy numbers of correlated rows, :mod:`..adjust`). Residual: observed minus computed.
+Partials ``-1`` (from) and ``+1`` (to) on the row's coordinate.
 
-Block: ``index["from"]``, ``index["to"]`` (m,); ``value`` (3 m,).
+Block: ``index["from"]``, ``index["to"]``, ``index["axis"]`` (R,).
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ def register(block, layout) -> dict:
 
 
 def evaluate(block, layout, cols, x):
-    cf = layout.point_cols[np.asarray(block.index["from"], int)].reshape(-1)
-    ct = layout.point_cols[np.asarray(block.index["to"], int)].reshape(-1)
+    axis = np.asarray(block.index["axis"], int)
+    cf = layout.point_cols[np.asarray(block.index["from"], int), axis]
+    ct = layout.point_cols[np.asarray(block.index["to"], int), axis]
     values = np.tile([-1.0, 1.0], (len(cf), 1))
     return x[ct] - x[cf], values, np.stack([cf, ct], 1)
