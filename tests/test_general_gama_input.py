@@ -45,6 +45,8 @@ POINTS = ('<point id="A" x="0" y="0" z="10" fix="xyz" />\n<point id="B" x="100" 
      9, r"holds 5 values, expected 6"),
     ('<height-differences><dh from="A" to="C" val="1" /></height-differences>', 8, r"no stdev, no dist"),
     ('<obs from="A"><s-distance to="B" val="10" stdev="1" bogus="1" /></obs>', 8, r"attribute bogus= is not in"),
+    ('<obs from="A"><dh to="B" val="1" stdev="1" /></obs>', 8, r"<dh> inside <obs> is not read"),
+    ('<dh from="A" to="B" val="1" stdev="1" />', 8, r"<dh> is not read in <points-observations>"),
     ('<obs from="A"><s-distance to="B" val="10" stdev="1" /><cov-mat dim="1" band="0">1</cov-mat></obs>', 8,
      r"<cov-mat> inside <obs>"),
 ])

@@ -133,7 +133,9 @@ class _Reader:
             if o.tag == "cov-mat":
                 raise MultilatError(f"{p}:{o.line}: <cov-mat> inside <obs> (correlated observations of a set) is "
                                     "not read yet")
-            kind = _OBS_KINDS[o.tag]
+            kind = _OBS_KINDS.get(o.tag)
+            if kind is None:
+                raise MultilatError(f"{p}:{o.line}: <{o.tag}> inside <obs> is not read (not an observation of a set)")
             frm = (o.attrib.get("from") or station).strip()
             if not frm:
                 raise MultilatError(f"{p}:{o.line}: <{o.tag}> needs from (or <obs from=>)")
