@@ -24,7 +24,7 @@ from scipy.optimize import least_squares
 from multilat.errors import MultilatError
 from multilat.network.general.adjust import AdjustOptions, adjust
 from multilat.network.general.observations import Block, Network
-from multilat.network.general.points import FIXED, FREE, PointSet
+from multilat.network.general.points import FIXED, FREE, WEIGHTED, PointSet
 
 SIG_D, SIG_A = 20e-6, 5e-6          # metres, radians
 
@@ -44,12 +44,17 @@ def _simulate(rng, stations, kappas, targets, pairs):
             el + SIG_A * rng.standard_normal(m))
 
 
-def _blocks(pairs, obs, n_st):
+def _blocks(pairs, obs, n_st, offset=False):
+    """Distances (of one instrument "I", its additive constant estimated when ``offset``) and
+    tracker angles of levelled set-ups T1, T2, ..."""
     s, t = pairs
     m = len(s)
     idx = {"from": s, "to": t + n_st}
+    if offset:
+        idx["instrument"] = np.zeros(m, int)
     names = {"setup": tuple(f"T{i + 1}" for i in range(n_st))}
-    return (Block("slope_distance", obs[0], np.full(m, SIG_D), None, idx),
+    return (Block("slope_distance", obs[0], np.full(m, SIG_D), None, idx, names={"instrument": ("I",)},
+                  options={"estimate_offset": offset}),
             Block("tracker_angles", np.concatenate(obs[1:]), np.full(2 * m, SIG_A), None,
                   {"from": np.tile(s, 2), "to": np.tile(t + n_st, 2), "setup": np.tile(s, 2),
                    "component": np.repeat([0, 1], m)}, names=names, options={"levelled": True}))
@@ -133,3 +138,37 @@ def test_a_target_seen_by_one_distance_is_named():
     lone = Block("slope_distance", np.array([4.3]), np.array([SIG_D]), None, {"from": np.array([0]), "to": np.array([6])})
     with pytest.raises(MultilatError, match=r"point 'LONE' not determined by the observations \(datum defect 2"):
         adjust(Network(pts, _blocks(pairs, obs, 1) + (lone,)))
+
+
+def test_instrument_constant_and_weighted_control():
+    """One tracker with an additive constant (0.4 mm, estimated) on weighted control points
+    (σ 0.05 mm each coordinate, status WEIGHTED): against least_squares with the constant and the
+    control's coordinates as parameters and the control's given values as observations."""
+    rng = np.random.default_rng(11)
+    station, kappa, c_true = np.array([1.0, 2.0, 0.5]), np.array([0.7]), 0.4e-3
+    control = station + np.column_stack([rng.uniform(-8, 8, 6), rng.uniform(-8, 8, 6), rng.uniform(-1, 1, 6)])
+    targets = station + np.column_stack([rng.uniform(-8, 8, 8), rng.uniform(-8, 8, 8), rng.uniform(-1, 2, 8)])
+    allp = np.vstack([control, targets])
+    pairs = (np.zeros(14, int), np.arange(14))
+    obs = list(_simulate(rng, station[None], kappa, allp, pairs))
+    obs[0] = obs[0] + c_true
+    sig_c = 5e-5
+    given = control + sig_c * rng.standard_normal(control.shape)
+    approx = np.vstack([station + 0.01, given, targets + 0.01 * rng.standard_normal((8, 3))])
+    status = [FREE] + [WEIGHTED] * 6 + [FREE] * 8
+    sigma = np.where(np.array(status)[:, None] == WEIGHTED, sig_c, np.nan) * np.ones((15, 3))
+    pts = PointSet.build(["T"] + [f"K{i}" for i in range(6)] + [f"Q{i}" for i in range(8)], approx, status=status,
+                         sigma_m=sigma)
+    res = adjust(Network(pts, _blocks(pairs, obs, 1, offset=True)))
+    assert res.dof == 14 * 3 + 18 - (3 + 1 + 1 + 18 + 24)
+
+    def fun(p):
+        xyz = np.vstack([p[:3], p[5:].reshape(14, 3)])
+        r = _residual(xyz[None, 0], p[3:4], xyz[1:], pairs, [obs[0] - p[4], obs[1], obs[2]])
+        return np.concatenate([r, ((given - xyz[1:7]) / sig_c).ravel()])
+
+    p0 = np.concatenate([approx[0], [0.0, 0.0], approx[1:].ravel()])
+    ind = least_squares(fun, p0, xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    assert res.parameters[res.names.index("offset:I")] == pytest.approx(ind.x[4], abs=1e-10)
+    assert np.abs(res.xyz_m - np.vstack([ind.x[:3], ind.x[5:].reshape(14, 3)])).max() < 1e-9
+    assert res.sigma0 == pytest.approx(np.sqrt(2 * ind.cost / res.dof), rel=1e-9)
