@@ -34,7 +34,6 @@ POINTS = ('<point id="A" x="0" y="0" z="10" fix="xyz" />\n<point id="B" x="100" 
     ('<obs from="A"><s-distance to="Z" val="10" stdev="1" /></obs>', 8, r"point 'Z' is observed but has no <point>"),
     ('<point id="D" x="1" y="2" z="3" adj="XYz" />', 8, r"adj='XYz': mixed case"),
     ('<point id="D" x="1" y="2" z="3" fix="xy" />', 8, r"its z is neither fixed"),
-    ('<point id="D" x="1" y="2" z="3" fix="z" adj="xyz" />', 8, r"z is both fixed and adjusted"),
     ('<obs from="A"><s-distance to="B" val="10" /></obs>', 8, r"no stdev and <points-observations> no distance-stdev"),
     ('<obs from="A"><direction to="B" val="10" /></obs>', 8, r"no stdev and <points-observations> no direction-stdev"),
     ('<vectors><vec from="A" to="C" dx="1" dy="2" dz="3" to_dh="1.5" />\n<cov-mat dim="3" band="0">1 1 1</cov-mat>'
@@ -90,3 +89,11 @@ def test_point_without_approximate_coordinates_is_named(tmp_path):
     net = read_gama_input(_write(tmp_path, POINTS.replace('x="50" y="80" z="9" ', '') + body))
     with pytest.raises(MultilatError, match=r"point 'C' \(and 1 more\): no approximate coordinates"):
         approximate(net)
+
+
+def test_fix_takes_precedence_over_adj(tmp_path):
+    """gama-local's manual: a coordinate in both fix and adj is fixed; a note says so."""
+    net = read_gama_input(_write(tmp_path, POINTS + '<point id="D" x="1" y="2" z="3" fix="z" adj="xyz" />'))
+    d = net.points.ids.index("D")
+    assert list(net.points.status[d]) == [0, 0, 1]
+    assert any("point 'D': z both fixed and adjusted: fixed" in n for n in net.notes)

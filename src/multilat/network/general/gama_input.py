@@ -5,7 +5,9 @@ Read and applied:
 
 * ``<point id x y z fix adj>``: ``fix`` = ``xyz`` / ``xy`` / ``z`` holds those coordinates, ``adj``
   makes them unknowns, upper case (``XYZ``, ``XY``, ``Z``) marks the point as a datum point of a
-  free network (minimum trace); coordinates may be absent (computed by :mod:`.approximate`);
+  free network (minimum trace); a coordinate in both ``fix`` and ``adj`` is fixed (gama-local's
+  manual: "the fix parameter will take precedence"; a note says so); coordinates may be absent
+  (computed by :mod:`.approximate`);
 * ``<obs from from_dh>`` sets: ``<direction>`` (one orientation unknown per set, several sets per
   point), ``<s-distance>`` and ``<z-angle>`` with ``from_dh``/``to_dh`` (the set's ``from_dh`` is
   each observation's default), ``<distance>`` (horizontal), ``<angle bs fs>``; on the horizontal
@@ -22,8 +24,7 @@ Read and applied:
 
 Refused by ``FILE:LINE``: ``<azimuth>``, a ``<cov-mat>`` inside ``<obs>``, non-zero heights on
 ``<vec>`` (gama-local ignores them: no model to apply), mixed-case ``adj`` (``XYz``), a coordinate
-neither fixed nor adjusted, both ``fix`` and ``adj`` on one coordinate, an observation of an
-undeclared point, any element or attribute the format does not have there.
+neither fixed nor adjusted, an observation of an undeclared point, any element or attribute the format does not have there.
 """
 
 from __future__ import annotations
@@ -111,8 +112,10 @@ class _Reader:
         status = np.full(3, -1)
         for letters, st in ((fix.lower(), FIXED), (adj.lower(), FREE)):
             for a in ([0, 1] if "xy" in letters else []) + ([2] if "z" in letters else []):
-                if status[a] != -1:
-                    raise MultilatError(f"{p}:{el.line}: point {pid!r}: {'xyz'[a]} is both fixed and adjusted")
+                if status[a] == FIXED:            # the manual: "the fix parameter will take precedence"
+                    self.notes.append(f"{p}:{el.line}: point {pid!r}: {'xyz'[a]} both fixed and adjusted: fixed "
+                                      "(fix takes precedence, as in gama-local)")
+                    continue
                 status[a] = st
         if np.any(status == -1):
             a = int(np.flatnonzero(status == -1)[0])
