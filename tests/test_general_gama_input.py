@@ -97,3 +97,14 @@ def test_fix_takes_precedence_over_adj(tmp_path):
     d = net.points.ids.index("D")
     assert list(net.points.status[d]) == [0, 0, 1]
     assert any("point 'D': z both fixed and adjusted: fixed" in n for n in net.notes)
+
+
+def test_levelling_sigma_from_the_section_length(tmp_path):
+    """<dh dist> without stdev: σ = m0 sqrt(D_km) with m0 = sigma-apr in mm (gama-local's manual);
+    a stdev wins over dist."""
+    body = ('<height-differences><dh from="A" to="C" val="1" dist="0.25" />'
+            '<dh from="C" to="B" val="1" dist="0.25" stdev="0.7" /></height-differences>')
+    p = _write(tmp_path, POINTS + body)
+    p.write_text(p.read_text().replace("<points-observations>", '<parameters sigma-apr="2" />\n<points-observations>'))
+    b = read_gama_input(p).blocks[0]
+    assert b.sigma == pytest.approx([2 * 0.5e-3, 0.7e-3])

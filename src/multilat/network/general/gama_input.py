@@ -12,7 +12,8 @@ Read and applied:
   point), ``<s-distance>`` and ``<z-angle>`` with ``from_dh``/``to_dh`` (the set's ``from_dh`` is
   each observation's default), ``<distance>`` (horizontal), ``<angle bs fs>``; on the horizontal
   kinds the heights have no effect (a vertical shift), as in gama-local;
-* ``<height-differences>`` with ``<dh stdev>``, ``<dh dist>`` (σ = sqrt(D/km) mm) or a block
+* ``<height-differences>`` with ``<dh stdev>``, ``<dh dist>`` (σ = m0 sqrt(D/km), m0 the
+  ``<parameters sigma-apr>`` in mm, default 10: the manual's ``m_dh = m_0 sqrt(D_km)``) or a block
   ``<cov-mat>``; ``<vectors>`` of ``<vec dx dy dz>`` with their ``<cov-mat>``; ``<coordinates>``
   (observed coordinates) with their ``<cov-mat>`` (mm², upper band by rows);
 * the σ defaults of ``<points-observations>`` (``distance-stdev="a [b [c]]"``: a + b D^c mm, D in
@@ -82,6 +83,9 @@ class _Reader:
         if sense not in ("left-handed", "right-handed"):
             raise MultilatError(f"{path}:{net.line}: angles={sense!r} must be left-handed or right-handed")
         self.sign = -1.0 if sense == "left-handed" else 1.0
+        par = net.find("parameters")
+        # m0 of <dh dist>: sigma-apr (mm), default 10 (xml/gama-local.xsd; the manual's m_dh = m_0 sqrt(D_km))
+        self.m0 = (xml_float(path, par, "sigma-apr", positive=True, required=False) if par is not None else None) or 10.0
         self.points: dict = {}            # id -> [line, xyz(3), status(3), constrained]
         self.rows = {k: [] for k in _OBS_KINDS.values()}
         self.rows["height_difference"] = []
@@ -230,7 +234,7 @@ class _Reader:
                 self.refs.append((d.line, pid))
             sd, dist = (xml_float(p, d, a, positive=True, required=False) for a in ("stdev", "dist"))
             rows.append(dict(line=d.line, ref=ref, value=xml_float(p, d, "val"),
-                             sigma=sd * 1e-3 if sd is not None else (math.sqrt(dist) * 1e-3 if dist else None)))
+                             sigma=sd * 1e-3 if sd is not None else (self.m0 * math.sqrt(dist) * 1e-3 if dist else None)))
         cov = self.cov_mat(el, len(rows))
         if cov is None:
             for r in rows:
