@@ -27,9 +27,10 @@ def _sights(network: Network):
     sd, za = blocks.get("slope_distance"), blocks.get("zenith_angle")
     zen = {}
     if za is not None:
+        m = len(za.index["from"])
+        fdh, tdh = (np.asarray(za.data.get(h, np.zeros(m)), float) for h in ("from_dh", "to_dh"))
         for k, (i, j) in enumerate(zip(za.index["from"], za.index["to"])):
-            zen[(int(i), int(j))] = (za.value[k], za.data.get("from_dh", np.zeros(1))[k] if "from_dh" in za.data else 0.0,
-                                     za.data["to_dh"][k] if "to_dh" in za.data else 0.0)
+            zen[(int(i), int(j))] = (za.value[k], fdh[k], tdh[k])
     if sd is not None:
         for k, (i, j) in enumerate(zip(sd.index["from"], sd.index["to"])):
             key = (int(i), int(j))
