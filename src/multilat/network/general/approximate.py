@@ -22,23 +22,19 @@ __all__ = ["approximate"]
 def _sights(network: Network):
     """Per ordered pair (from, to): horizontal distance and mark-to-mark rise where derivable, and
     the direction readings per set."""
-    hd, rise, dirs = {}, {}, {}
-    blocks = {b.kind: b for b in network.blocks}
-    sd, za = blocks.get("slope_distance"), blocks.get("zenith_angle")
-    zen = {}
-    if za is not None:
+    hd, rise, dirs, zen = {}, {}, {}, {}
+    for za in (b for b in network.blocks if b.kind == "zenith_angle"):
         m = len(za.index["from"])
         fdh, tdh = (np.asarray(za.data.get(h, np.zeros(m)), float) for h in ("from_dh", "to_dh"))
         for k, (i, j) in enumerate(zip(za.index["from"], za.index["to"])):
             zen[(int(i), int(j))] = (za.value[k], fdh[k], tdh[k])
-    if sd is not None:
+    for sd in (b for b in network.blocks if b.kind == "slope_distance"):
         for k, (i, j) in enumerate(zip(sd.index["from"], sd.index["to"])):
             key = (int(i), int(j))
             if key in zen:
                 z, fdh, tdh = zen[key]
-                s = sd.value[k]
-                hd[key] = s * np.sin(z)
-                rise[key] = fdh + s * np.cos(z) - tdh
+                hd[key] = sd.value[k] * np.sin(z)
+                rise[key] = fdh + sd.value[k] * np.cos(z) - tdh
     for b in network.blocks:
         if b.kind == "horizontal_distance":
             for k, (i, j) in enumerate(zip(b.index["from"], b.index["to"])):
