@@ -44,7 +44,7 @@ def _sights(network: Network):
                 rise.setdefault((int(i), int(j)), b.value[k])
         if b.kind == "direction":
             for k, (i, j, s) in enumerate(zip(b.index["from"], b.index["to"], b.index["set"])):
-                dirs.setdefault(("set", int(s)), (int(i), []))[1].append((int(j), b.value[k]))
+                dirs.setdefault(b.names["set"][int(s)], (int(i), []))[1].append((int(j), b.value[k]))
     for (i, j), v in list(hd.items()):
         hd.setdefault((j, i), v)
     for (i, j), v in list(rise.items()):
