@@ -213,3 +213,35 @@ def test_heights_gama_linearises_at_the_marks():
     assert vtpv_ours < vtpv_gama < vtpv_ours * (1 + 2e-6)    # measured: 1.1e-6 relative
     worst = np.abs(res.parameters - x_gama)[exact.layout.point_coordinate_mask()].max()
     assert 1e-6 < worst < 1e-5
+
+
+def _gama_covariance(name):
+    """Gama's ``<cov-mat>`` (mm², cc²; upper band by rows) as a full matrix."""
+    cm = _root(DATA / f"{name}_out.xml").find(".//cov-mat")
+    dim, band = int(cm.find("dim").text), int(cm.find("band").text)
+    vals = iter(float(f.text) for f in cm.findall("flt"))
+    c = np.zeros((dim, dim))
+    for i in range(dim):
+        for j in range(i, min(i + band, dim - 1) + 1):
+            c[i, j] = c[j, i] = next(vals)
+    return c
+
+
+def test_coordinate_covariance(case):
+    """The coordinates' covariance (σ0 a priori 1) against Gama's ``<cov-mat>``, whose rows are the
+    adjusted coordinates in the order it prints them (file axes), then the orientations; both at
+    Gama's linearisation point (see test_redundancy_numbers), with the free networks' minimum-trace
+    datum over the constrained points. Tolerance 1e-6 of the largest element: Gama prints 8
+    significant digits, and the µm rounding of its printed linearisation point; measured 6e-7 at
+    worst (trilateration_free)."""
+    name, net, res, (_, _, _, _, code) = case
+    root = _root(DATA / f"{name}_out.xml")
+    system = System(_without_heights(net))
+    _, _, _, _, _, q = system.linearise(_at(system, res, _gama_point(name, "approximate")), system.datum_mask("auto"))
+    free_names = list(np.array(system.layout.names)[system.layout.free])
+    ours = {"ne": "yxz", "en": "xyz"}[code]            # Gama's x, y, z -> multilat's axis letter
+    order = [free_names.index(f"{ours['xyz'.index(c)]}:{p.find('id').text}")
+             for p in root.find("coordinates").find("adjusted") for c in "xyz"
+             if p.find(c) is not None or p.find(c.upper()) is not None]
+    gama = _gama_covariance(name)[:len(order), :len(order)]
+    assert np.abs(q[np.ix_(order, order)] * 1e6 - gama).max() < 1e-6 * np.abs(gama).max(), name
