@@ -1,0 +1,239 @@
+"""Least-squares adjustment of a general network: Gauss-Newton on the whitened system, dense back end.
+
+Every block of observations is whitened by the Cholesky factor of its covariance (``C = L L^T``:
+``r_w = L^-1 r``, ``J_w = L^-1 J``), so correlated blocks (vectors, levelling lines, observed
+coordinates) and independent ones are one least-squares problem ``min |r_w - J_w dx|^2``. The kinds
+give the residuals and the Jacobian rows (:mod:`.kinds`); the :class:`~.layout.Layout` gives the
+columns; only the free parameters are solved for.
+
+**Datum.** The defect and the undetermined parameters come from the observations at each iterate
+(:mod:`.determinability`). With fixed points only (no datum points) a non-zero defect names the
+undetermined points in one line. A free network carries its datum by inner constraints on its datum
+points' free coordinates (minimum trace over them): each step solves the bordered system
+``[[N, B], [B^T, 0]]`` with ``B`` the null space restricted to those coordinates, and the cofactor
+matrix is the top-left block of its inverse (the minimum-trace covariance over the datum points).
+
+**Results** (:class:`GeneralResult`): adjusted parameters and point coordinates, the cofactor
+matrix ``Q`` of the free parameters (a-priori σ0 = 1: covariance ``Q``, or ``sigma0**2 Q`` a
+posteriori), σ0 = sqrt(vᵀPv / dof), dof = observations - free parameters + defect, residuals per
+row (observed - adjusted, SI), redundancy numbers ``r_i = 1 - (J_w Q J_w^T)_ii`` of the whitened rows
+(for a correlated block: its rows decorrelated by the Cholesky factor in the block's row order, as
+gama-local does; they sum to dof), and the record of iterations. Non-convergence is a one-line :class:`~multilat.errors.MultilatError`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+from multilat.errors import MultilatError
+from multilat.network.general import kinds as kinds_registry
+from multilat.network.general.determinability import Determinability, analyse
+from multilat.network.general.layout import Layout
+from multilat.network.general.observations import Block, Network
+
+__all__ = ["AdjustOptions", "GeneralResult", "System", "adjust"]
+
+
+@dataclass(frozen=True)
+class AdjustOptions:
+    """max_iterations : int  Gauss-Newton iterations before giving up (one-line error)
+    step_tolerance : float  convergence when the largest step is below it (metres and radians)
+    datum : "auto" | "free" | "fixed"  ``auto``: inner constraints on the points flagged
+        ``constrained`` if any, else the fixed points alone; ``free``: on every point's free
+        coordinates; ``fixed``: no inner constraints (a defect is an error)
+    """
+
+    max_iterations: int = 50
+    step_tolerance: float = 1e-10
+    datum: str = "auto"
+
+    def __post_init__(self):
+        if self.datum not in ("auto", "free", "fixed"):
+            raise MultilatError(f"datum={self.datum!r} must be 'auto', 'free' or 'fixed'")
+        if self.max_iterations < 1 or not self.step_tolerance > 0:
+            raise MultilatError("max_iterations must be >= 1 and step_tolerance > 0")
+
+
+@dataclass(frozen=True, eq=False)
+class GeneralResult:
+    """ids : point ids; xyz_m : (n, 3) adjusted coordinates (held ones as given)
+    parameters : (n_full,) adjusted full parameter vector; names : its parameter names
+    free_names : names of the free parameters, the order of ``cofactor``
+    cofactor : (n_free, n_free) Q (covariance with σ0 a priori = 1)
+    sigma0 : a-posteriori standard deviation of unit weight; dof : degrees of freedom; defect : datum defect
+    residuals : (R,) observed - adjusted per row, in network order of the blocks; redundancy : (R,)
+    block_rows : per block the slice of its rows; iterations : tuple of (max |step|, vᵀPv) per iteration
+    determinability : the analysis at the solution
+    """
+
+    ids: tuple
+    xyz_m: np.ndarray
+    parameters: np.ndarray
+    names: tuple
+    free_names: tuple
+    cofactor: np.ndarray
+    sigma0: float
+    dof: int
+    defect: int
+    residuals: np.ndarray
+    redundancy: np.ndarray
+    block_rows: tuple
+    iterations: tuple
+    determinability: Determinability
+
+    def point_cofactor(self, pid: str) -> np.ndarray:
+        """(3, 3) cofactor of a point's coordinates (zero rows/columns for held coordinates)."""
+        idx = {n: k for k, n in enumerate(self.free_names)}
+        cols = [idx.get(f"{c}:{pid}", -1) for c in "xyz"]
+        q = np.zeros((3, 3))
+        for a, ca in enumerate(cols):
+            for b, cb in enumerate(cols):
+                if ca >= 0 and cb >= 0:
+                    q[a, b] = self.cofactor[ca, cb]
+        return q
+
+
+class System:
+    """The network's least-squares system: layout, the kinds' columns, the whiteners."""
+
+    def __init__(self, network: Network):
+        self.network = network
+        self.layout = Layout(network.points)
+        blocks = list(network.blocks) + _weighted_block(network.points)
+        self.blocks = tuple(blocks)
+        self.cols = [kinds_registry.kind(b.kind).register(b, self.layout) for b in blocks]
+        self.chol = [b.whitener() for b in blocks]
+        bounds = np.cumsum([0] + [b.n_rows for b in blocks])
+        self.rows = tuple(slice(int(a), int(c)) for a, c in zip(bounds[:-1], bounds[1:]))
+        self.n_rows = int(bounds[-1])
+        self.reduced = self.layout.reduced
+        self.n_free = int(self.layout.free.sum())
+
+    def evaluate(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals (R,) observed - computed and the dense Jacobian (R, n_free), unwhitened."""
+        r = np.empty(self.n_rows)
+        jac = np.zeros((self.n_rows, self.n_free))
+        for b, cols, sl in zip(self.blocks, self.cols, self.rows):
+            mod = kinds_registry.kind(b.kind)
+            computed, values, columns = mod.evaluate(b, self.layout, cols, x)
+            r[sl] = kinds_registry.residual(b, computed)
+            red = self.reduced[columns]                     # -1 (column -1 maps to the extra entry)
+            rows = np.broadcast_to(np.arange(sl.start, sl.stop)[:, None], red.shape)
+            keep = red >= 0
+            np.add.at(jac, (rows[keep], red[keep]), values[keep])
+        return r, jac
+
+    def whiten(self, a: np.ndarray) -> np.ndarray:
+        """``L^-1 a`` block by block (rows of ``a``)."""
+        out = np.empty_like(a)
+        for L, sl, b in zip(self.chol, self.rows, self.blocks):
+            if b.cov is None:
+                out[sl] = a[sl] / (b.sigma if a.ndim == 1 else b.sigma[:, None])
+            else:
+                out[sl] = scipy.linalg.solve_triangular(L, a[sl], lower=True)
+        return out
+
+    def linearise(self, x: np.ndarray, mask: np.ndarray):
+        """At parameters ``x``: whitened residuals and Jacobian, the determinability analysis, the
+        constrained Gauss-Newton step and the cofactor matrix (undetermined parameters named)."""
+        r, jac = self.evaluate(x)
+        rw, jw = self.whiten(r), self.whiten(jac)
+        det = analyse(jw, mask)
+        if det.undetermined.size:
+            raise MultilatError(_undetermined_line(self, det))
+        dx, q = _step(jw, rw, det)
+        return r, rw, jw, det, dx, q
+
+    def redundancy(self, jw: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Redundancy numbers ``1 - diag(J_w Q J_w^T)`` of the whitened rows."""
+        return 1.0 - np.einsum("ij,jk,ik->i", jw, q, jw)
+
+    def datum_mask(self, datum: str) -> np.ndarray:
+        """(n_free,) bool: the free coordinates of the datum points (inner constraints)."""
+        pts = self.network.points
+        use = pts.constrained if datum == "auto" else np.full(pts.n, datum == "free")
+        mask = np.zeros(self.layout.n, bool)
+        mask[self.layout.point_cols[use].ravel()] = True
+        return mask[self.layout.free]
+
+
+def _weighted_block(points) -> list:
+    i, c, v, s = points.weighted_rows()
+    if len(i) == 0:
+        return []
+    labels = tuple(f"weighted coordinate {'xyz'[a]} of {points.ids[p]}" for p, a in zip(i, c))
+    return [Block("observed_coordinates", v, s, None, {"point": i, "axis": c}, labels=labels)]
+
+
+def _undetermined_line(system: System, det: Determinability) -> str:
+    names = [n for k, n in enumerate(np.array(system.layout.names)[system.layout.free]) if k in set(det.undetermined)]
+    points = list(dict.fromkeys(n.split(":", 1)[1] for n in names if n[:2] in ("x:", "y:", "z:")))
+    others = [n for n in names if n[:2] not in ("x:", "y:", "z:")]
+    what = (f"point {points[0]!r}" + (f" (and {len(points) - 1} more: {', '.join(points[1:4])}"
+                                       f"{', ...' if len(points) > 4 else ''})" if len(points) > 1 else "")
+            if points else f"parameter {others[0]!r}")
+    return (f"{what} not determined by the observations (datum defect {det.defect}, "
+            f"{'not removed by the datum points' if det.constraints is not None else 'no datum points to remove it'})")
+
+
+def _step(jw, rw, det: Determinability):
+    """Gauss-Newton step and the cofactor matrix, under the datum constraints ``B^T dx = 0``."""
+    n = jw.shape[1]
+    N = jw.T @ jw
+    b = det.constraints
+    k = 0 if b is None else b.shape[1]
+    M = np.zeros((n + k, n + k))
+    M[:n, :n] = N
+    if k:
+        M[:n, n:] = b
+        M[n:, :n] = b.T
+    try:
+        Minv = np.linalg.inv(M)
+    except np.linalg.LinAlgError:
+        raise MultilatError("the normal equations are singular although the datum removes the defect") from None
+    rhs = np.zeros(n + k)
+    rhs[:n] = jw.T @ rw
+    return (Minv @ rhs)[:n], Minv[:n, :n]
+
+
+def adjust(network: Network, *, options: AdjustOptions | None = None) -> GeneralResult:
+    """Adjust ``network`` (approximate coordinates of every free point must be given, e.g. by
+    :func:`multilat.network.general.approximate.approximate`)."""
+    opt = options or AdjustOptions()
+    system = System(network)
+    pts = network.points
+    if np.any(~np.isfinite(pts.xyz_m)):
+        i = int(np.argwhere(~np.isfinite(pts.xyz_m))[0][0])
+        raise MultilatError(f"point {pts.ids[i]!r} has no approximate coordinates (compute them with "
+                            "approximate())")
+    x = system.layout.initial()
+    mask = system.datum_mask(opt.datum)
+    free = system.layout.free
+    record = []
+    for _ in range(opt.max_iterations):
+        _, rw, _, _, dx, _ = system.linearise(x, mask)
+        x[free] += dx
+        record.append((float(np.abs(dx).max(initial=0.0)), float(rw @ rw)))
+        if record[-1][0] < opt.step_tolerance:
+            break
+    else:
+        raise MultilatError(f"the adjustment did not converge in {opt.max_iterations} iterations (last step "
+                            f"{record[-1][0]:.3g}, vTPv {record[-1][1]:.6g})")
+    return _result(system, x, mask, tuple(record))
+
+
+def _result(system: System, x, mask, record) -> GeneralResult:
+    r, rw, jw, det, _, Q = system.linearise(x, mask)
+    dof = system.n_rows - system.n_free + det.defect
+    vtpv = float(rw @ rw)
+    sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")
+    lay = system.layout
+    names = np.array(lay.names)
+    return GeneralResult(
+        ids=system.network.points.ids, xyz_m=x[lay.point_cols].copy(), parameters=x.copy(),
+        names=tuple(lay.names), free_names=tuple(names[lay.free]), cofactor=Q, sigma0=sigma0, dof=int(dof),
+        defect=det.defect, residuals=r, redundancy=system.redundancy(jw, Q), block_rows=system.rows, iterations=record,
+        determinability=det)

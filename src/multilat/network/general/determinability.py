@@ -1,0 +1,81 @@
+"""What the observations determine: the datum defect and the undetermined parameters, found from
+the whitened Jacobian itself (never from counts of stations, targets or observations).
+
+The whitened Jacobian ``J`` (R x n, free parameters) is scaled to unit column norms (so metres and
+radians weigh alike) and factorised by SVD; singular values below ``rtol * s_max`` span its null
+space ``G = D V_0`` (n x d): the directions along which the observations do not move. ``d`` is the
+datum defect. A free network removes it by inner constraints on its datum coordinates ``S``
+(minimum trace over them): possible when ``G_S`` (the rows of ``G`` on ``S``) has rank ``d``.
+What ``G_S`` cannot remove is undetermined: the parameters with a non-zero share of those null
+directions are named (a point seen along coplanar lines of sight, a target with two distances, a
+direction set with no sight to a known point, ...).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+
+__all__ = ["Determinability", "analyse", "RTOL"]
+
+#: relative singular-value threshold of the rank decision (column-scaled Jacobian)
+RTOL = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class Determinability:
+    """defect : int  dimension of the null space of the observations
+    null_space : ndarray (n, d)  its basis, in the free parameters' columns
+    constraints : ndarray (n, d') or None  the datum rows ``B`` (``B^T dx = 0``) that remove it, None when d = 0
+    undetermined : ndarray of int  free-parameter columns the observations and the datum leave undetermined
+    singular_values : ndarray  of the column-scaled whitened Jacobian, descending
+    """
+
+    defect: int
+    null_space: np.ndarray
+    constraints: np.ndarray | None
+    undetermined: np.ndarray
+    singular_values: np.ndarray
+
+
+def null_space(jw: np.ndarray, rtol: float = RTOL) -> tuple[np.ndarray, np.ndarray]:
+    """Null-space basis (n, d) of the whitened Jacobian and its scaled singular values."""
+    norms = np.linalg.norm(jw, axis=0)
+    scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0)
+    js = jw * scale
+    _, s, vt = scipy.linalg.svd(js, full_matrices=True, lapack_driver="gesvd")
+    s_full = np.zeros(js.shape[1])
+    s_full[:len(s)] = s
+    smax = s_full.max() if s_full.size else 0.0
+    null = s_full <= rtol * smax if smax > 0 else np.ones_like(s_full, bool)
+    g = (vt[null].T) * scale[:, None]
+    return g / np.linalg.norm(g, axis=0, keepdims=True).clip(1e-300), s_full
+
+
+def analyse(jw: np.ndarray, datum_mask: np.ndarray, *, rtol: float = RTOL) -> Determinability:
+    """Defect, datum constraints and undetermined columns.
+
+    jw : (R, n) whitened Jacobian over the free parameters
+    datum_mask : (n,) bool  the free columns that carry a free network's datum (minimum trace over
+        them); all False for a datum of fixed points only
+    """
+    g, s = null_space(jw, rtol)
+    d = g.shape[1]
+    if d == 0:
+        return Determinability(0, g, None, np.zeros(0, int), s)
+    gs = g * datum_mask[:, None]
+    if not datum_mask.any():
+        left = g
+        b = None
+    else:
+        u, sv, vt = np.linalg.svd(gs, full_matrices=True)
+        sv_full = np.zeros(d)
+        sv_full[:len(sv)] = sv
+        ok = sv_full > 1e-6 * max(sv_full.max(), 1e-300)
+        b = gs @ vt[ok].T if ok.any() else None
+        left = g @ vt[~ok].T
+    share = np.abs(left).max(axis=1) if left.size else np.zeros(jw.shape[1])
+    undetermined = np.flatnonzero(share > 1e-6)
+    return Determinability(d, g, b, undetermined, s)

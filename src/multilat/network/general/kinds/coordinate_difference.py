@@ -1,0 +1,34 @@
+"""Coordinate-difference vector (a GNSS baseline, a tracker's point-to-point vector in the world
+frame), one row per observed component.
+
+Model (metres)::
+
+    d_a = P_to[a] - P_from[a]        a = 0, 1, 2: x (east), y (north), z (up)
+
+in multilat's frame. A vector is three rows with the same ``from`` and ``to``; its 3 x 3
+covariance, and any correlation between vectors, is the block's ``cov``. The rows may come in any
+order of components (a reader keeps its file's order, which fixes the Cholesky decorrelation and so
+the redundancy numbers of correlated rows, :mod:`..adjust`). Residual: observed minus computed.
+Partials ``-1`` (from) and ``+1`` (to) on the row's coordinate.
+
+Block: ``index["from"]``, ``index["to"]``, ``index["axis"]`` (R,).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+NAME = "coordinate_difference"
+ANGULAR = False
+
+
+def register(block, layout) -> dict:
+    return {}
+
+
+def evaluate(block, layout, cols, x):
+    axis = np.asarray(block.index["axis"], int)
+    cf = layout.point_cols[np.asarray(block.index["from"], int), axis]
+    ct = layout.point_cols[np.asarray(block.index["to"], int), axis]
+    values = np.tile([-1.0, 1.0], (len(cf), 1))
+    return x[ct] - x[cf], values, np.stack([cf, ct], 1)

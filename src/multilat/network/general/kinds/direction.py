@@ -1,0 +1,37 @@
+"""Direction in a set: a horizontal bearing read on a circle whose zero is unknown.
+
+Model (radians)::
+
+    t = atan2(dy, dx) - o_S,      (dx, dy) = P_to - P_from  (horizontal)
+
+the bearing counter-clockwise from +x (east) towards +y (north), multilat's azimuth convention
+(``docs/conventions.md``, :mod:`multilat.network.angles`), minus ``o_S``, the orientation unknown of
+direction set ``S`` (one per set; several sets on one point each have their own). A reader of a
+clockwise instrument (gama-local's ``angles="left-handed"``) negates its readings first. Heights
+do not enter (a vertical shift leaves the bearing unchanged). Residual: observed minus computed,
+wrapped to ``[-pi, pi)``. Partials: ``dt/d(dx, dy) = (-dy, dx) / h^2``, ``dt/do_S = -1``.
+
+Block: ``index["from"]``, ``index["to"]``, ``index["set"]`` (into ``names["set"]``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.network.general.kinds.geometry import bearing_partials, columns, sight
+
+NAME = "direction"
+ANGULAR = True
+
+
+def register(block, layout) -> dict:
+    return {"orientation": layout.columns("orientation", block.names["set"])[np.asarray(block.index["set"], int)]}
+
+
+def evaluate(block, layout, cols, x):
+    d = sight(block, layout, x)
+    g = bearing_partials(d, block)
+    values = np.concatenate([-g, g, -np.ones((len(d), 1))], 1)
+    cols_ = np.concatenate([columns(layout, block.index["from"], (0, 1)), columns(layout, block.index["to"], (0, 1)),
+                            cols["orientation"][:, None]], 1)
+    return np.arctan2(d[:, 1], d[:, 0]) - x[cols["orientation"]], values, cols_

@@ -1,0 +1,30 @@
+"""Height difference (levelling): the rise of z from one point to another.
+
+Model (metres)::
+
+    dh = z_to - z_from
+
+Residual: observed minus computed. Partials ``-1`` (from) and ``+1`` (to). A levelling line's
+correlated block carries its full covariance (``Block.cov``).
+
+Block: ``index["from"]``, ``index["to"]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.network.general.kinds.geometry import columns
+
+NAME = "height_difference"
+ANGULAR = False
+
+
+def register(block, layout) -> dict:
+    return {}
+
+
+def evaluate(block, layout, cols, x):
+    cf, ct = columns(layout, block.index["from"], (2,)), columns(layout, block.index["to"], (2,))
+    values = np.concatenate([-np.ones_like(cf, float), np.ones_like(ct, float)], 1)
+    return x[ct[:, 0]] - x[cf[:, 0]], values, np.concatenate([cf, ct], 1)

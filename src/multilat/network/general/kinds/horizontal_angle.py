@@ -1,0 +1,37 @@
+"""Horizontal angle at a point between a backsight and a foresight.
+
+Model (radians)::
+
+    a = atan2(P_fs - P_from) - atan2(P_bs - P_from)      (horizontal bearings, counter-clockwise)
+
+the foresight's bearing minus the backsight's, in multilat's counter-clockwise sense (a clockwise
+reading, gama-local's ``angles="left-handed"``, is negated by its reader). No orientation unknown:
+it cancels. Heights do not enter. Residual: observed minus computed, wrapped to ``[-pi, pi)``.
+Partials: each bearing's ``(-dy, dx) / h^2`` with the sign of its term; the point ``from`` takes
+minus the sum of the two.
+
+Block: ``index["from"]``, ``index["bs"]``, ``index["fs"]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.network.general.kinds.geometry import bearing_partials, columns, sight
+
+NAME = "horizontal_angle"
+ANGULAR = True
+
+
+def register(block, layout) -> dict:
+    return {}
+
+
+def evaluate(block, layout, cols, x):
+    df = sight(block, layout, x, "from", "fs")
+    db = sight(block, layout, x, "from", "bs")
+    gf, gb = bearing_partials(df, block), bearing_partials(db, block)
+    values = np.concatenate([gb - gf, -gb, gf], 1)
+    cols_ = np.concatenate([columns(layout, block.index[k], (0, 1)) for k in ("from", "bs", "fs")], 1)
+    a = np.arctan2(df[:, 1], df[:, 0]) - np.arctan2(db[:, 1], db[:, 0])
+    return a, values, cols_

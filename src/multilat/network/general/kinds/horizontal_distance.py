@@ -1,0 +1,38 @@
+"""Horizontal distance between two points.
+
+Model (metres)::
+
+    h = hypot(dx, dy),   (dx, dy) = P_to - P_from  (horizontal components)
+
+Heights do not enter (a vertical shift leaves it unchanged). Residual: observed minus computed.
+Partials: ``dh/d(dx, dy) = (dx, dy) / h``.
+
+Block: ``index["from"]``, ``index["to"]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network.general.kinds.geometry import columns, sight
+
+NAME = "horizontal_distance"
+ANGULAR = False
+
+
+def register(block, layout) -> dict:
+    return {}
+
+
+def evaluate(block, layout, cols, x):
+    d = sight(block, layout, x)
+    h = np.hypot(d[:, 0], d[:, 1])
+    if np.any(h <= 0):
+        k = int(np.flatnonzero(h <= 0)[0])
+        raise MultilatError(f"horizontal distance {block.labels[k] if block.labels else k + 1}: the two points "
+                            "are on one vertical")
+    g = d[:, :2] / h[:, None]
+    values = np.concatenate([-g, g], 1)
+    cols_ = np.concatenate([columns(layout, block.index["from"], (0, 1)), columns(layout, block.index["to"], (0, 1))], 1)
+    return h, values, cols_

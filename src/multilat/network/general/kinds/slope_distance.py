@@ -1,0 +1,58 @@
+"""Slope distance from an instrument to a target, with the instrument's additive constant and scale.
+
+Model (metres)::
+
+    rho = | (P_to + to_dh e_z) - (P_from + from_dh e_z) |
+    s   = (1 + k_I) rho + c_I
+
+``from_dh`` is the instrument height over the point it stands on, ``to_dh`` the target (reflector)
+height over its point, both along the vertical z (up); ``c_I`` the additive constant of instrument
+``I`` (positive makes distances longer, as multilat's head offset ``o_i``), ``k_I`` its scale
+(dimensionless). One instrument may stand on many points (a head moved between stations): its
+``c`` and ``k`` are shared by all its distances (JAG3D's ``SlopeDistanceGroup``). Residual: observed
+minus computed. Partials: ``ds/dP_to = (1 + k) u``, ``ds/dP_from = -(1 + k) u`` with ``u`` the unit
+vector of the sight, ``ds/dc = 1``, ``ds/dk = rho``.
+
+Block: ``index["from"]``, ``index["to"]`` (points), optional ``index["instrument"]`` (into
+``names["instrument"]``, -1 for none); ``data["from_dh"]``, ``data["to_dh"]`` optional; options
+``estimate_offset`` and ``estimate_scale`` (default False: held at 0).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network.general.kinds.geometry import columns, sight
+
+NAME = "slope_distance"
+ANGULAR = False
+
+
+def register(block, layout) -> dict:
+    inst = block.index.get("instrument")
+    m = len(block.index["from"])
+    if inst is None:
+        return {"offset": np.full(m, -1), "scale": np.full(m, -1)}
+    names = block.names["instrument"]
+    off = layout.columns("offset", names, free=bool(block.options.get("estimate_offset", False)))
+    sca = layout.columns("scale", names, free=bool(block.options.get("estimate_scale", False)))
+    inst = np.asarray(inst, int)
+    has = inst >= 0
+    return {"offset": np.where(has, off[np.maximum(inst, 0)], -1), "scale": np.where(has, sca[np.maximum(inst, 0)], -1)}
+
+
+def evaluate(block, layout, cols, x):
+    d = sight(block, layout, x)
+    rho = np.linalg.norm(d, axis=1)
+    if np.any(rho <= 0):
+        k = int(np.flatnonzero(rho <= 0)[0])
+        raise MultilatError(f"slope distance {block.labels[k] if block.labels else k + 1}: its two ends coincide")
+    c = np.where(cols["offset"] >= 0, x[cols["offset"]], 0.0)
+    k = np.where(cols["scale"] >= 0, x[cols["scale"]], 0.0)
+    u = d / rho[:, None]
+    g = (1.0 + k)[:, None] * u
+    values = np.concatenate([-g, g, np.ones((len(rho), 1)), rho[:, None]], 1)
+    cols_ = np.concatenate([columns(layout, block.index["from"]), columns(layout, block.index["to"]),
+                            cols["offset"][:, None], cols["scale"][:, None]], 1)
+    return (1.0 + k) * rho + c, values, cols_

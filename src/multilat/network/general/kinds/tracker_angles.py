@@ -1,0 +1,51 @@
+"""Azimuth and elevation read in an instrument's own frame (a laser tracker's encoders).
+
+Model (radians), per set-up ``U`` standing on point ``P_from`` with frame ``R_U = Rz(kappa)
+Ry(phi) Rx(omega)`` (:mod:`multilat.network.angles`)::
+
+    v  = R_U^T ((P_to + to_dh e_z) - (P_from + from_dh e_z))
+    az = atan2(v_y, v_x)              counter-clockwise from the instrument's x axis
+    el = atan2(v_z, hypot(v_x, v_y))  above the instrument's horizontal plane
+
+one row per reading, ``index["component"]`` 0 (azimuth) or 1 (elevation). A levelled set-up
+(``options["levelled"]``, default True) holds ``omega = phi = 0`` and estimates ``kappa`` only.
+Residual: observed minus computed, azimuths wrapped to ``[-pi, pi)`` (elevations lie in
+``[-pi/2, pi/2]`` and are unaffected by the wrap). Partials from
+:func:`multilat.network.angles.angle_jacobian`.
+
+Block: ``index["from"]``, ``index["to"]``, ``index["setup"]`` (into ``names["setup"]``),
+``index["component"]``; ``data["from_dh"]``, ``data["to_dh"]`` optional.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.network.angles import angle_jacobian, predicted_angles
+from multilat.network.general.kinds.geometry import columns, sight
+
+NAME = "tracker_angles"
+ANGULAR = True
+
+
+def register(block, layout) -> dict:
+    names = block.names["setup"]
+    tilt_free = not bool(block.options.get("levelled", True))
+    frame = np.stack([layout.columns("omega", names, free=tilt_free), layout.columns("phi", names, free=tilt_free),
+                      layout.columns("kappa", names)], 1)
+    return {"frame": frame[np.asarray(block.index["setup"], int)]}
+
+
+def evaluate(block, layout, cols, x):
+    d = sight(block, layout, x)
+    m = len(d)
+    ori = x[cols["frame"]]
+    zero = np.zeros((m, 3))
+    d_st, d_ori, d_tg = angle_jacobian(zero, ori, d, np.arange(m), np.arange(m))
+    comp = np.asarray(block.index["component"], int)
+    rows = np.arange(m)
+    az, el = predicted_angles(zero, ori, d, np.arange(m), np.arange(m))
+    computed = np.where(comp == 0, az, el)
+    values = np.concatenate([d_st[rows, comp], d_tg[rows, comp], d_ori[rows, comp]], 1)
+    cols_ = np.concatenate([columns(layout, block.index["from"]), columns(layout, block.index["to"]), cols["frame"]], 1)
+    return computed, values, cols_

@@ -1,0 +1,40 @@
+"""Zenith angle: the angle of a line of sight from the upward vertical.
+
+Model (radians)::
+
+    z = atan2(h, dz),   (dx, dy, dz) = (P_to + to_dh e_z) - (P_from + from_dh e_z),  h = hypot(dx, dy)
+
+0 looks straight up, pi/2 is horizontal (elevation = pi/2 - z). Heights along the vertical, as for
+the slope distance. The instrument is levelled (its vertical is the world's z). Residual: observed
+minus computed. Partials: ``dz/d(dx, dy) = dz (dx, dy) / (h rho^2)``, ``dz/d(dz) = -h / rho^2``.
+
+Block: ``index["from"]``, ``index["to"]``; ``data["from_dh"]``, ``data["to_dh"]`` optional.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network.general.kinds.geometry import columns, sight
+
+NAME = "zenith_angle"
+ANGULAR = False
+
+
+def register(block, layout) -> dict:
+    return {}
+
+
+def evaluate(block, layout, cols, x):
+    d = sight(block, layout, x)
+    h = np.hypot(d[:, 0], d[:, 1])
+    r2 = h * h + d[:, 2] ** 2
+    if np.any(h <= 0):
+        k = int(np.flatnonzero(h <= 0)[0])
+        raise MultilatError(f"zenith angle {block.labels[k] if block.labels else k + 1}: the sight is vertical "
+                            "(its derivative is undefined)")
+    g = np.stack([d[:, 2] * d[:, 0] / (h * r2), d[:, 2] * d[:, 1] / (h * r2), -h / r2], -1)
+    values = np.concatenate([-g, g], 1)
+    cols_ = np.concatenate([columns(layout, block.index["from"]), columns(layout, block.index["to"])], 1)
+    return np.arctan2(h, d[:, 2]), values, cols_

@@ -1,0 +1,93 @@
+"""Observations of a general network: blocks of one kind each, and the network they make with its
+points.
+
+A :class:`Block` holds the observations of one kind (:mod:`.kinds`) as arrays: ``value`` and the
+a-priori covariance of its rows (SI: metres, radians), per-observation integer references
+(``index``: ``from``, ``to``, ``set``, ``instrument``, ...) into the point set or into ``names``,
+per-observation numbers (``data``: instrument and target heights), and a label per observation for
+messages (``FILE:LINE`` when read from a file). A kind with vector observations (coordinate
+differences, observed coordinates) has 3 or 1 rows per observation; ``value`` and ``cov`` are per
+row. Rows of different blocks are uncorrelated; inside a block ``cov`` may be full (a correlated
+levelling line, a GNSS vector's 3 x 3), or None with ``sigma`` alone (independent rows).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network.general.points import PointSet
+
+__all__ = ["Block", "Network"]
+
+
+@dataclass(frozen=True, eq=False)
+class Block:
+    """Observations of one kind.
+
+    kind : str  a name in :data:`multilat.network.general.kinds.KINDS`
+    value : ndarray (R,)  observed values per row (SI)
+    sigma : ndarray (R,)  a-priori standard deviations per row
+    cov : ndarray (R, R) or None  full a-priori covariance (None: diagonal ``sigma**2``)
+    index : dict of str -> int ndarray (m,)  references per observation
+    data : dict of str -> float ndarray (m,)  numbers per observation (``from_dh``, ``to_dh``: metres)
+    labels : tuple of str (m,)  one per observation, for messages
+    names : dict of str -> tuple of str  what ``index`` entries other than points refer to
+        (``set``: direction-set ids, ``instrument``: instrument ids, ``setup``: set-up ids)
+    options : dict  per-block settings of the kind (``levelled``, ``estimate_offset``, ...)
+    """
+
+    kind: str
+    value: np.ndarray
+    sigma: np.ndarray
+    cov: np.ndarray | None = None
+    index: dict = field(default_factory=dict)
+    data: dict = field(default_factory=dict)
+    labels: tuple = ()
+    names: dict = field(default_factory=dict)
+    options: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        r = np.shape(self.value)[0]
+        if np.shape(self.sigma) != (r,) or not np.all(np.isfinite(self.sigma) & (np.asarray(self.sigma) > 0)):
+            raise MultilatError(f"{self.kind}: sigma must be (R,) finite and > 0")
+        if not np.all(np.isfinite(self.value)):
+            k = int(np.flatnonzero(~np.isfinite(self.value))[0])
+            raise MultilatError(f"{self.kind}: value of row {k + 1} is not finite")
+        if self.cov is not None and np.shape(self.cov) != (r, r):
+            raise MultilatError(f"{self.kind}: cov must be ({r}, {r}), got {np.shape(self.cov)}")
+
+    @property
+    def n_rows(self) -> int:
+        return int(np.shape(self.value)[0])
+
+    @property
+    def covariance(self) -> np.ndarray:
+        """The full (R, R) a-priori covariance."""
+        return np.diag(self.sigma ** 2) if self.cov is None else np.asarray(self.cov, float)
+
+    def whitener(self) -> np.ndarray:
+        """Lower Cholesky factor ``L`` of the covariance (``C = L L^T``), diagonal when independent;
+        a covariance that is not positive definite is named."""
+        if self.cov is None:
+            return np.diag(self.sigma)
+        try:
+            return np.linalg.cholesky(self.covariance)
+        except np.linalg.LinAlgError:
+            raise MultilatError(f"{self.kind} block at {self.labels[0] if self.labels else '?'}: its covariance "
+                                "matrix is not positive definite") from None
+
+
+@dataclass(frozen=True, eq=False)
+class Network:
+    """Points and observation blocks; ``notes`` say what a reader applied (one line each)."""
+
+    points: PointSet
+    blocks: tuple
+    notes: tuple = ()
+
+    @property
+    def n_rows(self) -> int:
+        return sum(b.n_rows for b in self.blocks)
