@@ -245,3 +245,19 @@ def test_summary_and_detection_by_root_element(capsys, tmp_path):
     assert rc == 0, err
     assert "gama-local" in out and "σ0 = 0.7566" in out and "datum: given by 5 fixed point(s)" in out
     assert "w-test: α0 = 0.001" in out
+
+
+def test_fixed_global_alpha(capsys):
+    """--test-method fixed (default α_global 0.05, as the distance path): two_trackers' vᵀPv 49.72 on
+    41 dof passes at 5 % (χ²_0.95(41) = 56.94, gama-local's own test passes too) and fails the
+    B-method's α 0.22 (critical 47.58): the option is applied, not ignored."""
+    rc, out, err = _main(capsys, EX / "two_trackers.xml", "--json", "--test-method", "fixed")
+    assert rc == 0, err
+    gt = json.loads(out)["global_test"]
+    assert gt["alpha"] == 0.05 and gt["method"] == "fixed" and gt["passed"] is True
+    assert gt["critical"] == pytest.approx(scipy.stats.chi2.ppf(0.95, 41), rel=1e-9)
+    rc, out, err = _main(capsys, EX / "two_trackers.xml", "--json")
+    gt = json.loads(out)["global_test"]
+    assert gt["method"] == "b-method" and gt["passed"] is False and gt["alpha"] > 0.2
+    rc, out, err = _main(capsys, EX / "two_trackers.xml", "--alpha-global", "0.01", "--test-method", "b-method")
+    assert rc == 2 and err.startswith("error: --alpha-global goes with --test-method fixed")

@@ -3,7 +3,8 @@
 
 Reached from the ``adjust`` command (:mod:`multilat.cli.network_cmd`) when its input is a gama-local
 file (suffix ``.xml`` / ``.gkf``, or a ``<gama-local>`` root element). The options that apply are
-``--json``, ``--out DIR``, ``--alpha``, ``--variance-factor`` and ``--strict``; every other option of
+``--json``, ``--out DIR``, ``--alpha``, ``--variance-factor``, ``--test-method``, ``--alpha-global``
+and ``--strict``; every other option of
 the distance-only path is refused in one line naming it (never silently ignored): the file itself
 carries the datum (``fix=``/``adj=``), the σ (``stdev=`` and ``<points-observations>``) and the
 approximate coordinates.
@@ -21,7 +22,7 @@ from multilat.errors import MultilatError
 __all__ = ["is_general_input", "run", "APPLIES", "WHY_NOT"]
 
 #: the adjust command's parameters that the general path reads
-APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict")
+APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method")
 _OPTION = {"as_json": "--json", "fix_offsets_um": "--fix-offsets-um", "scale_bar": "--scale-bars",
            "snooping": "--snooping/--no-snooping"}
 #: why an option of the distance-only path is refused here (the default reason for the others)
@@ -77,16 +78,19 @@ def run(**params) -> None:
             raise MultilatError(f"{_option_name(name)} does not apply to a gama-local input "
                                 f"({params['observations']}): {why}")
     path, out = Path(params["observations"]), params["out"]
-    alpha, vf = params["alpha"], params["variance_factor"]
-    if vf not in ("known", "unknown"):
-        raise MultilatError(f"--variance-factor must be known or unknown, got {vf!r}")
-    if not 0 < alpha < 1:
-        raise MultilatError(f"--alpha must be in (0, 1), got {alpha!r}")
+    alpha, vf, a_glob, method = (params[k] for k in ("alpha", "variance_factor", "alpha_global", "test_method"))
+    if method is None:
+        method = "fixed" if a_glob is not None else "b-method"
+    from multilat.cli.network_cmd import _check_tests
+
+    _check_tests(alpha, a_glob, method, vf, 10.0)        # the distance path's checks of the test options
+    if method == "fixed" and a_glob is None:
+        a_glob = 0.05                                      # as the distance path: fixed α_global default 0.05
     from multilat.io import check_output_dir
 
     if out is not None:
         check_output_dir(out, inputs=[path])
-    doc, adj, stats = compute(path, alpha=alpha, variance_factor=vf, strict=params["strict"])
+    doc, adj, stats = compute(path, alpha=alpha, variance_factor=vf, alpha_global=a_glob, strict=params["strict"])
     for e in adj.excluded:
         warnings.warn(f"point {e['id']!r} left out: {e['reason']} ({e['n_obs']} observation row(s) removed)",
                       stacklevel=2)
@@ -100,14 +104,15 @@ def run(**params) -> None:
     print_summary(doc, adj, stats, out)
 
 
-def compute(path, *, alpha: float, variance_factor: str, strict: bool):
+def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_global: float | None = None):
     """Read, adjust (undetermined points left out unless ``strict``), statistics: (doc, adjustment, stats)."""
     from multilat.network.general import adjust_network, read_gama_input, statistics, to_json
     from multilat.vocabulary import stamp
 
     net = read_gama_input(path)
     adj = adjust_network(net, strict=strict)
-    stats = statistics(adj.system, adj.result, alpha=alpha, variance_factor=variance_factor)
+    stats = statistics(adj.system, adj.result, alpha=alpha, variance_factor=variance_factor,
+                       alpha_global=alpha_global)
     return stamp(to_json(adj, stats, source=str(path)), "adjust"), adj, stats
 
 
@@ -146,7 +151,7 @@ def print_summary(doc, adj, stats, out) -> None:
     else:
         say(f"  σ0 = {doc['sigma0']:.4f} (ratio to the a-priori σ), dof = {doc['dof']}; global χ² test: "
             f"{gt['statistic']:.2f} {'<=' if gt['passed'] else '>'} {gt['critical']:.2f} (α = {gt['alpha']:.3g}, "
-            f"B-method): {'passed' if gt['passed'] else 'FAILED'}")
+            f"{'B-method' if gt['method'] == 'b-method' else 'fixed α'}): {'passed' if gt['passed'] else 'FAILED'}")
         say(f"  w-test: α0 = {t['alpha0']:g}, critical |w| {t['critical']:.2f}, λ0 = {t['lambda0']:.2f}")
     red = stats.redundancy
     say(f"  redundancy {max(red.min(), 0.0):.3f}..{red.max():.3f}; {int((red <= 1e-9).sum())} uncontrolled row(s) "

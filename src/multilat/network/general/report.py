@@ -83,7 +83,7 @@ def datum_words(points, result) -> str:
 def observation_rows(system, stats) -> list[dict]:
     """One dict per row of the adjusted system (the ``observations`` table of the JSON)."""
     ids = system.network.points.ids
-    out, r = [], 0
+    out = []
     for b, sl in zip(system.blocks, system.rows):
         labels = b.labels if len(b.labels) == b.n_rows else ("",) * b.n_rows
         for k in range(b.n_rows):
@@ -104,7 +104,6 @@ def observation_rows(system, stats) -> list[dict]:
                        statistic=float(stats.statistic[i]), passed=bool(stats.passed[i]),
                        mdb=_finite(stats.mdb[i]), mdb_sigma=_finite(stats.mdb_sigma[i]))
             out.append(row)
-            r += 1
     return out
 
 
@@ -126,6 +125,14 @@ def to_json(adjustment, stats, *, source: str) -> dict:
                      "status_xyz": [{FREE: "free", FIXED: "fixed", WEIGHTED: "weighted"}[int(s)]
                                     for s in pts.status[i]]}
     gt = stats.global_test
+    scale = res.sigma0 ** 2 if stats.variance_factor == "unknown" and np.isfinite(res.sigma0) else 1.0
+    others = {}
+    for k, name in enumerate(res.free_names):
+        if name[:2] not in ("x:", "y:", "z:"):
+            kind = name.split(":", 1)[0]
+            others[name] = {"value": float(res.parameters[res.names.index(name)]),
+                            "std": float(np.sqrt(max(res.cofactor[k, k], 0.0) * scale)),
+                            "unit": {"offset": "m", "scale": "1"}.get(kind, "rad")}
     failing = [k for k in range(len(stats.passed)) if not stats.passed[k]]
     return {
         "input": source,
@@ -136,13 +143,14 @@ def to_json(adjustment, stats, *, source: str) -> dict:
         "n_obs": int(sum(b.n_rows for b in adjustment.system.blocks)),
         "excluded": [dict(e) for e in adjustment.excluded],
         "points": points,
+        "parameters": others,
         "sigma0": res.sigma0,
         "dof": res.dof,
         "vtpv": stats.vtpv,
         "variance_factor": stats.variance_factor,
         "global_test": {"statistic": gt.statistic, "critical": gt.critical, "passed": gt.passed, "alpha": gt.alpha,
                         "dof": gt.dof, "power": gt.power, "lambda0": gt.lambda0,
-                        "decides": stats.variance_factor == "known", "method": "b-method"},
+                        "decides": stats.variance_factor == "known", "method": stats.test_method},
         "tests": {"test": stats.test, "alpha0": stats.alpha0, "critical": stats.critical,
                   "lambda0": stats.lambda0, "n_failed": len(failing), "snooping": False},
         "sigma_source": {"kind": "file", "file": source,
