@@ -261,3 +261,13 @@ def test_fixed_global_alpha(capsys):
     assert gt["method"] == "b-method" and gt["passed"] is False and gt["alpha"] > 0.2
     rc, out, err = _main(capsys, EX / "two_trackers.xml", "--alpha-global", "0.01", "--test-method", "b-method")
     assert rc == 2 and err.startswith("error: --alpha-global goes with --test-method fixed")
+
+
+def test_a_network_without_datum_is_refused_not_emptied(capsys, tmp_path):
+    """Every point free, none a datum point (lower-case adj): every point is undetermined. Leaving
+    them all out would adjust nothing: refused in one line instead."""
+    net = tmp_path / "nodatum.xml"
+    net.write_text((EX / "two_trackers.xml").read_text().replace('adj="XYZ"', 'adj="xyz"'))
+    rc, out, err = _main(capsys, net, "--json")
+    assert rc == 2 and out == "" and err.count("\n") == 1
+    assert err.startswith("error: point 'T1' (and 16 more") and "datum defect 4, no datum points" in err

@@ -65,7 +65,7 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
             ready = approximate(net)
             res = adjust(ready, options=options)
         except UndeterminedError as e:
-            if strict or e.others or not e.points:
+            if strict or not e.points:              # a defect no point carries: refused
                 raise
             net = _leave_out(net, {p: _reason(c) for p, c in e.points.items()}, rnd, excluded, error=e)
             continue
