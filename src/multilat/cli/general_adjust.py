@@ -30,6 +30,7 @@ WHY_NOT = {
     "datum": "the datum of a gama-local file is its fix=/adj= attributes (upper-case adj = datum points)",
     "points": "the file's <point> elements carry the coordinates", "sigma_um": "the σ are the file's stdev=",
     "instrument": "the σ are the file's stdev=", "snooping": "data snooping is not done on the general path yet",
+    "report": "the HTML report is built from the distance path's result",
 }
 
 
@@ -44,7 +45,7 @@ def is_general_input(path) -> bool:
     from multilat.io import read_input_head
 
     try:
-        head = read_input_head(p, 4096).lstrip()
+        head = read_input_head(p, 4096).removeprefix(b"\xef\xbb\xbf").lstrip()
     except MultilatError:
         return False
     return head.startswith(b"<?xml") and b"<gama-local" in head or head.startswith(b"<gama-local")
