@@ -62,7 +62,7 @@ def test_example_cli_json_against_gama(name):
     r = _cli(EX / f"{name}.xml", "--json")
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
-    assert doc["schema"] == "multilat.adjust/1" and doc["format"] == "gama-local"
+    assert doc["schema"] == "multilat.adjust-general/1" and doc["format"] == "gama-local"
     coords = _against_gama({p: v["xyz_m"] for p, v in doc["points"].items()}, doc["sigma0"], doc["dof"], name)
     assert set(coords) <= set(doc["points"])
     for p, v in doc["points"].items():
@@ -271,3 +271,16 @@ def test_a_network_without_datum_is_refused_not_emptied(capsys, tmp_path):
     rc, out, err = _main(capsys, net, "--json")
     assert rc == 2 and out == "" and err.count("\n") == 1
     assert err.startswith("error: point 'T1' (and 16 more") and "datum defect 4, no datum points" in err
+
+
+def test_json_keys_follow_the_vocabulary():
+    """Every key follows multilat's output vocabulary except the ids of the two id maps (`points`,
+    `parameters`), which vocabulary.ID_MAPS does not list yet."""
+    from multilat.cli.general_adjust import compute
+    from multilat.vocabulary import document_problems
+
+    doc, _, _ = compute(EX / "two_trackers.xml", alpha=0.001, variance_factor="known", strict=False)
+    probs = [p for p in document_problems(doc) if not p.startswith(("$.points.", "$.parameters."))
+             or p.split(":", 1)[0].count(".") > 2]
+    assert probs == []
+    assert any(p.startswith("$.points.T1") for p in document_problems(doc))   # the filter is not vacuous

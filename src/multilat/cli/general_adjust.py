@@ -19,7 +19,11 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["is_general_input", "run", "APPLIES", "WHY_NOT"]
+__all__ = ["is_general_input", "run", "APPLIES", "WHY_NOT", "SCHEMA"]
+
+#: the document's schema name: ``"schema": "multilat.adjust-general/1"`` (not the distance path's
+#: ``multilat.adjust``: the keys differ, so a reader can tell them apart)
+SCHEMA = "adjust-general"
 
 #: the adjust command's parameters that the general path reads
 APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method")
@@ -100,7 +104,7 @@ def run(**params) -> None:
     from multilat.cli.app import emit_json
 
     if params["as_json"]:
-        emit_json(doc, "adjust")
+        emit_json(doc, SCHEMA)
         return
     print_summary(doc, adj, stats, out)
 
@@ -114,7 +118,7 @@ def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_glo
     adj = adjust_network(net, strict=strict)
     stats = statistics(adj.system, adj.result, alpha=alpha, variance_factor=variance_factor,
                        alpha_global=alpha_global)
-    return stamp(to_json(adj, stats, source=str(path)), "adjust"), adj, stats
+    return stamp(to_json(adj, stats, source=str(path)), SCHEMA), adj, stats
 
 
 def write_out(out, path, doc) -> None:
