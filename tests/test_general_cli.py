@@ -284,3 +284,48 @@ def test_json_keys_follow_the_vocabulary():
              or p.split(":", 1)[0].count(".") > 2]
     assert probs == []
     assert any(p.startswith("$.points.T1") for p in document_problems(doc))   # the filter is not vacuous
+
+
+# --------------------------------------------------------------------------- without_points
+GAMA3D = ROOT / "tests" / "data" / "gama3d"
+
+
+def _rows(net):
+    """Every row as (kind, {key: point id or set name}, value, label)."""
+    ids = net.points.ids
+    out = []
+    for b in net.blocks:
+        for k in range(b.n_rows):
+            ref = {key: (b.names[key][int(v[k])] if key in b.names else
+                         ids[int(v[k])] if key not in ("axis", "component") else int(v[k]))
+                   for key, v in b.index.items()}
+            out.append((b.kind, ref, float(b.value[k]), b.labels[k] if len(b.labels) == b.n_rows else ""))
+    return out
+
+
+def test_without_points_keeps_every_other_row_and_its_set():
+    """Removing S2 (a station with one direction set) from direction_sets: every row not touching S2
+    is kept with the same set name and value, S2's set is gone from the layout."""
+    from multilat.network.general import System, read_gama_input, without_points
+
+    net = read_gama_input(GAMA3D / "direction_sets.xml")
+    out, n = without_points(net, ["S2"])
+    before = [r for r in _rows(net) if "S2" not in r[1].values()]
+    assert _rows(out) == before and n == len(_rows(net)) - len(before) > 0
+    names = System(out).layout.names
+    assert not any(x.startswith("orientation:S2#") or x.endswith(":S2") for x in names)
+    assert sum(x.startswith("orientation:S1#") for x in names) == 3
+
+
+def test_without_points_keeps_the_covariance_of_the_remaining_rows():
+    from multilat.network.general import read_gama_input, without_points
+
+    net = read_gama_input(GAMA3D / "vectors.xml")
+    (vec,) = [b for b in net.blocks if b.kind == "coordinate_difference"]
+    ids = net.points.ids
+    keep = np.array([ids[f] != "G5" and ids[t] != "G5" for f, t in zip(vec.index["from"], vec.index["to"])])
+    assert 0 < keep.sum() < len(keep)
+    out, _ = without_points(net, ["G5"])
+    (vec2,) = [b for b in out.blocks if b.kind == "coordinate_difference"]
+    assert np.array_equal(vec2.cov, vec.cov[np.ix_(keep, keep)]) and np.array_equal(vec2.value, vec.value[keep])
+    assert "G5" not in out.points.ids and out.points.n == net.points.n - 1
