@@ -244,7 +244,7 @@ def test_summary_and_detection_by_root_element(capsys, tmp_path):
     rc, out, err = _main(capsys, net)
     assert rc == 0, err
     assert "gama-local" in out and "σ0 = 0.7566" in out and "datum: given by 5 fixed point(s)" in out
-    assert "w-test: α0 = 0.001" in out
+    assert "w-test: α0 = 0.001" in out and "note: approximate coordinates computed for 11 point(s)" in out
 
 
 def test_fixed_global_alpha(capsys):

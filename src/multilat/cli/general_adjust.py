@@ -163,6 +163,8 @@ def print_summary(doc, adj, stats, out) -> None:
         f"(r = 0); {t['n_failed']} test(s) above the critical value (listed in the JSON; no data snooping here)")
     for e in doc["excluded"]:
         say(f"  left out: point {e['id']} ({e['reason']}; {e['n_obs']} observation rows)")
+    for note in doc["notes"]:
+        say(f"  note: {note}")
     _worst(say, doc, stats)
     tb = Table(title="points", title_justify="left")
     for c in ("point", "status", "roles", "x (m)", "y (m)", "z (m)", "95 % max (mm)"):
