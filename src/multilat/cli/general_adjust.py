@@ -151,7 +151,8 @@ def print_summary(doc, adj, stats, out) -> None:
     elif doc["variance_factor"] == "unknown":
         say(f"  σ0 = {doc['sigma0']:.4f} (estimated: variance factor unknown; covariances and MDBs scaled by σ0²), "
             f"dof = {doc['dof']}")
-        say(f"  global χ² test (information only): {gt['statistic']:.2f} vs {gt['critical']:.2f} (α = {gt['alpha']:.3g})")
+        say(f"  global χ² test (information only): {gt['statistic']:.2f} vs {gt['critical']:.2f} "
+            f"(α = {gt['alpha']:.3g})")
         say(f"  Pope's τ-test: α0 = {t['alpha0']:g}, critical |τ| {t['critical']:.3f}")
     else:
         say(f"  σ0 = {doc['sigma0']:.4f} (ratio to the a-priori σ), dof = {doc['dof']}; global χ² test: "

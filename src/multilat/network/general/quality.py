@@ -16,8 +16,8 @@ convention); independent rows are the observations themselves.
 
 Tests, as the distance-only ``multilat adjust`` does them (``docs/reliability.md``): ``alpha`` is
 α0 of each observation's test; the global test's α follows from it by Baarda's B-method (equal
-power 80 %), or is ``alpha_global`` when given. ``variance_factor="known"``: the global χ² test decides and each row's w-test uses the
-a-priori σ; ``"unknown"``: σ0 is estimated, the global test is information only, each row gets
+power 80 %), or is ``alpha_global`` when given. ``variance_factor="known"``: the global χ² test
+decides and each row's w-test uses the a-priori σ; ``"unknown"``: σ0 is estimated, the global test is information only, each row gets
 Pope's τ = w / σ̂0, and the covariances and MDBs are scaled by σ̂0². No observation is rejected here
 (no data snooping on the general path yet): the failing tests are listed.
 """
@@ -98,7 +98,8 @@ def statistics(system, result, *, alpha: float = 0.001, variance_factor: str = "
     cov = np.stack([result.point_cofactor(p) for p in result.ids]) * scale ** 2 if result.ids else np.zeros((0, 3, 3))
     semi, axes = st.confidence_ellipsoid(cov, level=0.95)
     return GeneralStatistics(
-        sigma0=result.sigma0, dof=dof, test_method="b-method" if alpha_global is None else "fixed", vtpv=vtpv, global_test=gt, alpha0=alpha, critical=float(crit), test=test,
+        sigma0=result.sigma0, dof=dof, test_method="b-method" if alpha_global is None else "fixed", vtpv=vtpv,
+        global_test=gt, alpha0=alpha, critical=float(crit), test=test,
         variance_factor=variance_factor, lambda0=lam, residual=result.residuals, sigma=sigma, angular=angular,
         redundancy=red, w=w, statistic=stat, passed=passed, mdb=mdb, mdb_sigma=mdb / sigma,
         bias_to_noise=st.bias_to_noise_ratio(red, alpha=alpha, power=power), cov_m2=cov, semi_axes_95_m=semi,

@@ -47,7 +47,9 @@ class NetworkAdjustment:
 
 
 def _reason(coords: str) -> str:
-    what = "its coordinates are" if coords == "xyz" else f"its {', '.join(coords)} {'is' if len(coords) == 1 else 'are'}"
+    if coords == "xyz":
+        return "its coordinates are not determined by the observations"
+    what = f"its {', '.join(coords)} {'is' if len(coords) == 1 else 'are'}"
     return f"{what} not determined by the observations"
 
 
