@@ -177,6 +177,9 @@ def adjust_command(
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
     ellipsoids and reference-length comparisons."""
+    from multilat.cli import general_adjust
+    if general_adjust.is_general_input(observations):      # a gama-local XML input: the general layer
+        return general_adjust.run(**locals())
     from multilat.network.adjust import adjust
     from multilat.network.files import read_points, read_reference_lengths, write_result_tables
     from multilat.network.result import result_to_json

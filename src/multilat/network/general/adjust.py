@@ -34,7 +34,18 @@ from multilat.network.general.determinability import Determinability, analyse
 from multilat.network.general.layout import Layout
 from multilat.network.general.observations import Block, Network
 
-__all__ = ["AdjustOptions", "GeneralResult", "System", "adjust"]
+__all__ = ["AdjustOptions", "GeneralResult", "System", "UndeterminedError", "adjust"]
+
+
+class UndeterminedError(MultilatError):
+    """Points (or other parameters) the observations and the datum leave undetermined: the one-line
+    message, and ``points`` {id: the undetermined coordinates, e.g. "z" or "xyz"} so that a caller
+    can leave them out (:func:`multilat.network.general.run.adjust_network`)."""
+
+    def __init__(self, message: str, points: dict, others: tuple):
+        super().__init__(message)
+        self.points = points
+        self.others = others
 
 
 @dataclass(frozen=True)
@@ -143,7 +154,7 @@ class System:
         rw, jw = self.whiten(r), self.whiten(jac)
         det = analyse(jw, mask)
         if det.undetermined.size:
-            raise MultilatError(_undetermined_line(self, det))
+            raise UndeterminedError(_undetermined_line(self, det), *_undetermined(self, det))
         dx, q = _step(jw, rw, det)
         return r, rw, jw, det, dx, q
 
@@ -168,10 +179,19 @@ def _weighted_block(points) -> list:
     return [Block("observed_coordinates", v, s, None, {"point": i, "axis": c}, labels=labels)]
 
 
-def _undetermined_line(system: System, det: Determinability) -> str:
+def _undetermined(system: System, det: Determinability) -> tuple[dict, tuple]:
+    """{point id: its undetermined coordinates ("z", "xyz", ...)} and the other undetermined parameters."""
     names = [n for k, n in enumerate(np.array(system.layout.names)[system.layout.free]) if k in set(det.undetermined)]
-    points = list(dict.fromkeys(n.split(":", 1)[1] for n in names if n[:2] in ("x:", "y:", "z:")))
-    others = [n for n in names if n[:2] not in ("x:", "y:", "z:")]
+    points: dict = {}
+    for n in names:
+        if n[:2] in ("x:", "y:", "z:"):
+            points[n[2:]] = points.get(n[2:], "") + n[0]
+    return points, tuple(n for n in names if n[:2] not in ("x:", "y:", "z:"))
+
+
+def _undetermined_line(system: System, det: Determinability) -> str:
+    pts, others = _undetermined(system, det)
+    points = list(pts)
     what = (f"point {points[0]!r}" + (f" (and {len(points) - 1} more: {', '.join(points[1:4])}"
                                        f"{', ...' if len(points) > 4 else ''})" if len(points) > 1 else "")
             if points else f"parameter {others[0]!r}")

@@ -16,7 +16,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.general.observations import Network
 
-__all__ = ["approximate"]
+__all__ = ["approximate", "unreachable"]
 
 
 def _sights(network: Network):
@@ -74,14 +74,37 @@ def _resect(xyz, known, station, readings, hd, rise):
     return None if not zs else np.array([xy[0], xy[1], np.mean(zs)])
 
 
+def unreachable(network: Network) -> tuple:
+    """The ids of the points whose approximate coordinates cannot be computed from the observations
+    (what :func:`approximate` would name), in point order."""
+    xyz, known = _chain(network)
+    return tuple(network.points.ids[i] for i in np.flatnonzero(~known))
+
+
 def approximate(network: Network) -> Network:
     """The network with every missing approximate coordinate computed (points whose three
     coordinates are all given are left as they are)."""
     pts = network.points
+    if np.all(np.isfinite(pts.xyz_m)):
+        return network
+    xyz, known = _chain(network)
+    if not known.all():
+        missing = [pts.ids[i] for i in np.flatnonzero(~known)]
+        raise MultilatError(f"point {missing[0]!r}{f' (and {len(missing) - 1} more)' if len(missing) > 1 else ''}: "
+                            "no approximate coordinates can be computed from the observations (no polar reading "
+                            "from an oriented set-up, no resection on two known points); give them in the file")
+    return Network(pts.with_xyz(np.where(np.isfinite(pts.xyz_m), pts.xyz_m, xyz)), network.blocks,
+                   network.notes + (f"approximate coordinates computed for {int((~np.all(np.isfinite(pts.xyz_m), 1)).sum())} "
+                                    "point(s)",))
+
+
+def _chain(network: Network):
+    """Approximate coordinates chained pass by pass: (xyz (n, 3), known (n,) bool)."""
+    pts = network.points
     xyz = pts.xyz_m.copy()
     known = np.all(np.isfinite(xyz), axis=1)
     if known.all():
-        return network
+        return xyz, known
     hd, rise, sets = _sights(network)
     changed = True
     while changed and not known.all():
@@ -99,11 +122,4 @@ def approximate(network: Network) -> Network:
                     xyz[j] = xyz[station] + [hd[(station, j)] * np.cos(a), hd[(station, j)] * np.sin(a),
                                              rise[(station, j)]]
                     known[j], changed = True, True
-    if not known.all():
-        missing = [pts.ids[i] for i in np.flatnonzero(~known)]
-        raise MultilatError(f"point {missing[0]!r}{f' (and {len(missing) - 1} more)' if len(missing) > 1 else ''}: "
-                            "no approximate coordinates can be computed from the observations (no polar reading "
-                            "from an oriented set-up, no resection on two known points); give them in the file")
-    return Network(pts.with_xyz(np.where(np.isfinite(pts.xyz_m), pts.xyz_m, xyz)), network.blocks,
-                   network.notes + (f"approximate coordinates computed for {int((~np.all(np.isfinite(pts.xyz_m), 1)).sum())} "
-                                    "point(s)",))
+    return xyz, known

@@ -20,7 +20,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.general.points import PointSet
 
-__all__ = ["Block", "Network"]
+__all__ = ["Block", "Network", "without_points"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,3 +91,39 @@ class Network:
     @property
     def n_rows(self) -> int:
         return sum(b.n_rows for b in self.blocks)
+
+
+def without_points(network: Network, ids) -> tuple[Network, int]:
+    """The network with the points ``ids`` and every observation row that references one of them
+    removed (a correlated block keeps the covariance of its remaining rows; direction sets,
+    instruments and set-ups left without rows are dropped), and the number of rows removed."""
+    pts = network.points
+    gone = np.zeros(pts.n, bool)
+    gone[[pts.index(p) for p in ids]] = True
+    new_index = np.cumsum(~gone) - 1                      # old point index -> new one
+    blocks, removed = [], 0
+    for b in network.blocks:
+        point_keys = [k for k in b.index if k not in b.names and k not in ("axis", "component")]
+        keep = np.ones(b.n_rows, bool)
+        for k in point_keys:
+            keep &= ~gone[np.asarray(b.index[k], int)]
+        removed += int((~keep).sum())
+        if not keep.any():
+            continue
+        index = {k: (new_index[np.asarray(v, int)[keep]] if k in point_keys else np.asarray(v)[keep])
+                 for k, v in b.index.items()}
+        names = {}
+        for k, nm in b.names.items():                     # compact sets / instruments / set-ups still used
+            used = sorted(set(int(i) for i in index[k] if i >= 0))
+            remap = {o: n for n, o in enumerate(used)}
+            index[k] = np.array([remap.get(int(i), -1) for i in index[k]], int)
+            names[k] = tuple(nm[o] for o in used)
+        data = {k: np.asarray(v)[keep] for k, v in b.data.items()}
+        labels = tuple(np.asarray(b.labels, object)[keep]) if len(b.labels) == b.n_rows else b.labels
+        cov = None if b.cov is None else np.asarray(b.cov)[np.ix_(keep, keep)]
+        blocks.append(Block(b.kind, np.asarray(b.value)[keep], np.asarray(b.sigma)[keep], cov, index, data,
+                            labels, names, b.options))
+    k = ~gone
+    p = PointSet(tuple(np.array(pts.ids, object)[k]), pts.xyz_m[k], pts.status[k], pts.sigma_m[k],
+                 pts.constrained[k])
+    return Network(p, tuple(blocks), network.notes), removed

@@ -1,0 +1,106 @@
+"""Statistics of a general-network adjustment: σ0 and the global χ² test, per-row redundancy numbers,
+standardized residuals and w-tests (or Pope's τ-tests), minimal detectable biases, and the 95 %
+confidence ellipsoid of every point.
+
+An adapter, not a second implementation: every statistic is computed by the array functions of
+:mod:`multilat.network.statistics` (``global_test``, ``b_method_alpha_global``, ``w_statistics``,
+``w_critical``, ``tau_critical``, ``noncentrality``, ``minimal_detectable_bias_m``,
+``bias_to_noise_ratio``, ``confidence_ellipsoid``), the functions the distance-only adjustment
+uses; this module only feeds them the general layer's whitened rows.
+
+Rows: one per observation row of the adjusted system (a vector has three, a weighted coordinate is
+an ``observed_coordinates`` row), in the system's block order. A correlated block's rows are
+decorrelated by the Cholesky factor of its covariance in the block's row order (as the redundancy
+numbers, :mod:`.adjust`): its w, r and MDB are those of the decorrelated rows (gama-local's
+convention); independent rows are the observations themselves.
+
+Tests, as the distance-only ``multilat adjust`` does them (``docs/reliability.md``): ``alpha`` is
+α0 of each observation's test; the global test's α follows from it by Baarda's B-method (equal
+power 80 %), or is ``alpha_global`` when given. ``variance_factor="known"``: the global χ² test
+decides and each row's w-test uses the a-priori σ; ``"unknown"``: σ0 is estimated, the global test is information only, each row gets
+Pope's τ = w / σ̂0, and the covariances and MDBs are scaled by σ̂0². No observation is rejected here
+(no data snooping on the general path yet): the failing tests are listed.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from multilat.network import statistics as st
+from multilat.network.general import kinds as kinds_registry
+
+__all__ = ["GeneralStatistics", "statistics", "POWER"]
+
+#: power of the w-test against a bias of the MDB's size (as the distance-only path)
+POWER = 0.80
+
+
+@dataclass(frozen=True, eq=False)
+class GeneralStatistics:
+    """Per row (R,): ``residual`` (observed - adjusted, SI), ``sigma`` (a-priori σ, SI), ``angular``
+    (bool), ``redundancy``, ``w`` (standardized residual v / (σ sqrt(r)) of the whitened row; 0 where
+    r = 0), ``statistic`` (w, or τ = w / σ̂0 with the variance factor unknown), ``passed``,
+    ``mdb`` (SI; inf where r = 0), ``mdb_sigma`` (MDB / σ), ``bias_to_noise``.
+    Per point (n,): ``cov_m2`` (n, 3, 3) (a posteriori with the variance factor unknown),
+    ``semi_axes_95_m`` (n, 3) ascending, ``axes_95`` (n, 3, 3).
+    """
+
+    sigma0: float
+    dof: int
+    test_method: str
+    vtpv: float
+    global_test: st.GlobalTest
+    alpha0: float
+    critical: float
+    test: str
+    variance_factor: str
+    lambda0: float
+    residual: np.ndarray
+    sigma: np.ndarray
+    angular: np.ndarray
+    redundancy: np.ndarray
+    w: np.ndarray
+    statistic: np.ndarray
+    passed: np.ndarray
+    mdb: np.ndarray
+    mdb_sigma: np.ndarray
+    bias_to_noise: np.ndarray
+    cov_m2: np.ndarray
+    semi_axes_95_m: np.ndarray
+    axes_95: np.ndarray
+
+
+def statistics(system, result, *, alpha: float = 0.001, variance_factor: str = "known",
+               alpha_global: float | None = None, power: float = POWER) -> GeneralStatistics:
+    """The statistics of ``result`` (a :class:`~.adjust.GeneralResult` of ``system``); the global
+    test at ``alpha_global`` when given (a fixed α), else by the B-method from ``alpha``."""
+    rw = system.whiten(result.residuals)
+    vtpv = float(rw @ rw)
+    dof = result.dof
+    lam = st.noncentrality(alpha, power)
+    a_glob = st.b_method_alpha_global(dof, alpha0=alpha, power=power) if alpha_global is None else alpha_global
+    gt = st.global_test(vtpv, dof, alpha=a_glob, lambda0=lam)
+    red = result.redundancy
+    w = st.w_statistics(rw, None, red)                     # whitened rows: σ = 1
+    sigma = np.concatenate([np.asarray(b.sigma, float) for b in system.blocks])
+    angular = np.concatenate([np.full(b.n_rows, kinds_registry.kind(b.kind).ANGULAR) for b in system.blocks])
+    unknown = variance_factor == "unknown"
+    scale = result.sigma0 if unknown and np.isfinite(result.sigma0) else 1.0
+    if unknown:
+        stat, crit, test = w / scale, st.tau_critical(alpha, dof), "tau"
+    else:
+        stat, crit, test = w, st.w_critical(alpha), "w"
+    controlled = red > 1e-9
+    passed = ~controlled | ~(np.abs(stat) > crit)          # an uncontrolled row cannot fail (nor pass a real test)
+    mdb = st.minimal_detectable_bias_m(sigma * scale, red, alpha=alpha, power=power)
+    cov = np.stack([result.point_cofactor(p) for p in result.ids]) * scale ** 2 if result.ids else np.zeros((0, 3, 3))
+    semi, axes = st.confidence_ellipsoid(cov, level=0.95)
+    return GeneralStatistics(
+        sigma0=result.sigma0, dof=dof, test_method="b-method" if alpha_global is None else "fixed", vtpv=vtpv,
+        global_test=gt, alpha0=alpha, critical=float(crit), test=test,
+        variance_factor=variance_factor, lambda0=lam, residual=result.residuals, sigma=sigma, angular=angular,
+        redundancy=red, w=w, statistic=stat, passed=passed, mdb=mdb, mdb_sigma=mdb / sigma,
+        bias_to_noise=st.bias_to_noise_ratio(red, alpha=alpha, power=power), cov_m2=cov, semi_axes_95_m=semi,
+        axes_95=axes)

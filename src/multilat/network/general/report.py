@@ -1,0 +1,164 @@
+"""The JSON document of a general-network adjustment (``multilat adjust NET.xml --json``), and the
+words for its datum, point roles and status. The keys are documented in ``docs/general-network.md``
+("The JSON document").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.network.general.points import FIXED, FREE, WEIGHTED
+
+__all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "SETUP_KINDS"]
+
+#: kinds whose ``from`` point carries an instrument set-up (the others: levelling, vectors)
+SETUP_KINDS = ("slope_distance", "direction", "zenith_angle", "horizontal_distance", "horizontal_angle",
+               "tracker_angles")
+_UNIT = {True: "rad", False: "m"}
+
+
+def roles(network) -> list[list[str]]:
+    """Per point its roles, in this order: ``station`` (an instrument set up on it), ``target``
+    (sighted from a set-up), ``levelling`` (an end of a height difference), ``vector`` (an end of a
+    coordinate difference), ``observed`` (observed coordinates), ``control`` (a fixed or weighted
+    coordinate), ``datum`` (a datum point of a free network)."""
+    pts = network.points
+    found = [set() for _ in range(pts.n)]
+    for b in network.blocks:
+        if b.kind in SETUP_KINDS:
+            for i in b.index["from"]:
+                found[int(i)].add("station")
+            for k in ("to", "bs", "fs"):
+                for i in b.index.get(k, ()):
+                    found[int(i)].add("target")
+        elif b.kind in ("height_difference", "coordinate_difference"):
+            for k in ("from", "to"):
+                for i in b.index[k]:
+                    found[int(i)].add("levelling" if b.kind == "height_difference" else "vector")
+        elif b.kind == "observed_coordinates":
+            for i in b.index["point"]:
+                found[int(i)].add("observed")
+    for i in range(pts.n):
+        if np.any(pts.status[i] != FREE):
+            found[i].add("control")
+        if pts.constrained[i]:
+            found[i].add("datum")
+    order = ("station", "target", "levelling", "vector", "observed", "control", "datum")
+    return [[r for r in order if r in f] for f in found]
+
+
+def status_words(status_row) -> str:
+    """``free``, ``fixed``, ``weighted`` (all three alike) or ``partly fixed`` (mixed)."""
+    s = set(int(v) for v in status_row)
+    if len(s) == 1:
+        return {FREE: "free", FIXED: "fixed", WEIGHTED: "weighted"}[s.pop()]
+    return "partly fixed" if FIXED in s else "partly weighted"
+
+
+def _names(ids, limit=6):
+    ids = list(ids)
+    return ", ".join(ids[:limit]) + (f" and {len(ids) - limit} more" if len(ids) > limit else "")
+
+
+def datum_words(points, result) -> str:
+    """The datum in one sentence, from the points' status and the adjustment's defect."""
+    d = result.determinability
+    if d.constraints is not None:
+        dp = [p for p, c in zip(points.ids, points.constrained) if c] or list(points.ids)
+        return (f"free network (datum defect {result.defect}): inner constraints, minimum trace over the "
+                f"free coordinates of {len(dp)} datum point(s) ({_names(dp)})")
+    fixed = [p for p, s in zip(points.ids, points.status) if np.all(s == FIXED)]
+    partly = [p for p, s in zip(points.ids, points.status) if np.any(s == FIXED) and not np.all(s == FIXED)]
+    weighted = [p for p, s in zip(points.ids, points.status) if np.any(s == WEIGHTED)]
+    parts = []
+    if fixed:
+        parts.append(f"{len(fixed)} fixed point(s) ({_names(fixed)})")
+    if partly:
+        parts.append(f"{len(partly)} partly fixed ({_names(partly)})")
+    if weighted:
+        parts.append(f"{len(weighted)} weighted ({_names(weighted)})")
+    return "given by " + "; ".join(parts) if parts else "no datum points (datum defect 0)"
+
+
+def observation_rows(system, stats) -> list[dict]:
+    """One dict per row of the adjusted system (the ``observations`` table of the JSON)."""
+    ids = system.network.points.ids
+    out = []
+    for b, sl in zip(system.blocks, system.rows):
+        labels = b.labels if len(b.labels) == b.n_rows else ("",) * b.n_rows
+        for k in range(b.n_rows):
+            row = {"kind": b.kind}
+            for key in ("from", "to", "bs", "fs", "point"):
+                if key in b.index:
+                    row[key] = ids[int(b.index[key][k])]
+            if "axis" in b.index:
+                row["axis"] = "xyz"[int(b.index["axis"][k])]
+            if "component" in b.index:
+                row["component"] = ("azimuth", "elevation")[int(b.index["component"][k])]
+            if "set" in b.index:
+                row["set"] = b.names["set"][int(b.index["set"][k])]
+            i = sl.start + k
+            row.update(label=str(labels[k]), unit=_UNIT[bool(stats.angular[i])], value=float(b.value[k]),
+                       sigma=float(stats.sigma[i]), residual=float(stats.residual[i]),
+                       redundancy=float(stats.redundancy[i]), w=float(stats.w[i]),
+                       statistic=float(stats.statistic[i]), passed=bool(stats.passed[i]),
+                       mdb=_finite(stats.mdb[i]), mdb_sigma=_finite(stats.mdb_sigma[i]))
+            out.append(row)
+    return out
+
+
+def _finite(v):
+    return float(v) if np.isfinite(v) else None
+
+
+def to_json(adjustment, stats, *, source: str) -> dict:
+    """The document (without its schema stamp): points map, observations table, statistics."""
+    net, res = adjustment.network, adjustment.result
+    pts = net.points
+    rl = roles(net)
+    points = {}
+    for i, p in enumerate(pts.ids):
+        cov = stats.cov_m2[i]
+        points[p] = {"xyz_m": res.xyz_m[i].tolist(), "xyz_std_m": np.sqrt(np.clip(np.diag(cov), 0, None)).tolist(),
+                     "cov_m2": cov.tolist(), "semi_axes_95_m": stats.semi_axes_95_m[i].tolist(), "roles": rl[i],
+                     "status": status_words(pts.status[i]),
+                     "status_xyz": [{FREE: "free", FIXED: "fixed", WEIGHTED: "weighted"}[int(s)]
+                                    for s in pts.status[i]]}
+    gt = stats.global_test
+    scale = res.sigma0 ** 2 if stats.variance_factor == "unknown" and np.isfinite(res.sigma0) else 1.0
+    others = {}
+    for k, name in enumerate(res.free_names):
+        if name[:2] not in ("x:", "y:", "z:"):
+            kind = name.split(":", 1)[0]
+            others[name] = {"value": float(res.parameters[res.names.index(name)]),
+                            "std": float(np.sqrt(max(res.cofactor[k, k], 0.0) * scale)),
+                            "unit": {"offset": "m", "scale": "1"}.get(kind, "rad")}
+    failing = [k for k in range(len(stats.passed)) if not stats.passed[k]]
+    return {
+        "input": source,
+        "format": "gama-local",
+        "datum": datum_words(pts, res),
+        "defect": res.defect,
+        "n_points": pts.n,
+        "n_obs": int(sum(b.n_rows for b in adjustment.system.blocks)),
+        "excluded": [dict(e) for e in adjustment.excluded],
+        "points": points,
+        "parameters": others,
+        "sigma0": res.sigma0,
+        "dof": res.dof,
+        "vtpv": stats.vtpv,
+        "variance_factor": stats.variance_factor,
+        "global_test": {"statistic": gt.statistic, "critical": gt.critical, "passed": gt.passed, "alpha": gt.alpha,
+                        "dof": gt.dof, "power": gt.power, "lambda0": gt.lambda0,
+                        "decides": stats.variance_factor == "known", "method": stats.test_method},
+        "tests": {"test": stats.test, "alpha0": stats.alpha0, "critical": stats.critical,
+                  "lambda0": stats.lambda0, "n_failed": len(failing), "snooping": False},
+        "sigma_source": {"kind": "file", "file": source,
+                         "description": "a-priori σ of the gama-local input: each observation's stdev=, else the "
+                                        "<points-observations> defaults (distance-stdev, direction-stdev, "
+                                        "angle-stdev, zenith-angle-stdev), <cov-mat> of vectors, coordinates "
+                                        "and height-difference blocks"},
+        "observations": observation_rows(adjustment.system, stats),
+        "iterations": [{"step_max": s, "vtpv": v} for s, v in res.iterations],
+        "notes": list(net.notes),
+    }

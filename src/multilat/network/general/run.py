@@ -1,0 +1,93 @@
+"""The general network adjusted the way a metrologist expects: approximate coordinates, the
+adjustment, and the points the observations cannot determine left out and named, never the network
+refused.
+
+:func:`adjust_network` chains :func:`.approximate.approximate` and :func:`.adjust.adjust`. A point
+that is not determined (a target seen along coplanar lines of sight, one with two distances, a
+point no observation reaches with approximate coordinates) is removed with every observation that
+references it and the rest is adjusted again, for at most ``max_rounds`` rounds; each one is
+recorded in :attr:`NetworkAdjustment.excluded` with its reason and the number of observation rows it
+took with it. ``strict=True`` refuses instead (the one-line error of :func:`.adjust.adjust`).
+
+What cannot be left out is still refused in one line: a defect no point carries (an instrument
+scale with no scale in the network), or a network whose every free point is undetermined (a free
+network without datum points).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from multilat.errors import MultilatError
+from multilat.network.general.adjust import AdjustOptions, GeneralResult, System, UndeterminedError, adjust
+from multilat.network.general.approximate import approximate, unreachable
+from multilat.network.general.observations import Network, without_points
+from multilat.network.general.points import FREE
+
+__all__ = ["NetworkAdjustment", "adjust_network", "MAX_ROUNDS"]
+
+#: rounds of leaving out undetermined points before giving up (each round removes at least one point)
+MAX_ROUNDS = 10
+
+
+@dataclass(frozen=True, eq=False)
+class NetworkAdjustment:
+    """network : the adjusted network (without the left-out points); system : its least-squares system
+    result : the :class:`~.adjust.GeneralResult`; given : the network as read (every point)
+    excluded : tuple of dicts {id, kind: "point", reason, n_obs, round} in the order they were left out
+    """
+
+    network: Network
+    system: System
+    result: GeneralResult
+    given: Network
+    excluded: tuple
+
+
+def _reason(coords: str) -> str:
+    if coords == "xyz":
+        return "its coordinates are not determined by the observations"
+    what = f"its {', '.join(coords)} {'is' if len(coords) == 1 else 'are'}"
+    return f"{what} not determined by the observations"
+
+
+def adjust_network(network: Network, *, options: AdjustOptions | None = None, strict: bool = False,
+                   max_rounds: int = MAX_ROUNDS) -> NetworkAdjustment:
+    """Approximate coordinates, adjustment, undetermined points left out and named (module docstring)."""
+    given, net, excluded = network, network, []
+    for rnd in range(1, max_rounds + 1):
+        missing = unreachable(net)
+        if missing and not strict:
+            net = _leave_out(net, {p: "no approximate coordinates can be computed from the observations (no polar "
+                                      "reading from an oriented set-up, no resection on two known points)"
+                                   for p in missing}, rnd, excluded)
+        try:
+            ready = approximate(net)
+            res = adjust(ready, options=options)
+        except UndeterminedError as e:
+            if strict or not e.points:              # a defect no point carries: refused
+                raise
+            net = _leave_out(net, {p: _reason(c) for p, c in e.points.items()}, rnd, excluded, error=e)
+            continue
+        return NetworkAdjustment(ready, System(ready), res, given, tuple(excluded))
+    raise MultilatError(f"still undetermined points after {max_rounds} rounds of leaving them out "
+                        f"({len(excluded)} left out: {', '.join(e['id'] for e in excluded[:5])}"
+                        f"{', ...' if len(excluded) > 5 else ''}); use --strict to see the first")
+
+
+def _leave_out(net: Network, reasons: dict, rnd: int, excluded: list, error: MultilatError | None = None) -> Network:
+    pts = net.points
+    free_left = [i for i, p in enumerate(pts.ids) if p not in reasons and np.any(pts.status[i] == FREE)]
+    if not free_left:
+        raise error or MultilatError(f"no point of the network can be determined: {', '.join(list(reasons)[:5])}"
+                                     f"{', ...' if len(reasons) > 5 else ''} ({next(iter(reasons.values()))})")
+    out = net
+    for p, why in reasons.items():
+        out, n = without_points(out, [p])
+        excluded.append({"id": p, "kind": "point", "reason": why, "n_obs": n, "round": rnd})
+    if not out.blocks:
+        raise MultilatError("no observation is left once the undetermined points are left out: "
+                            + ", ".join(list(reasons)[:5]))
+    return out
