@@ -33,6 +33,7 @@ from multilat.network.angle_rows import angle_results
 from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, snooping_round
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
+from multilat.network.unit_slip import check_unit_slip
 
 __all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
 
@@ -306,6 +307,9 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                         and "near-degenerate" in str(exc)):
                     raise
                 core = _start_as_partial(obs, start, exc)
+            slip = first and cost == "distance" and not unknown    # a unit slip stops (unit_slip.py)
+            if slip:
+                check_unit_slip(obs, core, sigma_source)   # a scale error, not a wrong minimum: no search
             if first and search_ok:
                 # a converged result failing the global test by far may be a wrong minimum: search
                 # (not under control points: they give the frame and the start; a failing test there
@@ -313,6 +317,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                 core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
                                                max_iter, solver, chunk_targets, rng, cspec)
                 how["search"] = search.as_dict()
+                if slip:
+                    check_unit_slip(obs, core, sigma_source)
             if first and datum.kind == "control" and cost == "distance":
                 # a failed global test under control may be the control coordinates, not the distances:
                 # test them (against the free network) before data snooping blames the distances

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.bounds import RESTART_SECONDS, Bound, report
 from multilat.network.data import Observations, Points
 from multilat.network.datum import apply_rigid, rigid_fit
 from multilat.network.fit import as_start
@@ -71,12 +72,22 @@ def initial_from_distances(obs: Observations, rng):
     if sub.n_stations != obs.n_stations:
         raise MultilatError("initial values from distances need every station to see targets that 4 or "
                             "more stations see; give approximate coordinates (--points)")
-    for attempt in range(PARTIAL_RESTARTS + 1):
-        raw = initial_values(sub, rng=gen)
+    bound = Bound("initial values, flat-solution restarts", max_work=PARTIAL_RESTARTS + 1,
+                  max_seconds=RESTART_SECONDS)
+    while True:
+        bound.spend()
+        if bound.work > 1:
+            report(f"initial values: flat solution, new start {bound.work - 1} of {PARTIAL_RESTARTS}")
+        raw = initial_values(sub, rng=gen, deadline=None if bound.work == 1 else bound.deadline)
         if not flat_geometry(raw.station_xyz_m, raw.target_xyz_m, sigma_m=float(np.median(sub.sigma_m)),
-                             n_obs=sub.n_obs):
+                             n_obs=sub.n_obs) or bound.exhausted():
             break
+    attempt = bound.work - 1
+    bound.warn_if_timed_out()
     how = {"method": f"distances: {raw.method}", "residual_rms_m": float(raw.rms_residual_m)}
+    notes = [n for n in (raw.bounded, bound.note() if bound.stopped_by == "time" else None) if n]
+    if notes:
+        how["bounded"] = "; ".join(notes)
     if raw.refinement is not None:
         how["refinement"] = raw.refinement.to_json()
     if attempt:
