@@ -308,8 +308,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                     raise
                 core = _start_as_partial(obs, start, exc)
             slip = first and cost == "distance" and not unknown    # a unit slip stops (unit_slip.py)
-            if slip:
-                check_unit_slip(obs, core, sigma_source)   # a scale error, not a wrong minimum: no search
+            if slip and how.get("far_minimum_again"):   # the restarts found this minimum twice: no search
+                check_unit_slip(obs, core, sigma_source)
             if first and search_ok:
                 # a converged result failing the global test by far may be a wrong minimum: search
                 # (not under control points: they give the frame and the start; a failing test there
@@ -317,8 +317,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                 core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
                                                max_iter, solver, chunk_targets, rng, cspec)
                 how["search"] = search.as_dict()
-                if slip:
-                    check_unit_slip(obs, core, sigma_source)
+            if slip:
+                check_unit_slip(obs, core, sigma_source)    # after the search: its best solution
             if first and datum.kind == "control" and cost == "distance":
                 # a failed global test under control may be the control coordinates, not the distances:
                 # test them (against the free network) before data snooping blames the distances

@@ -81,6 +81,9 @@ class InitialValues:
         How the final least-squares refinement ended (None without refinement).
     bounded : str or None
         Set when a bound (:mod:`multilat.network.bounds`) stopped the random restarts: which one.
+    far_minimum_again : bool
+        A random restart reached the best RMS again while it was >= SLIP_FACTOR x RMS(sigma) (the
+        restarts stopped there): the minimum is the data's, no start can lower it.
     """
 
     station_xyz_m: np.ndarray
@@ -90,6 +93,7 @@ class InitialValues:
     rms_residual_m: float
     refinement: object = None
     bounded: str | None = None
+    far_minimum_again: bool = False
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -475,11 +479,12 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20,
         if confirmed or n_good >= 3:
             break
     bound = None
+    again = False
     if best is None or best[4] > good:
         bound = Bound("initial values, random restarts", max_work=restarts, max_seconds=RESTART_SECONDS,
                       deadline=deadline)
-        alt = _restarts(D, W, rng=gen, bound=bound, best_rms=None if best is None else best[4],
-                        far=SLIP_FACTOR * good / 10.0)
+        alt, again = _restarts(D, W, rng=gen, bound=bound, best_rms=None if best is None else best[4],
+                               far=SLIP_FACTOR * good / 10.0)
         if alt is not None and (best is None or alt[4] < best[4]):
             best = alt[:6] + ("restarts", alt[6])
         bound.warn_if_timed_out()
@@ -488,13 +493,14 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20,
                             "(disconnected or too few common targets)")
     H, T, o, frame, rms, _, method, conv = best
     H, T = fix_mirror(H, T, frame)
-    return InitialValues(H, T, o, method, rms, conv, None if bound is None else bound.note())
+    return InitialValues(H, T, o, method, rms, conv, None if bound is None else bound.note(), again)
 
 
 def _restarts(D, W, *, rng, bound, best_rms=None, far=np.inf):
     """Fallback: refinement from random starts while ``bound`` allows (its ``work`` counts the starts),
-    the lowest RMS as (H, T, o, frame, rms, robust scale, convergence). Ends early when a start
-    reaches ``best_rms`` (the blocks' best, or an earlier start's) again while that is >= ``far``."""
+    the lowest RMS as (H, T, o, frame, rms, robust scale, convergence) or None, and whether it ended
+    early because a start reached ``best_rms`` (the blocks' best, or an earlier start's) again while
+    that is >= ``far``."""
     s, t = D.shape
     L = float(np.nanmax(D))
     best = None
@@ -513,6 +519,6 @@ def _restarts(D, W, *, rng, bound, best_rms=None, far=np.inf):
         if best is None or rms < best[4]:
             best = (Hr, Tr, orr, frame, rms, rob, conv)
         if again:
-            break
+            return best, True
         best_rms = best[4] if best_rms is None else min(best_rms, best[4])
-    return best
+    return best, False

@@ -68,10 +68,13 @@ def initial_from_distances(obs: Observations, rng):
     gen = np.random.default_rng(rng)
     weak = np.bincount(obs.target_index, minlength=obs.n_targets) < 4
     strong_obs = ~weak[obs.target_index]
+    # before the subset (which refuses an empty one with a bare "no observations": issue 25, 8d)
+    if np.unique(obs.station_index[strong_obs]).size != obs.n_stations:
+        n_strong = int((~weak).sum())
+        raise MultilatError(f"initial values from distances need every station to see targets that 4 or "
+                            f"more stations see ({n_strong} of {obs.n_targets} targets are seen by 4 or "
+                            "more); give approximate coordinates of every station and target (--points)")
     sub = obs if not weak.any() else obs.subset(strong_obs)
-    if sub.n_stations != obs.n_stations:
-        raise MultilatError("initial values from distances need every station to see targets that 4 or "
-                            "more stations see; give approximate coordinates (--points)")
     bound = Bound("initial values, flat-solution restarts", max_work=PARTIAL_RESTARTS + 1,
                   max_seconds=RESTART_SECONDS)
     while True:
@@ -85,6 +88,8 @@ def initial_from_distances(obs: Observations, rng):
     attempt = bound.work - 1
     bound.warn_if_timed_out()
     how = {"method": f"distances: {raw.method}", "residual_rms_m": float(raw.rms_residual_m)}
+    if raw.far_minimum_again:   # the restarts found it twice: a unit slip or gross errors, not a start
+        how["far_minimum_again"] = True
     notes = [n for n in (raw.bounded, bound.note() if bound.stopped_by == "time" else None) if n]
     if notes:
         how["bounded"] = "; ".join(notes)
