@@ -317,13 +317,13 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                 core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
                                                max_iter, solver, chunk_targets, rng, cspec)
                 how["search"] = search.as_dict()
-            if slip:
-                check_unit_slip(obs, core, sigma_source)    # after the search: its best solution
             if first and datum.kind == "control" and cost == "distance":
                 # a failed global test under control may be the control coordinates, not the distances:
                 # test them (against the free network) before data snooping blames the distances
                 _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core["dof"]),
                                max_iter, solver, chunk_targets, datum, cspec)
+            if slip:    # after the search (its best solution) and the control test (control at fault)
+                check_unit_slip(obs, core, sigma_source)
             first = False
             # the next adjustment (after a rejection) starts from this solution
             gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
@@ -454,13 +454,19 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
         # the first solve did not converge: the same start by continuation, then other initial
         # values (the random starts of initial_values), before searching around the lowest-cost
         # point it reached
+        from multilat.network.bounds import RESTART_SECONDS, Bound, report
         from multilat.network.initial import initial_values
+
+        bound = Bound("restarts after a first solve that did not converge", max_work=PARTIAL_RESTARTS,
+                      max_seconds=RESTART_SECONDS)
 
         def starts():
             yield "the first start, offsets held then freed", lambda: continuation(start)
-            for k in range(PARTIAL_RESTARTS):
-                yield (f"initial values, random start {k + 1}, offsets held then freed",
-                       lambda: continuation(initial_values(obs, rng=gen)))
+            while not bound.exhausted():       # bounded by work and wall time (network/bounds.py)
+                bound.spend()
+                report(f"first solve did not converge: random start {bound.work} of {PARTIAL_RESTARTS}")
+                yield (f"initial values, random start {bound.work}, offsets held then freed",
+                       lambda: continuation(initial_values(obs, rng=gen, deadline=bound.deadline)))
 
         for label, attempt in starts():
             try:
@@ -471,6 +477,7 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
             restarts.append({"label": label, "cost": cand.vtpv})
             core = cand.core
             break
+        bound.warn_if_timed_out()
     first = wrap(core)
     if not core.get("partial") and _one_gross_error(core):
         # one observation carries most of the excess: a gross error, for data snooping, not a wrong

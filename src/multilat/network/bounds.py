@@ -32,9 +32,9 @@ from contextvars import ContextVar
 __all__ = ["Bound", "RESTART_SECONDS", "SEARCH_SECONDS", "SEARCH_SOLVES", "report", "reporting"]
 
 #: wall-time bound of the random restarts of one set of initial values, seconds
-RESTART_SECONDS = 30.0
+RESTART_SECONDS = 120.0
 #: wall-time bound of one minimum search (candidate solves and their initial values), seconds
-SEARCH_SECONDS = 120.0
+SEARCH_SECONDS = 300.0
 #: work bound of one minimum search: candidate starts solved (3 rounds of ~25 on small networks)
 SEARCH_SOLVES = 80
 

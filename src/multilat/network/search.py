@@ -103,7 +103,8 @@ class MinimumSearch:
 
     def as_dict(self) -> dict:
         """The JSON ``initial`` block's search part (plain types)."""
-        return {"search_triggered": self.triggered, "bounded": self.bounded, "first_cost": self.first_cost,
+        return {"search_triggered": self.triggered, **({"bounded": self.bounded} if self.bounded else {}),
+                "first_cost": self.first_cost,
                 "cost": self.cost, "dof": self.dof, "p_value": self.p_value,
                 "tried": [{"label": c.label, "cost": c.cost, "sigma0": c.sigma0,
                            "accepted": c.accepted, **({"note": c.note} if c.note else {})}
