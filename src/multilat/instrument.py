@@ -12,7 +12,12 @@ finite and, where physical, non-negative. Errors are one-line :class:`~multilat.
 messages naming the file and the key path, e.g. ``my.toml: heads.A.toh_std_m: must be >= 0``.
 
 Units: SI unless a key's suffix says otherwise (``_deg``, ``_db``, ``_hpa``, ``_pct``, ``_ppm``,
-``_nm``); angles are converted to radians by the properties that consume them.
+``_nm``); angles are converted to radians by the properties that consume them. The offsets of heads
+and targets, their bounds and standard uncertainties (metres keys of ``head_common``, ``heads``,
+``target``) must lie within ±``SMALL_LENGTH_MAX_M`` (0.1 m), ``am_pm_m_per_db`` within ±1e-3 m/dB:
+a larger value is a unit slip (µm written in a metres key), named with its file, key and the value
+it likely meant, e.g. ``my.toml: head_common.beam_offset_m: must lie within ±0.1 m, got -320 m;
+-320 µm written in a metres key? (-0.00032 m)``.
 
 Example
 -------

@@ -248,14 +248,21 @@ def adjust_command(
                    alpha_global=alpha_global, test_method=test_method, variance_factor=variance_factor,
                    mdb_limit_sigma=mdb_limit_sigma, sigma_source=src, snooping=snooping, solver=solver,
                    strict=strict, scale_bars=refs if scale_bar else None, rng=seed)
+    from rich.markup import escape
+
+    from multilat.errors import printable
     from multilat.network.bounds import reporting
     from multilat.network.unit_slip import UnitSlipError
 
     with progress() as p:
         what = f"adjusting {obs.n_obs:,} distances"
         task = p.add_task(what, total=None)
+
+        def step(text):      # the search's current start (ids from the files: shown literally)
+            p.update(task, description=f"{what}: {escape(printable(text, keep_newlines=False))}")
+
         try:
-            with reporting(lambda step: p.update(task, description=f"{what}: {step}")):
+            with reporting(step):
                 if variance_components is None:
                     res = adjust(obs, **options)
                 else:
