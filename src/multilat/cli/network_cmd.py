@@ -251,15 +251,30 @@ def adjust_command(
                    alpha_global=alpha_global, test_method=test_method, variance_factor=variance_factor,
                    mdb_limit_sigma=mdb_limit_sigma, sigma_source=src, snooping=snooping, solver=solver,
                    strict=strict, scale_bars=refs if scale_bar else None, rng=seed)
-    with progress() as p:
-        p.add_task(f"adjusting {obs.n_obs:,} distances", total=None)
-        if variance_components is None:
-            res = adjust(obs, **options)
-        else:
-            from multilat.network.variance_components import estimate_variance_components
+    from rich.markup import escape
 
-            vc = estimate_variance_components(obs, grouping=variance_components, **options)
-            res = vc.result
+    from multilat.errors import printable
+    from multilat.network.bounds import reporting
+    from multilat.network.unit_slip import UnitSlipError
+
+    with progress() as p:
+        what = f"adjusting {obs.n_obs:,} distances"
+        task = p.add_task(what, total=None)
+
+        def step(text):      # the search's current start (ids from the files: shown literally)
+            p.update(task, description=f"{what}: {escape(printable(text, keep_newlines=False))}")
+
+        try:
+            with reporting(step):
+                if variance_components is None:
+                    res = adjust(obs, **options)
+                else:
+                    from multilat.network.variance_components import estimate_variance_components
+
+                    vc = estimate_variance_components(obs, grouping=variance_components, **options)
+                    res = vc.result
+        except UnitSlipError as exc:      # name the file at fault
+            raise MultilatError(f"{points if exc.source == 'points' else observations}: {exc}") from None
     from multilat.vocabulary import stamp
 
     doc = stamp(result_to_json(res, refs), "adjust")
