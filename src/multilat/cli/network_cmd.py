@@ -323,6 +323,10 @@ def _print_summary(res, doc, out):
     if res.excluded:
         console.print("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
                                                                for e in res.excluded), markup=False)
+    if res.ambiguous:
+        console.print(f"  warning: ambiguous geometry, {len(res.ambiguous)} point(s) placed only up to a mirror "
+                      f"that fits equally: {', '.join(a.id for a in res.ambiguous[:8])}"
+                      f"{' ...' if len(res.ambiguous) > 8 else ''} (JSON 'ambiguous')", markup=False)
     if res.cost == "squared":
         console.print(f"  σ0 = {res.sigma0:.4g} m² (unweighted squared-distance residuals, eq. 6), "
                       f"dof = {res.dof}; no global test for this cost")
