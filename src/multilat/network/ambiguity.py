@@ -146,6 +146,12 @@ def _refit_point(p0, nb, r, w, iterations: int = 20):
     return p, float(np.sum(w * e * e))
 
 
+def _signed_height(p, tri) -> float:
+    """Height of ``p`` above the oriented plane of the triangle ``tri`` (3, 3), m."""
+    n = np.cross(tri[1] - tri[0], tri[2] - tri[0])
+    return float(np.dot(p - tri[0], n) / max(np.linalg.norm(n), 1e-300))
+
+
 def _sigma_along(cov, n) -> float:
     return float(np.sqrt(max(n @ cov @ n, 0.0)))
 
@@ -166,6 +172,7 @@ def mirror_ambiguities(res, readjust, *, lambda0: float, skip_targets=()) -> tup
     -------
     tuple of Ambiguous
     """
+    from multilat.network.fit import pick_321_stations
     from multilat.network.result import Start
 
     obs, used = res.obs, np.asarray(res.used, bool)
@@ -191,14 +198,13 @@ def mirror_ambiguities(res, readjust, *, lambda0: float, skip_targets=()) -> tup
         alt = readjust(Start(gs, tx.copy(), res.offset_m.copy()))
         if alt is None:
             continue
-        sx_alt = alt["sx"]
-        # distinct: the reflected station stays reflected relative to the others (not back)
-        others = np.arange(s) != i
-        d0 = np.linalg.norm(sx[others] - sx[i], axis=1)
-        d1 = np.linalg.norm(sx_alt[others] - sx_alt[i], axis=1)
-        moved = float(np.max(np.abs(d1 - d0), initial=0.0))
-        sig = float(np.sqrt(max(np.trace(scov[i]), 0.0)))
-        if not moved > k * sig:
+        # distinct: the station stayed on the other side of its targets (the re-adjustment may also
+        # bring it back, or flip another station instead); the side is the sign of the volume of the
+        # station over the largest triangle of its targets, in each solution
+        tri = by_s[i][list(pick_321_stations(tx[by_s[i]]))]
+        side0 = _signed_height(sx[i], tx[tri])
+        side1 = _signed_height(alt["sx"][i], alt["tx"][tri])
+        if not (side0 * side1 < 0 and abs(side1) > k * _sigma_along(scov[i], n)):
             continue
         delta = (float(alt["vtpv"]) - base) / unit if base is not None else 0.0
         if delta < lambda0:
