@@ -48,7 +48,8 @@ K_PLANE = 10.0
 @dataclass(frozen=True)
 class Ambiguous:
     """A point the distances do not place uniquely: ``kind`` station or target, ``cause`` "mirror"
-    (a reflection through ``plane_of`` fits equally), ``reason`` one phrase with the numbers."""
+    (its reflection through the plane of its neighbours fits equally), ``reason`` one phrase with the
+    numbers, ``delta_vtpv`` the reflected solution's vᵀPv minus the original's."""
 
     id: str
     kind: str
@@ -98,14 +99,10 @@ def flat_network(station_xyz_m, target_xyz_m, station_cov_m2, target_cov_m2) -> 
             "order, so it is undetermined; stations and targets must span a volume")
 
 
-def _neighbours(si, ti, s: int, t: int):
-    """Distinct neighbours: per station the targets it observes, per target its stations (CSR)."""
+def _targets_of_stations(si, ti, s: int, t: int) -> list:
+    """The distinct targets each station observes (s arrays)."""
     code = np.unique(si.astype(np.int64) * t + ti)
-    st_, tg = code // t, code % t
-    by_s = np.split(tg, np.cumsum(np.bincount(st_, minlength=s))[:-1])
-    order = np.argsort(tg, kind="stable")
-    by_t = np.split(st_[order], np.cumsum(np.bincount(tg, minlength=t))[:-1])
-    return by_s, by_t
+    return np.split(code % t, np.cumsum(np.bincount(code // t, minlength=s))[:-1])
 
 
 def _mirror(p, c, n):
@@ -178,11 +175,12 @@ def mirror_ambiguities(res, readjust, *, lambda0: float, skip_targets=()) -> tup
     obs, used = res.obs, np.asarray(res.used, bool)
     s, t = obs.n_stations, obs.n_targets
     si, ti = obs.station_index[used], obs.target_index[used]
-    by_s, by_t = _neighbours(si, ti, s, t)
+    by_s = _targets_of_stations(si, ti, s, t)
     sx, tx = res.station_xyz_m, res.target_xyz_m
     scov, tcov = res.station_cov_m2, res.target_cov_m2
-    base = float(res.sigma0 ** 2 * res.dof) if res.cost == "distance" else None
-    unit = 1.0 if res.cost == "distance" else max(res.sigma0, 1e-300)
+    base = float(res.sigma0 ** 2 * res.dof)               # the solution's vᵀPv
+    # the squared cost is unweighted: its vᵀPv in units of the estimated variance of unit weight
+    unit = 1.0 if res.cost == "distance" or not np.isfinite(res.sigma0) or res.sigma0 <= 0 else res.sigma0 ** 2
     k = float(np.sqrt(lambda0))
     out: list[Ambiguous] = []
     for i in range(s):
@@ -206,42 +204,78 @@ def mirror_ambiguities(res, readjust, *, lambda0: float, skip_targets=()) -> tup
         side1 = _signed_height(alt["sx"][i], alt["tx"][tri])
         if not (side0 * side1 < 0 and abs(side1) > k * _sigma_along(scov[i], n)):
             continue
-        delta = (float(alt["vtpv"]) - base) / unit if base is not None else 0.0
+        delta = (float(alt["vtpv"]) - base) / unit
         if delta < lambda0:
             out.append(Ambiguous(obs.station_ids[i], "station", "mirror", (
                 f"its {len(by_s[i])} targets lie in one plane within their uncertainty and it is "
                 f"{abs(h):.3g} m off that plane: its mirror image through it fits the distances equally "
                 f"(Δ vᵀPv {delta:+.2g}, undetectable below λ0 = {lambda0:.3g})"), delta))
-    skip = set(skip_targets)
+    out.extend(_target_mirrors(res, si, ti, lambda0=lambda0, unit=unit, skip=set(skip_targets)))
+    return tuple(out)
+
+
+def _target_screen(sx, scov, code, t: int, tx, tcov):
+    """Vectorised over targets: (candidate mask (t,), centroid (t, 3), unit normal (t, 3), height of
+    each target off its stations' plane (t,)). A candidate's stations are coplanar within their
+    uncertainty (3 stations always are) and the target is off their plane by more than
+    ``sqrt(lambda0)``-ish times its own σ (the caller's factor ``k``, applied by the caller)."""
+    st_, tg = code // t, code % t
+    cnt = np.bincount(tg, minlength=t).astype(float)
+    safe = np.maximum(cnt, 1.0)
+    s1 = np.stack([np.bincount(tg, weights=sx[st_, a], minlength=t) for a in range(3)], axis=1)
+    c = s1 / safe[:, None]
+    d = sx[st_] - c[tg]
+    M = np.zeros((t, 3, 3))
+    for a in range(3):
+        for b in range(a, 3):
+            M[:, a, b] = M[:, b, a] = np.bincount(tg, weights=d[:, a] * d[:, b], minlength=t)
+    lam, vec = np.linalg.eigh(M)
+    n = vec[:, :, 0]
+    spread = np.sqrt(np.clip(lam[:, 0], 0, None) / safe)
+    sn2 = np.einsum("pi,pij,pj->p", n[tg], scov[st_], n[tg])
+    sig = np.sqrt(np.bincount(tg, weights=np.clip(sn2, 0, None), minlength=t) / safe)
+    cand = (cnt >= 3) & ((cnt == 3) | (spread < K_PLANE * sig))
+    h = np.einsum("pi,pi->p", tx - c, n)
+    return cand, c, n, h
+
+
+def _target_mirrors(res, si, ti, *, lambda0: float, unit: float, skip: set) -> list:
+    """The targets whose reflection through their stations' plane, refitted with the stations held,
+    fits within ``lambda0`` (a target's stations are fixed by the other targets)."""
+    obs = res.obs
+    t = obs.n_targets
+    sx, tx, scov, tcov = res.station_xyz_m, res.target_xyz_m, res.station_cov_m2, res.target_cov_m2
+    code = np.unique(si.astype(np.int64) * t + ti)
+    cand, c, n, h = _target_screen(sx, scov, code, t, tx, tcov)
+    k = float(np.sqrt(lambda0))
+    sig_n = np.sqrt(np.clip(np.einsum("pi,pij,pj->p", n, tcov, n), 0, None))
+    cand &= 2 * np.abs(h) > k * sig_n
+    if not cand.any():
+        return []
+    order = np.argsort(ti, kind="stable")
+    ptr = np.r_[0, np.cumsum(np.bincount(ti, minlength=t))]
+    used = np.asarray(res.used, bool)
     d_all, w_all = obs.distance_m[used], 1.0 / obs.sigma_m[used] ** 2
-    for j in range(t):
+    out = []
+    for j in np.flatnonzero(cand):
         if obs.target_ids[j] in skip:
             continue
-        st_ = by_t[j]
-        cand = _candidate(tx[j], tcov[j], sx[st_], scov[st_])
-        if cand is None:
-            continue
-        c, n = cand
-        h = float(np.dot(tx[j] - c, n))
-        if not 2 * abs(h) > k * _sigma_along(tcov[j], n):
-            continue
-        rows = np.flatnonzero(ti == j)
+        rows = order[ptr[j]:ptr[j + 1]]
         sr = si[rows]
-        r = d_all[rows] - res.offset_m[sr]
-        r = r / (1.0 + res.scale[sr])
+        r = (d_all[rows] - res.offset_m[sr]) / (1.0 + res.scale[sr])
         w = w_all[rows] * (1.0 + res.scale[sr]) ** 2
         p0, c0 = _refit_point(tx[j], sx[sr], r, w)
-        p1, c1 = _refit_point(_mirror(tx[j], c, n), sx[sr], r, w)
-        if not np.linalg.norm(p1 - p0) > k * _sigma_along(tcov[j], n):
+        p1, c1 = _refit_point(_mirror(tx[j], c[j], n[j]), sx[sr], r, w)
+        if not np.linalg.norm(p1 - p0) > k * sig_n[j]:
             continue
         delta = (c1 - c0) / unit
         if delta < lambda0:
-            what = ("3 stations" if len(st_) == 3 else
-                    f"{len(st_)} stations that lie in one plane within their uncertainty")
+            m = int(np.unique(sr).size)
+            what = "3 stations" if m == 3 else f"{m} stations that lie in one plane within their uncertainty"
             out.append(Ambiguous(obs.target_ids[j], "target", "mirror", (
-                f"seen by {what}, {abs(h):.3g} m off their plane: its mirror image through it fits the "
+                f"seen by {what}, {abs(h[j]):.3g} m off their plane: its mirror image through it fits the "
                 f"distances equally (Δ vᵀPv {delta:+.2g}, undetectable below λ0 = {lambda0:.3g})"), delta))
-    return tuple(out)
+    return out
 
 
 def side_fixed_targets(obs, control=(), couplings=None) -> set:
