@@ -152,3 +152,13 @@ def test_plane_spread_closed_form():
     assert flat_network(xyz[:2], xyz[2:], cov[:2], cov[2:]) is not None
     assert flat_network(xyz[:2], xyz[2:], cov[:2] / 100, cov[2:] / 100) is None
     assert K_PLANE == 10.0
+
+
+def test_control_targets_in_the_plane_do_not_fix_the_side():
+    """Four targets held as control, all in z = 0: they give the frame but not a station's side
+    (a station's reflection through z = 0 keeps its distances to them too): all 6 stations named."""
+    obs, _, T = _network()
+    pts = Points(obs.target_ids[:4], T[:4])
+    with pytest.warns(UserWarning, match="ambiguous geometry"):
+        res = adjust(obs, datum="control", points=pts)
+    assert {a.id for a in res.ambiguous} == set(obs.station_ids)

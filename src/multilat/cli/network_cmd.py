@@ -157,7 +157,8 @@ def adjust_command(
                                               "default: keep them as separate observations."),
     strict: bool = typer.Option(False, "--strict",
                                 help="Refuse the network when a point is too weakly observed, instead "
-                                     "of leaving it out with a warning."),
+                                     "of leaving it out with a warning, or placed only up to a mirror "
+                                     "(ambiguous geometry)."),
     levelled: Optional[str] = typer.Option(None, "--levelled",
                                            help="Stations on their own level (vertical axis = the world's z): "
                                                 "one orientation angle (κ) for their angle observations, "

@@ -81,6 +81,13 @@ def plane_spread(xyz, cov) -> tuple[float, float, np.ndarray, np.ndarray]:
     return float(np.sqrt(np.mean(h ** 2))), float(np.sqrt(np.mean(np.clip(sn, 0, None)))), c, n
 
 
+def _coplanar(spread_m: float, sigma_normal_m: float, centred) -> bool:
+    """Coplanar within the uncertainty (``spread < K_PLANE sigma``), or exactly (points held fixed,
+    e.g. control, have no uncertainty: a spread below 1e-9 of their RMS extent)."""
+    extent = float(np.sqrt(np.mean(np.sum(np.asarray(centred) ** 2, axis=1))))
+    return spread_m < K_PLANE * sigma_normal_m or spread_m <= 1e-9 * extent
+
+
 def flat_network(station_xyz_m, target_xyz_m, station_cov_m2, target_cov_m2) -> str | None:
     """The one-line cause when every point lies in one plane within its uncertainty, else None."""
     xyz = np.vstack([station_xyz_m, target_xyz_m])
@@ -88,8 +95,8 @@ def flat_network(station_xyz_m, target_xyz_m, station_cov_m2, target_cov_m2) -> 
     ok = np.all(np.isfinite(xyz), axis=1) & np.all(np.isfinite(cov), axis=(1, 2))
     if ok.sum() < 4:
         return None
-    h, sn, _, n = plane_spread(xyz[ok], cov[ok])
-    if not h < K_PLANE * sn:
+    h, sn, c, n = plane_spread(xyz[ok], cov[ok])
+    if not _coplanar(h, sn, xyz[ok] - c):
         return None
     s, t = len(station_xyz_m), len(target_xyz_m)
     return (f"all {s + t} points ({s} stations, {t} targets) lie in one plane within their uncertainty "
@@ -120,7 +127,7 @@ def _candidate(p, cov_p, nb_xyz, nb_cov):
         nn = np.linalg.norm(n)
         return None if nn == 0 else (c, n / nn)
     h, sn, c, n = plane_spread(nb_xyz, nb_cov)
-    return (c, n) if h < K_PLANE * sn else None
+    return (c, n) if _coplanar(h, sn, nb_xyz - c) else None
 
 
 def _refit_point(p0, nb, r, w, iterations: int = 20):
@@ -234,7 +241,8 @@ def _target_screen(sx, scov, code, t: int, tx, tcov):
     spread = np.sqrt(np.clip(lam[:, 0], 0, None) / safe)
     sn2 = np.einsum("pi,pij,pj->p", n[tg], scov[st_], n[tg])
     sig = np.sqrt(np.bincount(tg, weights=np.clip(sn2, 0, None), minlength=t) / safe)
-    cand = (cnt >= 3) & ((cnt == 3) | (spread < K_PLANE * sig))
+    extent = np.sqrt(np.clip(np.trace(M, axis1=1, axis2=2), 0, None) / safe)
+    cand = (cnt >= 3) & ((cnt == 3) | (spread < K_PLANE * sig) | (spread <= 1e-9 * extent))
     h = np.einsum("pi,pi->p", tx - c, n)
     return cand, c, n, h
 
