@@ -134,7 +134,8 @@ def test_a_target_seen_by_coplanar_stations_is_named():
     np.testing.assert_allclose(np.linalg.norm(H[:4] - xm, axis=1), np.linalg.norm(H[:4] - x, axis=1), atol=1e-12)
     t = obs.n_targets
     obs = Observations(obs.station_ids, obs.target_ids + ("X",), np.r_[obs.station_index, np.arange(4)],
-                       np.r_[obs.target_index, np.full(4, t)], np.r_[obs.distance_m, d], np.r_[obs.sigma_m, np.full(4, SIG)])
+                       np.r_[obs.target_index, np.full(4, t)], np.r_[obs.distance_m, d],
+                       np.r_[obs.sigma_m, np.full(4, SIG)])
     with pytest.warns(UserWarning, match="ambiguous geometry"):
         res = adjust(obs)
     assert [(a.id, a.kind) for a in res.ambiguous] == [("X", "target")]

@@ -116,9 +116,9 @@ def _mirror(p, c, n):
     return p - 2.0 * np.dot(p - c, n) * n
 
 
-def _candidate(p, cov_p, nb_xyz, nb_cov):
-    """(centroid, normal) when ``p``'s neighbours are coplanar within their uncertainty and ``p`` is
-    off their plane by more than ``sqrt(lambda0)``-ish times its own σ (checked by the caller), else None."""
+def _candidate(nb_xyz, nb_cov):
+    """(centroid, unit normal) of a point's neighbours when they are coplanar within their uncertainty
+    (3 always are), else None; whether the point is off that plane is the caller's test."""
     if len(nb_xyz) < 3:
         return None
     if len(nb_xyz) == 3:            # three points always span a plane
@@ -191,7 +191,7 @@ def mirror_ambiguities(res, readjust, *, lambda0: float, skip_targets=()) -> tup
     k = float(np.sqrt(lambda0))
     out: list[Ambiguous] = []
     for i in range(s):
-        cand = _candidate(sx[i], scov[i], tx[by_s[i]], tcov[by_s[i]])
+        cand = _candidate(tx[by_s[i]], tcov[by_s[i]])
         if cand is None:
             continue
         c, n = cand
@@ -221,7 +221,7 @@ def mirror_ambiguities(res, readjust, *, lambda0: float, skip_targets=()) -> tup
     return tuple(out)
 
 
-def _target_screen(sx, scov, code, t: int, tx, tcov):
+def _target_screen(sx, scov, code, t: int, tx):
     """Vectorised over targets: (candidate mask (t,), centroid (t, 3), unit normal (t, 3), height of
     each target off its stations' plane (t,)). A candidate's stations are coplanar within their
     uncertainty (3 stations always are) and the target is off their plane by more than
@@ -254,7 +254,7 @@ def _target_mirrors(res, si, ti, *, lambda0: float, unit: float, skip: set) -> l
     t = obs.n_targets
     sx, tx, scov, tcov = res.station_xyz_m, res.target_xyz_m, res.station_cov_m2, res.target_cov_m2
     code = np.unique(si.astype(np.int64) * t + ti)
-    cand, c, n, h = _target_screen(sx, scov, code, t, tx, tcov)
+    cand, c, n, h = _target_screen(sx, scov, code, t, tx)
     k = float(np.sqrt(lambda0))
     sig_n = np.sqrt(np.clip(np.einsum("pi,pij,pj->p", n, tcov, n), 0, None))
     cand &= 2 * np.abs(h) > k * sig_n
