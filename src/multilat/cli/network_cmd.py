@@ -157,7 +157,8 @@ def adjust_command(
                                               "default: keep them as separate observations."),
     strict: bool = typer.Option(False, "--strict",
                                 help="Refuse the network when a point is too weakly observed, instead "
-                                     "of leaving it out with a warning."),
+                                     "of leaving it out with a warning, or placed only up to a mirror "
+                                     "(ambiguous geometry)."),
     levelled: Optional[str] = typer.Option(None, "--levelled",
                                            help="Stations on their own level (vertical axis = the world's z): "
                                                 "one orientation angle (κ) for their angle observations, "
@@ -341,6 +342,10 @@ def _print_summary(res, doc, out):
     if res.excluded:
         console.print("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
                                                                for e in res.excluded), markup=False)
+    if res.ambiguous:
+        console.print(f"  warning: ambiguous geometry, {len(res.ambiguous)} point(s) placed only up to a mirror "
+                      f"that fits equally: {', '.join(a.id for a in res.ambiguous[:8])}"
+                      f"{' ...' if len(res.ambiguous) > 8 else ''} (JSON 'ambiguous')", markup=False)
     if res.cost == "squared":
         console.print(f"  σ0 = {res.sigma0:.4g} m² (unweighted squared-distance residuals, eq. 6), "
                       f"dof = {res.dof}; no global test for this cost")

@@ -18,6 +18,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
+from multilat.network.ambiguity import check_geometry
 from multilat.network.data import Observations, Points, ReferenceLengths
 from multilat.network.datum import Datum, apply_rigid, parse_datum, rigid_fit
 from multilat.network.exclusion import exclude_weak_points, zero_redundancy_warnings
@@ -387,6 +388,14 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                    scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
                    sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient,
                    angle_design_w=None if core.get("angles") is None else core["angles"]["design_w"])
+    # geometry distances cannot fix: a flat network is refused, mirror-ambiguous points named
+    amb, note = check_geometry(res, lambda st_: fit_once(
+        obs_w if used.all() else obs_w.subset(used), datum, st_, start, obs, used, points, cost, off_free,
+        off_val, sc_free, max_iter, solver, chunk_targets, warn=False, couplings=cspec),
+        lambda0=lam0, strict=strict, control=ctrl, couplings=cspec)
+    if note:
+        warnings.warn(note, UserWarning, stacklevel=2)
+        res = replace(res, ambiguous=amb, warnings=res.warnings + (note,))
     return replace(res, angle_outliers=angle_outliers(obs, ang_rejected, res))
 
 
