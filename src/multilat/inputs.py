@@ -49,6 +49,17 @@ MAX_LINE_BYTES = 2**20
 MAX_CELL_CHARS = csv.field_size_limit()
 #: Deepest nesting of tables and arrays in a TOML file (the package's configs use 4).
 MAX_TOML_DEPTH = 32
+#: Share of the machine's physical memory a single request may plan to use (a table held as Python
+#: strings by :func:`read_csv_table`, the CLI's requests: :func:`multilat.cli.checks.memory`).
+MEMORY_SHARE = 0.8
+
+
+def physical_memory_bytes() -> int:
+    """Physical memory of the machine (bytes); 8 GiB when it cannot be read."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
+        return 8 * 2**30
 
 _CHUNK = 2**20
 _UTF16_BOMS = (b"\xff\xfe", b"\xfe\xff")
@@ -100,12 +111,80 @@ def check_plain_text(text: str, where: str) -> str:
     what = hidden_character(text)
     if what is not None:
         shown = _HIDDEN.sub(lambda m: f"\\u{ord(m.group()):04x}", text)
-        raise MultilatError(f"{where}: {shown!r} holds the invisible formatting character {what}: "
+        raise MultilatError(f"{where}: '{shown}' holds the invisible formatting character {what}: "
                             "ids and cells must be plain text")
     return text
 
 
-_PIPES: dict[str, bytes] = {}
+class _Pipe:
+    """A pipe or other non-regular input, opened once and read as far as asked: the bytes read are
+    kept, so that a header sniffed first and the table parsed next both see the same stream (a
+    second open of a pipe would wait for a writer that never comes). Each block is checked as it
+    comes (size limit, NUL bytes, line length), so memory stays within the limit of the kind."""
+
+    def __init__(self, p: Path, kind: str):
+        self.p, self.kind, self.buf, self.eof = p, kind, bytearray(), False
+        self.lines, self.run, self.text = 0, 0, True
+        try:
+            self.fh = open(p, "rb")
+        except OSError as exc:
+            raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
+
+    def more(self) -> bool:
+        """Read one more block; False at the end of the stream."""
+        if self.eof:
+            return False
+        try:
+            block = self.fh.read(_CHUNK)
+        except OSError as exc:
+            raise MultilatError(f"{self.p}: cannot read: {exc.strerror or exc}") from None
+        if not block:
+            self.eof = True
+            self.fh.close()
+            return False
+        if len(self.buf) + len(block) > _limit(self.kind):
+            raise _too_large(self.p, self.kind, f"more than {_size(len(self.buf))} (a pipe)")
+        if self.text:
+            nul = block.find(b"\0")
+            if nul >= 0:
+                raise _binary(self.p, self.lines + block.count(b"\n", 0, nul) + 1, bytes(self.buf[:2] or block[:2]))
+            last = block.rfind(b"\n")
+            self.run = self.run + len(block) if last < 0 else len(block) - last - 1
+            if self.run > MAX_LINE_BYTES:
+                raise _long_line(self.p, self.lines + block.count(b"\n") + 1)
+            self.lines += block.count(b"\n")
+        self.buf += block
+        return True
+
+    def upto(self, n: int) -> bytes:
+        while len(self.buf) < n and self.more():
+            pass
+        return bytes(self.buf[:n])
+
+    def whole(self) -> bytes:
+        while self.more():
+            pass
+        return bytes(self.buf)
+
+    def readline(self, pos: int, limit: int) -> bytes:
+        """The line starting at ``pos`` (with its newline), at most ``limit`` bytes."""
+        while True:
+            nl = self.buf.find(b"\n", pos, pos + limit)
+            if nl >= 0:
+                return bytes(self.buf[pos:nl + 1])
+            if len(self.buf) - pos >= limit or not self.more():
+                return bytes(self.buf[pos:pos + limit])
+
+
+_PIPES: dict[str, _Pipe] = {}
+
+
+def _pipe(p: Path, kind: str) -> _Pipe:
+    pipe = _PIPES.get(str(p))
+    if pipe is None:
+        pipe = _PIPES[str(p)] = _Pipe(p, kind)
+    pipe.kind = max(pipe.kind, kind, key=_limit)         # the largest limit any reader asked for
+    return pipe
 
 
 def _stat_input(p: Path) -> os.stat_result:
@@ -120,80 +199,58 @@ def _stat_input(p: Path) -> os.stat_result:
     return st
 
 
+def _is_pipe(p: Path) -> bool:
+    """Whether ``p`` is read as a stream (:class:`_Pipe`): anything but a regular file."""
+    return str(p) in _PIPES or not _stat.S_ISREG(_stat_input(p).st_mode)
+
+
 def read_input_bytes(path: str | os.PathLike, kind: str = "observations", *, text: bool = True) -> bytes:
-    """The bytes of an input file, read once, at most the limit of ``kind`` (:data:`INPUT_LIMITS`).
+    """The bytes of an input file, at most the limit of ``kind`` (:data:`INPUT_LIMITS`).
 
     A missing path, a directory, an unreadable file or one larger than the limit is a one-line
     :class:`MultilatError`; with ``text`` (default) so is binary data (a NUL byte) and, from a pipe, a
     line longer than :data:`MAX_LINE_BYTES`, found in the first block that holds it. A named pipe or
-    other non-regular file (``<(cmd)``, ``/dev/stdin``) is read once and remembered for the process,
-    so a command that sniffs a header and then parses the file does not open it twice (the second
-    open of a pipe would wait for a writer that never comes).
+    other non-regular file (``<(cmd)``, ``/dev/stdin``) is opened once for the process
+    (:class:`_Pipe`), so a command that sniffs a header and then parses the file reads it once.
     """
     p = Path(path)
-    key = str(p)
-    if key in _PIPES:
-        return _PIPES[key]
+    if _is_pipe(p):
+        pipe = _pipe(p, kind)
+        pipe.text = pipe.text and text
+        return pipe.whole()
     st = _stat_input(p)
-    regular = _stat.S_ISREG(st.st_mode)
-    if regular and st.st_size > _limit(kind):
+    if st.st_size > _limit(kind):
         raise _too_large(p, kind, _size(st.st_size))
     try:
         with open(p, "rb") as fh:
-            data = fh.read() if regular else _read_stream(fh, p, kind, text)
+            data = fh.read(_limit(kind) + 1)
     except OSError as exc:
         raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    if regular:
-        if len(data) > _limit(kind):                 # grew while read
-            raise _too_large(p, kind, _size(len(data)))
-        nul = data.find(b"\0") if text else -1
-        if nul >= 0:
-            raise _binary(p, data.count(b"\n", 0, nul) + 1, data[:2])
-    else:
-        _PIPES[key] = data
+    if len(data) > _limit(kind):                 # grew while read
+        raise _too_large(p, kind, f"more than {_size(_limit(kind))}")
+    nul = data.find(b"\0") if text else -1
+    if nul >= 0:
+        raise _binary(p, data.count(b"\n", 0, nul) + 1, data[:2])
     return data
 
 
-def _read_stream(fh, p: Path, kind: str, text: bool) -> bytes:
-    """A pipe's bytes in blocks, each checked as it comes (size, NUL bytes, line length)."""
-    parts, total, lines, run = [], 0, 0, 0
-    while True:
-        block = fh.read(_CHUNK)
-        if not block:
-            return b"".join(parts)
-        total += len(block)
-        if total > _limit(kind):
-            raise _too_large(p, kind, f"more than {_size(total - len(block))} (a pipe)")
-        if text:
-            nul = block.find(b"\0")
-            if nul >= 0:
-                raise _binary(p, lines + block.count(b"\n", 0, nul) + 1, (parts[0] if parts else block)[:2])
-            last = block.rfind(b"\n")
-            run = run + len(block) if last < 0 else len(block) - last - 1
-            if run > MAX_LINE_BYTES:
-                raise _long_line(p, lines + block.count(b"\n") + 1)
-            lines += block.count(b"\n")
-        parts.append(block)
-
-
 def read_input_head(path: str | os.PathLike, size: int = 1 << 16) -> bytes:
-    """The first ``size`` bytes of an input (for sniffing a header) without reading a large regular
-    file whole; a pipe is read whole once (:func:`read_input_bytes`) and served from memory."""
+    """The first ``size`` bytes of an input (for sniffing a header) without reading it whole."""
     p = Path(path)
-    if str(p) not in _PIPES and p.is_file():
-        try:
-            with open(p, "rb") as fh:
-                return fh.read(size)
-        except OSError as exc:
-            raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    return read_input_bytes(p)[:size]
+    if _is_pipe(p):
+        return _pipe(p, "observations").upto(size)
+    try:
+        with open(p, "rb") as fh:
+            return fh.read(size)
+    except OSError as exc:
+        raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
 
 
 def count_lines(path: str | os.PathLike) -> int:
     """Number of newline characters of an input, streamed for regular files (0 if unreadable)."""
     p = Path(path)
     try:
-        if str(p) not in _PIPES and p.is_file():
+        if not _is_pipe(p):
             with open(p, "rb") as f:
                 return sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b""))
         return read_input_bytes(p).count(b"\n")
@@ -224,21 +281,19 @@ def input_lines(path: str | os.PathLike, kind: str = "table") -> Iterator[tuple[
     Lines are split as :meth:`str.splitlines` splits them (a UTF-8 BOM dropped). Refused with
     ``FILE:LINE``: binary data (a NUL byte), a line longer than :data:`MAX_LINE_BYTES`, bytes that
     are not UTF-8; with ``FILE``: a file larger than the limit of ``kind``. A regular file is
-    streamed (memory: one line); a pipe is read by :func:`read_input_bytes` (bounded the same way).
+    streamed (memory: one line); a pipe is kept as far as it was read (:class:`_Pipe`).
     """
-    import io as _io
-
     p = Path(path)
-    st = None if str(p) in _PIPES else _stat_input(p)
-    if st is not None and _stat.S_ISREG(st.st_mode):
-        if st.st_size > _limit(kind):
-            raise _too_large(p, kind, _size(st.st_size))
+    if _is_pipe(p):
+        fh = _PipeLines(_pipe(p, kind))
+    else:
+        size = _stat_input(p).st_size
+        if size > _limit(kind):
+            raise _too_large(p, kind, _size(size))
         try:
             fh = open(p, "rb")
         except OSError as exc:
             raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    else:
-        fh = _io.BytesIO(read_input_bytes(p, kind))
     n, first = 0, b""
     with fh:
         while True:
@@ -263,6 +318,24 @@ def input_lines(path: str | os.PathLike, kind: str = "table") -> Iterator[tuple[
             for piece in text.splitlines() or [""]:
                 n += 1
                 yield n, piece
+
+
+class _PipeLines:
+    """A :class:`_Pipe` read line by line from its start (``readline``, a context manager)."""
+
+    def __init__(self, pipe: _Pipe):
+        self.pipe, self.pos = pipe, 0
+
+    def readline(self, limit: int) -> bytes:
+        line = self.pipe.readline(self.pos, limit)
+        self.pos += len(line)
+        return line
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        return False
 
 
 # ------------------------------------------------------------------------------------------- CSV tables
@@ -346,7 +419,7 @@ def read_csv_table(path: str | os.PathLike, *, required: Sequence[str], optional
     silently). Bytes that are not UTF-8 are an error naming the line.
     """
     p = Path(path)
-    at = [0, False]                                  # line of the last line given to csv, header seen
+    at = [0, False, 0]              # line of the last line given to csv, header seen, characters given
 
     def lines():
         for n, ln in input_lines(p, kind):
@@ -357,7 +430,7 @@ def read_csv_table(path: str | os.PathLike, *, required: Sequence[str], optional
                     raise MultilatError(f"{p}:{n}: a line beginning with '#' after the header: an id may "
                                         "not begin with '#' (comment lines go above the header)")
                 continue
-            at[0], at[1] = n, True
+            at[0], at[1], at[2] = n, True, at[2] + len(ln)
             yield ln
 
     reader = csv.reader(lines())
@@ -396,9 +469,26 @@ def read_csv_table(path: str | os.PathLike, *, required: Sequence[str], optional
             number(p, ln, name, r[i], **kw)
         rows.append(r)
         nums.append(ln)
+        if not len(rows) % 65536:
+            _check_held(p, ln, len(rows), len(header), at[2])
     if not rows:
         raise MultilatError(f"{p}: no data rows after the header")
     return CsvTable(str(p), header, tuple(rows), tuple(nums))
+
+
+#: bytes Python holds per row of a table and per cell, beyond the characters (tuple, str headers)
+_ROW_BYTES, _CELL_BYTES = 100, 58
+
+
+def _check_held(p: Path, line: int, rows: int, ncol: int, chars: int) -> None:
+    """Refuse a table whose rows held as Python strings would exceed :data:`MEMORY_SHARE` of the
+    physical memory (an endless pipe, a huge file outside the fast reader's plain format)."""
+    held = chars + rows * (_ROW_BYTES + _CELL_BYTES * ncol)
+    limit = MEMORY_SHARE * physical_memory_bytes()
+    if held > limit:
+        raise MultilatError(f"{p}:{line}: {rows:,} rows held take about {_size(held)} of memory, more than "
+                            f"this machine can give ({_size(limit)}); a larger observations file must be "
+                            "in the fast reader's plain format (docs/reliability.md)")
 
 
 def _check_cells(p: Path, line: int, cells: tuple[str, ...], header: tuple[str, ...]) -> None:
