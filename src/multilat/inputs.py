@@ -27,7 +27,7 @@ import stat as _stat
 import unicodedata
 import warnings
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -166,15 +166,6 @@ class _Pipe:
             pass
         return bytes(self.buf)
 
-    def readline(self, pos: int, limit: int) -> bytes:
-        """The line starting at ``pos`` (with its newline), at most ``limit`` bytes."""
-        while True:
-            nl = self.buf.find(b"\n", pos, pos + limit)
-            if nl >= 0:
-                return bytes(self.buf[pos:nl + 1])
-            if len(self.buf) - pos >= limit or not self.more():
-                return bytes(self.buf[pos:pos + limit])
-
 
 _PIPES: dict[str, _Pipe] = {}
 
@@ -281,7 +272,7 @@ def input_lines(path: str | os.PathLike, kind: str = "table") -> Iterator[tuple[
     Lines are split as :meth:`str.splitlines` splits them (a UTF-8 BOM dropped). Refused with
     ``FILE:LINE``: binary data (a NUL byte), a line longer than :data:`MAX_LINE_BYTES`, bytes that
     are not UTF-8; with ``FILE``: a file larger than the limit of ``kind``. A regular file is
-    streamed (memory: one line); a pipe is kept as far as it was read (:class:`_Pipe`).
+    streamed in blocks of about 1 MiB; a pipe is kept as far as it was read (:class:`_Pipe`).
     """
     p = Path(path)
     if _is_pipe(p):
@@ -294,42 +285,58 @@ def input_lines(path: str | os.PathLike, kind: str = "table") -> Iterator[tuple[
             fh = open(p, "rb")
         except OSError as exc:
             raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    n, first = 0, b""
+    n = 0
     with fh:
-        while True:
+        for block in _line_blocks(fh, p):
+            if n == 0 and block.startswith(b"\xef\xbb\xbf"):
+                block = block[3:]
+            nul = block.find(b"\0")
+            if nul >= 0:
+                raise _binary(p, n + block.count(b"\n", 0, nul) + 1, block[:2] if n == 0 else b"")
             try:
-                raw = fh.readline(MAX_LINE_BYTES + 1)
-            except OSError as exc:
-                raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
-            if not raw:
-                return
-            if n == 0:
-                first = raw
-                if raw.startswith(b"\xef\xbb\xbf"):
-                    raw = raw[3:]
-            if b"\0" in raw:
-                raise _binary(p, n + 1, first)
-            if len(raw) > MAX_LINE_BYTES:
-                raise _long_line(p, n + 1)
-            try:
-                text = raw.decode("utf-8")
+                text = block.decode("utf-8")
             except UnicodeDecodeError as exc:
-                raise _not_utf8(p, n + 1, raw[exc.start]) from None
-            for piece in text.splitlines() or [""]:
+                raise _not_utf8(p, n + block.count(b"\n", 0, exc.start) + 1, block[exc.start]) from None
+            for piece in text.splitlines():
                 n += 1
                 yield n, piece
 
 
+def _line_blocks(fh, p: Path) -> Iterator[bytes]:
+    """Blocks of about :data:`_CHUNK` bytes of ``fh``, each ending with a newline (but the last);
+    a run of more than :data:`MAX_LINE_BYTES` without one is refused (its line: counted so far)."""
+    rest, lines = b"", 0
+    while True:
+        try:
+            block = fh.read(_CHUNK)
+        except OSError as exc:
+            raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
+        if not block:
+            if rest:
+                yield rest
+            return
+        data = rest + block if rest else block
+        cut = data.rfind(b"\n") + 1
+        rest = data[cut:]
+        if len(rest) > MAX_LINE_BYTES:
+            raise _long_line(p, lines + data.count(b"\n", 0, cut) + 1)
+        if cut:
+            lines += data.count(b"\n", 0, cut)
+            yield data[:cut]
+
+
 class _PipeLines:
-    """A :class:`_Pipe` read line by line from its start (``readline``, a context manager)."""
+    """A :class:`_Pipe` read from its start (``read``, a context manager)."""
 
     def __init__(self, pipe: _Pipe):
         self.pipe, self.pos = pipe, 0
 
-    def readline(self, limit: int) -> bytes:
-        line = self.pipe.readline(self.pos, limit)
-        self.pos += len(line)
-        return line
+    def read(self, size: int) -> bytes:
+        while len(self.pipe.buf) < self.pos + size and self.pipe.more():
+            pass
+        chunk = bytes(self.pipe.buf[self.pos:self.pos + size])
+        self.pos += len(chunk)
+        return chunk
 
     def __enter__(self):
         return self
@@ -369,6 +376,8 @@ class CsvTable:
     columns: tuple[str, ...]
     rows: tuple[tuple[str, ...], ...]
     line_numbers: tuple[int, ...]
+    #: columns already read as numbers while the file was read: name -> (the checks, the values)
+    parsed: dict = field(default_factory=dict, compare=False, repr=False)
 
     def column(self, name: str) -> list[str]:
         i = self.columns.index(name)
@@ -393,6 +402,10 @@ class CsvTable:
         Raises :class:`MultilatError` ``"FILE:LINE: column 'name': ..."`` on the first bad cell.
         """
         i = self.columns.index(name)
+        kw = dict(positive=positive, nonnegative=nonnegative, required=required, within=within)
+        done = self.parsed.get(name)
+        if done is not None and done[0] == kw:
+            return np.array(done[1], dtype=float)
         out = np.empty(len(self.rows))
         for k, (r, ln) in enumerate(zip(self.rows, self.line_numbers)):
             out[k] = number(self.path, ln, name, r[i], positive=positive, nonnegative=nonnegative,
@@ -419,7 +432,7 @@ def read_csv_table(path: str | os.PathLike, *, required: Sequence[str], optional
     silently). Bytes that are not UTF-8 are an error naming the line.
     """
     p = Path(path)
-    at = [0, False, 0]              # line of the last line given to csv, header seen, characters given
+    at = [0, False, 0, False]       # last line given to csv, header seen, characters given, hidden character
 
     def lines():
         for n, ln in input_lines(p, kind):
@@ -430,7 +443,7 @@ def read_csv_table(path: str | os.PathLike, *, required: Sequence[str], optional
                     raise MultilatError(f"{p}:{n}: a line beginning with '#' after the header: an id may "
                                         "not begin with '#' (comment lines go above the header)")
                 continue
-            at[0], at[1], at[2] = n, True, at[2] + len(ln)
+            at[0], at[1], at[2], at[3] = n, True, at[2] + len(ln), _HIDDEN.search(ln) is not None
             yield ln
 
     reader = csv.reader(lines())
@@ -457,23 +470,26 @@ def read_csv_table(path: str | os.PathLike, *, required: Sequence[str], optional
     unknown = [c for c in header if c not in required and c not in optional]
     if unknown and warn_unknown:
         warnings.warn(f"{p}: ignoring unknown column(s) {', '.join(unknown)}", UserWarning, stacklevel=2)
-    checks = [(header.index(c), c, kw) for c, kw in (numbers or {}).items() if c in header]
+    checks = [(header.index(c), c, kw, []) for c, kw in (numbers or {}).items() if c in header]
     rows, nums = [], []
     while (cells := row()) is not None:
         ln = at[0]
         if len(cells) != len(header):
             raise MultilatError(f"{p}:{ln}: expected {len(header)} cells, got {len(cells)}")
         r = tuple(c.strip() for c in cells)
-        _check_cells(p, ln, r, header)
-        for i, name, kw in checks:
-            number(p, ln, name, r[i], **kw)
+        if at[3]:
+            _check_cells(p, ln, r, header)
+        for i, name, kw, vals in checks:
+            vals.append(number(p, ln, name, r[i], **kw))
         rows.append(r)
         nums.append(ln)
         if not len(rows) % 65536:
             _check_held(p, ln, len(rows), len(header), at[2])
     if not rows:
         raise MultilatError(f"{p}: no data rows after the header")
-    return CsvTable(str(p), header, tuple(rows), tuple(nums))
+    full = dict(positive=False, nonnegative=False, required=True, within=None)
+    return CsvTable(str(p), header, tuple(rows), tuple(nums),
+                    {name: ({**full, **kw}, vals) for _, name, kw, vals in checks})
 
 
 #: bytes Python holds per row of a table and per cell, beyond the characters (tuple, str headers)
