@@ -59,7 +59,8 @@ def atomic_paths(*paths: str | os.PathLike) -> Iterator[list[Path]]:
                 raise MultilatError(f"{target}: is a directory (expected a file to write)")
             try:
                 target.parent.mkdir(parents=True, exist_ok=True)
-                fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+                remove_stale_staging(target)
+                fd, tmp = tempfile.mkstemp(prefix=_staging_prefix(target), suffix=".part", dir=target.parent)
             except OSError as exc:
                 raise _named(exc, target) from None
             os.close(fd)
@@ -156,10 +157,12 @@ def _alive(pid: int) -> bool:
 
 
 def remove_stale_staging(out: str | os.PathLike) -> list[Path]:
-    """Remove the staging directories beside ``out`` left by a killed run (SIGKILL, power loss).
+    """Remove the staging directories (and files) beside ``out`` left by a killed run (SIGKILL,
+    power loss).
 
-    Only directories named as :func:`staging_dir` names them (``.NAME.PID.XXXX.part`` or ``.old``)
-    whose process is no longer alive are touched. A stale ``.old`` directory holds the previous
+    Only directories named as :func:`staging_dir` names them (``.NAME.PID.XXXX.part`` or ``.old``),
+    and files named as :func:`atomic_paths` names them (``.NAME.PID.XXXX.part``), whose process is no
+    longer alive are touched. A stale ``.old`` directory holds the previous
     results moved aside just before the new ones were renamed in: when ``out`` is missing they are
     put back, never deleted. Returns the directories removed."""
     import re
@@ -174,9 +177,16 @@ def remove_stale_staging(out: str | os.PathLike) -> list[Path]:
         return removed
     for e in entries:
         m = pat.fullmatch(e.name)
-        if m is None or not e.is_dir(follow_symlinks=False) or _alive(int(m.group(1))):
+        if m is None or _alive(int(m.group(1))):
             continue
         d = Path(e.path)
+        if m.group(2) == "part" and e.is_file(follow_symlinks=False):
+            with contextlib.suppress(OSError):
+                d.unlink()
+                removed.append(d)
+            continue
+        if not e.is_dir(follow_symlinks=False):
+            continue
         if m.group(2) == "old" and (d / "d").is_dir() and not out.exists():
             with contextlib.suppress(OSError):
                 os.replace(d / "d", out)          # the previous results, moved aside when the run died

@@ -213,3 +213,18 @@ def test_staging_directories_carry_the_pid(ws):
 
     with staging_dir(ws / "out") as tmp:
         assert tmp.name.startswith(f".out.{os.getpid()}.") and tmp.name.endswith(".part")
+
+
+def test_stale_part_files_of_dead_runs_are_removed(ws):
+    """A SIGKILL while a single output file is written leaves ``.NAME.PID.XXXX.part`` beside it; the
+    next write of that file removes it (a live process's stays)."""
+    dead = _dead_pid()
+    stale = ws / f".obs_out.csv.{dead}.abcd1234.part"
+    stale.write_text("half a file")
+    alive = ws / f".obs_out.csv.{os.getppid()}.abcd1234.part"
+    alive.write_text("being written")
+    from multilat.io import write_text_atomic
+
+    write_text_atomic(ws / "obs_out.csv", "x\n")
+    assert not stale.exists() and alive.exists()
+    assert (ws / "obs_out.csv").read_text() == "x\n"
