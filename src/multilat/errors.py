@@ -7,6 +7,8 @@ parameter). The CLI turns it into ``error: <message>`` and a non-zero exit, neve
 
 from __future__ import annotations
 
+import re
+
 
 class MultilatError(ValueError):
     """Bad input or an unsolvable problem, with a one-line message naming the culprit."""
@@ -58,17 +60,30 @@ def validation_error_line(err, source: str) -> str:
 _NP_SCALAR = None
 
 
+#: The invisible formatting characters that change how text is shown: bidirectional marks,
+#: embeddings, overrides (U+202E RIGHT-TO-LEFT OVERRIDE) and isolates, zero-width characters, the BOM,
+#: line and paragraph separators, interlinear annotations, tag characters. Refused in ids and cells
+#: (:mod:`multilat.inputs`); escaped by :func:`printable`.
+FORMAT_CHARACTERS = ("\u061c\u200b-\u200f\u2028-\u202e\u2060-\u206f\ufeff\ufff9-\ufffb"
+                     "\U000e0000-\U000e007f")
+#: What :func:`printable` escapes: control characters (C0 but tab, DEL, C1) and :data:`FORMAT_CHARACTERS`.
+HIDDEN_CHARACTERS = re.compile(f"[\x00-\x08\x0a-\x1f\x7f-\x9f{FORMAT_CHARACTERS}]")
+
+
+def _escape(m) -> str:
+    o = ord(m.group())
+    return f"\\x{o:02x}" if o < 0x100 else f"\\u{o:04x}" if o < 0x10000 else f"\\U{o:08x}"
+
+
 def printable(text: str, *, keep_newlines: bool = True) -> str:
-    """``text`` with control characters (ANSI escapes, BEL, C1 codes) written as ``\\xNN`` escapes,
-    so that an id or a file name is shown literally and never acts on the terminal."""
-    out = []
-    for ch in str(text):
-        o = ord(ch)
-        if (o < 32 and not (keep_newlines and ch in "\n\t")) or 0x7F <= o < 0xA0:
-            out.append(f"\\x{o:02x}")
-        else:
-            out.append(ch)
-    return "".join(out)
+    """``text`` with control characters (ANSI escapes, BEL, C1 codes) written as ``\\xNN`` escapes and
+    invisible formatting characters (U+202E RIGHT-TO-LEFT OVERRIDE, zero-width ones:
+    :data:`HIDDEN_CHARACTERS`) as ``\\uNNNN``, so that an id or a file name is shown literally and
+    never acts on the terminal."""
+    text = str(text)
+    if keep_newlines:
+        return "\n".join(HIDDEN_CHARACTERS.sub(_escape, part) for part in text.split("\n"))
+    return HIDDEN_CHARACTERS.sub(_escape, text.replace("\t", "\\x09"))
 
 
 def format_error(exc: BaseException) -> str:

@@ -32,7 +32,6 @@ Example
 from __future__ import annotations
 
 import math
-import tomllib
 from importlib import resources
 from pathlib import Path
 from typing import Literal
@@ -449,11 +448,11 @@ def load_instrument(name_or_path: str | Path = "seed2020") -> Instrument:
     s = str(name_or_path)
     path = Path(s)
     if path.suffix == ".toml" or path.exists() or "/" in s or "\\" in s:
-        from multilat.io import decode_text, read_input_bytes
+        from multilat.inputs import read_text_input
 
         if not path.exists():
             raise MultilatError(f"instrument file not found: {s}")
-        text = decode_text(read_input_bytes(path), path)
+        text = read_text_input(path, "config")
         source = s
     else:
         if s not in presets():
@@ -461,8 +460,6 @@ def load_instrument(name_or_path: str | Path = "seed2020") -> Instrument:
                                 f"(or give a path to a .toml file)")
         text = resources.files("multilat").joinpath("presets", f"{s}.toml").read_text(encoding="utf-8")
         source = f"preset {s}"
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise MultilatError(f"{source}: malformed TOML: {exc}".replace("\n", " ")) from None
-    return parse_instrument(data, source=source)
+    from multilat.inputs import parse_toml
+
+    return parse_instrument(parse_toml(text, source), source=source)

@@ -1,4 +1,4 @@
-"""Shared file primitives: atomic writes and strict CSV reading.
+"""Shared file primitives: atomic writes (reading: :mod:`multilat.inputs`, re-exported here).
 
 Domain formats live beside their science (``network/files.py``, ``lbb/files.py``,
 ``campaign/files.py``); they build on these helpers so that every reader reports errors the same
@@ -13,14 +13,14 @@ import io as _io
 import json
 import os
 import tempfile
-import warnings
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.inputs import (CsvTable, count_lines, decode_text, read_csv_table, read_input_bytes,  # noqa: F401
+                             read_input_head)
 from multilat.rows_text import CHUNK_ROWS, JsonKeyedRows, JsonRows, assemble, column_tokens, encode_labels
 
 #: The range of an elevation angle, for :meth:`CsvTable.floats` ``within=``.
@@ -59,7 +59,8 @@ def atomic_paths(*paths: str | os.PathLike) -> Iterator[list[Path]]:
                 raise MultilatError(f"{target}: is a directory (expected a file to write)")
             try:
                 target.parent.mkdir(parents=True, exist_ok=True)
-                fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".part", dir=target.parent)
+                remove_stale_staging(target)
+                fd, tmp = tempfile.mkstemp(prefix=_staging_prefix(target), suffix=".part", dir=target.parent)
             except OSError as exc:
                 raise _named(exc, target) from None
             os.close(fd)
@@ -111,7 +112,8 @@ def staging_dir(out: str | os.PathLike, *, inputs: Sequence[str | os.PathLike] =
     check_output_dir(out, inputs=inputs)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".part", dir=out.parent))
+        remove_stale_staging(out)
+        tmp = Path(tempfile.mkdtemp(prefix=_staging_prefix(out), suffix=".part", dir=out.parent))
     except OSError as exc:
         raise _named(exc, out) from None
     old = None
@@ -123,7 +125,7 @@ def staging_dir(out: str | os.PathLike, *, inputs: Sequence[str | os.PathLike] =
         with _signals_held():                    # no Ctrl-C / SIGTERM between the two renames
             try:
                 if out.exists():
-                    old = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".old", dir=out.parent))
+                    old = Path(tempfile.mkdtemp(prefix=_staging_prefix(out), suffix=".old", dir=out.parent))
                     os.replace(out, old / "d")
                 os.replace(tmp, out)
             except OSError as exc:
@@ -134,6 +136,63 @@ def staging_dir(out: str | os.PathLike, *, inputs: Sequence[str | os.PathLike] =
         shutil.rmtree(tmp, ignore_errors=True)
         if old is not None:
             shutil.rmtree(old, ignore_errors=True)
+
+
+def _staging_prefix(out: Path) -> str:
+    """``.NAME.PID.``: the staging directories of ``out`` carry the writing process's id, so that a
+    later run can tell the leftovers of a killed run (:func:`remove_stale_staging`)."""
+    return f".{out.name}.{os.getpid()}."
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OSError):        # another user's process: alive
+        return True
+    return True
+
+
+def remove_stale_staging(out: str | os.PathLike) -> list[Path]:
+    """Remove the staging directories (and files) beside ``out`` left by a killed run (SIGKILL,
+    power loss).
+
+    Only directories named as :func:`staging_dir` names them (``.NAME.PID.XXXX.part`` or ``.old``),
+    and files named as :func:`atomic_paths` names them (``.NAME.PID.XXXX.part``), whose process is no
+    longer alive are touched. A stale ``.old`` directory holds the previous
+    results moved aside just before the new ones were renamed in: when ``out`` is missing they are
+    put back, never deleted. Returns the directories removed."""
+    import re
+    import shutil
+
+    out = Path(out)
+    pat = re.compile(rf"\.{re.escape(out.name)}\.(\d+)\.[A-Za-z0-9_]+\.(part|old)")
+    removed = []
+    try:
+        entries = list(os.scandir(out.parent))
+    except OSError:
+        return removed
+    for e in entries:
+        m = pat.fullmatch(e.name)
+        if m is None or _alive(int(m.group(1))):
+            continue
+        d = Path(e.path)
+        if m.group(2) == "part" and e.is_file(follow_symlinks=False):
+            with contextlib.suppress(OSError):
+                d.unlink()
+                removed.append(d)
+            continue
+        if not e.is_dir(follow_symlinks=False):
+            continue
+        if m.group(2) == "old" and (d / "d").is_dir() and not out.exists():
+            with contextlib.suppress(OSError):
+                os.replace(d / "d", out)          # the previous results, moved aside when the run died
+        shutil.rmtree(d, ignore_errors=True)
+        removed.append(d)
+    return removed
 
 
 @contextlib.contextmanager
@@ -198,76 +257,6 @@ def check_not_input(out: str | os.PathLike | None, inputs: Sequence[str | os.Pat
             raise MultilatError(f"{option} {out}: is the input file {i}; it would be overwritten")
     if o.is_dir():
         raise MultilatError(f"{option} {out}: is a directory (expected a file to write)")
-
-
-_PIPES: dict[str, bytes] = {}
-
-
-def read_input_bytes(path: str | os.PathLike) -> bytes:
-    """The bytes of an input file, read once.
-
-    A missing path, a directory or an unreadable file is a one-line :class:`MultilatError`. A named
-    pipe or other non-regular file (``<(cmd)``, ``/dev/stdin``) is read once and remembered for the
-    process, so a command that sniffs a header and then parses the file does not open it twice
-    (the second open of a pipe would wait for a writer that never comes).
-    """
-    p = Path(path)
-    key = str(p)
-    if key in _PIPES:
-        return _PIPES[key]
-    try:
-        st = os.stat(p)
-    except FileNotFoundError:
-        raise MultilatError(f"{p}: no such file") from None
-    except OSError as exc:
-        raise MultilatError(f"{p}: {exc.strerror or exc}") from None
-    import stat as _stat
-
-    if _stat.S_ISDIR(st.st_mode):
-        raise MultilatError(f"{p}: is a directory, not a file")
-    try:
-        with open(p, "rb") as fh:
-            data = fh.read()
-    except OSError as exc:
-        raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    if not _stat.S_ISREG(st.st_mode):
-        _PIPES[key] = data
-    return data
-
-
-def read_input_head(path: str | os.PathLike, size: int = 1 << 16) -> bytes:
-    """The first ``size`` bytes of an input (for sniffing a header) without reading a large regular
-    file whole; a pipe is read whole once (:func:`read_input_bytes`) and served from memory."""
-    p = Path(path)
-    if str(p) not in _PIPES and p.is_file():
-        try:
-            with open(p, "rb") as fh:
-                return fh.read(size)
-        except OSError as exc:
-            raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
-    return read_input_bytes(p)[:size]
-
-
-def count_lines(path: str | os.PathLike) -> int:
-    """Number of newline characters of an input, streamed for regular files (0 if unreadable)."""
-    p = Path(path)
-    try:
-        if str(p) not in _PIPES and p.is_file():
-            with open(p, "rb") as f:
-                return sum(block.count(b"\n") for block in iter(lambda: f.read(1 << 20), b""))
-        return read_input_bytes(p).count(b"\n")
-    except (OSError, MultilatError):
-        return 0
-
-
-def decode_text(data: bytes, path) -> str:
-    """UTF-8 text of an input file (a BOM dropped); a bad byte is ``FILE:LINE: not UTF-8 ...``."""
-    try:
-        return data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        line = data.count(b"\n", 0, exc.start) + 1
-        raise MultilatError(f"{path}:{line}: not UTF-8 text (byte 0x{data[exc.start]:02x}); "
-                            "save the file as UTF-8") from None
 
 
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
@@ -514,111 +503,3 @@ def dumps_json(obj, *, indent: bool = True) -> bytes:
     buf = _io.BytesIO()
     write_json(obj, buf, indent=indent)
     return buf.getvalue()
-
-
-@dataclass(frozen=True)
-class CsvTable:
-    """A CSV read as strings: ``columns`` (header names) and ``rows``; ``line_numbers[i]`` is the
-    1-based file line of ``rows[i]`` (the header is line 1) for error messages."""
-
-    path: str
-    columns: tuple[str, ...]
-    rows: tuple[tuple[str, ...], ...]
-    line_numbers: tuple[int, ...]
-
-    def column(self, name: str) -> list[str]:
-        i = self.columns.index(name)
-        return [r[i] for r in self.rows]
-
-    def has(self, name: str) -> bool:
-        return name in self.columns
-
-    def ids(self, name: str) -> list[str]:
-        """Column ``name`` as ids: an empty cell is ``FILE:LINE: column 'name': empty id``."""
-        vals = self.column(name)
-        for k, v in enumerate(vals):
-            if v == "":
-                raise self.error(k, f"column '{name}': empty id")
-        return vals
-
-    def floats(self, name: str, *, positive: bool = False, nonnegative: bool = False,
-               required: bool = True, within: tuple[float, float, str] | None = None) -> np.ndarray:
-        """Column ``name`` as float64, each cell checked: finite (and > 0 / >= 0 if asked).
-
-        Raises :class:`MultilatError` ``"FILE:LINE: column 'name': ..."`` on the first bad cell.
-        An empty cell is an error when ``required``, otherwise NaN. ``within=(lo, hi, text)``: also
-        ``lo <= value <= hi`` (``text`` states the range in the message, e.g. ``"±π/2"``).
-        """
-        i = self.columns.index(name)
-        out = np.empty(len(self.rows))
-        for k, (r, ln) in enumerate(zip(self.rows, self.line_numbers)):
-            s = r[i].strip()
-            if s == "" and not required:
-                out[k] = np.nan
-                continue
-            try:
-                v = float(s)
-            except ValueError:
-                raise MultilatError(f"{self.path}:{ln}: column '{name}': not a number: {s!r}") from None
-            if not np.isfinite(v):
-                raise MultilatError(f"{self.path}:{ln}: column '{name}': must be finite, got {s!r}")
-            if positive and not v > 0:
-                raise MultilatError(f"{self.path}:{ln}: column '{name}': must be > 0, got {s!r}")
-            if nonnegative and not v >= 0:
-                raise MultilatError(f"{self.path}:{ln}: column '{name}': must be >= 0, got {s!r}")
-            if within is not None and not within[0] <= v <= within[1]:
-                raise MultilatError(f"{self.path}:{ln}: column '{name}': must be within {within[2]}, got {s!r}")
-            out[k] = v
-        return out
-
-    def error(self, row_index: int, message: str) -> MultilatError:
-        """An error naming the file line of ``rows[row_index]``."""
-        return MultilatError(f"{self.path}:{self.line_numbers[row_index]}: {message}")
-
-
-def read_csv_table(path: str | os.PathLike, *, required: Sequence[str], optional: Sequence[str] = (),
-                   warn_unknown: bool = True) -> CsvTable:
-    """Read a header CSV strictly.
-
-    Checks: the file exists and is not empty, every ``required`` column is in the header, every row
-    has as many cells as the header. Columns neither required nor optional give a warning (or are
-    ignored with ``warn_unknown=False``). Blank lines are skipped; lines starting with ``#`` are
-    comments above the header and an error below it (an id may not begin with ``#``: such a row must
-    not vanish silently). Bytes that are not UTF-8 are an error naming the line.
-    """
-    p = Path(path)
-    text = decode_text(read_input_bytes(p), p)
-    lines, header_seen = [], False
-    for n, ln in enumerate(text.splitlines()):
-        if not ln.strip():
-            continue
-        if ln.lstrip().startswith("#"):
-            if header_seen:
-                raise MultilatError(f"{p}:{n + 1}: a line beginning with '#' after the header: an id may "
-                                    "not begin with '#' (comment lines go above the header)")
-            continue
-        header_seen = True
-        lines.append((n + 1, ln))
-    if not lines:
-        raise MultilatError(f"{p}: empty file (expected a header with {', '.join(required)})")
-    reader = csv.reader([ln for _, ln in lines])
-    parsed = list(reader)
-    header = tuple(h.strip() for h in parsed[0])
-    missing = [c for c in required if c not in header]
-    if missing:
-        raise MultilatError(f"{p}:{lines[0][0]}: header lacks column(s) {', '.join(missing)} "
-                            f"(got {', '.join(header)})")
-    if len(set(header)) != len(header):
-        raise MultilatError(f"{p}:{lines[0][0]}: duplicate column names in header")
-    unknown = [c for c in header if c not in required and c not in optional]
-    if unknown and warn_unknown:
-        warnings.warn(f"{p}: ignoring unknown column(s) {', '.join(unknown)}", UserWarning, stacklevel=2)
-    rows, nums = [], []
-    for (ln, _), cells in zip(lines[1:], parsed[1:]):
-        if len(cells) != len(header):
-            raise MultilatError(f"{p}:{ln}: expected {len(header)} cells, got {len(cells)}")
-        rows.append(tuple(c.strip() for c in cells))
-        nums.append(ln)
-    if not rows:
-        raise MultilatError(f"{p}: no data rows after the header")
-    return CsvTable(str(p), header, tuple(rows), tuple(nums))

@@ -172,6 +172,10 @@ def _opt_floats(t: CsvTable, name: str, **kw) -> np.ndarray | None:
     return t.floats(name, **kw) if t.has(name) else None
 
 
+#: numeric columns checked on each row as it is read (their range: below, with the whole file)
+_RAW_NUMBERS = ("optical_path_m", "phase_rad", "frequency_hz", "k", "approx_distance_m")
+
+
 def read_raw(path: str | os.PathLike) -> RawObservations:
     """Read and validate a raw-reading file (format in the module docstring).
 
@@ -180,7 +184,8 @@ def read_raw(path: str | os.PathLike) -> RawObservations:
     be resolved, a time that does not parse, an environment reading outside its range (humidity
     over 100 %), a row with both or neither of optical path and phase.
     """
-    t = read_csv_table(path, required=("station", "target"), optional=RAW_COLUMNS)
+    t = read_csv_table(path, required=("station", "target"), optional=RAW_COLUMNS, kind="observations",
+                       numbers={c: dict(required=False) for c in _RAW_NUMBERS})
     m = len(t.rows)
     where = lambda i: f"{t.path}:{t.line_numbers[i]}"  # noqa: E731
     stations = tuple(t.column("station"))

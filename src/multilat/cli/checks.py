@@ -12,6 +12,7 @@ import math
 import os
 
 from multilat.errors import MultilatError
+from multilat.inputs import MEMORY_SHARE, physical_memory_bytes  # noqa: F401 (re-exported)
 
 #: The largest seed accepted (numpy's SeedSequence takes any integer >= 0; 2**128 is plenty).
 MAX_SEED = 2**128 - 1
@@ -22,8 +23,6 @@ MAX_TRIALS = 10**10
 SIGMA_UM_RANGE = (1e-6, 1e6)
 #: A held station offset, µm (10 m: far beyond any head's additive constant).
 OFFSET_UM_MAX = 1e7
-#: Share of the machine's physical memory a single request may plan to use.
-MEMORY_SHARE = 0.8
 
 
 def seed(value: int | None, option: str = "--seed") -> int | None:
@@ -90,14 +89,6 @@ def sigma_um(value: float | None, option: str = "--sigma-um") -> float | None:
 def offset_um(value: float, option: str = "--fix-offsets-um") -> float:
     """A held offset in µm, ``|value| <= OFFSET_UM_MAX``."""
     return quantity(value, option, lo=-OFFSET_UM_MAX, hi=OFFSET_UM_MAX, unit="µm")
-
-
-def physical_memory_bytes() -> int:
-    """Physical memory of the machine (bytes); 8 GiB when it cannot be read."""
-    try:
-        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - non-POSIX
-        return 8 * 2**30
 
 
 def memory(nbytes: float, what: str) -> None:

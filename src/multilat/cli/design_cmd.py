@@ -79,10 +79,15 @@ def design_cmd(
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Predict a layout's uncertainty (pre-analysis) and optimise where the heads go."""
-    from multilat.network.design.config import load_design_config, run_design
+    from multilat.cli import checks
+    from multilat.network.design.config import design_memory_bytes, load_design_config, run_design
 
+    checks.seed(seed)
     report_opt.check_report_path(report, [config, evaluate])
     cfg = load_design_config(config)
+    need = design_memory_bytes(cfg)
+    if need is not None:
+        checks.memory(need, f"{config}: targets.grid x heads.count")
     heads = None
     if evaluate is not None:
         from multilat.network.files import read_points

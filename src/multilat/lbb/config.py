@@ -10,7 +10,6 @@ one-line :class:`~multilat.errors.MultilatError` naming the file and the key pat
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 from typing import Literal
 
@@ -289,13 +288,8 @@ def load_config(path: str | Path | None = None) -> LBBConfig:
         Missing/unreadable file, malformed TOML (with its line), a missing, unknown or mistyped key.
     """
     p = Path(path) if path is not None else DEFAULT_CONFIG
-    from multilat.io import decode_text, read_input_bytes
+    from multilat.inputs import load_toml
 
     if not p.exists():
         raise MultilatError(f"config file not found: {p}")
-    text = decode_text(read_input_bytes(p), p)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise MultilatError(f"{p}: malformed TOML: {exc}") from None
-    return parse_config(data, source=str(p))
+    return parse_config(load_toml(p), source=str(p))

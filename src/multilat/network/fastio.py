@@ -148,16 +148,40 @@ def read_observations_fast(path: str | os.PathLike, *, sigma_m: float | None = N
         other than the four columns above ("the fast reader needs the header ..."); no ``sigma_m``
         column and no ``sigma_m`` argument ("no sigma_m column: give sigma_m").
     """
-    from multilat.io import read_input_bytes
+    from multilat.inputs import read_input_bytes, read_input_head
 
     p = Path(path)
     if sigma_m is not None and not (np.isfinite(sigma_m) and sigma_m > 0):
         raise MultilatError(f"sigma_m must be finite and > 0, got {float(sigma_m)!r}")
-    data = read_input_bytes(p)
+    head = _header(p, _normalised(read_input_head(p, PROBE_BYTES)))        # the header before the file is read whole
+    if head is None:
+        return _general(p, sigma_m)          # the general reader's message
+    line, header, _ = head
+    if header[:3] != _HEADER or len(header) > 4 or (len(header) == 4 and header[3] != "sigma_m"):
+        raise MultilatError(f"{p}:{line}: the fast reader needs the header station,target,distance_m[,sigma_m]"
+                            f" (got {','.join(header)})")
+    ncol = len(header)
+    if ncol == 3 and sigma_m is None:
+        raise MultilatError(f"{p}: no sigma_m column: give sigma_m")
+    if not _probe(p, ncol, sigma_m, id_width, number_width):
+        return _general(p, sigma_m)          # a bad early line: named without reading the file whole
+    data = _normalised(read_input_bytes(p, "observations"))
+    _, _, end = _header(p, data)
+    try:
+        return _plain(data, end, ncol, sigma_m, id_width, number_width)
+    except _NotPlain:
+        return _general(p, sigma_m)
+
+
+def _normalised(data: bytes) -> bytes:
     if data.startswith(b"\xef\xbb\xbf"):
         data = data[3:]
-    data = data.replace(b"\r\n", b"\n")
-    # comment / blank lines before the header
+    return data.replace(b"\r\n", b"\n") if b"\r" in data else data
+
+
+def _header(p: Path, data: bytes):
+    """(line number, header cells, offset of its newline) of the first line that is not blank or a
+    comment, or None when there is none in ``data`` (:func:`_normalised` bytes)."""
     pos, line = 0, 1
     while pos < len(data) and (data[pos:pos + 1] in (b"#", b"\n") or data[pos:pos + 1].isspace()):
         nxt = data.find(b"\n", pos)
@@ -166,19 +190,34 @@ def read_observations_fast(path: str | os.PathLike, *, sigma_m: float | None = N
     end = data.find(b"\n", pos)
     if end < 0:
         end = len(data)
-    header = [h.strip() for h in data[pos:end].decode("utf-8", errors="replace").split(",")]
     if pos >= len(data):
-        return _general(p, sigma_m)          # empty: the general reader's message
-    if header[:3] != _HEADER or len(header) > 4 or (len(header) == 4 and header[3] != "sigma_m"):
-        raise MultilatError(f"{p}:{line}: the fast reader needs the header station,target,distance_m[,sigma_m]"
-                            f" (got {','.join(header)})")
-    ncol = len(header)
-    if ncol == 3 and sigma_m is None:
-        raise MultilatError(f"{p}: no sigma_m column: give sigma_m")
+        return None
+    return line, [h.strip() for h in data[pos:end].decode("utf-8", errors="replace").split(",")], end
+
+
+#: Bytes of the start of a file the vectorised path checks before reading the file whole: a bad
+#: early line sends the file to the general reader at once, which names it after reading that far.
+PROBE_BYTES = 1 << 16
+
+
+def _probe(path, ncol: int, sigma_m, id_width: int, number_width: int) -> bool:
+    """Whether the whole lines in the first :data:`PROBE_BYTES` of ``path`` are plain (syntax only:
+    the screening of the distances needs the whole file)."""
+    from multilat.inputs import read_input_head
+
+    data = _normalised(read_input_head(path, PROBE_BYTES))
+    head = _header(Path(path), data)
+    if head is None:
+        return False
+    end = head[2]
+    last = data.rfind(b"\n")
+    if last <= end:
+        return True                        # no whole row in the block: nothing to check here
     try:
-        return _plain(data, end, ncol, sigma_m, id_width, number_width)
-    except _NotPlain:
-        return _general(p, sigma_m)
+        _plain(data[:last + 1], end, ncol, sigma_m, id_width, number_width, screen=False)
+    except (_NotPlain, MultilatError):
+        return False
+    return True
 
 
 def plain_observations(path: str | os.PathLike, sigma_m: float | None = None):
@@ -189,41 +228,54 @@ def plain_observations(path: str | os.PathLike, sigma_m: float | None = None):
     ``station,target,distance_m,sigma_m`` (or the three columns and a ``sigma_m`` option), every
     row plain. A file with both a ``sigma_m`` column and option is left to the general reader (it warns).
     """
-    from multilat.io import read_input_bytes
+    from multilat.inputs import read_input_bytes, read_input_head
 
     try:
-        data = read_input_bytes(path)
+        head = read_input_head(path, PROBE_BYTES)    # the header before the file is read whole
     except MultilatError:
         return None
-    if data.startswith(b"\xef\xbb\xbf"):
-        data = data[3:]
-    end = data.find(b"\n")
+    if head.startswith(b"\xef\xbb\xbf"):
+        head = head[3:]
+    end = head.find(b"\n")
     if end < 0:
         return None
-    header = data[:end].rstrip(b"\r")
+    header = head[:end].rstrip(b"\r")
     if header == b"station,target,distance_m,sigma_m" and sigma_m is None:
         ncol = 4
     elif header == b"station,target,distance_m" and sigma_m is not None and np.isfinite(sigma_m) and sigma_m > 0:
         ncol = 3
     else:
         return None
-    if b"\r" in data:
-        data = data.replace(b"\r\n", b"\n")
-        end = data.find(b"\n")
+    if not _probe(path, ncol, sigma_m, 32, 32):
+        return None
+    try:
+        data = _normalised(read_input_bytes(path, "observations"))
+    except MultilatError:
+        return None
+    end = data.find(b"\n")
     try:
         return _plain(data, end, ncol, sigma_m, 32, 32).to_observations()
     except (_NotPlain, MultilatError):
         return None
 
 
-def _plain(data: bytes, end: int, ncol: int, sigma_m, id_width: int, number_width: int) -> FastObservations:
-    """The vectorised path; raises :class:`_NotPlain` on anything outside the plain subset."""
+#: Bytes outside the vectorised path's plain subset: non-ASCII, control characters but the newline,
+#: quotes, '#', spaces (tabs and lone CRs are control characters)
+_NOT_PLAIN = np.ones(256, bool)
+_NOT_PLAIN[33:127] = False
+_NOT_PLAIN[[10]] = False
+_NOT_PLAIN[[34, 35]] = True
+
+
+def _plain(data: bytes, end: int, ncol: int, sigma_m, id_width: int, number_width: int,
+           screen: bool = True) -> FastObservations:
+    """The vectorised path; raises :class:`_NotPlain` on anything outside the plain subset (with
+    ``screen=False`` the distances are not screened: a probe of the first lines)."""
     body = np.frombuffer(data, np.uint8, offset=min(end + 1, len(data)))
     if body.size and body[-1] != 10:
         body = np.concatenate([body, np.array([10], np.uint8)])
-    if body.size == 0 or np.any((body >= 0x80) | (body == 34) | (body == 35) | (body == 32)
-                                | (body == 9) | (body == 13)):
-        raise _NotPlain                    # non-ASCII, quotes, '#', spaces, lone CR
+    if body.size == 0 or _NOT_PLAIN[body].any():
+        raise _NotPlain
     nl = np.flatnonzero(body == 10)
     n = len(nl)
     starts = np.concatenate([[0], nl[:-1] + 1])
@@ -249,7 +301,7 @@ def _plain(data: bytes, end: int, ncol: int, sigma_m, id_width: int, number_widt
     obs = FastObservations(sids, tids, si, ti, d, sig)
     from multilat.network.screening import suspect_rows
 
-    if suspect_rows(obs):
+    if screen and suspect_rows(obs):
         raise _NotPlain                    # the general reader names the rows with their lines
     return obs
 

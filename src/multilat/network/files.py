@@ -31,14 +31,17 @@ __all__ = ["read_observations", "read_reference_lengths", "read_points", "write_
 OBS_REQUIRED = ("station", "target", "distance_m")
 OBS_OPTIONAL = ("sigma_m", "head", "azimuth_rad", "elevation_rad", "zenith_rad", "sigma_azimuth_rad",
                 "sigma_elevation_rad")
-
-
-def _check_ids(tab, col):
-    vals = tab.column(col)
-    for k, v in enumerate(vals):
-        if v == "":
-            raise tab.error(k, f"column '{col}': empty id")
-    return vals
+#: The checks of each numeric column of an observations file (:func:`multilat.inputs.number`),
+#: applied to each row as it is read.
+OBS_NUMBERS = {"distance_m": dict(positive=True), "sigma_m": dict(positive=True),
+               "azimuth_rad": dict(required=False, within=(-2 * np.pi, 2 * np.pi, "±2π")),
+               "elevation_rad": dict(required=False, within=ELEVATION_RANGE),
+               "zenith_rad": dict(required=False, within=(0.0, np.pi, "[0, π]")),
+               "sigma_azimuth_rad": dict(required=False, positive=True),
+               "sigma_elevation_rad": dict(required=False, positive=True)}
+REF_NUMBERS = {"length_m": dict(positive=True), "u_m": dict(nonnegative=True, required=False)}
+POINT_STD = ("sx_m", "sy_m", "sz_m")
+POINT_NUMBERS = {"x_m": {}, "y_m": {}, "z_m": {}, **{c: dict(required=False) for c in POINT_STD}}
 
 
 def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
@@ -72,10 +75,11 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
         if fast is not None:
             _record(sigma_source, "column", path) if sigma_m is None else _record(sigma_source, "option", sigma_m)
             return fast
-    tab = read_csv_table(path, required=OBS_REQUIRED, optional=OBS_OPTIONAL)
-    st = _check_ids(tab, "station")
-    tg = _check_ids(tab, "target")
-    d = tab.floats("distance_m", positive=True)
+    tab = read_csv_table(path, required=OBS_REQUIRED, optional=OBS_OPTIONAL, numbers=OBS_NUMBERS,
+                         kind="observations")
+    st = tab.ids("station")
+    tg = tab.ids("target")
+    d = tab.floats("distance_m", **OBS_NUMBERS["distance_m"])
     hd = None
     if tab.has("head"):
         hd = [h if h else s_ for h, s_ in zip(tab.column("head"), st)]
@@ -97,17 +101,17 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     if tab.has("azimuth_rad") != has_el:
         raise MultilatError(f"{path}: give both azimuth_rad and elevation_rad (or zenith_rad) columns, or neither")
     if tab.has("azimuth_rad"):
-        az = tab.floats("azimuth_rad", required=False, within=(-2 * np.pi, 2 * np.pi, "±2π"))
+        az = tab.floats("azimuth_rad", **OBS_NUMBERS["azimuth_rad"])
         if tab.has("zenith_rad"):
-            el = np.pi / 2 - tab.floats("zenith_rad", required=False, within=(0.0, np.pi, "[0, π]"))
+            el = np.pi / 2 - tab.floats("zenith_rad", **OBS_NUMBERS["zenith_rad"])
         else:
-            el = tab.floats("elevation_rad", required=False, within=ELEVATION_RANGE)
+            el = tab.floats("elevation_rad", **OBS_NUMBERS["elevation_rad"])
     for name in ("sigma_azimuth_rad", "sigma_elevation_rad"):
         if tab.has(name):
             if az is None:
                 raise MultilatError(f"{path}: column {name} without the angle columns (azimuth_rad, "
                                     "elevation_rad or zenith_rad)")
-            v = tab.floats(name, required=False, positive=True)
+            v = tab.floats(name, **OBS_NUMBERS[name])
             ang = az if name == "sigma_azimuth_rad" else el
             miss = np.flatnonzero(np.isfinite(v) & ~np.isfinite(ang))
             if miss.size:
@@ -117,7 +121,7 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
             else:
                 sel = v
     if tab.has("sigma_m"):
-        sig = tab.floats("sigma_m", positive=True)
+        sig = tab.floats("sigma_m", **OBS_NUMBERS["sigma_m"])
         _record(sigma_source, "column", path)
         if sigma_m is not None:
             import warnings
@@ -222,11 +226,12 @@ def _model_sigma(d, heads, instrument, *, where=None):
 
 def read_reference_lengths(path: str | os.PathLike) -> ReferenceLengths:
     """Read ``target_a,target_b,length_m[,u_m]`` (u_m: standard uncertainty, metres)."""
-    tab = read_csv_table(path, required=("target_a", "target_b", "length_m"), optional=("u_m",))
-    a = _check_ids(tab, "target_a")
-    b = _check_ids(tab, "target_b")
-    L = tab.floats("length_m", positive=True)
-    u = tab.floats("u_m", nonnegative=True, required=False) if tab.has("u_m") else np.full(L.shape, np.nan)
+    tab = read_csv_table(path, required=("target_a", "target_b", "length_m"), optional=("u_m",),
+                         numbers=REF_NUMBERS)
+    a = tab.ids("target_a")
+    b = tab.ids("target_b")
+    L = tab.floats("length_m", **REF_NUMBERS["length_m"])
+    u = tab.floats("u_m", **REF_NUMBERS["u_m"]) if tab.has("u_m") else np.full(L.shape, np.nan)
     seen = {}
     for k, (x, y) in enumerate(zip(a, b)):
         if x == y:
@@ -239,9 +244,6 @@ def read_reference_lengths(path: str | os.PathLike) -> ReferenceLengths:
     return ReferenceLengths(tuple(a), tuple(b), L, u, path=str(tab.path), line_numbers=tab.line_numbers)
 
 
-POINT_STD = ("sx_m", "sy_m", "sz_m")
-
-
 def read_points(path: str | os.PathLike) -> Points:
     """Read ``point,x_m,y_m,z_m[,sx_m,sy_m,sz_m]`` (approximate or control coordinates, metres).
 
@@ -249,8 +251,9 @@ def read_points(path: str | os.PathLike) -> Points:
     datum (all three > 0 on the row); a row with them empty is hard control. A value <= 0, or a row
     with only some of them, is ``FILE:LINE: ...``.
     """
-    tab = read_csv_table(path, required=("point", "x_m", "y_m", "z_m"), optional=POINT_STD)
-    ids = _check_ids(tab, "point")
+    tab = read_csv_table(path, required=("point", "x_m", "y_m", "z_m"), optional=POINT_STD,
+                         numbers=POINT_NUMBERS)
+    ids = tab.ids("point")
     seen = {}
     for k, i in enumerate(ids):
         if i in seen:

@@ -23,7 +23,6 @@ Each simulation uses its own ``SeedSequence`` child: results do not depend on ho
 from __future__ import annotations
 
 import os
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -397,12 +396,9 @@ def _build(name, sid, sx, tid, tx, off, pairs, vertical_axis=2) -> NetworkConfig
 
 
 def _load_toml(p: Path) -> NetworkConfig:
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
-        raise MultilatError(f"{p}: malformed TOML: {exc}") from None
-    except UnicodeDecodeError:
-        raise MultilatError(f"{p}: not a UTF-8 text file") from None
+    from multilat.inputs import load_toml
+
+    data = load_toml(p)
     unknown = sorted(set(data) - _TOML_KEYS)
     if unknown:
         raise MultilatError(f"{p}: unknown key {unknown[0]!r} (allowed: {', '.join(sorted(_TOML_KEYS))})")

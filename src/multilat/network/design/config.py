@@ -37,7 +37,6 @@ line naming the file and the key.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -49,7 +48,15 @@ from multilat.network.design.preanalysis import CRITERIA, Layout, PreAnalysis, S
 from multilat.network.design.search import (DesignResult, choose_candidates, head_ids, min_heads,
                                             optimise_heads, visibility)
 
-__all__ = ["DesignConfig", "parse_design_config", "load_design_config", "run_design", "DesignRun"]
+__all__ = ["DesignConfig", "parse_design_config", "load_design_config", "run_design", "DesignRun",
+           "MAX_DESIGN_TARGETS", "MAX_DESIGN_HEADS", "design_memory_bytes"]
+
+
+#: The most targets a design may hold (a grid's product or a targets file's rows): the 20 x 200 000
+#: benchmark network's size; beyond it a search of thousands of evaluations takes days.
+MAX_DESIGN_TARGETS = 200_000
+#: The most heads (or candidate positions) a design may place.
+MAX_DESIGN_HEADS = 200
 
 
 class _Model(BaseModel):
@@ -82,6 +89,9 @@ class TargetsCfg(_Model):
         if has_box:
             if self.grid is None or len(self.grid) != 3 or min(self.grid) < 1:
                 raise ValueError("grid: need 3 counts >= 1 (points per axis)")
+            if math.prod(self.grid) > MAX_DESIGN_TARGETS:
+                raise ValueError(f"grid: {' x '.join(map(str, self.grid))} = {math.prod(self.grid):,} targets, "
+                                 f"more than the {MAX_DESIGN_TARGETS:,} a design may hold")
         return self
 
 
@@ -107,6 +117,8 @@ class HeadsCfg(_Model):
         if self.count is not None and self.count < min_heads(True):
             raise ValueError(f"count: self-calibration needs at least {min_heads(True)} heads, "
                              f"got {self.count}")
+        if self.count is not None and self.count > MAX_DESIGN_HEADS:
+            raise ValueError(f"count: at most {MAX_DESIGN_HEADS} heads, got {self.count:,}")
         if self.min_range_m < 0:
             raise ValueError("min_range_m must be >= 0")
         if self.max_range_m is not None and not self.max_range_m > self.min_range_m:
@@ -243,16 +255,12 @@ def parse_design_config(data: dict, *, source: str = "<dict>") -> DesignConfig:
 
 
 def load_design_config(path: str | Path) -> DesignConfig:
+    from multilat.inputs import load_toml
+
     p = Path(path)
     if not p.is_file():
         raise MultilatError(f"config file not found: {p}")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError) as exc:
-        raise MultilatError(f"cannot read config file {p}: {exc}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise MultilatError(f"{p}: malformed TOML: {exc}") from None
-    return parse_design_config(data, source=str(p))
+    return parse_design_config(load_toml(p), source=str(p))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -313,6 +321,39 @@ def _hidden(cfg, head_ids_, tid, source):
     return out
 
 
+def _check_sizes(n_targets: int, n_fixed: int | None, source: str) -> None:
+    """Refuse a targets or heads file beyond :data:`MAX_DESIGN_TARGETS` / :data:`MAX_DESIGN_HEADS`
+    (a grid and a head count are refused when the config is read)."""
+    if n_targets > MAX_DESIGN_TARGETS:
+        raise MultilatError(f"{source}: targets: {n_targets:,} targets, more than the "
+                            f"{MAX_DESIGN_TARGETS:,} a design may hold")
+    if n_fixed is not None and n_fixed > MAX_DESIGN_HEADS:
+        raise MultilatError(f"{source}: heads: {n_fixed:,} heads, at most {MAX_DESIGN_HEADS}")
+
+
+def _check_datum(datum: str, known: set, source: str) -> None:
+    """``network.datum`` parsed, each point it names a target or head of the design."""
+    from multilat.network.datum import parse_datum
+
+    try:
+        d = parse_datum(datum)
+    except MultilatError as exc:
+        raise MultilatError(f"{source}: network.datum: {exc}") from None
+    for p in d.points or ():
+        if p not in known:
+            raise MultilatError(f"{source}: network.datum: unknown point id {p!r} (not a target or head "
+                                "of the design)")
+
+
+def design_memory_bytes(cfg: DesignConfig) -> float | None:
+    """A rough estimate of the memory a design needs (~200 bytes per head-target pair, as ``lbb
+    simulate --grid`` counts per point), None when the targets or heads come from files."""
+    t, h = cfg.targets, cfg.heads
+    if t.grid is None or h.count is None:
+        return None
+    return 200.0 * math.prod(t.grid) * h.count
+
+
 @dataclass(frozen=True, eq=False)
 class DesignRun:
     """What ``multilat design`` computed: the search (None with fixed or evaluated heads), the
@@ -349,6 +390,7 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
     skw = dict(kw, evaluation=cfg.search.evaluation)
     known = set(tid)
     fixed = evaluate if evaluate is not None else (_read_points(base, h.fixed) if h.fixed else None)
+    _check_sizes(len(tid), None if fixed is None else len(fixed.ids), source)
     if fixed is not None:
         if len(fixed.ids) < min_heads(cfg.network.offsets):
             raise MultilatError(f"{source}: heads: self-calibration needs at least "
@@ -369,6 +411,7 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         for p in (a, b):
             if p not in known:
                 raise MultilatError(f"{source}: criterion.lengths: unknown point id {p!r}")
+    _check_datum(datum, known, source)
     search = None
     occ = tuple((o.box_min_m, o.box_max_m) for o in cfg.occluders)
     if fixed is not None:
