@@ -154,3 +154,14 @@ def test_valid_file_unchanged(ws):
     import json
 
     assert json.loads(out)["sigma0"] == pytest.approx(1.199, abs=5e-4)
+
+
+def test_an_unused_instrument_is_refused_not_ignored(ws):
+    """`--instrument` with a file that gives sigma_m for every distance and no angles used none of the
+    instrument: even a malformed TOML passed silently. Now the TOML is loaded (its error named) and
+    the unused option refused by name."""
+    bad = ws / "bad.toml"
+    bad.write_text("[a\nb = 1\n")
+    ws.fails(["adjust", "{d}/obs.csv", "--instrument", str(bad)], "bad.toml", "malformed TOML")
+    ws.fails(["adjust", "{d}/obs.csv", "--instrument", "seed2020"], "--instrument seed2020: not used",
+             "sigma_m")

@@ -205,6 +205,7 @@ def adjust_command(
                                    sigma_source=src)
     if corrected is not None:
         src["defaulted"] = instrument is None
+    _check_instrument_used(instrument, observations, obs, src, corrected)
     averaged = None
     if average_repeats:
         from multilat.network.repeats import average_repeats as _average
@@ -481,3 +482,21 @@ def reliability_lines(res, limit: int = 8) -> list[str]:
         out.append(f"  every observation controlled (redundancy >= {rel.r_min:g}, MDB <= "
                    f"{rel.mdb_limit_sigma:g} σ)")
     return out
+
+
+def _check_instrument_used(instrument, path, obs, src, corrected) -> None:
+    """``--instrument`` is applied or refused, never dropped: with a raw file it corrects the readings,
+    without a ``sigma_m`` column its distance model gives the σ, with angles it says which stations
+    are levelled trackers and their angles' σ. A file that gives σ for every distance and no angles
+    uses none of it: refused, naming both (the TOML is still loaded first, so a broken file is named
+    for what it is)."""
+    if instrument is None or corrected is not None or obs.azimuth_rad is not None:
+        return
+    if src.get("kind") != "file column":
+        return
+    from multilat import instrument as _inst
+
+    _inst.load_instrument(instrument)
+    raise MultilatError(f"--instrument {instrument}: not used: {path} gives sigma_m for every distance and no "
+                        "angles (drop --instrument, or drop the sigma_m column to take σ from the instrument's "
+                        "distance model)")
