@@ -87,25 +87,26 @@ def wants_general(observations, model: str) -> bool:
 
 @contextlib.contextmanager
 def refusal_hint(obs=None):
-    """Around the distance path's adjustment: a refusal (or, on a network with angle observations
-    or control, a left-out point) by one of its counting rules gets the hint that ``--model general``
+    """Around the distance path's adjustment: a refusal (or, on a network with angle observations, a
+    left-out point) by one of its counting rules gets the hint that ``--model general``
     adjusts the network by what the observations determine. Nothing else changes: the model is not
     switched."""
-    with warnings.catch_warnings(record=True) as seen:
-        try:
+    seen: list = []
+    try:
+        with warnings.catch_warnings(record=True) as seen:      # held back, re-emitted below (outside)
             yield
-        except MultilatError as e:
-            msg = str(e)
-            if any(r.search(msg) for r in _COUNT_RULES) and "--model general" not in msg:
-                raise MultilatError(msg + _HINT) from e
-            raise
-        finally:
-            for w in seen:
-                msg = str(w.message)
-                if (obs is not None and obs.has_angle_observations and any(r.search(msg) for r in _COUNT_RULES)
-                        and "--model general" not in msg):
-                    msg += _HINT
-                warnings.warn_explicit(msg, w.category, w.filename, w.lineno)
+    except MultilatError as e:
+        msg = str(e)
+        if any(r.search(msg) for r in _COUNT_RULES) and "--model general" not in msg:
+            raise MultilatError(msg + _HINT) from e
+        raise
+    finally:
+        for w in seen:
+            msg = str(w.message)
+            if (obs is not None and obs.has_angle_observations and any(r.search(msg) for r in _COUNT_RULES)
+                    and "--model general" not in msg):
+                msg += _HINT
+            warnings.warn_explicit(msg, w.category, w.filename, w.lineno)
 
 
 def is_general_input(path) -> bool:
