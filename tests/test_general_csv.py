@@ -9,7 +9,8 @@
 (b) The three tracker networks the old path refuses by its counting rules, written as CSVs from a
     known truth with seeded noise and adjusted by ``--model general`` (a subprocess): two levelled
     trackers on 15 common targets (free, defect 4); one unlevelled tracker on 5 hard control points
-    and 10 polar targets; 4 distance-only heads, one levelled tracker and 5 polar points (free,
+    and 10 polar targets (and the same on weighted control, σ 50 µm: the control's coordinates are
+    observations here and in the independent solution); 4 distance-only heads, one levelled tracker and 5 polar points (free,
     defect 4). Against an independent solution written here (scipy.optimize.least_squares on
     closed-form residuals with its own rotation matrices, its own datum: the first tracker and its
     κ held): σ0 to 1e-9 relative, dof by counting, coordinates to 1e-8 m (free networks: after the
@@ -116,9 +117,10 @@ class Case:
     """A known network: stations {id: xyz}, frames {id: (ω, φ, κ)} of the angle-reading ones,
     offsets {id: m}, targets {id: xyz}, pairs [(station, target)], control ids (hard, --points)."""
 
-    def __init__(self, stations, frames, offsets, targets, pairs, control=(), levelled=()):
+    def __init__(self, stations, frames, offsets, targets, pairs, control=(), levelled=(), control_sigma=None):
         self.stations, self.frames, self.offsets, self.targets = stations, frames, offsets, targets
         self.pairs, self.control, self.levelled = pairs, tuple(control), tuple(levelled)
+        self.control_sigma = control_sigma          # weighted control (sx_m = sy_m = sz_m), else hard
 
     def simulate(self, rng):
         rows = []
@@ -130,6 +132,8 @@ class Case:
                 el += SIG_A * rng.standard_normal()
             rows.append((s, t, d, az, el))
         self.rows = rows
+        sc = self.control_sigma or 0.0
+        self.given = {p: self.targets[p] + sc * rng.standard_normal(3) for p in self.control}
         return self
 
     def write(self, tmp: Path) -> list:
@@ -146,9 +150,10 @@ class Case:
             pts = tmp / "points.csv"
             with open(pts, "w", newline="") as f:
                 w = csv.writer(f)
-                w.writerow(["point", "x_m", "y_m", "z_m"])
+                sc = self.control_sigma
+                w.writerow(["point", "x_m", "y_m", "z_m"] + (["sx_m", "sy_m", "sz_m"] if sc else []))
                 for p in self.control:
-                    w.writerow([p, *(f"{v:.15g}" for v in self.targets[p])])
+                    w.writerow([p, *(f"{v:.15g}" for v in self.given[p])] + ([sc] * 3 if sc else []))
             args += ["--points", pts, "--datum", "control"]
         if self.levelled:
             args += ["--levelled", ",".join(self.levelled)]
@@ -158,7 +163,8 @@ class Case:
         """least_squares on the closed-form residuals. Unknowns: every station's xyz, the frames
         (κ only for levelled stations), the offsets, the free targets; ``hold``: a station whose xyz and
         κ are held at the truth (the datum of a free network)."""
-        st, tg = list(self.stations), [t for t in self.targets if t not in self.control]
+        weighted = self.control_sigma is not None
+        st, tg = list(self.stations), [t for t in self.targets if weighted or t not in self.control]
         layout, p0 = [], []
 
         def add(name, v):
@@ -188,7 +194,7 @@ class Case:
                 tilt = p[where[("tilt", s)]] if ("tilt", s) in where else np.zeros(2)
                 k = p[where[("kappa", s)]][0] if ("kappa", s) in where else self.frames[s][2]
                 F[s] = (tilt[0], tilt[1], k)
-            T = {t: (p[where[("T", t)]] if ("T", t) in where else self.targets[t]) for t in self.targets}
+            T = {t: (p[where[("T", t)]] if ("T", t) in where else self.given[t]) for t in self.targets}
             C = {s: p[where[("c", s)]][0] for s in st}
             return H, F, T, C
 
@@ -200,7 +206,8 @@ class Case:
                 rd.append((d - dd) / SIG_D)
                 if s in F:
                     ra += [np.angle(np.exp(1j * (az - a))) / SIG_A, (el - e) / SIG_A]
-            return np.array(rd + ra)
+            rc = [(self.given[c] - T[c]) / self.control_sigma for c in self.control] if weighted else []
+            return np.concatenate([rd, ra] + rc)
 
         sol = least_squares(fun, np.array(p0), xtol=1e-15, ftol=1e-15, gtol=1e-15, x_scale="jac")
         H, F, T, C = unpack(sol.x)
@@ -230,6 +237,12 @@ def tracker_on_control(rng):
                 [("T", t) for t in targets], control=tuple(control))
 
 
+def tracker_on_weighted_control(rng):
+    case = tracker_on_control(rng)
+    case.control_sigma = 50e-6
+    return case
+
+
 def heads_tracker_polar(rng):
     common = {f"P{i:02d}": x for i, x in enumerate(_rng_box(rng, 12, (0, 0, 0), (4, 3, 1.5)))}
     polar = {f"Q{i}": x for i, x in enumerate(_rng_box(rng, 5, (0, 0, 0), (4, 3, 1.5)))}
@@ -249,6 +262,7 @@ def _fit_about_z(src, dst):
 
 
 CASES = {"two_trackers": (two_trackers, 20261126, "T1"), "tracker_on_control": (tracker_on_control, 7, None),
+         "tracker_on_weighted_control": (tracker_on_weighted_control, 8, None),
          "heads_tracker_polar": (heads_tracker_polar, 11, "AT")}
 
 
@@ -280,6 +294,8 @@ def test_refused_tracker_networks_against_independent_solution(name, tmp_path):
             assert abs(o["redundancy"]) < 1e-8
     # the old path refuses (two trackers, one tracker) or leaves the polar points out, naming --model general
     old = _cli(*args, "--json", "--no-snooping")
+    if name == "tracker_on_weighted_control":
+        assert {doc["points"][k]["status"] for k in case.control} == {"weighted"}
     if name == "heads_tracker_polar":
         assert old.returncode == 0, old.stderr
         assert "Q0' left out: has 1 observation(s); 3 are needed" in old.stderr

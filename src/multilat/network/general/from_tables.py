@@ -205,17 +205,11 @@ def _with_approximations(net: Network, obs, points, rng) -> Network:
     has_angles = obs.azimuth_rad is not None and obs.elevation_rad is not None and bool(
         np.any(np.isfinite(obs.azimuth_rad) & np.isfinite(obs.elevation_rad)))
     if not has_angles:
-        from multilat.network.starts import initial_for
-
-        try:
-            start, how = initial_for(obs, None, points, rng)
-        except MultilatError as e:
-            notes.append(f"the distance path's initial values failed ({e}); chained instead")
-        else:
-            fill = np.vstack([start.station_xyz_m, start.target_xyz_m])
-            xyz[~known] = fill[~known]
-            notes.append(f"approximate coordinates of {int((~known).sum())} point(s) from the distance path's "
-                         f"initial values ({how.get('method', '?')})")
+        xyz, how = _distance_start(obs, points, rng, xyz, known)
+        if how is not None:
+            notes.append(how)
+        known = np.all(np.isfinite(xyz), 1)
+        if known.all():
             return Network(pts.with_xyz(xyz), net.blocks, tuple(notes))
     n_before = int((~known).sum())
     xyz = _chain(obs, xyz)
@@ -223,6 +217,30 @@ def _with_approximations(net: Network, obs, points, rng) -> Network:
     notes.append(f"approximate coordinates of {placed} point(s) chained from polar readings, set-ups fitted to "
                  "known points and multilateration")
     return Network(PointSet(pts.ids, xyz, pts.status, pts.sigma_m, pts.constrained), net.blocks, tuple(notes))
+
+
+def _distance_start(obs, points, rng, xyz, known):
+    """The distance path's initial values (:func:`multilat.network.starts.initial_for`) on the targets
+    three or more stations see (the others are left to the chain, or left out): (xyz, note or None)."""
+    from multilat.network.data import distinct_pair_codes
+    from multilat.network.starts import initial_for
+
+    pairs = distinct_pair_codes(obs.station_index, obs.target_index, obs.n_targets)
+    seen_by = np.bincount(pairs % obs.n_targets, minlength=obs.n_targets)
+    keep = seen_by[obs.target_index] >= 3
+    try:
+        sub = obs if keep.all() else obs.subset(keep)
+        start, how = initial_for(sub, None, points, rng)
+    except MultilatError as e:
+        return xyz, f"the distance path's initial values failed ({e}); chained instead"
+    xyz = xyz.copy()
+    ids = obs.station_ids + obs.target_ids
+    got = dict(zip(sub.station_ids + sub.target_ids, np.vstack([start.station_xyz_m, start.target_xyz_m])))
+    fill = [k for k, p in enumerate(ids) if not known[k] and p in got]
+    for k in fill:
+        xyz[k] = got[ids[k]]
+    return xyz, (f"approximate coordinates of {len(fill)} point(s) from the distance path's initial values "
+                 f"({how.get('method', '?')})")
 
 
 def _polar_local(obs):
