@@ -10,10 +10,10 @@
     known truth with seeded noise and adjusted by ``--model general`` (a subprocess): two levelled
     trackers on 15 common targets (free, defect 4); one unlevelled tracker on 5 hard control points
     and 10 polar targets (and the same on weighted control, σ 50 µm: the control's coordinates are
-    observations here and in the independent solution); 4 distance-only heads, one levelled tracker and 5 polar points (free,
-    defect 4). Against an independent solution written here (scipy.optimize.least_squares on
-    closed-form residuals with its own rotation matrices, its own datum: the first tracker and its
-    κ held): σ0 to 1e-9 relative, dof by counting, coordinates to 1e-8 m (free networks: after the
+    observations here and in the independent solution); 4 distance-only heads, one levelled tracker
+    and 5 polar points (free, defect 4). Against an independent solution written here
+    (scipy.optimize.least_squares on closed-form residuals with its own rotation matrices, its own
+    datum: the first tracker and its κ held): σ0 to 1e-9 relative, dof by counting, coordinates to 1e-8 m (free networks: after the
     4-parameter transformation, rotation about z and shift, that maps one datum onto the other —
     exact for two solutions of the same problem). Measured: ~1e-11 m.
 (c) The CLI: each of these through ``multilat adjust ... --model general --json`` in a subprocess;
@@ -55,7 +55,8 @@ def _dist(xyz):
 
 # ----------------------------------------------------------------------------- (a) both paths agree
 
-EXAMPLES = [("mixed", NET / "mixed" / "obs.csv", ()), ("small_volume", NET / "small_volume_obs.csv", ("--datum", "free")),
+EXAMPLES = [("mixed", NET / "mixed" / "obs.csv", ()),
+            ("small_volume", NET / "small_volume_obs.csv", ("--datum", "free")),
             ("sequential", NET / "sequential" / "obs.csv", ())]
 
 

@@ -282,7 +282,8 @@ def print_summary(doc, adj, stats, out) -> None:
     for o in doc["observations"]:
         kinds[o["kind"]] = kinds.get(o["kind"], 0) + 1
     say(f"adjusted {doc['n_points']} points from {doc['n_obs']} observation rows ("
-        + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in kinds.items()) + f") of {doc['input']} ({doc['format']}; general model)")
+        + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in kinds.items())
+        + f") of {doc['input']} ({doc['format']}; general model)")
     say(f"  datum: {doc['datum']}")
     gt, t = doc["global_test"], doc["tests"]
     if gt["statistic"] is None:
@@ -301,6 +302,10 @@ def print_summary(doc, adj, stats, out) -> None:
     red = stats.redundancy
     say(f"  redundancy {max(red.min(), 0.0):.3f}..{red.max():.3f}; {int((red <= 1e-9).sum())} uncontrolled row(s) "
         f"(r = 0); {t['n_failed']} test(s) above the critical value (listed in the JSON; no data snooping here)")
+    inst = [f"{n.split(':', 1)[1]} {v['value'] * 1e3:+.4f} mm (u {v['std'] * 1e3:.4f})"
+            for n, v in doc["parameters"].items() if n.startswith("offset:")]
+    if inst:
+        say("  additive constants: " + "; ".join(inst))
     for e in doc["excluded"]:
         say(f"  left out: point {e['id']} ({e['reason']}; {e['n_obs']} observation rows)")
     for note in doc["notes"]:
