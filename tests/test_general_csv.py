@@ -368,3 +368,28 @@ def test_shipped_csv_example_is_its_generator_output(tmp_path):
     shipped = ROOT / "examples" / "general" / "two_trackers_csv"
     for f in ("obs.csv", "truth.csv"):
         assert (tmp_path / f).read_text() == (shipped / f).read_text()
+
+
+def test_refusal_hint_only_on_the_counting_rules():
+    """The hint is added to the distance path's counting-rule refusals only (other errors pass
+    unchanged), and to its left-out warnings only when the file has angle observations."""
+    import warnings
+
+    from multilat.cli.general_adjust import refusal_hint
+    from multilat.errors import MultilatError
+    from multilat.network.files import read_observations
+
+    for msg, hinted in (("a self-calibrating network needs at least 3 stations, got 2 (T1, T2)", True),
+                        ("target 'X' has 2 observation(s); it needs at least 3 (4 for redundancy)", True),
+                        ("the network is disconnected into 2 parts", False)):
+        with pytest.raises(MultilatError) as e, refusal_hint():
+            raise MultilatError(msg)
+        assert str(e.value).startswith(msg) and ("--model general adjusts" in str(e.value)) == hinted
+    left = "target 'Q0' left out: has 1 observation(s); 3 are needed to place it"
+    for path, hinted in ((NET / "mixed" / "obs.csv", True), (NET / "sequential" / "obs.csv", False)):
+        with warnings.catch_warnings(record=True) as seen:
+            warnings.simplefilter("always")
+            with refusal_hint(read_observations(path)):
+                warnings.warn(left, UserWarning)
+        assert [str(w.message).startswith(left) for w in seen] == [True]
+        assert ("--model general adjusts" in str(seen[0].message)) == hinted

@@ -67,7 +67,7 @@ for _raw in ("environment", "heights", "formula", "extrapolate", "max_gap_s"):
 
 #: the distance path's refusals by station or observation counts (its messages' text)
 _COUNT_RULES = (re.compile(r"needs at least 3 stations"), re.compile(r"3 are needed to place it"),
-                re.compile(r"unknowns need at least \d+"))
+                re.compile(r"unknowns need at least \d+"), re.compile(r"observation\(s\); it needs at least \d+"))
 _HINT = ("; --model general adjusts a network by what its observations determine (angles, control points, "
          "polar points), not by station counts")
 
