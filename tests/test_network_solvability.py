@@ -74,12 +74,15 @@ def test_degenerate_geometries_are_named():
     assert _rank_defect(H4, Tl, OFF4)[0] == 3           # collinear targets: 3 extra defects
     with pytest.raises(MultilatError, match="targets are \\(nearly\\) collinear"):
         adjust(_obs(H4, Tl, OFF4), initial=Start(H4, Tl, np.zeros(4)))
-    # coplanar targets are NOT degenerate with distances and offsets (rank says so; solve works)
+    # coplanar targets are NOT degenerate with distances and offsets (rank says so; solve works), but
+    # each station's side of the target plane is a discrete ambiguity: named (multilat.network.ambiguity)
     Tp = T.copy()
     Tp[:, 2] = 0.7
     assert _rank_defect(H4, Tp, OFF4)[0] == 0
-    res = adjust(_obs(H4, Tp, OFF4), initial=Start(H4, Tp, np.zeros(4)))
+    with pytest.warns(UserWarning, match="ambiguous geometry: the side of 4 station"):
+        res = adjust(_obs(H4, Tp, OFF4), initial=Start(H4, Tp, np.zeros(4)))
     np.testing.assert_allclose(res.offset_m, OFF4, atol=1e-8)
+    assert [a.id for a in res.ambiguous] == list(res.station_ids)
 
 
 def test_structure_errors():

@@ -12,7 +12,12 @@ finite and, where physical, non-negative. Errors are one-line :class:`~multilat.
 messages naming the file and the key path, e.g. ``my.toml: heads.A.toh_std_m: must be >= 0``.
 
 Units: SI unless a key's suffix says otherwise (``_deg``, ``_db``, ``_hpa``, ``_pct``, ``_ppm``,
-``_nm``); angles are converted to radians by the properties that consume them.
+``_nm``); angles are converted to radians by the properties that consume them. The offsets of heads
+and targets, their bounds and standard uncertainties (metres keys of ``head_common``, ``heads``,
+``target``) must lie within ±``SMALL_LENGTH_MAX_M`` (0.1 m), ``am_pm_m_per_db`` within ±1e-3 m/dB:
+a larger value is a unit slip (µm written in a metres key), named with its file, key and the value
+it likely meant, e.g. ``my.toml: head_common.beam_offset_m: must lie within ±0.1 m, got -320 m;
+-320 µm written in a metres key? (-0.00032 m)``.
 
 Example
 -------
@@ -42,6 +47,25 @@ __all__ = ["ADMConfig", "Environment", "HeadCommon", "HeadConfig", "TargetConfig
 
 class _Model(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+#: largest magnitude of a head's or target's offset, offset bound or its uncertainty, metres: the
+#: seed's are a few hundred µm; a value above this is a unit slip (µm or mm written in a metres key)
+SMALL_LENGTH_MAX_M = 0.1
+#: largest magnitude of the amplitude-to-phase coupling, metres per dB (the seed: 0.15 µm/dB)
+AM_PM_MAX_M_PER_DB = 1e-3
+
+
+def _small_length(v, limit=SMALL_LENGTH_MAX_M, unit="m"):
+    """``v`` (a float or an interval) unless a magnitude exceeds ``limit``: then the one-line reason,
+    naming the unit the value was likely written in."""
+    for x in (v if isinstance(v, tuple) else (v,)):
+        if abs(x) > limit:
+            key = "metres" if unit == "m" else unit
+            guess = next((f"; {x:g} {u}{unit[1:]} written in a {key} key? ({x * f:g} {unit})"
+                          for f, u in ((1e-3, "mm"), (1e-6, "µm")) if abs(x) * f <= limit / 100), "")
+            raise ValueError(f"must lie within ±{limit:g} {unit}, got {x:g} {unit}{guess}")
+    return v
 
 
 def _interval(v, name="interval"):
@@ -89,6 +113,9 @@ class ADMConfig(_Model):
         if not v > 0:
             raise ValueError(f"must be > 0, got {v}")
         return v
+
+    _len = field_validator("am_pm_m_per_db")(
+        classmethod(lambda cls, v: _small_length(v, AM_PM_MAX_M_PER_DB, "m/dB")))
 
     @field_validator("phase_noise_rad", "power_variation_db", "clock_ageing_per_year",
                      "calibration_interval_years")
@@ -160,6 +187,7 @@ class HeadCommon(_Model):
     elevation_deg: tuple[float, float] = (-90.0, 90.0)
 
     _iv = field_validator("beam_offset_m", "elevation_deg")(classmethod(lambda cls, v: _interval(v)))
+    _len = field_validator("beam_offset_m")(classmethod(lambda cls, v: _small_length(v)))
 
     @field_validator("elevation_deg")
     @classmethod
@@ -192,6 +220,8 @@ class HeadConfig(_Model):
     toh_std_m: float
 
     _iv = field_validator("alpha_deg", "gamma_deg")(classmethod(lambda cls, v: _interval(v)))
+    _len = field_validator("a_limit_m", "c_limit_m", "toh_m", "toh_std_m")(
+        classmethod(lambda cls, v: _small_length(v)))
 
     @field_validator("a_limit_m", "c_limit_m", "toh_std_m")
     @classmethod
@@ -238,6 +268,8 @@ class TargetConfig(_Model):
     constant_calibrated: bool = True
 
     _iv = field_validator("elevation_deg")(classmethod(lambda cls, v: _interval(v)))
+    _len = field_validator("a_m", "b_m", "c_m", "offset_std_m", "tot_m", "tot_std_m")(
+        classmethod(lambda cls, v: _small_length(v)))
 
     @field_validator("offset_std_m", "tot_std_m", "misalignment_half_angle_deg")
     @classmethod

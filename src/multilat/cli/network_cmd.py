@@ -157,7 +157,8 @@ def adjust_command(
                                               "default: keep them as separate observations."),
     strict: bool = typer.Option(False, "--strict",
                                 help="Refuse the network when a point is too weakly observed, instead "
-                                     "of leaving it out with a warning."),
+                                     "of leaving it out with a warning, or placed only up to a mirror "
+                                     "(ambiguous geometry)."),
     levelled: Optional[str] = typer.Option(None, "--levelled",
                                            help="Stations on their own level (vertical axis = the world's z): "
                                                 "one orientation angle (κ) for their angle observations, "
@@ -254,15 +255,30 @@ def adjust_command(
                    alpha_global=alpha_global, test_method=test_method, variance_factor=variance_factor,
                    mdb_limit_sigma=mdb_limit_sigma, sigma_source=src, snooping=snooping, solver=solver,
                    strict=strict, scale_bars=refs if scale_bar else None, rng=seed)
-    with progress() as p, general_adjust.refusal_hint(obs):     # count-rule refusals name --model general
-        p.add_task(f"adjusting {obs.n_obs:,} distances", total=None)
-        if variance_components is None:
-            res = adjust(obs, **options)
-        else:
-            from multilat.network.variance_components import estimate_variance_components
+    from rich.markup import escape
 
-            vc = estimate_variance_components(obs, grouping=variance_components, **options)
-            res = vc.result
+    from multilat.errors import printable
+    from multilat.network.bounds import reporting
+    from multilat.network.unit_slip import UnitSlipError
+
+    with progress() as p, general_adjust.refusal_hint(obs):     # count-rule refusals name --model general
+        what = f"adjusting {obs.n_obs:,} distances"
+        task = p.add_task(what, total=None)
+
+        def step(text):      # the search's current start (ids from the files: shown literally)
+            p.update(task, description=f"{what}: {escape(printable(text, keep_newlines=False))}")
+
+        try:
+            with reporting(step):
+                if variance_components is None:
+                    res = adjust(obs, **options)
+                else:
+                    from multilat.network.variance_components import estimate_variance_components
+
+                    vc = estimate_variance_components(obs, grouping=variance_components, **options)
+                    res = vc.result
+        except UnitSlipError as exc:      # name the file at fault
+            raise MultilatError(f"{points if exc.source == 'points' else observations}: {exc}") from None
     from multilat.vocabulary import stamp
 
     doc = stamp(result_to_json(res, refs), "adjust")
@@ -329,6 +345,10 @@ def _print_summary(res, doc, out):
     if res.excluded:
         console.print("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
                                                                for e in res.excluded), markup=False)
+    if res.ambiguous:
+        console.print(f"  warning: ambiguous geometry, {len(res.ambiguous)} point(s) placed only up to a mirror "
+                      f"that fits equally: {', '.join(a.id for a in res.ambiguous[:8])}"
+                      f"{' ...' if len(res.ambiguous) > 8 else ''} (JSON 'ambiguous')", markup=False)
     if res.cost == "squared":
         console.print(f"  σ0 = {res.sigma0:.4g} m² (unweighted squared-distance residuals, eq. 6), "
                       f"dof = {res.dof}; no global test for this cost")

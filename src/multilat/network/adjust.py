@@ -18,6 +18,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
+from multilat.network.ambiguity import check_geometry
 from multilat.network.data import Observations, Points, ReferenceLengths
 from multilat.network.datum import Datum, apply_rigid, parse_datum, rigid_fit
 from multilat.network.exclusion import exclude_weak_points, zero_redundancy_warnings
@@ -33,6 +34,7 @@ from multilat.network.angle_rows import angle_results
 from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, snooping_round
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
+from multilat.network.unit_slip import check_unit_slip
 
 __all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
 
@@ -306,6 +308,9 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                         and "near-degenerate" in str(exc)):
                     raise
                 core = _start_as_partial(obs, start, exc)
+            slip = first and cost == "distance" and not unknown    # a unit slip stops (unit_slip.py)
+            if slip and how.get("far_minimum_again"):   # the restarts found this minimum twice: no search
+                check_unit_slip(obs, core, sigma_source)
             if first and search_ok:
                 # a converged result failing the global test by far may be a wrong minimum: search
                 # (not under control points: they give the frame and the start; a failing test there
@@ -318,6 +323,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                 # test them (against the free network) before data snooping blames the distances
                 _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core["dof"]),
                                max_iter, solver, chunk_targets, datum, cspec)
+            if slip:    # after the search (its best solution) and the control test (control at fault)
+                check_unit_slip(obs, core, sigma_source)
             first = False
             # the next adjustment (after a rejection) starts from this solution
             gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
@@ -381,6 +388,14 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                    scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
                    sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient,
                    angle_design_w=None if core.get("angles") is None else core["angles"]["design_w"])
+    # geometry distances cannot fix: a flat network is refused, mirror-ambiguous points named
+    amb, note = check_geometry(res, lambda st_: fit_once(
+        obs_w if used.all() else obs_w.subset(used), datum, st_, start, obs, used, points, cost, off_free,
+        off_val, sc_free, max_iter, solver, chunk_targets, warn=False, couplings=cspec),
+        lambda0=lam0, strict=strict, control=ctrl, couplings=cspec)
+    if note:
+        warnings.warn(note, UserWarning, stacklevel=2)
+        res = replace(res, ambiguous=amb, warnings=res.warnings + (note,))
     return replace(res, angle_outliers=angle_outliers(obs, ang_rejected, res))
 
 
@@ -448,13 +463,19 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
         # the first solve did not converge: the same start by continuation, then other initial
         # values (the random starts of initial_values), before searching around the lowest-cost
         # point it reached
+        from multilat.network.bounds import RESTART_SECONDS, Bound, report
         from multilat.network.initial import initial_values
+
+        bound = Bound("restarts after a first solve that did not converge", max_work=PARTIAL_RESTARTS,
+                      max_seconds=RESTART_SECONDS)
 
         def starts():
             yield "the first start, offsets held then freed", lambda: continuation(start)
-            for k in range(PARTIAL_RESTARTS):
-                yield (f"initial values, random start {k + 1}, offsets held then freed",
-                       lambda: continuation(initial_values(obs, rng=gen)))
+            while not bound.exhausted():       # bounded by work and wall time (network/bounds.py)
+                bound.spend()
+                report(f"first solve did not converge: random start {bound.work} of {PARTIAL_RESTARTS}")
+                yield (f"initial values, random start {bound.work}, offsets held then freed",
+                       lambda: continuation(initial_values(obs, rng=gen, deadline=bound.deadline)))
 
         for label, attempt in starts():
             try:
@@ -465,6 +486,7 @@ def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
             restarts.append({"label": label, "cost": cand.vtpv})
             core = cand.core
             break
+        bound.warn_if_timed_out()
     first = wrap(core)
     if not core.get("partial") and _one_gross_error(core):
         # one observation carries most of the excess: a gross error, for data snooping, not a wrong

@@ -11,7 +11,9 @@ Rules, applied repeatedly until nothing changes (leaving one point out can weake
   is a network of its own, to be adjusted separately or linked by common targets).
 
 A target with exactly 3 observations stays: it is determined, without redundancy, and from distances
-alone its mirror image through the plane of its 3 stations fits them equally (named in a warning).
+alone its mirror image through the plane of its 3 stations fits them equally (named in a warning; after
+the adjustment :mod:`multilat.network.ambiguity` lists it among the mirror-ambiguous points, with the
+stations that see only coplanar targets and the targets seen by coplanar stations).
 With ``strict=True`` the first point that would be left out is an error instead.
 """
 

@@ -24,7 +24,12 @@ from multilat.network.solve.loop import check_target_blocks
 from multilat.network.solve.system import weighted_cost, whitened
 
 __all__ = ["fit_once", "as_start", "check_network", "control_ids", "station_map", "target_map",
-           "raise_if_flat", "raise_unconverged", "pick_321_stations"]
+           "raise_if_flat", "raise_unconverged", "pick_321_stations", "check_control_scale",
+           "CONTROL_SCALE_LIMIT"]
+
+#: control coordinates whose scale differs from the distances' by this factor or more (either way)
+#: are refused as a unit slip (a real scale error is ~1e-5; offsets of mm change short spacings by %)
+CONTROL_SCALE_LIMIT = 2.0
 
 
 def as_start(initial, obs: Observations) -> Start:
@@ -111,6 +116,53 @@ def control_ids(sub, datum, points):
     return set(ids)
 
 
+def _control_scale(sub, ctrl, points, sx0, tx0) -> tuple[float, int, str]:
+    """(median ratio of control-coordinate lengths to the distances' lengths, number of lengths, how):
+    from the observed pairs whose both ends have coordinates in ``points`` (3 or more), else from the
+    control points' spacings against those of the start ``sx0``/``tx0`` (computed from the distances)."""
+    def xyz(ids):
+        return np.array([points.get(i) if points.get(i) is not None else (np.nan,) * 3 for i in ids], float)
+
+    P = np.vstack([xyz(sub.station_ids), xyz(sub.target_ids)])
+    a, b = sub.station_index, sub.n_stations + sub.target_index
+    lc = np.linalg.norm(P[a] - P[b], axis=1)
+    ok = np.isfinite(lc) & (lc > 0) & (sub.distance_m > 0)
+    if ok.sum() >= 3:
+        return float(np.median(lc[ok] / sub.distance_m[ok])), int(ok.sum()), "observed distances"
+    ids = sub.station_ids + sub.target_ids
+    k = [ids.index(i) for i in sorted(ctrl)]
+    S = np.vstack([sx0, tx0])[k]
+    iu = np.triu_indices(len(k), 1)
+    lc = np.linalg.norm(P[k][:, None] - P[k][None], axis=2)[iu]
+    ls = np.linalg.norm(S[:, None] - S[None], axis=2)[iu]
+    ok = (lc > 0) & (ls > 0)
+    return (float(np.median(lc[ok] / ls[ok])) if ok.any() else 1.0), int(ok.sum()), \
+        "the same points' spacings from the distances"
+
+
+def check_control_scale(sub, ctrl, points, sx0, tx0) -> None:
+    """Raise :class:`~multilat.network.unit_slip.UnitSlipError` (source ``points``) when the control
+    coordinates and the distances differ in scale by :data:`CONTROL_SCALE_LIMIT` or more: control in
+    mm with distances in metres made the adjustment fail with a message blaming the distances."""
+    from multilat.network.unit_slip import UnitSlipError, likely_unit
+
+    ratio, n, how = _control_scale(sub, ctrl, points, sx0, tx0)
+    if 1.0 / CONTROL_SCALE_LIMIT < ratio < CONTROL_SCALE_LIMIT:
+        return
+    big = ratio >= 1.0
+    k = ratio if big else 1.0 / ratio
+    unit = likely_unit(k)
+    if big:
+        guess = (f"x_m, y_m, z_m in {unit[1]} while distance_m is in metres?" if unit
+                 else "control coordinates and distances in different units?")
+    else:
+        guess = (f"distance_m in {unit[1]} while the control coordinates are in metres?" if unit
+                 else "control coordinates and distances in different units?")
+    raise UnitSlipError(f"the control coordinates are ~{k:.3g}x {'larger' if big else 'smaller'} in scale "
+                        f"than the distances (median ratio {ratio:.4g} over {n} lengths, against {how}): "
+                        f"{guess}", source="points")
+
+
 def _levelled_frame(sub, ang, sx0, tx0, a):
     """The internal frame when the vertical is observed (levelled stations): rotate the start so that
     the first levelled station's vertical axis (fitted to its directions) is +z, put station ``a`` at
@@ -165,6 +217,7 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
     all_ids = sub.station_ids + sub.target_ids
     if datum.kind == "control":
         ctrl = control_ids(sub, datum, points)
+        check_control_scale(sub, ctrl, points, sx0, tx0)
         # bring the initial values into the control frame first (rigid fit on the control points)
         cur = dict(zip(all_ids, np.vstack([sx0, tx0])))
         cids = sorted(ctrl)

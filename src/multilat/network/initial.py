@@ -30,7 +30,12 @@ Stations and targets outside the block are added by multilateration, re-fitting 
 then a least-squares refinement over every coordinate and offset. A solution is *good* when its RMS
 residual is within 10 x RMS(sigma); blocks are tried until two reach the same RMS (or three are
 good), then random restarts of the refinement if none is good; the lowest RMS is kept. docs/network-simulation.md gives the measured
-convergence rates.
+convergence rates. The restarts are bounded by their number and by wall time
+(:data:`~multilat.network.bounds.RESTART_SECONDS`, :mod:`multilat.network.bounds`), and end early
+when a restart reaches the best RMS again while it is still :data:`~multilat.network.unit_slip.SLIP_FACTOR`
+times RMS(sigma) or more: a minimum found twice from unrelated starts with residuals that large is
+a scale error of the data (a unit slip, :mod:`multilat.network.unit_slip`) or gross errors, which
+no restart can lower.
 
 Frame and mirror
 ----------------
@@ -50,7 +55,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.bounds import RESTART_SECONDS, Bound, report
 from multilat.network.datum import rigid_fit
+from multilat.network.unit_slip import SLIP_FACTOR
 from multilat.network.initial_refine import (choose_frame, fix_mirror, levenberg_marquardt,
                                              refine as refine_fit, refine_unmirrored, to_frame)
 
@@ -72,6 +79,11 @@ class InitialValues:
         RMS of the distance residuals after the refinement (a converged network shows the noise level).
     refinement : Convergence or None
         How the final least-squares refinement ended (None without refinement).
+    bounded : str or None
+        Set when a bound (:mod:`multilat.network.bounds`) stopped the random restarts: which one.
+    far_minimum_again : bool
+        A random restart reached the best RMS again while it was >= SLIP_FACTOR x RMS(sigma) (the
+        restarts stopped there): the minimum is the data's, no start can lower it.
     """
 
     station_xyz_m: np.ndarray
@@ -80,6 +92,8 @@ class InitialValues:
     method: str
     rms_residual_m: float
     refinement: object = None
+    bounded: str | None = None
+    far_minimum_again: bool = False
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -343,7 +357,8 @@ def _grow(D, W, H, T, o, placedH, placedT):
 # ----------------------------------------------------------------------------- refinement
 
 
-def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) -> InitialValues:
+def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20,
+                   deadline: float | None = None) -> InitialValues:
     """Approximate station and target coordinates and station offsets of a network.
 
     Parameters
@@ -360,7 +375,11 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
         (default); ``False`` returns the plain eq. 7 + multilateration values. Distances alone
         always refine (the refinement decides between candidate blocks).
     restarts : int
-        Number of random starts of the fallback.
+        Number of random starts of the fallback (its work bound; its wall-time bound is
+        :data:`~multilat.network.bounds.RESTART_SECONDS` from its first start).
+    deadline : float, optional
+        A :func:`time.monotonic` value after which no further random start begins (a search
+        that calls this inside its own bound).
 
     Returns
     -------
@@ -459,30 +478,47 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20) ->
             n_good += 1
         if confirmed or n_good >= 3:
             break
+    bound = None
+    again = False
     if best is None or best[4] > good:
-        alt = _restarts(D, W, rng=gen, restarts=restarts)
+        bound = Bound("initial values, random restarts", max_work=restarts, max_seconds=RESTART_SECONDS,
+                      deadline=deadline)
+        alt, again = _restarts(D, W, rng=gen, bound=bound, best_rms=None if best is None else best[4],
+                               far=SLIP_FACTOR * good / 10.0)
         if alt is not None and (best is None or alt[4] < best[4]):
             best = alt[:6] + ("restarts", alt[6])
+        bound.warn_if_timed_out()
     if best is None:
         raise MultilatError("initial values: the network could not be built up from its distances "
                             "(disconnected or too few common targets)")
     H, T, o, frame, rms, _, method, conv = best
     H, T = fix_mirror(H, T, frame)
-    return InitialValues(H, T, o, method, rms, conv)
+    return InitialValues(H, T, o, method, rms, conv, None if bound is None else bound.note(), again)
 
 
-def _restarts(D, W, *, rng, restarts):
-    """Fallback: refinement from random starts; the lowest robust residual scale as
-    (H, T, o, frame, rms, robust scale)."""
+def _restarts(D, W, *, rng, bound, best_rms=None, far=np.inf):
+    """Fallback: refinement from random starts while ``bound`` allows (its ``work`` counts the starts),
+    the lowest RMS as (H, T, o, frame, rms, robust scale, convergence) or None, and whether it ended
+    early because a start reached ``best_rms`` (the blocks' best, or an earlier start's) again while
+    that is >= ``far``."""
     s, t = D.shape
     L = float(np.nanmax(D))
     best = None
-    for _ in range(restarts):
+    while not bound.exhausted():
+        bound.spend()
+        report(f"initial values: random start {bound.work} of {bound.max_work}")
         H = rng.uniform(-0.5 * L, 0.5 * L, (s, 3))
         T = rng.uniform(-0.5 * L, 0.5 * L, (t, 3))
         frame = choose_frame(H)
         H, T = to_frame(H, T, frame)
-        Hr, Tr, orr, rms, rob, conv = refine_unmirrored(D, W, H, T, np.zeros(s), frame, max_nfev=100)
-        if np.isfinite(rms) and (best is None or rms < best[4]):
+        Hr, Tr, orr, rms, rob, conv = refine_unmirrored(D, W, H, T, np.zeros(s), frame, max_nfev=100,
+                                                        deadline=bound.deadline)
+        if not np.isfinite(rms):
+            continue
+        again = best_rms is not None and best_rms >= far and abs(rms - best_rms) <= 1e-6 * best_rms
+        if best is None or rms < best[4]:
             best = (Hr, Tr, orr, frame, rms, rob, conv)
-    return best
+        if again:
+            return best, True
+        best_rms = best[4] if best_rms is None else min(best_rms, best[4])
+    return best, False

@@ -6,6 +6,7 @@ mirror sweep that re-fits targets at their mirror image through the plane of the
 from __future__ import annotations
 
 import itertools
+import time
 
 import numpy as np
 import scipy.sparse
@@ -18,10 +19,11 @@ __all__ = ["refine", "refine_unmirrored", "point_fit", "mirror_sweep", "levenber
            "to_frame", "choose_frame", "fix_mirror", "SPARSE_FROM"]
 
 
-def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
+def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200, deadline=None):
     """Weighted least squares over all coordinates and offsets in the 3-2-1 frame ``frame``
     (station indices a, b, c: a fixed, b's y, z fixed, c's z fixed). Returns H, T, o, rms, robust
-    scale of the residuals and the solver's convergence record."""
+    scale of the residuals and the solver's convergence record. ``deadline`` (a
+    :func:`time.monotonic` value, :mod:`multilat.network.bounds`) ends the iterations early."""
     s, t = D.shape
     si, tj = np.nonzero(np.isfinite(D))
     d = D[si, tj]
@@ -76,16 +78,18 @@ def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200):
         return J
 
     x, conv = levenberg_marquardt(fun, jac, np.concatenate([H[free_h], T.ravel(), o]),
-                                   max_iter=max_nfev)
+                                   max_iter=max_nfev, deadline=deadline)
     if robust:
         r = fun(x)
         scale = max(1.4826 * np.median(np.abs(r)), 1.0)
         if np.max(np.abs(r)) > 10 * scale:   # gross errors: Huber weights, a few reweightings
             for _ in range(5):
+                if deadline is not None and time.monotonic() >= deadline:
+                    break
                 k = 3 * scale
                 hw = np.sqrt(np.minimum(1.0, k / np.maximum(np.abs(fun(x)), 1e-300)))
                 x, conv = levenberg_marquardt(lambda z: hw * fun(z), lambda z: row_scale(jac(z), hw), x,
-                                               max_iter=max_nfev)
+                                               max_iter=max_nfev, deadline=deadline)
     Hx, Tx, ox = unpack(x)
     diff = Hx[si] - Tx[tj]
     r = d - np.sqrt((diff ** 2).sum(1)) - ox[si]
@@ -136,9 +140,13 @@ def mirror_sweep(D, W, H, T, o):
 
 
 def refine_unmirrored(D, W, H, T, o, frame, *, rounds=4, **kw):
-    """:func:`refine`, then :func:`mirror_sweep` and a new refinement while targets move."""
+    """:func:`refine`, then :func:`mirror_sweep` and a new refinement while targets move (not after
+    ``kw['deadline']``)."""
     out = refine(D, W, H, T, o, frame, **kw)
+    deadline = kw.get("deadline")
     for _ in range(rounds):
+        if deadline is not None and time.monotonic() >= deadline:
+            break
         H, T, o = out[0], out[1].copy(), out[2]
         if not mirror_sweep(D, W, H, T, o):
             break
@@ -156,9 +164,11 @@ def row_scale(J, w):
     return w[:, None] * J
 
 
-def levenberg_marquardt(fun, jac, x, *, max_iter=200, tol=1e-10):
+def levenberg_marquardt(fun, jac, x, *, max_iter=200, tol=1e-10, deadline=None):
     """Minimise ``|fun(x)|^2`` by Levenberg-Marquardt with Marquardt scaling; ``jac`` may return a
-    dense array or a scipy sparse matrix (then the normal equations are solved by SuperLU).
+    dense array or a scipy sparse matrix (then the normal equations are solved by SuperLU). Bounded
+    by ``max_iter`` iterations (work) and, when given, by ``deadline`` (a :func:`time.monotonic`
+    value, wall time: checked before each iteration; :mod:`multilat.network.bounds`).
 
     Returns ``(x, convergence)``: the lowest-cost point and a :class:`~multilat.network.solve.Convergence`
     (``last_step_sigma`` is NaN here: the step is relative to the parameters)."""
@@ -167,6 +177,8 @@ def levenberg_marquardt(fun, jac, x, *, max_iter=200, tol=1e-10):
     lam = 1e-3
     it = 0
     for it in range(1, max_iter + 1):
+        if deadline is not None and time.monotonic() >= deadline:
+            return x, Convergence(False, it - 1, float("nan"), "wall-time bound")
         J = jac(x)
         sp = scipy.sparse.issparse(J)
         A = (J.T @ J).tocsc() if sp else J.T @ J

@@ -128,6 +128,8 @@ class AdjustmentResult:
         redundancy, w, MDB, verdict); orientations : dict  station -> (ω, φ, κ) and their σ
     angle_outliers : tuple of dict  angles rejected by data snooping, in order (station, target, kind,
         w when rejected, residual_rad against the final solution, test, statistic, critical, step)
+    ambiguous : tuple of ambiguity.Ambiguous  points whose mirror image fits the distances equally
+        (:mod:`multilat.network.ambiguity`; named in ``warnings`` too)
     """
 
     obs: Observations
@@ -177,6 +179,7 @@ class AdjustmentResult:
     reliability: object = None
     sigma_source: dict = field(default_factory=dict)
     variance_factor: str = "known"
+    ambiguous: tuple = ()     # ambiguity.Ambiguous: points the distances place only up to a mirror
 
     @property
     def sigma0_unit(self) -> str:
@@ -411,6 +414,7 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         "n_used": int(res.used.sum()),
         "excluded": [{"id": e.id, "kind": e.kind, "reason": e.reason, "n_obs": e.n_obs} for e in res.excluded],
         "warnings": list(res.warnings),
+        "ambiguous": [a.to_json() for a in res.ambiguous],
         "stations": stations,
         "heads": res.heads(),
         "scale_bars": list(res.scale_bars),

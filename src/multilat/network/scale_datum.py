@@ -19,7 +19,9 @@ def check_scale_datum(obs: Observations, sc_free, datum, *, bars: bool = False) 
     estimated (and no control points, no scale bars) the scale is a 7th datum defect."""
     if bars or datum.kind == "control" or not np.all(sc_free):
         return
+    # each suggestion is a command line the CLI accepts (issue 25, 8c: it suggested "--scales A,B")
     raise MultilatError("every head's scale is estimated, so the network's scale is undetermined (a 7th "
-                        "datum defect): estimate the scales of some heads only (--scales A,B) so the "
-                        "others fix it, hold one head's scale (--fixed-scale HEAD), or use reference "
-                        "lengths as scale bars (--references FILE --scale-bars)")
+                        "datum defect): hold one head's scale (--scales --fixed-scale HEAD; in Python "
+                        "scales=[the other heads]), use reference lengths as scale bars (--scales "
+                        "--references FILE --scale-bars), or control points (--scales --points FILE "
+                        "--datum control)")

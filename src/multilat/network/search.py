@@ -33,6 +33,15 @@ Candidates (from the current best solution, lowest cost wins)
 Each candidate start is solved by the caller's ``solve``; a candidate is accepted when its cost is
 lower than the best so far; rounds repeat from the new best while the test still fails by far (at
 most ``max_rounds``) and stop as soon as it no longer does.
+
+Bounds
+------
+The search is bounded by work, ``max_rounds`` rounds and at most ``max_solves`` candidate starts
+(:data:`~multilat.network.bounds.SEARCH_SOLVES`), and by wall time, ``max_seconds``
+(:data:`~multilat.network.bounds.SEARCH_SECONDS`, which also bounds the initial values computed for
+candidate 5). A search stopped by a bound keeps its best solution; the record's ``bounded`` says
+which bound stopped it, and a wall-time stop is a warning (the result then depends on the machine's
+speed). On a terminal the CLI shows the candidate being tried (:func:`multilat.network.bounds.report`).
 """
 
 from __future__ import annotations
@@ -44,6 +53,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.bounds import SEARCH_SECONDS, SEARCH_SOLVES, Bound, report
 from multilat.network.initial import distance_matrix, initial_values
 from multilat.network.initial_refine import choose_frame, point_fit, refine_unmirrored, to_frame
 
@@ -78,6 +88,7 @@ class MinimumSearch:
     p_value : float  χ² upper-tail probability of ``cost``
     candidates : tuple of Candidate  every start tried, in order
     warning : str or None  set when ``solution`` still fails the global test by far
+    bounded : str or None  set when a bound stopped the search (which one)
     """
 
     solution: object
@@ -88,10 +99,12 @@ class MinimumSearch:
     p_value: float
     candidates: tuple
     warning: str | None
+    bounded: str | None = None
 
     def as_dict(self) -> dict:
         """The JSON ``initial`` block's search part (plain types)."""
-        return {"search_triggered": self.triggered, "first_cost": self.first_cost,
+        return {"search_triggered": self.triggered, **({"bounded": self.bounded} if self.bounded else {}),
+                "first_cost": self.first_cost,
                 "cost": self.cost, "dof": self.dof, "p_value": self.p_value,
                 "tried": [{"label": c.label, "cost": c.cost, "sigma0": c.sigma0,
                            "accepted": c.accepted, **({"note": c.note} if c.note else {})}
@@ -183,13 +196,13 @@ def _partial_restart(obs, H, T, o, drop):
     return _start(Hs, T2, os_)
 
 
-def _other_anchors(obs, T, drop, rng):
+def _other_anchors(obs, T, drop, rng, deadline=None):
     """Initial values computed without targets ``drop`` (other blocks), the dropped placed again."""
     got = _without(obs, drop)
     if got is None:
         return None
     sub, tmap = got
-    iv = initial_values(sub, rng=rng)
+    iv = initial_values(sub, rng=rng, deadline=deadline)
     H, o = iv.station_xyz_m, iv.offset_m
     T2 = np.zeros_like(T)
     T2[tmap] = iv.target_xyz_m
@@ -202,7 +215,7 @@ def _other_anchors(obs, T, drop, rng):
     return _start(H, T2, o)
 
 
-def _candidates(obs, sol, *, n_targets, n_stations, n_triples, rng):
+def _candidates(obs, sol, *, n_targets, n_stations, n_triples, rng, deadline=None):
     """(label, start or callable returning a start) pairs from solution ``sol``."""
     H = np.asarray(sol.station_xyz_m, float)
     T = np.asarray(sol.target_xyz_m, float)
@@ -247,12 +260,13 @@ def _candidates(obs, sol, *, n_targets, n_stations, n_triples, rng):
         out.append((f"partial solution without {names}, then placed again",
                     lambda drop=drop: _partial_restart(obs, H, T, o, drop)))
         out.append((f"initial values without {names} (other anchor sets)",
-                    lambda drop=drop: _other_anchors(obs, T, drop, rng)))
+                    lambda drop=drop: _other_anchors(obs, T, drop, rng, deadline)))
     return out
 
 
 def find_minimum(obs, solve, first, *, rng=None, p_min: float = P_MIN, n_targets: int = 4,
-                 n_stations: int = 2, n_triples: int = 3, max_rounds: int = 3) -> MinimumSearch:
+                 n_stations: int = 2, n_triples: int = 3, max_rounds: int = 3,
+                 max_solves: int = SEARCH_SOLVES, max_seconds: float = SEARCH_SECONDS) -> MinimumSearch:
     """Search for a lower minimum when a converged solution fails the global test by far.
 
     Parameters
@@ -267,6 +281,7 @@ def find_minimum(obs, solve, first, *, rng=None, p_min: float = P_MIN, n_targets
     p_min : float  trigger and warning threshold on the χ² tail probability (module docstring)
     n_targets, n_stations, n_triples : int  how many worst targets / stations / triples to try
     max_rounds : int  rounds of candidates from the best solution so far
+    max_solves, max_seconds : int, float  the work and wall-time bounds (module docstring)
 
     Returns
     -------
@@ -279,10 +294,15 @@ def find_minimum(obs, solve, first, *, rng=None, p_min: float = P_MIN, n_targets
     tried: list[Candidate] = []
     triggered = p_value(best_cost, dof) < p_min
     rounds = max_rounds if triggered else 0
+    bound = Bound("minimum search", max_work=max_solves, max_seconds=max_seconds)
     for _ in range(rounds):
         improved = False
         for label, start in _candidates(obs, best, n_targets=n_targets, n_stations=n_stations,
-                                        n_triples=n_triples, rng=gen):
+                                        n_triples=n_triples, rng=gen, deadline=bound.deadline):
+            if bound.exhausted():
+                break
+            bound.spend()
+            report(f"minimum search: start {bound.work} ({label})")
             try:
                 if callable(start):
                     start = start()
@@ -299,8 +319,9 @@ def find_minimum(obs, solve, first, *, rng=None, p_min: float = P_MIN, n_targets
                 best, best_cost, improved = sol, c, True
                 if p_value(best_cost, dof) >= p_min:
                     break
-        if not improved or p_value(best_cost, dof) >= p_min:
+        if not improved or p_value(best_cost, dof) >= p_min or bound.stopped_by:
             break
+    bound.warn_if_timed_out()
     p = p_value(best_cost, dof)
     warning = None
     if p < p_min:
@@ -308,4 +329,4 @@ def find_minimum(obs, solve, first, *, rng=None, p_min: float = P_MIN, n_targets
                    f"(sigma0 {np.sqrt(best_cost / dof):.3g}, chi-square p {p:.1e}, {len(tried)} "
                    "starts tried): check for gross errors, a-priori sigma too small, or give "
                    "approximate coordinates")
-    return MinimumSearch(best, triggered, first_cost, best_cost, dof, p, tuple(tried), warning)
+    return MinimumSearch(best, triggered, first_cost, best_cost, dof, p, tuple(tried), warning, bound.note())

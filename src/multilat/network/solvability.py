@@ -14,7 +14,10 @@ Rules (documented in ``docs/network.md``):
   unknowns, as if the datum took 7 parameters, i.e. the scale too, which distances do determine);
 * shape (:func:`flat_geometry`, on the initial coordinates and again when the solver fails):
   stations off one plane and targets off one line by more than the spread the distances resolve,
-  ``h_min = sqrt(sigma L / sqrt(m))`` (:func:`resolvable_spread_m`);
+  ``h_min = sqrt(sigma L / sqrt(m))`` (:func:`resolvable_spread_m`), and all points together off
+  one plane by more than noise bends a flat network, ``K_BEND sqrt(sigma L)``
+  (:func:`bending_spread_m`); after the adjustment :mod:`.ambiguity` checks the same with the
+  covariance (a flat network, mirror-ambiguous points);
 * geometry: the reduced normal matrix (after the datum), scaled to unit diagonal, must be well
   conditioned; otherwise the cause is named (coplanar stations, collinear targets, or the
   parameters of the weakest direction).
@@ -30,7 +33,7 @@ from multilat.errors import MultilatError
 from multilat.network.data import Observations
 
 __all__ = ["check_structure", "count_unknowns", "diagnose_degeneracy", "flat_geometry",
-           "resolvable_spread_m", "CONDITION_LIMIT"]
+           "resolvable_spread_m", "bending_spread_m", "CONDITION_LIMIT", "K_BEND"]
 
 #: largest acceptable condition number of the unit-diagonal reduced normal matrix
 CONDITION_LIMIT = 1e10
@@ -166,8 +169,11 @@ def flat_geometry(station_xyz_m, target_xyz_m, *, sigma_m: float, n_obs: int) ->
     Degenerate (see :func:`resolvable_spread_m` for the bound ``h_min``): the stations' RMS spread
     off their best-fit line or plane below ``h_min`` (collinear / coplanar stations: each target may
     be mirrored, and with offsets the network bends), or the targets' RMS distance from their
-    best-fit line below ``h_min`` (collinear targets: each station may turn about the line).
-    Coplanar targets are not a defect with distances and offsets.
+    best-fit line below ``h_min`` (collinear targets: each station may turn about the line), or
+    all points' RMS spread off their plane below :func:`bending_spread_m` (a flat network).
+    Coplanar targets are not a continuous defect with distances and offsets; they leave each
+    station's side of their plane open (a discrete mirror, named after the adjustment by
+    :mod:`multilat.network.ambiguity`).
 
     Parameters
     ----------
@@ -200,7 +206,33 @@ def flat_geometry(station_xyz_m, target_xyz_m, *, sigma_m: float, n_obs: int) ->
         if sv[1] < h_min:
             causes.append(f"the {t} targets are (nearly) collinear (RMS distance from their line "
                           f"{sv[1]:.2g} m, resolvable {h_min:.2g} m); they must span a plane or a volume")
+    if s + t >= 4 and not causes:
+        sv = np.array(_flatness(np.vstack([H, T]))) / np.sqrt(s + t)
+        h_flat = bending_spread_m(sv[0], sigma_m)
+        if sv[2] < h_flat:
+            causes.append(f"all {s + t} points ({s} stations, {t} targets) lie (nearly) in one plane (RMS "
+                          f"out-of-plane spread {sv[2]:.2g} m, resolvable {h_flat:.2g} m): distances fix "
+                          "their out-of-plane coordinates only to second order; stations and targets must "
+                          "span a volume")
     return "; ".join(causes) if causes else None
+
+
+#: a flat network's points are bent off their plane by noise by about 2 sqrt(sigma L) (measured on
+#: flat networks of 4-8 stations, 20-1000 targets, sigma 5-50 µm, L 1-10 m: 1-2.2 times); a spread
+#: below K_BEND sqrt(sigma L) is not a volume the distances resolve
+K_BEND = 10.0
+
+
+def bending_spread_m(extent_m: float, sigma_m: float) -> float:
+    """Smallest RMS out-of-plane spread of *all* points (stations and targets) that is a volume
+    rather than a flat network bent by noise: ``K_BEND sqrt(sigma L)``.
+
+    In a flat network a point's displacement ``z`` off the plane changes its distances by about
+    ``z² / (2 L)`` (second order), so noise of ``sigma`` bends the network off its plane by
+    ``sqrt(2 sigma L)``-ish; the out-of-plane coordinates are then not determined (their linearised
+    σ is of the order of the bending itself). ``L`` the RMS extent along the main axis, m.
+    """
+    return float(K_BEND * np.sqrt(max(sigma_m, 0.0) * max(extent_m, 0.0)))
 
 
 def diagnose_degeneracy(station_xyz_m, target_xyz_m, station_ids, target_ids, null_vector=None,
@@ -211,7 +243,8 @@ def diagnose_degeneracy(station_xyz_m, target_xyz_m, station_ids, target_ids, nu
     Checks (:func:`flat_geometry`, when ``sigma_m`` and ``n_obs`` are given; otherwise a relative
     bound 1e-4 on the singular values): all stations (nearly) in one plane (2 extra defects); all
     targets on a line (3 extra defects: each station may turn about the line). Coplanar targets are
-    *not* a defect with distances and offsets (checked by the rank of the Jacobian in the tests).
+    *not* a rank defect with distances and offsets (checked by the rank of the Jacobian in the tests);
+    their mirror ambiguity is named by :mod:`multilat.network.ambiguity`.
     Otherwise names the parameters dominating the weakest direction ``null_vector``.
     """
     causes = []

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.bounds import RESTART_SECONDS, Bound, report
 from multilat.network.data import Observations, Points
 from multilat.network.datum import apply_rigid, rigid_fit
 from multilat.network.fit import as_start
@@ -67,16 +68,31 @@ def initial_from_distances(obs: Observations, rng):
     gen = np.random.default_rng(rng)
     weak = np.bincount(obs.target_index, minlength=obs.n_targets) < 4
     strong_obs = ~weak[obs.target_index]
+    # before the subset (which refuses an empty one with a bare "no observations": issue 25, 8d)
+    if np.unique(obs.station_index[strong_obs]).size != obs.n_stations:
+        n_strong = int((~weak).sum())
+        raise MultilatError(f"initial values from distances need every station to see targets that 4 or "
+                            f"more stations see ({n_strong} of {obs.n_targets} targets are seen by 4 or "
+                            "more); give approximate coordinates of every station and target (--points)")
     sub = obs if not weak.any() else obs.subset(strong_obs)
-    if sub.n_stations != obs.n_stations:
-        raise MultilatError("initial values from distances need every station to see targets that 4 or "
-                            "more stations see; give approximate coordinates (--points)")
-    for attempt in range(PARTIAL_RESTARTS + 1):
-        raw = initial_values(sub, rng=gen)
+    bound = Bound("initial values, flat-solution restarts", max_work=PARTIAL_RESTARTS + 1,
+                  max_seconds=RESTART_SECONDS)
+    while True:
+        bound.spend()
+        if bound.work > 1:
+            report(f"initial values: flat solution, new start {bound.work - 1} of {PARTIAL_RESTARTS}")
+        raw = initial_values(sub, rng=gen, deadline=None if bound.work == 1 else bound.deadline)
         if not flat_geometry(raw.station_xyz_m, raw.target_xyz_m, sigma_m=float(np.median(sub.sigma_m)),
-                             n_obs=sub.n_obs):
+                             n_obs=sub.n_obs) or bound.exhausted():
             break
+    attempt = bound.work - 1
+    bound.warn_if_timed_out()
     how = {"method": f"distances: {raw.method}", "residual_rms_m": float(raw.rms_residual_m)}
+    if raw.far_minimum_again:   # the restarts found it twice: a unit slip or gross errors, not a start
+        how["far_minimum_again"] = True
+    notes = [n for n in (raw.bounded, bound.note() if bound.stopped_by == "time" else None) if n]
+    if notes:
+        how["bounded"] = "; ".join(notes)
     if raw.refinement is not None:
         how["refinement"] = raw.refinement.to_json()
     if attempt:
