@@ -61,7 +61,8 @@ RENAMED = {
 #: Keys whose object is keyed by ids (stations, targets, heads, pairs, components), not by names.
 ID_MAPS = frozenset({"stations", "targets", "heads", "interpoint_std_m", "paper_m", "pair_error_rms_m",
                      "offset_error_rms_m", "components", "component_error_mean_m", "component_error_std_m",
-                     "sensitivity_um_per_m", "inputs", "offsets_m", "start_stations"})
+                     "sensitivity_um_per_m", "inputs", "offsets_m", "start_stations",
+                     "points", "parameters"})     # adjust-general: {point id: ...}, {"offset:H1": ...}
 
 _SNAKE = re.compile(r"^[a-z][a-z0-9]*(_[a-z0-9]+)*$")
 _FORBIDDEN_TOKENS = frozenset({"u", "sd", "sem", "entropy", "ell95", "sim"})

@@ -1,17 +1,24 @@
-"""``multilat adjust NET.xml``: a gama-local XML input adjusted by the general network layer
-(:mod:`multilat.network.general`): parse, call, print.
+"""``multilat adjust NET.xml`` and ``multilat adjust obs.csv --model general``: the general network
+layer (:mod:`multilat.network.general`) from the command line: parse, call, print.
 
 Reached from the ``adjust`` command (:mod:`multilat.cli.network_cmd`) when its input is a gama-local
-file (suffix ``.xml`` / ``.gkf``, or a ``<gama-local>`` root element). The options that apply are
-``--json``, ``--out DIR``, ``--alpha``, ``--variance-factor``, ``--test-method``, ``--alpha-global``
-and ``--strict``; every other option of
-the distance-only path is refused in one line naming it (never silently ignored): the file itself
-carries the datum (``fix=``/``adj=``), the σ (``stdev=`` and ``<points-observations>``) and the
-approximate coordinates.
+file (suffix ``.xml`` / ``.gkf``, or a ``<gama-local>`` root element), or with ``--model general``
+on multilat's own observation CSV (:mod:`multilat.network.general.from_tables`). For a gama-local
+file the options that apply are ``--json``, ``--out DIR``, ``--alpha``, ``--variance-factor``,
+``--test-method``, ``--alpha-global`` and ``--strict``: the file itself carries the datum
+(``fix=``/``adj=``), the σ (``stdev=`` and ``<points-observations>``) and the approximate
+coordinates. A CSV network also takes ``--points``, ``--datum free|control``, ``--sigma-um``,
+``--instrument``, ``--fix-offsets-um``, ``--scales``, ``--fixed-scale``, ``--references`` with
+``--scale-bars``, ``--levelled``, ``--seed`` and ``--no-snooping``. Every other option is refused in
+one line naming it (never silently ignored). The model is never switched silently: the default
+(distance) path's refusals by station counts say that ``--model general`` adjusts by what the
+observations determine (:func:`refusal_hint`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import re
 import warnings
 from pathlib import Path
 
@@ -19,14 +26,21 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["is_general_input", "run", "APPLIES", "WHY_NOT", "SCHEMA"]
+__all__ = ["is_general_input", "wants_general", "refusal_hint", "run", "APPLIES", "APPLIES_CSV", "WHY_NOT",
+           "WHY_NOT_CSV", "SCHEMA", "MODELS"]
 
 #: the document's schema name: ``"schema": "multilat.adjust-general/1"`` (not the distance path's
 #: ``multilat.adjust``: the keys differ, so a reader can tell them apart)
 SCHEMA = "adjust-general"
 
 #: the adjust command's parameters that the general path reads
-APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method")
+APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method",
+           "model")
+#: ... and on a multilat CSV network (``--model general``)
+APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offsets_um", "scales", "fixed_scale",
+                         "scale_bar", "references", "levelled", "seed", "snooping")
+#: ``--model``: the default distance-only self-calibrating path, or the general network layer
+MODELS = ("multilateration", "general")
 _OPTION = {"as_json": "--json", "fix_offsets_um": "--fix-offsets-um", "scale_bar": "--scale-bars",
            "snooping": "--snooping/--no-snooping"}
 #: why an option of the distance-only path is refused here (the default reason for the others)
@@ -36,6 +50,63 @@ WHY_NOT = {
     "instrument": "the σ are the file's stdev=", "snooping": "data snooping is not done on the general path yet",
     "report": "the HTML report is built from the distance path's result",
 }
+#: why an option is refused with ``--model general`` on a CSV network (the default reason for the others)
+WHY_NOT_CSV = {
+    "snooping": "data snooping is not done on the general path yet (--no-snooping is accepted)",
+    "report": "the HTML report is built from the distance path's result",
+    "cost": "the general path minimises the weighted distance residuals only",
+    "solver": "the general path has one dense back end",
+    "variance_components": "variance components are not estimated on the general path yet",
+    "average_repeats": "repeated readings are kept as separate observations on the general path",
+    "mdb_limit_sigma": "the general path lists every row's MDB in the JSON and names no poor targets yet",
+    "distance_only": "the general path takes the angles that have a sigma as observations, whatever the station",
+    "tables": "the general path writes result.json and points.csv",
+}
+for _raw in ("environment", "heights", "formula", "extrapolate", "max_gap_s"):
+    WHY_NOT_CSV[_raw] = "raw readings are corrected and adjusted on the distance path only"
+
+#: the distance path's refusals by station or observation counts (its messages' text)
+_COUNT_RULES = (re.compile(r"needs at least 3 stations"), re.compile(r"3 are needed to place it"),
+                re.compile(r"unknowns need at least \d+"), re.compile(r"observation\(s\); it needs at least \d+"))
+_HINT = ("; --model general adjusts a network by what its observations determine (angles, control points, "
+         "polar points), not by station counts")
+
+
+def wants_general(observations, model: str) -> bool:
+    """Whether ``multilat adjust`` takes the general path: ``--model general``, or a gama-local input
+    (which the distance path cannot read: ``--model multilateration`` on one is refused)."""
+    if model not in MODELS:
+        raise MultilatError(f"--model must be {' or '.join(MODELS)}, got {model!r}")
+    if is_general_input(observations):
+        if model != "general" and "model" in _given_options({"model": model}):
+            raise MultilatError(f"--model {model} does not read a gama-local input ({observations}): "
+                                "it is adjusted by --model general")
+        return True
+    return model == "general"
+
+
+@contextlib.contextmanager
+def refusal_hint(obs=None):
+    """Around the distance path's adjustment: a refusal (or, on a network with angle observations, a
+    left-out point) by one of its counting rules gets the hint that ``--model general``
+    adjusts the network by what the observations determine. Nothing else changes: the model is not
+    switched."""
+    seen: list = []
+    try:
+        with warnings.catch_warnings(record=True) as seen:      # held back, re-emitted below (outside)
+            yield
+    except MultilatError as e:
+        msg = str(e)
+        if any(r.search(msg) for r in _COUNT_RULES) and "--model general" not in msg:
+            raise MultilatError(msg + _HINT) from e
+        raise
+    finally:
+        for w in seen:
+            msg = str(w.message)
+            if (obs is not None and obs.has_angle_observations and any(r.search(msg) for r in _COUNT_RULES)
+                    and "--model general" not in msg):
+                msg += _HINT
+            warnings.warn_explicit(msg, w.category, w.filename, w.lineno)
 
 
 def is_general_input(path) -> bool:
@@ -77,12 +148,14 @@ def _option_name(name: str) -> str:
 def run(**params) -> None:
     """The general path of ``multilat adjust`` (``params``: the adjust command's parameters)."""
     params.pop("general_adjust", None)                 # the hook's own import, passed with locals()
-    for name in _given_options(params):
-        if name not in APPLIES:
-            why = WHY_NOT.get(name, "it belongs to the distance-only adjustment")
-            raise MultilatError(f"{_option_name(name)} does not apply to a gama-local input "
-                                f"({params['observations']}): {why}")
     path, out = Path(params["observations"]), params["out"]
+    xml = is_general_input(path)
+    applies, why_not = (APPLIES, WHY_NOT) if xml else (APPLIES_CSV, WHY_NOT_CSV)
+    what = "a gama-local input" if xml else "--model general"
+    for name in _given_options(params):
+        if name not in applies or (name == "snooping" and params[name] and not xml):
+            why = why_not.get(name, "it belongs to the distance-only adjustment")
+            raise MultilatError(f"{_option_name(name)} does not apply to {what} ({path}): {why}")
     alpha, vf, a_glob, method = (params[k] for k in ("alpha", "variance_factor", "alpha_global", "test_method"))
     if method is None:
         method = "fixed" if a_glob is not None else "b-method"
@@ -93,14 +166,19 @@ def run(**params) -> None:
         a_glob = 0.05                                      # as the distance path: fixed α_global default 0.05
     from multilat.io import check_output_dir
 
+    inputs = [path] + [params.get(k) for k in ("points", "references") if params.get(k) is not None]
     if out is not None:
-        check_output_dir(out, inputs=[path])
-    doc, adj, stats = compute(path, alpha=alpha, variance_factor=vf, alpha_global=a_glob, strict=params["strict"])
+        check_output_dir(out, inputs=inputs)
+    tests = dict(alpha=alpha, variance_factor=vf, alpha_global=a_glob, strict=params["strict"])
+    if xml:
+        doc, adj, stats = compute(path, **tests)
+    else:
+        doc, adj, stats = compute_tables(params, **tests)
     for e in adj.excluded:
         warnings.warn(f"point {e['id']!r} left out: {e['reason']} ({e['n_obs']} observation row(s) removed)",
                       stacklevel=2)
     if out is not None:
-        write_out(out, path, doc)
+        write_out(out, inputs, doc)
     from multilat.cli.app import emit_json
 
     if params["as_json"]:
@@ -111,21 +189,82 @@ def run(**params) -> None:
 
 def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_global: float | None = None):
     """Read, adjust (undetermined points left out unless ``strict``), statistics: (doc, adjustment, stats)."""
-    from multilat.network.general import adjust_network, read_gama_input, statistics, to_json
+    from multilat.network.general import read_gama_input
+
+    return _finish(read_gama_input(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
+                   strict=strict, alpha_global=alpha_global)
+
+
+def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_global, fmt="gama-local",
+            sigma_source=None):
+    from multilat.network.general import adjust_network, statistics, to_json
     from multilat.vocabulary import stamp
 
-    net = read_gama_input(path)
-    adj = adjust_network(net, strict=strict)
+    adj = adjust_network(net, options=options, strict=strict)
     stats = statistics(adj.system, adj.result, alpha=alpha, variance_factor=variance_factor,
                        alpha_global=alpha_global)
-    return stamp(to_json(adj, stats, source=str(path)), SCHEMA), adj, stats
+    doc = to_json(adj, stats, source=source)
+    doc = {"model": "general", **doc, "format": fmt}
+    if sigma_source is not None:
+        doc["sigma_source"] = sigma_source
+    return stamp(doc, SCHEMA), adj, stats
 
 
-def write_out(out, path, doc) -> None:
+def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: bool,
+                   alpha_global: float | None = None):
+    """A multilat observation CSV (with ``--points``, ``--references`` ...) adjusted by the general
+    layer: (doc, adjustment, stats). ``params``: the adjust command's parameters."""
+    from multilat.campaign.propagation import read_campaign
+    from multilat.campaign.raw import is_raw_file
+    from multilat.cli import checks
+    from multilat.cli.network_cmd import parse_fixed_offsets, with_levelled
+    from multilat.network.files import read_points, read_reference_lengths
+    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.sigma_source import describe
+
+    path = Path(params["observations"])
+    if is_raw_file(path):
+        raise MultilatError(f"--model general does not apply to raw readings ({path}): correct them first "
+                            "(multilat correct) or adjust them on the distance path")
+    sigma_um, seed = params.get("sigma_um"), params.get("seed", 0)
+    checks.sigma_um(sigma_um)
+    checks.seed(seed)
+    src: dict = {}
+    obs, _ = read_campaign(path, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
+                           instrument=params.get("instrument"), sigma_source=src)
+    obs = with_levelled(obs, params.get("levelled"))
+    refs = read_reference_lengths(params["references"]) if params.get("references") is not None else None
+    if refs is not None and not params.get("scale_bar"):
+        raise MultilatError("--references does not apply to --model general without --scale-bars: the "
+                            "comparison with reference lengths is not done on the general path (give "
+                            "--scale-bars to adjust them as observations)")
+    if params.get("scale_bar") and refs is None:
+        raise MultilatError("--scale-bars needs --references FILE (the bars' lengths with u_m)")
+    pts = read_points(params["points"]) if params.get("points") is not None else None
+    what = "station" if obs.station_heads is None else "head"
+    fix = params.get("fix_offsets_um")
+    offsets = None if fix is None else parse_fixed_offsets(fix, obs.head_ids, what=what)
+    scales, fixed_scale = params.get("scales", False), params.get("fixed_scale")
+    if fixed_scale is not None:
+        if not scales:
+            raise MultilatError("--fixed-scale goes with --scales")
+        if fixed_scale not in obs.head_ids:
+            raise MultilatError(f"--fixed-scale: unknown {what} id {fixed_scale!r} ({what}s: "
+                                f"{', '.join(obs.head_ids)})")
+        scales = [h for h in obs.head_ids if h != fixed_scale]
+    net, options = network_from_tables(obs, points=pts, datum=params.get("datum", "free"), offsets=offsets,
+                                       scales=scales, scale_bars=refs, rng=seed, source=str(path))
+    src_doc = {"kind": str(src.get("kind", "file column")), "file": str(path),
+               "description": describe(src) if src else "the file's sigma_m column"}
+    return _finish(net, options, str(path), alpha=alpha, variance_factor=variance_factor, strict=strict,
+                   alpha_global=alpha_global, fmt="multilat-csv", sigma_source=src_doc)
+
+
+def write_out(out, inputs, doc) -> None:
     """``result.json`` and ``points.csv`` into ``out``, all or nothing (:func:`multilat.io.staging_dir`)."""
     from multilat.io import staging_dir, write_csv_atomic, write_json_atomic
 
-    with staging_dir(out, inputs=[path]) as tmp:
+    with staging_dir(out, inputs=list(inputs) if isinstance(inputs, (list, tuple)) else [inputs]) as tmp:
         write_json_atomic(tmp / "result.json", doc)
         rows = [[p, *v["xyz_m"], *v["xyz_std_m"], v["semi_axes_95_m"][2], v["status"], " ".join(v["roles"])]
                 for p, v in doc["points"].items()]
@@ -143,7 +282,8 @@ def print_summary(doc, adj, stats, out) -> None:
     for o in doc["observations"]:
         kinds[o["kind"]] = kinds.get(o["kind"], 0) + 1
     say(f"adjusted {doc['n_points']} points from {doc['n_obs']} observation rows ("
-        + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in kinds.items()) + f") of {doc['input']} (gama-local)")
+        + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in kinds.items())
+        + f") of {doc['input']} ({doc['format']}; general model)")
     say(f"  datum: {doc['datum']}")
     gt, t = doc["global_test"], doc["tests"]
     if gt["statistic"] is None:
@@ -162,6 +302,10 @@ def print_summary(doc, adj, stats, out) -> None:
     red = stats.redundancy
     say(f"  redundancy {max(red.min(), 0.0):.3f}..{red.max():.3f}; {int((red <= 1e-9).sum())} uncontrolled row(s) "
         f"(r = 0); {t['n_failed']} test(s) above the critical value (listed in the JSON; no data snooping here)")
+    inst = [f"{n.split(':', 1)[1]} {v['value'] * 1e3:+.4f} mm (u {v['std'] * 1e3:.4f})"
+            for n, v in doc["parameters"].items() if n.startswith("offset:")]
+    if inst:
+        say("  additive constants: " + "; ".join(inst))
     for e in doc["excluded"]:
         say(f"  left out: point {e['id']} ({e['reason']}; {e['n_obs']} observation rows)")
     for note in doc["notes"]:

@@ -174,12 +174,15 @@ def adjust_command(
                                                            "always a group of their own), Förstner's iterated "
                                                            "estimator, and adjust with the re-weighted σ."),
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
+    model: str = typer.Option("multilateration", "--model",
+                              help="multilateration (self-calibrating, the default) or general (any point in any "
+                                   "role, by what the observations determine: docs/general-network.md)."),
 ) -> None:
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
     ellipsoids and reference-length comparisons."""
     from multilat.cli import general_adjust
-    if general_adjust.is_general_input(observations):      # a gama-local XML input: the general layer
+    if general_adjust.wants_general(observations, model):  # --model general, or a gama-local XML input
         return general_adjust.run(**locals())
     from multilat.network.adjust import adjust
     from multilat.network.files import read_points, read_reference_lengths, write_result_tables
@@ -259,7 +262,7 @@ def adjust_command(
     from multilat.network.bounds import reporting
     from multilat.network.unit_slip import UnitSlipError
 
-    with progress() as p:
+    with progress() as p, general_adjust.refusal_hint(obs):     # count-rule refusals name --model general
         what = f"adjusting {obs.n_obs:,} distances"
         task = p.add_task(what, total=None)
 
