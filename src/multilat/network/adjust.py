@@ -28,6 +28,7 @@ from multilat.network.problem import Params
 from multilat.network.result import (AdjustmentResult, InterpointDistance, Outlier, Start,
                                      build_result)
 from multilat.network.search import P_MIN, p_value
+from multilat.network.sigma_source import describe as describe_sigma
 from multilat.network.couplings import coupling_spec
 from multilat.network.angle_rows import angle_results
 from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, snooping_round
@@ -90,6 +91,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
            points: Points | None = None, cost: str = "distance", offsets=None, scales=False,
            alpha: float = 0.001, power: float = 0.80, alpha_global: float | None = None,
            test_method: str | None = None, variance_factor: str = "known", mdb_limit_sigma: float = 10.0,
+           alpha_family: float = st.ALPHA_FAMILY,
            r_min: float = 0.1, sigma_source: dict | None = None, snooping: bool = True,
            max_rejections: int | None = None, max_iter: int = 100, solver: str = "auto", strict: bool = False,
            scale_bars: ReferenceLengths | None = None, scale_bar: ReferenceLengths | None = None,
@@ -139,16 +141,23 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         (``excluded`` in the result, with a warning).
     alpha : float
         alpha0: significance of each one-observation test (Baarda's w-test, or Pope's τ-test with
-        ``variance_factor="unknown"``), two-sided; also the MDBs' alpha.
+        ``variance_factor="unknown"``), two-sided; also the MDBs' alpha. Under ``test_method="auto"``
+        an upper bound: large networks test at Šidák's smaller alpha0 (``alpha_family``).
+    alpha_family : float
+        The family-wise significance of a network's w-tests: the most often a blunder-free network may
+        lose an observation (:func:`statistics.test_levels`; ``auto`` and ``sidak``).
     power : float
         Power of the tests for the minimal detectable biases (Baarda: 0.80).
     alpha_global : float, optional
         Significance of the global χ² test (one-sided, upper); giving it means ``test_method="fixed"``
         (whose default is 0.05).
-    test_method : "b-method", "fixed" or None
-        None: ``fixed`` when ``alpha_global`` is given, else ``b-method``. ``b-method``: Baarda's B-method, the global test's alpha derived from ``alpha`` and
+    test_method : "auto", "b-method", "sidak", "fixed" or None
+        None: ``fixed`` when ``alpha_global`` is given, else ``auto``. ``b-method``: Baarda's B-method, the global test's alpha derived from ``alpha`` and
         ``power`` and the degrees of freedom so that it detects the same non-centrality as the w-test
-        (:func:`statistics.b_method_alpha_global`); ``fixed``: ``alpha_global`` as given.
+        (:func:`statistics.b_method_alpha_global`); ``sidak``: the w-tests at Šidák's alpha0 for
+        ``alpha_family``, detection by the largest |w|; ``auto``: the B-method while its w-tests'
+        family-wise alpha is at most ``alpha_family``, else Šidák (:func:`statistics.test_levels`);
+        ``fixed``: ``alpha_global`` as given.
     variance_factor : "known" or "unknown"
         ``known`` (default): the a-priori σ are right in scale; detection by the global χ² test,
         identification by w-tests. ``unknown``: σ0 is estimated; identification by Pope's τ-test
@@ -192,26 +201,29 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         raise MultilatError("adjust: obs must be an Observations")
     if cost not in COSTS:
         raise MultilatError(f"cost must be one of {', '.join(COSTS)}, got {cost!r}")
-    if test_method is None:     # alpha_global given: a fixed global test; otherwise Baarda's B-method
-        test_method = "fixed" if alpha_global is not None else "b-method"
+    if test_method is None:     # alpha_global given: a fixed global test; otherwise the rule of test_levels
+        test_method = "fixed" if alpha_global is not None else "auto"
     if test_method not in st.TEST_METHODS:
         raise MultilatError(f"test_method must be one of {', '.join(st.TEST_METHODS)}, got {test_method!r}")
     if variance_factor not in st.VARIANCE_FACTORS:
         raise MultilatError(f"variance_factor must be known or unknown, got {variance_factor!r}")
-    if alpha_global is not None and test_method == "b-method":
-        raise MultilatError("alpha_global is derived by the B-method: give test_method='fixed' to set it")
+    if alpha_global is not None and test_method != "fixed":
+        raise MultilatError(f"alpha_global is derived by test_method={test_method!r}: give test_method='fixed' "
+                            "to set it")
     if alpha_global is None and test_method == "fixed":
         alpha_global = 0.05
-    for name, v in (("alpha", alpha), ("power", power), ("alpha_global", alpha_global)):
+    for name, v in (("alpha", alpha), ("power", power), ("alpha_global", alpha_global),
+                    ("alpha_family", alpha_family)):
         if v is not None and not (0 < v < 1):
             raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
     if not (np.isfinite(mdb_limit_sigma) and mdb_limit_sigma > 0):
         raise MultilatError(f"mdb_limit_sigma must be > 0, got {mdb_limit_sigma!r}")
+    # the levels of the tests (alpha_g(dof): the global test's alpha); alpha is from here on each
+    # w-test's, the one that runs (Šidák's on large networks)
+    alpha_g = st.test_levels(_n_tests(obs), alpha0=alpha, power=power, method=test_method,
+                             alpha_global=alpha_global, alpha_family=alpha_family)
+    alpha = alpha_g.alpha0
     lam0 = st.noncentrality(alpha, power)
-
-    def alpha_g(dof):
-        """The global test's alpha for ``dof`` (B-method) or as given (fixed)."""
-        return st.b_method_alpha_global(dof, alpha0=alpha, power=power) if alpha_global is None else alpha_global
     datum = parse_datum(datum)
     if scale_bars is not None and scale_bar is not None:
         raise MultilatError("give scale_bars or scale_bar (the same), not both")
@@ -371,17 +383,29 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                        alpha_g(core["dof"]), reason=reason, snooped=do_snoop, sigma_scale=s0,
                        mdb_limit_sigma=mdb_limit_sigma, r_min=r_min)
     groups = _w_failure_groups(core, used, final_crit) if cost == "distance" else ()
-    tests = {"method": test_method, "variance_factor": variance_factor, "alpha0": alpha, "power": power,
+    tests = {"method": alpha_g.method, "variance_factor": variance_factor, "alpha0": alpha, "power": power,
              "lambda0": lam0, "w_critical": crit,
              "tau_critical": st.tau_critical(alpha, core["dof"]) if unknown else None,
-             "alpha_global": alpha_g(core["dof"]), "steps": steps}
+             "alpha_global": alpha_g(core["dof"]), **alpha_g.as_dict(), "steps": steps}
+    check = st.sigma0_check(res.sigma0 if cost == "distance" else float("nan"), res.dof,   # σ0 in m² for eq. 6
+                            variance_factor=variance_factor, source=describe_sigma(sigma_source or {}))
+    if check["message"]:
+        notes.append(check["message"])
+        warnings.warn(check["message"], UserWarning, stacklevel=2)
     bars_out, ctrl_out = coupling_results(core)
     ang_out, orient = angle_results(core, lam0, final_crit)
     res = replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
+                  sigma0_check=check,
                    scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
                    sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient,
                    angle_design_w=None if core.get("angles") is None else core["angles"]["design_w"])
     return replace(res, angle_outliers=angle_outliers(obs, ang_rejected, res))
+
+
+def _n_tests(obs: Observations) -> int:
+    """The observations data snooping tests: the distances and the angles."""
+    return obs.n_obs + sum(int(np.count_nonzero(np.isfinite(a))) for a in (obs.sigma_azimuth_rad,
+                                                                         obs.sigma_elevation_rad) if a is not None)
 
 
 def coupling_results(core) -> tuple[tuple, tuple]:
@@ -550,7 +574,7 @@ def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g
     misfit (a blunder inflates both). Only run when the global test under control fails.
     """
     gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global)
-    if gt.passed is None or gt.passed:
+    if gt.side != "upper":
         return
     used = np.ones(obs.n_obs, bool)
     ctrl = sorted(control_ids(obs, datum, points))
