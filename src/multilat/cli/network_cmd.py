@@ -417,7 +417,8 @@ def test_lines(res) -> list[str]:
                    f"{t['tau_critical']:.3f} (dof {res.dof})")
     else:
         out.append(f"  σ0 = {res.sigma0:.3f} (ratio to the a-priori uncertainties), dof = {res.dof}; "
-                   f"global χ² test: {gt.critical_low:.2f} <= {gt.statistic:.2f} <= {gt.critical:.2f} "
+                   f"global χ² test: {gt.statistic:.2f} {'in' if gt.passed else 'not in'} "
+                   f"[{gt.critical_low:.2f}, {gt.critical:.2f}] "
                    f"(α = {gt.alpha:.3g}, lower tail {gt.alpha_low:g}; {how}{pw}): "
                    f"{'passed' if gt.passed else f'FAILED ({gt.side} tail)'}")
         out.append(f"  w-test: α0 = {t['alpha0']:.3g}, critical |w| {t['w_critical']:.2f}, power "
