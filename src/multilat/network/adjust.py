@@ -31,7 +31,7 @@ from multilat.network.search import P_MIN, p_value
 from multilat.network.sigma_source import describe as describe_sigma
 from multilat.network.couplings import coupling_spec
 from multilat.network.angle_rows import angle_results
-from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, snooping_round
+from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, n_tested, snooping_round
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 
@@ -141,23 +141,19 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         (``excluded`` in the result, with a warning).
     alpha : float
         alpha0: significance of each one-observation test (Baarda's w-test, or Pope's τ-test with
-        ``variance_factor="unknown"``), two-sided; also the MDBs' alpha. Under ``test_method="auto"``
-        an upper bound: large networks test at Šidák's smaller alpha0 (``alpha_family``).
+        ``variance_factor="unknown"``), two-sided; also the MDBs' alpha; with ``auto`` an upper bound.
     alpha_family : float
-        The family-wise significance of a network's w-tests: the most often a blunder-free network may
-        lose an observation (:func:`statistics.test_levels`; ``auto`` and ``sidak``).
+        Family-wise significance of the w-tests (``auto``, ``sidak``: :func:`statistics.test_levels`).
     power : float
         Power of the tests for the minimal detectable biases (Baarda: 0.80).
     alpha_global : float, optional
         Significance of the global χ² test (one-sided, upper); giving it means ``test_method="fixed"``
         (whose default is 0.05).
     test_method : "auto", "b-method", "sidak", "fixed" or None
-        None: ``fixed`` when ``alpha_global`` is given, else ``auto``. ``b-method``: Baarda's B-method, the global test's alpha derived from ``alpha`` and
-        ``power`` and the degrees of freedom so that it detects the same non-centrality as the w-test
-        (:func:`statistics.b_method_alpha_global`); ``sidak``: the w-tests at Šidák's alpha0 for
-        ``alpha_family``, detection by the largest |w|; ``auto``: the B-method while its w-tests'
-        family-wise alpha is at most ``alpha_family``, else Šidák (:func:`statistics.test_levels`);
-        ``fixed``: ``alpha_global`` as given.
+        None: ``fixed`` when ``alpha_global`` is given, else ``auto`` (the B-method while its w-tests'
+        family-wise alpha is at most ``alpha_family``, else ``sidak``: :func:`statistics.test_levels`).
+        ``b-method``: Baarda's, the global test's alpha derived from ``alpha``, ``power`` and the dof
+        (:func:`statistics.b_method_alpha_global`); ``fixed``: ``alpha_global`` as given.
     variance_factor : "known" or "unknown"
         ``known`` (default): the a-priori σ are right in scale; detection by the global χ² test,
         identification by w-tests. ``unknown``: σ0 is estimated; identification by Pope's τ-test
@@ -220,7 +216,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         raise MultilatError(f"mdb_limit_sigma must be > 0, got {mdb_limit_sigma!r}")
     # the levels of the tests (alpha_g(dof): the global test's alpha); alpha is from here on each
     # w-test's, the one that runs (Šidák's on large networks)
-    alpha_g = st.test_levels(_n_tests(obs), alpha0=alpha, power=power, method=test_method,
+    alpha_g = st.test_levels(n_tested(obs), alpha0=alpha, power=power, method=test_method,
                              alpha_global=alpha_global, alpha_family=alpha_family)
     alpha = alpha_g.alpha0
     lam0 = st.noncentrality(alpha, power)
@@ -400,12 +396,6 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                    sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient,
                    angle_design_w=None if core.get("angles") is None else core["angles"]["design_w"])
     return replace(res, angle_outliers=angle_outliers(obs, ang_rejected, res))
-
-
-def _n_tests(obs: Observations) -> int:
-    """The observations data snooping tests: the distances and the angles."""
-    return obs.n_obs + sum(int(np.count_nonzero(np.isfinite(a))) for a in (obs.sigma_azimuth_rad,
-                                                                         obs.sigma_elevation_rad) if a is not None)
 
 
 def coupling_results(core) -> tuple[tuple, tuple]:

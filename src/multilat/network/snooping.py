@@ -44,7 +44,8 @@ from multilat.network import statistics as st
 from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
 from multilat.network.fit import check_network, control_ids, station_map
 
-__all__ = ["LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers"]
+__all__ = ["LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers",
+           "n_tested"]
 
 #: networks with at least this many distances use the downdated rounds (smaller ones are re-adjusted
 #: after every rejection: fast anyway, and the exact path)
@@ -185,6 +186,13 @@ class LinearRounds:
 
 
 # ---------------------------------------------------------------- one round of the procedure
+def n_tested(obs) -> int:
+    """How many observations data snooping tests: the distances and the angles (the n of the
+    family-wise rule, :func:`multilat.network.statistics.test_levels`)."""
+    return obs.n_obs + sum(int(np.count_nonzero(np.isfinite(a))) for a in (obs.sigma_azimuth_rad,
+                                                                         obs.sigma_elevation_rad) if a is not None)
+
+
 def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop, unknown,
                     alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec):
     """One round of detection, identification and adaptation on the last adjustment ``core`` (or its
