@@ -422,7 +422,8 @@ def test_lines(res) -> list[str]:
                    f"(α = {gt.alpha:.3g}, lower tail {gt.alpha_low:g}; {how}{pw}): "
                    f"{'passed' if gt.passed else f'FAILED ({gt.side} tail)'}")
         out.append(f"  w-test: α0 = {t['alpha0']:.3g}, critical |w| {t['w_critical']:.2f}, power "
-                   f"{t['power']:.2f}, λ0 = {t['lambda0']:.2f}")
+                   f"{t['power']:.2f}, λ0 = {t.get('lambda0_w', t['lambda0']):.2f} (MDBs at α0 = "
+                   f"{t.get('alpha0_given', t['alpha0']):g}, λ0 = {t['lambda0']:.2f})")
     if t.get("rule"):
         out.append(f"  test procedure: {t['rule']}")
     chk = res.sigma0_check or {}

@@ -214,12 +214,12 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
     if not (np.isfinite(mdb_limit_sigma) and mdb_limit_sigma > 0):
         raise MultilatError(f"mdb_limit_sigma must be > 0, got {mdb_limit_sigma!r}")
-    # the levels of the tests (alpha_g(dof): the global test's alpha); alpha is from here on each
-    # w-test's, the one that runs (Šidák's on large networks)
+    # the tests' levels (alpha_g(dof): the global test's); alpha is from here on the w-tests' (Šidák's)
     alpha_g = st.test_levels(n_tested(obs), alpha0=alpha, power=power, method=test_method,
                              alpha_global=alpha_global, alpha_family=alpha_family)
     alpha = alpha_g.alpha0
-    lam0 = st.noncentrality(alpha, power)
+    # MDBs: Baarda's reference at the given alpha0 (as the design's); the w-tests' own: tests.lambda0_w
+    lam0 = st.noncentrality(alpha_g.alpha0_given, power)
     datum = parse_datum(datum)
     if scale_bars is not None and scale_bar is not None:
         raise MultilatError("give scale_bars or scale_bar (the same), not both")
@@ -375,12 +375,12 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     if s0 != 1.0:
         core = dict(core, cov=_scaled_cov(core["cov"], s0 ** 2))
     final_crit = st.tau_critical(alpha, core["dof"]) * s0 if unknown else crit
-    res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power,
+    res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha_g.alpha0_given, power,
                        alpha_g(core["dof"]), reason=reason, snooped=do_snoop, sigma_scale=s0,
                        mdb_limit_sigma=mdb_limit_sigma, r_min=r_min)
     groups = _w_failure_groups(core, used, final_crit) if cost == "distance" else ()
     tests = {"method": alpha_g.method, "variance_factor": variance_factor, "alpha0": alpha, "power": power,
-             "lambda0": lam0, "w_critical": crit,
+             "lambda0": lam0, "lambda0_w": st.noncentrality(alpha, power), "w_critical": crit,
              "tau_critical": st.tau_critical(alpha, core["dof"]) if unknown else None,
              "alpha_global": alpha_g(core["dof"]), **alpha_g.as_dict(), "steps": steps}
     check = st.sigma0_check(res.sigma0 if cost == "distance" else float("nan"), res.dof,   # σ0 in m² for eq. 6
