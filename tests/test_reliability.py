@@ -132,7 +132,7 @@ def _rates(n_networks, seed0):
     for i in range(n_networks):
         net = synthetic_network(6, 40, 5, size_m=5.0, rng=seed0 + i)
         obs = _obs(net)
-        res = adjust(obs, initial=_start(net))
+        res = adjust(obs, initial=_start(net), test_method="b-method")     # forced: the B-method's rates
         rejected += len(res.outliers)
         tested += obs.n_obs
         red = res.redundancy
@@ -149,7 +149,7 @@ def _rates(n_networks, seed0):
         planted += 1
         d = obs.distance_m.copy()
         d[k] += 20 * obs.sigma_m[k]
-        bad = adjust(obs.with_distances(d), initial=_start(net))
+        bad = adjust(obs.with_distances(d), initial=_start(net), test_method="b-method")
         caught += bool(bad.outliers) and (bad.outliers[0].station, bad.outliers[0].target) == (
             obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]])
     return rejected, tested, caught, planted
@@ -243,18 +243,23 @@ def test_final_residuals_in_slices_are_the_whole_array_formula(monkeypatch):
 
 def test_correlated_with_is_the_ratio_formula():
     # |c_l| / sqrt(r_k r_l) > 1 - tol computed in place: the indices of the plain expression, with zero
-    # denominators (correlated when c_l != 0), zero rows and NaN
+    # redundancies, zero rows and NaN
     rng = np.random.default_rng(8)
     c = rng.normal(size=5000) * 0.4
     red = rng.uniform(0.0, 1.0, 5000)
     red[::97] = 0.0
     c[::89] = 0.0
     c[5], red[7] = np.nan, np.nan
-    for k in (0, 3, 97):
+    # a zero-redundancy observation (r <= R_ZERO: its exact hat row is e_l, any h_kl is rounding noise)
+    # is never correlated (issue 25 item 6: a zero denominator used to count as perfect correlation)
+    for k in (1, 3):
         with np.errstate(divide="ignore", invalid="ignore"):
-            want = np.flatnonzero(np.abs(c) / np.sqrt(red[k] * red) > 1.0 - 1e-6)
+            want = np.flatnonzero((np.abs(c) / np.sqrt(red[k] * red) > 1.0 - 1e-6) & (red > st.R_ZERO))
         got = st.correlated_with(c.copy(), red, k, 1e-6)
         assert np.array_equal(got, want) and got.size > 0
+        assert not np.isin(got, np.flatnonzero(red == 0.0)).any()
+    for k in (0, 97):                                                   # r_k = 0: no w-test, no group
+        assert red[k] == 0.0 and st.correlated_with(c.copy(), red, k, 1e-6).size == 0
 
 
 def test_w_statistics_in_place_are_the_plain_expression():

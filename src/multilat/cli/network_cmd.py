@@ -88,14 +88,21 @@ def adjust_command(
                                              help="Instrument preset or TOML for the distance model's "
                                                   "uncertainties (default seed2020) when no sigma is given."),
     alpha: float = typer.Option(0.001, "--alpha", help="alpha0: significance of each observation's test "
-                                "(w-test; τ-test with --variance-factor unknown)."),
+                                "(w-test; τ-test with --variance-factor unknown); an upper bound under "
+                                "--test-method auto."),
+    alpha_family: float = typer.Option(0.01, "--alpha-family",
+                                       help="Family-wise significance of a network's w-tests (auto, sidak): "
+                                            "the most often a blunder-free network may lose an observation."),
     alpha_global: Optional[float] = typer.Option(None, "--alpha-global",
                                                  help="Significance of the global χ² test (with "
                                                       "--test-method fixed; default there 0.05)."),
     test_method: Optional[str] = typer.Option(None, "--test-method",
-                                              help="b-method (Baarda: the global test's α derived from --alpha "
-                                                   "and power 80 % for equal power; the default) or fixed (the "
-                                                   "default when --alpha-global is given)."),
+                                              help="auto (the default: the B-method while its w-tests' "
+                                                   "family-wise α is at most --alpha-family, else sidak), "
+                                                   "b-method (Baarda: the global test's α derived from --alpha "
+                                                   "and power 80 % for equal power), sidak (w-tests at Šidák's "
+                                                   "α0 for --alpha-family, detection by the largest |w|) or "
+                                                   "fixed (the default when --alpha-global is given)."),
     variance_factor: str = typer.Option("known", "--variance-factor",
                                         help="known (the a-priori σ are right: global χ² test, w-tests) or "
                                              "unknown (σ0 estimated: Pope's τ-test, covariances scaled "
@@ -193,8 +200,8 @@ def adjust_command(
     checks.seed(seed)
     report_opt.check_report_path(report, [observations, references, points, environment, heights])
     if test_method is None:
-        test_method = "fixed" if alpha_global is not None else "b-method"
-    _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma)
+        test_method = "fixed" if alpha_global is not None else "auto"
+    _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma, alpha_family)
     if solver not in ("auto", "dense", "sparse"):
         raise MultilatError(f"--solver must be auto, dense or sparse, got {solver!r}")
     if out is not None:
@@ -254,6 +261,7 @@ def adjust_command(
                                 "their σ from the distance model and the sensors")
     options = dict(datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
                    alpha_global=alpha_global, test_method=test_method, variance_factor=variance_factor,
+                   alpha_family=alpha_family,
                    mdb_limit_sigma=mdb_limit_sigma, sigma_source=src, snooping=snooping, solver=solver,
                    strict=strict, scale_bars=refs if scale_bar else None, rng=seed)
     from rich.markup import escape
@@ -320,16 +328,16 @@ def adjust_command(
                       f"{wc['target_std_diagonal_max_m'] * 1e6:.1f} µm)", markup=False)
 
 
-def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma):
+def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma, alpha_family=0.01):
     """The test options, before any work."""
-    if test_method not in ("b-method", "fixed"):
-        raise MultilatError(f"--test-method must be b-method or fixed, got {test_method!r}")
+    if test_method not in ("auto", "b-method", "sidak", "fixed"):
+        raise MultilatError(f"--test-method must be auto, b-method, sidak or fixed, got {test_method!r}")
     if variance_factor not in ("known", "unknown"):
         raise MultilatError(f"--variance-factor must be known or unknown, got {variance_factor!r}")
-    if alpha_global is not None and test_method == "b-method":
-        raise MultilatError("--alpha-global goes with --test-method fixed (the B-method derives it from "
-                            "--alpha)")
-    for name, v in (("--alpha", alpha), ("--alpha-global", alpha_global)):
+    if alpha_global is not None and test_method != "fixed":
+        raise MultilatError(f"--alpha-global goes with --test-method fixed (--test-method {test_method} derives "
+                            "it)")
+    for name, v in (("--alpha", alpha), ("--alpha-global", alpha_global), ("--alpha-family", alpha_family)):
         if v is not None and not (0 < v < 1):
             raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
     if not (np.isfinite(mdb_limit_sigma) and mdb_limit_sigma > 0):
@@ -375,11 +383,12 @@ def _print_summary(res, doc, out):
     if res.reliability is not None:
         for line in reliability_lines(res):
             console.print(line, markup=False)
-    if res.w_failure_groups and res.global_test.passed and not res.outliers:
+    if (res.w_failure_groups and res.global_test.passed and not res.outliers
+            and res.tests.get("detection") != "max |w|"):       # under Šidák the largest |w| detects
         n = sum(len(g) for g in res.w_failure_groups)
         console.print(f"  the global test passes: {n} w-test(s) above the critical value are not acted on "
-                      f"(about α = {res.alpha:g} of all tests fail by chance); listed in w_failures",
-                      markup=False)
+                      f"(about α = {res.tests.get('alpha0', res.alpha):g} of all tests fail by chance); "
+                      "listed in w_failures", markup=False)
     if res.unlocated:
         ids = ", ".join(f"{o.station}->{o.target}" for o in res.unlocated)
         if len(res.unlocated) > 1:
@@ -424,8 +433,8 @@ def test_lines(res) -> list[str]:
     out = []
     if gt.statistic is None:
         return [f"  σ0 = {res.sigma0:.4g}, dof = {res.dof} (no global test without redundancy)"]
-    how = ("B-method: α_global for equal power to the w-test" if t.get("method") == "b-method"
-           else "fixed α_global")
+    how = {"b-method": "B-method: α_global for equal power to the w-test",
+           "sidak": "Šidák: the variance factor's test; the largest |w| detects"}.get(t.get("method"), "fixed α_global")
     pw = "" if gt.power is None else f", power {gt.power:.2f} at λ0 = {gt.lambda0:.2f}"
     if res.variance_factor == "unknown":
         out.append(f"  σ0 = {res.sigma0:.3f} (estimated: variance factor unknown; covariances and MDBs "
@@ -436,10 +445,19 @@ def test_lines(res) -> list[str]:
                    f"{t['tau_critical']:.3f} (dof {res.dof})")
     else:
         out.append(f"  σ0 = {res.sigma0:.3f} (ratio to the a-priori uncertainties), dof = {res.dof}; "
-                   f"global χ² test: {gt.statistic:.2f} {'<=' if gt.passed else '>'} {gt.critical:.2f} "
-                   f"(α = {gt.alpha:.3g}, {how}{pw}): {'passed' if gt.passed else 'FAILED'}")
-        out.append(f"  w-test: α0 = {t['alpha0']:g}, critical |w| {t['w_critical']:.2f}, power "
-                   f"{t['power']:.2f}, λ0 = {t['lambda0']:.2f}")
+                   f"global χ² test: {gt.statistic:.2f} {'in' if gt.passed else 'not in'} "
+                   f"[{gt.critical_low:.2f}, {gt.critical:.2f}] "
+                   f"(α = {gt.alpha:.3g}, lower tail {gt.alpha_low:g}; {how}{pw}): "
+                   f"{'passed' if gt.passed else f'FAILED ({gt.side} tail)'}")
+        out.append(f"  w-test: α0 = {t['alpha0']:.3g}, critical |w| {t['w_critical']:.2f}, power "
+                   f"{t['power']:.2f}, λ0 = {t.get('lambda0_w', t['lambda0']):.2f} (MDBs at α0 = "
+                   f"{t.get('alpha0_given', t['alpha0']):g}, λ0 = {t['lambda0']:.2f})")
+    if t.get("rule"):
+        out.append(f"  test procedure: {t['rule']}")
+    chk = res.sigma0_check or {}
+    if chk.get("verdict") in ("too low", "too high"):
+        out.append(f"  σ0 {chk['verdict']}: " + ("accepted (--variance-factor unknown)" if chk.get("accepted")
+                                                 else "IMPLAUSIBLE (see the warning)"))
     if not res.snooping:
         out.append("  data snooping not requested (--no-snooping)")
         return out

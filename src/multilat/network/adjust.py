@@ -29,9 +29,10 @@ from multilat.network.problem import Params
 from multilat.network.result import (AdjustmentResult, InterpointDistance, Outlier, Start,
                                      build_result)
 from multilat.network.search import P_MIN, p_value
+from multilat.network.sigma_source import describe as describe_sigma
 from multilat.network.couplings import coupling_spec
 from multilat.network.angle_rows import angle_results
-from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, snooping_round
+from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, n_tested, snooping_round
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
 from multilat.network.unit_slip import check_unit_slip
@@ -92,6 +93,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
            points: Points | None = None, cost: str = "distance", offsets=None, scales=False,
            alpha: float = 0.001, power: float = 0.80, alpha_global: float | None = None,
            test_method: str | None = None, variance_factor: str = "known", mdb_limit_sigma: float = 10.0,
+           alpha_family: float = st.ALPHA_FAMILY,
            r_min: float = 0.1, sigma_source: dict | None = None, snooping: bool = True,
            max_rejections: int | None = None, max_iter: int = 100, solver: str = "auto", strict: bool = False,
            scale_bars: ReferenceLengths | None = None, scale_bar: ReferenceLengths | None = None,
@@ -141,15 +143,18 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         (``excluded`` in the result, with a warning).
     alpha : float
         alpha0: significance of each one-observation test (Baarda's w-test, or Pope's τ-test with
-        ``variance_factor="unknown"``), two-sided; also the MDBs' alpha.
+        ``variance_factor="unknown"``), two-sided; also the MDBs' alpha; with ``auto`` an upper bound.
+    alpha_family : float
+        Family-wise significance of the w-tests (``auto``, ``sidak``: :func:`statistics.test_levels`).
     power : float
         Power of the tests for the minimal detectable biases (Baarda: 0.80).
     alpha_global : float, optional
         Significance of the global χ² test (one-sided, upper); giving it means ``test_method="fixed"``
         (whose default is 0.05).
-    test_method : "b-method", "fixed" or None
-        None: ``fixed`` when ``alpha_global`` is given, else ``b-method``. ``b-method``: Baarda's B-method, the global test's alpha derived from ``alpha`` and
-        ``power`` and the degrees of freedom so that it detects the same non-centrality as the w-test
+    test_method : "auto", "b-method", "sidak", "fixed" or None
+        None: ``fixed`` when ``alpha_global`` is given, else ``auto`` (the B-method while its w-tests'
+        family-wise alpha is at most ``alpha_family``, else ``sidak``: :func:`statistics.test_levels`).
+        ``b-method``: Baarda's, the global test's alpha derived from ``alpha``, ``power`` and the dof
         (:func:`statistics.b_method_alpha_global`); ``fixed``: ``alpha_global`` as given.
     variance_factor : "known" or "unknown"
         ``known`` (default): the a-priori σ are right in scale; detection by the global χ² test,
@@ -194,26 +199,29 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         raise MultilatError("adjust: obs must be an Observations")
     if cost not in COSTS:
         raise MultilatError(f"cost must be one of {', '.join(COSTS)}, got {cost!r}")
-    if test_method is None:     # alpha_global given: a fixed global test; otherwise Baarda's B-method
-        test_method = "fixed" if alpha_global is not None else "b-method"
+    if test_method is None:     # alpha_global given: a fixed global test; otherwise the rule of test_levels
+        test_method = "fixed" if alpha_global is not None else "auto"
     if test_method not in st.TEST_METHODS:
         raise MultilatError(f"test_method must be one of {', '.join(st.TEST_METHODS)}, got {test_method!r}")
     if variance_factor not in st.VARIANCE_FACTORS:
         raise MultilatError(f"variance_factor must be known or unknown, got {variance_factor!r}")
-    if alpha_global is not None and test_method == "b-method":
-        raise MultilatError("alpha_global is derived by the B-method: give test_method='fixed' to set it")
+    if alpha_global is not None and test_method != "fixed":
+        raise MultilatError(f"alpha_global is derived by test_method={test_method!r}: give test_method='fixed' "
+                            "to set it")
     if alpha_global is None and test_method == "fixed":
         alpha_global = 0.05
-    for name, v in (("alpha", alpha), ("power", power), ("alpha_global", alpha_global)):
+    for name, v in (("alpha", alpha), ("power", power), ("alpha_global", alpha_global),
+                    ("alpha_family", alpha_family)):
         if v is not None and not (0 < v < 1):
             raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
     if not (np.isfinite(mdb_limit_sigma) and mdb_limit_sigma > 0):
         raise MultilatError(f"mdb_limit_sigma must be > 0, got {mdb_limit_sigma!r}")
-    lam0 = st.noncentrality(alpha, power)
-
-    def alpha_g(dof):
-        """The global test's alpha for ``dof`` (B-method) or as given (fixed)."""
-        return st.b_method_alpha_global(dof, alpha0=alpha, power=power) if alpha_global is None else alpha_global
+    # the tests' levels (alpha_g(dof): the global test's); alpha is from here on the w-tests' (Šidák's)
+    alpha_g = st.test_levels(n_tested(obs), alpha0=alpha, power=power, method=test_method,
+                             alpha_global=alpha_global, alpha_family=alpha_family)
+    alpha = alpha_g.alpha0
+    # MDBs: Baarda's reference at the given alpha0 (as the design's); the w-tests' own: tests.lambda0_w
+    lam0 = st.noncentrality(alpha_g.alpha0_given, power)
     datum = parse_datum(datum)
     if scale_bars is not None and scale_bar is not None:
         raise MultilatError("give scale_bars or scale_bar (the same), not both")
@@ -374,17 +382,23 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     if s0 != 1.0:
         core = dict(core, cov=_scaled_cov(core["cov"], s0 ** 2))
     final_crit = st.tau_critical(alpha, core["dof"]) * s0 if unknown else crit
-    res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power,
+    res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha_g.alpha0_given, power,
                        alpha_g(core["dof"]), reason=reason, snooped=do_snoop, sigma_scale=s0,
                        mdb_limit_sigma=mdb_limit_sigma, r_min=r_min)
     groups = _w_failure_groups(core, used, final_crit) if cost == "distance" else ()
-    tests = {"method": test_method, "variance_factor": variance_factor, "alpha0": alpha, "power": power,
-             "lambda0": lam0, "w_critical": crit,
+    tests = {"method": alpha_g.method, "variance_factor": variance_factor, "alpha0": alpha, "power": power,
+             "lambda0": lam0, "lambda0_w": st.noncentrality(alpha, power), "w_critical": crit,
              "tau_critical": st.tau_critical(alpha, core["dof"]) if unknown else None,
-             "alpha_global": alpha_g(core["dof"]), "steps": steps}
+             "alpha_global": alpha_g(core["dof"]), **alpha_g.as_dict(), "steps": steps}
+    check = st.sigma0_check(res.sigma0 if cost == "distance" else float("nan"), res.dof,   # σ0 in m² for eq. 6
+                            variance_factor=variance_factor, source=describe_sigma(sigma_source or {}))
+    if check["message"]:
+        notes.append(check["message"])
+        warnings.warn(check["message"], UserWarning, stacklevel=2)
     bars_out, ctrl_out = coupling_results(core)
     ang_out, orient = angle_results(core, lam0, final_crit)
     res = replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
+                  sigma0_check=check,
                    scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
                    sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient,
                    angle_design_w=None if core.get("angles") is None else core["angles"]["design_w"])
@@ -572,7 +586,7 @@ def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g
     misfit (a blunder inflates both). Only run when the global test under control fails.
     """
     gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global)
-    if gt.passed is None or gt.passed:
+    if gt.side != "upper":
         return
     used = np.ones(obs.n_obs, bool)
     ctrl = sorted(control_ids(obs, datum, points))

@@ -117,9 +117,13 @@ class AdjustmentResult:
         ``xyz_m``, ``std_m``, ``residual_m`` (3), ``redundancy`` (3)
     covariance : NetworkCovariance  any block of the full covariance in the datum (scaled by σ̂0²
         with an unknown variance factor)
-    tests : dict  the test procedure: method (b-method/fixed), variance factor (known/unknown),
-        alpha0, power, lambda0, critical values, the final alpha_global, and each round of
-        detection/identification (``steps``: statistic, critical, alpha, dof, power, verdict, action)
+    tests : dict  the test procedure: method (b-method/sidak/fixed, and the one requested), variance
+        factor (known/unknown), alpha0 (the one used and the one given), alpha_family, n_tests, the
+        detection test, the rule in one sentence, power, lambda0, critical values, the final
+        alpha_global, and each round of detection/identification (``steps``: statistic, critical,
+        alpha, dof, power, verdict, action)
+    sigma0_check : dict or None  :func:`statistics.sigma0_check` of the final σ0 (verdict, tails,
+        the warning's message when implausible)
     reliability : reliability.Reliability or None  internal and external reliability and the poorly
         controlled observations and targets (distance cost)
     sigma_source : dict  where the a-priori σ came from (file column, option, distance model)
@@ -180,6 +184,7 @@ class AdjustmentResult:
     sigma_source: dict = field(default_factory=dict)
     variance_factor: str = "known"
     ambiguous: tuple = ()     # ambiguity.Ambiguous: points the distances place only up to a mirror
+    sigma0_check: dict | None = None
 
     @property
     def sigma0_unit(self) -> str:
@@ -427,7 +432,9 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         "dof": res.dof,
         "global_test": {"statistic": gt.statistic, "critical": gt.critical, "passed": gt.passed,
                         "alpha": gt.alpha, "dof": gt.dof, "power": gt.power, "lambda0": gt.lambda0,
+                        "critical_low": gt.critical_low, "alpha_low": gt.alpha_low, "failed_tail": gt.side,
                         "decides": res.variance_factor == "known"},
+        "sigma0_check": dict(res.sigma0_check or st.sigma0_check(float("nan"), res.dof)),
         "alpha": res.alpha,
         "snooping": res.snooping,
         "tests": dict(res.tests),

@@ -7,7 +7,10 @@ networks). :func:`multilat.network.adjust.adjust` runs the rounds.
 Data snooping rejects one observation per round and, in :func:`multilat.network.adjust.adjust`,
 adjusts the network again each time. On a network of 10⁵ distances the B-method's global test fails
 most of the time even without a blunder (``alpha_global`` near 0.8 at that redundancy), and the
-w-tests' own false alarms are then rejected one by one: dozens of rounds, each a full adjustment.
+w-tests' own false alarms were then rejected one by one: dozens of rounds, each a full adjustment
+(the default procedure now tests large networks at Šidák's family-wise level,
+:func:`multilat.network.statistics.test_levels`; the rounds serve blunders and ``--test-method
+b-method``).
 
 Between two adjustments the rounds here use the Sherman-Morrison downdate of the linearised model
 (whitened design ``A``, hat matrix ``H = A Q Aᵀ``, residuals ``v``, redundancy numbers ``r = 1 -
@@ -41,7 +44,8 @@ from multilat.network import statistics as st
 from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
 from multilat.network.fit import check_network, control_ids, station_map
 
-__all__ = ["LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers"]
+__all__ = ["LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers",
+           "n_tested"]
 
 #: networks with at least this many distances use the downdated rounds (smaller ones are re-adjusted
 #: after every rejection: fast anyway, and the exact path)
@@ -182,6 +186,13 @@ class LinearRounds:
 
 
 # ---------------------------------------------------------------- one round of the procedure
+def n_tested(obs) -> int:
+    """How many observations data snooping tests: the distances and the angles (the n of the
+    family-wise rule, :func:`multilat.network.statistics.test_levels`)."""
+    return obs.n_obs + sum(int(np.count_nonzero(np.isfinite(a))) for a in (obs.sigma_azimuth_rad,
+                                                                         obs.sigma_elevation_rad) if a is not None)
+
+
 def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop, unknown,
                     alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec):
     """One round of detection, identification and adaptation on the last adjustment ``core`` (or its
@@ -292,7 +303,8 @@ def angle_outliers(obs, rejected: list[dict], res) -> tuple:
 
 
 def detection_step(core, w_max, unknown, alpha, alpha_g, lam0, crit) -> dict:
-    """One round of detection and identification: the global test (variance factor known) or Pope's
+    """One round of detection and identification: the global test (variance factor known; the largest
+    |w| when ``alpha_g`` is a :class:`~.statistics.TestLevels` detecting by ``"max |w|"``) or Pope's
     τ-test of the largest |τ| (unknown), and whether the largest |w| (|τ|) exceeds its critical value."""
     dof = core["dof"]
     if unknown:
@@ -303,6 +315,15 @@ def detection_step(core, w_max, unknown, alpha, alpha_g, lam0, crit) -> dict:
                 "sigma0": core["sigma0"], "detection_passed": None if failed is None else not failed,
                 "identified": bool(failed), "statistic_k": tau, "critical_k": tc, "test_k": "tau",
                 "action": "none"}
+    if getattr(alpha_g, "detection", "global chi2") == "max |w|":
+        # Šidák (large networks): the largest |w| against the critical value of the family-wise alpha
+        # is the detection test (power: each w-test's against λ0); the χ² test (of the variance factor,
+        # in the result) starts nothing
+        failed = bool(abs(w_max) > crit)
+        return {"dof": dof, "test": "max |w|", "statistic": abs(float(w_max)), "critical": crit,
+                "alpha": alpha_g.alpha_family, "power": alpha_g.power, "sigma0": core["sigma0"],
+                "detection_passed": not failed, "identified": failed, "statistic_k": float(w_max),
+                "critical_k": crit, "test_k": "w", "action": "none"}
     gt = st.global_test(core["vtpv"], dof, alpha=alpha_g(dof), lambda0=lam0)
     return {"dof": dof, "test": "global chi2", "statistic": gt.statistic, "critical": gt.critical,
             "alpha": gt.alpha, "power": gt.power, "sigma0": core["sigma0"],

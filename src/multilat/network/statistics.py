@@ -14,19 +14,38 @@ import numpy as np
 
 __all__ = ["GlobalTest", "global_test", "w_statistics", "w_critical", "noncentrality", "chi2_ppf", "chi2_sf",
            "norm_ppf", "correlated_with", "minimal_detectable_bias_m", "confidence_ellipsoid", "b_method_alpha_global",
-           "test_power", "tau_critical", "bias_to_noise_ratio", "TEST_METHODS", "VARIANCE_FACTORS"]
+           "test_power", "tau_critical", "bias_to_noise_ratio", "TEST_METHODS", "VARIANCE_FACTORS", "R_ZERO",
+           "ALPHA_FAMILY", "ALPHA_LOW", "SIGMA0_FACTOR", "TestLevels", "test_levels", "sidak_alpha",
+           "sigma0_check"]
 
-TEST_METHODS = ("b-method", "fixed")
+TEST_METHODS = ("auto", "b-method", "sidak", "fixed")
 VARIANCE_FACTORS = ("known", "unknown")
+
+#: a redundancy number at or below this is zero: the observation is not controlled (its w-test is not
+#: computed, w = 0) and never counted as correlated with another. The computed r = 1 - h carries a
+#: rounding error of a few eps times the normal equations' condition (1e-12 on the ill-conditioned
+#: networks of the tests; 2e-16 on the well-conditioned), and the exact r of a controlled distance in
+#: a network that can be solved is far above it (JAG3D's test is the same kind: r > sqrt(eps) ~ 1.5e-8).
+R_ZERO = 1e-9
+#: the family-wise significance of the w-tests of a whole network (the probability that a blunder-free
+#: network loses an observation to data snooping; ``--alpha-family``): see :func:`test_levels`
+ALPHA_FAMILY = 0.01
+#: the lower tail of the global test: a vᵀPv below its ``ALPHA_LOW`` quantile fails the test (the
+#: a-priori σ too large; σ0 = 0.000 never "passes")
+ALPHA_LOW = 0.001
+#: σ0 outside [1/SIGMA0_FACTOR, SIGMA0_FACTOR] and significant: named as implausible (:func:`sigma0_check`)
+SIGMA0_FACTOR = 3.0
 
 
 @dataclass(frozen=True)
 class GlobalTest:
     """Global (χ²) test of the a-posteriori variance factor against 1.
 
-    ``statistic = sum (v_k / sigma_k)**2`` ~ χ²(dof) under the model; one-sided upper test at
-    ``alpha``: ``passed = statistic <= critical``; ``critical_low`` is the lower ``alpha`` quantile
-    (a statistic below it hints at pessimistic a-priori uncertainties; not a failure).
+    ``statistic = sum (v_k / sigma_k)**2`` ~ χ²(dof) under the model; the upper test at ``alpha``
+    (``critical``, the detection test of the B-method) and a lower-tail check at :data:`ALPHA_LOW`
+    (``critical_low``): ``passed = critical_low <= statistic <= critical``; ``side`` says which tail
+    failed (``"upper"``, ``"lower"``, None). A statistic below ``critical_low`` means a-priori σ far too
+    large (a unit slip); it starts no data snooping (no |w| is large then).
     None for a statistic that does not apply (``dof == 0`` or unweighted cost).
     """
 
@@ -38,19 +57,22 @@ class GlobalTest:
     dof: int
     power: float | None = None
     lambda0: float | None = None
+    side: str | None = None
+    alpha_low: float = ALPHA_LOW
 
 
 def global_test(weighted_sum_sq: float, dof: int, *, alpha: float = 0.05,
                 lambda0: float | None = None) -> GlobalTest:
-    """χ² test of ``weighted_sum_sq`` (= vᵀPv) with ``dof`` degrees of freedom; with ``lambda0`` the
-    record carries the test's power against that non-centrality (:func:`test_power`)."""
+    """χ² test of ``weighted_sum_sq`` (= vᵀPv) with ``dof`` degrees of freedom, both tails (upper at
+    ``alpha``, lower at :data:`ALPHA_LOW`); with ``lambda0`` the record carries the upper test's power
+    against that non-centrality (:func:`test_power`)."""
     pw = None if lambda0 is None or dof <= 0 else test_power(alpha, dof, lambda0)
     if dof <= 0 or not np.isfinite(weighted_sum_sq):
         return GlobalTest(None, None, None, None, alpha, dof, pw, lambda0)
     crit = chi2_ppf(1.0 - alpha, dof)
-    low = chi2_ppf(alpha, dof)
-    return GlobalTest(float(weighted_sum_sq), crit, low, bool(weighted_sum_sq <= crit), alpha, dof,
-                      pw, lambda0)
+    low = chi2_ppf(ALPHA_LOW, dof)
+    side = "upper" if weighted_sum_sq > crit else "lower" if weighted_sum_sq < low else None
+    return GlobalTest(float(weighted_sum_sq), crit, low, side is None, alpha, dof, pw, lambda0, side)
 
 
 def test_power(alpha: float, dof: int, lambda0: float) -> float:
@@ -100,7 +122,7 @@ def bias_to_noise_ratio(redundancy, *, alpha: float, power: float = 0.80):
     r = np.asarray(redundancy, float)
     lam = noncentrality(alpha, power)
     out = np.full_like(r, np.inf)
-    ok = r > 1e-9
+    ok = r > R_ZERO
     out[ok] = np.sqrt(lam * np.clip(1.0 - r[ok], 0.0, None) / r[ok])
     return out
 
@@ -143,11 +165,11 @@ def w_statistics(residual_m, sigma_m, redundancy):
     """Baarda's normalised residuals ``w_k = v_k / (sigma_k sqrt(r_k))`` (a-priori variance factor;
     ``sigma_m`` None: residuals already whitened, sigma 1).
 
-    Observations with ``r_k <= 1e-9`` (uncontrolled: a fault in them does not show in the residuals)
+    Observations with ``r_k <= R_ZERO`` (uncontrolled: a fault in them does not show in the residuals)
     get ``w = 0``.
     """
     r = np.asarray(redundancy, float)
-    ok = r > 1e-9
+    ok = r > R_ZERO
     # one array of the network's size, worked in place (10^6 rows per snooping round, and the w-tests
     # at the end run at the adjustment's peak memory): v / (sigma sqrt(r)), 0 where not controlled
     w = np.where(ok, r, 1.0)
@@ -160,14 +182,22 @@ def w_statistics(residual_m, sigma_m, redundancy):
 
 
 def correlated_with(c: np.ndarray, red: np.ndarray, k: int, tol: float) -> np.ndarray:
-    """Indices ``l`` with ``|c_l| / sqrt(r_k r_l) > 1 - tol`` (``c`` row ``k`` of the hat matrix, overwritten;
-    a zero denominator counts when ``c_l != 0``): the arithmetic of ``abs(c) / sqrt(r_k * r)``, in place
-    (two passes' worth of temporaries less over 10^6 observations)."""
+    """Indices ``l`` with ``|c_l| / sqrt(r_k r_l) > 1 - tol`` (``c`` row ``k`` of the hat matrix, overwritten):
+    the arithmetic of ``abs(c) / sqrt(r_k * r)``, in place (two passes' worth of temporaries less over
+    10^6 observations).
+
+    An observation with ``r_l <= R_ZERO`` is never correlated with another: its exact hat row is
+    ``e_l`` (``h_ll = 1`` and ``sum_j h_lj^2 = h_ll``), so ``h_kl = 0`` for every ``k != l`` and what
+    the computation gives is rounding noise, which a zero ``r_l`` would blow up to an infinite ρ (issue
+    25 item 6). None when ``r_k`` itself is zero (its w-test is not computed)."""
+    if not red[k] > R_ZERO:
+        return np.zeros(0, dtype=np.intp)
     q = np.abs(c, out=c)
     den = np.multiply(red[k], red)
     np.sqrt(den, out=den)
     with np.errstate(divide="ignore", invalid="ignore"):
         np.divide(q, den, out=q)
+    q[~(red > R_ZERO)] = 0.0
     return np.flatnonzero(q > 1.0 - tol)
 
 
@@ -177,7 +207,7 @@ def minimal_detectable_bias_m(sigma_m, redundancy, *, alpha: float, power: float
     r = np.asarray(redundancy, float)
     lam = noncentrality(alpha, power)
     out = np.full_like(r, np.inf)
-    ok = r > 1e-9
+    ok = r > R_ZERO
     out[ok] = np.asarray(sigma_m)[ok] * np.sqrt(lam / r[ok])
     return out
 
@@ -208,3 +238,119 @@ def confidence_ellipsoid(cov_m2, *, level: float = 0.95):
         if ok.any():
             w[ok], V[ok] = np.linalg.eigh(c[ok])
     return np.sqrt(np.clip(w, 0.0, None) * k), V
+
+
+# ------------------------------------------------------------------ the test procedure of a network
+def sidak_alpha(alpha_family: float, n: int) -> float:
+    """Šidák's per-test significance ``1 - (1 - alpha_family)^(1/n)`` for ``n`` tests whose family
+    (any one failing) has significance ``alpha_family``; computed as ``-expm1(log1p(-α)/n)`` (no
+    cancellation at n = 10^6). For the two-sided w-tests of correlated normal variables Šidák's
+    inequality (Šidák 1967) makes the family's significance at most ``alpha_family`` whatever the
+    correlations."""
+    return float(-np.expm1(np.log1p(-alpha_family) / max(int(n), 1)))
+
+
+@dataclass(frozen=True)
+class TestLevels:
+    """The significance levels of a network's tests and why (:func:`test_levels`).
+
+    ``method`` the procedure that runs (``b-method``, ``sidak`` or ``fixed``), ``requested`` what was
+    asked (``auto`` or one of those); ``alpha0`` each w-test's (τ-test's) significance, ``alpha0_given``
+    the ``--alpha`` asked for; ``n_tests`` the observations tested (distances and angles);
+    ``detection`` the test that starts data snooping: ``"global chi2"`` (the χ² test at
+    :meth:`alpha_global`) or ``"max |w|"`` (the largest |w| beyond ``w_critical(alpha0)``, a test of
+    the whole network at ``alpha_family``); ``rule`` one sentence for the summary and the JSON.
+    Called with ``dof`` it gives the global test's α (the B-method's depends on dof)."""
+
+    method: str
+    requested: str
+    alpha0: float
+    alpha0_given: float
+    power: float
+    alpha_family: float
+    n_tests: int
+    alpha_global_fixed: float | None
+    detection: str
+    rule: str
+
+    def __call__(self, dof: int) -> float:
+        return self.alpha_global(dof)
+
+    def alpha_global(self, dof: int) -> float:
+        if self.method == "b-method":
+            return b_method_alpha_global(dof, alpha0=self.alpha0, power=self.power)
+        return float(self.alpha_global_fixed)
+
+    def as_dict(self) -> dict:
+        return {"requested": self.requested, "alpha0_given": self.alpha0_given,
+                "alpha_family": self.alpha_family, "n_tests": self.n_tests, "detection": self.detection,
+                "rule": self.rule}
+
+
+def test_levels(n_tests: int, *, alpha0: float = 0.001, power: float = 0.80, method: str = "auto",
+                alpha_global: float | None = None, alpha_family: float = ALPHA_FAMILY) -> TestLevels:
+    """The test procedure for ``n_tests`` tested observations.
+
+    ``auto`` (the default): Baarda's B-method with ``alpha0`` while its w-tests' family-wise
+    significance ``1 - (1 - alpha0)^n`` is at most ``alpha_family`` (n <= 10 at the defaults 0.001,
+    0.01); above that, Šidák's rule: each w-test at ``alpha0 = 1 - (1 - alpha_family)^(1/n)`` and
+    the detection by the largest |w| against that critical value, so a blunder-free network of any size
+    loses an observation with probability at most ``alpha_family`` (the B-method's global test at
+    α_global = 0.79 on 92 805 dof fails on most blunder-free networks and its w-tests at 0.001 then
+    find a false alarm among 10^5; the χ² test at a small α instead misses a single 20σ blunder among
+    10^5 distances: its vᵀPv grows by 400 r against a spread of sqrt(2 dof) = 430). The χ² test is then
+    the test of the variance factor, at ``alpha_family`` (both tails: :func:`global_test`). This is
+    JAG3D's Šidák test statistic with the family-wise error rate (its ``SidakTestStatistic``: the local
+    α from the global one by Šidák over the number of hypotheses).
+    ``b-method``, ``sidak``: that method at any size; ``fixed``: ``alpha0`` and ``alpha_global`` as
+    given, detection by the χ² test."""
+    n = max(int(n_tests), 1)
+    a_sidak = sidak_alpha(alpha_family, n)
+    fw_b = float(-np.expm1(n * np.log1p(-alpha0)))        # 1 - (1 - alpha0)^n
+    if method == "fixed":
+        return TestLevels("fixed", method, alpha0, alpha0, power, alpha_family, n, alpha_global, "global chi2",
+                          f"fixed: w-tests at α0 = {alpha0:g}, global χ² test at α = {alpha_global:g} "
+                          "(as given)")
+    use = method if method in ("b-method", "sidak") else ("b-method" if a_sidak >= alpha0 else "sidak")
+    if use == "b-method":
+        why = ("as asked" if method == "b-method" else
+               f"{n} tests: their family-wise α {fw_b:.3g} <= α_family {alpha_family:g}")
+        return TestLevels("b-method", method, alpha0, alpha0, power, alpha_family, n, None, "global chi2",
+                          f"B-method: w-tests at α0 = {alpha0:g}, global test's α for equal power ({why})")
+    why = "as asked" if method == "sidak" else (
+        f"the B-method's α0 = {alpha0:g} over {n} tests would give a family-wise α of {fw_b:.3g}")
+    return TestLevels("sidak", method, a_sidak, alpha0, power, alpha_family, n, alpha_family, "max |w|",
+                      f"Šidák: {n} w-tests at α0 = 1 - (1 - {alpha_family:g})^(1/{n}) = {a_sidak:.3g}, the "
+                      f"largest |w| detects ({why}); global χ² test of the variance factor at α = "
+                      f"{alpha_family:g}")
+
+
+def sigma0_check(sigma0: float, dof: int, *, variance_factor: str = "known", source: str = "") -> dict:
+    """Is σ0 plausible? Implausible (``verdict`` ``"too low"`` / ``"too high"``) when it is outside
+    [1/:data:`SIGMA0_FACTOR`, :data:`SIGMA0_FACTOR`] and the χ² tail on that side is below
+    :data:`ALPHA_LOW` (a significant and large departure: a wrong unit of σ or of the distances, not
+    a slightly pessimistic σ); ``message`` then names it with the σ ``source`` (one line, for the
+    warnings). With ``variance_factor="unknown"`` σ0 is estimated and accepted: recorded, no message.
+    """
+    out = {"sigma0": float(sigma0), "dof": int(dof), "factor": SIGMA0_FACTOR, "alpha": ALPHA_LOW,
+           "p_lower": None, "p_upper": None, "verdict": "not tested", "accepted": variance_factor == "unknown",
+           "message": ""}
+    if dof <= 0 or not np.isfinite(sigma0):
+        return out
+    from scipy.special import chdtr
+
+    x = float(sigma0) ** 2 * dof
+    out["p_lower"], out["p_upper"] = float(chdtr(dof, x)), chi2_sf(x, dof)
+    low = sigma0 < 1.0 / SIGMA0_FACTOR and out["p_lower"] < ALPHA_LOW
+    high = sigma0 > SIGMA0_FACTOR and out["p_upper"] < ALPHA_LOW
+    out["verdict"] = "too low" if low else "too high" if high else "plausible"
+    if (low or high) and variance_factor != "unknown":
+        how = "larger" if low else "smaller"
+        out["message"] = (
+            f"σ0 = {sigma0:.3g} on {dof} dof is implausible ({out['verdict']}: χ² "
+            f"{'lower' if low else 'upper'}-tail p = {out['p_lower' if low else 'p_upper']:.1e}): the a-priori σ "
+            f"look about {(1 / sigma0 if sigma0 > 0 else np.inf) if low else sigma0:.3g}× {how} than the "
+            f"data; {source or 'σ source not recorded'}. Check the unit of σ and of the distances"
+            f"{'' if low else ' and the w-test failures left'}, or accept the scale with --variance-factor "
+            "unknown")
+    return out

@@ -70,6 +70,18 @@ def _worst(items, key, n=MAX_ROWS):
 
 
 # ---------------------------------------------------------------------------------------- adjust
+def _sigma0_line(doc: dict) -> str:
+    """The σ0 check in one line: the verdict, and for an implausible σ0 the σ source."""
+    from multilat.network.sigma_source import describe
+
+    c = doc.get("sigma0_check") or {}
+    v = c.get("verdict", "-")
+    if v in ("too low", "too high"):
+        how = "accepted (--variance-factor unknown)" if c.get("accepted") else "IMPLAUSIBLE"
+        return f"{how}: σ0 {v} ({describe(doc.get('sigma_source') or {})})"
+    return v
+
+
 def adjust(doc: dict, result=None, options=None) -> list[Section]:
     sec = Section("Adjustment")
     gt = doc.get("global_test") or {}
@@ -84,7 +96,12 @@ def adjust(doc: dict, result=None, options=None) -> list[Section]:
          if gt.get("statistic") is not None else "-"),
         ("critical value", _plain(doc, "global_test", "critical", digits=3)
          if gt.get("critical") is not None else "-"),
-        ("global test (α = %g)" % gt.get("alpha", float("nan")), _verdict(gt.get("passed"))),
+        ("lower-tail critical value (α = %g)" % gt.get("alpha_low", float("nan")),
+         _plain(doc, "global_test", "critical_low", digits=3) if gt.get("critical_low") is not None else "-"),
+        ("global test (α = %g, both tails) passed" % gt.get("alpha", float("nan")),
+         _verdict(gt.get("passed")) + (f" ({gt['failed_tail']} tail)" if gt.get("failed_tail") else "")),
+        ("test procedure", (doc.get("tests") or {}).get("rule", "-")),
+        ("σ0 plausibility", _sigma0_line(doc)),
     ], caption="Statistics")
     rows = []
     for sid, s in doc["stations"].items():
