@@ -68,3 +68,20 @@ def test_starnet_unknown_order_is_refused_by_name(ws):
     bad = (DATA / "small_volume.dat").read_text().replace(".ORDER EN", ".ORDER ENZ")
     (ws / "net.dat").write_text(bad)
     ws.fails(["import", "starnet", "{d}/net.dat", "-o", "{d}/imp"], ".ORDER ENZ")
+
+
+@pytest.mark.parametrize("name, cmd, needle", [
+    ("small_volume_gama224_out.xml", ["import", "gama-adjusted"], "<id>"),
+    ("small_volume.dat", ["import", "starnet"], "C "),
+])
+def test_invisible_formatting_characters_are_refused_by_line(ws, name, cmd, needle):
+    """U+202E (right-to-left override) in an id reached the terminal and the outputs raw through the
+    interchange readers (the CSV readers already refused it): now FILE:LINE and the code point."""
+    text = (DATA / name).read_text()
+    k = _nth_line(text, needle)
+    lines = text.splitlines(keepends=True)
+    i = lines[k - 1].index(needle) + len(needle)
+    lines[k - 1] = lines[k - 1][:i] + "\u202e" + lines[k - 1][i:]      # before the id's first character
+    bad = ws / name
+    bad.write_text("".join(lines))
+    ws.fails([*cmd, str(bad), "-o", "{d}/res"], f"{name}:{k}:", "U+202E")

@@ -21,6 +21,7 @@ from xml.parsers import expat
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.inputs import hidden_character
 from multilat.io import decode_text, read_input_bytes
 from multilat.network.data import Observations, Points
 
@@ -50,8 +51,23 @@ class Network:
 
 
 def read_text(path) -> str:
-    """The UTF-8 text of an input file (one-line errors naming the file)."""
-    return decode_text(read_input_bytes(path), Path(path))
+    """The UTF-8 text of an input file (one-line errors naming the file), refused by ``FILE:LINE``
+    when it holds an invisible formatting character (:func:`refuse_hidden`)."""
+    return refuse_hidden(decode_text(read_input_bytes(path), Path(path)), path)
+
+
+def refuse_hidden(text: str, path) -> str:
+    """``text``, or ``FILE:LINE: ... U+202E (...)`` for its first invisible formatting character
+    (bidi overrides, zero-width characters: :func:`multilat.inputs.hidden_character`), which would
+    reach ids, terminal output and reports unseen. A leading byte-order mark is allowed."""
+    what = hidden_character(text.removeprefix("\ufeff"))
+    if what is None:
+        return text
+    body = text.removeprefix("\ufeff")
+    ch = chr(int(what[2:].split(" ")[0], 16))
+    line = body.count("\n", 0, body.index(ch)) + 1
+    raise MultilatError(f"{path}:{line}: holds the invisible formatting character {what}: ids and values must "
+                        "be plain text")
 
 
 def fmt_m(v: float, decimals: int = DISTANCE_DECIMALS) -> str:
@@ -134,6 +150,7 @@ def parse_xml(path) -> XmlNode:
     """Parse an XML file into :class:`XmlNode` (namespaces dropped); a malformed file is an error
     ``FILE:LINE: malformed XML (...)``. DTDs and entity declarations are refused."""
     data = read_input_bytes(path)
+    refuse_hidden(data.decode("utf-8", errors="replace"), path)
     parser = expat.ParserCreate(namespace_separator="}")
     root: list[XmlNode] = []
     stack: list[XmlNode] = []
