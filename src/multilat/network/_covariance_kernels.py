@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat._numba import HAVE_NUMBA, njit, prange  # noqa: F401
+from multilat._numba import writable as _writable
 
 
 # The covariance of :class:`multilat.network.covariance.NetworkCovariance` in its Schur form: ``Qgg``
@@ -333,10 +334,8 @@ def _out(x):
 
 
 def writable(x, dtype=float):
-    """``x`` as a C-contiguous, writeable array of ``dtype`` (a copy only when it is not one): numba
-    compiles a separate variant for read-only or non-contiguous arrays (an array read from a file
-    may be read-only), which the install's warm-up cannot foresee; at every kernel boundary."""
-    return np.require(x, dtype, ("C", "W"))
+    """``x`` as a writeable C-contiguous array of ``dtype`` (:func:`multilat._numba.writable`)."""
+    return _writable(x, dtype)
 
 
 def target_ranges(tptr, block_obs: int | None = None):
