@@ -41,7 +41,7 @@ def _steps():
         with tempfile.TemporaryDirectory(prefix="multilat-warmup-") as tmp:
             path = Path(tmp) / "obs.csv"
             path.write_text("station,target,distance_m,sigma_m\n" + "".join(
-                f"S{i},T{j},{d!r},{s!r}\n" for i, j, d, s in
+                f"S{i},T{j},{float(d)!r},{float(s)!r}\n" for i, j, d, s in
                 zip(net.station_index, net.target_index, net.distance_m, net.sigma_m)))
             obs = read_observations(path)
         res = adjust(obs, solver="sparse", snooping=False, rng=0)
