@@ -182,3 +182,31 @@ def test_a_long_gap_in_a_sensor_log_is_refused_not_bridged(tmp_path):
     assert not be.extrapolated.any()
     with pytest.raises(MultilatError, match="max_gap_s must be > 0"):
         beam_environment(log, stale, max_gap_s=0.0)
+
+
+@pytest.mark.parametrize("column, first, second, expect", [
+    ("humidity_pct", "60", "90", r"humidity_pct of sensor 'S1' extrapolated to 120 .*\[0, 100\]"),
+    ("co2_ppm", "1200", "1900", r"co2_ppm of sensor 'S1' extrapolated to 2600 .*\[0, 2000\]"),
+    ("humidity_pct", "30", "10", r"humidity_pct of sensor 'S1' extrapolated to -10 .*\[0, 100\]"),
+])
+def test_extrapolated_air_outside_the_formula_range_is_refused(tmp_path, column, first, second, expect):
+    """``--extrapolate`` past the log's end: a humidity or CO2 carried outside the air formula's
+    range (0-100 %RH, 0-2000 ppm; :mod:`multilat.air`) is refused naming the observation, the
+    sensor and the value (it was clipped silently to the range's end). Linear extrapolation one
+    more hour: 60 -> 90 -> 120 %RH; 1200 -> 1900 -> 2600 ppm; 30 -> 10 -> -10 %RH."""
+    other = "humidity_pct" if column == "co2_ppm" else "co2_ppm"
+    base = {"humidity_pct": "40", "co2_ppm": "450"}[other]
+    p = _write(tmp_path / "env.csv", f"time,sensor,height_m,temperature_c,pressure_hpa,{column},{other}\n"
+               f"2020-03-10T09:00:00,S1,,19.0,1016.8,{first},{base}\n"
+               f"2020-03-10T10:00:00,S1,,19.2,1016.7,{second},{base}\n")
+    log = read_environment(p)
+    t0 = parse_time("2020-03-10T09:00:00")
+    times = t0 + np.array([1800.0, 3600.0, 7200.0])
+    with pytest.raises(MultilatError, match=r"^observation 3: " + expect + r" \(1 observation\(s\)\)"), \
+            pytest.warns(UserWarning, match="extrapolated"):
+        beam_environment(log, times, extrapolate=True)
+    with pytest.warns(UserWarning, match="extrapolated"):        # inside the range: extrapolated, kept
+        be = beam_environment(log, t0 + np.array([1800.0, 4000.0]), extrapolate=True)
+    slope = (float(second) - float(first)) / 3600
+    np.testing.assert_allclose(be.values[column], [float(first) + 1800 * slope, float(first) + 4000 * slope],
+                               rtol=1e-12)

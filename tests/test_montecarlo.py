@@ -276,6 +276,23 @@ def test_adaptive_meets_its_tolerance_and_matches_fixed_run():
     assert r3.converged is False and r3.trials == 4 * BLOCK
 
 
+def test_adaptive_exact_quantiles_stay_exact_or_are_refused():
+    """``quantiles="exact"`` in an adaptive run is honoured: exact intervals (the samples kept, the
+    same bits as a fixed exact run of that length); when the run would need more than ``exact_limit``
+    values it stops with an error naming the option, never switching to histogram intervals (it
+    did, saying only ``quantile_method='histogram'``). "auto" still switches and says so."""
+    inputs = {f"x{i}": Normal(0.0, 1.0) for i in range(1, 5)}
+    r = run_mc(additive, inputs, adaptive=True, ndigits=2, rng=21, quantiles="exact")
+    assert r.quantile_method == "exact" and r.samples.shape == (r.trials,)
+    f = run_mc(additive, inputs, trials=r.trials, rng=21, quantiles="exact")
+    assert np.array_equal(f.interval_symmetric, r.interval_symmetric)
+    assert np.array_equal(f.interval_shortest, r.interval_shortest)
+    with pytest.raises(MultilatError, match=r"quantiles='exact'.*exact_limit=65,536"):
+        run_mc(additive, inputs, adaptive=True, ndigits=2, rng=21, quantiles="exact", exact_limit=BLOCK)
+    a = run_mc(additive, inputs, adaptive=True, ndigits=2, rng=21, quantiles="auto", exact_limit=BLOCK)
+    assert a.quantile_method == "histogram" and a.as_dict()["quantile_method"] == "histogram"
+
+
 def test_numerical_tolerance_examples():
     # JCGM 101 §7.9.2 example: u = 0.028 (2 digits) -> delta = 0.0005
     assert numerical_tolerance(0.028, 2) == pytest.approx(0.0005)
@@ -367,6 +384,33 @@ def test_budget_additive_model_ranked():
         assert abs(comp.std - expect[comp.name]) <= 5 * max(expect[comp.name], 1e-9) * math.sqrt(1 / 100_000)
     assert sum(c.variance_fraction for c in bud.components) == pytest.approx(1.0, abs=0.02)
     assert bud.combined.std == pytest.approx(math.sqrt(41.0), rel=0.02)
+
+
+@pytest.mark.parametrize("rng", [None, np.random.default_rng(5), 7])
+def test_budget_reported_seed_reproduces_its_combined_run(rng):
+    """The combined run's reported seed (its JSON's ``seed``) re-runs it with ``run_mc``: the same
+    numbers, bit for bit (the combined run was on a spawned branch whose entropy alone seeded a
+    different run: std 1.5306 against 1.5370). A component, on its own branch, reports its spawn key
+    and is reproduced from both."""
+    inputs = {"a": Normal(0, 1.0), "b": Uniform.from_std(1.0), "c": Arcsine.from_amplitude(1.0)}
+
+    def model(a, b, c):
+        return a + b * c + c
+
+    bud = budget(model, inputs, trials=20_000, rng=rng)
+    doc = bud.combined.as_dict()
+    assert "seed_spawn_key" not in doc
+    again = run_mc(model, inputs, trials=20_000, rng=doc["seed"])
+    assert again.std == bud.combined.std and again.estimate == bud.combined.estimate
+    assert np.array_equal(again.interval_symmetric, bud.combined.interval_symmetric)
+    held = {"a": inputs["a"], "b": Constant(0.0), "c": Constant(0.0)}
+    branch = np.random.SeedSequence(doc["seed"], spawn_key=(0xB0D6E7, 1))
+    comp = run_mc(model, held, trials=20_000, rng=branch)
+    assert comp.as_dict()["seed_spawn_key"] == [0xB0D6E7, 1]
+    assert {c.name: c for c in bud.components}["a"].std == comp.std
+    rerun = run_mc(model, held, trials=20_000,
+                   rng=np.random.SeedSequence(comp.seed_entropy, spawn_key=comp.seed_spawn_key))
+    assert rerun.std == comp.std
 
 
 def test_budget_holds_cauchy_at_its_centre():

@@ -8,6 +8,7 @@ cache, ``multilat adjust`` of a network above every size gate (48 000 distances,
 import os
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -35,3 +36,98 @@ def test_first_adjust_after_the_warm_up_compiles_nothing(tmp_path):
         saved = [ln for ln in (p.stdout + p.stderr).splitlines() if ln.startswith("[cache]") and "saved" in ln]
         assert not saved, saved
     assert np.isfinite(net.distance_m).all()
+
+
+_ONE_VARIANT = r"""
+import sys
+import numpy as np
+from numba.core import types
+from numba.core.registry import CPUDispatcher
+
+from multilat.network import covariance as C
+from multilat.network.solve import loop
+
+C.KERNELS_ABOVE_OBS = 0                      # every size gate open: the kernels on a small network
+loop.KERNEL_MIN_TARGETS = 0
+from multilat.cli import main
+from multilat.network.adjust import adjust
+from multilat.network.data import Observations
+from multilat.network.large import multilaterate_targets, synthetic_network
+
+net = synthetic_network(6, 30, 5, rng=3)           # arrays made in memory: writeable
+obs = Observations(tuple(f"S{i}" for i in range(6)), tuple(f"T{j}" for j in range(30)),
+                   net.station_index, net.target_index, net.distance_m, net.sigma_m)
+res = adjust(obs, solver="sparse", rng=0)
+res.covariance.hat_row(0)
+multilaterate_targets(net.station_xyz_m, net.offset_m, net.station_index, net.target_index, net.distance_m,
+                      net.sigma_m, 30)
+csv = sys.argv[1]                                   # the same kernels on a CSV read from disk
+for extra in (["--solver", "sparse"], []):
+    assert main(["adjust", csv, "--json", *extra]) == 0
+ro = np.frombuffer(net.distance_m.tobytes())        # a read-only array straight into a kernel
+assert not ro.flags.writeable
+multilaterate_targets(net.station_xyz_m, net.offset_m, net.station_index, net.target_index, ro, net.sigma_m, 30)
+for name, mod in sorted(sys.modules.items()):
+    if name.startswith("multilat"):
+        for k, obj in vars(mod).items():
+            d = getattr(obj, "dispatcher", obj)
+            if isinstance(d, CPUDispatcher) and d.signatures:
+                ro_args = [i for s in d.signatures for i, a in enumerate(s)
+                           if isinstance(a, types.Array) and not a.mutable]
+                print(f"{name}.{k} {len(d.signatures)} {ro_args}", file=sys.stderr)
+"""
+
+
+def test_one_compiled_variant_per_kernel_for_files_and_memory(tmp_path):
+    """Every kernel an adjustment reaches has exactly one compiled signature, with no read-only
+    array in it, after adjusting a network built in memory (what the warm-up compiles) and the
+    example CSV read from disk (sparse and default solvers, every size gate opened), and a read-only
+    array passed straight in. A CSV's arrays are read-only: numba compiled a second variant of each
+    kernel for them, so the first ``adjust`` of a CSV after ``make install``'s warm-up compiled again
+    (33 s against 6 s). In a subprocess: a fresh process's dispatchers hold only what it compiled or
+    loaded."""
+    csv = Path(__file__).resolve().parents[1] / "examples" / "network" / "small_volume_obs.csv"
+    env = dict(os.environ, PYTHONPATH=str(Path(__file__).resolve().parents[1] / "src"))
+    p = subprocess.run([sys.executable, "-c", _ONE_VARIANT, str(csv)], env=env, capture_output=True, text=True,
+                       timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    rows = [ln.split(" ", 2) for ln in p.stderr.splitlines() if ln.startswith("multilat.")]
+    names = {r[0] for r in rows}
+    for must in ("multilat.network._sparse_kernels.assemble", "multilat.network._sparse_kernels.multilaterate",
+                 "multilat.network._covariance_kernels._hat_diagonal",
+                 "multilat.network._sparse_kernels.whitened_distances"):
+        assert must in names, sorted(names)
+    bad = [r for r in rows if r[1] != "1" or r[2] != "[]"]
+    assert not bad, bad
+
+
+_BLAS_THREADS = r"""
+import ctypes
+import multilat.cli  # noqa: F401  (the command line's entry: sets the BLAS threads before numpy loads)
+import numpy  # noqa: F401
+libs = sorted({ln.split()[-1] for ln in open("/proc/self/maps") if "openblas" in ln and ln.strip().endswith(".so")})
+get = None
+for lib in libs:
+    for name in ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads", "openblas_get_num_threads"):
+        get = get or getattr(ctypes.CDLL(lib), name, None)
+print(get() if get is not None else "unknown")
+"""
+
+
+@pytest.mark.parametrize("preset, expect", [(None, "1"), ("2", "2")])
+def test_the_command_line_runs_blas_on_one_thread(preset, expect):
+    """The CLI's entry sets OpenBLAS to one thread before numpy loads (OpenBLAS's own count, asked
+    through its C API in a fresh process); a value the user set wins. Measured: 3 000 small solves
+    and products took 44-64 s with OpenBLAS's default threads on 2 busy cores, 1.8 s with one."""
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                                                          "BLIS_NUM_THREADS", "OMP_NUM_THREADS")}
+    env["PYTHONPATH"] = str(Path(__file__).resolve().parents[1] / "src")
+    if preset is not None:
+        env["OPENBLAS_NUM_THREADS"] = preset
+    p = subprocess.run([sys.executable, "-c", _BLAS_THREADS], env=env, capture_output=True, text=True, timeout=120)
+    assert p.returncode == 0, p.stderr
+    if p.stdout.strip() == "unknown":
+        pytest.skip("numpy's BLAS is not OpenBLAS")
+    if preset is None and os.cpu_count() == 1:
+        pytest.skip("one core: OpenBLAS's default is one thread anyway")
+    assert p.stdout.strip() == expect

@@ -21,19 +21,29 @@ __all__ = ["main"]
 
 def _steps():
     def adjust_large():
-        """The sparse solver, multilateration, and the statistics kernels (>= 10 000 distances)."""
+        """The sparse solver, multilateration, and the statistics kernels (>= 10 000 distances), on a
+        network written to a CSV and read back as a user's file is (the kernels' boundary passes
+        read-only arrays as writeable copies, :func:`multilat._numba.boundary`; reading a file here
+        as well keeps the warm-up's arrays those of a command)."""
+        import tempfile
+        from pathlib import Path
+
         from multilat.io import dumps_json
         from multilat.network.adjust import adjust
         from multilat.network.covariance import KERNELS_ABOVE_OBS
-        from multilat.network.data import Observations
+        from multilat.network.files import read_observations
         from multilat.network.large import synthetic_network
 
         from multilat.network.solve.loop import KERNEL_MIN_TARGETS
 
         t = max(KERNELS_ABOVE_OBS // 8, KERNEL_MIN_TARGETS) + 50     # every size-gated kernel runs
         net = synthetic_network(20, t, 8, rng=1)
-        obs = Observations(tuple(f"S{i}" for i in range(20)), tuple(f"T{j}" for j in range(t)),
-                           net.station_index, net.target_index, net.distance_m, net.sigma_m)
+        with tempfile.TemporaryDirectory(prefix="multilat-warmup-") as tmp:
+            path = Path(tmp) / "obs.csv"
+            path.write_text("station,target,distance_m,sigma_m\n" + "".join(
+                f"S{i},T{j},{float(d)!r},{float(s)!r}\n" for i, j, d, s in
+                zip(net.station_index, net.target_index, net.distance_m, net.sigma_m)))
+            obs = read_observations(path)
         res = adjust(obs, solver="sparse", snooping=False, rng=0)
         cov = res.covariance
         cov.hat_row(0)

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multilat.campaign.raw import ENV_COLUMNS, check_environment_ranges, format_time, parse_time
+from multilat.campaign.raw import ENV_COLUMNS, ENV_RANGES, check_environment_ranges, format_time, parse_time
 from multilat.errors import MultilatError
 from multilat.io import read_csv_table
 
@@ -184,6 +184,24 @@ def _interp_series(ts: np.ndarray, ys: np.ndarray, t: np.ndarray) -> np.ndarray:
     return out
 
 
+def _check_extrapolated(sensor_values: dict, log: EnvironmentLog, time_s, where) -> None:
+    """Refuse a reading extrapolated (``--extrapolate``) outside the air formula's range
+    (:data:`multilat.campaign.raw.ENV_RANGES`, the ranges of :mod:`multilat.air`: humidity 0-100 %RH,
+    CO2 0-2000 ppm, ...). The readings themselves are checked when the log is read and interpolation
+    stays between them; only extrapolation leaves the range, where the values were clipped silently
+    (a humidity of 107 % used as 100 %). One line naming the observation, the sensor and the value."""
+    for q, vals in sensor_values.items():
+        lo, hi = ENV_RANGES[q]
+        bad = np.argwhere((vals < lo) | (vals > hi))
+        if bad.size:
+            i, s = (int(x) for x in bad[0])
+            raise MultilatError(
+                f"{where(i)}: {q} of sensor {log.sensor_ids[s]!r} extrapolated to {vals[i, s]:g} at "
+                f"{format_time(time_s[i])}, outside the air formula's range [{lo:g}, {hi:g}] "
+                f"({int(((vals < lo) | (vals > hi)).any(axis=1).sum())} observation(s)); the log "
+                f"{log.path} does not cover these times: extend it or drop those observations")
+
+
 GAP_FACTOR = 3.0  # default longest bridged gap: this many times a sensor's median logging interval
 
 
@@ -266,8 +284,7 @@ def beam_environment(log: EnvironmentLog, time_s, *, mid_height_m=None, extrapol
         warnings.warn(f"{int(extrap.sum())} observation(s) outside the environment log's span or in a "
                       f"long gap of a sensor (first: {where(i)}): environment extrapolated or interpolated "
                       "across the gap", UserWarning, stacklevel=2)
-    for q, lo_hi in (("humidity_pct", (0.0, 100.0)), ("co2_ppm", (0.0, 2000.0))):
-        np.clip(sensor_values[q], *lo_hi, out=sensor_values[q])
+    _check_extrapolated(sensor_values, log, time_s, where)
 
     weights = np.empty((m, S, len(QUANTITIES)))
     mean_w = np.full(S, 1.0 / S)

@@ -11,7 +11,7 @@ exception out of a parallel region.
 from __future__ import annotations
 
 import numpy as np
-from multilat._numba import njit, prange
+from multilat._numba import boundary, njit, prange
 
 
 @njit(cache=True, inline="always")
@@ -205,3 +205,9 @@ def apply_inner(pts, idx, x0c, proj, c0, iterations):  # pragma: no cover - jit
         for p in range(npts):
             for a in range(3):
                 pts[r, p, a] += c0[a]
+
+
+# Python entry points: read-only inputs (arrays read from a file) passed as writeable copies, so the
+# warm-up's compiled variant serves them (multilat._numba.boundary)
+solve_frozen = boundary(solve_frozen)
+apply_inner = boundary(apply_inner)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat._numba import HAVE_NUMBA, get_num_threads, njit, prange  # noqa: F401
+from multilat._numba import HAVE_NUMBA, boundary, get_num_threads, njit, prange  # noqa: F401
 
 
 @njit(cache=True)
@@ -453,3 +453,13 @@ def whitened_distances(h, tg, off, scale, si, ti, d, sigma, sfree, tfree, r_w, J
         Jt_w[k, 0] = (-js0 * w) * tf
         Jt_w[k, 1] = (-js1 * w) * tf
         Jt_w[k, 2] = (-js2 * w) * tf
+
+
+# Python entry points: read-only inputs (arrays read from a file) passed as writeable copies, so the
+# warm-up's compiled variant serves them (multilat._numba.boundary)
+assemble = boundary(assemble)
+back_substitute = boundary(back_substitute)
+degenerate_blocks = boundary(degenerate_blocks)
+multilaterate = boundary(multilaterate)
+distance_residuals = boundary(distance_residuals)
+whitened_distances = boundary(whitened_distances)
