@@ -225,19 +225,20 @@ def _sigma_net():
 
 
 def test_sigma_in_micrometres_is_named_both_in_warning_and_json(capsys, tmp_path):
-    """Issue 25 item 2's statistical side: σ written in the wrong unit into sigma_m (here mm read as m: 1000×
-    too large; the issue's µm case gave σ0 = 0.000 and 'global test passed'). The lower tail fails, σ0 is
-    named implausible with its source."""
+    """Issue 25 item 2's statistical side: σ too large by a factor (the issue's µm case gave σ0 = 0.000 and
+    'global test passed'). A unit's factor (≥ 100: mm or µm read as m) is stopped before any result by
+    :mod:`multilat.network.unit_slip` (tests/test_unit_slips.py); below it, here 30×, the lower tail fails and
+    σ0 is named implausible with its source."""
     from multilat.network.result import result_to_json
     from multilat.network.sigma_source import file_column
 
     net, obs = _sigma_net()
     slip = Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
-                        obs.sigma_m * 1e3)
+                        obs.sigma_m * 30)
     with pytest.warns(UserWarning, match=r"σ0 = .* implausible \(too low"):
         res = adjust(slip, initial=_start(net), sigma_source=file_column("obs.csv"))
     assert res.global_test.passed is False and res.global_test.side == "lower"
-    assert res.sigma0 < 2e-3 and res.outliers == ()
+    assert 0.01 < res.sigma0 < 0.1 and res.outliers == ()     # ~1/30
     assert res.sigma0_check["verdict"] == "too low" and "obs.csv" in res.sigma0_check["message"]
     assert any("implausible" in w for w in res.warnings)
     doc = result_to_json(res)
@@ -275,3 +276,16 @@ def test_a_plausible_sigma0_gives_no_warning():
     assert st.sigma0_check(0.2, 5)["verdict"] == "too low"          # P(χ²_5 < 0.2) = 6e-4
     assert st.sigma0_check(0.3, 3)["verdict"] == "plausible"        # P(χ²_3 < 0.27) = 0.035
     assert st.sigma0_check(0.9, 10 ** 5)["verdict"] == "plausible"  # significant, but within 3x
+
+
+def test_noise_free_data_are_not_judged():
+    """Error-free (simulated) distances give σ0 ~ 1e-11: neither the unit-slip stop nor the σ0 check may
+    call that implausible (simulate and the design's pre-analysis adjust such data); one unit slip rule,
+    :func:`multilat.network.unit_slip.noise_free`, decides for both."""
+    net, obs = _sigma_net()
+    rho = np.linalg.norm(net.station_xyz_m[net.station_index] - net.target_xyz_m[net.target_index], axis=1)
+    exact = obs.with_distances(rho + net.offset_m[net.station_index])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = adjust(exact, initial=_start(net))
+    assert res.sigma0 < 1e-6 and res.sigma0_check["verdict"] == "not tested" and res.sigma0_check["message"] == ""

@@ -20,8 +20,9 @@ def _scale_sigma(ws, factor):
 
 
 def test_sigma_written_in_mm_is_named_everywhere(ws):
-    # the σ column in mm read as metres (1000x too large): σ0 ~ 0.001 used to say "global test passed"
-    _scale_sigma(ws, 1e3)
+    # σ 30x too large: σ0 ~ 0.03 used to say "global test passed" (a unit's factor, >= 100, is stopped
+    # before any result: tests/hostile/test_unitslip_cases.py)
+    _scale_sigma(ws, 30)
     rc, out, err = ws.run(["adjust", "{d}/obs.csv"])
     assert rc == 0, err
     assert "implausible (too low" in err and "obs.csv" in err and "--variance-factor unknown" in err

@@ -35,7 +35,7 @@ from multilat.network.angle_rows import angle_results
 from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, n_tested, snooping_round
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import PARTIAL_RESTARTS, initial_for
-from multilat.network.unit_slip import check_unit_slip
+from multilat.network.unit_slip import check_unit_slip, noise_free
 
 __all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
 
@@ -390,7 +390,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
              "lambda0": lam0, "lambda0_w": st.noncentrality(alpha, power), "w_critical": crit,
              "tau_critical": st.tau_critical(alpha, core["dof"]) if unknown else None,
              "alpha_global": alpha_g(core["dof"]), **alpha_g.as_dict(), "steps": steps}
-    check = st.sigma0_check(res.sigma0 if cost == "distance" else float("nan"), res.dof,   # σ0 in m² for eq. 6
+    judged = cost == "distance" and not noise_free(obs, res.residuals_m[used])   # σ0 in m² for eq. 6
+    check = st.sigma0_check(res.sigma0 if judged else float("nan"), res.dof,
                             variance_factor=variance_factor, source=describe_sigma(sigma_source or {}))
     if check["message"]:
         notes.append(check["message"])

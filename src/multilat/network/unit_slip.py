@@ -39,7 +39,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["SLIP_FACTOR", "R_MIN", "SPREAD_MIN", "NOISE_FREE_REL", "UnitSlipError", "check_unit_slip", "likely_unit", "slip_message"]
+__all__ = ["SLIP_FACTOR", "R_MIN", "SPREAD_MIN", "NOISE_FREE_REL", "UnitSlipError", "noise_free", "check_unit_slip", "likely_unit", "slip_message"]
 
 #: σ0 at or beyond this factor from 1 (either way) is a unit slip, not a statistic (see the rule above)
 SLIP_FACTOR = 100.0
@@ -51,6 +51,14 @@ SPREAD_MIN = 0.7
 NOISE_FREE_REL = 1e-10
 
 _UNITS = ((1e2, "cm"), (1e3, "mm"), (1e6, "µm"), (1e9, "nm"))
+
+
+def noise_free(obs, residuals_m) -> bool:
+    """Residuals at the numerical floor: RMS below :data:`NOISE_FREE_REL` times the median distance
+    (simulated, error-free data). Neither the unit-slip stop nor the σ0 plausibility check
+    (:func:`multilat.network.statistics.sigma0_check`) judges such a fit."""
+    v = np.asarray(residuals_m, float)
+    return bool(v.size) and float(np.sqrt(np.mean(v ** 2))) < NOISE_FREE_REL * float(np.median(obs.distance_m))
 
 
 def _times(k: float) -> str:
@@ -141,8 +149,7 @@ def check_unit_slip(obs, core: dict, sigma_source: dict | None = None) -> None:
         if not chdtr(dof, vtpv) < P_MIN:
             return
         n = obs.n_obs
-        v_m = np.asarray(core["residual_w"], float)[:n] * np.asarray(obs.sigma_m, float)[:n]
-        if np.sqrt(np.mean(v_m ** 2)) < NOISE_FREE_REL * float(np.median(obs.distance_m)):
+        if noise_free(obs, np.asarray(core["residual_w"], float)[:n] * np.asarray(obs.sigma_m, float)[:n]):
             return
     else:
         return
