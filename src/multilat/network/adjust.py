@@ -20,9 +20,9 @@ from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.ambiguity import check_geometry
 from multilat.network.data import Observations, Points, ReferenceLengths
-from multilat.network.datum import Datum, apply_rigid, parse_datum, rigid_fit
+from multilat.network.datum import Datum, parse_datum
 from multilat.network.exclusion import exclude_weak_points, zero_redundancy_warnings
-from multilat.network.fit import (as_start, check_network, control_ids, fit_once, raise_if_flat,
+from multilat.network.fit import (as_start, check_control, check_network, control_ids, fit_once, raise_if_flat,
                                   raise_unconverged, station_map, target_map)
 from multilat.network.model import COSTS
 from multilat.network.problem import Params
@@ -329,7 +329,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             if first and datum.kind == "control" and cost == "distance":
                 # a failed global test under control may be the control coordinates, not the distances:
                 # test them (against the free network) before data snooping blames the distances
-                _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core["dof"]),
+                check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core["dof"]),
                                max_iter, solver, chunk_targets, datum, cspec)
             if slip:    # after the search (its best solution) and the control test (control at fault)
                 check_unit_slip(obs, core, sigma_source)
@@ -575,49 +575,3 @@ def _w_failure_groups(core, used, crit, limit: int = 50) -> tuple:
         seen.update(members)
         groups.append(tuple(int(idx[q]) for q in members))
     return tuple(groups)
-
-
-def _check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global, max_iter,
-                   solver, chunk_targets, datum, cspec=None) -> None:
-    """Raise if the control coordinates are inconsistent with the distances.
-
-    The adjustment with the control held fixed has ``Omega_c = v^T P v`` on ``dof_c``; the free
-    network of the same distances ``Omega_f`` on ``dof_f``. With a-priori weights, consistent
-    control gives ``Omega_c - Omega_f ~ chi2(dof_c - dof_f)`` independent of the distances' own
-    misfit (a blunder inflates both). Only run when the global test under control fails.
-    """
-    gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global)
-    if gt.side != "upper":
-        return
-    used = np.ones(obs.n_obs, bool)
-    ctrl = sorted(control_ids(obs, datum, points))
-    guess = Start(core["sx"], core["tx"], core["off"])
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            bars_only = None if cspec is None or not cspec.bars else replace(cspec, control=())
-            free = fit_once(obs, parse_datum("free"), guess, guess, obs, used, None, "distance",
-                                off_free, off_val, sc_free, max_iter, solver, chunk_targets, warn=False,
-                                couplings=bars_only)
-    except MultilatError:
-        return            # not solvable without the control: nothing to compare; snooping goes on
-    k = core["dof"] - free["dof"]
-    if k <= 0:
-        return
-    stat = core["vtpv"] - free["vtpv"]
-    crit = st.chi2_ppf(1.0 - alpha_global, k)
-    if not stat > crit:
-        return
-    ids = obs.station_ids + obs.target_ids
-    xyz = dict(zip(ids, np.vstack([free["sx"], free["tx"]])))
-    src = np.array([xyz[i] for i in ctrl])
-    dst = np.array([points.get(i) for i in ctrl])
-    R, t = rigid_fit(src, dst)
-    mis = np.linalg.norm(apply_rigid(R, t, src) - dst, axis=1)
-    w = int(np.argmax(mis))
-    raise MultilatError(
-        f"control coordinates inconsistent with the distances (σ0 = {core['sigma0']:.3g} with the "
-        f"control held fixed, {free['sigma0']:.3g} free; global test {gt.statistic:.1f} > "
-        f"{gt.critical:.1f}; control test χ² = {stat:.1f} > {crit:.1f} on {k} dof; largest misfit "
-        f"{ctrl[w]!r} {mis[w] * 1e3:.2f} mm after a rigid fit): check the control points or use "
-        "--datum free")

@@ -7,6 +7,8 @@ again after each rejection of data snooping.
 from __future__ import annotations
 
 import itertools
+import warnings
+from dataclasses import replace
 
 import numpy as np
 
@@ -14,7 +16,8 @@ from multilat.errors import MultilatError
 from multilat.network.couplings import flatten_params
 from multilat.network.covariance import CoupledCovariance, NetworkCovariance
 from multilat.network.data import Observations
-from multilat.network.datum import ABOUT_Z_COLUMNS, apply_rigid, datum_matrices, frame_321, rigid_fit
+from multilat.network import statistics as st
+from multilat.network.datum import ABOUT_Z_COLUMNS, apply_rigid, datum_matrices, frame_321, parse_datum, rigid_fit
 from multilat.network.model import Q
 from multilat.network.problem import Params, Problem, head_mean
 from multilat.network.result import Start
@@ -338,3 +341,49 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
                 chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
                 vtpv=vtpv, iterations=conv.iterations, cond=cond, cov=cov, convergence=conv,
                 solver=backend.name, coupled=coupled)
+
+
+def check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global, max_iter,
+                   solver, chunk_targets, datum, cspec=None) -> None:
+    """Raise if the control coordinates are inconsistent with the distances.
+
+    The adjustment with the control held fixed has ``Omega_c = v^T P v`` on ``dof_c``; the free
+    network of the same distances ``Omega_f`` on ``dof_f``. With a-priori weights, consistent
+    control gives ``Omega_c - Omega_f ~ chi2(dof_c - dof_f)`` independent of the distances' own
+    misfit (a blunder inflates both). Only run when the global test under control fails.
+    """
+    gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global)
+    if gt.side != "upper":
+        return
+    used = np.ones(obs.n_obs, bool)
+    ctrl = sorted(control_ids(obs, datum, points))
+    guess = Start(core["sx"], core["tx"], core["off"])
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            bars_only = None if cspec is None or not cspec.bars else replace(cspec, control=())
+            free = fit_once(obs, parse_datum("free"), guess, guess, obs, used, None, "distance",
+                            off_free, off_val, sc_free, max_iter, solver, chunk_targets, warn=False,
+                            couplings=bars_only)
+    except MultilatError:
+        return            # not solvable without the control: nothing to compare; snooping goes on
+    k = core["dof"] - free["dof"]
+    if k <= 0:
+        return
+    stat = core["vtpv"] - free["vtpv"]
+    crit = st.chi2_ppf(1.0 - alpha_global, k)
+    if not stat > crit:
+        return
+    ids = obs.station_ids + obs.target_ids
+    xyz = dict(zip(ids, np.vstack([free["sx"], free["tx"]])))
+    src = np.array([xyz[i] for i in ctrl])
+    dst = np.array([points.get(i) for i in ctrl])
+    R, t = rigid_fit(src, dst)
+    mis = np.linalg.norm(apply_rigid(R, t, src) - dst, axis=1)
+    w = int(np.argmax(mis))
+    raise MultilatError(
+        f"control coordinates inconsistent with the distances (σ0 = {core['sigma0']:.3g} with the "
+        f"control held fixed, {free['sigma0']:.3g} free; global test {gt.statistic:.1f} > "
+        f"{gt.critical:.1f}; control test χ² = {stat:.1f} > {crit:.1f} on {k} dof; largest misfit "
+        f"{ctrl[w]!r} {mis[w] * 1e3:.2f} mm after a rigid fit): check the control points or use "
+        "--datum free")
