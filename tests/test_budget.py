@@ -294,3 +294,15 @@ def test_mechanical_sigma_disk_cache_is_bit_identical(tmp_path, monkeypatch):
     assert budget._mechanical_u2(inst, "A") == first
     assert len(list((tmp_path / "budget").iterdir())) == 2
     budget._MECH_CACHE.clear()
+
+
+def test_cli_without_seed_reports_one_that_reproduces_the_run(capsys):
+    """Issue 25 item 9: a reported seed always reproduces the run it reports. Without --seed the
+    JSON said "seed": null (the run could not be repeated); now the fresh entropy drawn is reported
+    and re-running with it gives the same numbers, bit for bit."""
+    assert main(["budget", "--trials", "500", "--json"]) == 0
+    first = json.loads(capsys.readouterr().out)
+    assert isinstance(first["seed"], int) and first["seed"] >= 0
+    assert main(["budget", "--trials", "500", "--seed", str(first["seed"]), "--json"]) == 0
+    again = json.loads(capsys.readouterr().out)
+    assert again == first

@@ -22,7 +22,8 @@ def budget_command(
     head: str = typer.Option("A", "--head", help="Measurement head (A-D for seed2020)."),
     trials: Optional[int] = typer.Option(None, "--trials", "-n",
                                          help="Trials per distance (default from the instrument: 200000)."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Random seed (default: fresh entropy)."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Random seed (default: fresh entropy, reported "
+                                                            "in --json so the run can be repeated)."),
     air: Optional[bool] = typer.Option(None, "--air/--no-air",
                                        help="Include the air-index group in the combined error "
                                             "(default from the instrument; the seed excludes it)."),
@@ -44,6 +45,10 @@ def budget_command(
         check_not_input(plot, [instrument if str(instrument).endswith(".toml") else None], "--plot")
     inst = load_instrument(instrument)
     inst.head(head)
+    if seed is None:          # fresh entropy, drawn here so that the seed reported reproduces the run
+        import secrets        # (63 bits: JSON integers are exact to 64 bits in orjson and most readers)
+
+        seed = secrets.randbits(63)
     n = inst.budget.trials_per_distance if trials is None else trials
     total = n * inst.budget.distances_m.size
     with progress(disable=total < 500_000) as bar:
