@@ -132,7 +132,7 @@ def test_statistics_against_independent_formulas(name):
     from multilat.network.general import adjust_network, read_gama_input, statistics
 
     adj = adjust_network(read_gama_input(EX / f"{name}.xml"))
-    st = statistics(adj.system, adj.result, alpha=0.001)
+    st = statistics(adj.system, adj.result, alpha=0.001, method="b-method")
     v, P, r, w, mdb, lam = _independent(adj, 0.001)
     assert np.allclose(st.redundancy, r, atol=1e-8)
     ok = r > 1e-6
@@ -158,8 +158,8 @@ def test_variance_factor_unknown_tau_and_scaled_covariance():
     from multilat.network.general import adjust_network, read_gama_input, statistics
 
     adj = adjust_network(read_gama_input(EX / "two_trackers.xml"))
-    known = statistics(adj.system, adj.result, alpha=0.01)
-    unk = statistics(adj.system, adj.result, alpha=0.01, variance_factor="unknown")
+    known = statistics(adj.system, adj.result, alpha=0.01, method="b-method")
+    unk = statistics(adj.system, adj.result, alpha=0.01, variance_factor="unknown", method="b-method")
     s0, dof = adj.result.sigma0, adj.result.dof
     assert np.allclose(unk.statistic, known.w / s0, rtol=1e-12)
     assert unk.critical == pytest.approx(np.sqrt(dof * scipy.stats.beta.ppf(0.99, 0.5, (dof - 1) / 2)), rel=1e-8)
@@ -227,7 +227,7 @@ def test_options_of_the_distance_path_are_refused(capsys, tmp_path, opt):
 def test_out_written_whole_and_equal_to_json(capsys, tmp_path):
     out_dir = tmp_path / "res"
     rc, out, err = _main(capsys, EX / "station_control.xml", "--out", out_dir, "--json",
-                         "--alpha", "0.01", "--variance-factor", "unknown")
+                         "--alpha", "0.01", "--variance-factor", "unknown", "--test-method", "b-method")
     assert rc == 0, err
     assert sorted(p.name for p in out_dir.iterdir()) == ["points.csv", "result.json"]
     doc = json.loads(out)
@@ -244,7 +244,7 @@ def test_summary_and_detection_by_root_element(capsys, tmp_path):
     rc, out, err = _main(capsys, net)
     assert rc == 0, err
     assert "gama-local" in out and "σ0 = 0.7566" in out and "datum: given by 5 fixed point(s)" in out
-    assert "w-test: α0 = 0.001" in out and "note: approximate coordinates computed for 11 point(s)" in out
+    assert "w-test: α0 = 0.00067" in out and "Šidák: 15 w-tests" in out and "note: approximate coordinates computed for 11 point(s)" in out
 
 
 def test_fixed_global_alpha(capsys):
@@ -256,11 +256,26 @@ def test_fixed_global_alpha(capsys):
     gt = json.loads(out)["global_test"]
     assert gt["alpha"] == 0.05 and gt["method"] == "fixed" and gt["passed"] is True
     assert gt["critical"] == pytest.approx(scipy.stats.chi2.ppf(0.95, 41), rel=1e-9)
-    rc, out, err = _main(capsys, EX / "two_trackers.xml", "--json")
+    rc, out, err = _main(capsys, EX / "two_trackers.xml", "--json", "--test-method", "b-method")
     gt = json.loads(out)["global_test"]
     assert gt["method"] == "b-method" and gt["passed"] is False and gt["alpha"] > 0.2
     rc, out, err = _main(capsys, EX / "two_trackers.xml", "--alpha-global", "0.01", "--test-method", "b-method")
     assert rc == 2 and err.startswith("error: --alpha-global goes with --test-method fixed")
+
+
+def test_default_test_procedure_is_the_distance_paths(capsys):
+    """One rule for both paths (statistics.test_levels, --test-method auto): 90 rows tested, so the
+    B-method's family-wise α (1 - 0.999^90 = 0.086) exceeds α_family 0.01 and Šidák's α0 =
+    1 - 0.99^(1/90) runs; the global test is the variance factor's at 0.01, both tails."""
+    rc, out, err = _main(capsys, EX / "two_trackers.xml", "--json")
+    doc = json.loads(out)
+    gt, t = doc["global_test"], doc["tests"]
+    n = int(sum(1 for o in doc["observations"] if o["redundancy"] > 1e-9))
+    a0 = 1 - 0.99 ** (1 / n)
+    assert gt["method"] == "sidak" and gt["alpha"] == 0.01 and gt["passed"] is True
+    assert t["alpha0"] == pytest.approx(a0, rel=1e-12)
+    assert t["critical"] == pytest.approx(scipy.stats.norm.ppf(1 - a0 / 2), rel=1e-9)
+    assert "Šidák" in t["rule"]
 
 
 def test_a_network_without_datum_is_refused_not_emptied(capsys, tmp_path):

@@ -35,10 +35,12 @@ SCHEMA = "adjust-general"
 
 #: the adjust command's parameters that the general path reads
 APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method",
-           "model")
+           "alpha_family", "model")
 #: ... and on a multilat CSV network (``--model general``)
 APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offsets_um", "scales", "fixed_scale",
                          "scale_bar", "references", "levelled", "seed", "snooping")
+#: the test procedures' names in the summary (statistics.test_levels)
+_METHOD_NAMES = {"b-method": "B-method", "sidak": "Šidák", "fixed": "fixed α"}
 #: ``--model``: the default distance-only self-calibrating path, or the general network layer
 MODELS = ("multilateration", "general")
 _OPTION = {"as_json": "--json", "fix_offsets_um": "--fix-offsets-um", "scale_bar": "--scale-bars",
@@ -158,7 +160,7 @@ def run(**params) -> None:
             raise MultilatError(f"{_option_name(name)} does not apply to {what} ({path}): {why}")
     alpha, vf, a_glob, method = (params[k] for k in ("alpha", "variance_factor", "alpha_global", "test_method"))
     if method is None:
-        method = "fixed" if a_glob is not None else "b-method"
+        method = "fixed" if a_glob is not None else "auto"
     from multilat.cli.network_cmd import _check_tests
 
     _check_tests(alpha, a_glob, method, vf, 10.0)        # the distance path's checks of the test options
@@ -169,7 +171,8 @@ def run(**params) -> None:
     inputs = [path] + [params.get(k) for k in ("points", "references") if params.get(k) is not None]
     if out is not None:
         check_output_dir(out, inputs=inputs)
-    tests = dict(alpha=alpha, variance_factor=vf, alpha_global=a_glob, strict=params["strict"])
+    tests = dict(alpha=alpha, variance_factor=vf, alpha_global=a_glob, strict=params["strict"], method=method,
+                 alpha_family=params.get("alpha_family", 0.01))
     if xml:
         doc, adj, stats = compute(path, **tests)
     else:
@@ -187,22 +190,23 @@ def run(**params) -> None:
     print_summary(doc, adj, stats, out)
 
 
-def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_global: float | None = None):
+def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_global: float | None = None,
+            method: str | None = None, alpha_family: float = 0.01):
     """Read, adjust (undetermined points left out unless ``strict``), statistics: (doc, adjustment, stats)."""
     from multilat.network.general import read_gama_input
 
     return _finish(read_gama_input(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
-                   strict=strict, alpha_global=alpha_global)
+                   strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family)
 
 
 def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_global, fmt="gama-local",
-            sigma_source=None):
+            sigma_source=None, method=None, alpha_family=0.01):
     from multilat.network.general import adjust_network, statistics, to_json
     from multilat.vocabulary import stamp
 
     adj = adjust_network(net, options=options, strict=strict)
     stats = statistics(adj.system, adj.result, alpha=alpha, variance_factor=variance_factor,
-                       alpha_global=alpha_global)
+                       alpha_global=alpha_global, method=method, alpha_family=alpha_family)
     doc = to_json(adj, stats, source=source)
     doc = {"model": "general", **doc, "format": fmt}
     if sigma_source is not None:
@@ -211,7 +215,7 @@ def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_globa
 
 
 def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: bool,
-                   alpha_global: float | None = None):
+                   alpha_global: float | None = None, method: str | None = None, alpha_family: float = 0.01):
     """A multilat observation CSV (with ``--points``, ``--references`` ...) adjusted by the general
     layer: (doc, adjustment, stats). ``params``: the adjust command's parameters."""
     from multilat.campaign.propagation import read_campaign
@@ -257,7 +261,8 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
     src_doc = {"kind": str(src.get("kind", "file column")), "file": str(path),
                "description": describe(src) if src else "the file's sigma_m column"}
     return _finish(net, options, str(path), alpha=alpha, variance_factor=variance_factor, strict=strict,
-                   alpha_global=alpha_global, fmt="multilat-csv", sigma_source=src_doc)
+                   alpha_global=alpha_global, fmt="multilat-csv", sigma_source=src_doc, method=method,
+                   alpha_family=alpha_family)
 
 
 def write_out(out, inputs, doc) -> None:
@@ -297,8 +302,9 @@ def print_summary(doc, adj, stats, out) -> None:
     else:
         say(f"  σ0 = {doc['sigma0']:.4f} (ratio to the a-priori σ), dof = {doc['dof']}; global χ² test: "
             f"{gt['statistic']:.2f} {'<=' if gt['passed'] else '>'} {gt['critical']:.2f} (α = {gt['alpha']:.3g}, "
-            f"{'B-method' if gt['method'] == 'b-method' else 'fixed α'}): {'passed' if gt['passed'] else 'FAILED'}")
-        say(f"  w-test: α0 = {t['alpha0']:g}, critical |w| {t['critical']:.2f}, λ0 = {t['lambda0']:.2f}")
+            f"{_METHOD_NAMES.get(gt['method'], gt['method'])}): {'passed' if gt['passed'] else 'FAILED'}")
+        say(f"  w-test: α0 = {t['alpha0']:.3g}, critical |w| {t['critical']:.2f}, λ0 = {t['lambda0']:.2f}")
+    say(f"  test procedure: {t['rule']}")
     red = stats.redundancy
     say(f"  redundancy {max(red.min(), 0.0):.3f}..{red.max():.3f}; {int((red <= 1e-9).sum())} uncontrolled row(s) "
         f"(r = 0); {t['n_failed']} test(s) above the critical value (listed in the JSON; no data snooping here)")

@@ -14,9 +14,12 @@ decorrelated by the Cholesky factor of its covariance in the block's row order (
 numbers, :mod:`.adjust`): its w, r and MDB are those of the decorrelated rows (gama-local's
 convention); independent rows are the observations themselves.
 
-Tests, as the distance-only ``multilat adjust`` does them (``docs/reliability.md``): ``alpha`` is
-α0 of each observation's test; the global test's α follows from it by Baarda's B-method (equal
-power 80 %), or is ``alpha_global`` when given. ``variance_factor="known"``: the global χ² test
+Tests, as the distance-only ``multilat adjust`` does them (``docs/reliability.md``), by one rule,
+:func:`multilat.network.statistics.test_levels`: ``method="auto"`` (the default) runs Baarda's
+B-method with ``alpha`` while the rows' family-wise α stays within ``alpha_family``, Šidák's α0
+beyond (the global test then the variance factor's, at ``alpha_family``); ``"b-method"``,
+``"sidak"`` force one, ``"fixed"`` takes ``alpha_global``. MDBs stay at Baarda's reference
+(``alpha``, power 80 %), as on the distance-only path. ``variance_factor="known"``: the global χ² test
 decides and each row's w-test uses the a-priori σ; ``"unknown"``: σ0 is estimated, the global test is information only, each row gets
 Pope's τ = w / σ̂0, and the covariances and MDBs are scaled by σ̂0². No observation is rejected here
 (no data snooping on the general path yet): the failing tests are listed.
@@ -57,6 +60,7 @@ class GeneralStatistics:
     test: str
     variance_factor: str
     lambda0: float
+    rule: str
     residual: np.ndarray
     sigma: np.ndarray
     angular: np.ndarray
@@ -73,34 +77,39 @@ class GeneralStatistics:
 
 
 def statistics(system, result, *, alpha: float = 0.001, variance_factor: str = "known",
-               alpha_global: float | None = None, power: float = POWER) -> GeneralStatistics:
-    """The statistics of ``result`` (a :class:`~.adjust.GeneralResult` of ``system``); the global
-    test at ``alpha_global`` when given (a fixed α), else by the B-method from ``alpha``."""
+               alpha_global: float | None = None, power: float = POWER, method: str | None = None,
+               alpha_family: float = st.ALPHA_FAMILY) -> GeneralStatistics:
+    """The statistics of ``result`` (a :class:`~.adjust.GeneralResult` of ``system``); the tests'
+    levels by :func:`~multilat.network.statistics.test_levels` (``method`` None: ``"fixed"`` when
+    ``alpha_global`` is given, else ``"auto"``)."""
     rw = system.whiten(result.residuals)
     vtpv = float(rw @ rw)
     dof = result.dof
-    lam = st.noncentrality(alpha, power)
-    a_glob = st.b_method_alpha_global(dof, alpha0=alpha, power=power) if alpha_global is None else alpha_global
-    gt = st.global_test(vtpv, dof, alpha=a_glob, lambda0=lam)
     red = result.redundancy
+    method = method or ("fixed" if alpha_global is not None else "auto")
+    levels = st.test_levels(int(np.count_nonzero(red > 1e-9)), alpha0=alpha, power=power, method=method,
+                            alpha_global=alpha_global, alpha_family=alpha_family)
+    lam = st.noncentrality(alpha, power)
+    gt = st.global_test(vtpv, dof, alpha=levels(dof), lambda0=lam)
+    alpha_w = levels.alpha0                                # each row's test: Šidák's α0 on large networks
     w = st.w_statistics(rw, None, red)                     # whitened rows: σ = 1
     sigma = np.concatenate([np.asarray(b.sigma, float) for b in system.blocks])
     angular = np.concatenate([np.full(b.n_rows, kinds_registry.kind(b.kind).ANGULAR) for b in system.blocks])
     unknown = variance_factor == "unknown"
     scale = result.sigma0 if unknown and np.isfinite(result.sigma0) else 1.0
     if unknown:
-        stat, crit, test = w / scale, st.tau_critical(alpha, dof), "tau"
+        stat, crit, test = w / scale, st.tau_critical(alpha_w, dof), "tau"
     else:
-        stat, crit, test = w, st.w_critical(alpha), "w"
+        stat, crit, test = w, st.w_critical(alpha_w), "w"
     controlled = red > 1e-9
     passed = ~controlled | ~(np.abs(stat) > crit)          # an uncontrolled row cannot fail (nor pass a real test)
     mdb = st.minimal_detectable_bias_m(sigma * scale, red, alpha=alpha, power=power)
     cov = np.stack([result.point_cofactor(p) for p in result.ids]) * scale ** 2 if result.ids else np.zeros((0, 3, 3))
     semi, axes = st.confidence_ellipsoid(cov, level=0.95)
     return GeneralStatistics(
-        sigma0=result.sigma0, dof=dof, test_method="b-method" if alpha_global is None else "fixed", vtpv=vtpv,
-        global_test=gt, alpha0=alpha, critical=float(crit), test=test,
-        variance_factor=variance_factor, lambda0=lam, residual=result.residuals, sigma=sigma, angular=angular,
+        sigma0=result.sigma0, dof=dof, test_method=levels.method, vtpv=vtpv,
+        global_test=gt, alpha0=alpha_w, critical=float(crit), test=test,
+        variance_factor=variance_factor, lambda0=lam, rule=levels.rule, residual=result.residuals, sigma=sigma, angular=angular,
         redundancy=red, w=w, statistic=stat, passed=passed, mdb=mdb, mdb_sigma=mdb / sigma,
         bias_to_noise=st.bias_to_noise_ratio(red, alpha=alpha, power=power), cov_m2=cov, semi_axes_95_m=semi,
         axes_95=axes)

@@ -152,7 +152,7 @@ def to_json(adjustment, stats, *, source: str) -> dict:
                         "dof": gt.dof, "power": gt.power, "lambda0": gt.lambda0,
                         "decides": stats.variance_factor == "known", "method": stats.test_method},
         "tests": {"test": stats.test, "alpha0": stats.alpha0, "critical": stats.critical,
-                  "lambda0": stats.lambda0, "n_failed": len(failing), "snooping": False},
+                  "lambda0": stats.lambda0, "n_failed": len(failing), "snooping": False, "rule": stats.rule},
         "sigma_source": {"kind": "file", "file": source,
                          "description": "a-priori σ of the gama-local input: each observation's stdev=, else the "
                                         "<points-observations> defaults (distance-stdev, direction-stdev, "
