@@ -23,7 +23,9 @@ from multilat.network.model import Q
 
 __all__ = ["Reliability", "external_shifts", "reliability", "MAX_EXTERNAL_OBS"]
 
-MAX_EXTERNAL_OBS = 20000     # the coordinate shifts cost O(m) per observation: computed up to this many
+# the coordinate shifts are computed up to this many used observations (since issue 29 they cost
+# O(m s²) plus a bounded search, not O(m) each; the cap keeps the large documents as they were)
+MAX_EXTERNAL_OBS = 20000
 
 
 @dataclass(frozen=True, eq=False)
