@@ -2,7 +2,7 @@
 1 000, 4 000, 16 000 (and 200 000 in full mode) targets, 7 distances per target
 (``synthetic_network(8, t, 7)``), medians of 3 (1 at 200 000), and the growth between successive
 sizes (goal: each 4x step <= 5x). Before issue 29 the external reliability made one covariance product
-per observation, O(m^2): 8 x 2 000 took 37 s (108 s at load 6.6), 3.4 s after.
+per observation, O(m^2): 8 x 2 000 (14 000 distances) took 89 s at load 6 (37 s quiet), 2.9 s after.
 
 With ``BENCH_BASELINE_SRC=/path/to/old/src`` each size also runs on that tree (``extra["before_s"]``).
 ``python benchmarks/bench_adjust_growth.py [--quick]`` (quick: 1 000 and 4 000).
