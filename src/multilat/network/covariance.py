@@ -288,6 +288,16 @@ class NetworkCovariance:
         K.design_times(Js, Jt, si, ti, np.ascontiguousarray(xg), np.ascontiguousarray(xt), out)
         return out
 
+    def target_coupling(self) -> np.ndarray:
+        """The Schur coupling of every target to the station parameters, ``L_j = sum_l p_l a_l^T``
+        over target j's observations (``p_l = M_j b_l``, ``a_l`` at station ``si_l``'s columns)
+        -> (t, 3, 5s), internal frame: the internal response of target j to a station-part
+        vector ``g`` is ``-L_j Q_gg g`` (the off-diagonal block of :meth:`_times`)."""
+        s, t = self.s, self.t
+        key = np.asarray(self.ti, np.int64) * s + np.asarray(self.si, np.int64)
+        L = segment_sum(key, self.P[:, :, None] * self.Js_w[:, None, :], t * s)      # (t s, 3, Q)
+        return np.ascontiguousarray(L.reshape(t, s, 3, Q).transpose(0, 2, 1, 3)).reshape(t, 3, Q * s)
+
     def design_row(self, k: int) -> np.ndarray:
         """Row ``k`` of the whitened design as a parameter-space vector (n,) (station and target parts)."""
         a = np.zeros(self.n)

@@ -23,7 +23,9 @@ from multilat.network.model import Q
 
 __all__ = ["Reliability", "external_shifts", "reliability", "MAX_EXTERNAL_OBS"]
 
-MAX_EXTERNAL_OBS = 20000     # the coordinate shifts cost O(m) per observation: computed up to this many
+# the coordinate shifts are computed up to this many used observations (since issue 29 they cost
+# O(m s²) plus a bounded search, not O(m) each; the cap keeps the large documents as they were)
+MAX_EXTERNAL_OBS = 20000
 
 
 @dataclass(frozen=True, eq=False)
@@ -51,47 +53,150 @@ class Reliability:
     shifts_computed: bool
 
 
-def external_shifts(cov, obs, used, sx_ids, tx_ids, bias_m, *, batch: int = 256):
+def external_shifts(cov, obs, used, sx_ids, tx_ids, bias_m, *, batch: int = 2048):
     """Largest point shift ``max_p |Δx_p|`` caused by a bias ``bias_m[k]`` in each used observation.
 
     ``cov``: the adjustment's :class:`~.covariance.NetworkCovariance` (its whitened Jacobian rows are
     the used observations' ``A_k / sigma_k``); ``bias_m`` over the used observations. The a-priori
     covariance is used (``cov.factor`` divided out; a low-rank ``extra`` term, the uncertainty of a
     reference length, is not part of the least-squares response and is left out).
-    Checked against re-adjusting with the bias added (tests/test_reliability.py). Returns
-    ``(shift_m (mu,), point id per observation)``.
+    Checked against re-adjusting with the bias added (tests/test_reliability.py) and against one
+    covariance product per observation (tests/test_reliability_fast.py). Returns
+    ``(shift_m (mu,), point id per observation)``; ties go to the first point (stations, then targets).
+
+    Independent targets: block algebra through the Schur form (:func:`_shifts_blocked`), O(m s²)
+    plus the other targets' shifts, pruned by a bound. Coupled targets (scale bars, angles): the
+    dense product in batches (those networks are small; their covariance is dense already).
     """
+    from multilat.network.covariance import CoupledCovariance
+
+    ids = list(sx_ids) + list(tx_ids)
+    mu = cov.Js_w.shape[0]
+    if isinstance(cov, CoupledCovariance):
+        norm_max, where = _shifts_dense(cov, batch=256)
+    else:
+        norm_max, where = np.empty(mu), np.empty(mu, dtype=np.intp)
+        ctx = _BlockContext(cov)
+        for lo in range(0, mu, batch):
+            ks = np.arange(lo, min(lo + batch, mu))
+            norm_max[ks], where[ks] = ctx.shifts(ks)
+    # the response is to a whitened unit bias: scale by bias / sigma (whitening: a_k = A_k / sigma_k)
+    return norm_max * bias_m, tuple(ids[j] for j in where)
+
+
+def _shifts_dense(cov, *, batch: int):
+    """Largest point response ``|S C a_k|`` and its point, from the covariance product of the whole
+    design row (coupled targets)."""
     s, t, n = cov.s, cov.t, cov.n
     mu = cov.Js_w.shape[0]
-    ids = list(sx_ids) + list(tx_ids)
-    out = np.empty(mu)
-    where = np.empty(mu, dtype=np.intp)
-    R = cov.R
+    out, where = np.empty(mu), np.empty(mu, dtype=np.intp)
     for lo in range(0, mu, batch):
         ks = np.arange(lo, min(lo + batch, mu))
         V = np.zeros((n, ks.size))
         c = np.arange(ks.size)
         si, ti = cov.si[ks], cov.ti[ks]
-        a_s = cov.Js_w[ks].copy()
-        a_s[:, :3] = a_s[:, :3] @ R.T              # into the final frame
         for q in range(Q):
-            V[Q * si + q, c] = a_s[:, q]
-        a_t = cov.Jt_w[ks] @ R.T
+            V[Q * si + q, c] = cov.Js_w[ks, q]
         for q in range(3):
-            V[Q * s + 3 * ti + q, c] = a_t[:, q]
-        # S C a: the internal (minimal-constraint) response, rotated, then S-transformed on the left
-        # only (the Jacobian rows have the internally fixed columns zeroed, so Sᵀ a != a)
-        D = cov._rot_times(V)
+            V[Q * s + 3 * ti + q, c] = cov.Jt_w[ks, q]
+        # S C a: the internal response, rotated, then S-transformed on the left only (the Jacobian
+        # rows have the internally fixed columns zeroed, so Sᵀ a != a)
+        D = cov._rotate_rows(cov._times(V), cov.R) / cov.factor
         if cov.G is not None:
             D = D - cov.G @ (cov.H @ D)
-        D /= cov.factor
         pts = np.concatenate([D[:Q * s].reshape(s, Q, -1)[:, :3], D[Q * s:].reshape(t, 3, -1)], axis=0)
         norm = np.linalg.norm(pts, axis=1)           # (points, batch)
         j = np.argmax(norm, axis=0)
-        # the response is to a whitened unit bias: scale by bias / sigma (whitening: a_k = A_k / sigma_k)
-        out[ks] = norm[j, c] * bias_m[ks]
-        where[ks] = j
-    return out, tuple(ids[j] for j in where)
+        out[ks], where[ks] = norm[j, c], j
+    return out, where
+
+
+class _BlockContext:
+    """What every observation's response shares (independent targets), in the final frame::
+
+        u_k = Q_gg (E_i a_k - L_jᵀ b_k)                   station part (internal), one multi-RHS product
+        h_k = H Δ_k = H_u u_k + H_j R M_j b_k             the S-transform's coefficients (d,)
+        Δ_j' = T_j' [u_k; h_k] (+ R M_j b_k for j' = j),  T_j' = [-R L_j', -G_j']
+
+    ``L_j`` the target's Schur coupling (:meth:`~.covariance.NetworkCovariance.target_coupling`).
+    The largest other-target shift is searched in order of the bound ``|T_j' z| <= ||T_j'||_2 |z|``
+    and stops when the bound falls below the best shift found: exact, and usually only the own
+    target and the stations are evaluated.
+    """
+
+    CHUNK = 512          # targets per step of the search
+    MARGIN = 1e-9        # relative slack on the bound (rounding of the evaluated norms)
+
+    def __init__(self, cov):
+        s, t = cov.s, cov.t
+        self.cov, self.s, self.t = cov, s, t
+        R = cov.R
+        self.L = cov.target_coupling()                                        # (t, 3, 5s)
+        Rb = np.eye(Q * s)
+        for i in range(s):
+            Rb[Q * i:Q * i + 3, Q * i:Q * i + 3] = R
+        self.Rb = Rb
+        RL = -np.einsum("ij,tjc->tic", R, self.L)                             # (t, 3, 5s)
+        if cov.G is None:
+            self.Hu = None
+            T = RL
+        else:
+            Ht = cov.H[:, Q * s:].reshape(-1, t, 3)                           # (d, t, 3)
+            self.Ht = np.ascontiguousarray(Ht.transpose(1, 0, 2))             # (t, d, 3)
+            self.Hu = cov.H[:, :Q * s] @ Rb + np.einsum("dti,tic->dc", Ht, RL)
+            Gt = cov.G[Q * s:].reshape(t, 3, -1)
+            self.Gs = cov.G[:Q * s].reshape(s, Q, -1)[:, :3]                  # (s, 3, d)
+            self.Gt = Gt
+            T = np.concatenate([RL, -Gt], axis=2)
+        self.T = T                                                            # (t, 3, p)
+        bound = np.sqrt(np.maximum(np.linalg.eigvalsh(np.einsum("tip,tjp->tij", T, T))[:, -1], 0.0))
+        self.order = np.argsort(-bound, kind="stable")
+        self.bound = bound[self.order]
+        self.Ts = T[self.order].reshape(-1, T.shape[2])                       # (3t, p), sorted
+
+    def shifts(self, ks):
+        """Largest point response and its point index for the observations ``ks``."""
+        cov, s, t = self.cov, self.s, self.t
+        si, ti = cov.si[ks], cov.ti[ks]
+        a, b = cov.Js_w[ks], cov.Jt_w[ks]
+        c = np.arange(ks.size)
+        acc = -np.einsum("kic,ki->kc", self.L[ti], b)
+        acc.reshape(-1, s, Q)[c, si] += a
+        u = acc @ cov.Qgg.T                                                   # (k, 5s)
+        own = np.einsum("ij,kj->ki", cov.R, np.einsum("kij,kj->ki", cov.Minv[ti], b))   # R M_j b
+        st_xyz = (u @ self.Rb.T).reshape(-1, s, Q)[:, :, :3]                  # (k, s, 3)
+        if self.Hu is None:
+            z = u
+        else:
+            h = u @ self.Hu.T + np.einsum("kdi,ki->kd", self.Ht[ti], own)
+            st_xyz = st_xyz - np.einsum("sid,kd->ksi", self.Gs, h)
+            z = np.concatenate([u, h], axis=1)
+        sn = np.linalg.norm(st_xyz, axis=2)                                   # (k, s)
+        where = np.argmax(sn, axis=1)
+        best = sn[c, where]
+        on = np.linalg.norm(np.einsum("kip,kp->ki", self.T[ti], z) + own, axis=1)
+        better = on > best
+        best = np.where(better, on, best)
+        where = np.where(better, s + ti, where)
+        return self._others(z, ti, best, where)
+
+    def _others(self, z, ti, best, where):
+        """The other targets' shifts ``|T_j' z|``, largest bound first, while they can still win."""
+        s, t = self.s, self.t
+        zn = np.linalg.norm(z, axis=1)
+        for lo in range(0, t, self.CHUNK):
+            act = np.flatnonzero((self.bound[lo] * zn * (1 + self.MARGIN) >= best) & (self.bound[lo] > 0))
+            if act.size == 0:
+                break
+            hi = min(lo + self.CHUNK, t)
+            tj = self.order[lo:hi]
+            val = np.linalg.norm((self.Ts[3 * lo:3 * hi] @ z[act].T).reshape(hi - lo, 3, -1), axis=1)
+            val[tj[:, None] == ti[act][None, :]] = -np.inf                   # the own target: done
+            vmax = val.max(axis=0)
+            idx = np.where(val == vmax, (s + tj)[:, None], np.iinfo(np.intp).max).min(axis=0)
+            win = (vmax > best[act]) | ((vmax == best[act]) & (idx < where[act]))
+            best[act[win]], where[act[win]] = vmax[win], idx[win]
+        return best, where
 
 
 def reliability(res_obs, used, redundancy, sigma_m, cov, station_ids, target_ids, *, alpha: float,

@@ -1,0 +1,63 @@
+"""Issue 29, the growth row: whole ``multilat adjust NET.csv --json > /dev/null`` on 8 stations x
+1 000, 4 000, 16 000 (and 200 000 in full mode) targets, 7 distances per target
+(``synthetic_network(8, t, 7)``), medians of 3 (1 at 200 000), and the growth between successive
+sizes (goal: each 4x step <= 5x). Before issue 29 the external reliability made one covariance product
+per observation, O(m^2): 8 x 2 000 (14 000 distances) took 89 s at load 6 (37 s quiet), 2.9 s after.
+
+With ``BENCH_BASELINE_SRC=/path/to/old/src`` each size also runs on that tree (``extra["before_s"]``).
+``python benchmarks/bench_adjust_growth.py [--quick]`` (quick: 1 000 and 4 000).
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from bench_cli_large import BASE_SRC, ROOT, SEED, _median_runs
+from common import load_avg as _load
+
+
+def _write(t: int, path: Path) -> int:
+    from multilat.network.large import synthetic_network
+
+    net = synthetic_network(8, t, 7, rng=SEED)
+    s = np.char.add("S", net.station_index.astype(str))
+    tg = np.char.add("T", net.target_index.astype(str))
+    dd = np.char.mod("%.9f", net.distance_m)
+    body = np.char.add(np.char.add(np.char.add(np.char.add(np.char.add(s, ","), tg), ","), dd), ",5e-06")
+    path.write_text("station,target,distance_m,sigma_m\n" + "\n".join(body.tolist()) + "\n")
+    return len(body)
+
+
+def run(quick: bool = False) -> list[dict]:
+    sizes = [1000, 4000] if quick else [1000, 4000, 16000, 200000]
+    new = str(ROOT / "src")
+    rows, prev = [], None
+    with tempfile.TemporaryDirectory() as tmp:
+        for t in sizes:
+            p = Path(tmp) / f"net8x{t}.csv"
+            m = _write(t, p)
+            reps = 1 if t > 20000 else 3
+            _median_runs(["adjust", str(p), "--json"], new, 1)                 # caches warm
+            load = _load()
+            med, rss, runs = _median_runs(["adjust", str(p), "--json"], new, reps)
+            extra = {"command": f"multilat adjust net8x{t}.csv --json > /dev/null", "distances": m,
+                     "runs_s": [round(w, 3) for w in runs], "peak_rss_mib": rss, "load_avg": load,
+                     "growth_vs_previous": None if prev is None else round(med / prev, 2)}
+            if BASE_SRC and t <= 20000:
+                extra["before_s"] = round(_median_runs(["adjust", str(p), "--json"], BASE_SRC, reps)[0], 3)
+            rows.append({"name": f"adjust_growth_s8_t{t}_json", "median_s": med, "baseline": None,
+                         "baseline_median_s": None, "ratio": None, "extra": extra})
+            prev = med
+    return rows
+
+
+if __name__ == "__main__":
+    import sys
+
+    os.chdir(Path(__file__).resolve().parent)
+    for r in run(quick="--quick" in sys.argv):
+        print(r["name"], f"{r['median_s']:.2f} s", r["extra"])
