@@ -230,9 +230,9 @@ def leaving_out_undetermined(run, *, strict: bool = False):
     again, at most :data:`MAX_UNDETERMINED_ROUNDS` rounds. The warnings of a round that found
     undetermined targets are dropped (the next round gives its own, with the targets named as left
     out). With ``strict`` the first undetermined target is refused (the error alone)."""
-    def replay(caught):
+    def replay(caught):     # at the caller of adjust(): replay < here < adjust < caller
         for w in caught:
-            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+            warnings.warn(w.message, w.category, stacklevel=4)
 
     found: dict = {}
     for _ in range(MAX_UNDETERMINED_ROUNDS):
