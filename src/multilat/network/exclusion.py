@@ -215,12 +215,14 @@ def undetermined_targets(obs: Observations, station_xyz_m, target_xyz_m, skip=()
 def raise_undetermined(obs: Observations, core: dict, skip=()) -> None:
     """Raise :class:`UndeterminedTargets` for the targets of an adjustment (``core``: its points
     ``sx``, ``tx`` and their indices ``smap``, ``tmap`` in ``obs``) that :func:`undetermined_targets`
-    finds, if any."""
+    finds, if any. When it finds every target tested, the network is flat, not one target weak: left
+    to the flat-network test (:func:`multilat.network.ambiguity.flat_network`), which names it."""
     H = np.full((obs.n_stations, 3), np.nan)
     T = np.full((obs.n_targets, 3), np.nan)
     H[core["smap"]], T[core["tmap"]] = core["sx"], core["tx"]
     found = undetermined_targets(obs, H, T, skip)
-    if found:
+    tested = {obs.target_ids[j] for j in np.asarray(core["tmap"])} - set(skip)
+    if found and not tested <= set(found):
         raise UndeterminedTargets(found)
 
 
