@@ -188,27 +188,30 @@ def undetermined_targets(obs: Observations, station_xyz_m, target_xyz_m, skip=()
     d = T[ti] - H[si]
     L = np.linalg.norm(d, axis=1)
     ok = np.isfinite(L) & (L > 0) & np.isfinite(sig) & (sig > 0)
-    u = d / np.where(ok, L, 1.0)[:, None]
+    u = np.where(ok[:, None], d, 0.0) / np.where(ok, L, 1.0)[:, None]
     w = np.where(ok, 1.0 / np.where(ok, sig, 1.0) ** 2, 0.0)
-    N = np.zeros((obs.n_targets, 3, 3))
-    np.add.at(N, ti, w[:, None, None] * u[:, :, None] * u[:, None, :])
-    n_ok = np.bincount(ti[ok], minlength=obs.n_targets)
+    t = obs.n_targets
+    N = np.zeros((t, 9))
+    uu = (w[:, None, None] * u[:, :, None] * u[:, None, :]).reshape(-1, 9)
+    for k in range(9):
+        N[:, k] = np.bincount(ti, weights=uu[:, k], minlength=t)
+    test = np.all(np.isfinite(T), axis=1) & np.array([tid not in skip for tid in obs.target_ids], bool)
+    ev, V = np.linalg.eigh(N.reshape(t, 3, 3))
+    along = np.einsum("mi,mi->m", np.where(ok[:, None], d, 0.0), V[ti, :, 0])
+    n_ok = np.bincount(ti[ok], minlength=t)
+    h = np.sqrt(np.bincount(ti, weights=along ** 2, minlength=t) / np.maximum(n_ok, 1))
+    singular = ~(ev[:, 0] > 1e-12 * ev[:, 2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sv = 1.0 / np.sqrt(ev[:, 0])
     out = {}
-    for j in np.flatnonzero(n_ok > 0):
+    for j in np.flatnonzero(test & (n_ok > 0) & (singular | (h < K_PLANE * sv))):
         tid = obs.target_ids[j]
-        if tid in skip or not np.all(np.isfinite(T[j])):
-            continue
-        ev, V = np.linalg.eigh(N[j])
-        rows = ok & (ti == j)
-        h = float(np.sqrt(np.mean((d[rows] @ V[:, 0]) ** 2)))
-        if not ev[0] > 1e-12 * ev[2]:          # numerically singular: rank < 3
+        if singular[j]:                        # numerically singular: rank < 3
             out[tid] = COPLANAR_REASON
-            continue
-        sv = float(1.0 / np.sqrt(ev[0]))
-        if h < K_PLANE * sv:
-            out[tid] = (f"is undetermined: its lines of sight are coplanar within their uncertainty (spread {h * 1e3:.3g} mm "
-                        f"along its weakest direction, {h / sv:.2g} times its standard uncertainty "
-                        f"{sv * 1e3:.2g} mm there; {K_PLANE:g} times is needed)")
+        else:
+            out[tid] = (f"is undetermined: its lines of sight are coplanar within their uncertainty "
+                        f"(spread {h[j] * 1e3:.3g} mm along its weakest direction, {h[j] / sv[j]:.2g} times "
+                        f"its standard uncertainty {sv[j] * 1e3:.2g} mm there; {K_PLANE:g} times is needed)")
     return out
 
 
