@@ -94,7 +94,7 @@ def test_three_stations_off_their_plane_stay():
     n = np.cross(H[2] - H[1], H[3] - H[1])
     n /= np.linalg.norm(n)
     assert list(undetermined_targets(weak, H, T)) == ["P403"]
-    T[-1] += 0.3 * n                                  # 0.3 m off the plane: σ along the normal ~ σL/(h√3) ≈ 0.02 mm
+    T[-1] += 0.3 * n                  # 0.3 m off the plane: σ along the normal ~ σL/(h√3) ≈ 0.02 mm
     assert undetermined_targets(weak, H, T) == {}
-    T[-1] -= 0.3 * n - 1e-4 * n                       # 0.1 mm off: σ there ≈ 60 mm, undetermined
+    T[-1] -= 0.3 * n - 1e-4 * n       # 0.1 mm off: σ there ≈ 60 mm, undetermined
     assert list(undetermined_targets(weak, H, T)) == ["P403"]
