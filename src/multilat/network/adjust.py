@@ -18,10 +18,11 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
-from multilat.network.ambiguity import check_geometry
+from multilat.network.ambiguity import check_geometry, side_fixed_targets
 from multilat.network.data import Observations, Points, ReferenceLengths
 from multilat.network.datum import Datum, parse_datum
-from multilat.network.exclusion import exclude_weak_points, zero_redundancy_warnings
+from multilat.network.exclusion import (UndeterminedTargets, exclude_weak_points, leaving_out_undetermined,
+                                        raise_undetermined, zero_redundancy_warnings)
 from multilat.network.fit import (as_start, check_control, check_network, control_ids, fit_once, raise_if_flat,
                                   raise_unconverged, station_map, target_map)
 from multilat.network.model import COSTS
@@ -97,7 +98,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
            r_min: float = 0.1, sigma_source: dict | None = None, snooping: bool = True,
            max_rejections: int | None = None, max_iter: int = 100, solver: str = "auto", strict: bool = False,
            scale_bars: ReferenceLengths | None = None, scale_bar: ReferenceLengths | None = None,
-           chunk_targets: int = 20000, rng=0) -> AdjustmentResult:
+           chunk_targets: int = 20000, rng=0, _undetermined: dict | None = None) -> AdjustmentResult:
     """Adjust a self-calibrating multilateration network.
 
     Unknowns: station coordinates, target coordinates, one additive offset per station (estimated
@@ -195,6 +196,9 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         inconsistent with the distances (``datum="control"``, tested before data snooping), bad
         options, or no convergence — one line naming the cause.
     """
+    if _undetermined is None:   # a target found undetermined is left out and the network adjusted again
+        args = dict(locals())
+        return leaving_out_undetermined(lambda u: adjust(**{**args, "_undetermined": u}), strict=strict)
     if not isinstance(obs, Observations):
         raise MultilatError("adjust: obs must be an Observations")
     if cost not in COSTS:
@@ -250,7 +254,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     # weak points are left out (named), not a reason to refuse the network
     ctrl = control_ids(obs, datum, points) if datum.kind == "control" else set()
     keep, excluded = exclude_weak_points(obs, offset_free=off_free, scale_free=sc_free, fixed_targets=ctrl,
-                                         strict=strict)
+                                         strict=strict, undetermined=_undetermined)
     if excluded:
         if not keep.any():
             raise MultilatError(f"nothing left to adjust: {excluded[0].kind} {excluded[0].id!r} "
@@ -313,7 +317,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                 # computed initial values can make a solvable network look degenerate (a collapsed
                 # start): the search's restarts get their chance before the error is final
                 if not (first and search_ok and how["method"].startswith("distances")
-                        and "near-degenerate" in str(exc)):
+                        and ("near-degenerate" in str(exc) or isinstance(exc, UndeterminedTargets))):
                     raise
                 core = _start_as_partial(obs, start, exc)
             slip = first and cost == "distance" and not unknown    # a unit slip stops (unit_slip.py)
@@ -326,6 +330,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                 core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
                                                max_iter, solver, chunk_targets, rng, cspec)
                 how["search"] = search.as_dict()
+            if first and not core.get("partial"):   # coplanar lines of sight: left out, adjusted again
+                raise_undetermined(obs, core, side_fixed_targets(obs, ctrl, cspec))
             if first and datum.kind == "control" and cost == "distance":
                 # a failed global test under control may be the control coordinates, not the distances:
                 # test them (against the free network) before data snooping blames the distances

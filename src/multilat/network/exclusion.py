@@ -14,10 +14,17 @@ A target with exactly 3 observations stays: it is determined, without redundancy
 alone its mirror image through the plane of its 3 stations fits them equally (named in a warning; after
 the adjustment :mod:`multilat.network.ambiguity` lists it among the mirror-ambiguous points, with the
 stations that see only coplanar targets and the targets seen by coplanar stations).
+A target whose lines of sight are coplanar within their uncertainty is not determined either,
+whatever the size of the network (:func:`undetermined_targets`): it is left out the same way, named
+with its reason. Its coordinates are needed to see it, so it is found on the initial values or the
+first adjustment (a 3x3 target block numerically singular: :class:`UndeterminedTargets`) and the
+adjustment runs again without it (:func:`leaving_out_undetermined`, a bounded number of rounds).
 With ``strict=True`` the first point that would be left out is an error instead.
 """
 
 from __future__ import annotations
+
+import warnings
 
 import numpy as np
 
@@ -25,7 +32,27 @@ from multilat.errors import MultilatError
 from multilat.network.data import Observations, distinct_pair_codes
 from multilat.network.result import Excluded
 
-__all__ = ["exclude_weak_points", "zero_redundancy_warnings"]
+__all__ = ["UndeterminedTargets", "exclude_weak_points", "leaving_out_undetermined", "raise_undetermined",
+           "undetermined_targets",
+           "zero_redundancy_warnings"]
+
+#: at most this many rounds of "adjust, find undetermined targets, leave them out" (each round leaves
+#: out every target found in it; a target left out can weaken another only through its stations)
+MAX_UNDETERMINED_ROUNDS = 5
+
+COPLANAR_REASON = "is undetermined: its lines of sight are coplanar (its 3x3 normal block is singular)"
+
+
+class UndeterminedTargets(MultilatError):
+    """Targets the observations cannot place, found with coordinates at hand (initial values, the
+    solve's 3x3 blocks): ``reasons`` maps each target id to its reason. The adjustment leaves them
+    out and runs again (:func:`leaving_out_undetermined`)."""
+
+    def __init__(self, reasons: dict):
+        self.reasons = dict(reasons)
+        tid, why = next(iter(self.reasons.items()))
+        more = f" (and {len(self.reasons) - 1} more)" if len(self.reasons) > 1 else ""
+        super().__init__(f"target {tid!r} {why}{more}")
 
 
 def _distinct_counts(obs: Observations, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,7 +89,7 @@ def _largest_component(obs: Observations, keep: np.ndarray) -> np.ndarray:
 
 
 def exclude_weak_points(obs: Observations, *, offset_free: np.ndarray, scale_free: np.ndarray,
-                        fixed_targets=(), strict: bool = False):
+                        fixed_targets=(), strict: bool = False, undetermined=None):
     """Leave out what cannot be determined.
 
     Parameters
@@ -74,6 +101,9 @@ def exclude_weak_points(obs: Observations, *, offset_free: np.ndarray, scale_fre
         Ids of targets held fixed (control): they need no observation of their own.
     strict : bool
         Raise :class:`MultilatError` instead of leaving a point out.
+    undetermined : dict, optional
+        Target id -> reason for targets found undetermined on coordinates (coplanar lines of sight,
+        :func:`undetermined_targets`): left out first.
 
     Returns
     -------
@@ -103,6 +133,10 @@ def exclude_weak_points(obs: Observations, *, offset_free: np.ndarray, scale_fre
         keep[rows] = False
         (gone_s if kind == "station" else gone_t)[idx] = True
 
+    index = {tid: j for j, tid in enumerate(obs.target_ids)}
+    for tid, why in (undetermined or {}).items():
+        if tid in index and not gone_t[index[tid]]:
+            drop("target", index[tid], why)
     while True:
         changed = False
         per_t, per_s = _distinct_counts(obs, keep)
@@ -129,6 +163,105 @@ def exclude_weak_points(obs: Observations, *, offset_free: np.ndarray, scale_fre
         if not changed:
             break
     return keep, tuple(out)
+
+
+def undetermined_targets(obs: Observations, station_xyz_m, target_xyz_m, skip=()) -> dict:
+    """Targets whose lines of sight are coplanar within their uncertainty: id -> reason.
+
+    Per free target with distances ``k`` to stations ``H_k`` (σ_k), at position ``T``: the 3x3 normal
+    block ``N = sum u_k u_k^T / σ_k^2`` (``u_k`` the unit sight vectors), its weakest direction ``v``
+    (smallest eigenvalue λ) with the standard uncertainty ``σ_v = λ^-1/2`` along it, and the RMS
+    spread of the sight vectors along ``v``, ``h = rms((T - H_k).v)`` (for stations in one plane: the
+    target's height above it; ``σ_v ≈ σ L / (h sqrt(k))``). The target is undetermined when
+    ``h < K_PLANE σ_v`` (:data:`multilat.network.ambiguity.K_PLANE`, the tolerance for "in one
+    plane" of the mirror test: ``h`` below about ``sqrt(K_PLANE σ L)``, where distances fix the
+    height only to second order) or when ``N`` is singular. A target seen by 3 stations well off
+    their plane is determined (mirror-ambiguous only) and stays. Targets in ``skip`` (control,
+    angles, scale-bar ends: placed otherwise) and targets without finite coordinates are not tested.
+    """
+    from multilat.network.ambiguity import K_PLANE
+
+    H = np.asarray(station_xyz_m, float)
+    T = np.asarray(target_xyz_m, float)
+    skip = set(skip)
+    si, ti, sig = obs.station_index, obs.target_index, np.asarray(obs.sigma_m, float)
+    d = T[ti] - H[si]
+    L = np.linalg.norm(d, axis=1)
+    ok = np.isfinite(L) & (L > 0) & np.isfinite(sig) & (sig > 0)
+    u = np.where(ok[:, None], d, 0.0) / np.where(ok, L, 1.0)[:, None]
+    w = np.where(ok, 1.0 / np.where(ok, sig, 1.0) ** 2, 0.0)
+    t = obs.n_targets
+    N = np.zeros((t, 9))
+    uu = (w[:, None, None] * u[:, :, None] * u[:, None, :]).reshape(-1, 9)
+    for k in range(9):
+        N[:, k] = np.bincount(ti, weights=uu[:, k], minlength=t)
+    test = np.all(np.isfinite(T), axis=1) & np.array([tid not in skip for tid in obs.target_ids], bool)
+    ev, V = np.linalg.eigh(N.reshape(t, 3, 3))
+    along = np.einsum("mi,mi->m", np.where(ok[:, None], d, 0.0), V[ti, :, 0])
+    n_ok = np.bincount(ti[ok], minlength=t)
+    h = np.sqrt(np.bincount(ti, weights=along ** 2, minlength=t) / np.maximum(n_ok, 1))
+    singular = ~(ev[:, 0] > 1e-12 * ev[:, 2])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sv = 1.0 / np.sqrt(ev[:, 0])
+    out = {}
+    for j in np.flatnonzero(test & (n_ok > 0) & (singular | (h < K_PLANE * sv))):
+        tid = obs.target_ids[j]
+        if singular[j]:                        # numerically singular: rank < 3
+            out[tid] = COPLANAR_REASON
+        else:
+            out[tid] = (f"is undetermined: its lines of sight are coplanar within their uncertainty "
+                        f"(spread {h[j] * 1e3:.3g} mm along its weakest direction, {h[j] / sv[j]:.2g} times "
+                        f"its standard uncertainty {sv[j] * 1e3:.2g} mm there; {K_PLANE:g} times is needed)")
+    return out
+
+
+def raise_undetermined(obs: Observations, core: dict, skip=()) -> None:
+    """Raise :class:`UndeterminedTargets` for the targets of an adjustment (``core``: its points
+    ``sx``, ``tx`` and their indices ``smap``, ``tmap`` in ``obs``) that :func:`undetermined_targets`
+    finds, if any. When it finds every target tested, the network is flat, not one target weak: left
+    to the flat-network test (:func:`multilat.network.ambiguity.flat_network`), which names it."""
+    H = np.full((obs.n_stations, 3), np.nan)
+    T = np.full((obs.n_targets, 3), np.nan)
+    H[core["smap"]], T[core["tmap"]] = core["sx"], core["tx"]
+    found = undetermined_targets(obs, H, T, skip)
+    tested = {obs.target_ids[j] for j in np.asarray(core["tmap"])} - set(skip)
+    if found and not tested <= set(found):
+        raise UndeterminedTargets(found)
+
+
+def leaving_out_undetermined(run, *, strict: bool = False):
+    """``run(undetermined)`` (an adjustment leaving out the targets in the dict ``undetermined``) until
+    it no longer raises :class:`UndeterminedTargets`: each round adds the targets found and runs
+    again, at most :data:`MAX_UNDETERMINED_ROUNDS` rounds. The warnings of a round that found
+    undetermined targets are dropped (the next round gives its own, with the targets named as left
+    out). With ``strict`` the first undetermined target is refused (the error alone)."""
+    def replay(caught):     # at the caller of adjust(): replay < here < adjust < caller
+        for w in caught:
+            warnings.warn(w.message, w.category, stacklevel=4)
+
+    found: dict = {}
+    for _ in range(MAX_UNDETERMINED_ROUNDS):
+        error = None
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                res = run(dict(found))
+            except BaseException as e:      # noqa: BLE001 - re-raised below, after the warnings
+                error = e
+        if not isinstance(error, UndeterminedTargets):
+            replay(caught)
+        if error is None:
+            return res
+        if not isinstance(error, UndeterminedTargets):
+            raise error
+        new = {k: v for k, v in error.reasons.items() if k not in found}
+        if strict or not new:       # one line: the refusal (the round's warnings were about it)
+            tid, why = next(iter(error.reasons.items()))
+            tail = " (--strict: refused; without it, it would be left out)" if strict else ""
+            raise MultilatError(f"target {tid!r} {why}{tail}") from None
+        found.update(new)
+    raise MultilatError(f"undetermined targets still found after {MAX_UNDETERMINED_ROUNDS} rounds of "
+                        f"leaving them out ({', '.join(list(found)[:8])}...)")
 
 
 def zero_redundancy_warnings(obs: Observations, fixed_targets=()) -> list[str]:

@@ -232,12 +232,12 @@ def multilaterate_targets(station_xyz_m, offset_m, station_index, target_index, 
     rms = np.empty(t)
     status = np.zeros(t, np.int64)
     K.multilaterate(h, o, d, 1.0 / sig**2, si, tptr, side, int(iterations), float(flat_tol), x, rms, status)
-    if np.any(status == 2):
-        j = int(np.argmax(status == 2))
-        raise MultilatError(f"target {name(j)}: its stations are collinear (position undetermined)")
-    if np.any(status == 3):
-        j = int(np.argmax(status == 3))
-        raise MultilatError(f"target {name(j)}: its lines of sight are coplanar (position undetermined)")
+    if np.any(status >= 2):     # undetermined targets: named, left out by the adjustment (exclusion.py)
+        from multilat.network.exclusion import COPLANAR_REASON, UndeterminedTargets
+
+        why = {2: "is undetermined: its stations are collinear", 3: COPLANAR_REASON}
+        raise UndeterminedTargets({(target_ids[j] if target_ids is not None else f"index {j}"):
+                                   why[int(status[j])] for j in np.flatnonzero(status >= 2)})
     return x, rms, status == 1
 
 

@@ -118,10 +118,11 @@ def check_target_blocks(Ntt, problem: Problem) -> None:
         with np.errstate(invalid="ignore"):
             ev = np.linalg.eigvalsh(np.where(np.isfinite(blocks), blocks, 0.0))
         bad = ~(ev[:, 0] > 1e-10 * ev[:, 2])
-    if np.any(bad):
-        j = int(np.flatnonzero(tf)[np.flatnonzero(bad)[0]])
-        raise MultilatError(f"near-degenerate geometry: target {problem.obs.target_ids[j]!r} is not "
-                            "determined (its stations are (nearly) on one line through it)")
+    if np.any(bad):     # named and left out by the adjustment (exclusion.leaving_out_undetermined)
+        from multilat.network.exclusion import COPLANAR_REASON, UndeterminedTargets
+
+        raise UndeterminedTargets({problem.obs.target_ids[j]: COPLANAR_REASON
+                                   for j in np.flatnonzero(tf)[np.flatnonzero(bad)]})
 
 
 def _step_length_m(dg, dt, scale_len, do=None):
