@@ -32,7 +32,8 @@ def budget_command(
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Uncertainty of one distance measurement by Monte Carlo: telemetric, head and target groups
-    (and optionally air), pooled over 0.2 m to 20.2 m (seed paper section 3.4)."""
+    (and optionally air), pooled over the instrument's budget distances (the budget table of its TOML;
+    0.2 m to 20.2 m for seed2020, seed paper section 3.4)."""
     from multilat import budget as bmod
     from multilat.instrument import load_instrument
 
