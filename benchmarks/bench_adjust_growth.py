@@ -14,22 +14,13 @@ import os
 import tempfile
 from pathlib import Path
 
-import numpy as np
 
-from bench_cli_large import BASE_SRC, ROOT, SEED, _median_runs
+from bench_cli_large import BASE_SRC, ROOT, _median_runs, _write_csv
 from common import load_avg as _load
 
 
 def _write(t: int, path: Path) -> int:
-    from multilat.network.large import synthetic_network
-
-    net = synthetic_network(8, t, 7, rng=SEED)
-    s = np.char.add("S", net.station_index.astype(str))
-    tg = np.char.add("T", net.target_index.astype(str))
-    dd = np.char.mod("%.9f", net.distance_m)
-    body = np.char.add(np.char.add(np.char.add(np.char.add(np.char.add(s, ","), tg), ","), dd), ",5e-06")
-    path.write_text("station,target,distance_m,sigma_m\n" + "\n".join(body.tolist()) + "\n")
-    return len(body)
+    return _write_csv(t, path, stations=8, per_target=7)
 
 
 def run(quick: bool = False) -> list[dict]:

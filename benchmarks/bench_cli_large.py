@@ -40,10 +40,11 @@ MAX_TARGETS = int(os.environ.get("BENCH_NETWORK_MAX_TARGETS", "200000"))
 BASE_SRC = os.environ.get("BENCH_BASELINE_SRC")
 
 
-def _write_csv(t: int, path: Path) -> int:
+def _write_csv(t: int, path: Path, *, stations: int = 20, per_target: int = 8) -> int:
+    """``synthetic_network(stations, t, per_target)`` as an observation CSV (σ 5 µm); its row count."""
     from multilat.network.large import synthetic_network
 
-    net = synthetic_network(20, t, 8, rng=SEED)
+    net = synthetic_network(stations, t, per_target, rng=SEED)
     s = np.char.add("S", net.station_index.astype(str))
     tg = np.char.add("T", net.target_index.astype(str))
     dd = np.char.mod("%.9f", net.distance_m)

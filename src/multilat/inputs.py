@@ -21,6 +21,7 @@ everywhere with one line naming the file (``FILE:LINE`` where a line is at fault
 from __future__ import annotations
 
 import csv
+import math
 import os
 import re
 import stat as _stat
@@ -103,6 +104,18 @@ def hidden_character(text: str) -> str | None:
         return None
     ch = m.group()
     return f"U+{ord(ch):04X} ({unicodedata.name(ch, unicodedata.category(ch))})"
+
+
+def finite_number(text: str, where: str) -> float:
+    """``text`` as a finite float, or ``WHERE: not a number: 'x'`` / ``WHERE: must be finite, got 'nan'``:
+    the one check of a number read from any file (CSV cells, Star*Net tokens, Gama XML)."""
+    try:
+        v = float(text)
+    except ValueError:
+        raise MultilatError(f"{where}: not a number: {text!r}") from None
+    if not math.isfinite(v):
+        raise MultilatError(f"{where}: must be finite, got {text!r}")
+    return v
 
 
 def check_plain_text(text: str, where: str) -> str:
@@ -352,12 +365,7 @@ def number(path, line: int, name: str, s: str, *, positive: bool = False, nonneg
     within ``(lo, hi, text)`` if asked); an empty cell is NaN unless ``required``."""
     if s == "" and not required:
         return np.nan
-    try:
-        v = float(s)
-    except ValueError:
-        raise MultilatError(f"{path}:{line}: column '{name}': not a number: {s!r}") from None
-    if not np.isfinite(v):
-        raise MultilatError(f"{path}:{line}: column '{name}': must be finite, got {s!r}")
+    v = finite_number(s, f"{path}:{line}: column '{name}'")
     if positive and not v > 0:
         raise MultilatError(f"{path}:{line}: column '{name}': must be > 0, got {s!r}")
     if nonnegative and not v >= 0:

@@ -38,6 +38,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from multilat.network.large import refit_point
+
 __all__ = ["K_PLANE", "Ambiguous", "flat_network", "mirror_ambiguities", "plane_spread"]
 
 #: a point set is coplanar within its uncertainty when its RMS out-of-plane spread is below
@@ -128,26 +130,6 @@ def _candidate(nb_xyz, nb_cov):
         return None if nn == 0 else (c, n / nn)
     h, sn, c, n = plane_spread(nb_xyz, nb_cov)
     return (c, n) if _coplanar(h, sn, nb_xyz - c) else None
-
-
-def _refit_point(p0, nb, r, w, iterations: int = 20):
-    """Gauss-Newton on one point's position with its neighbours held: minimise sum w (r - |p - nb|)²;
-    returns (p, cost)."""
-    p = np.array(p0, float)
-    for _ in range(iterations):
-        v = p - nb
-        g = np.linalg.norm(v, axis=1)
-        a = v / g[:, None]
-        e = r - g
-        try:
-            step = np.linalg.solve((a * w[:, None]).T @ a, (a * w[:, None]).T @ e)
-        except np.linalg.LinAlgError:
-            break
-        p = p + step
-        if np.linalg.norm(step) < 1e-12:
-            break
-    e = r - np.linalg.norm(p - nb, axis=1)
-    return p, float(np.sum(w * e * e))
 
 
 def _signed_height(p, tri) -> float:
@@ -272,8 +254,8 @@ def _target_mirrors(res, si, ti, *, lambda0: float, unit: float, skip: set) -> l
         sr = si[rows]
         r = (d_all[rows] - res.offset_m[sr]) / (1.0 + res.scale[sr])
         w = w_all[rows] * (1.0 + res.scale[sr]) ** 2
-        p0, c0 = _refit_point(tx[j], sx[sr], r, w)
-        p1, c1 = _refit_point(_mirror(tx[j], c[j], n[j]), sx[sr], r, w)
+        p0, c0 = refit_point(tx[j], sx[sr], r, w)
+        p1, c1 = refit_point(_mirror(tx[j], c[j], n[j]), sx[sr], r, w)
         if not np.linalg.norm(p1 - p0) > k * sig_n[j]:
             continue
         delta = (c1 - c0) / unit

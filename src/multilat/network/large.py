@@ -273,26 +273,35 @@ def _refit_ambiguous(x, rms, flagged, station_xyz_m, offset_m, station_index, tp
         normal = np.linalg.svd(h - c)[2][-1]
         best = (np.inf, x[j])
         for start in (x[j], x[j] - 2.0 * np.dot(x[j] - c, normal) * normal):
-            p = start.astype(float).copy()
-            for _ in range(iterations):
-                v = p - h
-                g = np.linalg.norm(v, axis=1)
-                a = v / g[:, None]
-                e = r - g
-                n = (a * w[:, None]).T @ a
-                try:
-                    step = np.linalg.solve(n, (a * w[:, None]).T @ e)
-                except np.linalg.LinAlgError:
-                    break
-                p = p + step
-                if np.linalg.norm(step) < 1e-12:
-                    break
+            p, _ = refit_point(start, h, r, w, iterations)
             res = r - np.linalg.norm(p - h, axis=1)
             q = float(np.sqrt(np.mean(res**2)))
             if q < best[0]:
                 best = (q, p)
         rms[j], x[j] = best
     return x, rms
+
+
+def refit_point(p0, nb, r, w, iterations: int = 20):
+    """Gauss-Newton on one point's position with its neighbours ``nb`` (k, 3) held: minimise
+    ``sum w (r - |p - nb|)^2`` from ``p0``; stops on a step below 1e-12 m or a singular system.
+    Returns ``(p, cost)``. Used by the initial values' re-trial of doubtful targets here and by the
+    mirror test of :mod:`multilat.network.ambiguity`."""
+    p = np.array(p0, float)
+    for _ in range(iterations):
+        v = p - nb
+        g = np.linalg.norm(v, axis=1)
+        a = v / g[:, None]
+        e = r - g
+        try:
+            step = np.linalg.solve((a * w[:, None]).T @ a, (a * w[:, None]).T @ e)
+        except np.linalg.LinAlgError:
+            break
+        p = p + step
+        if np.linalg.norm(step) < 1e-12:
+            break
+    e = r - np.linalg.norm(p - nb, axis=1)
+    return p, float(np.sum(w * e * e))
 
 
 # ---------------------------------------------------------------------------------------------

@@ -34,6 +34,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.data import Points
+from multilat.inputs import finite_number
 from multilat.network.interop.common import parse_xml
 from multilat.network.interop.gama import GON_PER_RAD, _axes, _to_enu
 
@@ -176,14 +177,7 @@ class GamaAdjustment:
 
 def _float(path, node, what) -> float:
     """The text of ``node`` as a finite float (NaN and infinities refused, ``FILE:LINE``)."""
-    text = (node.text or "").strip()
-    try:
-        v = float(text)
-    except ValueError:
-        raise MultilatError(f"{path}:{node.line}: {what} {text!r} is not a number") from None
-    if not math.isfinite(v):
-        raise MultilatError(f"{path}:{node.line}: {what} is {text!r}, not a finite number")
-    return v
+    return finite_number((node.text or "").strip(), f"{path}:{node.line}: {what}")
 
 
 def _num(path, node, tag, *, integer=False):

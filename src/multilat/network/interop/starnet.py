@@ -35,6 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.inputs import finite_number
 from multilat.io import write_text_atomic
 from multilat.network.data import Observations, Points
 from multilat.network.interop.common import (SIGMA_DECIMALS, Network, apply_offsets, build_network,
@@ -122,13 +123,7 @@ def _option(path, n, word):
 
 
 def _num(path, n, tok, what):
-    try:
-        v = float(tok)
-    except ValueError:
-        raise MultilatError(f"{path}:{n}: {what}: not a number: {tok!r}") from None
-    if not math.isfinite(v):
-        raise MultilatError(f"{path}:{n}: {what}: must be finite, got {tok!r}")
-    return v
+    return finite_number(tok, f"{path}:{n}: {what}")
 
 
 @dataclass
