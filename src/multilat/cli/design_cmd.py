@@ -70,7 +70,7 @@ def design_cmd(
                                             help="Heads CSV (point,x_m,y_m,z_m): score this layout, no search."),
     seed: int = typer.Option(1, "--seed", help="Seed of the search."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Directory for design.json and the figures."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Directory for design.json and the figures."),
     simulate: int = typer.Option(0, "--simulate", min=0,
                                  help="Confirm the returned layout by a Monte Carlo of this many trials (propagate)."),
     noise: Optional[str] = typer.Option(None, "--noise",
