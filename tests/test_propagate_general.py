@@ -317,4 +317,4 @@ def test_cli_propagate_levelled(tmp_path, capsys):
     assert doc["solver"] == "batched-coupled" and doc["n_failed"] == 0
     assert main(["propagate", str(p), "--trials", "300", "--noise", "gaussian", "--levelled", "NOPE"]) != 0
     err = capsys.readouterr().err.strip()
-    assert "levelled: 'NOPE' is not a station" in err and len(err.splitlines()) == 1
+    assert "--levelled: unknown station 'NOPE'" in err and len(err.splitlines()) == 1   # as `adjust` says it

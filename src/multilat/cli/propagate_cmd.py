@@ -54,7 +54,7 @@ def load_problem(source: str, opts, *, noise: str | None, instrument: str | None
         src.update(ss.distance_model(cfg.station_ids, inst) if sigma is None else
                    ss.option(sigma, "--sigma-um" if sigma_um else "default 4.7 µm (the paper's σ)"))
         return pr.problem_from_config(cfg, sigma_m=sigma, instrument=inst, datum=opts.datum, source=source,
-                                      pairs=pair_list), noise
+                                      pairs=pair_list, pairs_option="--pairs"), noise
     from multilat.campaign.propagation import campaign_problem
     from multilat.campaign.raw import is_raw_file
     from multilat.cli.network_cmd import with_fixed_offsets

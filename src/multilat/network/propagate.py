@@ -133,7 +133,8 @@ def _heads_for(head_names, instrument, head: str | None):
 
 def problem_from_truth(station_ids, target_ids, station_index, target_index, sigma_m, station_xyz_m,
                        offset_m, target_xyz_m, *, datum="free", pairs=None, references=None,
-                       instrument=None, head: str | None = None, source: str = "") -> Problem:
+                       instrument=None, head: str | None = None, source: str = "",
+                       pairs_option: str = "interpoint distance") -> Problem:
     """A problem whose nominal distances are the exact distances of a known truth.
 
     With a ``321:A,B,C`` datum the truth is first expressed in that frame (A at the origin, B on +x,
@@ -156,7 +157,7 @@ def problem_from_truth(station_ids, target_ids, station_index, target_index, sig
         rot, shift = frame_321(x[a], x[b], x[c])
         h, tg = apply_rigid(rot, shift, h), apply_rigid(rot, shift, tg)
     net = bt.BatchedNetwork(station_index, target_index, sigma_m, h, offset_m, tg, datum=dt)
-    pairs_, ref = pairs_and_refs(pairs, references, target_ids, station_ids)
+    pairs_, ref = pairs_and_refs(pairs, references, target_ids, station_ids, pairs_option)
     return Problem(station_ids, target_ids, net, net.nominal_distance_m(),
                    _heads_for(station_ids, instrument, head), pairs_, ref, source, instrument=instrument)
 
@@ -283,7 +284,7 @@ def _coupled_network(obs, res, dat, scale_bars, points):
 
 
 def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pairs=None,
-                        source: str = "") -> Problem:
+                        source: str = "", pairs_option: str = "interpoint distance") -> Problem:
     """A problem from a built-in configuration (``network.configs.small_volume()`` etc.).
 
     Every station observes every target. ``sigma_m``: weights' standard uncertainty (scalar or (m,));
@@ -314,7 +315,7 @@ def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pai
     refs = getattr(cfg, "reference_lengths", None)
     return problem_from_truth(sid, tid, si, ti, sig, h, off, tg, datum=datum, pairs=pairs,
                               references=refs, instrument=instrument,
-                              source=source or getattr(cfg, "name", ""))
+                              source=source or getattr(cfg, "name", ""), pairs_option=pairs_option)
 
 
 # ---------------------------------------------------------------------------------------------
