@@ -35,7 +35,8 @@ from multilat.network.search import P_MIN, p_value
 from multilat.network.sigma_source import describe as describe_sigma
 from multilat.network.couplings import coupling_spec
 from multilat.network.angle_rows import angle_results
-from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, n_tested, snooping_round
+from multilat.network.snooping import (LINEAR_W_MAX, LinearRounds, Procedure, Rounds, angle_outliers, n_tested,
+                                       snooping_round)
 from multilat.network.scale_datum import check_scale_datum
 from multilat.network.starts import initial_for
 from multilat.network.unit_slip import check_unit_slip, noise_free
@@ -321,11 +322,12 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
                   np.where(off_free, start.offset_m, off_val))
     do_snoop = snooping and cost == "distance"
     used = np.ones(obs.n_obs, bool)
-    rejected: list[tuple[int, float]] = []
-    steps: list[dict] = []
+    rounds = Rounds()
+    rejected, steps, ang_rejected = rounds.rejected, rounds.steps, rounds.ang_rejected
     limit = obs.n_obs if max_rejections is None else int(max_rejections)
     crit = st.w_critical(alpha)
     unknown = variance_factor == "unknown"
+    proc = Procedure(do_snoop, limit, unknown, alpha, alpha_g, lam0, crit)
     warn = True
     guess = start
     unlocated: tuple = ()
@@ -334,7 +336,6 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
     search_ok = cost == "distance" and datum.kind != "control"
     search = None
     obs_w = obs                      # the observations with the rejected angles left out (σ NaN)
-    ang_rejected: list[dict] = []
     lin = None                       # rounds downdated since the last adjustment (large networks)
     refit = True
     while True:
@@ -380,8 +381,7 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
                                 sub.n_stations, sub.n_targets)
                    if do_snoop and not core.partial and LinearRounds.applies(core, sub, datum) else None)
         n_steps = len(steps)
-        go_on = snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop,
-                                unknown, alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec)
+        go_on = snooping_round(obs, obs_w, used, core, lin, rounds, proc, model)
         if lin is not None and lin.pending and go_on[0] == "stop":
             # the procedure would stop on downdated statistics: adjust again and decide on exact ones
             del steps[n_steps:]

@@ -37,7 +37,7 @@ full adjustment; only the statistics recorded for the intermediate rounds are th
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -47,7 +47,7 @@ from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
 from multilat.network.fit import check_network, control_ids, station_map
 from multilat.network.fit_state import Fit
 
-__all__ = ["LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers",
+__all__ = ["Procedure", "Rounds", "LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers",
            "n_tested"]
 
 #: networks with at least this many distances use the downdated rounds (smaller ones are re-adjusted
@@ -207,13 +207,41 @@ def n_tested(obs) -> int:
                                                                          obs.sigma_elevation_rad) if a is not None)
 
 
-def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop, unknown,
-                    alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec):
+@dataclass(frozen=True)
+class Procedure:
+    """The test procedure of the snooping rounds: whether to snoop, at most ``limit`` rejections, the
+    variance factor unknown (τ-test), the w-tests' ``alpha``, the levels ``alpha_g``
+    (:class:`multilat.network.statistics.TestLevels`), Baarda's ``lam0`` and the critical value ``crit``."""
+
+    do_snoop: bool
+    limit: int
+    unknown: bool
+    alpha: float
+    alpha_g: object
+    lam0: float
+    crit: float
+
+
+@dataclass
+class Rounds:
+    """What the rounds have done: one record per round (``steps``), the rejected distances
+    ``(k, w, statistic, critical, test)`` and the rejected angles (dicts), in order."""
+
+    steps: list = field(default_factory=list)
+    rejected: list = field(default_factory=list)
+    ang_rejected: list = field(default_factory=list)
+
+
+def snooping_round(obs, obs_w, used, core: Fit, lin, rounds: Rounds, proc: Procedure, model):
     """One round of detection, identification and adaptation on the last adjustment ``core`` (or its
-    downdate ``lin``). Appends the round to ``steps`` and a rejection to ``rejected`` /
-    ``ang_rejected``. Returns ``("stop", (unlocated, reason))``, ``("distance", new used mask)`` or
-    ``("angle", observations without the rejected angle)``."""
-    if not do_snoop or len(rejected) + len(ang_rejected) >= limit:
+    downdate ``lin``) of the network ``model`` (:class:`multilat.network.adjust.Model`: datum, points,
+    held offsets and scales, couplings). Appends the round to ``rounds.steps`` and a rejection to
+    ``rounds.rejected`` / ``rounds.ang_rejected``. Returns ``("stop", (unlocated, reason))``,
+    ``("distance", new used mask)`` or ``("angle", observations without the rejected angle)``."""
+    steps, rejected, ang_rejected = rounds.steps, rounds.rejected, rounds.ang_rejected
+    unknown, alpha, alpha_g, lam0, crit = proc.unknown, proc.alpha, proc.alpha_g, proc.lam0, proc.crit
+    datum, points = model.datum, model.points
+    if not proc.do_snoop or len(rejected) + len(ang_rejected) >= proc.limit:
         return "stop", ((), "")
     state = core if lin is None else lin.stats()
     to_global = np.flatnonzero(used) if lin is None else lin.gidx
@@ -260,8 +288,8 @@ def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, l
         return "stop", ((k,), why)
     if lin is None or not lin.keeps_structure(k_sub):
         try:
-            check_network(obs.subset(trial), datum, points, off_free[station_map(obs, trial)],
-                          sc_free[station_map(obs, trial)], warn=False, couplings=cspec)
+            check_network(obs.subset(trial), datum, points, model.off_free[station_map(obs, trial)],
+                          model.sc_free[station_map(obs, trial)], warn=False, couplings=model.couplings)
         except MultilatError as exc:
             # rejecting it would make the network unsolvable: keep it, report it as not rejected
             return "stop", ((k,), f"rejecting it would leave the network unsolvable ({exc})")
