@@ -60,14 +60,3 @@ class Fit:
     chunk_targets: int = 20000
     angles: dict | None = None
     coupled: dict | None = None
-
-    # the statistics of a snooping round read a fit and the downdated rounds' dict alike
-    # (:func:`multilat.network.snooping.detection_step`): item access by field name
-    def __getitem__(self, key: str):
-        try:
-            return getattr(self, key)
-        except AttributeError:
-            raise KeyError(key) from None
-
-    def get(self, key: str, default=None):
-        return getattr(self, key, default)
