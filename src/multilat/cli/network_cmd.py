@@ -60,8 +60,8 @@ def parse_fixed_offsets(text: str, station_ids, *, what: str = "station") -> flo
     """``--fix-offsets-um``: ``"X"`` (every head, µm) -> metres; ``"A=1234,B=-871"`` -> {head id: metres}.
 
     ``station_ids`` are the ids that may be named (the head ids; a head is its station when the
-    observations name no heads; None: not checked here). Raises :class:`MultilatError` (one line) on a malformed value or an
-    unknown id.
+    observations name no heads; None: not checked here). Raises :class:`MultilatError` (one line) on a
+    malformed value or an unknown id.
     """
     text = text.strip()
     if "=" not in text:

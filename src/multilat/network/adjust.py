@@ -248,19 +248,25 @@ def adjust(obs: Observations, options: NetworkOptions | None = None, *, initial=
     return leaving_out_undetermined(once, strict=opts.strict)
 
 
-def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, sigma_source, rng,
-            undetermined) -> AdjustmentResult:
-    """:func:`adjust` with the options validated and the undetermined targets of the earlier tries."""
-    cost, alpha, power, alpha_family = opts.cost, opts.alpha, opts.power, opts.alpha_family
-    test_method, alpha_global = opts.test_method_resolved, opts.alpha_global_resolved
-    variance_factor, mdb_limit_sigma, r_min = opts.variance_factor, opts.mdb_limit_sigma, opts.r_min
-    snooping, max_rejections, strict = opts.snooping, opts.max_rejections, opts.strict
-    # the tests' levels (alpha_g(dof): the global test's); alpha is from here on the w-tests' (Šidák's)
-    alpha_g = st.test_levels(n_tested(obs), alpha0=alpha, power=power, method=test_method,
-                             alpha_global=alpha_global, alpha_family=alpha_family)
-    alpha = alpha_g.alpha0
-    # MDBs: Baarda's reference at the given alpha0 (as the design's); the w-tests' own: tests.lambda0_w
-    lam0 = st.noncentrality(alpha_g.alpha0_given, power)
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """An adjustment before its first solve: the observations kept (weak points left out, named in
+    ``excluded``), the network ``model``, the ``start`` and how it was found (``how``), the warnings so
+    far (``notes``) and the control points (``ctrl``)."""
+
+    obs: Observations
+    model: Model
+    start: Start
+    how: dict
+    excluded: tuple
+    notes: list
+    ctrl: set
+
+
+def _prepare(obs: Observations, opts: NetworkOptions, *, initial, points, bars, rng, undetermined) -> Prepared:
+    """The options resolved against ``obs`` (held offsets, scales, datum, couplings), weak points left
+    out, the network checked and the initial values: everything before the first solve."""
+    cost, strict = opts.cost, opts.strict
     datum = parse_datum(opts.datum)
     if bars is not None and cost != "distance":
         raise MultilatError("scale bars need the distance cost (weighted observations)")
@@ -320,6 +326,28 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
         raise_if_flat(obs, start.station_xyz_m, start.target_xyz_m, "initial coordinates")
     start = Start(start.station_xyz_m, start.target_xyz_m,
                   np.where(off_free, start.offset_m, off_val))
+    return Prepared(obs, model, start, how, excluded, notes, ctrl)
+
+
+def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, sigma_source, rng,
+            undetermined) -> AdjustmentResult:
+    """:func:`adjust` with the options validated and the undetermined targets of the earlier tries."""
+    cost, alpha, power, alpha_family = opts.cost, opts.alpha, opts.power, opts.alpha_family
+    test_method, alpha_global = opts.test_method_resolved, opts.alpha_global_resolved
+    variance_factor, mdb_limit_sigma, r_min = opts.variance_factor, opts.mdb_limit_sigma, opts.r_min
+    snooping, max_rejections, strict = opts.snooping, opts.max_rejections, opts.strict
+    # the tests' levels (alpha_g(dof): the global test's); alpha is from here on the w-tests' (Šidák's)
+    alpha_g = st.test_levels(n_tested(obs), alpha0=alpha, power=power, method=test_method,
+                             alpha_global=alpha_global, alpha_family=alpha_family)
+    alpha = alpha_g.alpha0
+    # MDBs: Baarda's reference at the given alpha0 (as the design's); the w-tests' own: tests.lambda0_w
+    lam0 = st.noncentrality(alpha_g.alpha0_given, power)
+    prep = _prepare(obs, opts, initial=initial, points=points, bars=bars, rng=rng, undetermined=undetermined)
+    obs, model, start, how, excluded, notes, ctrl = (prep.obs, prep.model, prep.start, prep.how, prep.excluded,
+                                                     prep.notes, prep.ctrl)
+    datum, off_free, off_val, sc_free = model.datum, model.off_free, model.off_val, model.sc_free
+    cspec = model.couplings
+    n_bars = 0 if cspec is None else len(cspec.bars)
     do_snoop = snooping and cost == "distance"
     used = np.ones(obs.n_obs, bool)
     rounds = Rounds()

@@ -47,7 +47,8 @@ from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
 from multilat.network.fit import check_network, control_ids, station_map
 from multilat.network.fit_state import Fit
 
-__all__ = ["Procedure", "Rounds", "LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers",
+__all__ = ["Procedure", "Rounds",
+           "LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers",
            "n_tested"]
 
 #: networks with at least this many distances use the downdated rounds (smaller ones are re-adjusted
