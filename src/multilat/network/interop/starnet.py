@@ -21,15 +21,15 @@ approximate coordinates (their σ ignored, a note). Other data types (``A``, ``V
 and levelling modes, ``.DELTA ON`` (horizontal distances), non-zero HI/HT and inline options that
 would change distances in ways multilat does not model are refused with the line and type named.
 
-A ``.dat`` file has no additive constant per instrument: fixed offsets are subtracted and recorded
-as ``# multilat-offsets-m: ..`` (restored by the reader); offsets to be estimated are refused.
+A ``.dat`` file has no additive constant per instrument: fixed offsets (and estimated scales) are
+divided out, ``(d - o) / (1 + k)``, and recorded with the heads as the comments
+``# multilat-offsets-m: S1=..``, ``# multilat-heads: S1=T1 ..``, ``# multilat-scales: T1=..``, which
+the reader restores (docs/interop.md); offsets to be estimated are refused.
 Star*Net needs a datum (fixed or weighted control): give the points to hold fixed.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,12 +38,12 @@ from multilat.errors import MultilatError
 from multilat.inputs import finite_number
 from multilat.io import write_text_atomic
 from multilat.network.data import Observations, Points
-from multilat.network.interop.common import (SIGMA_DECIMALS, Network, apply_offsets, build_network,
-                                              check_ids, fmt_m, read_text, restore_offsets)
+from multilat.network.interop.common import (SIGMA_DECIMALS, ModelTags, Network, apply_offsets, build_network,
+                                              check_ids, fmt_m, model_lines, read_text, refuse_weighted_points,
+                                              restore_model)
 
 __all__ = ["starnet_text", "write_starnet", "read_starnet"]
 
-_OFFSETS_TAG = "# multilat-offsets-m:"
 _US_FOOT = 1200.0 / 3937.0
 #: data codes multilat does not read, with what they are (refused, named)
 _CODES = {"A": "horizontal angles", "V": "vertical observations", "B": "bearings/azimuths",
@@ -69,21 +69,21 @@ _INLINE_HARMLESS = ("COPY", "ELLIPSE", "RELATIVE", "PTOLERANCE", "LONGITUDE", "R
                     "ELEVATION")
 
 
-def starnet_text(obs: Observations, points: Points | None, *, offsets=None, fixed=()) -> str:
-    """The ``.dat`` text (see the module docstring). ``offsets``: fixed values subtracted from
-    the distances (required: Star*Net has no per-instrument additive constant); ``fixed``: point
-    ids written with ``! ! !``, the others ``* * *``."""
+def starnet_text(obs: Observations, points: Points | None, *, offsets=None, fixed=(), scales=None) -> str:
+    """The ``.dat`` text (see the module docstring). ``offsets``: fixed values (a number, or by
+    head or station) subtracted from the distances (required: Star*Net has no per-instrument
+    additive constant); ``scales``: fixed head scales divided out; ``fixed``: point ids written with
+    ``! ! !``, the others ``* * *``. Heads, offsets and scales are recorded in comments."""
     check_ids(obs, points, "starnet", forbid="-")
-    corrected, notes = apply_offsets(obs, offsets, "Star*Net")
+    refuse_weighted_points(points, "starnet")
+    corrected, notes = apply_offsets(obs, offsets, "Star*Net", scales)
     fixed = set(fixed)
     ids = list(obs.station_ids) + list(obs.target_ids)
     for f in fixed:
         if f not in ids:
             raise MultilatError(f"starnet: fixed point {f!r} is in no observation")
-    o = [offsets[s] if isinstance(offsets, Mapping) else float(offsets) for s in obs.station_ids]
     out = ["# multilat network: slope distances for STAR*NET (3D), metres",
-           _OFFSETS_TAG + " " + " ".join(f"{s}={fmt_m(v, 10)}" for s, v in zip(obs.station_ids, o)),
-           *("# " + n for n in notes)]
+           *("# " + t for t in model_lines(obs, offsets, scales, "starnet")), *("# " + n for n in notes)]
     if not fixed:
         out.append("# no point is fixed: Star*Net needs a datum; fix or weight control before "
                    "adjusting")
@@ -181,17 +181,10 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
     """Read a Star*Net ``.dat``: ``C`` (coordinates) and ``D`` (slope distances) lines. ``sigma_m``:
     σ for ``D`` lines without a standard error (or with ``&``, the default)."""
     st = _Options()
-    declared, coords, fixed, rows, notes, offsets = {}, {}, [], [], [], None
+    declared, coords, fixed, rows, notes, tags = {}, {}, [], [], [], ModelTags()
     weighted = 0
     for n, raw in enumerate(read_text(path).splitlines(), 1):
-        if raw.strip().startswith(_OFFSETS_TAG):
-            offsets = {}
-            for item in raw.strip()[len(_OFFSETS_TAG):].split():
-                key, s_, val = item.partition("=")
-                v = _num(path, n, val, f"offset {key!r}") if s_ else math.nan
-                if not key or not math.isfinite(v):
-                    raise MultilatError(f"{path}:{n}: offsets item {item!r} is not ID=metres")
-                offsets[key] = v
+        if raw.strip().startswith("#") and tags.read(f"{path}:{n}", raw.strip()[1:].strip()):
             continue
         line = raw.split("#", 1)[0].split("'", 1)[0].strip()
         if not line:
@@ -259,5 +252,5 @@ def read_starnet(path, *, sigma_m: float | None = None) -> Network:
                                 "distances) only")
     if weighted:
         notes.append(f"{weighted} C line(s) with numeric σ read as approximate coordinates (σ ignored)")
-    rows = restore_offsets(path, rows, offsets, notes)
-    return build_network(path, rows, declared, coords, fixed, notes, "Star*Net (C line)")
+    rows, heads = restore_model(path, rows, tags, notes)
+    return build_network(path, rows, declared, coords, fixed, notes, "Star*Net (C line)", heads)
