@@ -102,7 +102,8 @@ def apply_offsets(obs: Observations, offsets, fmt: str, scales=None) -> tuple[Ob
     ``(d - o) / (1 + k)``; the σ stay as given. Returns the corrected observations and one note
     line per station."""
     if offsets is None or (isinstance(offsets, str) and offsets == "estimate"):
-        raise MultilatError(f"{fmt} has no additive constant per instrument, so the offsets cannot "
+        what = f"the offsets of heads {', '.join(obs.head_ids)}" if obs.station_heads is not None else "the offsets"
+        raise MultilatError(f"{fmt} has no additive constant per instrument, so {what} cannot "
                             "be estimated there: give them fixed (--offsets-um A=..,B=.. or "
                             "--result DIR of `multilat adjust --out`) to export the distances "
                             "corrected by them")
