@@ -22,6 +22,7 @@ Refusals are one line naming the head or station and the format, exit 2, nothing
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -41,12 +42,12 @@ EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 SEQ = EX / "sequential" / "obs.csv"
 MIX = EX / "mixed" / "obs.csv"
 E_ROUND = 5.1e-9      # half a unit of 8 decimals of a metre, plus half a unit of the offsets' 10 decimals
+E_ANGLE = 2.5e-12     # half a unit of the angles: 1e-6" of arc (Star*Net d-m-s); 12 decimals of gon: 8e-15 rad
 SOLVER = 1e-9         # the same numbers adjusted twice (Gauss-Newton to convergence)
+_ANGLES = ("azimuth_rad", "elevation_rad", "sigma_azimuth_rad", "sigma_elevation_rad")
 
 
 def _levelled(obs, ids):
-    import dataclasses
-
     return dataclasses.replace(obs, levelled=tuple(ids))
 
 
@@ -98,8 +99,10 @@ def _check(obs, res, net):
     np.testing.assert_allclose(got.sigma_m[order], obs.sigma_m, rtol=0, atol=1e-10)   # σ: 10 decimals of m
     back = adjust(got, points=net.points, solver="dense")
     assert back.dof == res.dof
-    # the same numbers in the original model: equal to solver precision
-    same = adjust(obs.with_distances(d_file), points=net.points, solver="dense")
+    # the same numbers (the file's distances and angles) in the original model: equal to solver precision
+    same = adjust(dataclasses.replace(obs, distance_m=d_file, **{
+        a: None if getattr(got, a) is None else getattr(got, a)[order] for a in _ANGLES}),
+        points=net.points, solver="dense")
     assert same.dof == back.dof and abs(back.sigma0 / same.sigma0 - 1) < SOLVER
     a, b = _per_head(back, back.offset_m), _per_head(same, same.offset_m)
     assert all(abs(a[h] - b[h]) < SOLVER * 1e-3 for h in a), (a, b)
@@ -113,6 +116,8 @@ def _check(obs, res, net):
     np.testing.assert_allclose(list(_per_head(back, back.offset_std_m).values()), list(u.values()), rtol=1e-6)
     v, sg = res.residuals_m, obs.sigma_m
     d_vpv = 2 * E_ROUND * np.sum(np.abs(v) / sg**2) + m * E_ROUND**2 / s_min**2
+    va, sa = (np.array([a[k] for a in res.angles]) for k in ("residual_rad", "sigma_rad"))
+    d_vpv += 2 * E_ANGLE * np.sum(np.abs(va) / sa**2) + va.size * E_ANGLE**2 / min(sa, default=1.0)**2
     assert abs(back.sigma0**2 * back.dof - res.sigma0**2 * res.dof) <= d_vpv
     return back
 
@@ -125,22 +130,20 @@ def test_sequential_round_trip_keeps_heads_dof_and_offsets(fmt, seq, tmp_path):
     assert back.dof == 42
 
 
-def test_mixed_round_trip_through_gama_keeps_levelled_trackers(mixed, tmp_path):
+@pytest.mark.parametrize("fmt", ["gama", "jag3d", "starnet"])
+def test_mixed_round_trip_keeps_levelled_trackers_and_their_angles(fmt, mixed, tmp_path):
     obs, res = mixed
-    back = _check(obs, res, _round_trip("gama", obs, res, tmp_path))
-    assert back.dof == res.dof and len(back.obs.head_ids) == 6
-
-
-@pytest.mark.parametrize("fmt", ["jag3d", "starnet"])
-def test_mixed_distances_round_trip(fmt, tmp_path):
-    """JAG3D and Star*Net carry the mixed example's distances (its angles are refused below)."""
-    full = read_observations(MIX)
-    obs = full.with_angle_sigma(None, None)
-    import dataclasses
-
-    obs = dataclasses.replace(obs, azimuth_rad=None, elevation_rad=None)
-    res = adjust(obs, solver="dense")
-    _check(obs, res, _round_trip(fmt, obs, res, tmp_path))
+    net = _round_trip(fmt, obs, res, tmp_path)
+    back = _check(obs, res, net)
+    assert back.dof == res.dof == 47 and len(back.obs.head_ids) == 6
+    got, row = net.obs, {net.obs.label(k): k for k in range(net.obs.n_obs)}
+    order = np.array([row[obs.label(k)] for k in range(obs.n_obs)])
+    for name in ("sigma_azimuth_rad", "sigma_elevation_rad"):     # σ written to 1e-15 gon / 1e-9"
+        np.testing.assert_allclose(getattr(got, name)[order], getattr(obs, name), rtol=1e-9, atol=0)
+    has = np.isfinite(obs.sigma_azimuth_rad)
+    da = (got.azimuth_rad[order] - obs.azimuth_rad + np.pi) % (2 * np.pi) - np.pi
+    assert np.max(np.abs(da[has])) < 3e-11                         # 12 decimals of gon, 1e-6" of arc
+    np.testing.assert_allclose(got.elevation_rad[order][has], obs.elevation_rad[has], rtol=0, atol=3e-11)
 
 
 def test_jag3d_writes_one_group_file_per_head(seq, tmp_path):
@@ -211,21 +214,13 @@ def test_two_offsets_for_one_head_refused(capsys, tmp_path, seq):
     assert not (tmp_path / "x.xml").exists()
 
 
-@pytest.mark.parametrize("fmt", ["jag3d", "starnet"])
-def test_angles_refused_naming_the_format(capsys, tmp_path, fmt):
+@pytest.mark.parametrize("fmt", ["gama", "jag3d", "starnet"])
+def test_unlevelled_tracker_angles_refused_naming_station_and_format(capsys, tmp_path, fmt):
     out = tmp_path / "n.out"
     rc, _, err = _run(capsys, ["export", fmt, MIX, "--points", EX / "mixed" / "truth.csv", "-o", out,
                                "--offsets-um", "0"])
-    _one_line_error(rc, err, f"cannot be exported to {fmt}")
+    _one_line_error(rc, err, f"{fmt}: station 'AT1' reads angles", "not levelled", "--levelled AT1")
     assert not list(tmp_path.iterdir())
-
-
-def test_unlevelled_tracker_angles_refused_for_gama(capsys, tmp_path):
-    out = tmp_path / "n.xml"
-    rc, _, err = _run(capsys, ["export", "gama", MIX, "--points", EX / "mixed" / "truth.csv", "-o", out,
-                               "--offsets-um", "0"])
-    _one_line_error(rc, err, "station 'AT1'", "not levelled")
-    assert not out.exists()
 
 
 @pytest.mark.parametrize("fmt", ["gama", "jag3d", "starnet"])
@@ -245,8 +240,6 @@ def test_weighted_control_refused_naming_the_point(capsys, tmp_path, fmt):
 
 
 def test_jag3d_head_id_that_cannot_name_a_file_refused(seq, tmp_path):
-    import dataclasses
-
     obs, res = seq
     bad = dataclasses.replace(obs, station_heads=tuple("T/1" if h == "T1" else h for h in obs.head_of_station))
     with pytest.raises(MultilatError, match=r"jag3d: head id 'T/1' cannot name a file"):

@@ -47,9 +47,9 @@ def export_command(
                                       "points; starnet: none (Star*Net then needs a datum)."),
     sigma_um: Optional[float] = typer.Option(None, "--sigma-um", help="σ of every distance, µm, "
                                              "when the CSV has no sigma_m column."),
-    levelled: Optional[str] = typer.Option(None, "--levelled", help="Stations on their level (gama: "
-                                           "their angles become directions and zenith angles; "
-                                           "gama-local's angles need levelled stations): ID,ID,..."),
+    levelled: Optional[str] = typer.Option(None, "--levelled", help="Stations on their level: their "
+                                           "angles become directions (one orientation) and zenith angles; "
+                                           "the three formats' angles need levelled stations: ID,ID,..."),
     as_json: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
 ) -> None:
     """Write the network for GNU Gama, JAG3D or Star*Net. What a format cannot carry (a per-station
@@ -65,9 +65,6 @@ def export_command(
         raise MultilatError("give --points or --result, not both")
     obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6)
     obs = with_levelled(obs, levelled)
-    if obs.has_angle_observations and fmt != "gama":
-        raise MultilatError(f"{observations}: angle observations cannot be exported to {fmt} yet (gama "
-                            "takes them from levelled stations); drop the angle columns to export the distances")
     offsets, scales = None, None
     pts = read_points(points) if points is not None else None
     if result is not None:
@@ -95,11 +92,10 @@ def export_command(
         if fixed:
             raise MultilatError("--fix: JAG3D's point type (reference/datum/new) is chosen on its "
                                 "import, not in the file")
-        from multilat.network.interop.jag3d import head_file
+        from multilat.network.interop.jag3d import jag3d_files
 
         p_out = out.with_name(out.stem + "-points" + (out.suffix or ".txt"))
-        d_out = [out] if obs.station_heads is None else [head_file(out, h) for h in obs.head_ids]
-        for w in [*d_out, p_out]:
+        for w in [*jag3d_files(out, obs), p_out]:
             check_not_input(w, inputs)
         written = write_jag3d(p_out, out, obs, pts, offsets=offsets, scales=scales) + [p_out]
     else:

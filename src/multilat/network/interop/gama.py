@@ -45,6 +45,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.io import write_text_atomic
 from multilat.network.data import Observations, Points
+from multilat.network.interop.angles import angle_sigmas, join_angles
 from multilat.network.interop.common import (ModelTags, Network, apply_offsets, build_network, check_ids, fmt_m,
                                               model_lines, parse_xml, refuse_weighted_points, restore_model,
                                               xml_escape, xml_float)
@@ -123,7 +124,7 @@ def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=()
         flag = 'fix="XYZ"' if i in fixed else 'adj="XYZ"'
         out.append(f'<point id="{xml_escape(i)}" x="{fmt_m(x)}" y="{fmt_m(y)}" z="{fmt_m(z)}" {flag} />')
     d, sig = corrected.distance_m, corrected.sigma_m
-    sa, se = _angle_sigmas(obs)
+    sa, se = angle_sigmas(obs, "gama", "gama-local")
     for si, sid in enumerate(obs.station_ids):
         ks = np.flatnonzero(obs.station_index == si)
         out.append(f'<obs from="{xml_escape(sid)}">')
@@ -154,23 +155,6 @@ def _gon(a_rad: float) -> str:
 
 def _cc(s_rad: float) -> str:
     return f"{float(s_rad) * GON_PER_RAD * 1e4:.9f}"      # 1e-9 cc = 1.6e-15 rad
-
-
-def _angle_sigmas(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
-    """The σ of the azimuths and elevations that are observations (NaN elsewhere); an angle on a
-    station that is not levelled is refused: gama-local's directions and zenith angles are read
-    from a levelled instrument (one orientation unknown per station, the vertical known)."""
-    nan = np.full(obs.n_obs, np.nan)
-    sa = nan if obs.sigma_azimuth_rad is None else np.asarray(obs.sigma_azimuth_rad, float)
-    se = nan if obs.sigma_elevation_rad is None else np.asarray(obs.sigma_elevation_rad, float)
-    has = np.isfinite(sa) | np.isfinite(se)
-    for k in np.flatnonzero(has):
-        sid = obs.station_ids[obs.station_index[k]]
-        if sid not in obs.levelled:
-            raise MultilatError(f"gama: station {sid!r} reads angles (observation {obs.label(int(k))}) but is "
-                                "not levelled: gama-local's directions and zenith angles need a levelled "
-                                f"instrument (declare it with --levelled {sid}, or drop its angle columns)")
-    return sa, se
 
 
 def write_gama_local(path, obs: Observations, points: Points, **kw) -> None:
@@ -269,7 +253,7 @@ def read_gama_local(path) -> Network:
                      "them on directions")
     rows, heads = restore_model(path, rows, tags, notes)
     network = build_network(path, rows, declared, coords, fixed, notes, "Gama", heads)
-    return _with_angles(path, network, arows) if arows else network
+    return join_angles(path, network, arows) if arows else network
 
 
 def _network(path, root):
@@ -344,34 +328,6 @@ def _read_angle(path, o, obs_el, default_sd, sense, dir_sets):
     if not 0.0 <= val <= math.pi:
         raise MultilatError(f"{path}:{o.line}: <z-angle> {s}->{t} val is outside 0..200 gon")
     return (o.line, s, t, "elevation", math.pi / 2 - val, sigma)
-
-
-def _with_angles(path, network: Network, arows) -> Network:
-    """The network's observations with the angles joined to the slope distances of their rows."""
-    obs = network.obs
-    row = {obs.label(k): k for k in range(obs.n_obs)}
-    n = obs.n_obs
-    val = {"azimuth": np.full(n, np.nan), "elevation": np.full(n, np.nan)}
-    sig = {"azimuth": np.full(n, np.nan), "elevation": np.full(n, np.nan)}
-    seen = {}
-    for line, s, t, kind, v, sg in arows:
-        k = row.get(f"{s}->{t}")
-        if k is None:
-            raise MultilatError(f"{path}:{line}: {'direction' if kind == 'azimuth' else 'zenith angle'} {s}->{t} "
-                                "has no slope distance: multilat's observation rows are distances with "
-                                "optional angles")
-        if (k, kind) in seen:
-            raise MultilatError(f"{path}:{line}: a second {kind} {s}->{t} (the first at line {seen[(k, kind)]})")
-        seen[(k, kind)] = line
-        val[kind][k], sig[kind][k] = v, sg
-    # an azimuth without an elevation (or the reverse) on a row: the other stays an empty cell
-    levelled = tuple(dict.fromkeys(s for _, s, _, _, _, _ in arows))
-    angles = Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
-                          obs.sigma_m, val["azimuth"], val["elevation"], obs.station_heads, sig["azimuth"],
-                          sig["elevation"], levelled)
-    note = (f"{int(np.isfinite(sig['azimuth']).sum())} directions and {int(np.isfinite(sig['elevation']).sum())} "
-            f"zenith angles read as azimuths and elevations; levelled stations: {', '.join(levelled)}")
-    return Network(angles, network.points, network.fixed, network.notes + (note,))
 
 
 def _refuse(path, el):

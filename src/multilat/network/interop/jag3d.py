@@ -50,11 +50,12 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.io import write_text_atomic
 from multilat.network.data import Observations, Points
+from multilat.network.interop.angles import angle_sigmas, join_angles
 from multilat.network.interop.common import (SIGMA_DECIMALS, ModelTags, Network, apply_offsets, build_network,
                                               OFFSETS_TAG, SCALES_TAG, check_ids, fmt_m, read_text,
                                               refuse_weighted_points, restore_model, station_values)
 
-__all__ = ["jag3d_texts", "write_jag3d", "read_jag3d", "head_file"]
+__all__ = ["jag3d_texts", "write_jag3d", "read_jag3d", "head_file", "jag3d_files"]
 
 #: the comment naming the head (one JAG3D observation group) whose distances a file holds
 HEAD_TAG = "multilat-head:"
@@ -96,11 +97,56 @@ def jag3d_texts(obs: Observations, points: Points | None, *, offsets=None, scale
         st = [i for i in range(obs.n_stations) if head is None or obs.head_index[i] == hi]
         texts[head] = "\n".join(_head_header(obs, head, st, estimate, scales, offsets, notes)
                                 + _distance_lines(obs, corrected, st)) + "\n"
+    for key, text in _angle_texts(obs).items():
+        if key in texts:
+            raise MultilatError(f"jag3d: head {key!r} and the angle file of that name would be one file: rename the head")
+        texts[key] = text
     pts = ["# multilat points: NAME Y X Z = multilat x y z (east, north, up), metres"]
     if points is not None:
         for i, xyz in zip(points.ids, points.xyz_m):
             pts.append(f"{i} {fmt_m(xyz[0])} {fmt_m(xyz[1])} {fmt_m(xyz[2])}")
     return "\n".join(pts) + "\n", texts
+
+
+#: the comment naming the observation type of a file (JAG3D's import dialog asks for it; the file
+#: does not say): slope distances when absent
+TYPE_TAG = "multilat-observations:"
+_TYPES = ("slope distances", "directions", "zenith angles")
+
+
+def _angle_texts(obs: Observations) -> dict:
+    """The angle files: ``directions-S`` per levelled station (one JAG3D direction group = one
+    orientation unknown = the station's heading) and ``zenith-angles`` (one group, refraction off).
+    Values and σ in gon (JAG3D's default angle unit; its reader takes a σ < 1 as a σ); directions
+    clockwise, ``-azimuth``; zenith = 100 gon - elevation."""
+    sa, se = angle_sigmas(obs, "jag3d", "JAG3D")
+    out, zen = {}, []
+    for si, sid in enumerate(obs.station_ids):
+        ks = [k for k in np.flatnonzero(obs.station_index == si)]
+        rows = [f"{sid} {obs.target_ids[obs.target_index[k]]} {_gon((-obs.azimuth_rad[k]) % (2 * math.pi))} "
+                f"{_gon(sa[k], 15)}" for k in ks if np.isfinite(sa[k])]
+        zen += [f"{sid} {obs.target_ids[obs.target_index[k]]} {_gon(math.pi / 2 - obs.elevation_rad[k])} "
+                f"{_gon(se[k], 15)}" for k in ks if np.isfinite(se[k])]
+        if rows:
+            if not _FILE_SAFE.match(sid):
+                raise MultilatError(f"jag3d: station id {sid!r} cannot name its directions file: use letters, "
+                                    "digits, '.', '_', '+', '-'")
+            out[f"directions-{sid}"] = "\n".join([
+                f"# multilat network: horizontal directions of the levelled station {sid} for JAG3D (gon)",
+                f"# {TYPE_TAG} directions",
+                "# import this file as ONE group of directions (one orientation = the station's heading); "
+                "JAG3D's angle unit gon, directions clockwise", *rows]) + "\n"
+    if zen:
+        out["zenith-angles"] = "\n".join([
+            "# multilat network: zenith angles of the levelled stations for JAG3D (gon)",
+            f"# {TYPE_TAG} zenith angles",
+            "# import this file as ONE group of zenith angles, refraction coefficient off; JAG3D's angle unit gon",
+            *zen]) + "\n"
+    return out
+
+
+def _gon(a_rad: float, decimals: int = 12) -> str:
+    return f"{float(a_rad) * 200.0 / math.pi:.{decimals}f}"      # 1e-12 gon = 1.6e-14 rad
 
 
 def _head_header(obs, head, st, estimate, scales, offsets, notes) -> list[str]:
@@ -147,9 +193,21 @@ def _distance_lines(obs, corrected, st) -> list[str]:
     return lines
 
 
+def jag3d_files(obs_path, obs: Observations) -> list[Path]:
+    """The files :func:`write_jag3d` writes for ``obs`` besides the points file: the distances
+    (``obs_path``, or one :func:`head_file` per head), the directions of each levelled station
+    (``OUT-directions-S``) and the zenith angles (``OUT-zenith-angles``)."""
+    keys = list(obs.head_ids) if obs.station_heads is not None else [None]
+    for v, key in ((obs.sigma_azimuth_rad, "directions-"), (obs.sigma_elevation_rad, "zenith-angles")):
+        has = np.zeros(obs.n_obs, bool) if v is None else np.isfinite(np.asarray(v, float))
+        stations = dict.fromkeys(obs.station_ids[i] for i in obs.station_index[has])
+        keys += [key + s for s in stations] if key.endswith("-") else ([key] if stations else [])
+    return [Path(obs_path) if k is None else head_file(obs_path, k) for k in keys]
+
+
 def write_jag3d(points_path, obs_path, obs: Observations, points: Points | None, **kw) -> list[Path]:
-    """Write the points file and the distances file(s) (each atomically): ``obs_path``, or with
-    heads over several stations one file per head (:func:`head_file`). Returns the distance files."""
+    """Write the points file and the observation files (each atomically; :func:`jag3d_files`).
+    Returns the observation files."""
     p, texts = jag3d_texts(obs, points, **kw)
     paths = {h: Path(obs_path) if h is None else head_file(obs_path, h) for h in texts}
     write_text_atomic(points_path, p)
@@ -171,15 +229,21 @@ def _number(path, n, tok, what, *, comma=False):
 
 
 def read_jag3d(points_path, obs_path, *, sigma_m: float | None = None) -> Network:
-    """Read JAG3D flat files: points (``NAME Y X Z [σ..]``) and slope distances (``obs_path``: one
-    file or a sequence of files, e.g. one per head). ``sigma_m``: σ for distances that have none in
-    the file (else an error naming the line). A file marked ``# multilat-head: T1`` holds the
-    distances of head T1 (one JAG3D group); the stations of an unmarked file are their own heads."""
+    """Read JAG3D flat files: points (``NAME Y X Z [σ..]``) and observations (``obs_path``: one file
+    or a sequence of files). A file is slope distances unless marked ``# multilat-observations:
+    directions`` (one group: one station, one orientation) or ``zenith angles`` (gon). A distances
+    file marked ``# multilat-head: T1`` holds head T1's distances (one JAG3D group); the stations of
+    an unmarked file are their own heads. ``sigma_m``: σ for distances without one (else an error
+    naming the line)."""
     coords, declared, notes = _read_points(points_path)
     paths = [obs_path] if isinstance(obs_path, (str, Path)) else list(obs_path)
-    rows, heads, where = [], {}, {}
+    rows, arows, heads, where, dir_file = [], [], {}, {}, {}
     for path in paths:
-        f_rows, f_heads = _read_distances(path, sigma_m, notes)
+        kind, f_rows, f_heads = _read_file(path, sigma_m, notes)
+        if kind != "slope distances":
+            _check_angle_file(path, kind, f_rows, dir_file)
+            arows += [(f"{path}:{n}", *rest) for n, *rest in f_rows]
+            continue
         for r in f_rows:
             h = (f_heads or {}).get(r[1], r[1])
             if heads.setdefault(r[1], h) != h:
@@ -188,7 +252,24 @@ def read_jag3d(points_path, obs_path, *, sigma_m: float | None = None) -> Networ
             where.setdefault(r[1], path)
         rows += [(f"{path}:{n}", a, b, d, sg) for n, a, b, d, sg in f_rows]
     shared = any(h != s for s, h in heads.items())
-    return build_network(None, rows, declared, coords, (), notes, "JAG3D points", heads if shared else None)
+    network = build_network(None, rows, declared, coords, (), notes, "JAG3D points", heads if shared else None)
+    return join_angles(None, network, arows) if arows else network
+
+
+def _check_angle_file(path, kind, rows, dir_file) -> None:
+    """A directions file is one JAG3D group with one orientation: one station, in one file."""
+    if kind != "directions":
+        return
+    stations = list(dict.fromkeys(r[1] for r in rows))
+    if len(stations) > 1:
+        line = next(r[0] for r in rows if r[1] == stations[1])
+        raise MultilatError(f"{path}:{line}: directions from a second station {stations[1]!r} in one group (one "
+                            "orientation): multilat has one orientation per station; one file per station")
+    for s in stations:
+        if s in dir_file:
+            raise MultilatError(f"{path}: directions of station {s!r} in a second group (the first: {dir_file[s]}): "
+                                "two orientation unknowns; multilat has one per station")
+        dir_file[s] = path
 
 
 def _read_points(points_path):
@@ -215,10 +296,11 @@ def _read_points(points_path):
     return coords, declared, notes
 
 
-def _read_distances(obs_path, sigma_m, notes):
-    """The rows ``(line, from, to, d, σ)`` of one distances file, restored by its convention lines,
-    and its heads (station -> head; None when the file names no head)."""
-    rows, tags, head = [], ModelTags(), None
+def _read_file(obs_path, sigma_m, notes):
+    """The observation type of one file, its rows and its heads: slope distances ``(line, from, to,
+    d, σ)`` restored by the file's convention lines (heads: station -> head, or None), or angles
+    ``(line, from, to, "azimuth"|"elevation", rad, σ rad)``."""
+    rows, tags, head, kind = [], ModelTags(), None, "slope distances"
     for n, line in enumerate(read_text(obs_path).splitlines(), 1):
         s = line.strip()
         if s.startswith("#"):
@@ -228,18 +310,44 @@ def _read_distances(obs_path, sigma_m, notes):
                     raise MultilatError(f"{obs_path}:{n}: one '{HEAD_TAG} ID' line per file (one file = one "
                                         "JAG3D group = one head)")
                 head = body[len(HEAD_TAG):].strip()
+            elif body.startswith(TYPE_TAG):
+                kind = body[len(TYPE_TAG):].strip()
+                if kind not in _TYPES or rows:
+                    raise MultilatError(f"{obs_path}:{n}: {TYPE_TAG} {kind!r}: expected one of "
+                                        f"{', '.join(_TYPES)}, before the first observation")
             else:
                 tags.read(f"{obs_path}:{n}", body)
             continue
-        if not s:
-            continue
-        rows.append(_distance_row(obs_path, n, s, sigma_m))
+        if s:
+            rows.append(_distance_row(obs_path, n, s, sigma_m) if kind == "slope distances" else
+                        _angle_row(obs_path, n, s, kind))
+    if kind != "slope distances":
+        if head is not None or tags.where:
+            raise MultilatError(f"{obs_path}: a file of {kind} has no head, offsets or scales lines")
+        return kind, rows, None
     if head is not None:
         if tags.heads is not None:
             raise MultilatError(f"{tags.where['heads']}: a heads line beside '{HEAD_TAG} {head}'")
         tags.heads = {r[1]: head for r in rows}
         tags.where["heads"] = str(obs_path)
-    return restore_model(obs_path, rows, tags, notes)
+    return (kind, *restore_model(obs_path, rows, tags, notes))
+
+
+def _angle_row(path, n, s, kind):
+    """``FROM TO VALUE SIGMA`` in gon: a direction (clockwise, read as ``-azimuth``) or a zenith angle."""
+    tok = s.split()
+    if len(tok) != 4:
+        raise MultilatError(f"{path}:{n}: expected FROM TO VALUE SIGMA ({kind}, gon; instrument heights are "
+                            f"not in multilat's model), got {len(tok)} fields")
+    v, sg = (_number(path, n, t, w) * math.pi / 200.0 for t, w in ((tok[2], "value"), (tok[3], "σ")))
+    if not 0 < sg < math.pi / 200.0:
+        raise MultilatError(f"{path}:{n}: σ {tok[3]} of {tok[0]}->{tok[1]} must be > 0 and < 1 gon (JAG3D reads "
+                            "a larger number as a distance)")
+    if kind == "directions":
+        return (n, tok[0], tok[1], "azimuth", (-v + math.pi) % (2 * math.pi) - math.pi, sg)
+    if not 0.0 <= v <= math.pi:
+        raise MultilatError(f"{path}:{n}: zenith angle {tok[0]}->{tok[1]} is outside 0..200 gon")
+    return (n, tok[0], tok[1], "elevation", math.pi / 2 - v, sg)
 
 
 def _distance_row(obs_path, n, s, sigma_m):
