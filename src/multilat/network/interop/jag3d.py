@@ -37,6 +37,13 @@ With the offsets to be estimated the headers say to enable each group's zero-poi
 scale of the heads whose scale the source adjustment estimated). Fixed offsets (and scales) are
 divided out, ``(d - o) / (1 + k)``, and recorded as ``# multilat-offsets-m: ..`` /
 ``# multilat-scales: ..``; the reader restores them, and the heads from ``# multilat-head:``.
+
+Angles of levelled stations: ``OUT-directions-S.txt`` per station (a ``DirectionGroup`` has one
+``Orientation`` for all of its directions: the station's heading) and ``OUT-zenith-angles.txt``,
+``FROM TO VALUE SIGMA`` in gon (JAG3D's reader passes value and σ of an angle through its angle
+unit, gradian by default, and takes a σ < 1 as a σ); directions clockwise, ``-azimuth``; zenith
+``100 gon - elevation``. The file type, which JAG3D's import dialog asks for, is recorded as
+``# multilat-observations: directions`` / ``zenith angles`` (unmarked files: slope distances).
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """Star*Net (MicroSurvey STAR*NET) data files (``.dat``): written and read for a 3D network of
-slope distances.
+slope distances, with the directions and zenith angles of levelled stations.
 
-Format (STAR*NET reference manual ch. 5 "Preparing Input Data"; MicroSurvey help desk "Summary of
-STAR*NET Input Data Types and Inline Options"): one record per line, ``#`` starts a comment,
-``'`` a description; inline options start with ``.`` and may be abbreviated. Written::
+Format (STAR*NET reference manual ch. 5 "Preparing Input Data", its "DM" code; MicroSurvey help desk
+"Summary of STAR*NET Input Data Types and Inline Options"): one record per line, ``#`` starts a
+comment, ``'`` a description; inline options start with ``.`` and may be abbreviated. Written::
 
     .UNITS Meters
     .ORDER EN
@@ -11,13 +11,18 @@ STAR*NET Input Data Types and Inline Options"): one record per line, ``#`` start
     .DELTA OFF                         (slope distances)
     C A  0.50460000 0.94120000 0.49200000  * * *     ('*' free, '!' fixed)
     D A-1  0.77560520 0.0000047000                   (From-To  slope distance  std error)
+    DB AT1                                           (a levelled station's direction set: one orientation)
+    DM P1 146-00-09.064076 3.02822109 104-37-04.683822 1.13 0.0000054542 1.13
+    DE                                               (direction, slope distance, zenith; std errors, " and m)
 
-``.ORDER EN`` puts easting before northing on ``C`` lines: multilat's x, y, z (east, north, up).
-The reader also takes ``.ORDER NE`` (Star*Net's default), ``.UNITS FeetUS/FeetInt`` (any other
-linear unit, e.g. ``Furlongs``, is refused by name; the angular ``DMS``/``Gons`` have no effect),
-``.MULTIPLIER``, ``.SEP``, ``.DATA OFF/ON`` and ``.END`` (the rest of the file is not read); ``C`` lines with three numeric σ are read as
-approximate coordinates (their σ ignored, a note). Other data types (``A``, ``V``, ``B``, ``M``,
-``BM``, ``DV``, ``DB``/``DN``/``DM``/``DE``, ``L``, ``G``, ``T``, ``SS``, ``E``, ``P``, ...), 2D
+Directions are clockwise (``-azimuth``), zenith angles ``90° - elevation``, d-m-s; a direction
+without zenith angle is a ``DN`` line (its distance a ``D`` line), a zenith angle without direction
+a ``V`` line. ``.ORDER EN`` puts easting before northing on ``C`` lines: multilat's x, y, z (east,
+north, up). The reader also takes ``.ORDER NE`` (Star*Net's default), ``.UNITS FeetUS/FeetInt``
+(any other linear unit, e.g. ``Furlongs``, is refused by name; angles are read in ``DMS`` only),
+``.MULTIPLIER``, ``.SEP``, ``.DATA OFF/ON`` and ``.END`` (the rest of the file is not read); ``C``
+lines with three numeric σ are read as approximate coordinates (their σ ignored, a note). Other
+data types (``A``, ``B``, ``M``, ``BM``, ``DV``, ``L``, ``G``, ``T``, ``SS``, ``E``, ``P``, ...), 2D
 and levelling modes, ``.DELTA ON`` (horizontal distances), non-zero HI/HT and inline options that
 would change distances in ways multilat does not model are refused with the line and type named.
 
