@@ -288,3 +288,21 @@ def test_cli_round_trip_jag3d_and_starnet_keep_heads(capsys, tmp_path, seq):
     rc, _, e = _run(capsys, ["import", "starnet", tmp_path / "s.dat", tmp_path / "s.dat", "-o", tmp_path / "x"])
     _one_line_error(rc, e, "import starnet reads one file")
     assert not (tmp_path / "x").exists()
+
+
+def test_cli_result_with_estimated_scale_divides_it_out(capsys, tmp_path, seq):
+    """``--result`` of ``adjust --scales``: the scale (from result.json) is divided out with the offset and
+    recorded; the import restores the distances (within the printed unit, times 1 + k)."""
+    obs, _ = seq
+    rc, _, e = _run(capsys, ["adjust", SEQ, "--scales", "--fixed-scale", "T1", "--out", tmp_path / "adj"])
+    assert rc == 0, e
+    k = json.loads((tmp_path / "adj" / "result.json").read_text())["heads"]["T2"]["scale"]
+    assert k != 0
+    rc, _, e = _run(capsys, ["export", "gama", SEQ, "--result", tmp_path / "adj", "-o", tmp_path / "n.xml"])
+    assert rc == 0, e
+    assert f"multilat-scales: T2={k!r}" in (tmp_path / "n.xml").read_text()
+    got = read_gama_local(tmp_path / "n.xml")
+    assert any("fixed scales restored" in n for n in got.notes)
+    row = {got.obs.label(j): j for j in range(got.obs.n_obs)}
+    d = got.obs.distance_m[[row[obs.label(j)] for j in range(obs.n_obs)]]
+    assert np.max(np.abs(d - obs.distance_m)) <= E_ROUND * (1 + abs(k))

@@ -133,8 +133,8 @@ def import_command(
     fmt: str = typer.Argument(..., metavar="FORMAT", help="gama (gama-local XML input), "
                               "gama-adjusted (gama-local's --xml output), jag3d (slope distances; "
                               "with --points-file) or starnet (.dat)."),
-    source: list[Path] = typer.Argument(..., help="The file to read (jag3d: the distance files, e.g. one per "
-                                        "head = one JAG3D group)."),
+    source: list[Path] = typer.Argument(..., help="The file to read (jag3d: its observation files: distances, "
+                                        "one per head; directions; zenith angles)."),
     out: Path = typer.Option(..., "--out", "-o", help="Directory for distances.csv and points.csv "
                              "(gama-adjusted: points.csv, residuals.csv, summary.json), written "
                              "all or nothing."),
