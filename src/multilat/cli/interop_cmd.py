@@ -254,6 +254,6 @@ def _import_gama(source: Path, out: Path, as_json: bool) -> None:
         emit_json(doc, "import")
         return
     console.print(f"gama: {net.n_rows} observation rows, {net.points.n} points -> {out} ({', '.join(written)}; "
-                  f"multilat adjust {out})")
+                  f"multilat adjust {out})", markup=False)
     for n in doc["notes"]:
         console.print(f"note: {n}", markup=False)

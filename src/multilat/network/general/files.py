@@ -94,8 +94,8 @@ def read_network_dir(path: str | os.PathLike) -> Network:
     d = Path(path)
     for name in (POINTS, OBSERVATIONS):
         if not (d / name).is_file():
-            raise MultilatError(f"{d}: no {name} (a network directory holds {POINTS}, {OBSERVATIONS} and, for "
-                                f"correlated blocks, {COVARIANCES}: docs/general-network.md)")
+            raise MultilatError(f"{d}: is a directory without {name} (a network directory holds {POINTS}, "
+                                f"{OBSERVATIONS} and, for correlated blocks, {COVARIANCES}: docs/general-network.md)")
     points = read_points_table(d / POINTS)
     ix = {p: i for i, p in enumerate(points.ids)}
     tab, groups = _observation_groups(d / OBSERVATIONS)
@@ -353,6 +353,11 @@ def _observation_rows(net: Network):
         n += m
         if block.cov is not None:
             c = np.asarray(block.cov, float)
+            if not np.array_equal(c, c.T):
+                i, j = np.unravel_index(int(np.argmax(np.abs(c - c.T))), c.shape)
+                raise MultilatError(f"{block.kind} block {b + 1}: its covariance is not symmetric (entry ({i + 1}, "
+                                    f"{j + 1}) differs from ({j + 1}, {i + 1})): not written (make it symmetric, "
+                                    "e.g. (C + C.T) / 2)")
             i, j = np.nonzero((np.triu(c) != 0) | np.eye(m, dtype=bool))
             cov_rows += [[str(b + 1), int(r) + 1, int(q) + 1, repr(float(c[r, q]))] for r, q in zip(i, j)]
     header = [c for c, v in cols.items() if c in ("kind", "block", "value", "sigma", "unit") or any(v)]

@@ -73,7 +73,8 @@ class Column:
 
 def value_sigma(unit: str, what: str, within: tuple | None = None) -> tuple:
     """The ``value`` and ``sigma`` columns of a kind whose values are ``what`` in ``unit``."""
-    return (Column("value", "value", f"{what}, {unit}", required=True, within=within),
+    rng = f", within {within[2]}" if within is not None else ""
+    return (Column("value", "value", f"{what}, {unit}{rng}", required=True, within=within),
             Column("sigma", "sigma", f"a-priori standard deviation, {unit} (> 0; may be empty in a block "
                    "with covariances: their diagonal)", required=True))
 

@@ -38,8 +38,8 @@ UNIT = "m"
 #: this kind's columns of observations.csv (besides kind, block, unit)
 COLUMNS = (
     *value_sigma(UNIT, "height difference z_to - z_from"),
-    Column("from", "point", "the lower end of the rise (z_from)", required=True),
-    Column("to", "point", "the upper end (z_to)", required=True),
+    Column("from", "point", "the point levelled from (z_from)", required=True),
+    Column("to", "point", "the point levelled to (z_to)", required=True),
 )
 
 

@@ -45,7 +45,7 @@ from multilat.network.general.kinds.columns import Column, block_from_rows, rows
 UNIT = "m"
 #: this kind's columns of observations.csv (besides kind, block, unit)
 COLUMNS = (
-    *value_sigma(UNIT, "horizontal distance", within=(5e-324, float("inf"), "> 0")),
+    *value_sigma(UNIT, "horizontal distance", within=(5e-324, float("inf"), "(0, inf)")),
     Column("from", "point", "the point the instrument stands on", required=True),
     Column("to", "point", "the other end", required=True),
 )

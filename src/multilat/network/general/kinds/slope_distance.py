@@ -65,7 +65,7 @@ from multilat.network.general.kinds.columns import Column, block_from_rows, rows
 UNIT = "m"
 #: this kind's columns of observations.csv (besides kind, block, unit)
 COLUMNS = (
-    *value_sigma(UNIT, "slope distance", within=(5e-324, float("inf"), "> 0")),
+    *value_sigma(UNIT, "slope distance", within=(5e-324, float("inf"), "(0, inf)")),
     Column("from", "point", "the point the instrument stands on", required=True),
     Column("to", "point", "the target's point", required=True),
     Column("instrument", "name", "the instrument (head) whose additive constant and scale the distance shares "

@@ -60,7 +60,7 @@ UNIT = "rad"
 #: this kind's columns of observations.csv (besides kind, block, unit)
 COLUMNS = (
     *value_sigma(UNIT, "azimuth (counter-clockwise from the instrument's x) or elevation "
-                "(above its horizontal, within [-pi/2, pi/2])"),
+                "(above its horizontal, within [-pi/2, pi/2]; refused outside)"),
     Column("from", "point", "the point the instrument stands on", required=True),
     Column("to", "point", "the target's point", required=True),
     Column("setup", "name", "the instrument set-up whose frame (omega, phi, kappa) the reading is in", required=True),
