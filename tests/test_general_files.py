@@ -114,7 +114,8 @@ def test_import_then_adjust_dir_equals_adjust_xml(path, tmp_path, capsys):
 
 def test_import_keeps_distances_csv_where_the_distance_path_reads_the_file(tmp_path, capsys):
     """two_trackers (slope distances and levelled stations' angles): distances.csv as before, and
-    the general files beside it; heights.xml (instrument heights): the general files only, a note."""
+    the general files beside it; heights.xml (instrument heights) and station_control.xml (a point
+    without coordinates, which the old points.csv left out): the general files only, a note."""
     from multilat.network.files import read_observations
     from multilat.network.interop.gama import read_gama_local
 
@@ -129,6 +130,20 @@ def test_import_keeps_distances_csv_where_the_distance_path_reads_the_file(tmp_p
     assert not (tmp_path / "b" / "distances.csv").exists()
     assert any("no distances.csv" in n and "heights.xml:" in n for n in doc["notes"])
     assert sorted(p.name for p in (tmp_path / "b").iterdir()) == ["observations.csv", "points.csv"]
+    assert main(["import", "gama", str(GAMA3D / "station_control.xml"), "-o", str(tmp_path / "c"), "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)            # station_control: the station has no coordinates
+    assert not (tmp_path / "c" / "distances.csv").exists()
+    assert any("no distances.csv" in n and "point(s) without coordinates (S, ...)" in n for n in doc["notes"])
+
+
+def test_the_example_directory_is_what_import_writes(tmp_path, capsys):
+    """examples/general/station_control_files is `import gama station_control.xml`, byte for byte."""
+    ex = ROOT / "examples" / "general"
+    assert main(["import", "gama", str(ex / "station_control.xml"), "-o", str(tmp_path / "s")]) == 0
+    stored = sorted(p.name for p in (ex / "station_control_files").iterdir())
+    assert stored == sorted(p.name for p in (tmp_path / "s").iterdir()) == ["observations.csv", "points.csv"]
+    for name in stored:
+        assert (ex / "station_control_files" / name).read_text() == (tmp_path / "s" / name).read_text(), name
 
 
 # ------------------------------------------------------------------------------ write -> read: identity
@@ -291,7 +306,7 @@ def test_the_good_files_are_read():
 
 HOSTILE = [  # (file, line, old, new, needle[, the line named])
     ("observations", 2, "slope_distance", "slope_distanse", "unknown observation kind 'slope_distanse'"),
-    ("observations", 1, ",unit", ",units", "header lacks column(s) unit"),
+    ("observations", 1, ",unit\n", "\n", "header lacks column(s) unit"),
     ("observations", 3, ",S1,", ",,", "needs column 'set'"),
     ("observations", 2, ",0.001,m", ",0,m", "column 'sigma': must be > 0"),
     ("observations", 2, ",0.001,m", ",-0.001,m", "column 'sigma': must be > 0"),
@@ -319,7 +334,9 @@ HOSTILE = [  # (file, line, old, new, needle[, the line named])
     ("points", 5, "D,,,,,", "D,,,,z,", "its z is fixed but column 'z_m' is empty"),
     ("points", 3, "0.001", "0", "column 'sz_m': must be > 0"),
     ("points", 4, "false", "maybe", "column 'datum' must be true or false"),
-    ("points", 1, "datum", "colour", "header: unknown column 'colour'"),
+    ("points", 1, "datum", "colour", "unknown column 'colour'"),
+    ("observations", 1, ",unit", ",unit,to_dh", "unknown column 'to_dh'"),
+    ("covariances", 1, ",cov", ",cov,note", "unknown column 'note'"),
 ]
 
 
@@ -334,8 +351,7 @@ def test_hostile_rows_are_refused_by_file_and_line(tmp_path, case):
         read_network_dir(d)
     msg = str(e.value)
     assert "\n" not in msg and needle in msg, msg
-    where = f"{d / (name + '.csv')}:" if "header:" in needle else f"{d / (name + '.csv')}:{at}:"
-    assert msg.startswith(where), msg
+    assert msg.startswith(f"{d / (name + '.csv')}:{at}:"), msg
 
 
 def test_missing_variance_is_named_at_its_observation_row(tmp_path):
@@ -386,6 +402,25 @@ def test_adjust_dir_from_the_cli(tmp_path, capsys):
     doc = json.loads((tmp_path / "res" / "result.json").read_text())
     ref, _, _ = compute(EXAMPLES[0], **TESTS)
     assert doc["dof"] == ref["dof"] and doc["sigma0"] == pytest.approx(ref["sigma0"], rel=1e-12)
+
+
+def test_the_documents_follow_the_shipped_schemas(tmp_path, capsys):
+    """adjust DIR's document (adjust-general) and import gama's (import), both with the general files."""
+    jsonschema = pytest.importorskip("jsonschema")
+    from multilat.vocabulary import document_problems
+
+    schemas = ROOT / "src" / "multilat" / "schemas"
+    for name in ("heights", "two_trackers"):                 # with and without distances.csv
+        assert main(["import", "gama", str(GAMA3D / f"{name}.xml"), "-o", str(tmp_path / name), "--json"]) == 0
+        doc = json.loads(capsys.readouterr().out)
+        schema = json.loads((schemas / "import.json").read_text("utf-8"))
+        assert not list(jsonschema.Draft202012Validator(schema).iter_errors(doc))
+        assert main(["adjust", str(tmp_path / name), "--json"]) == 0
+        doc = json.loads(capsys.readouterr().out)
+        schema = json.loads((schemas / "adjust-general.json").read_text("utf-8"))
+        errors = list(jsonschema.Draft202012Validator(schema).iter_errors(doc))
+        assert not errors, errors[0].message[:200]
+        assert document_problems(doc) == [] and doc["format"] == "multilat-files"
 
 
 # ------------------------------------------------------------------------------ docs

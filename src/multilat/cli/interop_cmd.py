@@ -226,6 +226,8 @@ def _import_gama(source: Path, out: Path, as_json: bool) -> None:
     (observations.csv, points.csv, covariances.csv: every kind, σ, heights, partly fixed points;
     ``multilat adjust OUT``) and, when the distance path's reader takes the file (slope distances,
     levelled stations' angles), its distances.csv as before, all or nothing."""
+    import numpy as np
+
     from multilat.io import staging_dir
     from multilat.network.files import write_observations
     from multilat.network.general import FIXED, read_gama_input
@@ -238,6 +240,9 @@ def _import_gama(source: Path, out: Path, as_json: bool) -> None:
         old = read_gama_local(source)
     except MultilatError as e:                          # e.g. heights, partly fixed points: general files only
         old, why = None, str(e)
+    bare = [p for p, x in zip(net.points.ids, net.points.xyz_m) if not np.isfinite(x).all()]
+    if old is not None and bare:                        # points.csv would not be the distance path's --points
+        old, why = None, f"{len(bare)} point(s) without coordinates ({bare[0]}, ...), which its --points needs"
     doc = {"format": "gama", "n_obs": net.n_rows, "n_points": net.points.n,
            "fixed": [p for p, s in zip(net.points.ids, net.points.status) if (s == FIXED).any()],
            "n_angles": sum(b.n_rows for b in net.blocks if KINDS[b.kind].UNIT == "rad"), "notes": list(net.notes)}

@@ -125,12 +125,9 @@ def _observation_groups(path: Path):
     """observations.csv as a table and its rows grouped into blocks (first appearance order):
     ``{key: [row, ...]}``; every row checked against its kind's columns and unit."""
     known = _kind_columns()
+    _check_header(path, known)
     tab = read_csv_table(path, required=("kind", "value", "sigma", "unit"), optional=known, warn_unknown=False,
                          numbers={"value": {}, "sigma": dict(positive=True, required=False)}, kind="observations")
-    stray = [c for c in tab.columns if c not in known]
-    if stray:
-        raise MultilatError(f"{path}: header: unknown column {stray[0]!r} (the columns of {OBSERVATIONS}: "
-                            f"{', '.join(known)}; docs/general-network.md)")
     col = {c: i for i, c in enumerate(tab.columns)}
     own = {name: {c.name for c in k.COLUMNS} | set(COMMON) for name, k in KINDS.items()}
     options = {name: [col[c.name] for c in k.COLUMNS if c.role == "option" and c.name in col]
@@ -164,13 +161,25 @@ def _observation_groups(path: Path):
     return tab, {key: np.array(v, int) for key, v in groups.items()}
 
 
+def _check_header(path, known) -> None:
+    """A column of the header that is not one of ``known`` is ``FILE:LINE: unknown column`` (before
+    any row is read: a misspelt column is never ignored)."""
+    from multilat.inputs import input_lines
+
+    for n, ln in input_lines(path):
+        if ln.strip() and not ln.lstrip().startswith("#"):
+            stray = [c.strip() for c in next(csv.reader([ln])) if c.strip() not in known]
+            if stray:
+                raise MultilatError(f"{path}:{n}: unknown column {stray[0]!r} (the columns of {Path(path).name}: "
+                                    f"{', '.join(known)}; docs/general-network.md)")
+            return
+
+
 def _read_covariances(path: Path, obs, groups) -> dict:
     """The covariance matrices of covariances.csv, by group key; every entry checked (FILE:LINE)."""
+    _check_header(path, [c for c, _ in COVARIANCE_COLUMNS])
     tab = read_csv_table(path, required=("block", "row", "col", "cov"), warn_unknown=False,
                          numbers={"cov": {}, "row": {}, "col": {}}, kind="observations")
-    stray = [c for c in tab.columns if c not in ("block", "row", "col", "cov")]
-    if stray:
-        raise MultilatError(f"{path}: header: unknown column {stray[0]!r} (block, row, col, cov)")
     vals = tab.floats("cov")
     rc = np.column_stack([tab.floats("row"), tab.floats("col")])
     entries: dict = {}
@@ -233,12 +242,9 @@ def read_points_table(path: str | os.PathLike) -> PointSet:
     names = [c for c, _ in POINT_COLUMNS]
     nums = {c: dict(required=False) for c in ("x_m", "y_m", "z_m")}
     nums.update({c: dict(required=False, positive=True) for c in _STD})
+    _check_header(path, names)
     tab = read_csv_table(path, required=("point", "x_m", "y_m", "z_m"), optional=names, warn_unknown=False,
                          numbers=nums)
-    stray = [c for c in tab.columns if c not in names]
-    if stray:
-        raise MultilatError(f"{path}: header: unknown column {stray[0]!r} (the columns of {POINTS}: "
-                            f"{', '.join(names)})")
     ids = tab.ids("point")
     xyz = np.column_stack([tab.floats(c, required=False) for c in ("x_m", "y_m", "z_m")])
     sd = np.column_stack([tab.floats(c, required=False, positive=True) if tab.has(c) else np.full(len(ids), np.nan)
