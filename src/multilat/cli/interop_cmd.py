@@ -253,6 +253,10 @@ def _import_gama(source: Path, out: Path, as_json: bool) -> None:
             write_observations(tmp / "distances.csv", old.obs)
             written.append("distances.csv")
             doc.update(n_stations=old.obs.n_stations, n_targets=old.obs.n_targets, levelled=list(old.obs.levelled))
+            doc["notes"] += [f"distances.csv: {n}" for n in old.notes]
+            if old.fixed:
+                doc["notes"].append(f"distances.csv: the file holds {', '.join(old.fixed)} fixed: adjust it with "
+                                    f"--datum control:{','.join(old.fixed)} to keep them")
         else:
             doc["notes"].append(f"no distances.csv (the distance path cannot take this file: {why})")
     if as_json:

@@ -115,8 +115,11 @@ def read_network_dir(path: str | os.PathLike) -> Network:
                                    f"{COVARIANCES} (give sigma > 0)")
         else:
             sg = _sigma_of_cov(tab, rows, sg, cov)
-        cells = {c.name: [tab.rows[k][tab.columns.index(c.name)] for k in rows]
-                 for c in kind.COLUMNS if tab.has(c.name)}
+        cells = {}
+        for c in kind.COLUMNS:
+            if tab.has(c.name):
+                i = tab.columns.index(c.name)
+                cells[c.name] = [tab.rows[k][i] for k in rows]
         blocks.append(kind.from_rows(Rows(cells, tuple(where[k] for k in rows), ix, value[rows], sg, cov)))
     return Network(points, tuple(blocks))
 
@@ -144,9 +147,9 @@ def _observation_groups(path: Path):
         if r[col["unit"]] != kind.UNIT:
             raise tab.error(k, f"column 'unit': a {kd} is in {kind.UNIT}, got {r[col['unit']]!r} (the files hold "
                                "metres and radians)")
-        for i, c in foreign[kd]:
+        for i, name in foreign[kd]:
             if r[i] != "":
-                raise tab.error(k, f"column {c!r} does not apply to a {kd} (its columns: "
+                raise tab.error(k, f"column {name!r} does not apply to a {kd} (its columns: "
                                    f"{', '.join(c.name for c in kind.COLUMNS)})")
         b = r[b_col] if b_col is not None else ""
         if b:
