@@ -135,8 +135,9 @@ def import_command(
                               "with --points-file) or starnet (.dat)."),
     source: Path = typer.Argument(..., help="The file to read."),
     out: Path = typer.Option(..., "--out", "-o", help="Directory for distances.csv and points.csv "
-                             "(gama-adjusted: points.csv, residuals.csv, summary.json), written "
-                             "all or nothing."),
+                             "(gama-adjusted: points.csv, residuals.csv, summary.json; gama: "
+                             "observations.csv, points.csv [covariances.csv, distances.csv] for "
+                             "`multilat adjust DIR`), written all or nothing."),
     points_file: Optional[Path] = typer.Option(None, "--points-file", help="jag3d: the points file "
                                                "(NAME Y X Z)."),
     sigma_um: Optional[float] = typer.Option(None, "--sigma-um", help="σ, µm, for distances without "
