@@ -136,7 +136,7 @@ def import_command(
     source: Path = typer.Argument(..., help="The file to read."),
     out: Path = typer.Option(..., "--out", "-o", help="Directory for distances.csv and points.csv "
                              "(gama-adjusted: points.csv, residuals.csv, summary.json; gama: "
-                             "observations.csv, points.csv [covariances.csv, distances.csv] for "
+                             "observations.csv, points.csv, covariances.csv and distances.csv where they apply, for "
                              "`multilat adjust DIR`), written all or nothing."),
     points_file: Optional[Path] = typer.Option(None, "--points-file", help="jag3d: the points file "
                                                "(NAME Y X Z)."),
