@@ -64,6 +64,11 @@ WHY_NOT_CSV = {
     "distance_only": "the general path takes the angles that have a sigma as observations, whatever the station",
     "tables": "the general path writes result.json and points.csv",
 }
+#: why an option is refused for a directory of multilat's files (``multilat adjust DIR``)
+WHY_NOT_DIR = {"datum": "the datum is points.csv's fixed, sx_m.. and datum columns",
+               "points": "the directory's points.csv carries the coordinates",
+               "sigma_um": "the σ are observations.csv's sigma column", "instrument": "the σ are observations.csv's "
+               "sigma column"}
 for _raw in ("environment", "heights", "formula", "extrapolate", "max_gap_s"):
     WHY_NOT_CSV[_raw] = "raw readings are corrected and adjusted on the distance path only"
 
@@ -115,7 +120,7 @@ def is_general_input(path) -> bool:
     """True for a gama-local XML input: suffix ``.xml`` or ``.gkf``, or a file whose first element is
     ``<gama-local>`` (a name without the suffix)."""
     p = Path(path)
-    if p.suffix.lower() in (".xml", ".gkf"):
+    if p.suffix.lower() in (".xml", ".gkf") or p.is_dir():     # a directory: multilat's files (general/files.py)
         return True
     if not p.is_file():
         return False
@@ -154,6 +159,8 @@ def run(**params) -> None:
     xml = is_general_input(path)
     applies, why_not = (APPLIES, WHY_NOT) if xml else (APPLIES_CSV, WHY_NOT_CSV)
     what = "a gama-local input" if xml else "--model general"
+    if path.is_dir():                                  # multilat's files for the general network
+        why_not, what = {**why_not, **WHY_NOT_DIR}, "a network directory"
     for name in _given_options(params):
         if name not in applies or (name == "snooping" and params[name] and not xml):
             why = why_not.get(name, "it belongs to the distance-only adjustment")
@@ -194,7 +201,14 @@ def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_glo
             method: str | None = None, alpha_family: float = 0.01):
     """Read, adjust (undetermined points left out unless ``strict``), statistics: (doc, adjustment, stats)."""
     from multilat.network.general import read_gama_input
+    from multilat.network.general.files import is_network_dir, read_network_dir
 
+    if is_network_dir(path):                           # `multilat adjust DIR` (multilat's files)
+        src = {"kind": "file", "file": str(path), "description": "observations.csv's sigma column and the "
+               "correlated blocks' covariances.csv"}
+        return _finish(read_network_dir(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
+                       strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family,
+                       fmt="multilat-files", sigma_source=src)
     return _finish(read_gama_input(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
                    strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family)
 

@@ -136,8 +136,9 @@ def import_command(
     source: list[Path] = typer.Argument(..., help="The file to read (jag3d: its observation files: distances, "
                                         "one per head; directions; zenith angles)."),
     out: Path = typer.Option(..., "--out", "-o", help="Directory for distances.csv and points.csv "
-                             "(gama-adjusted: points.csv, residuals.csv, summary.json), written "
-                             "all or nothing."),
+                             "(gama-adjusted: points.csv, residuals.csv, summary.json; gama: "
+                             "observations.csv, points.csv, covariances.csv and distances.csv where they apply, for "
+                             "`multilat adjust DIR`), written all or nothing."),
     points_file: Optional[Path] = typer.Option(None, "--points-file", help="jag3d: the points file "
                                                "(NAME Y X Z)."),
     sigma_um: Optional[float] = typer.Option(None, "--sigma-um", help="σ, µm, for distances without "
@@ -196,10 +197,8 @@ def import_command(
                           f"points, dof {g.dof}, sigma0 {g.sigma_aposteriori:.4f} -> {out}")
         return
     if fmt == "gama":
-        from multilat.network.interop.gama import read_gama_local
-
-        net = read_gama_local(source)
-    elif fmt == "jag3d":
+        return _import_gama(source, out, as_json)       # the general network's files (docs/interop.md)
+    if fmt == "jag3d":
         from multilat.network.interop.jag3d import read_jag3d
 
         net = read_jag3d(points_file, sources, sigma_m=sig)
@@ -225,3 +224,50 @@ def import_command(
     if net.fixed:
         console.print(f"note: the file holds {', '.join(net.fixed)} fixed: adjust with --datum "
                       f"control:{','.join(net.fixed)} to keep them")
+
+
+def _import_gama(source: Path, out: Path, as_json: bool) -> None:
+    """``import gama``: the whole network as multilat's files for the general network
+    (observations.csv, points.csv, covariances.csv: every kind, σ, heights, partly fixed points;
+    ``multilat adjust OUT``) and, when the distance path's reader takes the file (slope distances,
+    levelled stations' angles), its distances.csv as before, all or nothing."""
+    import numpy as np
+
+    from multilat.io import staging_dir
+    from multilat.network.files import write_observations
+    from multilat.network.general import FIXED, read_gama_input
+    from multilat.network.general.files import write_network_files
+    from multilat.network.general.kinds import KINDS
+    from multilat.network.interop.gama import read_gama_local
+
+    net = read_gama_input(source)
+    try:
+        old = read_gama_local(source)
+    except MultilatError as e:                          # e.g. heights, partly fixed points: general files only
+        old, why = None, str(e)
+    bare = [p for p, x in zip(net.points.ids, net.points.xyz_m) if not np.isfinite(x).all()]
+    if old is not None and bare:                        # points.csv would not be the distance path's --points
+        old, why = None, f"{len(bare)} point(s) without coordinates ({bare[0]}, ...), which its --points needs"
+    doc = {"format": "gama", "n_obs": net.n_rows, "n_points": net.points.n,
+           "fixed": [p for p, s in zip(net.points.ids, net.points.status) if (s == FIXED).any()],
+           "n_angles": sum(b.n_rows for b in net.blocks if KINDS[b.kind].UNIT == "rad"), "notes": list(net.notes)}
+    with staging_dir(out, inputs=[source]) as tmp:
+        written = write_network_files(net, tmp, comments=[f"imported from {source.name} by multilat import gama",
+                                                          *net.notes])
+        if old is not None:
+            write_observations(tmp / "distances.csv", old.obs)
+            written.append("distances.csv")
+            doc.update(n_stations=old.obs.n_stations, n_targets=old.obs.n_targets, levelled=list(old.obs.levelled))
+            doc["notes"] += [f"distances.csv: {n}" for n in old.notes]
+            if old.fixed:
+                doc["notes"].append(f"distances.csv: the file holds {', '.join(old.fixed)} fixed: adjust it with "
+                                    f"--datum control:{','.join(old.fixed)} to keep them")
+        else:
+            doc["notes"].append(f"no distances.csv (the distance path cannot take this file: {why})")
+    if as_json:
+        emit_json(doc, "import")
+        return
+    console.print(f"gama: {net.n_rows} observation rows, {net.points.n} points -> {out} ({', '.join(written)}; "
+                  f"multilat adjust {out})", markup=False)
+    for n in doc["notes"]:
+        console.print(f"note: {n}", markup=False)

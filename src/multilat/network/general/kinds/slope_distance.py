@@ -56,3 +56,33 @@ def evaluate(block, layout, cols, x):
     cols_ = np.concatenate([columns(layout, block.index["from"]), columns(layout, block.index["to"]),
                             cols["offset"][:, None], cols["scale"][:, None]], 1)
     return (1.0 + k) * rho + c, values, cols_
+
+
+# ---------------------------------------------------------------------------------------------------
+# multilat's files: this kind's columns in observations.csv (kinds/columns.py, general/files.py)
+from multilat.network.general.kinds.columns import Column, block_from_rows, rows_from_block, value_sigma  # noqa: E402
+
+UNIT = "m"
+#: this kind's columns of observations.csv (besides kind, block, unit)
+COLUMNS = (
+    *value_sigma(UNIT, "slope distance", within=(5e-324, float("inf"), "(0, inf)")),
+    Column("from", "point", "the point the instrument stands on", required=True),
+    Column("to", "point", "the target's point", required=True),
+    Column("instrument", "name", "the instrument (head) whose additive constant and scale the distance shares "
+           "(empty: none)"),
+    Column("from_dh_m", "number", "instrument height above `from` along z, m (empty: 0)", key="from_dh"),
+    Column("to_dh_m", "number", "target (reflector) height above `to` along z, m (empty: 0)", key="to_dh"),
+    Column("estimate_offset", "option", "estimate the block's instruments' additive constants (default false: "
+           "held at 0)"),
+    Column("estimate_scale", "option", "estimate the block's instruments' scales (default false: held at 0)"),
+)
+
+
+def from_rows(rows):
+    """This kind's rows of ``observations.csv`` (:class:`~.columns.Rows`) -> its Block."""
+    return block_from_rows(NAME, COLUMNS, rows)
+
+
+def to_rows(block, point_ids) -> dict:
+    """This kind's cells of ``observations.csv`` (column -> one str per row) for ``block``."""
+    return rows_from_block(block, COLUMNS, point_ids)

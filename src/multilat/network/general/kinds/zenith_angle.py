@@ -38,3 +38,28 @@ def evaluate(block, layout, cols, x):
     values = np.concatenate([-g, g], 1)
     cols_ = np.concatenate([columns(layout, block.index["from"]), columns(layout, block.index["to"])], 1)
     return np.arctan2(h, d[:, 2]), values, cols_
+
+
+# ---------------------------------------------------------------------------------------------------
+# multilat's files: this kind's columns in observations.csv (kinds/columns.py, general/files.py)
+from multilat.network.general.kinds.columns import Column, block_from_rows, rows_from_block, value_sigma  # noqa: E402
+
+UNIT = "rad"
+#: this kind's columns of observations.csv (besides kind, block, unit)
+COLUMNS = (
+    *value_sigma(UNIT, "zenith angle, 0 up, pi/2 horizontal", within=(0.0, np.pi, "[0, pi]")),
+    Column("from", "point", "the point the instrument stands on", required=True),
+    Column("to", "point", "the target's point", required=True),
+    Column("from_dh_m", "number", "instrument height above `from` along z, m (empty: 0)", key="from_dh"),
+    Column("to_dh_m", "number", "target (reflector) height above `to` along z, m (empty: 0)", key="to_dh"),
+)
+
+
+def from_rows(rows):
+    """This kind's rows of ``observations.csv`` (:class:`~.columns.Rows`) -> its Block."""
+    return block_from_rows(NAME, COLUMNS, rows)
+
+
+def to_rows(block, point_ids) -> dict:
+    """This kind's cells of ``observations.csv`` (column -> one str per row) for ``block``."""
+    return rows_from_block(block, COLUMNS, point_ids)
