@@ -191,7 +191,7 @@ def test_numba_normals_identical_to_numpy(monkeypatch):
     pytest.importorskip("numba")
     import os
 
-    import multilat.distributions as dist
+    import multilat.fast_normal as dist
 
     if os.environ.get("MULTILAT_NO_NUMBA"):
         pytest.skip("numba path disabled by MULTILAT_NO_NUMBA")

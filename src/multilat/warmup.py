@@ -61,7 +61,7 @@ def _steps():
 
     def normals():
         """numba's bit-identical standard normal draws (used past a size threshold)."""
-        from multilat import distributions as D
+        from multilat import fast_normal as D
 
         D._NUMPY_NORMALS = D.NUMBA_AFTER
         D._fast_std_normal(np.random.default_rng(0), 4096)
