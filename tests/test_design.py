@@ -16,7 +16,6 @@ from multilat.network.adjust import adjust
 from multilat.network.design import (Layout, SigmaModel, choose_candidates, criterion_value,
                                      layout_observations, optimise_heads, preanalyse)
 from multilat.network.design.config import parse_design_config, run_design
-from multilat.network.model import Q
 
 SIG = 4.7e-6
 
