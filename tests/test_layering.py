@@ -147,3 +147,26 @@ def test_a_new_upward_import_is_named(tmp_path, monkeypatch, importer, imported,
     me = module_name(f)
     bad = [v for v in violations() if v.startswith(f"{me} -> ")]
     assert len(bad) == 1 and imported.split(".")[1] in bad[0] and layer in bad[0], bad
+
+
+#: the developers' guide: no module over ~600 lines; no function over ~80 body lines (checked where a
+#: package was cut to that size: the Monte Carlo engine)
+MAX_MODULE_LINES = 600
+MAX_FUNCTION_LINES = 80
+
+
+def test_no_module_over_600_lines():
+    long = [f"{p.relative_to(SRC.parent)}: {n} lines" for p in sorted(PKG.rglob("*.py"))
+            if (n := len(p.read_text("utf-8").splitlines())) > MAX_MODULE_LINES]
+    assert not long, long
+
+
+def test_no_montecarlo_function_over_80_body_lines():
+    long = []
+    for path in sorted((PKG / "montecarlo").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text("utf-8"))):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                body = node.body[1:] if ast.get_docstring(node) is not None else node.body
+                if body and body[-1].end_lineno - body[0].lineno + 1 > MAX_FUNCTION_LINES:
+                    long.append(f"{path.relative_to(SRC.parent)}:{node.lineno} {node.name}")
+    assert not long, long
