@@ -38,7 +38,8 @@ NETWORK_TIERS = [
     ("network adjust", ["multilat.network.adjust", "multilat.network.costs", "multilat.network.simulate",
                         "multilat.network.variance_components", "multilat.network.general"]),
     ("network propagate/design", ["multilat.network.propagate", "multilat.network.propagate_result",
-                                  "multilat.network.propagate_summary", "multilat.network.design"]),
+                                  "multilat.network.propagate_summary", "multilat.network.design",
+                                  "multilat.network.general.propagate"]),
 ]
 
 
