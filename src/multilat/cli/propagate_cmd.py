@@ -44,7 +44,7 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
         except ImportError:
             raise MultilatError("built-in configurations are not available (multilat.network.configs)") from None
         cfg = configs.small_volume() if source == "small-volume" else configs.large_volume()
-        sigma = None if noise == "model" else (sigma_um * 1e-6 if sigma_um else 4.7e-6)
+        sigma = None if noise == "model" else (sigma_um * 1e-6 if sigma_um else ss.DEFAULT_SIGMA_M)
         src.update(ss.distance_model(cfg.station_ids, inst) if sigma is None else
                    ss.option(sigma, "--sigma-um" if sigma_um else "default 4.7 µm (the paper's σ)"))
         return pr.problem_from_config(cfg, sigma_m=sigma, instrument=inst if noise == "model" else None,

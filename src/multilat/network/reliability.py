@@ -156,7 +156,7 @@ class _BlockContext:
 
     def shifts(self, ks):
         """Largest point response and its point index for the observations ``ks``."""
-        cov, s, t = self.cov, self.s, self.t
+        cov, s = self.cov, self.s
         si, ti = cov.si[ks], cov.ti[ks]
         a, b = cov.Js_w[ks], cov.Jt_w[ks]
         c = np.arange(ks.size)

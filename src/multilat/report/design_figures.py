@@ -13,11 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
+from multilat.network.statistics import CHI2_3_95
 from multilat.report.network_figures import _plt, plot_3d, plot_top_view
 
 __all__ = ["plot_slice_maps", "save_design_figures"]
-
-_CHI2_3_95 = 7.814727903251178
 
 
 def plot_slice_maps(pre, box_min_m, box_max_m, *, n_slices: int = 3, n_grid: int = 40,
@@ -38,7 +37,7 @@ def plot_slice_maps(pre, box_min_m, box_max_m, *, n_slices: int = 3, n_grid: int
         cov = pre.probe_cov_m2(pts, min_range_m=min_range_m, max_range_m=max_range_m)
         ev = np.linalg.eigvalsh(np.nan_to_num(cov, nan=0.0))[:, -1]
         ev[~np.isfinite(cov).all(axis=(1, 2))] = np.nan
-        maps.append(np.sqrt(_CHI2_3_95 * np.clip(ev, 0, None)).reshape(X.shape) * 1e6)
+        maps.append(np.sqrt(CHI2_3_95 * np.clip(ev, 0, None)).reshape(X.shape) * 1e6)
     vmax = np.nanmax([np.nanmax(m) for m in maps])
     for ax, z, m in zip(axes, zs, maps):
         im = ax.pcolormesh(X, Y, m, shading="auto", vmin=0, vmax=vmax, cmap="viridis")

@@ -197,9 +197,11 @@ def warnings_section(ctx: JobContext, doc: dict) -> Section:
 
 
 def uncertainty_note() -> str:
+    from multilat.network.statistics import CHI2_3_95   # here: scipy loads only for a report
+
     return (f"Standard uncertainties u are k = 1. Expanded uncertainties U = k u with k = {K_EXPANDED:g} "
             "(coverage probability about 95 % for a normal distribution). 95 % ellipsoids: semi-axes "
-            f"sqrt(χ²₃(0.95)) = {math.sqrt(7.814727903251178):.2f} × the principal standard deviations. "
+            f"sqrt(χ²₃(0.95)) = {math.sqrt(CHI2_3_95):.2f} × the principal standard deviations. "
             "Monte Carlo coverage intervals are quantiles of the simulated distribution (JCGM 101), "
             "no coverage factor.")
 

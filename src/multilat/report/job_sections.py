@@ -431,7 +431,7 @@ def lbb_simulate(doc: dict, result=None, options=None) -> list[Section]:
               caption=f"Points (µm unless stated), the {len(keep)} with the largest std; U with k = {K:g}")
     if result is not None:
         from multilat.lbb.simulate import base_xyz
-        from multilat.report import lbb_figures as F
+        from multilat.lbb import figures as F
 
         sim, cfg = result
         sec.figure(F.volume_map(sim, base_xyz(cfg), quantity="std"),
@@ -454,7 +454,7 @@ def lbb_compare(doc: dict, result=None, options=None) -> list[Section]:
                   "mean ± 2σ" + (" (x / y / z: " + " / ".join(f"{per[c]:.0%}" for c in "xyz" if c in per) + ")"
                                  if per else "") + ".")
     if result is not None:
-        from multilat.report import lbb_figures as F
+        from multilat.lbb import figures as F
 
         s = result.simulation
         sec.figure(F.reference_comparison(result.points, result.difference_m, s.mean_error_m, s.std_m),

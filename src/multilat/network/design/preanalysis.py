@@ -41,8 +41,6 @@ CRITERIA = {
     "max_mdb": "largest minimal detectable bias over the distances (m)",
 }
 
-_CHI2_3_95 = 7.814727903251178      # chi-square quantile, 3 degrees of freedom, 0.95
-
 
 # ---------------------------------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
@@ -251,7 +249,7 @@ def _point_blocks(cov, s, t):
 
 
 def _u95_max(cov3):
-    return np.sqrt(_CHI2_3_95 * np.clip(np.linalg.eigvalsh(cov3)[..., -1], 0.0, None))
+    return np.sqrt(st.CHI2_3_95 * np.clip(np.linalg.eigvalsh(cov3)[..., -1], 0.0, None))
 
 
 def _length_u(layout: Layout, cov, pairs):
