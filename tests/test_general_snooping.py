@@ -240,17 +240,41 @@ def test_one_group_is_sigma0_squared():
     assert c["variance_factor_std"] == pytest.approx(c["variance_factor"] * np.sqrt(2.0 / adj.result.dof), rel=1e-6)
 
 
+def _stations_and_targets(rng) -> tuple[Network, np.ndarray]:
+    """4 fixed stations, 25 free targets; a slope distance (σ 1 mm) and a zenith angle (σ 0.3 mgon)
+    from every station to every target: 200 rows, 75 unknowns, dof 125 (about 60 per kind). Returns
+    the network with its values at the truth and the truth's parameter vector."""
+    from multilat.network.general.points import FIXED, FREE, PointSet
+
+    st_xyz = np.array([[0, 0, 1.5], [60, 0, 1.0], [60, 50, 2.0], [0, 50, 1.2]])
+    tg = rng.uniform([5, 5, 0], [55, 45, 12], size=(25, 3))
+    ids = [f"S{i}" for i in range(4)] + [f"T{j}" for j in range(25)]
+    pts = PointSet.build(ids, np.vstack([st_xyz, tg]), status=[FIXED] * 4 + [FREE] * 25)
+    fr, to = np.repeat(np.arange(4), 25), np.tile(np.arange(4, 29), 4)
+    zeros = {"from_dh": np.zeros(100), "to_dh": np.zeros(100)}
+    blocks = (Block("slope_distance", np.zeros(100), np.full(100, 1e-3), index={"from": fr, "to": to}, data=zeros),
+              Block("zenith_angle", np.zeros(100), np.full(100, 0.3e-3 * np.pi / 200), index={"from": fr, "to": to},
+                    data=zeros))
+    net = Network(pts, blocks, ())
+    sysm = System(net)
+    x = sysm.layout.initial()
+    r, _ = sysm.evaluate(x)
+    return Network(pts, tuple(replace(b, value=-r[sl]) for b, sl in zip(blocks, sysm.rows)), ()), x
+
+
 def test_two_kinds_scaled_by_known_factors():
-    """σ of the directions × 2 (factor 4) and of the zenith angles × 0.5 (factor 0.25), the distances
-    as given: the mean estimate over 60 seeds equals the factors within 4 Monte Carlo SE, and the
-    mean Helmert standard error equals the spread of the estimates within 25 % (the SE of a standard
-    deviation from 60 samples is 9 %)."""
-    adj = adjust_network(read_gama_input(DATA / "two_trackers.xml"))
-    true = {"direction": 4.0, "zenith_angle": 0.25, "slope_distance": 1.0}
+    """The distances simulated with σ × 2 (variance factor 4), the zenith angles with σ × 0.5 (0.25):
+    the mean estimate over 60 seeds equals the factors within 4 Monte Carlo standard errors, and the
+    mean Helmert standard error (relative) equals the spread of the estimates within 25 % (the
+    relative SE of a standard deviation from 60 samples is 9 %)."""
     rng = np.random.default_rng(7)
+    net, _ = _stations_and_targets(rng)
+    true = {"slope_distance": 4.0, "zenith_angle": 0.25}
     est, se = {k: [] for k in true}, {k: [] for k in true}
     for _ in range(60):
-        v = estimate(_simulated(adj, rng, true), tol=1e-6)
+        noisy = tuple(replace(b, value=b.value + np.sqrt(true[b.kind]) * b.sigma * rng.standard_normal(b.n_rows))
+                      for b in net.blocks)
+        v = estimate(Network(net.points, noisy, ()), tol=1e-6)
         for c in v.components:
             est[c["group"]].append(c["variance_factor"])
             se[c["group"]].append(c["variance_factor_std"] / c["variance_factor"])   # relative
@@ -303,7 +327,7 @@ def test_same_rejections_as_the_distance_path(tmp_path):
 def _cli(capsys, *args):
     from multilat.cli import main
 
-    rc = main([str(a) for a in args])
+    rc = main(["adjust"] + [str(a) for a in args])
     out, err = capsys.readouterr()
     return rc, out, err
 
@@ -316,15 +340,22 @@ def test_cli_snooping_and_variance_components(capsys, tmp_path):
     line = int(b.labels[3].rsplit(":", 1)[1])
     old = text[line - 1]
     val = old.split('val="')[1].split('"')[0]
-    text[line - 1] = old.replace(f'val="{val}"', f'val="{float(val) + 0.025:.6f}"')   # + 20 σ (1.2 mm)
+    text[line - 1] = old.replace(f'val="{val}"', f'val="{float(val) + 0.025:.6f}"')   # + 20 σ (σ 1.2 mm)
     bad = tmp_path / "bad.xml"
     bad.write_text("".join(text))
-    rc, out, err = _cli(capsys, bad, "--json", "--variance-components", "kind")
+    rc, out, err = _cli(capsys, bad, "--json")
     assert rc == 0, err
     doc = json.loads(out)
     assert doc["snooping"] is True and [o["label"] for o in doc["outliers"]] == [f"{bad}:{line}"]
-    assert doc["variance_components"]["grouping"] == "kind"
     assert doc["external_reliability"]["largest"][0]["shift_max_m"] == doc["external_reliability"]["shift_max_m"]
+    _valid(doc)
+    # with variance components the blunder is first absorbed by its group's factor (the estimation runs
+    # without snooping, as on the distance path): the distances' factor is large and differs from 1
+    rc, out, err = _cli(capsys, bad, "--json", "--variance-components", "kind")
+    assert rc == 0, err
+    doc = json.loads(out)
+    vcs = {c["group"]: c for c in doc["variance_components"]["components"]}
+    assert vcs["slope_distance"]["variance_factor"] > 5 and vcs["slope_distance"]["differs_from_1"]
     _valid(doc)
     rc, out, err = _cli(capsys, bad, "--json", "--no-snooping")
     assert rc == 0 and json.loads(out)["outliers"] == [] and json.loads(out)["tests"]["n_failed"] >= 1
