@@ -149,6 +149,52 @@ def test_perfectly_correlated_rows_are_not_rejected():
     assert "perfectly correlated" in sn.unlocated_reason
 
 
+def _vector_to_new_point(strict=False):
+    """vectors.xml plus a point X placed by one correlated vector from G1 (its x, y have no check) and
+    two height differences (its z has redundancy 2); the vector's dz carries a 20σ blunder."""
+    from multilat.network.general.points import FREE, PointSet
+
+    net = read_gama_input(DATA / "vectors.xml")
+    res = adjust_network(net).result
+    g1, g2, g3 = (res.xyz_m[res.ids.index(p)] for p in ("G1", "G2", "G3"))
+    x_true = g1 + np.array([120.0, -80.0, 15.0])
+    pts = net.points
+    P = PointSet(pts.ids + ("X",), np.vstack([res.xyz_m, x_true]), np.vstack([pts.status, [[FREE] * 3]]),
+                 np.vstack([pts.sigma_m, [[np.nan] * 3]]), np.append(pts.constrained, False))
+    ix = {p: i for i, p in enumerate(P.ids)}
+    cov = np.array([[4.0, 1.0, 0.5], [1.0, 4.0, 0.8], [0.5, 0.8, 9.0]]) * 1e-6
+    vec = Block("coordinate_difference", (x_true - g1) + np.array([0.0, 0.0, 20 * 3e-3]), np.sqrt(np.diag(cov)), cov,
+                {"from": np.full(3, ix["G1"]), "to": np.full(3, ix["X"]), "axis": np.arange(3)},
+                labels=("v:1", "v:1", "v:1"))
+    dh = Block("height_difference", np.array([x_true[2] - g2[2], x_true[2] - g3[2]]), np.array([2e-3, 2e-3]),
+               index={"from": np.array([ix["G2"], ix["G3"]]), "to": np.array([ix["X"], ix["X"]])},
+               labels=("h:1", "h:2"))
+    # the file's vectors at the adjusted values: the blunder is the only inconsistency
+    r, _ = adjust_network(net).system.evaluate(res.parameters)
+    b0 = replace(net.blocks[0], value=net.blocks[0].value - r)
+    return snoop(Network(P, (b0, vec, dh), ()), strict=strict)
+
+
+def test_a_block_that_was_all_a_point_had_takes_the_point_with_it():
+    sn = _vector_to_new_point()
+    (rej,) = sn.rejected
+    assert rej["label"] == "v:1" and rej["n_rows"] == 3 and rej["points_left_out"] == ["X"]
+    assert any(e["id"] == "X" and "once v:1 was rejected" in e["reason"] for e in sn.adjustment.excluded)
+    assert "X" not in sn.adjustment.result.ids
+    strict = _vector_to_new_point(strict=True)
+    assert strict.rejected == () and "--strict" in strict.unlocated_reason and "'X'" in strict.unlocated_reason
+
+
+def test_the_number_of_rejections_is_bounded():
+    net = read_gama_input(DATA / "direction_sets.xml")
+    b = net.blocks[1]
+    value = b.value.copy()
+    value[[2, 7]] += 20.0 * b.sigma[[2, 7]]
+    sn = snoop(_with_value(net, 1, value), max_rejections=1)
+    assert len(sn.rejected) == 1 and "bound of 1 rejection" in sn.note
+    assert len(snoop(_with_value(net, 1, value)).rejected) == 2
+
+
 # ------------------------------------------------------------------------------ false alarms
 def _simulated(adj, rng, factors=None) -> Network:
     """The adjusted network's design with new observations: the model at the adjusted parameters
@@ -164,15 +210,18 @@ def _simulated(adj, rng, factors=None) -> Network:
     return Network(pts, tuple(blocks), ())
 
 
-def test_false_rejections_match_the_family_wise_alpha():
+@pytest.mark.parametrize("vf", ["known", "unknown"])
+def test_false_rejections_match_the_family_wise_alpha(vf):
     """Šidák's rule (the default on these networks, > 10 tests): P(a blunder-free network loses a
-    row) <= α_family = 0.01, close to it for weakly correlated tests. 3 designs × 200 seeds."""
+    row) <= α_family = 0.01, close to it for weakly correlated tests; with the variance factor unknown
+    the largest |τ| at the same α0. 3 designs × 200 seeds; measured 5/600 (known) and 6/600 (unknown),
+    Monte Carlo SE 0.004."""
     rng = np.random.default_rng(20261127)
     n, lost = 0, 0
     for name in ("direction_sets", "two_trackers", "trilateration_fixed"):
         adj = adjust_network(read_gama_input(DATA / f"{name}.xml"))
         for _ in range(200):
-            sn = snoop(_simulated(adj, rng))
+            sn = snoop(_simulated(adj, rng), variance_factor=vf)
             assert sn.stats.levels.method == "sidak"
             n += 1
             lost += bool(sn.rejected)

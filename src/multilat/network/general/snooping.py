@@ -145,6 +145,13 @@ def snoop(network: Network, *, options=None, strict: bool = False, alpha: float 
         bound.spend()
         adj = NetworkAdjustment(new.network, new.system, new.result, given, tuple(excluded))
         stats = statistics(adj.system, adj.result, levels=levels, **tests)
+    return _finish(adj, stats, rejected, params_then, steps, unlocated, reason, snooping, bound, limit, max_seconds)
+
+
+def _finish(adj, stats, rejected, params_then, steps, unlocated, reason, snooping, bound, limit,
+            max_seconds) -> Snooping:
+    """The record: the rejections with their residuals at the final solution, the steps' actions, the
+    bound's note."""
     if unlocated and steps:
         steps[-1]["action"] = f"not rejected: {reason}"
     out = []
