@@ -91,7 +91,7 @@ def snoop(network: Network, *, options=None, strict: bool = False, alpha: float 
     given, excluded = adj.given, list(adj.excluded)
     tests = dict(alpha=alpha, variance_factor=variance_factor, method=method, alpha_global=alpha_global,
                  alpha_family=alpha_family, power=power)
-    stats = statistics(adj.system, adj.result, **tests)
+    stats = statistics(adj.system, adj.result, external=False, **tests)   # the rounds need no shifts
     levels = stats.levels
     unknown = variance_factor == "unknown"
     lam0 = st.noncentrality(levels.alpha0, power)
@@ -144,7 +144,8 @@ def snoop(network: Network, *, options=None, strict: bool = False, alpha: float 
         rejected.append((record, _removed_rows(system, unit), system.network.points))
         bound.spend()
         adj = NetworkAdjustment(new.network, new.system, new.result, given, tuple(excluded))
-        stats = statistics(adj.system, adj.result, levels=levels, **tests)
+        stats = statistics(adj.system, adj.result, levels=levels, external=False, **tests)
+    stats = statistics(adj.system, adj.result, levels=levels, **tests)   # the final one, with external reliability
     return _finish(adj, stats, rejected, params_then, steps, unlocated, reason, snooping, bound, limit, max_seconds)
 
 
