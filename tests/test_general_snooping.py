@@ -73,7 +73,7 @@ def _levelling_loops(tmp_path) -> Path:
     """height_differences.xml with 5 more height differences closing loops (the file's two lines alone
     leave every w-test of a segment perfectly correlated with its neighbour's: no blunder there can be
     located). Values: the stored truth plus seeded noise of their σ (0.8 mm)."""
-    truth = {r["id"]: float(r["z_m"]) for r in csv.DictReader(open(DATA / "height_differences_truth.csv"))}
+    truth = {r["id"]: float(r["z_m"]) for r in csv.DictReader((DATA / "height_differences_truth.csv").read_text().splitlines())}
     rng = np.random.default_rng(11)
     extra = "".join(f'  <dh from="{a}" to="{b}" val="{truth[b] - truth[a] + 0.0008 * rng.standard_normal():.6f}" '
                     'stdev="0.80" />\n'
@@ -340,7 +340,7 @@ def test_variance_components_by_head_on_a_csv_network():
 
     params = {"observations": ROOT / "examples" / "network" / "mixed" / "obs.csv", "references": None,
               "points": None, "datum": "free"}
-    doc, adj, _ = compute_tables(params, alpha=0.001, variance_factor="known", strict=False,
+    doc, _, _ = compute_tables(params, alpha=0.001, variance_factor="known", strict=False,
                                  variance_components="head")
     groups = [c["group"] for c in doc["variance_components"]["components"]]
     assert any(g.startswith("slope_distance:") for g in groups) and "tracker_angles" in groups
@@ -353,7 +353,7 @@ def test_same_rejections_as_the_distance_path(tmp_path):
     from multilat.network.adjust import adjust as adjust_old
     from multilat.network.files import read_observations
 
-    rows = list(csv.reader(open(ROOT / "examples" / "network" / "mixed" / "obs.csv")))
+    rows = list(csv.reader((ROOT / "examples" / "network" / "mixed" / "obs.csv").read_text().splitlines()))
     rows[10][2] = f"{float(rows[10][2]) + 20 * float(rows[10][3]):.9f}"            # H1->P10 distance
     ang = [i for i, r in enumerate(rows[1:], 1) if r[4]]
     a = rows[ang[3]]

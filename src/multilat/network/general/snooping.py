@@ -216,7 +216,7 @@ def _guard(system: System, jw, Q, red, unit) -> str:
     after[unit] = 0.0
     rows_of = _point_rows(system)
     pts = system.network.points
-    for p in sorted(set(int(i) for q in unit for i in rows_of[1][q])):
+    for p in sorted({int(i) for q in unit for i in rows_of[1][q]}):
         if not np.any(pts.status[p] == FREE):
             continue
         mine = np.flatnonzero(np.any(rows_of[0] == p, axis=1))
