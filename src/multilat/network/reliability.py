@@ -21,7 +21,7 @@ import numpy as np
 from multilat.network import statistics as st
 from multilat.network.model import Q
 
-__all__ = ["Reliability", "external_shifts", "reliability", "MAX_EXTERNAL_OBS"]
+__all__ = ["Reliability", "external_shifts", "largest_point_shift", "reliability", "MAX_EXTERNAL_OBS"]
 
 # the coordinate shifts are computed up to this many used observations (since issue 29 they cost
 # O(m s²) plus a bounded search, not O(m) each; the cap keeps the large documents as they were)
@@ -105,10 +105,18 @@ def _shifts_dense(cov, *, batch: int):
         if cov.G is not None:
             D = D - cov.G @ (cov.H @ D)
         pts = np.concatenate([D[:Q * s].reshape(s, Q, -1)[:, :3], D[Q * s:].reshape(t, 3, -1)], axis=0)
-        norm = np.linalg.norm(pts, axis=1)           # (points, batch)
-        j = np.argmax(norm, axis=0)
-        out[ks], where[ks] = norm[j, c], j
+        out[ks], where[ks] = largest_point_shift(pts)
     return out, where
+
+
+def largest_point_shift(shifts):
+    """``shifts`` (points, 3, k): the coordinate shifts of every point caused by each of k biases.
+    Returns the largest point shift ``max_p |Δx_p|`` (k,) and its point's index (k,) (ties: the
+    first point). Shared by the distance path and the general layer
+    (:mod:`multilat.network.general.reliability`)."""
+    norm = np.linalg.norm(shifts, axis=1)           # (points, k)
+    j = np.argmax(norm, axis=0)
+    return norm[j, np.arange(norm.shape[1])], j
 
 
 class _BlockContext:
