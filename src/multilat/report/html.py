@@ -19,7 +19,8 @@ class Num:
     """A number shown in a table cell: ``value * k * scale`` (after ``op``) to ``digits`` decimals.
 
     ``path`` is where ``value`` sits in the command's JSON document (keys and list indices joined by
-    ``/``); ``op`` is ``""`` or ``"sqrt"`` (a standard deviation from a variance).
+    ``/``); ``op`` is ``""``, ``"sqrt"`` (a standard deviation from a variance) or ``"inv"`` (the
+    reciprocal: the lower bound ``1/f`` of a band ``[1/f, f]``).
     """
 
     value: float | None
@@ -37,6 +38,8 @@ class Num:
         v = float(v)
         if self.op == "sqrt":
             v = math.sqrt(max(v, 0.0))
+        elif self.op == "inv":
+            v = 1.0 / v if v != 0 else math.inf
         v = v * self.k * self.scale
         if round(v, self.digits) == 0:
             v = 0.0                      # no "-0.000"
@@ -50,16 +53,33 @@ class Num:
         return f"<td{attrs}>{html.escape(self.text())}</td>"
 
 
+@dataclass(frozen=True)
+class Verdict:
+    """A verdict cell: ``text`` computed by the report from the numbers in its row; ``ok`` True
+    (green), False (red) or None (neutral). ``data-verdict`` carries ``ok`` for a reader or a test."""
+
+    text: str
+    ok: bool | None = None
+
+    def cell(self) -> str:
+        cls = {True: "ok", False: "bad", None: ""}[self.ok]
+        flag = {True: "ok", False: "bad", None: "none"}[self.ok]
+        c = f' class="{cls}"' if cls else ""
+        return f'<td{c} data-verdict="{flag}">{html.escape(self.text)}</td>'
+
+
 def _cell(c) -> str:
-    return c.cell() if isinstance(c, Num) else f"<td>{html.escape(str(c))}</td>"
+    return c.cell() if isinstance(c, (Num, Verdict)) else f"<td>{html.escape(str(c))}</td>"
 
 
 @dataclass
 class Section:
-    """One report section. ``blocks`` are already-escaped HTML fragments built by the helpers below."""
+    """One report section. ``blocks`` are already-escaped HTML fragments built by the helpers below;
+    ``key`` names the section in the page (``<section data-section="key">``) for the tests."""
 
     title: str
     blocks: list[str] = field(default_factory=list)
+    key: str = ""
 
     def paragraph(self, text: str, *, cls: str | None = None) -> "Section":
         c = f' class="{cls}"' if cls else ""
@@ -72,13 +92,15 @@ class Section:
         self.blocks.append(f"<ul{c}>" + "".join(f"<li>{html.escape(str(t))}</li>" for t in texts) + "</ul>")
         return self
 
-    def table(self, header, rows, *, caption: str | None = None) -> "Section":
-        """Add a table; ``rows`` is an iterable of sequences of cells (:class:`Num`, or anything whose
-        str() is escaped)."""
+    def table(self, header, rows, *, caption: str | None = None, name: str | None = None) -> "Section":
+        """Add a table; ``rows`` is an iterable of sequences of cells (:class:`Num`, :class:`Verdict`,
+        or anything whose str() is escaped). ``name``: a ``data-table`` attribute naming the table
+        (for a reader's inspector and the tests)."""
         head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
         body = "".join("<tr>" + "".join(_cell(c) for c in r) + "</tr>" for r in rows)
         cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
-        self.blocks.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+        attr = f' data-table="{html.escape(name)}"' if name else ""
+        self.blocks.append(f"<table{attr}>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
         return self
 
     def figure(self, fig, *, caption: str = "") -> "Section":
@@ -115,6 +137,7 @@ def render(title: str, sections: list[Section], *, subtitle: str | None = None) 
              f"<link rel='icon' href='data:,'>"
              f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>{sub}"]
     for s in sections:
-        parts.append(f"<section><h2>{html.escape(s.title)}</h2>{''.join(s.blocks)}</section>")
+        key = f' data-section="{html.escape(s.key)}"' if s.key else ""
+        parts.append(f"<section{key}><h2>{html.escape(s.title)}</h2>{''.join(s.blocks)}</section>")
     parts.append("</body></html>")
     return "\n".join(parts)
