@@ -15,17 +15,18 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.report.html import Num, Section, Verdict
-from multilat.report.job_sections import K, MAX_ROWS, _m, _plain, _um, ptr, resolve
+from multilat.report.job_sections import K, MAX_ROWS, _m, _plain, _um, ptr
 
 #: rows of the "largest |w|" table of the reliability section
 LARGEST_W_ROWS = 10
 
 
-def sections(doc: dict, result=None, options=None) -> list[Section]:
-    """The adjust report's results sections (before the warnings and what was run)."""
+def sections(doc: dict, result=None, options=None, *, warnings=()) -> list[Section]:
+    """The adjust report's results sections (before the warnings and what was run); ``warnings``:
+    every warning of the job (counted among the verdicts)."""
     from multilat.report import adjust_checks as ac
 
-    out = [key_section(doc), reliability_section(doc), heads_section(doc), ac.angles_section(doc),
+    out = [key_section(doc, warnings), reliability_section(doc), heads_section(doc), ac.angles_section(doc),
            ac.bars_and_control_section(doc, options or {}), ac.frame_section(doc, options or {}),
            coordinates_section(doc)]
     if result is not None:
@@ -68,10 +69,10 @@ def w_verdict(w: float, crit: float) -> Verdict:
 
 
 # ---------------------------------------------------------------------------------- first section
-def key_section(doc: dict) -> Section:
+def key_section(doc: dict, warnings=()) -> Section:
     """Verdicts and key numbers: what the reader must decide first."""
     sec = Section("Verdicts and key numbers", key="verdicts")
-    sec.table(("check", "value", "lower limit", "upper limit", "verdict"), _verdict_rows(doc),
+    sec.table(("check", "value", "lower limit", "upper limit", "verdict"), _verdict_rows(doc, len(warnings)),
               caption="Each verdict compares the value with the limits printed beside it", name="verdicts")
     sec.table(("quantity", "value"), _key_rows(doc), caption="Key numbers", name="key-numbers")
     heads = doc.get("heads") or {}
@@ -100,7 +101,7 @@ def key_section(doc: dict) -> Section:
     return sec
 
 
-def _verdict_rows(doc: dict) -> list:
+def _verdict_rows(doc: dict, n_warnings: int) -> list:
     rows = []
     gt = doc.get("global_test") or {}
     if gt.get("statistic") is not None:
@@ -160,7 +161,7 @@ def _verdict_rows(doc: dict) -> list:
     rows.append(("solver converged", f"{cv.get('iterations', '-')} iterations", "-", "-",
                  Verdict(("yes: " if cv.get("converged") else "NO: ") + str(cv.get("reason", "")),
                          bool(cv.get("converged")))))
-    nw = len(doc.get("warnings") or [])
+    nw = n_warnings
     rows.append(("warnings", nw, "-", 0, Verdict("none" if nw == 0 else f"{nw}: see Warnings", nw == 0)))
     return rows
 
@@ -243,9 +244,10 @@ def reliability_section(doc: dict) -> Section:
     obs = doc.get("observations") or []
     if obs and obs[0].get("redundancy") is not None:
         rows = []
-        for label, key, scale, digits in (("redundancy number", "redundancy", 1.0, 3), ("MDB (µm)", "mdb_m", 1e6, 1),
-                                          ("MDB / σ", "mdb_sigma", 1.0, 1), ("largest shift (µm)", "shift_max_m", 1e6, 1)):
-            vals = np.array([np.nan if o.get(key) is None else o[key] for o in obs], float)
+        for label, key, scale, digits in (("redundancy number", "redundancy", 1.0, 3),
+                                          ("MDB (µm)", "mdb_m", 1e6, 1), ("MDB / σ", "mdb_sigma", 1.0, 1),
+                                          ("largest shift (µm)", "shift_max_m", 1e6, 1)):
+            vals = np.array([np.nan if o.get(key) is None or o.get("rejected") else o[key] for o in obs], float)
             if not np.isfinite(vals).any():
                 continue
             lo, hi = int(np.nanargmin(vals)), int(np.nanargmax(vals))
@@ -254,7 +256,8 @@ def reliability_section(doc: dict) -> Section:
                          Num(vals[hi], ptr("observations", hi, key), scale, digits),
                          f"{obs[hi]['station']}-{obs[hi]['target']}"))
         sec.table(("quantity", "smallest", "at", "largest", "at"), rows,
-                  caption="Internal and external reliability of the distances", name="reliability-ranges")
+                  caption="Internal and external reliability of the distances kept (the rejected ones left "
+                          "out)", name="reliability-ranges")
     rel = doc.get("reliability")
     if rel is not None:
         po = rel.get("poor_observations") or []
@@ -264,7 +267,8 @@ def reliability_section(doc: dict) -> Section:
                 why = [w for w, bad in ((f"r < {rel['r_min']:g}", o["redundancy"] < rel["r_min"]),
                                         (f"MDB > {rel['mdb_limit_sigma']:g} σ",
                                          o["mdb_sigma"] > rel["mdb_limit_sigma"])) if bad]
-                rows.append((o["station"], o["target"], _plain(doc, "reliability", "poor_observations", i, "redundancy"),
+                rows.append((o["station"], o["target"],
+                             _plain(doc, "reliability", "poor_observations", i, "redundancy"),
                              _um(doc, "reliability", "poor_observations", i, "mdb_m", digits=1),
                              _plain(doc, "reliability", "poor_observations", i, "mdb_sigma", digits=1),
                              _um(doc, "reliability", "poor_observations", i, "shift_max_m", digits=1),
@@ -287,7 +291,8 @@ def _largest_w_table(sec: Section, doc: dict) -> None:
     ws = np.array([abs(o["w"]) if o.get("w") is not None else np.nan for o in obs], float)
     order = [int(k) for k in np.argsort(-np.nan_to_num(ws, nan=-1.0))[:LARGEST_W_ROWS]]
     _, crit = w_critical(doc)
-    sec.table(("station", "target", "σ (µm)", "residual (µm)", "redundancy", "w", "MDB (µm)", "rejected", "verdict"),
+    sec.table(("station", "target", "σ (µm)", "residual (µm)", "redundancy", "w", "MDB (µm)", "rejected",
+               "verdict"),
               [(obs[k]["station"], obs[k]["target"], _um(doc, "observations", k, "sigma_m", digits=2),
                 _um(doc, "observations", k, "residual_m", digits=2, sign=True),
                 _plain(doc, "observations", k, "redundancy"), _plain(doc, "observations", k, "w"),
@@ -386,4 +391,4 @@ def coordinates_section(doc: dict) -> Section:
 
 
 __all__ = ["sections", "key_section", "reliability_section", "heads_section", "coordinates_section",
-           "independent_references", "worst_point", "largest_abs", "resolve"]
+           "independent_references", "worst_point", "largest_abs"]

@@ -187,9 +187,14 @@ def _esc(s) -> str:
     return html.escape(str(s))
 
 
+def job_warnings(ctx: JobContext, doc: dict) -> list[str]:
+    """Every warning of the job: those the command printed, then those in its JSON not printed."""
+    return list(ctx.warnings) + [str(w) for w in (doc.get("warnings") or []) if str(w) not in ctx.warnings]
+
+
 def warnings_section(ctx: JobContext, doc: dict) -> Section:
     sec = Section("Warnings", key="warnings")
-    ws = list(ctx.warnings) + [str(w) for w in (doc.get("warnings") or []) if str(w) not in ctx.warnings]
+    ws = job_warnings(ctx, doc)
     if ws:
         sec.items(ws, cls="warn")
     else:
@@ -216,7 +221,8 @@ def build_report(ctx: JobContext, doc: dict, *, result=None, title: str | None =
     from multilat.report import job_sections
 
     doc = to_jsonable(doc)
-    results = job_sections.sections(ctx.command, doc, result=result, options=ctx.options)
+    results = job_sections.sections(ctx.command, doc, result=result, options=ctx.options,
+                                    warnings=job_warnings(ctx, doc))
     sections = [*results, warnings_section(ctx, doc), meta_section(ctx, doc)]
     head = title or TITLES.get(ctx.command, ctx.command)
     return render(f"multilat {ctx.command}: {head}", sections, subtitle=uncertainty_note())

@@ -108,7 +108,7 @@ def _view_3d(sec: Section, result) -> None:
 
 # ------------------------------------------------------------------------------------- propagate
 def propagate(doc: dict, result=None, options=None) -> list[Section]:
-    sec = Section("Monte Carlo")
+    sec = Section("Monte Carlo", key="montecarlo")
     sec.table(("quantity", "value"), [
         ("source", doc["source"]), ("trials kept", doc["trials"]), ("failed to converge", doc["n_failed"]),
         ("noise", doc["noise"]), ("coverage probability", _plain(doc, "coverage", digits=2)),
@@ -129,20 +129,8 @@ def propagate(doc: dict, result=None, options=None) -> list[Section]:
                "a3 95 %", "in MC ellipsoid"), rows,
               caption="Points (µm): MC and linear standard uncertainties; semi-axes of the MC 95 % ellipsoid; "
                       "fraction of the trials inside it")
-    rows = []
-    for group in ("parameters", "distances"):
-        for i, r in enumerate(doc[group]):
-            if group == "parameters" and not r["label"].endswith((".offset", ".scale")):
-                continue
-            p_lo, p_hi = ptr(group, i, "interval_symmetric_m", 0), ptr(group, i, "interval_symmetric_m", 1)
-            rows.append((r["label"], _m(doc, group, i, "nominal_m"), _um(doc, group, i, "std_mc_m"),
-                         _um(doc, group, i, "std_mc_se_m", digits=3), _um(doc, group, i, "std_lin_m"),
-                         Num(resolve(doc, p_lo), p_lo, 1.0, 6), Num(resolve(doc, p_hi), p_hi, 1.0, 6),
-                         _verdict(r["agrees"])))
-    sec.table(("quantity", "nominal (m)", "u MC (µm)", "s.e. (µm)", "u lin (µm)", "95 % low (m)",
-               "95 % high (m)", "MC agrees with linear"), rows[:MAX_ROWS],
-              caption="Offsets and interpoint distances: the 95 % interval is probabilistically symmetric "
-                      "(JCGM 101); 'agrees': |u MC − u lin| within 3 MC standard errors")
+    _propagate_parameters(sec, doc)
+    _propagate_distances(sec, doc)
     out = [sec]
     if result is not None and getattr(result, "samples", None) is not None:
         from multilat.report.propagate_figures import clouds_figure
@@ -154,6 +142,42 @@ def propagate(doc: dict, result=None, options=None) -> list[Section]:
                          "MC (solid) and linear (dashed) 95 % ellipsoids; red: stations, blue: targets")
         out.append(f)
     return out
+
+
+AGREES = "'agrees': |u MC − u lin| within 3 MC standard errors"
+
+
+def _propagate_parameters(sec: Section, doc: dict) -> None:
+    """Offsets (µm) and scale factors (µm/m): nominal, u, s.e. and the 95 % interval in one unit."""
+    for suffix, unit, what in ((".offset", "µm", "Offsets"), (".scale", "µm/m", "Scale factors")):
+        rows = []
+        for i, r in enumerate(doc["parameters"]):
+            if not r["label"].endswith(suffix):
+                continue
+            rows.append((r["label"], _um(doc, "parameters", i, "nominal_m", sign=True),
+                         _um(doc, "parameters", i, "std_mc_m"), _um(doc, "parameters", i, "std_mc_se_m", digits=3),
+                         _um(doc, "parameters", i, "std_lin_m"),
+                         _um(doc, "parameters", i, "interval_symmetric_m", 0, sign=True),
+                         _um(doc, "parameters", i, "interval_symmetric_m", 1, sign=True), _verdict(r["agrees"])))
+        if rows:
+            sec.table(("quantity", f"nominal ({unit})", f"u MC ({unit})", f"s.e. ({unit})", f"u lin ({unit})",
+                       f"95 % low ({unit})", f"95 % high ({unit})", "MC agrees with linear"), rows[:MAX_ROWS],
+                      caption=f"{what} ({unit}): the 95 % interval is probabilistically symmetric (JCGM 101); "
+                              + AGREES, name=what.lower().replace(" ", "-"))
+
+
+def _propagate_distances(sec: Section, doc: dict) -> None:
+    """Interpoint distances: lengths and their interval in m (0.1 µm), uncertainties in µm."""
+    rows = [(r["label"], _m(doc, "distances", i, "nominal_m", digits=7), _um(doc, "distances", i, "std_mc_m"),
+             _um(doc, "distances", i, "std_mc_se_m", digits=3), _um(doc, "distances", i, "std_lin_m"),
+             _m(doc, "distances", i, "interval_symmetric_m", 0, digits=7),
+             _m(doc, "distances", i, "interval_symmetric_m", 1, digits=7), _verdict(r["agrees"]))
+            for i, r in enumerate(doc["distances"][:MAX_ROWS])]
+    if rows:
+        sec.table(("points", "length (m)", "u MC (µm)", "s.e. (µm)", "u lin (µm)", "95 % low (m)", "95 % high (m)",
+                   "MC agrees with linear"), rows,
+                  caption="Interpoint distances: lengths and the 95 % interval in m, their uncertainties in µm; "
+                          + AGREES, name="distances")
 
 
 def _split_ids(text):
@@ -354,6 +378,11 @@ SECTIONS = {"adjust": adjust, "propagate": propagate, "simulate": simulate, "des
             "budget": budget, "correct": correct, "lbb simulate": lbb_simulate, "lbb compare": lbb_compare}
 
 
-def sections(command: str, doc: dict, *, result=None, options=None) -> list[Section]:
-    """The results sections of ``command``'s report."""
+def sections(command: str, doc: dict, *, result=None, options=None, warnings=()) -> list[Section]:
+    """The results sections of ``command``'s report (``warnings``: every warning of the job, which
+    the adjust report counts among its verdicts)."""
+    if command == "adjust":
+        from multilat.report import adjust_sections
+
+        return adjust_sections.sections(doc, result, options, warnings=warnings)
     return SECTIONS[command](doc, result, options)
