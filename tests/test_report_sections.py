@@ -30,7 +30,7 @@ SEQ, MIX = EX / "sequential" / "obs.csv", EX / "mixed" / "obs.csv"
 ORDER = ["verdicts", "reliability", "heads", "angles", "bars", "frame", "coordinates", "figures", "warnings", "run"]
 
 _DOM = """() => Array.from(document.querySelectorAll("section")).map(s => ({
-  key: s.dataset.section || "", title: s.querySelector("h2").innerText, text: s.innerText,
+  key: s.querySelector("h2").id || "", title: s.querySelector("h2").innerText, text: s.innerText,
   tables: Array.from(s.querySelectorAll("table")).map(t => ({
     name: t.dataset.table || "", caption: t.caption ? t.caption.innerText : "",
     header: Array.from(t.querySelectorAll("thead th")).map(h => h.innerText.trim()),
@@ -331,6 +331,9 @@ def test_weighted_control_with_residuals(pages):
             assert same(r["given (m)"], c["xyz_m"][a]) and same(r["σ (µm)"], c["std_m"][a], 1e6)
             assert same(r["residual (µm)"], c["residual_m"][a], 1e6) and same(r["w"], c["w"][a])
             assert same(r["redundancy"], c["redundancy"][a])
+            assert c["w"][a] == pytest.approx(c["residual_m"][a] / (c["std_m"][a] * math.sqrt(c["redundancy"][a])),
+                                              rel=1e-12)          # Baarda's w, as the distances'
+            assert (r["verdict"] == "|w| <= critical") == (abs(printed(r["w"])[0]) <= doc["tests"]["w_critical"])
 
 
 def test_reference_lengths_not_in_the_adjustment_are_independent_checks(pages):

@@ -75,7 +75,8 @@ def _cell(c) -> str:
 @dataclass
 class Section:
     """One report section. ``blocks`` are already-escaped HTML fragments built by the helpers below;
-    ``key`` names the section in the page (``<section data-section="key">``) for the tests."""
+    ``key`` names the section in the page: the id of its heading (``<h2 id="key">``, a link target
+    ``report.html#key``)."""
 
     title: str
     blocks: list[str] = field(default_factory=list)
@@ -137,7 +138,7 @@ def render(title: str, sections: list[Section], *, subtitle: str | None = None) 
              f"<link rel='icon' href='data:,'>"
              f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>{sub}"]
     for s in sections:
-        key = f' data-section="{html.escape(s.key)}"' if s.key else ""
-        parts.append(f"<section{key}><h2>{html.escape(s.title)}</h2>{''.join(s.blocks)}</section>")
+        key = f' id="{html.escape(s.key)}"' if s.key else ""
+        parts.append(f"<section><h2{key}>{html.escape(s.title)}</h2>{''.join(s.blocks)}</section>")
     parts.append("</body></html>")
     return "\n".join(parts)
