@@ -151,6 +151,11 @@ def datum_kind(doc: dict, options: dict) -> str:
     return "321" if words.startswith("3-2-1") else "control" if words.startswith("fixed control") else "free"
 
 
+def _words(v) -> str:
+    """A JSON value in words: a list as its items joined by commas."""
+    return ", ".join(str(x) for x in v) if isinstance(v, (list, tuple)) else str(v)
+
+
 def frame_section(doc: dict, options: dict) -> Section:
     sec = Section("Frame and datum", key="frame")
     kind = datum_kind(doc, options)
@@ -173,7 +178,8 @@ def frame_section(doc: dict, options: dict) -> Section:
     sd = (doc.get("initial") or {}).get("scale_datum")
     if scaled:
         scale = (f"scale factors estimated for heads {', '.join(scaled)}; the scale from "
-                 + (", ".join(f"{k}: {v}" for k, v in sd.items()) if isinstance(sd, dict) else "the scale bars"))
+                 + (", ".join(f"{k}: {_words(v)}" for k, v in sd.items()) if isinstance(sd, dict)
+                    else "the scale bars"))
     elif doc.get("scale_bars"):
         scale = "the distances and the scale bars (observations); no head has a scale factor"
     else:

@@ -128,7 +128,7 @@ _CSS = """body{font-family:sans-serif;max-width:64em;margin:2em auto;line-height
 table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:.2em .6em;text-align:right}
 th{background:#eee}caption{caption-side:top;font-weight:bold;text-align:left}img{max-width:100%}
 .ok{color:#070}.bad{color:#a00}.warn{color:#a60}.meta td,.meta th{text-align:left}
-figcaption{font-size:90%;color:#333}"""
+figcaption{font-size:90%;color:#333}td[data-verdict]{text-align:left}"""
 
 
 def render(title: str, sections: list[Section], *, subtitle: str | None = None) -> str:
