@@ -72,7 +72,9 @@ def check_numbers(html_text: str, doc: dict) -> tuple[int, list[str]]:
             continue
         v = float(v)
         if a.get("data-op") == "sqrt":
-            v = math.sqrt(v)
+            if -1e-18 < v < 0:                          # a datum coordinate's zero variance, rounded
+                v = 0.0
+            v = math.sqrt(v) if v >= 0 else math.nan
         elif a.get("data-op") == "inv":                 # the lower bound 1/f of a band [1/f, f]
             v = 1.0 / v
         elif a.get("data-op"):

@@ -415,3 +415,30 @@ def test_propagate_offsets_in_one_unit(pages):
         assert same(row["nominal (µm)"], p["nominal_m"], 1e6) and same(row["u MC (µm)"], p["std_mc_m"], 1e6)
         assert same(row["95 % low (µm)"], p["interval_symmetric_m"][0], 1e6)
         assert same(row["95 % high (µm)"], p["interval_symmetric_m"][1], 1e6)
+
+
+def test_321_frame_and_estimated_scales_without_a_browser(tmp_path):
+    """A 3-2-1 datum and estimated head scales (scale bars as their datum): the frame in words, the
+    heads table with the scale in µm/m beside its u, every number equal to the JSON (the checker of
+    tests/test_job_report.py), the nine bars as observations and none as an independent check."""
+    from test_job_report import check_numbers
+
+    small = ROOT / "examples" / "network"
+    page = tmp_path / "r.html"
+    rc, out, err = _run(["adjust", str(small / "small_volume_obs.csv"), "--datum", "321:A,B,C", "--scales",
+                         "--references", str(small / "small_volume_refs.csv"), "--scale-bars", "--json",
+                         "--report", str(page)])
+    assert rc == 0, err
+    doc, text = json.loads(out), page.read_text(encoding="utf-8")
+    n, bad = check_numbers(text, doc)
+    assert not bad and n > 300, (n, bad[:3])
+    frame = text[text.index('<h2 id="frame">'):]
+    frame = frame[:frame.index("</section>")]
+    assert "datum: 3-2-1: A at origin, B on +x, C in the xy-plane" in frame
+    assert "the first point is the origin" in frame and "scale factors estimated for heads A, B, C, D" in frame
+    heads = text[text.index('<table data-table="heads">'):]
+    heads = heads[:heads.index("</table>")]
+    assert "<th>scale (µm/m)</th><th>u(scale) (µm/m)</th>" in heads
+    for h, v in doc["heads"].items():
+        assert v["scale_estimated"] and f'data-path="heads/{h}/scale"' in heads
+    assert text.count('<table data-table="scale-bars">') == 1 and 'data-table="reference-lengths"' not in text
