@@ -1,0 +1,458 @@
+"""Monte Carlo on the general layer: the adjustment's own system, frozen at its solution.
+
+Every network :func:`~.adjust.adjust` takes (any kind, heads over several stations, scale bars,
+weighted control, direction sets, tracker angles, correlated blocks, a free network's inner
+constraints) is propagated by the same :class:`~.adjust.System`:
+
+* **trials.** ``l_t = f(x̂) + L e_t`` with ``x̂`` the adjusted parameters, ``f`` the kinds' model,
+  ``L`` the blocks' Cholesky factors (``C = L L^T``, the whiteners of the adjustment) and ``e_t``
+  standard normal: the input distributions are centred on the adjusted observations, so every trial's
+  solution scatters about ``x̂`` with covariance ``Q`` (σ0 a priori = 1) to first order.
+* **chord steps.** Each trial starts at ``x̂`` and iterates
+  ``x_{k+1} = x_k + Q J(x_k)^T P (l_t - f(x_k))``: the model and its Jacobian exact per trial (the
+  kinds, vectorised over the trials), ``P = C^-1``, and ``Q`` the adjustment's cofactor matrix
+  (the top-left block of the inverse of its bordered normal matrix at ``x̂``, :func:`~.adjust._step`):
+  factorised once. The fixed point satisfies ``J(x*)^T P r(x*) = 0`` exactly, so each trial's
+  solution is the least-squares solution of its observations (what ``adjust`` gives for them, to the
+  step tolerance), in the datum ``B^T (x - x̂) = 0`` of the adjustment (``B`` its inner constraints;
+  none when the datum is fixed points).
+* **far trials.** A trial whose step does not shrink by half from one iteration to the next, or that
+  has not converged after ``max_iter`` chord steps, is solved again from ``x̂`` by full Gauss-Newton
+  (the Jacobian and the bordered system at every iterate, same datum): counted in
+  ``n_full_gauss_newton``. One that still does not converge is dropped and counted (``n_failed``).
+* **seeding.** Trials are drawn and solved in fixed blocks of :data:`BLOCK`; block ``b`` draws its
+  ``(n, R)`` standard normals, rows in the system's row order, from the Monte Carlo engine's
+  ``block_generator(entropy, spawn_key, b)``; a chunk (the unit of work handed to ``map``) is a run of
+  whole blocks, so the numbers are bit-identical for any chunk size, map or number of workers.
+
+Outputs: per free parameter (point coordinates, instrument constants and scales, orientations,
+set-up angles) and per interpoint distance the Monte Carlo mean, standard deviation with its Monte
+Carlo standard error, 95 % coverage intervals, beside the linear standard deviation from ``Q``; per
+point the Monte Carlo 3 x 3 covariance beside ``Q``'s.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse
+
+from multilat.errors import MultilatError
+from multilat.montecarlo import block_generator, block_trials, chunk_ranges, resolve_map, resolve_seed, summarize
+from multilat.network.angles import wrap_angle
+from multilat.network.general import kinds as kinds_registry
+from multilat.network.general.adjust import GeneralResult, System, _step
+
+__all__ = ["BLOCK", "Frozen", "GeneralPropagation", "freeze", "propagate", "SCHEMA"]
+
+#: Trials per seeded block (the unit of reproducibility; :data:`multilat.network.propagate.BLOCK`).
+BLOCK = 1000
+#: JSON schema stamp of :meth:`GeneralPropagation.to_dict`.
+SCHEMA = "multilat.propagate-general/1"
+#: A chord step larger than this fraction of the previous one sends the trial to full Gauss-Newton.
+CONTRACTION = 0.5
+
+
+@dataclass(frozen=True, eq=False)
+class Frozen:
+    """The adjustment's system frozen at its solution (everything a block of trials needs).
+
+    system : System;  x_hat : (n,) adjusted full parameter vector;  computed : (R,) ``f(x̂)``
+    q : (n_free, n_free) the cofactor matrix (σ0 a priori = 1);  free : (n_free,) full columns of the free parameters
+    angular : (R,) rows wrapped to [-pi, pi);  weight : per block ``1/σ²`` (R_b,) or ``C^-1`` (R_b, R_b)
+    scatter : sparse (Σ R_b k_b, n_free): Jacobian value slots -> free columns;  slots : (R,) slots per row
+    constraints : (n_free, d') inner constraints ``B`` of the datum, or None;  dof : degrees of freedom
+    """
+
+    system: System
+    x_hat: np.ndarray
+    computed: np.ndarray
+    q: np.ndarray
+    free: np.ndarray
+    angular: np.ndarray
+    weight: tuple
+    scatter: object
+    slots: np.ndarray
+    determinability: object
+    dof: int
+
+    @property
+    def n_rows(self) -> int:
+        return self.system.n_rows
+
+    def residuals(self, x: np.ndarray, obs: np.ndarray, jacobian: bool = True):
+        """Residuals ``obs - f(x)`` (T, R) (angles wrapped) and the Jacobian values (T, Σ R_b k_b)."""
+        s = self.system
+        r = np.empty(obs.shape)
+        vals = []
+        for b, cols, sl in zip(s.blocks, s.cols, s.rows):
+            computed, values, _ = kinds_registry.kind(b.kind).evaluate(b, s.layout, cols, x, jacobian)
+            r[:, sl] = obs[:, sl] - computed
+            if jacobian:
+                vals.append(values.reshape(len(x), -1))
+        r[:, self.angular] = wrap_angle(r[:, self.angular])
+        return r, (np.concatenate(vals, 1) if jacobian else None)
+
+    def weighted(self, r: np.ndarray) -> np.ndarray:
+        """``P r`` row block by row block (T, R)."""
+        out = np.empty_like(r)
+        for w, sl in zip(self.weight, self.system.rows):
+            out[:, sl] = r[:, sl] * w if w.ndim == 1 else r[:, sl] @ w
+        return out
+
+    def gradient(self, pr: np.ndarray, vals: np.ndarray) -> np.ndarray:
+        """``J^T P r`` per trial (T, n_free) from the Jacobian values and ``P r``."""
+        return np.asarray((self.scatter.T @ (np.repeat(pr, self.slots, axis=1) * vals).T).T)
+
+
+def freeze(system: System, result: GeneralResult) -> Frozen:
+    """The frozen system of an adjusted network (``system`` and ``result`` of one adjustment)."""
+    x = np.asarray(result.parameters, float)
+    lay = system.layout
+    red = lay.reduced
+    computed = np.empty(system.n_rows)
+    angular = np.zeros(system.n_rows, bool)
+    weight, rows_i, cols_i, repeat = [], [], [], []
+    offset = 0
+    for b, cols, sl in zip(system.blocks, system.cols, system.rows):
+        mod = kinds_registry.kind(b.kind)
+        c, values, columns = mod.evaluate(b, lay, cols, x)
+        computed[sl] = c
+        angular[sl] = mod.ANGULAR
+        weight.append(1.0 / np.asarray(b.sigma, float) ** 2 if b.cov is None else np.linalg.inv(b.covariance))
+        rc = red[columns]
+        slot = offset + np.arange(rc.size)
+        keep = rc.ravel() >= 0
+        rows_i.append(slot[keep])
+        cols_i.append(rc.ravel()[keep])
+        repeat.append(np.full(b.n_rows, columns.shape[1]))
+        offset += rc.size
+    ri, ci = np.concatenate(rows_i), np.concatenate(cols_i)
+    scatter = scipy.sparse.csr_matrix((np.ones(len(ri)), (ri, ci)), shape=(offset, system.n_free))
+    return Frozen(system, x, computed, np.asarray(result.cofactor, float), np.flatnonzero(lay.free), angular,
+                  tuple(weight), scatter, np.concatenate(repeat), result.determinability, int(result.dof))
+
+
+# ---------------------------------------------------------------------------------------------- solving
+@dataclass(frozen=True, eq=False)
+class Solution:
+    """x : (T, n) full parameter vectors; converged : (T,) bool; iterations : (T,) chord steps
+    full_gauss_newton : (T,) bool (re-solved by full Gauss-Newton); vtpv : (T,) at the solution"""
+
+    x: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+    full_gauss_newton: np.ndarray
+    vtpv: np.ndarray
+
+
+def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int = 10,
+          fallback: bool = True) -> Solution:
+    """Solve the trials ``obs`` (T, R) from ``x̂`` by chord steps (module docstring); trials whose step
+    does not shrink by :data:`CONTRACTION`, or not converged after ``max_iter`` steps, by full
+    Gauss-Newton (``fallback``)."""
+    obs = np.atleast_2d(np.asarray(obs, float))
+    t = len(obs)
+    x = np.repeat(frozen.x_hat[None], t, 0)
+    iters = np.zeros(t, np.int64)
+    vtpv = np.full(t, np.nan)
+    done = np.zeros(t, bool)
+    far = np.zeros(t, bool)
+    prev = np.full(t, np.inf)
+    active = np.arange(t)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for _ in range(max_iter):
+            xa = x[active]
+            r, vals = frozen.residuals(xa, obs[active])
+            pr = frozen.weighted(r)
+            dx = frozen.gradient(pr, vals) @ frozen.q
+            xa[:, frozen.free] += dx
+            x[active] = xa
+            iters[active] += 1
+            step = np.abs(dx).max(axis=1)
+            step = np.where(np.isfinite(step), step, np.inf)
+            ok = step < tol
+            vtpv[active[ok]] = np.einsum("tr,tr->t", r[ok], pr[ok])
+            done[active[ok]] = True
+            slow = ~ok & (step > CONTRACTION * prev[active])
+            far[active[slow]] = True
+            prev[active] = step
+            active = active[~ok & ~slow]
+            if not active.size:
+                break
+    far[active] = True
+    fell = np.flatnonzero(far)
+    if fallback:
+        for i in fell:
+            xi, ok, v = gauss_newton(frozen, obs[i], tol=tol)
+            x[i], done[i], vtpv[i] = xi, ok, v
+    return Solution(x, done, iters, far if fallback else np.zeros(t, bool), vtpv)
+
+
+def gauss_newton(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int = 50):
+    """One trial by full Gauss-Newton from ``x̂`` (the adjustment's step at every iterate, in the frozen
+    datum ``B``): ``(x, converged, vTPv)``."""
+    s = frozen.system
+    x = frozen.x_hat.copy()
+    det = frozen.determinability
+    value = np.concatenate([np.asarray(b.value, float) for b in s.blocks])
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        for _ in range(max_iter):
+            try:
+                r0, jac = s.evaluate(x)
+            except MultilatError:
+                return x, False, np.nan
+            r = r0 + (obs - value)
+            r[frozen.angular] = wrap_angle(r[frozen.angular])
+            rw = s.whiten(r)
+            dx, _ = _step(s.whiten(jac), rw, det)
+            x[frozen.free] += dx
+            step = float(np.abs(dx).max(initial=0.0))
+            if not np.isfinite(step):
+                return x, False, np.nan
+            if step < tol:
+                return x, True, float(rw @ rw)
+    return x, False, np.nan
+
+
+# ---------------------------------------------------------------------------------------------- blocks of trials
+def draw(frozen: Frozen, n: int, rng: np.random.Generator) -> np.ndarray:
+    """Observations of ``n`` trials (n, R): ``f(x̂) + L e``, ``e`` standard normal (n, R) in row order."""
+    e = rng.standard_normal((n, frozen.n_rows))
+    s = frozen.system
+    for L, b, sl in zip(s.chol, s.blocks, s.rows):
+        e[:, sl] = e[:, sl] * b.sigma if b.cov is None else e[:, sl] @ L.T
+    return frozen.computed + e
+
+
+@dataclass(frozen=True, eq=False)
+class _Spec:
+    frozen: Frozen
+    pairs: np.ndarray          # (q, 2) point indices
+    tol: float
+    max_iter: int
+
+
+def _outputs(frozen: Frozen, pairs: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Deviations from x̂ of the free parameters, then of the pairs' distances (T, n_free + q)."""
+    pc = frozen.system.layout.point_cols
+    out = np.empty((len(x), len(frozen.free) + len(pairs)))
+    out[:, :len(frozen.free)] = x[:, frozen.free] - frozen.x_hat[frozen.free]
+    if len(pairs):
+        a, b = pc[pairs[:, 0]], pc[pairs[:, 1]]
+        d0 = np.linalg.norm(frozen.x_hat[b] - frozen.x_hat[a], axis=-1)
+        out[:, len(frozen.free):] = np.linalg.norm(x[:, b] - x[:, a], axis=-1) - d0
+    return out
+
+
+def _solve_block(spec: _Spec, entropy, spawn_key: tuple, b: int, n: int) -> dict:
+    obs = draw(spec.frozen, n, block_generator(entropy, spawn_key, b))
+    sol = solve(spec.frozen, obs, tol=spec.tol, max_iter=spec.max_iter)
+    ok = sol.converged
+    return {"dev": _outputs(spec.frozen, spec.pairs, sol.x[ok]).astype(np.float32), "n": n,
+            "n_failed": int((~ok).sum()), "n_full_gauss_newton": int(sol.full_gauss_newton.sum()),
+            "iterations": int(sol.iterations.sum()), "vtpv": sol.vtpv[ok]}
+
+
+def _run_chunk(args) -> list:
+    """Blocks ``[start, stop)`` of a run of ``trials`` trials (module level: process pools pickle it)."""
+    spec, entropy, spawn_key, start, stop, trials = args
+    return [_solve_block(spec, entropy, spawn_key, b, block_trials(b, trials, BLOCK)) for b in range(start, stop)]
+
+
+# ---------------------------------------------------------------------------------------------- result
+@dataclass(frozen=True, eq=False)
+class GeneralPropagation:
+    """Result of :func:`propagate`; deviations from the adjusted values, SI units (m, rad, 1).
+
+    labels : free parameter names (``x:P``, ``offset:I``, ...) then the pairs ``"A-B"``;  n_params : how many parameters
+    units : "m", "rad" or "1" per label;  nominal : (k,) adjusted values
+    mc_mean, mc_std : (k,) Monte Carlo estimate (mean deviation added to the nominal) and standard deviation
+    mc_std_se : (k,) its Monte Carlo standard error ``mc_std sqrt((kurtosis - 1) / (4 N))``
+        (``sqrt(1 / (2 (N - 1)))`` relative for a gaussian output)
+    lin_std : (k,) the adjustment's linear standard deviation (``Q``, σ0 a priori = 1)
+    interval_symmetric, interval_shortest : (k, 2) 95 % coverage intervals (values, not deviations)
+    point_ids : points with a free coordinate;  point_cov_mc, point_cov_lin : (P, 3, 3) m²
+    trials : kept;  n_failed : dropped (not converged);  n_full_gauss_newton : re-solved by full Gauss-Newton
+    chord_steps_mean : mean chord steps per trial;  sigma0_mean, sigma0_rms : of the trials (dof of the adjustment)
+    seed_entropy : root entropy;  elapsed_s : wall time;  samples : (N, k) float32 deviations or None
+    """
+
+    labels: tuple
+    units: tuple
+    nominal: np.ndarray
+    mc_mean: np.ndarray
+    mc_std: np.ndarray
+    mc_std_se: np.ndarray
+    lin_std: np.ndarray
+    interval_symmetric: np.ndarray
+    interval_shortest: np.ndarray
+    point_ids: tuple
+    point_cov_mc: np.ndarray
+    point_cov_lin: np.ndarray
+    trials: int
+    n_failed: int
+    n_full_gauss_newton: int
+    chord_steps_mean: float
+    sigma0_mean: float
+    sigma0_rms: float
+    dof: int
+    seed_entropy: int
+    elapsed_s: float
+    n_params: int
+    samples: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def agrees(self) -> np.ndarray:
+        """|MC std - linear std| <= 3 MC standard errors, per quantity (held by a datum: True)."""
+        return np.abs(self.mc_std - self.lin_std) <= 3 * self.mc_std_se + 1e-15
+
+    def to_dict(self) -> dict:
+        """The JSON document (``schema`` :data:`SCHEMA`; keys in ``docs/general-network.md``)."""
+        def rows(sl):
+            return [{"label": self.labels[i], "unit": self.units[i], "nominal": float(self.nominal[i]),
+                     "mean_mc": float(self.mc_mean[i]), "std_mc": float(self.mc_std[i]),
+                     "std_mc_se": float(self.mc_std_se[i]), "std_lin": float(self.lin_std[i]),
+                     "ratio": float(self.mc_std[i] / self.lin_std[i]) if self.lin_std[i] > 0 else None,
+                     "agrees": bool(self.agrees[i]),
+                     "interval_symmetric": [float(v) for v in self.interval_symmetric[i]],
+                     "interval_shortest": [float(v) for v in self.interval_shortest[i]]}
+                    for i in range(*sl.indices(len(self.labels)))]
+        n_par = self.n_params
+        ratio = self.mc_std / np.where(self.lin_std > 0, self.lin_std, np.nan)
+        return {"schema": SCHEMA, "model": "general", "trials": int(self.trials), "n_failed": int(self.n_failed),
+                "n_full_gauss_newton": int(self.n_full_gauss_newton), "chord_steps_mean": float(self.chord_steps_mean),
+                "sigma0_mean": float(self.sigma0_mean), "sigma0_rms": float(self.sigma0_rms), "dof": int(self.dof),
+                "seed_entropy": str(self.seed_entropy), "elapsed_s": float(self.elapsed_s),
+                "parameters": rows(slice(0, n_par)), "distances": rows(slice(n_par, None)),
+                "points": {p: {"cov_mc_m2": self.point_cov_mc[i].tolist(), "cov_lin_m2": self.point_cov_lin[i].tolist(),
+                               "std_mc_m": np.sqrt(np.diag(self.point_cov_mc[i])).tolist(),
+                               "std_lin_m": np.sqrt(np.diag(self.point_cov_lin[i])).tolist()}
+                           for i, p in enumerate(self.point_ids)},
+                "summary": {"n_quantities": len(self.labels), "n_agree": int(self.agrees.sum()),
+                            "ratio_min": float(np.nanmin(ratio)) if np.isfinite(ratio).any() else None,
+                            "ratio_max": float(np.nanmax(ratio)) if np.isfinite(ratio).any() else None}}
+
+
+def _unit(name: str) -> str:
+    kind = name.split(":", 1)[0]
+    return "m" if kind in ("x", "y", "z", "offset") else "1" if kind == "scale" else "rad"
+
+
+def default_pairs(system: System) -> np.ndarray:
+    """Interpoint distances to report: every pair of points with a free coordinate when there are at
+    most 20 of them, consecutive pairs otherwise (:func:`multilat.network.propagate._default_pairs`)."""
+    from multilat.network.propagate import _default_pairs
+
+    pts = system.network.points
+    free = [i for i in range(pts.n) if system.layout.free[system.layout.point_cols[i]].any()]
+    return np.array([(a, b) for a, b in _default_pairs(free)], int).reshape(-1, 2)
+
+
+def _linear(frozen: Frozen, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Linear std of the outputs and the full-layout cofactor of the points (P, 3, 3)."""
+    n = frozen.system.layout.n
+    qf = np.zeros((n, n))
+    qf[np.ix_(frozen.free, frozen.free)] = frozen.q
+    pc = frozen.system.layout.point_cols
+    std = [np.sqrt(np.clip(np.diag(frozen.q), 0, None))]
+    if len(pairs):
+        a, b = pc[pairs[:, 0]], pc[pairs[:, 1]]
+        u = frozen.x_hat[b] - frozen.x_hat[a]
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        g = np.zeros((len(pairs), n))
+        np.put_along_axis(g, b, u, 1)
+        np.put_along_axis(g, a, -u, 1)
+        std.append(np.sqrt(np.clip(np.einsum("qi,ij,qj->q", g, qf, g), 0, None)))
+    return np.concatenate(std), qf[pc[:, :, None], pc[:, None, :]]
+
+
+def _summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples) -> GeneralPropagation:
+    from multilat.network.propagate_summary import _kurtosis
+
+    dev = np.concatenate([b["dev"] for b in blocks])
+    if dev.shape[0] < 2:
+        raise MultilatError(f"only {dev.shape[0]} trials converged: the network is too weak for a Monte Carlo "
+                            "from its adjusted solution")
+    lay = frozen.system.layout
+    names = tuple(np.array(lay.names)[frozen.free]) + tuple(
+        f"{frozen.system.network.points.ids[a]}-{frozen.system.network.points.ids[b]}" for a, b in pairs)
+    pc = lay.point_cols
+    nominal = np.concatenate([frozen.x_hat[frozen.free],
+                              np.linalg.norm(frozen.x_hat[pc[pairs[:, 1]]] - frozen.x_hat[pc[pairs[:, 0]]], axis=1)])
+    y = dev.astype(float)
+    mc = summarize(y)
+    mean = np.asarray(mc.estimate, float)
+    std = np.asarray(mc.std, float)
+    se = std * np.sqrt(np.clip(_kurtosis(y, mean) - 1.0, 0, None) / (4 * len(y)))
+    lin, qp = _linear(frozen, pairs)
+    red = lay.reduced
+    pts = [i for i in range(len(pc)) if (red[pc[i]] >= 0).any()]
+    cov_mc = np.zeros((len(pts), 3, 3))
+    for k, i in enumerate(pts):
+        c = red[pc[i]]
+        have = c >= 0
+        sub = y[:, c[have]]
+        cov_mc[k][np.ix_(have, have)] = np.atleast_2d(np.cov(sub, rowvar=False))
+    vtpv = np.concatenate([b["vtpv"] for b in blocks])
+    s0 = np.sqrt(vtpv / frozen.dof) if frozen.dof > 0 else np.full(len(vtpv), np.nan)
+    n_all = sum(b["n"] for b in blocks)
+    return GeneralPropagation(
+        labels=names, units=tuple(_unit(n) if ":" in n else "m" for n in names), nominal=nominal,
+        mc_mean=nominal + mean, mc_std=std, mc_std_se=se, lin_std=lin,
+        interval_symmetric=nominal[:, None] + np.asarray(mc.interval_symmetric),
+        interval_shortest=nominal[:, None] + np.asarray(mc.interval_shortest),
+        point_ids=tuple(frozen.system.network.points.ids[i] for i in pts), point_cov_mc=cov_mc,
+        point_cov_lin=qp[pts], trials=len(y), n_failed=sum(b["n_failed"] for b in blocks),
+        n_full_gauss_newton=sum(b["n_full_gauss_newton"] for b in blocks),
+        chord_steps_mean=sum(b["iterations"] for b in blocks) / max(n_all, 1),
+        sigma0_mean=float(np.mean(s0)), sigma0_rms=float(np.sqrt(np.mean(s0 ** 2))), dof=frozen.dof,
+        seed_entropy=int(seed_entropy), elapsed_s=time.perf_counter() - t0, n_params=len(frozen.free), samples=dev if keep_samples else None)
+
+
+def propagate(system: System, result: GeneralResult, *, trials: int = 100_000, rng=None, pairs=None,
+              chunk_size: int = 10_000, map=None, progress: Callable[[int], None] | None = None,
+              keep_samples: bool = False, tol: float = 1e-10, max_iter: int = 10) -> GeneralPropagation:
+    """Monte Carlo of an adjusted general network (``system``, ``result`` of one adjustment, e.g.
+    :func:`.run.adjust_network`'s) through its frozen system (module docstring).
+
+    trials : fixed number of trials;  rng : root seed (:func:`multilat.montecarlo.resolve_seed`)
+    pairs : (point id, point id) pairs whose distances to report (default :func:`default_pairs`)
+    chunk_size : trials per unit of work given to ``map`` (whole blocks; never changes a number)
+    map : ordered map (:func:`multilat.parallel.map_from_options`); default in-process threads
+    tol : convergence on the largest step (m, rad);  max_iter : chord steps before full Gauss-Newton
+    """
+    t0 = time.perf_counter()
+    for name, v, lo in (("trials", trials, 2), ("chunk_size", chunk_size, 1), ("max_iter", max_iter, 1)):
+        if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
+            raise MultilatError(f"{name} must be an integer >= {lo}, got {v!r}")
+    frozen = freeze(system, result)
+    ids = system.network.points.ids
+    if pairs is None:
+        pidx = default_pairs(system)
+    else:
+        idx = {p: i for i, p in enumerate(ids)}
+        bad = [p for ab in pairs for p in ab if p not in idx]
+        if bad:
+            raise MultilatError(f"pair point {bad[0]!r} is not a point of the adjusted network")
+        pidx = np.array([(idx[a], idx[b]) for a, b in pairs], int).reshape(-1, 2)
+    spec = _Spec(frozen, pidx, float(tol), int(max_iter))
+    ss = resolve_seed(rng)
+    entropy, key = ss.entropy, tuple(ss.spawn_key)
+    if map is None:
+        from multilat.parallel import thread_map
+
+        mapper, unit = thread_map, BLOCK
+    else:
+        mapper, unit = resolve_map(map), chunk_size
+    blocks, done = [], 0
+    for res in mapper(_run_chunk, [(spec, entropy, key, c0, c1, trials)
+                                   for c0, c1 in chunk_ranges(trials, unit, BLOCK)]):
+        blocks.extend(res)
+        done += sum(r["n"] for r in res)
+        if progress:
+            progress(done)
+    return _summarise(frozen, pidx, blocks, entropy, t0, keep_samples)
