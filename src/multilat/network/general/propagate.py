@@ -64,7 +64,8 @@ class Frozen:
     q : (n_free, n_free) the cofactor matrix (σ0 a priori = 1);  free : (n_free,) full columns of the free parameters
     angular : (R,) rows wrapped to [-pi, pi);  weight : per block ``1/σ²`` (R_b,) or ``C^-1`` (R_b, R_b)
     scatter : sparse (Σ R_b k_b, n_free): Jacobian value slots -> free columns;  slots : (R,) slots per row
-    constraints : (n_free, d') inner constraints ``B`` of the datum, or None;  dof : degrees of freedom
+    determinability : the adjustment's at x̂ (its ``constraints`` B: the datum of the fall-back);  dof : degrees of freedom
+    program : the rows for the compiled kernel (:func:`_program`)
     """
 
     system: System
@@ -78,6 +79,7 @@ class Frozen:
     slots: np.ndarray
     determinability: object
     dof: int
+    program: dict | None = None
 
     @property
     def n_rows(self) -> int:
@@ -133,7 +135,36 @@ def freeze(system: System, result: GeneralResult) -> Frozen:
     ri, ci = np.concatenate(rows_i), np.concatenate(cols_i)
     scatter = scipy.sparse.csr_matrix((np.ones(len(ri)), (ri, ci)), shape=(offset, system.n_free))
     return Frozen(system, x, computed, np.asarray(result.cofactor, float), np.flatnonzero(lay.free), angular,
-                  tuple(weight), scatter, np.concatenate(repeat), result.determinability, int(result.dof))
+                  tuple(weight), scatter, np.concatenate(repeat), result.determinability, int(result.dof),
+                  _program(system, x, weight))
+
+
+def _program(system: System, x: np.ndarray, weight) -> dict:
+    """The rows as the compiled kernel's program (:mod:`._frozen_numba`): codes, full and free columns
+    (R, 9), the vertical height offsets, the tracker components, ``P`` as CSR."""
+    from multilat.network.general._frozen_numba import CODES
+    from multilat.network.general.kinds.geometry import _heights
+
+    R = system.n_rows
+    code, hz, comp, setup = np.empty(R, np.int64), np.zeros(R), np.zeros(R, np.int64), np.full(R, -1, np.int64)
+    frames: dict = {}
+    cols = np.full((R, 9), -1, np.int64)
+    for b, bc, sl in zip(system.blocks, system.cols, system.rows):
+        _, _, columns = kinds_registry.kind(b.kind).evaluate(b, system.layout, bc, x)
+        code[sl] = CODES[b.kind]
+        cols[sl, :columns.shape[1]] = columns
+        if b.kind in ("slope_distance", "zenith_angle", "tracker_angles"):
+            hz[sl] = _heights(b, "to_dh") - _heights(b, "from_dh")
+        if b.kind == "tracker_angles":
+            comp[sl] = b.index["component"]
+            for k, f in enumerate(map(tuple, columns[:, 6:9])):
+                setup[sl.start + k] = frames.setdefault(f, len(frames))
+    red = system.layout.reduced
+    p = scipy.sparse.block_diag([scipy.sparse.diags(w) if w.ndim == 1 else scipy.sparse.csr_matrix(w)
+                                 for w in weight], format="csr")
+    return {"code": code, "cols": cols, "rcols": np.where(cols >= 0, red[cols], -1), "hz": hz, "comp": comp,
+            "setup": setup, "frames": np.array(list(frames), np.int64).reshape(-1, 3),
+            "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
 
 
 # ---------------------------------------------------------------------------------------------- solving
@@ -150,10 +181,15 @@ class Solution:
 
 
 def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int = 10,
-          fallback: bool = True) -> Solution:
+          fallback: bool = True, engine: str = "auto") -> Solution:
     """Solve the trials ``obs`` (T, R) from ``x̂`` by chord steps (module docstring); trials whose step
     does not shrink by :data:`CONTRACTION`, or not converged after ``max_iter`` steps, by full
-    Gauss-Newton (``fallback``)."""
+    Gauss-Newton (``fallback``). ``engine``: ``numba`` (compiled, :mod:`._frozen_numba`), ``numpy``
+    (the kinds vectorised over the trials), ``auto`` (numba when installed)."""
+    from multilat._numba import HAVE_NUMBA
+
+    if engine not in ("auto", "numpy", "numba"):
+        raise MultilatError(f"engine must be auto, numpy or numba, got {engine!r}")
     obs = np.atleast_2d(np.asarray(obs, float))
     t = len(obs)
     x = np.repeat(frozen.x_hat[None], t, 0)
@@ -161,21 +197,28 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
     vtpv = np.full(t, np.nan)
     done = np.zeros(t, bool)
     far = np.zeros(t, bool)
+    if engine == "numba" or (engine == "auto" and HAVE_NUMBA):
+        from multilat.network.general._frozen_numba import chord
+
+        p = frozen.program
+        chord(obs, x, p["code"], p["cols"], p["rcols"], p["hz"], p["comp"], p["setup"], p["frames"], frozen.angular,
+              p["p_ptr"], p["p_idx"], p["p_val"], frozen.free.astype(np.int64), frozen.q, float(tol), int(max_iter),
+              CONTRACTION, done, iters, far, vtpv)
+        return _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback)
     prev = np.full(t, np.inf)
     active = np.arange(t)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         for _ in range(max_iter):
             xa = x[active]
-            r, vals = frozen.residuals(xa, obs[active])
-            pr = frozen.weighted(r)
-            dx = frozen.gradient(pr, vals) @ frozen.q
+            g, v = _gradient(frozen, obs[active], xa)
+            dx = g @ frozen.q
             xa[:, frozen.free] += dx
             x[active] = xa
             iters[active] += 1
             step = np.abs(dx).max(axis=1)
             step = np.where(np.isfinite(step), step, np.inf)
             ok = step < tol
-            vtpv[active[ok]] = np.einsum("tr,tr->t", r[ok], pr[ok])
+            vtpv[active[ok]] = v[ok]
             done[active[ok]] = True
             slow = ~ok & (step > CONTRACTION * prev[active])
             far[active[slow]] = True
@@ -184,12 +227,23 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
             if not active.size:
                 break
     far[active] = True
-    fell = np.flatnonzero(far)
+    return _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback)
+
+
+def _gradient(frozen: Frozen, obs: np.ndarray, x: np.ndarray):
+    """``J(x)^T P r`` (T, n_free) and ``r^T P r`` (T,) with ``r = obs - f(x)`` per trial, by the kinds
+    vectorised over the trials (the numpy engine; the compiled one: :mod:`._frozen_numba`)."""
+    r, vals = frozen.residuals(x, obs)
+    pr = frozen.weighted(r)
+    return frozen.gradient(pr, vals), np.einsum("tr,tr->t", r, pr)
+
+
+def _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback) -> Solution:
+    """Far trials (``far``) solved again from ``x̂`` by full Gauss-Newton."""
     if fallback:
-        for i in fell:
-            xi, ok, v = gauss_newton(frozen, obs[i], tol=tol)
-            x[i], done[i], vtpv[i] = xi, ok, v
-    return Solution(x, done, iters, far if fallback else np.zeros(t, bool), vtpv)
+        for i in np.flatnonzero(far):
+            x[i], done[i], vtpv[i] = gauss_newton(frozen, obs[i], tol=tol)
+    return Solution(x, done, iters, far if fallback else np.zeros(len(x), bool), vtpv)
 
 
 def gauss_newton(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int = 50):
@@ -234,6 +288,7 @@ class _Spec:
     pairs: np.ndarray          # (q, 2) point indices
     tol: float
     max_iter: int
+    engine: str = "auto"
 
 
 def _outputs(frozen: Frozen, pairs: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -250,7 +305,7 @@ def _outputs(frozen: Frozen, pairs: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 def _solve_block(spec: _Spec, entropy, spawn_key: tuple, b: int, n: int) -> dict:
     obs = draw(spec.frozen, n, block_generator(entropy, spawn_key, b))
-    sol = solve(spec.frozen, obs, tol=spec.tol, max_iter=spec.max_iter)
+    sol = solve(spec.frozen, obs, tol=spec.tol, max_iter=spec.max_iter, engine=spec.engine)
     ok = sol.converged
     return {"dev": _outputs(spec.frozen, spec.pairs, sol.x[ok]).astype(np.float32), "n": n,
             "n_failed": int((~ok).sum()), "n_full_gauss_newton": int(sol.full_gauss_newton.sum()),
@@ -415,7 +470,8 @@ def _summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples) -> General
 
 def propagate(system: System, result: GeneralResult, *, trials: int = 100_000, rng=None, pairs=None,
               chunk_size: int = 10_000, map=None, progress: Callable[[int], None] | None = None,
-              keep_samples: bool = False, tol: float = 1e-10, max_iter: int = 10) -> GeneralPropagation:
+              keep_samples: bool = False, tol: float = 1e-10, max_iter: int = 10,
+              engine: str = "auto") -> GeneralPropagation:
     """Monte Carlo of an adjusted general network (``system``, ``result`` of one adjustment, e.g.
     :func:`.run.adjust_network`'s) through its frozen system (module docstring).
 
@@ -424,6 +480,7 @@ def propagate(system: System, result: GeneralResult, *, trials: int = 100_000, r
     chunk_size : trials per unit of work given to ``map`` (whole blocks; never changes a number)
     map : ordered map (:func:`multilat.parallel.map_from_options`); default in-process threads
     tol : convergence on the largest step (m, rad);  max_iter : chord steps before full Gauss-Newton
+    engine : ``auto`` | ``numba`` | ``numpy`` (:func:`solve`; the same solutions to the step tolerance)
     """
     t0 = time.perf_counter()
     for name, v, lo in (("trials", trials, 2), ("chunk_size", chunk_size, 1), ("max_iter", max_iter, 1)):
@@ -439,7 +496,7 @@ def propagate(system: System, result: GeneralResult, *, trials: int = 100_000, r
         if bad:
             raise MultilatError(f"pair point {bad[0]!r} is not a point of the adjusted network")
         pidx = np.array([(idx[a], idx[b]) for a, b in pairs], int).reshape(-1, 2)
-    spec = _Spec(frozen, pidx, float(tol), int(max_iter))
+    spec = _Spec(frozen, pidx, float(tol), int(max_iter), engine)
     ss = resolve_seed(rng)
     entropy, key = ss.entropy, tuple(ss.spawn_key)
     if map is None:
