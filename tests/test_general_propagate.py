@@ -252,3 +252,38 @@ def test_json_document(tracker):
     p = doc["parameters"][0]
     assert {"label", "unit", "nominal", "std_mc", "std_mc_se", "std_lin", "interval_symmetric"} <= set(p)
     assert set(doc["points"]) == set(tracker.result.ids)
+
+
+def _cli(*args, cwd=ROOT):
+    import os
+    import subprocess
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    return subprocess.run([sys.executable, "-c", "from multilat.cli import run; run()", "propagate", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd, env=env, timeout=600)
+
+
+def test_cli_gama_local_and_csv(tmp_path):
+    xml = ROOT / "examples" / "general" / "station_control.xml"
+    p = _cli(xml, "--trials", "1500", "--seed", "3", "--json")
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    assert doc["schema"] == SCHEMA and doc["format"] == "gama-local" and doc["trials"] == 1500
+    # the same numbers from Python (same seed, same blocks)
+    res = propagate(*(lambda a: (a.system, a.result))(adjust_network(read_gama_input(xml))), trials=1500, rng=3)
+    assert [r["std_mc"] for r in doc["parameters"]] == res.mc_std[:res.n_params].tolist()
+    csv = ROOT / "examples" / "network" / "mixed" / "obs.csv"
+    p = _cli(csv, "--model", "general", "--trials", "500", "--out", tmp_path / "o", "--json")
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    assert doc["format"] == "multilat-csv" and any(r["label"].startswith("kappa:") for r in doc["parameters"])
+    assert sorted(x.name for x in (tmp_path / "o").iterdir()) == ["parameters.csv", "result.json"]
+
+
+@pytest.mark.parametrize("args, word", [(("--adaptive",), "--adaptive"), (("--noise", "model"), "--noise model"),
+                                        (("--datum", "free"), "--datum"), (("--report", "r.html"), "--report")])
+def test_cli_refuses_what_does_not_apply(args, word, tmp_path):
+    p = _cli(ROOT / "examples" / "general" / "station_control.xml", *args, cwd=tmp_path)
+    assert p.returncode == 2 and p.stdout == ""
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {word} does not apply"), p.stderr

@@ -381,7 +381,7 @@ class GeneralPropagation:
         return {"schema": SCHEMA, "model": "general", "trials": int(self.trials), "n_failed": int(self.n_failed),
                 "n_full_gauss_newton": int(self.n_full_gauss_newton), "chord_steps_mean": float(self.chord_steps_mean),
                 "sigma0_mean": float(self.sigma0_mean), "sigma0_rms": float(self.sigma0_rms), "dof": int(self.dof),
-                "seed_entropy": str(self.seed_entropy), "elapsed_s": float(self.elapsed_s),
+                "seed": int(self.seed_entropy), "elapsed_s": float(self.elapsed_s),
                 "parameters": rows(slice(0, n_par)), "distances": rows(slice(n_par, None)),
                 "points": {p: {"cov_mc_m2": self.point_cov_mc[i].tolist(), "cov_lin_m2": self.point_cov_lin[i].tolist(),
                                "std_mc_m": np.sqrt(np.diag(self.point_cov_mc[i])).tolist(),
