@@ -19,8 +19,11 @@ HEADS = ("H1", "H2", "H1", "H2")          # station A, B, C, D -> head
 TRACKERS = (0, 3)                         # stations A and D also read angles
 
 
-def tracker_network(seed: int = 5, noise: bool = True) -> Network:
-    """The network (observations with noise drawn from ``seed`` unless ``noise`` is False)."""
+def tracker_network(seed: int = 5, noise: bool = True, extras: bool = True) -> Network:
+    """The network (observations with noise drawn from ``seed`` unless ``noise`` is False) and the
+    set-ups' true frames. ``extras=False``: the distance-only small volume of today's compiled Monte
+    Carlo instead (one head per station, no angles, bars or control: a free network, adjust it with
+    ``AdjustOptions(datum="free")``), the same 56 distances."""
     cfg = small_volume()
     rng = np.random.default_rng(seed)
     s, t = len(cfg.station_ids), len(cfg.target_ids)
@@ -28,19 +31,22 @@ def tracker_network(seed: int = 5, noise: bool = True) -> Network:
     xyz = np.vstack([cfg.station_xyz_m, cfg.target_xyz_m])
     status = np.full((s + t, 3), FREE)
     sigma = np.full((s + t, 3), np.nan)
-    for p in CONTROL:
+    for p in CONTROL if extras else ():
         status[ids.index(p)] = WEIGHTED
         sigma[ids.index(p)] = SIG_CONTROL_M
-    head_names = tuple(sorted(set(HEADS)))
-    offset = {"H1": 120e-6, "H2": -80e-6}
+    heads = HEADS if extras else cfg.station_ids
+    head_names = tuple(sorted(set(heads)))
+    offset = dict(zip(head_names, np.linspace(-80e-6, 120e-6, len(head_names))))
     si, ti = np.repeat(np.arange(s), t), np.tile(np.arange(t), s) + s
     rho = np.linalg.norm(xyz[ti] - xyz[si], axis=1)
-    d = rho + np.array([offset[HEADS[i]] for i in si])
+    d = rho + np.array([offset[heads[i]] for i in si])
     blocks = [Block("slope_distance", d, np.full(len(d), SIG_DIST_M), None,
-                    {"from": si, "to": ti, "instrument": np.array([head_names.index(HEADS[i]) for i in si])},
+                    {"from": si, "to": ti, "instrument": np.array([head_names.index(heads[i]) for i in si])},
                     labels=tuple(f"{ids[a]}-{ids[b]}" for a, b in zip(si, ti)),
                     names={"instrument": head_names}, options={"estimate_offset": True})]
     ori = np.array([[0.01, -0.02, 0.7], [-0.015, 0.01, -2.1]])
+    if not extras:
+        return _finish(blocks, ids, xyz, status, sigma, rng, noise, s + t), ori
     fr, to, setup, comp, val = [], [], [], [], []
     for u, st in enumerate(TRACKERS):
         az, el = predicted_angles(cfg.station_xyz_m[[st]], ori[[u]], cfg.target_xyz_m, np.zeros(t, int), np.arange(t))
@@ -59,12 +65,14 @@ def tracker_network(seed: int = 5, noise: bool = True) -> Network:
     b = np.array([ids.index(p) for p in refs.target_b])
     blocks.append(Block("slope_distance", np.linalg.norm(xyz[b] - xyz[a], axis=1), np.asarray(refs.u_m, float),
                         None, {"from": a, "to": b}))
+    return _finish(blocks, ids, xyz, status, sigma, rng, noise, s + t), ori
+
+
+def _finish(blocks, ids, xyz, status, sigma, rng, noise, n) -> Network:
     if noise:
         blocks = [Block(k.kind, k.value + rng.standard_normal(k.n_rows) * k.sigma, k.sigma, k.cov, k.index, k.data,
                         k.labels, k.names, k.options) for k in blocks]
         given = xyz + np.where(status == WEIGHTED, rng.standard_normal(xyz.shape) * SIG_CONTROL_M, 0.0)
     else:
         given = xyz
-    pts = PointSet(ids, given, status, sigma, np.zeros(s + t, bool))
-    net = Network(pts, tuple(blocks))
-    return net, ori
+    return Network(PointSet(ids, given, status, sigma, np.zeros(n, bool)), tuple(blocks))

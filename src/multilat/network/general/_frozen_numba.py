@@ -160,7 +160,8 @@ def _trial_gradient(obs_t, xt, code, cols, rcols, hz, comp, setup, frames, angul
 def _chord(obs, x, code, cols, rcols, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val, free, q, tol,
            max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
     """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place), the rule of
-    :func:`.propagate.solve`: converged when the largest step is below ``tol``; ``far`` when a step is
+    :func:`.propagate.solve`: converged when the largest step, or its bound on the error left
+    ``step c / (1 - c)`` (c = this step / the one before), is below ``tol``; ``far`` when a step is
     larger than ``contraction`` times the one before, or after ``max_iter`` steps."""
     t_n, r_n = obs.shape
     nf = len(free)
@@ -169,26 +170,32 @@ def _chord(obs, x, code, cols, rcols, hz, comp, setup, frames, angular, p_ptr, p
         val = np.zeros((r_n, 9))
         r = np.empty(r_n)
         g = np.empty(nf)
+        dx = np.empty(nf)
         rot = np.empty((max(len(frames), 1), 4, 3, 3))
         prev = np.inf
         for it in range(max_iter):
             v = _trial_gradient(obs[t], xt, code, cols, rcols, hz, comp, setup, frames, angular, p_ptr, p_idx,
                                 p_val, val, r, rot, g)
+            dx[:] = 0.0
+            for b in range(nf):               # dx = Q g, by rows of the symmetric Q (independent sums: vectorised)
+                gb = g[b]
+                qb = q[b]
+                for a in range(nf):
+                    dx[a] += qb[a] * gb
             step = 0.0
             for a in range(nf):
-                s = 0.0
-                for b in range(nf):
-                    s += q[a, b] * g[b]
-                xt[free[a]] += s
-                s = abs(s)
+                v -= g[a] * dx[a]             # vTPv after the step, to second order: v - g^T Q g
+                xt[free[a]] += dx[a]
+                s = abs(dx[a])
                 if not s <= step:
                     step = s if s == s else np.inf
             iters[t] = it + 1
-            if step < tol:
+            c = step / prev                   # the contraction of the last step (0 for the first: no bound)
+            if step < tol or (it > 0 and c <= contraction and step * c < tol * (1.0 - c)):
                 converged[t] = True
                 vtpv[t] = v
                 break
-            if step > contraction * prev:
+            if c > contraction:
                 far[t] = True
                 break
             prev = step
