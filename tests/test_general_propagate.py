@@ -34,7 +34,7 @@ import pytest
 from multilat.network.general import adjust_network, read_gama_input
 from multilat.network.general.adjust import adjust
 from multilat.network.general.kinds import KINDS
-from multilat.network.general.observations import Block, Network
+from multilat.network.general.observations import Network
 from multilat.network.general.propagate import SCHEMA, draw, freeze, propagate, solve
 
 sys.path.insert(0, str(Path(__file__).parent))

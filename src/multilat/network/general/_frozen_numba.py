@@ -3,9 +3,11 @@ path (the kinds' models and Jacobians, ``P r``, ``dx = Q J^T P r``), one trial a
 parallel (``prange``). The tests compare it with the numpy path and the kinds.
 
 Rows are a small program: a kind code per row, its full-layout columns (at most 9: the kind's
-Jacobian columns, in the kind's order) and per-row numbers (the height difference along z, the
-tracker component, the set-up of a tracker row: its frame is computed once per set-up); the columns are static, so only the values change per trial. ``P`` is a CSR
-matrix (the blocks' ``C^-1``). Codes: :data:`CODES`.
+Jacobian columns, in the kind's order), its Jacobian slots that are free parameters (CSR: ``s_ptr``,
+the slot ``s_j`` and free column ``s_col`` of each), per-row numbers (the height difference along z,
+the tracker component, the set-up of a tracker row: its frame is computed once per set-up and
+trial). The columns are static, so only the values change per trial. ``P`` is a CSR matrix (the
+blocks' ``C^-1``). Codes: :data:`CODES`.
 
 IEEE division (``multilat._numba.njit``): a zero divisor gives inf or nan, never an exception; the
 trial then does not converge and goes to full Gauss-Newton in numpy.
@@ -47,8 +49,8 @@ def _rot(w, p, k, out):  # pragma: no cover - jit
 
 @njit(cache=True, inline="always")
 def _row(code, c, hz, comp, x, val, rot):  # pragma: no cover - jit
-    """``rot`` (4, 3, 3): the row's set-up frame and its derivatives (tracker rows, :func:`_rotations`)."""
-    """Model of one row at ``x`` and its Jacobian values ``val[:9]`` (in the kind's column order)."""
+    """Model of one row at ``x`` and its Jacobian values ``val[:9]`` (in the kind's column order);
+    ``rot`` (4, 3, 3): the row's set-up frame and its derivatives (tracker rows, :func:`_rotations`)."""
     if code == 5:                     # x[c1] - x[c0]
         val[0] = -1.0
         val[1] = 1.0
@@ -106,12 +108,10 @@ def _row(code, c, hz, comp, x, val, rot):  # pragma: no cover - jit
         t = a0 * R[j, 0] + a1 * R[j, 1] + a2 * R[j, 2]
         val[3 + j] = t
         val[j] = -t
-    for p in range(3):                # d/dp = a (dR_p)^T d
-        D = rot[1 + p]
-        s = 0.0
-        for i in range(3):
-            s += (a0 * D[i, 0] + a1 * D[i, 1] + a2 * D[i, 2]) * (dx if i == 0 else (dy if i == 1 else dz))
-        val[6 + p] = s
+    for p in range(1, 4):             # d/dp = a (dR_p)^T d
+        val[5 + p] = ((a0 * rot[p, 0, 0] + a1 * rot[p, 0, 1] + a2 * rot[p, 0, 2]) * dx
+                      + (a0 * rot[p, 1, 0] + a1 * rot[p, 1, 1] + a2 * rot[p, 1, 2]) * dy
+                      + (a0 * rot[p, 2, 0] + a1 * rot[p, 2, 1] + a2 * rot[p, 2, 2]) * dz)
     return f
 
 
@@ -132,8 +132,8 @@ def model_rows(code, cols, hz, comp, setup, frames, x, out_f, out_val):  # pragm
 
 
 @njit(cache=True, inline="always")
-def _trial_gradient(obs_t, xt, code, cols, rcols, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val, val, r,
-                    rot, g):  # pragma: no cover - jit
+def _trial_gradient(obs_t, xt, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val,
+                    val, r, rot, g):  # pragma: no cover - jit
     """``g = J(x_t)^T P r`` with ``r = obs_t - f(x_t)`` (angles wrapped); returns ``r^T P r``."""
     two_pi = 2.0 * math.pi
     _rotations(frames, xt, rot)
@@ -149,20 +149,19 @@ def _trial_gradient(obs_t, xt, code, cols, rcols, hz, comp, setup, frames, angul
         for k in range(p_ptr[i], p_ptr[i + 1]):
             s += p_val[k] * r[p_idx[k]]
         v += s * r[i]
-        for j in range(9):
-            cj = rcols[i, j]
-            if cj >= 0:
-                g[cj] += val[i, j] * s
+        for k in range(s_ptr[i], s_ptr[i + 1]):
+            g[s_col[k]] += val[i, s_j[k]] * s
     return v
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def _chord(obs, x, code, cols, rcols, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val, free, q, tol,
-           max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
-    """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place), the rule of
-    :func:`.propagate.solve`: converged when the largest step, or its bound on the error left
-    ``step c / (1 - c)`` (c = this step / the one before), is below ``tol``; ``far`` when a step is
-    larger than ``contraction`` times the one before, or after ``max_iter`` steps."""
+def _chord(obs, x, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val, free, q,
+           tol, max_iter, contraction, prev0, converged, iters, far, vtpv):  # pragma: no cover - jit
+    """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place) after the first (taken by the
+    caller, its largest step ``prev0[t]``), the rule of :func:`.propagate.solve`: converged when the
+    largest step, or its bound on the error left ``step c / (1 - c)`` (c = this step / the one
+    before), is below ``tol``; ``far`` when a step is larger than ``contraction`` times the one
+    before, or after ``max_iter`` steps."""
     t_n, r_n = obs.shape
     nf = len(free)
     for t in prange(t_n):
@@ -172,10 +171,10 @@ def _chord(obs, x, code, cols, rcols, hz, comp, setup, frames, angular, p_ptr, p
         g = np.empty(nf)
         dx = np.empty(nf)
         rot = np.empty((max(len(frames), 1), 4, 3, 3))
-        prev = np.inf
-        for it in range(max_iter):
-            v = _trial_gradient(obs[t], xt, code, cols, rcols, hz, comp, setup, frames, angular, p_ptr, p_idx,
-                                p_val, val, r, rot, g)
+        prev = prev0[t]
+        for it in range(1, max_iter):
+            v = _trial_gradient(obs[t], xt, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr,
+                                p_idx, p_val, val, r, rot, g)
             dx[:] = 0.0
             for b in range(nf):               # dx = Q g, by rows of the symmetric Q (independent sums: vectorised)
                 gb = g[b]
@@ -190,8 +189,8 @@ def _chord(obs, x, code, cols, rcols, hz, comp, setup, frames, angular, p_ptr, p
                 if not s <= step:
                     step = s if s == s else np.inf
             iters[t] = it + 1
-            c = step / prev                   # the contraction of the last step (0 for the first: no bound)
-            if step < tol or (it > 0 and c <= contraction and step * c < tol * (1.0 - c)):
+            c = step / prev                   # the contraction of the last step
+            if step < tol or (c <= contraction and step * c < tol * (1.0 - c)):
                 converged[t] = True
                 vtpv[t] = v
                 break

@@ -8,7 +8,8 @@ constraints) is propagated by the same :class:`~.adjust.System`:
   ``L`` the blocks' Cholesky factors (``C = L L^T``, the whiteners of the adjustment) and ``e_t``
   standard normal: the input distributions are centred on the adjusted observations, so every trial's
   solution scatters about ``x̂`` with covariance ``Q`` (σ0 a priori = 1) to first order.
-* **chord steps.** Each trial starts at ``x̂`` and iterates
+* **chord steps.** Each trial starts at ``x̂`` (its first step, linear in the noise, is one matrix
+  product for a block of trials: ``K (l_t - f(x̂))``, ``K = Q J(x̂)^T P``) and iterates
   ``x_{k+1} = x_k + Q J(x_k)^T P (l_t - f(x_k))``: the model and its Jacobian exact per trial (the
   kinds, vectorised over the trials), ``P = C^-1``, and ``Q`` the adjustment's cofactor matrix
   (the top-left block of the inverse of its bordered normal matrix at ``x̂``, :func:`~.adjust._step`):
@@ -36,6 +37,7 @@ point the Monte Carlo 3 x 3 covariance beside ``Q``'s.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -67,8 +69,9 @@ class Frozen:
     q : (n_free, n_free) the cofactor matrix (σ0 a priori = 1);  free : (n_free,) full columns of the free parameters
     angular : (R,) rows wrapped to [-pi, pi);  weight : per block ``1/σ²`` (R_b,) or ``C^-1`` (R_b, R_b)
     scatter : sparse (Σ R_b k_b, n_free): Jacobian value slots -> free columns;  slots : (R,) slots per row
-    determinability : the adjustment's at x̂ (its ``constraints`` B: the datum of the fall-back);  dof : degrees of freedom
-    program : the rows for the compiled kernel (:func:`_program`)
+    determinability : the adjustment's at x̂ (its ``constraints`` B: the datum of the fall-back)
+    dof : degrees of freedom;  program : the rows for the compiled kernel (:func:`_program`)
+    gain : (n_free, R) ``K = Q J(x̂)^T P``, the first step
     """
 
     system: System
@@ -83,6 +86,7 @@ class Frozen:
     determinability: object
     dof: int
     program: dict | None = None
+    gain: np.ndarray | None = None
 
     @property
     def n_rows(self) -> int:
@@ -137,9 +141,11 @@ def freeze(system: System, result: GeneralResult) -> Frozen:
         offset += rc.size
     ri, ci = np.concatenate(rows_i), np.concatenate(cols_i)
     scatter = scipy.sparse.csr_matrix((np.ones(len(ri)), (ri, ci)), shape=(offset, system.n_free))
-    return Frozen(system, x, computed, np.asarray(result.cofactor, float), np.flatnonzero(lay.free), angular,
-                  tuple(weight), scatter, np.concatenate(repeat), result.determinability, int(result.dof),
-                  _program(system, x, weight))
+    fr = Frozen(system, x, computed, np.asarray(result.cofactor, float), np.flatnonzero(lay.free), angular,
+                tuple(weight), scatter, np.concatenate(repeat), result.determinability, int(result.dof),
+                _program(system, x, weight))
+    _, jac = system.evaluate(x)
+    return dataclasses.replace(fr, gain=fr.q @ fr.weighted(np.ascontiguousarray(jac.T)))
 
 
 def _program(system: System, x: np.ndarray, weight) -> dict:
@@ -165,7 +171,10 @@ def _program(system: System, x: np.ndarray, weight) -> dict:
     red = system.layout.reduced
     p = scipy.sparse.block_diag([scipy.sparse.diags(w) if w.ndim == 1 else scipy.sparse.csr_matrix(w)
                                  for w in weight], format="csr")
-    return {"code": code, "cols": cols, "rcols": np.where(cols >= 0, red[cols], -1), "hz": hz, "comp": comp,
+    rcols = np.where(cols >= 0, red[cols], -1)
+    have = rcols >= 0
+    return {"code": code, "cols": cols, "s_ptr": np.concatenate([[0], np.cumsum(have.sum(1))]).astype(np.int64),
+            "s_j": np.nonzero(have)[1].astype(np.int64), "s_col": rcols[have].astype(np.int64), "hz": hz, "comp": comp,
             "setup": setup, "frames": np.array(list(frames), np.int64).reshape(-1, 3),
             "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
 
@@ -201,18 +210,27 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
     vtpv = np.full(t, np.nan)
     done = np.zeros(t, bool)
     far = np.zeros(t, bool)
+    # the first step is linear in the noise (at x̂ the model and Jacobian are the adjustment's): one
+    # matrix product for all trials, dx = K (l - f(x̂)), K = Q J(x̂)^T P
+    r0 = obs - frozen.computed
+    r0[:, frozen.angular] = wrap_angle(r0[:, frozen.angular])
+    dx = r0 @ frozen.gain.T
+    x[:, frozen.free] += dx
+    iters[:] = 1
+    with np.errstate(invalid="ignore"):
+        prev = np.abs(dx).max(axis=1, initial=0.0)
+    prev = np.where(np.isfinite(prev), prev, np.inf)
     if engine == "numba" or (engine == "auto" and HAVE_NUMBA):
         from multilat.network.general._frozen_numba import chord
 
         p = frozen.program
-        chord(obs, x, p["code"], p["cols"], p["rcols"], p["hz"], p["comp"], p["setup"], p["frames"], frozen.angular,
-              p["p_ptr"], p["p_idx"], p["p_val"], frozen.free.astype(np.int64), frozen.q, float(tol), int(max_iter),
-              CONTRACTION, done, iters, far, vtpv)
+        chord(obs, x, p["code"], p["cols"], p["s_ptr"], p["s_j"], p["s_col"], p["hz"], p["comp"], p["setup"],
+              p["frames"], frozen.angular, p["p_ptr"], p["p_idx"], p["p_val"], frozen.free.astype(np.int64), frozen.q,
+              float(tol), int(max_iter), CONTRACTION, prev, done, iters, far, vtpv)
         return _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback)
-    prev = np.full(t, np.inf)
     active = np.arange(t)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        for _ in range(max_iter):
+        for _ in range(1, max_iter):
             xa = x[active]
             g, v = _gradient(frozen, obs[active], xa)
             dx = g @ frozen.q
@@ -223,7 +241,7 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
             step = np.abs(dx).max(axis=1)
             step = np.where(np.isfinite(step), step, np.inf)
             c = step / prev[active]
-            ok = (step < tol) | (np.isfinite(prev[active]) & (c <= CONTRACTION) & (step * c < tol * (1.0 - c)))
+            ok = (step < tol) | ((c <= CONTRACTION) & (step * c < tol * (1.0 - c)))
             vtpv[active[ok]] = v[ok]
             done[active[ok]] = True
             slow = ~ok & (c > CONTRACTION)
@@ -471,7 +489,8 @@ def _summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples) -> General
         n_full_gauss_newton=sum(b["n_full_gauss_newton"] for b in blocks),
         chord_steps_mean=sum(b["iterations"] for b in blocks) / max(n_all, 1),
         sigma0_mean=float(np.mean(s0)), sigma0_rms=float(np.sqrt(np.mean(s0 ** 2))), dof=frozen.dof,
-        seed_entropy=int(seed_entropy), elapsed_s=time.perf_counter() - t0, n_params=len(frozen.free), samples=dev if keep_samples else None)
+        seed_entropy=int(seed_entropy), elapsed_s=time.perf_counter() - t0, n_params=len(frozen.free),
+        samples=dev if keep_samples else None)
 
 
 def propagate(system: System, result: GeneralResult, *, trials: int = 100_000, rng=None, pairs=None,
