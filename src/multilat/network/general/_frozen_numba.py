@@ -156,22 +156,36 @@ def _trial_gradient(obs_t, xt, code, cols, s_ptr, s_j, s_col, hz, comp, setup, f
 
 @njit(cache=True, parallel=True, nogil=True)
 def _chord(obs, x, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val, free, q,
-           tol, max_iter, contraction, prev0, converged, iters, far, vtpv):  # pragma: no cover - jit
-    """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place) after the first (taken by the
-    caller, its largest step ``prev0[t]``), the rule of :func:`.propagate.solve`: converged when the
-    largest step, or its bound on the error left ``step c / (1 - c)`` (c = this step / the one
-    before), is below ``tol``; ``far`` when a step is larger than ``contraction`` times the one
-    before, or after ``max_iter`` steps."""
+           computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
+    """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place, from ``x̂``), the rule of
+    :func:`.propagate.solve`: the first ``K (l - f(x̂))`` (``kt`` = K^T (R, n_free), ``computed`` =
+    f(x̂)); converged when the largest step, or its bound on the error left ``step c / (1 - c)``
+    (c = this step / the one before), is below ``tol``; ``far`` when a step is larger than
+    ``contraction`` times the one before, or after ``max_iter`` steps."""
     t_n, r_n = obs.shape
     nf = len(free)
+    two_pi = 2.0 * math.pi
     for t in prange(t_n):
         xt = x[t]
         val = np.zeros((r_n, 9))
         r = np.empty(r_n)
         g = np.empty(nf)
-        dx = np.empty(nf)
+        dx = np.zeros(nf)
         rot = np.empty((max(len(frames), 1), 4, 3, 3))
-        prev = prev0[t]
+        for i in range(r_n):                  # the first step, linear in the noise: K (l - f(x̂))
+            e = obs[t, i] - computed[i]
+            if angular[i] and not -math.pi <= e < math.pi:
+                e = (e + math.pi) % two_pi - math.pi
+            ki = kt[i]
+            for a in range(nf):
+                dx[a] += ki[a] * e
+        prev = 0.0
+        for a in range(nf):
+            xt[free[a]] += dx[a]
+            s = abs(dx[a])
+            if not s <= prev:
+                prev = s if s == s else np.inf
+        iters[t] = 1
         for it in range(1, max_iter):
             v = _trial_gradient(obs[t], xt, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr,
                                 p_idx, p_val, val, r, rot, g)

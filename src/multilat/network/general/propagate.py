@@ -145,7 +145,9 @@ def freeze(system: System, result: GeneralResult) -> Frozen:
                 tuple(weight), scatter, np.concatenate(repeat), result.determinability, int(result.dof),
                 _program(system, x, weight))
     _, jac = system.evaluate(x)
-    return dataclasses.replace(fr, gain=fr.q @ fr.weighted(np.ascontiguousarray(jac.T)))
+    gain = fr.q @ fr.weighted(np.ascontiguousarray(jac.T))
+    fr.program["kt"] = np.ascontiguousarray(gain.T)
+    return dataclasses.replace(fr, gain=gain)
 
 
 def _program(system: System, x: np.ndarray, weight) -> dict:
@@ -210,6 +212,14 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
     vtpv = np.full(t, np.nan)
     done = np.zeros(t, bool)
     far = np.zeros(t, bool)
+    if engine == "numba" or (engine == "auto" and HAVE_NUMBA):
+        from multilat.network.general._frozen_numba import chord
+
+        p = frozen.program
+        chord(obs, x, p["code"], p["cols"], p["s_ptr"], p["s_j"], p["s_col"], p["hz"], p["comp"], p["setup"],
+              p["frames"], frozen.angular, p["p_ptr"], p["p_idx"], p["p_val"], frozen.free.astype(np.int64), frozen.q,
+              frozen.computed, p["kt"], float(tol), int(max_iter), CONTRACTION, done, iters, far, vtpv)
+        return _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback)
     # the first step is linear in the noise (at x̂ the model and Jacobian are the adjustment's): one
     # matrix product for all trials, dx = K (l - f(x̂)), K = Q J(x̂)^T P
     r0 = obs - frozen.computed
@@ -220,14 +230,6 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
     with np.errstate(invalid="ignore"):
         prev = np.abs(dx).max(axis=1, initial=0.0)
     prev = np.where(np.isfinite(prev), prev, np.inf)
-    if engine == "numba" or (engine == "auto" and HAVE_NUMBA):
-        from multilat.network.general._frozen_numba import chord
-
-        p = frozen.program
-        chord(obs, x, p["code"], p["cols"], p["s_ptr"], p["s_j"], p["s_col"], p["hz"], p["comp"], p["setup"],
-              p["frames"], frozen.angular, p["p_ptr"], p["p_idx"], p["p_val"], frozen.free.astype(np.int64), frozen.q,
-              float(tol), int(max_iter), CONTRACTION, prev, done, iters, far, vtpv)
-        return _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback)
     active = np.arange(t)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         for _ in range(1, max_iter):
