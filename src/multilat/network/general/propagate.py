@@ -141,7 +141,7 @@ def freeze(system: System, result: GeneralResult) -> Frozen:
         offset += rc.size
     ri, ci = np.concatenate(rows_i), np.concatenate(cols_i)
     scatter = scipy.sparse.csr_matrix((np.ones(len(ri)), (ri, ci)), shape=(offset, system.n_free))
-    fr = Frozen(system, x, computed, np.asarray(result.cofactor, float), np.flatnonzero(lay.free), angular,
+    fr = Frozen(system, x, computed, np.ascontiguousarray(result.cofactor, float), np.flatnonzero(lay.free), angular,
                 tuple(weight), scatter, np.concatenate(repeat), result.determinability, int(result.dof),
                 _program(system, x, weight))
     _, jac = system.evaluate(x)
