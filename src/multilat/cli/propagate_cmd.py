@@ -133,8 +133,13 @@ def propagate_cmd(
                                                     "report) show, ID,ID,... (default: the stations and "
                                                     "the targets with the largest ellipsoids)."),
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
+    model: str = typer.Option("multilateration", "--model", help="multilateration (distance path) or general "
+                              "(the general network layer; a gama-local XML input always)."),
 ) -> None:
     """Monte Carlo (JCGM 101/102) of stations, offsets, targets and interpoint distances."""
+    from multilat.cli import general_adjust, general_propagate
+    if general_adjust.wants_general(source, model):     # --model general, or a gama-local XML input
+        return general_propagate.run(**locals())
     from multilat.network.propagate import propagate
     from multilat.parallel import map_from_options
 

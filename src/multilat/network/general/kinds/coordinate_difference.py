@@ -26,12 +26,16 @@ def register(block, layout) -> dict:
     return {}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
+    x = np.asarray(x, float)
     axis = np.asarray(block.index["axis"], int)
     cf = layout.point_cols[np.asarray(block.index["from"], int), axis]
     ct = layout.point_cols[np.asarray(block.index["to"], int), axis]
-    values = np.tile([-1.0, 1.0], (len(cf), 1))
-    return x[ct] - x[cf], values, np.stack([cf, ct], 1)
+    computed = x[..., ct] - x[..., cf]
+    if not jacobian:
+        return computed, None, None
+    values = np.broadcast_to(np.array([-1.0, 1.0]), computed.shape + (2,)).copy()
+    return computed, values, np.stack([cf, ct], 1)
 
 
 # ---------------------------------------------------------------------------------------------------

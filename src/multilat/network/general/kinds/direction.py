@@ -28,13 +28,17 @@ def register(block, layout) -> dict:
     return {"orientation": layout.columns("orientation", block.names["set"])[np.asarray(block.index["set"], int)]}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
+    x = np.asarray(x, float)
     d = sight(block, layout, x)
     g = bearing_partials(d, block)
-    values = np.concatenate([-g, g, -np.ones((len(d), 1))], 1)
+    computed = np.arctan2(d[..., 1], d[..., 0]) - x[..., cols["orientation"]]
+    if not jacobian:
+        return computed, None, None
+    values = np.concatenate([-g, g, -np.ones(g.shape[:-1] + (1,))], -1)
     cols_ = np.concatenate([columns(layout, block.index["from"], (0, 1)), columns(layout, block.index["to"], (0, 1)),
                             cols["orientation"][:, None]], 1)
-    return np.arctan2(d[:, 1], d[:, 0]) - x[cols["orientation"]], values, cols_
+    return computed, values, cols_
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -24,10 +24,15 @@ def register(block, layout) -> dict:
     return {}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
+    x = np.asarray(x, float)
     cf, ct = columns(layout, block.index["from"], (2,)), columns(layout, block.index["to"], (2,))
-    values = np.concatenate([-np.ones_like(cf, float), np.ones_like(ct, float)], 1)
-    return x[ct[:, 0]] - x[cf[:, 0]], values, np.concatenate([cf, ct], 1)
+    computed = x[..., ct[:, 0]] - x[..., cf[:, 0]]
+    if not jacobian:
+        return computed, None, None
+    values = np.broadcast_to(np.concatenate([-np.ones_like(cf, float), np.ones_like(ct, float)], 1),
+                             computed.shape + (2,)).copy()
+    return computed, values, np.concatenate([cf, ct], 1)
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -27,13 +27,15 @@ def register(block, layout) -> dict:
     return {}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
     df = sight(block, layout, x, "from", "fs")
     db = sight(block, layout, x, "from", "bs")
     gf, gb = bearing_partials(df, block), bearing_partials(db, block)
-    values = np.concatenate([gb - gf, -gb, gf], 1)
+    a = np.arctan2(df[..., 1], df[..., 0]) - np.arctan2(db[..., 1], db[..., 0])
+    if not jacobian:
+        return a, None, None
+    values = np.concatenate([gb - gf, -gb, gf], -1)
     cols_ = np.concatenate([columns(layout, block.index[k], (0, 1)) for k in ("from", "bs", "fs")], 1)
-    a = np.arctan2(df[:, 1], df[:, 0]) - np.arctan2(db[:, 1], db[:, 0])
     return a, values, cols_
 
 

@@ -23,9 +23,13 @@ def register(block, layout) -> dict:
     return {}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
+    x = np.asarray(x, float)
     c = layout.point_cols[np.asarray(block.index["point"], int), np.asarray(block.index["axis"], int)]
-    return x[c], np.ones((len(c), 1)), c[:, None]
+    computed = x[..., c]
+    if not jacobian:
+        return computed, None, None
+    return computed, np.ones(computed.shape + (1,)), c[:, None]
 
 
 # ---------------------------------------------------------------------------------------------------

@@ -36,17 +36,22 @@ def register(block, layout) -> dict:
     return {"frame": frame[np.asarray(block.index["setup"], int)]}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
+    x = np.asarray(x, float)
     d = sight(block, layout, x)
+    lead = d.shape[:-1]                                   # (..., m): the angle functions take flat rows
+    d = d.reshape(-1, 3)
+    ori = np.broadcast_to(x[..., cols["frame"]], lead + (3,)).reshape(-1, 3)
     m = len(d)
-    ori = x[cols["frame"]]
     zero = np.zeros((m, 3))
-    d_st, d_ori, d_tg = angle_jacobian(zero, ori, d, np.arange(m), np.arange(m))
-    comp = np.asarray(block.index["component"], int)
-    rows = np.arange(m)
+    comp = np.broadcast_to(np.asarray(block.index["component"], int), lead).reshape(-1)
     az, el = predicted_angles(zero, ori, d, np.arange(m), np.arange(m))
-    computed = np.where(comp == 0, az, el)
-    values = np.concatenate([d_st[rows, comp], d_tg[rows, comp], d_ori[rows, comp]], 1)
+    computed = np.where(comp == 0, az, el).reshape(lead)
+    if not jacobian:
+        return computed, None, None
+    d_st, d_ori, d_tg = angle_jacobian(zero, ori, d, np.arange(m), np.arange(m))
+    rows = np.arange(m)
+    values = np.concatenate([d_st[rows, comp], d_tg[rows, comp], d_ori[rows, comp]], 1).reshape(lead + (9,))
     cols_ = np.concatenate([columns(layout, block.index["from"]), columns(layout, block.index["to"]), cols["frame"]], 1)
     return computed, values, cols_
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.general.kinds.geometry import columns, sight
+from multilat.network.general.kinds.geometry import columns, first_bad, sight
 
 NAME = "zenith_angle"
 ANGULAR = False
@@ -26,18 +26,20 @@ def register(block, layout) -> dict:
     return {}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
     d = sight(block, layout, x)
-    h = np.hypot(d[:, 0], d[:, 1])
-    r2 = h * h + d[:, 2] ** 2
-    if np.any(h <= 0):
-        k = int(np.flatnonzero(h <= 0)[0])
-        raise MultilatError(f"zenith angle {block.labels[k] if block.labels else k + 1}: the sight is vertical "
+    h = np.hypot(d[..., 0], d[..., 1])
+    bad = first_bad(h <= 0)
+    if bad is not None:
+        raise MultilatError(f"zenith angle {block.labels[bad] if block.labels else bad + 1}: the sight is vertical "
                             "(its derivative is undefined)")
-    g = np.stack([d[:, 2] * d[:, 0] / (h * r2), d[:, 2] * d[:, 1] / (h * r2), -h / r2], -1)
-    values = np.concatenate([-g, g], 1)
+    if not jacobian:
+        return np.arctan2(h, d[..., 2]), None, None
+    r2 = h * h + d[..., 2] ** 2
+    g = np.stack([d[..., 2] * d[..., 0] / (h * r2), d[..., 2] * d[..., 1] / (h * r2), -h / r2], -1)
+    values = np.concatenate([-g, g], -1)
     cols_ = np.concatenate([columns(layout, block.index["from"]), columns(layout, block.index["to"])], 1)
-    return np.arctan2(h, d[:, 2]), values, cols_
+    return np.arctan2(h, d[..., 2]), values, cols_
 
 
 # ---------------------------------------------------------------------------------------------------
