@@ -74,6 +74,15 @@ def test_named_heads_count_beyond_the_instrument_is_one_line(tmp_path):
         run_design(cfg, base_dir=tmp_path, rng=3, source="cfg.toml")
 
 
+def test_fixed_heads_not_named_after_the_instrument_are_refused(tmp_path):
+    inst_path = _named_instrument(tmp_path)
+    (tmp_path / "h.csv").write_text("point,x_m,y_m,z_m\nS1,-1,-1,0\nS2,2,-1,1.5\nS3,2,2,0\nS4,-1,2,1.5\n")
+    cfg = _cube_cfg({"file": inst_path.name})
+    cfg["heads"] = {"fixed": "h.csv"}
+    with pytest.raises(MultilatError, match=r"^d.toml: heads.fixed: station 'S1' is not a head of instrument"):
+        run_design(parse_design_config(cfg), base_dir=tmp_path, source="d.toml")
+
+
 def test_named_heads_candidates_carry_the_head(tmp_path):
     """Candidate positions: the i-th chosen position holds the i-th head; σ follows that head."""
     from multilat import budget
@@ -138,9 +147,11 @@ def test_target_seen_by_three_heads_is_warned_everywhere(tmp_path, capsys):
     p = _fixed_cfg(tmp_path, EIGHT)
     rc, out, err = _run(capsys, ["design", str(p), "--json"])
     assert rc == 0, err
-    assert json.loads(out)["poorly_controlled"]["count"] == 0        # the control case: no warning
+    assert json.loads(out)["poorly_controlled"]["n_targets"] == 0        # the control case: no warning
     p = _fixed_cfg(tmp_path, EIGHT, hidden={h: ["T1"] for h in "DEFGH"})
     rc, out, err = _run(capsys, ["design", str(p), "--json"])
+    line = [s for s in err.replace("\n", " ").split("warning: ")[1:]]      # stderr, with --json too
+    assert len(line) == 1 and "1 of 18 targets poorly controlled" in line[0] and "T1 (r " in line[0]
     doc = json.loads(out)
     pc = doc["poorly_controlled"]
     assert pc["r_min"] == 0.1 and pc["mdb_limit_sigma"] == 10.0
@@ -148,8 +159,6 @@ def test_target_seen_by_three_heads_is_warned_everywhere(tmp_path, capsys):
     assert pc["targets"][0]["n_obs"] == 3 and pc["targets"][0]["redundancy"] < 1e-9
     rc, out, err = _run(capsys, ["design", str(p), "--report", str(tmp_path / "r.html")])
     assert rc == 0, err
-    line = [s for s in out.replace("\n", " ").split("warning: ")[1:]]
-    assert line and "1 of 18 targets poorly controlled" in line[0] and "T1 (r " in line[0]
     html = (tmp_path / "r.html").read_text(encoding="utf-8")
     assert "targets poorly controlled" in html and ">T1<" in html
 

@@ -61,19 +61,19 @@ def poorly_controlled_document(run) -> dict:
     distance (:func:`~multilat.network.design.config.poorly_controlled_targets`)."""
     from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
 
-    return {"r_min": R_MIN, "mdb_limit_sigma": MDB_LIMIT_SIGMA, "count": len(run.poorly_controlled),
+    return {"r_min": R_MIN, "mdb_limit_sigma": MDB_LIMIT_SIGMA, "n_targets": len(run.poorly_controlled),
             "targets": list(run.poorly_controlled)}
 
 
 def poorly_controlled_line(doc: dict) -> str | None:
-    """The terminal's warning naming the poorly controlled targets (worst first), None if none."""
+    """The warning naming the poorly controlled targets (worst first), None if none."""
     pc = doc["poorly_controlled"]
-    if not pc["count"]:
+    if not pc["n_targets"]:
         return None
     ts = pc["targets"]
     names = ", ".join(f"{t['id']} (r {t['redundancy']:.2g})" for t in ts[:12]) + \
         (f" and {len(ts) - 12} more" if len(ts) > 12 else "")
-    return (f"warning: {pc['count']} of {len(doc['targets'])} targets poorly controlled (a distance with "
+    return (f"{pc['n_targets']} of {len(doc['targets'])} targets poorly controlled (a distance with "
             f"redundancy < {pc['r_min']:g} or MDB > {pc['mdb_limit_sigma']:g} σ: a blunder in it would not "
             f"show): {names}")
 
@@ -127,6 +127,11 @@ def design_cmd(
         raise MultilatError(f"--noise must be gaussian or model, got {noise!r}")
     run = run_design(cfg, base_dir=config.parent, evaluate=heads, rng=seed, source=str(config))
     doc = design_document(run)
+    warn = poorly_controlled_line(doc)
+    if warn is not None:        # stderr (with --json too) and the report's warnings
+        import warnings
+
+        warnings.warn(warn, stacklevel=1)
     sim = None
     if simulate:
         from multilat.network.design.confirm import simulate_design
@@ -154,6 +159,13 @@ def design_cmd(
     if as_json:
         emit_json(doc, "design")
         return
+    _print_summary(run, doc, sim)
+    if out is not None:
+        console.print(f"wrote {out}/design.json, {out}/stations.csv and figures")
+
+
+def _print_summary(run, doc: dict, sim) -> None:
+    """The terminal's summary of a design."""
     um = 1e6
     console.print(f"criterion {run.criterion}: {doc['criterion_m'] * um:.2f} µm"
                   + (f" (start layout {doc['start_criterion_m'] * um:.2f} µm)"
@@ -169,9 +181,6 @@ def design_cmd(
                   f"median {np.median(u) * um:.2f} µm; smallest redundancy "
                   f"{doc['reliability']['redundancy_min']:.3f}, largest MDB "
                   f"{doc['reliability']['mdb_max_m'] * um:.1f} µm")
-    warn = poorly_controlled_line(doc)
-    if warn is not None:
-        console.print(warn, markup=False)
     if run.search is not None:
         n_bad = sum(r.start_unsolvable for r in run.search.starts)
         console.print(f"search: {run.search.method}, {run.search.evaluations} evaluations"
@@ -191,8 +200,6 @@ def design_cmd(
                       f"target std MC/predicted {sm['ratio_mean']:.4f} on average, largest |z| "
                       f"{sm['z_abs_max']:.2f} MC standard errors; predicted 95 % ellipsoids hold "
                       f"{sm['ellipsoid_coverage_mean'] * 100:.2f} % of the trials")
-    if out is not None:
-        console.print(f"wrote {out}/design.json, {out}/stations.csv and figures")
 
 
 def stations_csv(doc: dict) -> str:

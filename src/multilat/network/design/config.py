@@ -46,7 +46,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from multilat.errors import MultilatError, validation_error_line
 from multilat.network.design.preanalysis import (CRITERIA, Layout, PreAnalysis, SigmaModel, design_head_names,
                                                  preanalyse)
-from multilat.network.design.search import (DesignResult, choose_candidates, head_ids, min_heads,
+from multilat.network.design.search import (PENALTY_M, DesignResult, choose_candidates, head_ids, min_heads,
                                             optimise_heads, visibility)
 
 __all__ = ["DesignConfig", "parse_design_config", "load_design_config", "run_design", "DesignRun",
@@ -416,16 +416,11 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
                source: str = "config") -> DesignRun:
     """Run a validated config: optimise (box or candidates) or, with fixed heads or ``evaluate``
     (a :class:`~multilat.network.data.Points` of heads), score the given layout only."""
-    from multilat import instrument as _inst
-
     base = Path(base_dir)
     tid, tx = _targets(cfg.targets, base)
     h = cfg.heads
     rmin, rmax = h.min_range_m, (math.inf if h.max_range_m is None else h.max_range_m)
-    ic = cfg.instrument
-    sigma = SigmaModel(ic.sigma_um * 1e-6) if ic.sigma_um is not None else \
-        SigmaModel(instrument=_inst.load_instrument(ic.preset or str(base / ic.file)),
-                   max_distance_m=max(100.0, 2 * rmax if np.isfinite(rmax) else 100.0))
+    sigma = _sigma_model(cfg.instrument, base, rmax)
     c = cfg.criterion
     net = cfg.network
     coupled = bool(net.scale_bars or net.control)
@@ -439,22 +434,13 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         if len(fixed.ids) < min_heads(cfg.network.offsets):
             raise MultilatError(f"{source}: heads: self-calibration needs at least "
                                 f"{min_heads(cfg.network.offsets)} heads, got {len(fixed.ids)}")
-        known |= set(fixed.ids)
         ids = tuple(fixed.ids)
         _check_heads(sigma, ids, f"{source}: " + ("--evaluate" if evaluate is not None else "heads.fixed"))
     else:
         ids = head_ids(h.count, design_head_names(sigma.instrument))
         _check_heads(sigma, ids, f"{source}: heads.count")
-        known |= set(ids)
-    n_heads = len(fixed.ids) if fixed is not None else h.count
-    per = 4 if cfg.network.offsets else 3
-    n_unknown = per * n_heads + 3 * len(tid) - 6
-    if n_heads * len(tid) < n_unknown:
-        t_min = per * n_heads - 6
-        t_min = -(-t_min // (n_heads - 3))
-        raise MultilatError(f"{source}: targets: {len(tid)} targets and {n_heads} heads give at most "
-                            f"{n_heads * len(tid)} distances for {n_unknown} unknowns: need at least "
-                            f"{t_min} targets")
+    known |= set(ids)
+    _check_counts(len(ids), len(tid), cfg.network.offsets, source)
     for a, b in c.lengths:
         for p in (a, b):
             if p not in known:
@@ -463,23 +449,12 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
     search = None
     occ = tuple((o.box_min_m, o.box_max_m) for o in cfg.occluders)
     if fixed is not None:
-        hid = _hidden(cfg, tuple(fixed.ids), tid, source)
-        _check_reach(tid, tx, fixed.xyz_m, None, rmin, rmax, source, hid, occ, tuple(fixed.ids))
+        hid = _hidden(cfg, ids, tid, source)
+        _check_reach(tid, tx, fixed.xyz_m, None, rmin, rmax, source, hid, occ, ids)
         lay = Layout(fixed.ids, fixed.xyz_m, tid, tx,
                      visibility(fixed.xyz_m, tx, min_range_m=rmin, max_range_m=rmax, hidden=hid,
                                 occluders=occ))
-        if coupled:
-            from multilat.network.design.couplings import preanalyse_coupled
-
-            if c.target_u95_m is not None:
-                raise MultilatError(f"{source}: criterion.target_u95_m (fewest targets) does not use scale "
-                                    "bars or control points yet: leave them out for that search")
-            pa = preanalyse_coupled(lay, sigma, scale_bars=[(b.a, b.b, b.u_um * 1e-6) for b in net.scale_bars],
-                                    control=[(k.point, *(v * 1e-6 for v in k.s_um)) for k in net.control],
-                                    **kw)
-            return _run(c.name, None, pa, pa, sigma, None)
-        pa = preanalyse(lay, sigma, **kw)
-        return _run(c.name, None, pa, pa, sigma, _select(c, pa, sigma, kw))
+        return _evaluate(cfg, lay, sigma, kw, source)
     if coupled:
         raise MultilatError(f"{source}: network.scale_bars / network.control are used in the pre-analysis of "
                             "given heads (heads.fixed or --evaluate); the optimisation does not model them yet")
@@ -505,7 +480,7 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
                                 hidden=_hidden(cfg, ids, tid, source), occluders=occ, head_names=ids,
                                 min_range_m=rmin, max_range_m=rmax, method=s.method, starts=s.starts,
                                 max_evaluations=s.max_evaluations, rng=rng, **skw)
-    if search.criterion_m >= 1e3:
+    if search.criterion_m >= PENALTY_M:
         raise MultilatError(f"{source}: no solvable layout found (every head layout tried leaves a "
                             "target seen by too few heads): widen the heads box or the range limits")
     if h.file is not None:      # the i-th chosen candidate holds the i-th design head
@@ -517,6 +492,44 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         start_pa = None
     best = preanalyse(search.layout, sigma, **kw)
     return _run(c.name, search, best, start_pa, sigma, _select(c, best, sigma, kw))
+
+
+def _sigma_model(ic: InstrumentCfg, base: Path, rmax: float) -> SigmaModel:
+    """The distance model of ``[instrument]``: a constant σ, or a preset's or file's model tabulated up
+    to twice the heads' range (at least 100 m)."""
+    from multilat import instrument as _inst
+
+    if ic.sigma_um is not None:
+        return SigmaModel(ic.sigma_um * 1e-6)
+    return SigmaModel(instrument=_inst.load_instrument(ic.preset or str(base / ic.file)),
+                      max_distance_m=max(100.0, 2 * rmax if np.isfinite(rmax) else 100.0))
+
+
+def _check_counts(n_heads: int, n_targets: int, offsets: bool, source: str) -> None:
+    """Enough distances for the unknowns (one line naming the fewest targets if not)."""
+    per = 4 if offsets else 3
+    n_unknown = per * n_heads + 3 * n_targets - 6
+    if n_heads * n_targets < n_unknown:
+        t_min = -(-(per * n_heads - 6) // (n_heads - 3))
+        raise MultilatError(f"{source}: targets: {n_targets} targets and {n_heads} heads give at most "
+                            f"{n_heads * n_targets} distances for {n_unknown} unknowns: need at least "
+                            f"{t_min} targets")
+
+
+def _evaluate(cfg: DesignConfig, lay: Layout, sigma: SigmaModel, kw: dict, source: str) -> DesignRun:
+    """The pre-analysis of given heads (with the config's scale bars and control, if any)."""
+    c, net = cfg.criterion, cfg.network
+    if net.scale_bars or net.control:
+        from multilat.network.design.couplings import preanalyse_coupled
+
+        if c.target_u95_m is not None:
+            raise MultilatError(f"{source}: criterion.target_u95_m (fewest targets) does not use scale "
+                                "bars or control points yet: leave them out for that search")
+        pa = preanalyse_coupled(lay, sigma, scale_bars=[(b.a, b.b, b.u_um * 1e-6) for b in net.scale_bars],
+                                control=[(k.point, *(v * 1e-6 for v in k.s_um)) for k in net.control], **kw)
+        return _run(c.name, None, pa, pa, sigma, None)
+    pa = preanalyse(lay, sigma, **kw)
+    return _run(c.name, None, pa, pa, sigma, _select(c, pa, sigma, kw))
 
 
 def _check_heads(sigma: SigmaModel, ids, where: str) -> None:
