@@ -247,7 +247,7 @@ def test_cli_json_evaluate_and_out(tmp_path, capsys):
     assert rc == 0, err
     assert json.loads(out)["criterion_m"] == pytest.approx(doc["criterion_m"], rel=1e-12)
     assert {f.name for f in (tmp_path / "o").iterdir()} == {"design.json", "layout_3d.png", "layout_top.png",
-                                                          "uncertainty_slices.png"}
+                                                          "uncertainty_slices.png", "stations.csv"}
 
 
 @pytest.mark.parametrize("edit,msg", [

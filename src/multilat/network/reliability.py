@@ -21,7 +21,13 @@ import numpy as np
 from multilat.network import statistics as st
 from multilat.network.model import Q
 
-__all__ = ["Reliability", "external_shifts", "largest_point_shift", "reliability", "MAX_EXTERNAL_OBS"]
+__all__ = ["Reliability", "external_shifts", "largest_point_shift", "reliability", "MAX_EXTERNAL_OBS", "R_MIN",
+           "MDB_LIMIT_SIGMA"]
+
+#: an observation is poorly controlled when its redundancy number is below R_MIN or its MDB above
+#: MDB_LIMIT_SIGMA times its σ (the adjustment's defaults; the design's warning uses the same)
+R_MIN = 0.1
+MDB_LIMIT_SIGMA = 10.0
 
 # the coordinate shifts are computed up to this many used observations (since issue 29 they cost
 # O(m s²) plus a bounded search, not O(m) each; the cap keeps the large documents as they were)
@@ -208,7 +214,7 @@ class _BlockContext:
 
 
 def reliability(res_obs, used, redundancy, sigma_m, cov, station_ids, target_ids, *, alpha: float,
-                power: float, r_min: float = 0.1, mdb_limit_sigma: float = 10.0,
+                power: float, r_min: float = R_MIN, mdb_limit_sigma: float = MDB_LIMIT_SIGMA,
                 sigma_scale: float = 1.0) -> Reliability:
     """Internal and external reliability of the used observations (``redundancy`` over all
     observations, 0 for rejected ones). ``sigma_scale``: σ̂0 when the variance factor is estimated

@@ -252,6 +252,15 @@ def design(doc: dict, result=None, options=None) -> list[Section]:
                 *(_um(doc, "targets", t, "cov_m2", i, i, op="sqrt") for i in range(3)),
                 _um(doc, "targets", t, "u95_max_m"), doc["targets"][t]["seen_by"]) for t in
                (tids[j] for j in keep)], caption="Targets")
+    pc = doc.get("poorly_controlled")
+    if pc and pc["n_targets"]:
+        sec.table(("target", "poorly controlled distances", "smallest redundancy", "largest MDB (µm)", "MDB / σ"),
+                  [(t["id"], t["n_obs"], f"{t['redundancy']:.3g}",       # MDB null: infinite (r = 0)
+                    "∞" if t["mdb_m"] is None else f"{t['mdb_m'] * UM:.1f}",
+                    "∞" if t["mdb_sigma"] is None else f"{t['mdb_sigma']:.3g}")
+                   for t in pc["targets"]],
+                  caption=f"Warning: {pc['n_targets']} targets poorly controlled (redundancy < {pc['r_min']:g} or "
+                          f"MDB > {pc['mdb_limit_sigma']:g} σ): a blunder in their distances would not show")
     if doc.get("lengths"):
         sec.table(("a", "b", "length (m)", "u (µm)", f"U, k = {K:g} (µm)"),
                   [(L["a"], L["b"], _m(doc, "lengths", i, "length_m"), _um(doc, "lengths", i, "length_std_m"),
