@@ -76,7 +76,7 @@ def numpy_oneshot(n: int, seed: int):
 
 def _timed_chunk(spec):
     """Run one engine chunk and report its wall and CPU time (to see whether workers got a core)."""
-    from multilat.montecarlo import _run_chunk
+    from multilat.montecarlo.chunks import _run_chunk
 
     t, c = time.perf_counter(), time.process_time()
     part = _run_chunk(spec)
@@ -167,7 +167,7 @@ def run(quick: bool = False) -> list[dict]:
     ))
 
     with process_map(2) as m:
-        # start the workers and let each pass the numba switch-over (multilat.distributions.NUMBA_AFTER)
+        # start the workers and let each pass the numba switch-over (multilat.fast_normal.NUMBA_AFTER)
         run_mc(eq3_error_m, inputs, trials=1 << 23, rng=1, map=m, chunk_size=1 << 19)
         t_2p, _ = _median_time(lambda: run_mc(eq3_error_m, inputs, trials=n, rng=SEED, chunk_size=1 << 19, map=m),
                                repeats)

@@ -16,7 +16,6 @@ from multilat.network.adjust import adjust
 from multilat.network.design import (Layout, SigmaModel, choose_candidates, criterion_value,
                                      layout_observations, optimise_heads, preanalyse)
 from multilat.network.design.config import parse_design_config, run_design
-from multilat.network.model import Q
 
 SIG = 4.7e-6
 
@@ -248,7 +247,7 @@ def test_cli_json_evaluate_and_out(tmp_path, capsys):
     assert rc == 0, err
     assert json.loads(out)["criterion_m"] == pytest.approx(doc["criterion_m"], rel=1e-12)
     assert {f.name for f in (tmp_path / "o").iterdir()} == {"design.json", "layout_3d.png", "layout_top.png",
-                                                          "uncertainty_slices.png"}
+                                                          "uncertainty_slices.png", "stations.csv"}
 
 
 @pytest.mark.parametrize("edit,msg", [
@@ -486,11 +485,11 @@ def test_python_api_bad_input_one_line():
 
 
 def test_paper_volume_study_small_run_verdicts():
-    """report.design_study on the large volume with a short search: the paper row is the paper's
+    """network.design.paper_study on the large volume with a short search: the paper row is the paper's
     layout's pre-analysis, the searches (started from the paper's heads) never end worse on their own
     criterion, gains are the ratios, and the Monte Carlo confirms each prediction."""
     from multilat.instrument import load_instrument
-    from multilat.report.design_study import markdown_table, paper_volume_study
+    from multilat.network.design.paper_study import markdown_table, paper_volume_study
 
     d = paper_volume_study("large-volume", evaluations=200, starts=1, mc_trials=2000, sims=20)
     cfg = configs.large_volume()
@@ -516,7 +515,7 @@ def test_docs_paper_volume_table():
     import importlib.util
     from pathlib import Path
 
-    from multilat.report.design_study import markdown_table, paper_volume_study
+    from multilat.network.design.paper_study import markdown_table, paper_volume_study
 
     root = Path(__file__).resolve().parents[1]
     spec = importlib.util.spec_from_file_location("pv", root / "examples" / "design" / "paper_volumes.py")

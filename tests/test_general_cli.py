@@ -213,7 +213,7 @@ def test_strict_refuses_in_one_line_and_writes_nothing(tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------- options and files
-@pytest.mark.parametrize("opt", [["--datum", "free"], ["--sigma-um", "3"], ["--no-snooping"], ["--scales"],
+@pytest.mark.parametrize("opt", [["--datum", "free"], ["--sigma-um", "3"], ["--mdb-limit-sigma", "5"], ["--scales"],
                                  ["--solver", "auto"], ["--seed", "0"], ["--points", "p.csv"]])
 def test_options_of_the_distance_path_are_refused(capsys, tmp_path, opt):
     out_dir = tmp_path / "res"

@@ -260,7 +260,7 @@ def test_export_of_angles_to_a_format_without_them_is_one_line(mixed, tmp_path, 
     p = _csv(obs, tmp_path)
     assert main(["export", "starnet", str(p), "-o", str(tmp_path / "x.dat"), "--offsets-um", "0"]) != 0
     err = capsys.readouterr().err.strip()
-    assert "angle observations cannot be exported to starnet" in err and len(err.splitlines()) == 1
+    assert "starnet: station 'S1' reads angles" in err and "not levelled" in err and len(err.splitlines()) == 1
     pts_csv = tmp_path / "pts.csv"
     pts_csv.write_text("point,x_m,y_m,z_m\n" + "".join(f"{i},{x!r},{y!r},{z!r}\n" for i, (x, y, z)
                                                        in zip(pts.ids, pts.xyz_m.tolist())))

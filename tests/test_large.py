@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from multilat.errors import MultilatError
 from multilat.io import to_jsonable
 from multilat.network import _sparse_kernels as K
 from multilat.network.adjust import adjust

@@ -1,6 +1,6 @@
 """One vocabulary and a schema for every command's ``--json`` (issue 13 item 2).
 
-Every sample run of :data:`multilat.schemas.infer.SAMPLES` (each command on the shipped examples, with
+Every sample run of ``SAMPLES`` of ``tools/schema_infer.py`` (each command on the shipped examples, with
 the options that add keys) must (a) carry ``"schema": "multilat.<command>/<version>"``, (b) validate
 against the shipped JSON Schema (jsonschema, draft 2020-12: a renamed, removed or undeclared key fails),
 and (c) use only names of the convention (:func:`multilat.vocabulary.document_problems`: statistic after
@@ -13,6 +13,7 @@ from __future__ import annotations
 import copy
 import json
 import re
+import sys
 from pathlib import Path
 
 import pytest
@@ -21,7 +22,8 @@ jsonschema = pytest.importorskip("jsonschema")
 
 from multilat.cli import main  # noqa: E402
 from multilat.schemas import COMMANDS, load  # noqa: E402
-from multilat.schemas.infer import SAMPLES, infer, run_sample  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
+from schema_infer import SAMPLES, infer, run_sample  # noqa: E402
 from multilat.vocabulary import RENAMED, SCHEMA_VERSION, document_problems, key_problems  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -63,7 +65,7 @@ def test_every_command_has_a_schema_and_a_sample():
 
 def test_shipped_schemas_are_what_the_samples_give(tmp_path):
     """The shipped files are the inference of the sample documents (regenerate with
-    ``python -m multilat.schemas.infer`` and read the diff when an output changes)."""
+    ``python tools/schema_infer.py`` and read the diff when an output changes)."""
     for cmd in ("budget", "lbb-simulate", "two-face", "simulate"):
         docs = [_doc(cmd, i, tmp_path) for i in range(len(SAMPLES[cmd]))]
         assert infer(cmd, docs) == load(cmd)

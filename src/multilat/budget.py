@@ -458,14 +458,16 @@ _MODEL_HASH: list = []
 
 def _model_hash() -> str:
     """sha256 of the source of the modules that define the distance budget (this one, adm, gimbal,
-    air, distributions, montecarlo): the on-disk cache's version."""
+    air, distributions, fast_normal, the montecarlo package): the on-disk cache's version."""
     if not _MODEL_HASH:
         import hashlib
         from pathlib import Path
 
         h = hashlib.sha256()
         here = Path(__file__).resolve().parent
-        for name in ("budget.py", "adm.py", "gimbal.py", "air.py", "distributions.py", "montecarlo.py"):
+        names = ["budget.py", "adm.py", "gimbal.py", "air.py", "distributions.py", "fast_normal.py"]
+        names += sorted(p.relative_to(here).as_posix() for p in (here / "montecarlo").glob("*.py"))
+        for name in names:
             h.update((here / name).read_bytes())
         _MODEL_HASH.append(h.hexdigest())
     return _MODEL_HASH[0]

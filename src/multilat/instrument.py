@@ -36,7 +36,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Literal
 
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from multilat.errors import MultilatError, validation_error_line
 
@@ -97,14 +97,23 @@ class ADMConfig(_Model):
         Time between clock calibrations (years, >= 0).
     """
 
-    modulation_frequency_hz: float
-    wavelength_nm: float = 1550.0
-    signal_to_crosstalk_db: float
-    phase_noise_rad: float
-    am_pm_m_per_db: float = 0.0
-    power_variation_db: float = 0.0
-    clock_ageing_per_year: float = 0.0
-    calibration_interval_years: float = 1.0
+    modulation_frequency_hz: float = Field(json_schema_extra={"constraint": "> 0"},
+                                           description="RF modulation frequency f_RF of the ADM (Table I)")
+    wavelength_nm: float = Field(1550.0, json_schema_extra={"constraint": "> 0"},
+                                 description="vacuum wavelength of the optical carrier, for the air group index")
+    signal_to_crosstalk_db: float = Field(json_schema_extra={"constraint": "> 0"},
+                                          description="worst accepted signal-to-crosstalk ratio")
+    phase_noise_rad: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                   description="standard deviation of one phase measurement")
+    am_pm_m_per_db: float = Field(0.0, json_schema_extra={"constraint": "within ±0.001 m/dB"},
+                                  description="amplitude-to-phase coupling: distance change per dB of received power "
+                                              "(any sign)")
+    power_variation_db: float = Field(0.0, json_schema_extra={"constraint": ">= 0"},
+                                      description="peak-to-peak received-power variation, uniformly distributed")
+    clock_ageing_per_year: float = Field(0.0, json_schema_extra={"constraint": ">= 0"},
+                                         description="relative ageing rate of the reference clock")
+    calibration_interval_years: float = Field(1.0, json_schema_extra={"constraint": ">= 0"},
+                                              description="time between clock calibrations")
 
     @field_validator("modulation_frequency_hz", "wavelength_nm", "signal_to_crosstalk_db")
     @classmethod
@@ -128,14 +137,23 @@ class ADMConfig(_Model):
 class Environment(_Model):
     """Nominal air and the standard uncertainties of the environmental sensors."""
 
-    temperature_c: float = 20.0
-    pressure_hpa: float = 1013.25
-    humidity_pct: float = 50.0
-    co2_ppm: float = 450.0
-    u_temperature_c: float = 0.0
-    u_pressure_hpa: float = 0.0
-    u_humidity_pct: float = 0.0
-    u_co2_ppm: float = 0.0
+    temperature_c: float = Field(20.0, json_schema_extra={"constraint": "within [-40, 100] (the air formulas' range)"},
+                                 description="nominal air temperature")
+    pressure_hpa: float = Field(
+        1013.25, json_schema_extra={"constraint": "within [100, 1400] (the air formulas' range)"},
+        description="nominal air pressure")
+    humidity_pct: float = Field(50.0, json_schema_extra={"constraint": "within [0, 100]"},
+                                description="nominal relative humidity")
+    co2_ppm: float = Field(450.0, json_schema_extra={"constraint": "within [0, 2000] (the air formulas' range)"},
+                           description="nominal CO2 mole fraction")
+    u_temperature_c: float = Field(0.0, json_schema_extra={"constraint": ">= 0"},
+                                   description="standard uncertainty of the temperature sensor")
+    u_pressure_hpa: float = Field(0.0, json_schema_extra={"constraint": ">= 0"},
+                                  description="standard uncertainty of the pressure sensor")
+    u_humidity_pct: float = Field(0.0, json_schema_extra={"constraint": ">= 0"},
+                                  description="standard uncertainty of the humidity sensor")
+    u_co2_ppm: float = Field(0.0, json_schema_extra={"constraint": ">= 0"},
+                             description="standard uncertainty of the CO2 value")
 
     @field_validator("pressure_hpa")
     @classmethod
@@ -182,8 +200,12 @@ class HeadCommon(_Model):
     horizontal (the convention that makes eq. 2's ``cos(phi)`` right, see :mod:`multilat.gimbal`).
     """
 
-    beam_offset_m: tuple[float, float] = (-320e-6, 320e-6)
-    elevation_deg: tuple[float, float] = (-90.0, 90.0)
+    beam_offset_m: tuple[float, float] = Field(
+        (-320e-6, 320e-6), json_schema_extra={"constraint": "[low, high], low <= high; within ±0.1 m"},
+        description="uniform interval of the beam offsets a and c of every head (the seed: ±320 µm)")
+    elevation_deg: tuple[float, float] = Field(
+        (-90.0, 90.0), json_schema_extra={"constraint": "[low, high], low <= high; within [-180, 180]"},
+        description="uniform range of the head elevation angle φ, measured from the horizontal")
 
     _iv = field_validator("beam_offset_m", "elevation_deg")(classmethod(lambda cls, v: _interval(v)))
     _len = field_validator("beam_offset_m")(classmethod(lambda cls, v: _small_length(v)))
@@ -211,12 +233,23 @@ class HeadConfig(_Model):
         lengthens the measured distance at horizontal sight).
     """
 
-    a_limit_m: float
-    c_limit_m: float
-    alpha_deg: tuple[float, float]
-    gamma_deg: tuple[float, float]
-    toh_m: float
-    toh_std_m: float
+    a_limit_m: float = Field(json_schema_extra={"constraint": ">= 0; within ±0.1 m"},
+                             description="observed bound of |a| for this head (used when budget.beam_offset_model = "
+                                         "\"per_head\")")
+    c_limit_m: float = Field(json_schema_extra={"constraint": ">= 0; within ±0.1 m"},
+                             description="observed bound of |c| for this head (used when budget.beam_offset_model = "
+                                         "\"per_head\")")
+    alpha_deg: tuple[float, float] = Field(
+        json_schema_extra={"constraint": "[low, high], low <= high; within (-90, 90)"},
+        description="beam-tilt interval α, uniform")
+    gamma_deg: tuple[float, float] = Field(
+        json_schema_extra={"constraint": "[low, high], low <= high; within (-90, 90)"},
+        description="beam-tilt interval γ, uniform")
+    toh_m: float = Field(json_schema_extra={"constraint": "within ±0.1 m"},
+                         description="transit-offset estimate Toh (eq. 2/4: positive lengthens the measured distance "
+                                     "at horizontal sight)")
+    toh_std_m: float = Field(json_schema_extra={"constraint": ">= 0; within ±0.1 m"},
+                             description="standard uncertainty of Toh")
 
     _iv = field_validator("alpha_deg", "gamma_deg")(classmethod(lambda cls, v: _interval(v)))
     _len = field_validator("a_limit_m", "c_limit_m", "toh_m", "toh_std_m")(
@@ -253,18 +286,38 @@ class TargetConfig(_Model):
     the ADM zero and removed from the error.
     """
 
-    a_m: float
-    b_m: float
-    c_m: float
-    offset_std_m: float
-    tot_m: float
-    tot_std_m: float
-    aperture_deg: float = 30.0
-    elevation_deg: tuple[float, float] = (-90.0, 90.0)
-    misalignment_half_angle_deg: float = 15.0
-    misalignment_shape: Literal["cone", "square"] = "cone"
-    transit_correction: Literal["model", "line_of_sight", "target_axis"] = "model"
-    constant_calibrated: bool = True
+    a_m: float = Field(json_schema_extra={"constraint": "within ±0.1 m"},
+                       description="target offset a′ in the corner-cube frame (eq. 5)")
+    b_m: float = Field(json_schema_extra={"constraint": "within ±0.1 m"},
+                       description="target offset b′ along the cube axis, positive towards the head (eq. 5)")
+    c_m: float = Field(json_schema_extra={"constraint": "within ±0.1 m"},
+                       description="target offset c′ in the corner-cube frame (eq. 5)")
+    offset_std_m: float = Field(json_schema_extra={"constraint": ">= 0; within ±0.1 m"},
+                                description="standard uncertainty of each target offset")
+    tot_m: float = Field(json_schema_extra={"constraint": "within ±0.1 m"},
+                         description="target transit offset Tot, positive when the transit axis is displaced towards "
+                                     "the head")
+    tot_std_m: float = Field(json_schema_extra={"constraint": ">= 0; within ±0.1 m"},
+                             description="standard uncertainty of Tot")
+    aperture_deg: float = Field(30.0, json_schema_extra={"constraint": "within (0, 180)"},
+                                description="full acceptance angle of the corner cube")
+    elevation_deg: tuple[float, float] = Field(
+        (-90.0, 90.0), json_schema_extra={"constraint": "[low, high], low <= high"},
+        description="range of the target's elevation angle φ′ in use")
+    misalignment_half_angle_deg: float = Field(15.0, json_schema_extra={"constraint": ">= 0; < 90"},
+                                               description="largest angle between the cube axis and the line of sight")
+    misalignment_shape: Literal["cone", "square"] = Field("cone",
+                                                          description="\"cone\": the axis direction uniform over the "
+                                                                      "cone's solid angle; \"square\": θ″ and φ″ "
+                                                                      "independent uniforms on [-h, h]")
+    transit_correction: Literal["model", "line_of_sight", "target_axis"] = Field(
+        "model",
+        description="how the estimated Tot is corrected: \"model\" (eq. 5's Tot term), \"line_of_sight\" (eq. 2 form, "
+                    "elevation of the line of sight seen from the target), \"target_axis\" (eq. 2 form, the target's "
+                    "own elevation)")
+    constant_calibrated: bool = Field(True,
+                                      description="b′ at perfect alignment is a constant of the target, calibrated "
+                                                  "with the ADM zero and removed from the error")
 
     _iv = field_validator("elevation_deg")(classmethod(lambda cls, v: _interval(v)))
     _len = field_validator("a_m", "b_m", "c_m", "offset_std_m", "tot_m", "tot_std_m")(
@@ -294,12 +347,19 @@ class TargetConfig(_Model):
 class BudgetConfig(_Model):
     """Monte Carlo set-up of the distance budget (section 3.4)."""
 
-    distance_start_m: float = 0.2
-    distance_stop_m: float = 20.2
-    distance_step_m: float = 0.8
-    trials_per_distance: int = 200_000
-    include_air: bool = False
-    beam_offset_model: Literal["common", "per_head"] = "common"
+    distance_start_m: float = Field(0.2, json_schema_extra={"constraint": "> 0"},
+                                    description="first distance of the budget's grid")
+    distance_stop_m: float = Field(20.2, json_schema_extra={"constraint": ">= distance_start_m"},
+                                   description="last distance of the grid (included)")
+    distance_step_m: float = Field(0.8, description="step of the grid", json_schema_extra={"constraint": "> 0"})
+    trials_per_distance: int = Field(200_000, json_schema_extra={"constraint": ">= 2"},
+                                     description="Monte Carlo trials per distance")
+    include_air: bool = Field(False,
+                              description="add the air group-index uncertainty (environment's u_*) to the budget")
+    beam_offset_model: Literal["common", "per_head"] = Field(
+        "common",
+        description="\"common\": head_common.beam_offset_m for every head; \"per_head\": each head's a_limit_m and "
+                    "c_limit_m")
 
     @field_validator("distance_start_m", "distance_step_m")
     @classmethod
@@ -337,13 +397,21 @@ class TrackerConfig(_Model):
     ``angular_c_urad``, ``std_per_mpe`` (0.5: the MPE read as k = 2), and ``levelled`` (its vertical is
     the world's: one orientation angle instead of three when angles are adjusted)."""
 
-    adm_a_um: float
-    adm_b_um_per_m: float
-    transverse_a_um: float
-    transverse_b_um_per_m: float
-    angular_c_urad: float = 0.0
-    std_per_mpe: float = 0.5
-    levelled: bool = False
+    adm_a_um: float = Field(json_schema_extra={"constraint": ">= 0"},
+                            description="constant term of the tracker's distance MPE a + b·L")
+    adm_b_um_per_m: float = Field(json_schema_extra={"constraint": ">= 0; a + b > 0"},
+                                  description="length term of the distance MPE")
+    transverse_a_um: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                   description="constant term of the transverse (angle) MPE over the range")
+    transverse_b_um_per_m: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                         description="length term of the transverse MPE")
+    angular_c_urad: float = Field(0.0, json_schema_extra={"constraint": ">= 0; some angular MPE > 0"},
+                                  description="constant angular MPE")
+    std_per_mpe: float = Field(0.5, json_schema_extra={"constraint": "within (0, 1]"},
+                               description="standard uncertainty per MPE (0.5: the MPE read as k = 2)")
+    levelled: bool = Field(False,
+                           description="the tracker's vertical is the world's: one orientation angle instead of three"
+                                       " when angles are adjusted")
 
     @model_validator(mode="after")
     def _spec(self):
@@ -370,17 +438,23 @@ class Instrument(_Model):
     then ``heads.default``.
     """
 
-    name: str = "custom"
-    description: str = ""
-    adm: ADMConfig
-    environment: Environment = Environment()
-    head_common: HeadCommon = HeadCommon()
-    heads: dict[str, HeadConfig] = {}
-    head_types: dict[str, HeadConfig] = {}
-    head_map: dict[str, str] = {}
-    trackers: dict[str, TrackerConfig] = {}
-    target: TargetConfig
-    budget: BudgetConfig = BudgetConfig()
+    name: str = Field("custom", description="the instrument's name, shown in outputs")
+    description: str = Field("", description="free text")
+    adm: ADMConfig = Field(description="the absolute distance meter (Table I)")
+    environment: Environment = Field(Environment(),
+                                     description="nominal air and the environmental sensors' uncertainties")
+    head_common: HeadCommon = Field(HeadCommon(),
+                                    description="what all heads share: the beam-offset law and the elevation range")
+    heads: dict[str, HeadConfig] = Field({}, json_schema_extra={"constraint": "heads or head_types non-empty"},
+                                         description="one table per head, by name; [heads.default] applies to any "
+                                                     "head not listed")
+    head_types: dict[str, HeadConfig] = Field({}, description="named head designs, given to heads by head_map")
+    head_map: dict[str, str] = Field({}, json_schema_extra={"constraint": "a known type; not a head of [heads]"},
+                                     description="head name -> head type (a key of head_types)")
+    trackers: dict[str, TrackerConfig] = Field({}, json_schema_extra={"constraint": "not also a head"},
+                                               description="laser trackers beside the heads, by name")
+    target: TargetConfig = Field(description="the target (Table IV)")
+    budget: BudgetConfig = Field(BudgetConfig(), description="Monte Carlo set-up of the distance budget (section 3.4)")
 
     @model_validator(mode="after")
     def _some(self):

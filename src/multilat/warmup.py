@@ -56,12 +56,13 @@ def _steps():
         """The batched Monte Carlo solver and the distance-model draws."""
         from multilat.network.configs import small_volume
         from multilat.network.propagate import problem_from_config, propagate
+        from multilat.network.sigma_source import DEFAULT_SIGMA_M
 
-        propagate(problem_from_config(small_volume(), sigma_m=4.7e-6), trials=2000, rng=1)
+        propagate(problem_from_config(small_volume(), sigma_m=DEFAULT_SIGMA_M), trials=2000, rng=1)
 
     def normals():
         """numba's bit-identical standard normal draws (used past a size threshold)."""
-        from multilat import distributions as D
+        from multilat import fast_normal as D
 
         D._NUMPY_NORMALS = D.NUMBA_AFTER
         D._fast_std_normal(np.random.default_rng(0), 4096)

@@ -4,7 +4,8 @@
 - NaN (or inf) in gama-local's adjusted output (coordinates, covariance, observations): was read.
 - Star*Net ``.UNITS Furlongs`` (any unit the reader does not know): was read as metres; ``.ORDER``
   words it does not know were skipped.
-- gama-local's set-wide instrument height ``<obs from_dh="1.500">`` over slope distances: was dropped.
+- gama-local's set-wide instrument height ``<obs from_dh="1.500">`` over slope distances: was dropped
+  (now refused by the distance path's reader, applied by ``import gama``'s general files).
 """
 
 from pathlib import Path
@@ -51,15 +52,27 @@ def test_starnet_miles_are_not_metres(ws):
     ws.fails(["import", "starnet", "{d}/net.dat", "-o", "{d}/imp"], ".UNITS Miles")
 
 
-def test_gama_set_wide_instrument_height_is_refused(ws, tmp_path):
-    from multilat.network.interop.gama import gama_local_text
+def test_gama_set_wide_instrument_height_is_applied_or_refused(ws, tmp_path):
+    """The distance path's reader refuses the height (FILE:LINE); ``import gama`` now writes the
+    general network's files, which apply it to every slope distance of the set, and no
+    distances.csv (a note says why)."""
+    from multilat.cli.app import main
+    from multilat.errors import MultilatError
+    from multilat.inputs import read_csv_table
     from multilat.network.files import read_observations, read_points
+    from multilat.network.interop.gama import gama_local_text, read_gama_local
 
     text = gama_local_text(read_observations(ws / "obs.csv"), read_points(ws / "points.csv"), offsets=0.0)
     bad = text.replace('<obs from="A">', '<obs from="A" from_dh="1.500">')
     (ws / "net.xml").write_text(bad)
     line = _nth_line(bad, 'from_dh="1.500"')
-    ws.fails(["import", "gama", "{d}/net.xml", "-o", "{d}/imp"], f"net.xml:{line}:", "from_dh=1.5")
+    with pytest.raises(MultilatError, match=rf"net\.xml:{line}:.*from_dh=1\.5"):
+        read_gama_local(ws / "net.xml")
+    assert main(["import", "gama", str(ws / "net.xml"), "-o", str(ws / "imp")]) == 0
+    assert not (ws / "imp" / "distances.csv").exists()
+    tab = read_csv_table(ws / "imp" / "observations.csv", required=("kind", "from", "from_dh_m"), warn_unknown=False)
+    dh = {(f, h) for f, h in zip(tab.column("from"), tab.column("from_dh_m"))}
+    assert {h for f, h in dh if f == "A"} == {"1.5"} and {h for f, h in dh if f != "A"} == {"0.0"}
 
 
 def test_starnet_unknown_order_is_refused_by_name(ws):

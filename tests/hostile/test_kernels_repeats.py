@@ -8,7 +8,6 @@ returns. The kernels are now linear in a target's observations and run in blocks
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys

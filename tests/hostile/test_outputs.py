@@ -210,7 +210,7 @@ def test_inputs_untouched_after_success(ws):
     assert rc == 0, err
     after = snapshot(ws.path)
     assert {k: v for k, v in after.items() if not k.startswith("res")} == before
-    assert time.time()  # noqa: the run is bounded by the CLI itself
+    assert time.time()  # the run is bounded by the CLI itself
 
 
 def test_concurrent_writers_of_one_out(ws):

@@ -19,7 +19,6 @@ anticipated input errors) into ``error: <one line>`` on stderr with exit code 2.
 from __future__ import annotations
 
 import os
-import sys
 
 #: BLAS threads of a command: one, set here before numpy is first imported (OpenBLAS reads it when it
 #: loads). The compiled kernels and the Monte Carlo already use every core (numba's threads, worker

@@ -9,7 +9,6 @@ The limits are deliberate and stated in ``docs/reliability.md``.
 from __future__ import annotations
 
 import math
-import os
 
 from multilat.errors import MultilatError
 from multilat.inputs import MEMORY_SHARE, physical_memory_bytes  # noqa: F401 (re-exported)

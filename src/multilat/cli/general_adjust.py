@@ -35,10 +35,10 @@ SCHEMA = "adjust-general"
 
 #: the adjust command's parameters that the general path reads
 APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method",
-           "alpha_family", "model")
+           "alpha_family", "model", "snooping", "variance_components")
 #: ... and on a multilat CSV network (``--model general``)
 APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offsets_um", "scales", "fixed_scale",
-                         "scale_bar", "references", "levelled", "seed", "snooping")
+                         "scale_bar", "references", "levelled", "seed")
 #: the test procedures' names in the summary (statistics.test_levels)
 _METHOD_NAMES = {"b-method": "B-method", "sidak": "Šidák", "fixed": "fixed α"}
 #: ``--model``: the default distance-only self-calibrating path, or the general network layer
@@ -49,21 +49,24 @@ _OPTION = {"as_json": "--json", "fix_offsets_um": "--fix-offsets-um", "scale_bar
 WHY_NOT = {
     "datum": "the datum of a gama-local file is its fix=/adj= attributes (upper-case adj = datum points)",
     "points": "the file's <point> elements carry the coordinates", "sigma_um": "the σ are the file's stdev=",
-    "instrument": "the σ are the file's stdev=", "snooping": "data snooping is not done on the general path yet",
+    "instrument": "the σ are the file's stdev=",
     "report": "the HTML report is built from the distance path's result",
 }
 #: why an option is refused with ``--model general`` on a CSV network (the default reason for the others)
 WHY_NOT_CSV = {
-    "snooping": "data snooping is not done on the general path yet (--no-snooping is accepted)",
     "report": "the HTML report is built from the distance path's result",
     "cost": "the general path minimises the weighted distance residuals only",
     "solver": "the general path has one dense back end",
-    "variance_components": "variance components are not estimated on the general path yet",
     "average_repeats": "repeated readings are kept as separate observations on the general path",
     "mdb_limit_sigma": "the general path lists every row's MDB in the JSON and names no poor targets yet",
     "distance_only": "the general path takes the angles that have a sigma as observations, whatever the station",
     "tables": "the general path writes result.json and points.csv",
 }
+#: why an option is refused for a directory of multilat's files (``multilat adjust DIR``)
+WHY_NOT_DIR = {"datum": "the datum is points.csv's fixed, sx_m.. and datum columns",
+               "points": "the directory's points.csv carries the coordinates",
+               "sigma_um": "the σ are observations.csv's sigma column", "instrument": "the σ are observations.csv's "
+               "sigma column"}
 for _raw in ("environment", "heights", "formula", "extrapolate", "max_gap_s"):
     WHY_NOT_CSV[_raw] = "raw readings are corrected and adjusted on the distance path only"
 
@@ -115,7 +118,7 @@ def is_general_input(path) -> bool:
     """True for a gama-local XML input: suffix ``.xml`` or ``.gkf``, or a file whose first element is
     ``<gama-local>`` (a name without the suffix)."""
     p = Path(path)
-    if p.suffix.lower() in (".xml", ".gkf"):
+    if p.suffix.lower() in (".xml", ".gkf") or p.is_dir():     # a directory: multilat's files (general/files.py)
         return True
     if not p.is_file():
         return False
@@ -154,8 +157,10 @@ def run(**params) -> None:
     xml = is_general_input(path)
     applies, why_not = (APPLIES, WHY_NOT) if xml else (APPLIES_CSV, WHY_NOT_CSV)
     what = "a gama-local input" if xml else "--model general"
+    if path.is_dir():                                  # multilat's files for the general network
+        why_not, what = {**why_not, **WHY_NOT_DIR}, "a network directory"
     for name in _given_options(params):
-        if name not in applies or (name == "snooping" and params[name] and not xml):
+        if name not in applies:
             why = why_not.get(name, "it belongs to the distance-only adjustment")
             raise MultilatError(f"{_option_name(name)} does not apply to {what} ({path}): {why}")
     alpha, vf, a_glob, method = (params[k] for k in ("alpha", "variance_factor", "alpha_global", "test_method"))
@@ -172,11 +177,18 @@ def run(**params) -> None:
     if out is not None:
         check_output_dir(out, inputs=inputs)
     tests = dict(alpha=alpha, variance_factor=vf, alpha_global=a_glob, strict=params["strict"], method=method,
-                 alpha_family=params.get("alpha_family", 0.01))
-    if xml:
-        doc, adj, stats = compute(path, **tests)
-    else:
-        doc, adj, stats = compute_tables(params, **tests)
+                 alpha_family=params.get("alpha_family", 0.01), snooping=params.get("snooping", True),
+                 variance_components=params.get("variance_components"))
+    from multilat.cli.app import progress
+    from multilat.network.bounds import reporting
+
+    with progress() as p:
+        task = p.add_task(f"adjusting {path.name}", total=None)
+        with reporting(lambda text: p.update(task, description=text)):
+            if xml:
+                doc, adj, stats = compute(path, **tests)
+            else:
+                doc, adj, stats = compute_tables(params, **tests)
     for e in adj.excluded:
         warnings.warn(f"point {e['id']!r} left out: {e['reason']} ({e['n_obs']} observation row(s) removed)",
                       stacklevel=2)
@@ -191,23 +203,41 @@ def run(**params) -> None:
 
 
 def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_global: float | None = None,
-            method: str | None = None, alpha_family: float = 0.01):
-    """Read, adjust (undetermined points left out unless ``strict``), statistics: (doc, adjustment, stats)."""
+            method: str | None = None, alpha_family: float = 0.01, snooping: bool = True,
+            variance_components: str | None = None):
+    """Read, adjust (undetermined points left out unless ``strict``), variance components if asked,
+    data snooping (the default, as the distance path), statistics: (doc, adjustment, stats)."""
     from multilat.network.general import read_gama_input
+    from multilat.network.general.files import is_network_dir, read_network_dir
 
+    if is_network_dir(path):                           # `multilat adjust DIR` (multilat's files)
+        src = {"kind": "file", "file": str(path), "description": "observations.csv's sigma column and the "
+               "correlated blocks' covariances.csv"}
+        return _finish(read_network_dir(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
+                       strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family,
+                       fmt="multilat-files", sigma_source=src)
     return _finish(read_gama_input(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
-                   strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family)
+                   strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family,
+                   snooping=snooping, variance_components=variance_components)
 
 
 def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_global, fmt="gama-local",
-            sigma_source=None, method=None, alpha_family=0.01):
-    from multilat.network.general import adjust_network, statistics, to_json
+            sigma_source=None, method=None, alpha_family=0.01, snooping=True, variance_components=None):
+    from multilat.network.general import adjust_network, to_json
+    from multilat.network.general.snooping import snoop
+    from multilat.network.general.variance import estimate
     from multilat.vocabulary import stamp
 
     adj = adjust_network(net, options=options, strict=strict)
-    stats = statistics(adj.system, adj.result, alpha=alpha, variance_factor=variance_factor,
-                       alpha_global=alpha_global, method=method, alpha_family=alpha_family)
-    doc = to_json(adj, stats, source=source)
+    vcomp = None
+    if variance_components is not None:      # snooping off during the estimation, as the distance path
+        vcomp = estimate(adj.network, grouping=variance_components, options=options)
+        again = adjust_network(vcomp.network, options=options, strict=strict)
+        adj = type(adj)(again.network, again.system, again.result, net, tuple(adj.excluded) + tuple(again.excluded))
+    sn = snoop(net, options=options, strict=strict, alpha=alpha, variance_factor=variance_factor, method=method,
+               alpha_global=alpha_global, alpha_family=alpha_family, snooping=snooping, adjustment=adj)
+    adj, stats = sn.adjustment, sn.stats
+    doc = to_json(adj, stats, source=source, snooping=sn, variance=vcomp)
     doc = {"model": "general", **doc, "format": fmt}
     if sigma_source is not None:
         doc["sigma_source"] = sigma_source
@@ -215,7 +245,8 @@ def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_globa
 
 
 def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: bool,
-                   alpha_global: float | None = None, method: str | None = None, alpha_family: float = 0.01):
+                   alpha_global: float | None = None, method: str | None = None, alpha_family: float = 0.01,
+                   snooping: bool = True, variance_components: str | None = None):
     """A multilat observation CSV (with ``--points``, ``--references`` ...) adjusted by the general
     layer: (doc, adjustment, stats). ``params``: the adjust command's parameters."""
     from multilat.campaign.propagation import read_campaign
@@ -262,7 +293,7 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
                "description": describe(src) if src else "the file's sigma_m column"}
     return _finish(net, options, str(path), alpha=alpha, variance_factor=variance_factor, strict=strict,
                    alpha_global=alpha_global, fmt="multilat-csv", sigma_source=src_doc, method=method,
-                   alpha_family=alpha_family)
+                   alpha_family=alpha_family, snooping=snooping, variance_components=variance_components)
 
 
 def write_out(out, inputs, doc) -> None:
@@ -307,7 +338,8 @@ def print_summary(doc, adj, stats, out) -> None:
     say(f"  test procedure: {t['rule']}")
     red = stats.redundancy
     say(f"  redundancy {max(red.min(), 0.0):.3f}..{red.max():.3f}; {int((red <= 1e-9).sum())} uncontrolled row(s) "
-        f"(r = 0); {t['n_failed']} test(s) above the critical value (listed in the JSON; no data snooping here)")
+        f"(r = 0); {t['n_failed']} test(s) above the critical value"
+        + ("" if doc["snooping"] else " (listed in the JSON; data snooping not requested: --no-snooping)"))
     inst = [f"{n.split(':', 1)[1]} {v['value'] * 1e3:+.4f} mm (u {v['std'] * 1e3:.4f})"
             for n, v in doc["parameters"].items() if n.startswith("offset:")]
     if inst:
@@ -316,6 +348,8 @@ def print_summary(doc, adj, stats, out) -> None:
         say(f"  left out: point {e['id']} ({e['reason']}; {e['n_obs']} observation rows)")
     for note in doc["notes"]:
         say(f"  note: {note}")
+    for line in snooping_lines(doc) + reliability_lines(doc) + variance_lines(doc):
+        say(line)
     _worst(say, doc, stats)
     tb = Table(title="points", title_justify="left")
     for c in ("point", "status", "roles", "x (m)", "y (m)", "z (m)", "95 % max (mm)"):
@@ -327,6 +361,56 @@ def print_summary(doc, adj, stats, out) -> None:
     console.print(tb)
     if out is not None:
         say(f"results written to {out}")
+
+
+def _ends(o: dict) -> str:
+    return "->".join(o[e] for e in ("from", "to", "point", "bs", "fs") if e in o)
+
+
+def snooping_lines(doc) -> list[str]:
+    """The data snooping part of the summary: the rejected rows in order, or why none was."""
+    if not doc["snooping"]:
+        return []
+    out, steps = [], doc["tests"]["steps"]
+    if doc["outliers"]:
+        out.append("  rejected by data snooping, in order:")
+        for o in doc["outliers"]:
+            res = o["residual"] if isinstance(o["residual"], (int, float)) else None
+            what = f", residual {res:+.4g} {o['unit']}" if res is not None else ""
+            block = f" with its correlated block ({o['n_rows']} rows)" if o["n_rows"] > 1 else ""
+            left = f"; point(s) left out with it: {', '.join(o['points_left_out'])}" if o["points_left_out"] else ""
+            out.append(f"    {o['order']}. {o['label'] or '(no label)'} {o['kind'].replace('_', ' ')} {_ends(o)}{block}: "
+                       f"{o['test']} = {o['statistic']:+.2f} > {o['critical']:.2f}{what}{left}")
+    elif steps and steps[0]["detection_passed"]:
+        out.append("  detection passed: no data snooping")
+    if doc["unlocated"]:
+        names = "; ".join(f"{u['label'] or u['kind']} {_ends(u)} (w = {u['w']:+.2f})" for u in doc["unlocated"])
+        out.append(f"  not rejected: {names}: {doc['unlocated_reason']}")
+    if doc["tests"]["snooping_note"]:
+        out.append(f"  {doc['tests']['snooping_note']}")
+    return out
+
+
+def reliability_lines(doc, n: int = 3) -> list[str]:
+    """External reliability: the rows whose MDB moves a point most."""
+    er = doc["external_reliability"]
+    if not er["largest"]:
+        return []
+    parts = [f"{o['label']} {o['kind'].replace('_', ' ')} {_ends(o)} moves {o['shift_point']} by {o['shift_max_m'] * 1e3:.3f} mm"
+             for o in er["largest"][:n]]
+    return [f"  external reliability (shift by an undetected MDB; {er['n_uncontrolled']} uncontrolled row(s) "
+            "without one): " + "; ".join(parts)]
+
+
+def variance_lines(doc) -> list[str]:
+    v = doc.get("variance_components")
+    if not v:
+        return []
+    parts = [f"{c['group']} factor {c['variance_factor']:.3f} ± {c['variance_factor_std']:.3f} (σ × "
+             f"{c['sigma_scale']:.3f}, r = {c['redundancy']:.1f}{', differs from 1' if c['differs_from_1'] else ''})"
+             for c in v["components"]]
+    return [f"  variance components by {v['grouping']} (Förstner, {v['iterations']} iterations; test against 1 "
+            f"at α = {v['alpha']:g}): " + "; ".join(parts)]
 
 
 def _worst(say, doc, stats, n: int = 3) -> None:

@@ -47,9 +47,9 @@ def export_command(
                                       "points; starnet: none (Star*Net then needs a datum)."),
     sigma_um: Optional[float] = typer.Option(None, "--sigma-um", help="σ of every distance, µm, "
                                              "when the CSV has no sigma_m column."),
-    levelled: Optional[str] = typer.Option(None, "--levelled", help="Stations on their level (gama: "
-                                           "their angles become directions and zenith angles; "
-                                           "gama-local's angles need levelled stations): ID,ID,..."),
+    levelled: Optional[str] = typer.Option(None, "--levelled", help="Stations on their level: their "
+                                           "angles become directions (one orientation) and zenith angles; "
+                                           "the three formats' angles need levelled stations: ID,ID,..."),
     as_json: bool = typer.Option(False, "--json", help="Print what was written as JSON."),
 ) -> None:
     """Write the network for GNU Gama, JAG3D or Star*Net. What a format cannot carry (a per-station
@@ -65,20 +65,18 @@ def export_command(
         raise MultilatError("give --points or --result, not both")
     obs = read_observations(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6)
     obs = with_levelled(obs, levelled)
-    if obs.has_angle_observations and fmt != "gama":
-        raise MultilatError(f"{observations}: angle observations cannot be exported to {fmt} yet (gama "
-                            "takes them from levelled stations); drop the angle columns to export the distances")
-    offsets = None
+    offsets, scales = None, None
     pts = read_points(points) if points is not None else None
     if result is not None:
-        pts, offsets = read_result_dir(result)
+        pts, offsets, scales = read_result_dir(result)
         if fmt == "jag3d":
-            offsets = None        # JAG3D estimates them itself (one zero-point offset per group)
+            offsets = None        # JAG3D estimates them itself (one zero-point offset per group = head)
     if offsets_um is not None:
-        offsets = parse_fixed_offsets(offsets_um, obs.station_ids)
-        if isinstance(offsets, dict) and set(offsets) != set(obs.station_ids):
-            missing = [s for s in obs.station_ids if s not in offsets][0]
-            raise MultilatError(f"--offsets-um: no value for station {missing!r}; give every station's")
+        what = "head" if obs.station_heads is not None else "station"
+        offsets = parse_fixed_offsets(offsets_um, obs.head_ids, what=what)
+        if isinstance(offsets, dict) and set(offsets) != set(obs.head_ids):
+            missing = [s for s in obs.head_ids if s not in offsets][0]
+            raise MultilatError(f"--offsets-um: no value for {what} {missing!r}; give every {what}'s")
     fixed = _fixed_ids(fix)
     inputs = [observations, points] + ([result / "stations.csv", result / "targets.csv"] if result else [])
     written = [out]
@@ -87,31 +85,33 @@ def export_command(
 
         check_not_input(out, inputs)
         write_gama_local(out, obs, pts if pts is not None else _no_points(), offsets=offsets,
-                         fixed=fixed, description=f"multilat export of {observations.name}")
+                         fixed=fixed, description=f"multilat export of {observations.name}", scales=scales)
     elif fmt == "jag3d":
         from multilat.network.interop.jag3d import write_jag3d
 
         if fixed:
             raise MultilatError("--fix: JAG3D's point type (reference/datum/new) is chosen on its "
                                 "import, not in the file")
+        from multilat.network.interop.jag3d import jag3d_files
+
         p_out = out.with_name(out.stem + "-points" + (out.suffix or ".txt"))
-        check_not_input(out, inputs)
-        check_not_input(p_out, inputs)
-        write_jag3d(p_out, out, obs, pts, offsets=offsets)
-        written = [out, p_out]
+        for w in [*jag3d_files(out, obs), p_out]:
+            check_not_input(w, inputs)
+        written = write_jag3d(p_out, out, obs, pts, offsets=offsets, scales=scales) + [p_out]
     else:
         from multilat.network.interop.starnet import write_starnet
 
         check_not_input(out, inputs)
-        write_starnet(out, obs, pts, offsets=offsets, fixed=fixed)
+        write_starnet(out, obs, pts, offsets=offsets, fixed=fixed, scales=scales)
     doc = {"format": fmt, "files": [str(w) for w in written], "n_obs": obs.n_obs,
            "n_stations": obs.n_stations, "n_targets": obs.n_targets,
-           "n_angles": _n_angles(obs), "offsets_subtracted": offsets is not None}
+           "n_angles": _n_angles(obs), "offsets_subtracted": offsets is not None,
+           "heads": {h: [s for s, g in zip(obs.station_ids, obs.head_of_station) if g == h] for h in obs.head_ids}}
     if as_json:
         emit_json(doc, "export")
         return
-    console.print(f"{fmt}: {obs.n_obs} distances, {obs.n_stations} stations, {obs.n_targets} "
-                  f"targets -> {', '.join(str(w) for w in written)}")
+    console.print(f"{fmt}: {obs.n_obs} distances, {obs.n_stations} stations ({len(obs.head_ids)} heads), "
+                  f"{obs.n_targets} targets -> {', '.join(str(w) for w in written)}")
 
 
 def _n_angles(obs) -> int:
@@ -133,10 +133,12 @@ def import_command(
     fmt: str = typer.Argument(..., metavar="FORMAT", help="gama (gama-local XML input), "
                               "gama-adjusted (gama-local's --xml output), jag3d (slope distances; "
                               "with --points-file) or starnet (.dat)."),
-    source: Path = typer.Argument(..., help="The file to read."),
+    source: list[Path] = typer.Argument(..., help="The file to read (jag3d: its observation files: distances, "
+                                        "one per head; directions; zenith angles)."),
     out: Path = typer.Option(..., "--out", "-o", help="Directory for distances.csv and points.csv "
-                             "(gama-adjusted: points.csv, residuals.csv, summary.json), written "
-                             "all or nothing."),
+                             "(gama-adjusted: points.csv, residuals.csv, summary.json; gama: "
+                             "observations.csv, points.csv, covariances.csv and distances.csv where they apply, for "
+                             "`multilat adjust DIR`), written all or nothing."),
     points_file: Optional[Path] = typer.Option(None, "--points-file", help="jag3d: the points file "
                                                "(NAME Y X Z)."),
     sigma_um: Optional[float] = typer.Option(None, "--sigma-um", help="σ, µm, for distances without "
@@ -151,6 +153,9 @@ def import_command(
     if fmt not in IMPORT_FORMATS:
         raise MultilatError(f"import FORMAT must be one of {', '.join(IMPORT_FORMATS)}, got {fmt!r}")
     checks.sigma_um(sigma_um)
+    sources, source = source, source[0]
+    if len(sources) > 1 and fmt != "jag3d":
+        raise MultilatError(f"import {fmt} reads one file, got {len(sources)} (several: jag3d's distance files)")
     sig = None if sigma_um is None else sigma_um * 1e-6
     if (points_file is not None) != (fmt == "jag3d"):
         raise MultilatError("--points-file goes with jag3d (and jag3d needs it)")
@@ -192,22 +197,20 @@ def import_command(
                           f"points, dof {g.dof}, sigma0 {g.sigma_aposteriori:.4f} -> {out}")
         return
     if fmt == "gama":
-        from multilat.network.interop.gama import read_gama_local
-
-        net = read_gama_local(source)
-    elif fmt == "jag3d":
+        return _import_gama(source, out, as_json)       # the general network's files (docs/interop.md)
+    if fmt == "jag3d":
         from multilat.network.interop.jag3d import read_jag3d
 
-        net = read_jag3d(points_file, source, sigma_m=sig)
+        net = read_jag3d(points_file, sources, sigma_m=sig)
     else:
         from multilat.network.interop.starnet import read_starnet
 
         net = read_starnet(source, sigma_m=sig)
     o = net.obs
     doc = {"format": fmt, "n_obs": o.n_obs, "n_stations": o.n_stations, "n_targets": o.n_targets,
-           "n_angles": _n_angles(o), "levelled": list(o.levelled),
+           "n_angles": _n_angles(o), "levelled": list(o.levelled), "n_heads": len(o.head_ids),
            "n_points": len(net.points.ids), "fixed": list(net.fixed), "notes": list(net.notes)}
-    with staging_dir(out, inputs=[source, points_file]) as tmp:
+    with staging_dir(out, inputs=[*sources, points_file]) as tmp:
         write_observations(tmp / "distances.csv", o)
         write_csv_atomic(tmp / "points.csv", ["point", "x_m", "y_m", "z_m"],
                          [[i, *x] for i, x in zip(net.points.ids, net.points.xyz_m)])
@@ -221,3 +224,50 @@ def import_command(
     if net.fixed:
         console.print(f"note: the file holds {', '.join(net.fixed)} fixed: adjust with --datum "
                       f"control:{','.join(net.fixed)} to keep them")
+
+
+def _import_gama(source: Path, out: Path, as_json: bool) -> None:
+    """``import gama``: the whole network as multilat's files for the general network
+    (observations.csv, points.csv, covariances.csv: every kind, σ, heights, partly fixed points;
+    ``multilat adjust OUT``) and, when the distance path's reader takes the file (slope distances,
+    levelled stations' angles), its distances.csv as before, all or nothing."""
+    import numpy as np
+
+    from multilat.io import staging_dir
+    from multilat.network.files import write_observations
+    from multilat.network.general import FIXED, read_gama_input
+    from multilat.network.general.files import write_network_files
+    from multilat.network.general.kinds import KINDS
+    from multilat.network.interop.gama import read_gama_local
+
+    net = read_gama_input(source)
+    try:
+        old = read_gama_local(source)
+    except MultilatError as e:                          # e.g. heights, partly fixed points: general files only
+        old, why = None, str(e)
+    bare = [p for p, x in zip(net.points.ids, net.points.xyz_m) if not np.isfinite(x).all()]
+    if old is not None and bare:                        # points.csv would not be the distance path's --points
+        old, why = None, f"{len(bare)} point(s) without coordinates ({bare[0]}, ...), which its --points needs"
+    doc = {"format": "gama", "n_obs": net.n_rows, "n_points": net.points.n,
+           "fixed": [p for p, s in zip(net.points.ids, net.points.status) if (s == FIXED).any()],
+           "n_angles": sum(b.n_rows for b in net.blocks if KINDS[b.kind].UNIT == "rad"), "notes": list(net.notes)}
+    with staging_dir(out, inputs=[source]) as tmp:
+        written = write_network_files(net, tmp, comments=[f"imported from {source.name} by multilat import gama",
+                                                          *net.notes])
+        if old is not None:
+            write_observations(tmp / "distances.csv", old.obs)
+            written.append("distances.csv")
+            doc.update(n_stations=old.obs.n_stations, n_targets=old.obs.n_targets, levelled=list(old.obs.levelled))
+            doc["notes"] += [f"distances.csv: {n}" for n in old.notes]
+            if old.fixed:
+                doc["notes"].append(f"distances.csv: the file holds {', '.join(old.fixed)} fixed: adjust it with "
+                                    f"--datum control:{','.join(old.fixed)} to keep them")
+        else:
+            doc["notes"].append(f"no distances.csv (the distance path cannot take this file: {why})")
+    if as_json:
+        emit_json(doc, "import")
+        return
+    console.print(f"gama: {net.n_rows} observation rows, {net.points.n} points -> {out} ({', '.join(written)}; "
+                  f"multilat adjust {out})", markup=False)
+    for n in doc["notes"]:
+        console.print(f"note: {n}", markup=False)

@@ -50,7 +50,7 @@ def load_problem(source: str, opts, *, noise: str | None, instrument: str | None
         except ImportError:
             raise MultilatError("built-in configurations are not available (multilat.network.configs)") from None
         cfg = configs.small_volume() if source == "small-volume" else configs.large_volume()
-        sigma = None if noise == "model" else (sigma_um * 1e-6 if sigma_um else 4.7e-6)
+        sigma = None if noise == "model" else (sigma_um * 1e-6 if sigma_um else ss.DEFAULT_SIGMA_M)
         src.update(ss.distance_model(cfg.station_ids, inst) if sigma is None else
                    ss.option(sigma, "--sigma-um" if sigma_um else "default 4.7 µm (the paper's σ)"))
         return pr.problem_from_config(cfg, sigma_m=sigma, instrument=inst, datum=opts.datum, source=source,
@@ -187,8 +187,13 @@ def propagate_cmd(
                                                     "report) show, ID,ID,... (default: the stations and "
                                                     "the targets with the largest ellipsoids)."),
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
+    model: str = typer.Option("multilateration", "--model", help="multilateration (distance path) or general "
+                              "(the general network layer; a gama-local XML input always)."),
 ) -> None:
     """Monte Carlo (JCGM 101/102) of stations, offsets, targets and interpoint distances."""
+    from multilat.cli import general_adjust, general_propagate
+    if general_adjust.wants_general(source, model):     # --model general, or a gama-local XML input
+        return general_propagate.run(**locals())
     from multilat.network.propagate import propagate
     from multilat.parallel import map_from_options
 

@@ -42,7 +42,7 @@ def simulate_cmd(
     from multilat.network import sigma_source as ss
 
     given_sigma = sigma_um is not None
-    sigma_um = 4.7 if sigma_um is None else sigma_um
+    sigma_um = ss.DEFAULT_SIGMA_M * 1e6 if sigma_um is None else sigma_um
     inst_name = instrument or "seed2020"
     checks.count(trials, "--trials", hi=10**6)   # each trial is a whole adjustment
     checks.seed(seed)

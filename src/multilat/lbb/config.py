@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from multilat.errors import MultilatError, validation_error_line
 
@@ -42,10 +42,11 @@ def _nonneg(v, info):
 class Tube(_Model):
     """A round tube: outer diameter and wall (m), Young's modulus (Pa), density (kg/m³)."""
 
-    outer_diameter_m: float
-    wall_m: float
-    youngs_modulus_pa: float
-    density_kg_m3: float
+    outer_diameter_m: float = Field(description="outer diameter of the tube", json_schema_extra={"constraint": "> 0"})
+    wall_m: float = Field(description="wall thickness", json_schema_extra={"constraint": "> 0; < outer_diameter_m / 2"})
+    youngs_modulus_pa: float = Field(json_schema_extra={"constraint": "> 0"},
+                                     description="Young's modulus of the material")
+    density_kg_m3: float = Field(description="density of the material", json_schema_extra={"constraint": "> 0"})
 
     _p = field_validator("outer_diameter_m", "wall_m", "youngs_modulus_pa", "density_kg_m3")(_pos)
 
@@ -59,18 +60,26 @@ class Tube(_Model):
 class Bar(_Model):
     """Bar geometry (section lengths along the DMI axis, see :mod:`multilat.lbb.htm`)."""
 
-    la_m: float
-    lb_min_m: float
-    lb_max_m: float
-    lc_min_m: float
-    lc_max_m: float
-    retroreflector_x_in_cs3_m: float
-    unsensed_length_m: float
-    optics_mass_kg: float
-    gravity_m_s2: float
-    outer_tube: Tube
-    middle_tube: Tube
-    inner_tube: Tube
+    la_m: float = Field(json_schema_extra={"constraint": "> 0"},
+                        description="length La from the left ball to the outer tube's bearing (fixed; holds the "
+                                    "optics)")
+    lb_min_m: float = Field(json_schema_extra={"constraint": "> 0"},
+                            description="shortest Lb, bearing to CS2 (middle-tube extension)")
+    lb_max_m: float = Field(description="longest Lb", json_schema_extra={"constraint": "> lb_min_m"})
+    lc_min_m: float = Field(json_schema_extra={"constraint": "> 0"},
+                            description="shortest Lc, CS2 to the right ball (inner-tube extension)")
+    lc_max_m: float = Field(description="longest Lc", json_schema_extra={"constraint": "> lc_min_m"})
+    retroreflector_x_in_cs3_m: float = Field(
+        description="retroreflector apex on CS3's x axis (negative: towards the left ball)")
+    unsensed_length_m: float = Field(json_schema_extra={"constraint": "> 0"},
+                                     description="total unsensed length (left ball to beam splitter, apex to right "
+                                                 "ball)")
+    optics_mass_kg: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                  description="mass of the optics package, spread over La in the sag model")
+    gravity_m_s2: float = Field(description="local acceleration of gravity", json_schema_extra={"constraint": "> 0"})
+    outer_tube: Tube = Field(description="the outer tube")
+    middle_tube: Tube = Field(description="the middle tube")
+    inner_tube: Tube = Field(description="the inner tube")
 
     _p = field_validator("la_m", "lb_min_m", "lb_max_m", "lc_min_m", "lc_max_m",
                          "unsensed_length_m", "gravity_m_s2")(_pos)
@@ -96,17 +105,30 @@ class Bar(_Model):
 class Errors(_Model):
     """Error sources of §3 (SI; see the TOML comments for the unit decisions)."""
 
-    axis_distribution: Literal["normal_2sigma", "uniform"]
-    middle_angle_bound_rad: float
-    middle_straightness_bound_m: float
-    inner_angle_bound_rad: float
-    inner_straightness_bound_m: float
-    bearing_compliance_rad: float
-    cosine_misalignment_std_rad: float
-    unsensed_cte_per_c: float
-    unsensed_temperature_bound_c: float
-    thermal_model: Literal["paper_normal", "uniform"]
-    interferometer_std_m: float
+    axis_distribution: Literal["normal_2sigma", "uniform"] = Field(
+        description="\"normal_2sigma\": a ±bound is 2 σ of a normal; \"uniform\": uniform on ±bound")
+    middle_angle_bound_rad: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                          description="axis-motion angle bound of the middle tube (Table 1, e_y)")
+    middle_straightness_bound_m: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                               description="straightness bound of the middle tube (Table 1, d_y)")
+    inner_angle_bound_rad: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                         description="axis-motion angle bound of the inner tube")
+    inner_straightness_bound_m: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                              description="straightness bound of the inner tube")
+    bearing_compliance_rad: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                          description="bearing compliance tilt (§3.1.3), about z at CS2, directed by "
+                                                      "gravity")
+    cosine_misalignment_std_rad: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                               description="standard deviation of the beam's cosine misalignment "
+                                                           "(§3.1.4)")
+    unsensed_cte_per_c: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                      description="thermal expansion coefficient of the unsensed lengths (§3.1.6)")
+    unsensed_temperature_bound_c: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                                description="± bound of their temperature change")
+    thermal_model: Literal["paper_normal", "uniform"] = Field(
+        description="\"paper_normal\": the bound is 2 σ of a normal (the paper); \"uniform\": uniform on ±bound")
+    interferometer_std_m: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                        description="standard deviation of the interferometer's reading (§3.1.7)")
 
     _n = field_validator("middle_angle_bound_rad", "middle_straightness_bound_m", "inner_angle_bound_rad",
                          "inner_straightness_bound_m", "bearing_compliance_rad",
@@ -117,10 +139,13 @@ class Errors(_Model):
 class Initialization(_Model):
     """Initialization fixture (§4.2, Fig. 2, eq. 6)."""
 
-    enabled: bool
-    l12_m: float
-    l23_m: float
-    fixture_offset_std_m: float
+    enabled: bool = Field(description="simulate the initialization fixture (§4.2, eq. 6); off: L0 known exactly")
+    l12_m: float = Field(json_schema_extra={"constraint": "> 0; within the bar's range"},
+                         description="distance between fixture sockets 1 and 2")
+    l23_m: float = Field(json_schema_extra={"constraint": "> 0; within the bar's range"},
+                         description="distance between fixture sockets 2 and 3")
+    fixture_offset_std_m: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                        description="standard deviation of socket 3's offset from the 1-2 line")
 
     _p = field_validator("l12_m", "l23_m")(_pos)
     _n = field_validator("fixture_offset_std_m")(_nonneg)
@@ -129,11 +154,16 @@ class Initialization(_Model):
 class Base(_Model):
     """Base sockets (base edges in metres) and their thermal drift during the cycle (§4.3)."""
 
-    l12_m: float
-    l13_m: float
-    l23_m: float
-    thermal_cte_per_c: float
-    thermal_bound_c: float
+    l12_m: float = Field(json_schema_extra={"constraint": "> 0; within the bar's range"},
+                         description="base edge between sockets 1 and 2")
+    l13_m: float = Field(json_schema_extra={"constraint": "> 0; within the bar's range"},
+                         description="base edge between sockets 1 and 3")
+    l23_m: float = Field(json_schema_extra={"constraint": "> 0; triangle inequality"},
+                         description="base edge between sockets 2 and 3")
+    thermal_cte_per_c: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                     description="thermal expansion coefficient of the base")
+    thermal_bound_c: float = Field(json_schema_extra={"constraint": ">= 0"},
+                                   description="± bound of the base's temperature change during the cycle, uniform")
 
     _p = field_validator("l12_m", "l13_m", "l23_m")(_pos)
     _n = field_validator("thermal_cte_per_c", "thermal_bound_c")(_nonneg)
@@ -149,11 +179,15 @@ class Base(_Model):
 class MonteCarlo(_Model):
     """Draw counts of the §5 procedure and of the direct propagation."""
 
-    init_draws: int
-    side_draws: int
-    point_draws: int
-    direct_trials: int
-    min_height_ratio: float
+    init_draws: int = Field(description="draws of L0 (§5, step 4)", json_schema_extra={"constraint": ">= 2"})
+    side_draws: int = Field(json_schema_extra={"constraint": ">= 2"},
+                            description="draws of the six sides per point (§5, step 6)")
+    point_draws: int = Field(json_schema_extra={"constraint": ">= 2"},
+                             description="points in each point cloud (§5, step 7)")
+    direct_trials: int = Field(description="trials of the direct propagation", json_schema_extra={"constraint": ">= 2"})
+    min_height_ratio: float = Field(json_schema_extra={"constraint": "> 0"},
+                                    description="a point is singular when its height above the base is below this "
+                                                "times the largest edge")
 
     @field_validator("init_draws", "side_draws", "point_draws", "direct_trials")
     @classmethod
@@ -168,12 +202,13 @@ class MonteCarlo(_Model):
 class Grid(_Model):
     """A lattice ``x × y × z`` given by ranges (m) and counts."""
 
-    x_m: tuple[float, float]
-    y_m: tuple[float, float]
-    z_m: tuple[float, float]
-    nx: int
-    ny: int
-    nz: int
+    x_m: tuple[float, float] = Field(description="x range [low, high] of the lattice")
+    y_m: tuple[float, float] = Field(description="y range [low, high] of the lattice")
+    z_m: tuple[float, float] = Field(json_schema_extra={"constraint": "0 < low <= high"},
+                                     description="z range [low, high] of the lattice (above the base)")
+    nx: int = Field(description="points along x", json_schema_extra={"constraint": ">= 1"})
+    ny: int = Field(description="points along y", json_schema_extra={"constraint": ">= 1"})
+    nz: int = Field(description="points along z", json_schema_extra={"constraint": ">= 1"})
 
     @field_validator("nx", "ny", "nz")
     @classmethod
@@ -204,12 +239,13 @@ class Volume(_Model):
     """The work volume of Fig. 8: an ``nx × ny`` lattice over ``x_m × y_m`` at each height of
     ``z_levels_m`` (the map slices). Points the bar cannot reach are dropped."""
 
-    x_m: tuple[float, float]
-    y_m: tuple[float, float]
-    nx: int
-    ny: int
-    z_levels_m: tuple[float, ...]
-    inside_base_only: bool
+    x_m: tuple[float, float] = Field(description="x range [low, high] of each map slice")
+    y_m: tuple[float, float] = Field(description="y range [low, high] of each map slice")
+    nx: int = Field(description="points along x (the CLI's --grid overrides)", json_schema_extra={"constraint": ">= 2"})
+    ny: int = Field(description="points along y (the CLI's --grid overrides)", json_schema_extra={"constraint": ">= 2"})
+    z_levels_m: tuple[float, ...] = Field(json_schema_extra={"constraint": "non-empty; each > 0"},
+                                          description="heights of the map slices")
+    inside_base_only: bool = Field(description="keep only the points above the base triangle")
 
     @field_validator("nx", "ny")
     @classmethod
@@ -238,13 +274,13 @@ class Volume(_Model):
 class LBBConfig(_Model):
     """The whole configuration (see ``canning2007.toml``)."""
 
-    bar: Bar
-    errors: Errors
-    initialization: Initialization
-    base: Base
-    monte_carlo: MonteCarlo
-    volume: Volume
-    comparison: Grid
+    bar: Bar = Field(description="the bar's geometry and tubes")
+    errors: Errors = Field(description="the error sources of §3")
+    initialization: Initialization = Field(description="the initialization fixture (§4.2)")
+    base: Base = Field(description="the base sockets and their thermal drift (§4.3)")
+    monte_carlo: MonteCarlo = Field(description="draw counts")
+    volume: Volume = Field(description="the work volume mapped (Fig. 8)")
+    comparison: Grid = Field(description="the lattice of the comparison (stand-in for the lost Table 2)")
 
     @model_validator(mode="after")
     def _reach(self):

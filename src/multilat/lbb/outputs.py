@@ -38,7 +38,7 @@ def _save(fig, path):
 def write_simulation(out_dir, sim: LBBSimulation, cfg: LBBConfig, *, marks_m=None) -> list[Path]:
     """Write ``points.csv``, ``sides.csv``, ``summary.json``, ``fig8_mean_error.png``,
     ``fig8_std.png``, ``fig9_cdf.png`` into ``out_dir`` (each file whole or not at all)."""
-    from multilat.report import lbb_figures as F
+    from multilat.lbb import figures as F
 
     out = Path(out_dir)
     files = []
@@ -127,7 +127,7 @@ def compare_reference(cfg: LBBConfig, edges: EdgeTable, ref: ReferenceTable, *, 
 
 def write_comparison(out_dir, comp: Comparison) -> list[Path]:
     """``comparison.csv`` and ``fig7_comparison.png`` into ``out_dir``."""
-    from multilat.report import lbb_figures as F
+    from multilat.lbb import figures as F
 
     out = Path(out_dir)
     s = comp.simulation

@@ -30,13 +30,15 @@ def coupling_results(core: Fit) -> tuple[tuple, tuple]:
         return (), ()
     cp, res, red = c["couplings"], c["residual_m"], c["redundancy"]
     k = cp.bar_a.size
+    w = st.w_statistics(res, cp.sigma_m, red)          # Baarda w, as the distances' (v / σ√r)
     bars = tuple({"target_a": a, "target_b": b, "length_m": float(cp.bar_length_m[q]), "sigma_m": float(cp.bar_sigma_m[q]),
                   "adjusted_m": float(cp.bar_length_m[q] - res[q]), "residual_m": float(res[q]),
-                  "redundancy": float(red[q])} for q, (a, b) in enumerate(cp.bar_ids))
+                  "redundancy": float(red[q]), "w": float(w[q])} for q, (a, b) in enumerate(cp.bar_ids))
     ctrl = tuple({"point": pid, "xyz_m": cp.prior_value_m[3 * q:3 * q + 3].tolist(),
                   "std_m": cp.prior_sigma_m[3 * q:3 * q + 3].tolist(),
                   "residual_m": res[k + 3 * q:k + 3 * q + 3].tolist(),
-                  "redundancy": red[k + 3 * q:k + 3 * q + 3].tolist()} for q, pid in enumerate(cp.prior_ids))
+                  "redundancy": red[k + 3 * q:k + 3 * q + 3].tolist(),
+                  "w": w[k + 3 * q:k + 3 * q + 3].tolist()} for q, pid in enumerate(cp.prior_ids))
     return bars, ctrl
 
 

@@ -268,7 +268,7 @@ class BatchedNetwork(NetworkSizes):
     # -- linear propagation ------------------------------------------------------------------
     def jacobian(self) -> np.ndarray:
         """Jacobian of the model distances at the nominal solution, shape (m, 4s + 3t), m/m."""
-        s, t, m = self.n_stations, self.n_targets, self.n_obs
+        s, m = self.n_stations, self.n_obs
         u0 = self._pre["u0"]
         k = np.arange(m)
         j = np.zeros((m, self.n_params))

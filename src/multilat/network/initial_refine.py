@@ -88,7 +88,7 @@ def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200, deadline=None):
                     break
                 k = 3 * scale
                 hw = np.sqrt(np.minimum(1.0, k / np.maximum(np.abs(fun(x)), 1e-300)))
-                x, conv = levenberg_marquardt(lambda z: hw * fun(z), lambda z: row_scale(jac(z), hw), x,
+                x, conv = levenberg_marquardt(lambda z: hw * fun(z), lambda z: row_scale(jac(z), hw), x,  # noqa: B023
                                                max_iter=max_nfev, deadline=deadline)
     Hx, Tx, ox = unpack(x)
     diff = Hx[si] - Tx[tj]

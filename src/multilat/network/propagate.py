@@ -46,6 +46,7 @@ from multilat.network import batched as bt
 from multilat.network.propagate_pairs import pairs_and_refs, parse_pairs
 from multilat.network.propagate_result import PropagationResult, chi2_3_95
 from multilat.network.propagate_summary import linear_std, summarise
+from multilat.network.sigma_source import DEFAULT_SIGMA_M
 
 __all__ = ["BLOCK", "NOT_PROPAGATED", "Problem", "noise_choice", "parse_pairs", "problem_from_observations",
            "problem_from_truth", "problem_from_config", "propagate", "PropagationResult", "chi2_3_95"]
@@ -309,7 +310,7 @@ def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pai
                 sel = si == i
                 sig[sel] = budget.distance_std_m(instrument, d[sel], head=hd)
         else:
-            sig = np.full(len(si), 4.7e-6)
+            sig = np.full(len(si), DEFAULT_SIGMA_M)
     else:
         sig = np.broadcast_to(np.asarray(sigma_m, float), (len(si),)).copy()
     refs = getattr(cfg, "reference_lengths", None)

@@ -8,13 +8,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from multilat.network.statistics import CHI2_3_95
+
 if TYPE_CHECKING:
     from multilat.network.propagate import Problem
 
 __all__ = ["PropagationResult", "chi2_3_95"]
 
-#: chi-square quantile with 3 degrees of freedom at 0.95 (JCGM 102 ellipsoid scale), exact to 1e-12
-chi2_3_95 = 7.814727903251178
+#: chi-square quantile with 3 degrees of freedom at 0.95 (JCGM 102 ellipsoid scale): statistics.CHI2_3_95
+chi2_3_95 = CHI2_3_95
 
 
 @dataclass(frozen=True)

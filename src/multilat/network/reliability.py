@@ -21,7 +21,13 @@ import numpy as np
 from multilat.network import statistics as st
 from multilat.network.model import Q
 
-__all__ = ["Reliability", "external_shifts", "reliability", "MAX_EXTERNAL_OBS"]
+__all__ = ["Reliability", "external_shifts", "largest_point_shift", "reliability", "MAX_EXTERNAL_OBS", "R_MIN",
+           "MDB_LIMIT_SIGMA"]
+
+#: an observation is poorly controlled when its redundancy number is below R_MIN or its MDB above
+#: MDB_LIMIT_SIGMA times its σ (the adjustment's defaults; the design's warning uses the same)
+R_MIN = 0.1
+MDB_LIMIT_SIGMA = 10.0
 
 # the coordinate shifts are computed up to this many used observations (since issue 29 they cost
 # O(m s²) plus a bounded search, not O(m) each; the cap keeps the large documents as they were)
@@ -105,10 +111,18 @@ def _shifts_dense(cov, *, batch: int):
         if cov.G is not None:
             D = D - cov.G @ (cov.H @ D)
         pts = np.concatenate([D[:Q * s].reshape(s, Q, -1)[:, :3], D[Q * s:].reshape(t, 3, -1)], axis=0)
-        norm = np.linalg.norm(pts, axis=1)           # (points, batch)
-        j = np.argmax(norm, axis=0)
-        out[ks], where[ks] = norm[j, c], j
+        out[ks], where[ks] = largest_point_shift(pts)
     return out, where
+
+
+def largest_point_shift(shifts):
+    """``shifts`` (points, 3, k): the coordinate shifts of every point caused by each of k biases.
+    Returns the largest point shift ``max_p |Δx_p|`` (k,) and its point's index (k,) (ties: the
+    first point). Shared by the distance path and the general layer
+    (:mod:`multilat.network.general.reliability`)."""
+    norm = np.linalg.norm(shifts, axis=1)           # (points, k)
+    j = np.argmax(norm, axis=0)
+    return norm[j, np.arange(norm.shape[1])], j
 
 
 class _BlockContext:
@@ -156,7 +170,7 @@ class _BlockContext:
 
     def shifts(self, ks):
         """Largest point response and its point index for the observations ``ks``."""
-        cov, s, t = self.cov, self.s, self.t
+        cov, s = self.cov, self.s
         si, ti = cov.si[ks], cov.ti[ks]
         a, b = cov.Js_w[ks], cov.Jt_w[ks]
         c = np.arange(ks.size)
@@ -200,7 +214,7 @@ class _BlockContext:
 
 
 def reliability(res_obs, used, redundancy, sigma_m, cov, station_ids, target_ids, *, alpha: float,
-                power: float, r_min: float = 0.1, mdb_limit_sigma: float = 10.0,
+                power: float, r_min: float = R_MIN, mdb_limit_sigma: float = MDB_LIMIT_SIGMA,
                 sigma_scale: float = 1.0) -> Reliability:
     """Internal and external reliability of the used observations (``redundancy`` over all
     observations, 0 for rejected ones). ``sigma_scale``: σ̂0 when the variance factor is estimated

@@ -15,6 +15,10 @@ import os
 __all__ = ["file_column", "option", "distance_model", "describe"]
 
 DEFAULT_INSTRUMENT = "seed2020"
+#: σ of one distance where neither the file, nor ``--sigma-um``, nor a distance model gives one: the
+#: combined standard uncertainty of the default instrument's budget (seed2020, seed paper §3.4: 4.7 µm),
+#: the gaussian σ of the paper's §4.4 simulations.
+DEFAULT_SIGMA_M = 4.7e-6
 
 
 def file_column(path) -> dict:

@@ -32,6 +32,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.configs import BUILTIN, NetworkConfig, get_config
 from multilat.network.data import Observations, ReferenceLengths
+from multilat.network.sigma_source import DEFAULT_SIGMA_M
 
 __all__ = ["PaperStudy", "PAPER_STUDY", "SimulationResult", "simulate", "interpoint_error_std",
            "linear_prediction", "load_config", "load_config_file", "NOISES", "RandomNetwork",
@@ -204,7 +205,7 @@ def _pairs(cfg: NetworkConfig, pairs):
 # ------------------------------------------------------------------------------------ simulate
 
 
-def simulate(cfg: NetworkConfig, *, trials: int = 50, noise: str = "gaussian", sigma_m: float = 4.7e-6,
+def simulate(cfg: NetworkConfig, *, trials: int = 50, noise: str = "gaussian", sigma_m: float = DEFAULT_SIGMA_M,
              instrument=None, rng=None, pairs=None, cost: str = "distance", initial: str = "distances",
              callback: Callable[[int], None] | None = None) -> SimulationResult:
     """Simulate the §4.4 study of the self-calibrating adjustment's own uncertainty.

@@ -147,6 +147,16 @@ def chi2_ppf(p: float, dof) -> float:
     return float(2 * gammaincinv(dof / 2, p))
 
 
+def __getattr__(name: str):
+    """``CHI2_3_95``: χ²₃(0.95) = :func:`chi2_ppf` ``(0.95, 3)``, the squared scale of a 95 % ellipsoid in
+    3-D (JCGM 102), computed on first use (scipy is not imported by every command) and kept. The one
+    value every module that draws or reports an ellipsoid uses (tests/test_constants.py)."""
+    if name == "CHI2_3_95":
+        value = globals()["CHI2_3_95"] = chi2_ppf(0.95, 3)
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 def chi2_sf(x: float, dof) -> float:
     """Upper tail probability ``P(χ²_dof > x)``."""
     from scipy.special import chdtrc

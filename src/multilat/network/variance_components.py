@@ -36,7 +36,7 @@ from multilat.network.data import Observations
 from multilat.network.model import Q
 
 __all__ = ["VarianceComponent", "VarianceComponents", "GROUPINGS", "observation_groups",
-           "estimate_variance_components"]
+           "estimate_variance_components", "forstner_factors", "helmert_sums", "factor_variances"]
 
 GROUPINGS = ("head", "station", "kind")
 
@@ -188,14 +188,7 @@ def estimate_variance_components(obs: Observations, *, grouping: str = "head", g
         if res.excluded:
             raise MultilatError("variance components: the adjustment left points out; remove them first")
         v_w, r_all = _rows(cur, res)
-        num = np.bincount(gi, weights=v_w * v_w, minlength=ng)
-        red = np.bincount(gi, weights=r_all, minlength=ng)
-        weak = np.flatnonzero(red < 1.0)
-        if weak.size:
-            g = int(weak[0])
-            raise MultilatError(f"variance components: group {gnames[g]!r} has redundancy {red[g]:.2f} "
-                                "(< 1): its σ cannot be estimated from these data")
-        f = num / red
+        f, red = forstner_factors(v_w, r_all, gi, gnames)
         scale2 = scale2 * f
         if np.all(np.abs(f - 1.0) < tol):
             converged = True
@@ -207,18 +200,50 @@ def estimate_variance_components(obs: Observations, *, grouping: str = "head", g
     final = adjust(final_obs, snooping=snooping, initial=res,
                    **{k: v for k, v in adjust_options.items() if k != "initial"})
     n = np.bincount(gi, minlength=ng)
-    if n_rows <= RIGOROUS_MAX_OBS:
-        S = helmert_matrix(res, gi, ng)
-        var = 2.0 * np.diag(np.linalg.inv(S))
-        method = "helmert"
-    else:
-        var = 2.0 / red
-        method = "approximate: sqrt(2/r)"
+    var, method = factor_variances(helmert_matrix(res, gi, ng) if n_rows <= RIGOROUS_MAX_OBS else None, red)
     comps = tuple(VarianceComponent(gnames[g], int(n[g]), float(red[g]), float(scale2[g]),
                                     float(scale2[g] * np.sqrt(var[g])), float(np.sqrt(scale2[g])))
                   for g in range(ng))
     final = replace(final, sigma_source=dict(final.sigma_source or {}, variance_components=grouping))
     return VarianceComponents(grouping, comps, it, converged, final, final_obs.sigma_m, method)
+
+
+def forstner_factors(v_w, redundancy, gi, names) -> tuple[np.ndarray, np.ndarray]:
+    """One step of Förstner's estimator from whitened residuals ``v_w`` and redundancy numbers of the
+    rows in groups ``gi`` (``names`` the groups' names; a row with ``gi < 0`` is in none): the new
+    factors ``f_g = v_gᵀ P_g v_g / r_g`` and the groups' redundancies ``r_g``. A group with ``r_g < 1``
+    is refused (its σ cannot be estimated), named. Shared by the distance path and the general layer."""
+    gi = np.asarray(gi, np.int64)
+    ng = len(names)
+    m = gi >= 0
+    v = np.asarray(v_w, float)[m]
+    num = np.bincount(gi[m], weights=v * v, minlength=ng)
+    red = np.bincount(gi[m], weights=np.asarray(redundancy, float)[m], minlength=ng)
+    weak = np.flatnonzero(red < 1.0)
+    if weak.size:
+        g = int(weak[0])
+        raise MultilatError(f"variance components: group {names[g]!r} has redundancy {red[g]:.2f} "
+                            "(< 1): its σ cannot be estimated from these data")
+    return num / red, red
+
+
+def helmert_sums(R: np.ndarray, gi, ng: int) -> np.ndarray:
+    """Helmert's ``S_gk = Σ_{i∈g, j∈k} R_ij²`` (ng, ng) from the whitened redundancy matrix ``R = I - H``
+    of the rows (``gi`` their groups; rows with ``gi < 0`` are in none)."""
+    gi = np.asarray(gi, np.int64)
+    S = np.zeros((ng, ng))
+    for g in range(ng):
+        for k in range(ng):
+            S[g, k] = float(np.sum(R[np.ix_(gi == g, gi == k)] ** 2))
+    return S
+
+
+def factor_variances(S, red) -> tuple[np.ndarray, str]:
+    """Variances of the estimated factors (relative to the re-weighted σ, i.e. at the fixed point):
+    Helmert's ``2 diag(S⁻¹)`` when ``S`` is given, else the shortcut ``2 / r_g``; and the method's name."""
+    if S is not None:
+        return 2.0 * np.diag(np.linalg.inv(S)), "helmert"
+    return 2.0 / np.asarray(red, float), "approximate: sqrt(2/r)"
 
 
 def _hat(res) -> np.ndarray:
@@ -242,11 +267,7 @@ def helmert_matrix(res, gi, ng: int) -> np.ndarray:
     (``R = I - H``; rows: the distances, then the angles). Distances only: one hat row at a time."""
     S = np.zeros((ng, ng))
     if res.angle_design_w is not None:
-        R = np.eye(gi.size) - _hat(res)
-        for g in range(ng):
-            for k in range(ng):
-                S[g, k] = float(np.sum(R[np.ix_(gi == g, gi == k)] ** 2))
-        return S
+        return helmert_sums(np.eye(gi.size) - _hat(res), gi, ng)
     cov = res.covariance
     for k in range(res.obs.n_obs):
         r = -cov.hat_row(k)

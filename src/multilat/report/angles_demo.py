@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from multilat.network.sigma_source import DEFAULT_SIGMA_M
 from multilat.report.html import Section
 
 __all__ = ["section", "encoder_angle_study", "ENCODER_SIGMA_RAD"]
@@ -13,7 +14,7 @@ __all__ = ["section", "encoder_angle_study", "ENCODER_SIGMA_RAD"]
 #: The heads' encoder angle σ assumed here: the seed gives no encoder specification; 20 µrad (about 4")
 #: is typical of the absolute encoders of precision gimbals. An assumption, stated as such in the report.
 ENCODER_SIGMA_RAD = 20e-6
-DIST_SIGMA_M = 4.7e-6          # the seed's §4.4 distance σ
+DIST_SIGMA_M = DEFAULT_SIGMA_M          # the seed's §4.4 distance σ
 
 
 def _small_volume_obs(sigma_angle_rad):

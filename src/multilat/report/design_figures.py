@@ -1,7 +1,9 @@
 """Figures of a network design: the layout in 3-D and top view with predicted 95 % ellipsoids
 (the network figures, fed a :class:`~multilat.network.design.PreAnalysis`), and maps of the
 predicted uncertainty of a point measured anywhere in the volume, over horizontal slices (as seed
-003's work-volume maps).
+003's work-volume maps). Declared obstructions (``[[occluders]]`` boxes) are drawn (hatched where a
+slice cuts the box, dashed outline elsewhere; outline in the top view) and used: a map point is
+measured only by the heads whose line of sight to it no box cuts.
 
 Plot functions take ``ax=None`` and return the axes; :func:`save_design_figures` writes PNGs atomically.
 """
@@ -13,17 +15,33 @@ from pathlib import Path
 
 import numpy as np
 
+from multilat.network.statistics import CHI2_3_95
 from multilat.report.network_figures import _plt, plot_3d, plot_top_view
 
-__all__ = ["plot_slice_maps", "save_design_figures"]
+__all__ = ["plot_slice_maps", "save_design_figures", "draw_occluders"]
 
-_CHI2_3_95 = 7.814727903251178
+
+def draw_occluders(ax, occluders, *, z=None):
+    """Outline each occluder box ``(box_min_m, box_max_m)`` in the x-y plane of ``ax``: hatched when
+    the height ``z`` lies within the box (the slice cuts it), a dashed outline otherwise."""
+    from matplotlib.patches import Rectangle
+
+    for lo, hi in occluders:
+        lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+        cut = z is not None and lo[2] <= z <= hi[2]
+        ax.add_patch(Rectangle((lo[0], lo[1]), hi[0] - lo[0], hi[1] - lo[1], fill=False, edgecolor="k",
+                               hatch="///" if cut else None, ls="-" if cut else "--", lw=1.2,
+                               label="obstruction", gid="occluder"))
+    return ax
 
 
 def plot_slice_maps(pre, box_min_m, box_max_m, *, n_slices: int = 3, n_grid: int = 40,
-                    min_range_m: float = 0.0, max_range_m: float = np.inf, axes=None):
+                    min_range_m: float = 0.0, max_range_m: float = np.inf, occluders=(), axes=None):
     """Largest 95 % semi-axis (µm) of a point measured by the designed heads, over ``n_slices``
-    horizontal (z) slices of the box; returns the axes (one per slice)."""
+    horizontal (z) slices of the box; a head whose line of sight to a point an ``occluders`` box
+    cuts does not measure it (blank where fewer than 3 heads do); returns the axes (one per slice)."""
+    from multilat.network.design.search import visibility
+
     plt = _plt()
     lo, hi = np.asarray(box_min_m, float), np.asarray(box_max_m, float)
     if axes is None:
@@ -35,14 +53,16 @@ def plot_slice_maps(pre, box_min_m, box_max_m, *, n_slices: int = 3, n_grid: int
     maps = []
     for z in zs:
         pts = np.column_stack([X.ravel(), Y.ravel(), np.full(X.size, z)])
-        cov = pre.probe_cov_m2(pts, min_range_m=min_range_m, max_range_m=max_range_m)
+        vis = visibility(pre.station_xyz_m, pts, occluders=occluders).T if occluders else None
+        cov = pre.probe_cov_m2(pts, min_range_m=min_range_m, max_range_m=max_range_m, visible=vis)
         ev = np.linalg.eigvalsh(np.nan_to_num(cov, nan=0.0))[:, -1]
         ev[~np.isfinite(cov).all(axis=(1, 2))] = np.nan
-        maps.append(np.sqrt(_CHI2_3_95 * np.clip(ev, 0, None)).reshape(X.shape) * 1e6)
+        maps.append(np.sqrt(CHI2_3_95 * np.clip(ev, 0, None)).reshape(X.shape) * 1e6)
     vmax = np.nanmax([np.nanmax(m) for m in maps])
     for ax, z, m in zip(axes, zs, maps):
         im = ax.pcolormesh(X, Y, m, shading="auto", vmin=0, vmax=vmax, cmap="viridis")
         ax.plot(pre.station_xyz_m[:, 0], pre.station_xyz_m[:, 1], "r^", ms=6)
+        draw_occluders(ax, occluders, z=z)
         ax.set_aspect("equal")
         ax.set_title(f"z = {z:.2f} m")
         ax.set_xlabel("x (m)")
@@ -52,17 +72,19 @@ def plot_slice_maps(pre, box_min_m, box_max_m, *, n_slices: int = 3, n_grid: int
 
 
 def save_design_figures(pre, out_dir: str | os.PathLike, *, box_min_m, box_max_m,
-                        min_range_m: float = 0.0, max_range_m: float = np.inf) -> list[Path]:
-    """Write ``layout_3d.png``, ``layout_top.png`` and ``uncertainty_slices.png`` into ``out_dir``."""
+                        min_range_m: float = 0.0, max_range_m: float = np.inf, occluders=()) -> list[Path]:
+    """Write ``layout_3d.png``, ``layout_top.png`` and ``uncertainty_slices.png`` into ``out_dir``
+    (``occluders``: the declared obstruction boxes, drawn and used in the maps)."""
     _plt()                      # the non-interactive backend
     from multilat.report.png import save_png
 
     out = Path(out_dir)
     written = []
-    figs = [("layout_3d.png", plot_3d(pre).figure), ("layout_top.png", plot_top_view(pre).figure),
+    figs = [("layout_3d.png", plot_3d(pre).figure),
+            ("layout_top.png", draw_occluders(plot_top_view(pre), occluders).figure),
             ("uncertainty_slices.png",
              plot_slice_maps(pre, box_min_m, box_max_m, min_range_m=min_range_m,
-                             max_range_m=max_range_m)[0].figure)]
+                             max_range_m=max_range_m, occluders=occluders)[0].figure)]
     for name, fig in figs:
         p = out / name
         save_png(fig, p)

@@ -19,7 +19,8 @@ class Num:
     """A number shown in a table cell: ``value * k * scale`` (after ``op``) to ``digits`` decimals.
 
     ``path`` is where ``value`` sits in the command's JSON document (keys and list indices joined by
-    ``/``); ``op`` is ``""`` or ``"sqrt"`` (a standard deviation from a variance).
+    ``/``); ``op`` is ``""``, ``"sqrt"`` (a standard deviation from a variance) or ``"inv"`` (the
+    reciprocal: the lower bound ``1/f`` of a band ``[1/f, f]``).
     """
 
     value: float | None
@@ -37,6 +38,8 @@ class Num:
         v = float(v)
         if self.op == "sqrt":
             v = math.sqrt(max(v, 0.0))
+        elif self.op == "inv":
+            v = 1.0 / v if v != 0 else math.inf
         v = v * self.k * self.scale
         if round(v, self.digits) == 0:
             v = 0.0                      # no "-0.000"
@@ -50,16 +53,34 @@ class Num:
         return f"<td{attrs}>{html.escape(self.text())}</td>"
 
 
+@dataclass(frozen=True)
+class Verdict:
+    """A verdict cell: ``text`` computed by the report from the numbers in its row; ``ok`` True
+    (green), False (red) or None (neutral). ``data-verdict`` carries ``ok`` for a reader or a test."""
+
+    text: str
+    ok: bool | None = None
+
+    def cell(self) -> str:
+        cls = {True: "ok", False: "bad", None: ""}[self.ok]
+        flag = {True: "ok", False: "bad", None: "none"}[self.ok]
+        c = f' class="{cls}"' if cls else ""
+        return f'<td{c} data-verdict="{flag}">{html.escape(self.text)}</td>'
+
+
 def _cell(c) -> str:
-    return c.cell() if isinstance(c, Num) else f"<td>{html.escape(str(c))}</td>"
+    return c.cell() if isinstance(c, (Num, Verdict)) else f"<td>{html.escape(str(c))}</td>"
 
 
 @dataclass
 class Section:
-    """One report section. ``blocks`` are already-escaped HTML fragments built by the helpers below."""
+    """One report section. ``blocks`` are already-escaped HTML fragments built by the helpers below;
+    ``key`` names the section in the page: the id of its heading (``<h2 id="key">``, a link target
+    ``report.html#key``)."""
 
     title: str
     blocks: list[str] = field(default_factory=list)
+    key: str = ""
 
     def paragraph(self, text: str, *, cls: str | None = None) -> "Section":
         c = f' class="{cls}"' if cls else ""
@@ -72,13 +93,15 @@ class Section:
         self.blocks.append(f"<ul{c}>" + "".join(f"<li>{html.escape(str(t))}</li>" for t in texts) + "</ul>")
         return self
 
-    def table(self, header, rows, *, caption: str | None = None) -> "Section":
-        """Add a table; ``rows`` is an iterable of sequences of cells (:class:`Num`, or anything whose
-        str() is escaped)."""
+    def table(self, header, rows, *, caption: str | None = None, name: str | None = None) -> "Section":
+        """Add a table; ``rows`` is an iterable of sequences of cells (:class:`Num`, :class:`Verdict`,
+        or anything whose str() is escaped). ``name``: a ``data-table`` attribute naming the table
+        (for a reader's inspector and the tests)."""
         head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
         body = "".join("<tr>" + "".join(_cell(c) for c in r) + "</tr>" for r in rows)
         cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
-        self.blocks.append(f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
+        attr = f' data-table="{html.escape(name)}"' if name else ""
+        self.blocks.append(f"<table{attr}>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>")
         return self
 
     def figure(self, fig, *, caption: str = "") -> "Section":
@@ -105,7 +128,7 @@ _CSS = """body{font-family:sans-serif;max-width:64em;margin:2em auto;line-height
 table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #bbb;padding:.2em .6em;text-align:right}
 th{background:#eee}caption{caption-side:top;font-weight:bold;text-align:left}img{max-width:100%}
 .ok{color:#070}.bad{color:#a00}.warn{color:#a60}.meta td,.meta th{text-align:left}
-figcaption{font-size:90%;color:#333}"""
+figcaption{font-size:90%;color:#333}td[data-verdict]{text-align:left}"""
 
 
 def render(title: str, sections: list[Section], *, subtitle: str | None = None) -> str:
@@ -115,6 +138,7 @@ def render(title: str, sections: list[Section], *, subtitle: str | None = None) 
              f"<link rel='icon' href='data:,'>"
              f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>{sub}"]
     for s in sections:
-        parts.append(f"<section><h2>{html.escape(s.title)}</h2>{''.join(s.blocks)}</section>")
+        key = f' id="{html.escape(s.key)}"' if s.key else ""
+        parts.append(f"<section><h2{key}>{html.escape(s.title)}</h2>{''.join(s.blocks)}</section>")
     parts.append("</body></html>")
     return "\n".join(parts)

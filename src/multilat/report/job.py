@@ -148,8 +148,9 @@ def _sigma_source(ctx: JobContext, doc: dict) -> list[str]:
 
 
 def meta_section(ctx: JobContext, doc: dict) -> Section:
-    """What was measured and how it was computed: inputs, options, seed, version, date."""
-    sec = Section("What was run")
+    """What was measured and how it was computed: inputs, options, seed, version, date (the last
+    section: the reader wants the results and their verdicts first)."""
+    sec = Section("What was run: inputs and options", key="run")
     rows = [("command", ctx.command_line or f"multilat {ctx.command}"),
             ("multilat version", ctx.version), ("date (UTC)", ctx.date_utc)]
     seed = ctx.options.get("seed")
@@ -186,9 +187,14 @@ def _esc(s) -> str:
     return html.escape(str(s))
 
 
+def job_warnings(ctx: JobContext, doc: dict) -> list[str]:
+    """Every warning of the job: those the command printed, then those in its JSON not printed."""
+    return list(ctx.warnings) + [str(w) for w in (doc.get("warnings") or []) if str(w) not in ctx.warnings]
+
+
 def warnings_section(ctx: JobContext, doc: dict) -> Section:
-    sec = Section("Warnings")
-    ws = list(ctx.warnings) + [str(w) for w in (doc.get("warnings") or []) if str(w) not in ctx.warnings]
+    sec = Section("Warnings", key="warnings")
+    ws = job_warnings(ctx, doc)
     if ws:
         sec.items(ws, cls="warn")
     else:
@@ -197,15 +203,18 @@ def warnings_section(ctx: JobContext, doc: dict) -> Section:
 
 
 def uncertainty_note() -> str:
+    from multilat.network.statistics import CHI2_3_95   # here: scipy loads only for a report
+
     return (f"Standard uncertainties u are k = 1. Expanded uncertainties U = k u with k = {K_EXPANDED:g} "
             "(coverage probability about 95 % for a normal distribution). 95 % ellipsoids: semi-axes "
-            f"sqrt(χ²₃(0.95)) = {math.sqrt(7.814727903251178):.2f} × the principal standard deviations. "
+            f"sqrt(χ²₃(0.95)) = {math.sqrt(CHI2_3_95):.2f} × the principal standard deviations. "
             "Monte Carlo coverage intervals are quantiles of the simulated distribution (JCGM 101), "
             "no coverage factor.")
 
 
 def build_report(ctx: JobContext, doc: dict, *, result=None, title: str | None = None) -> str:
-    """The whole HTML page of one job: what was run, results, figures, warnings.
+    """The whole HTML page of one job: results (verdicts first), figures, warnings, and last what
+    was run (inputs, options, seed, version).
 
     ``doc`` is the command's JSON document (as printed by ``--json``); ``result`` the library's
     result object where a figure needs more than the JSON (samples, the adjusted network).
@@ -214,8 +223,9 @@ def build_report(ctx: JobContext, doc: dict, *, result=None, title: str | None =
     from multilat.report import job_sections
 
     doc = to_jsonable(doc)
-    results = job_sections.sections(ctx.command, doc, result=result, options=ctx.options)
-    sections = [meta_section(ctx, doc), *results, warnings_section(ctx, doc)]
+    results = job_sections.sections(ctx.command, doc, result=result, options=ctx.options,
+                                    warnings=job_warnings(ctx, doc))
+    sections = [*results, warnings_section(ctx, doc), meta_section(ctx, doc)]
     head = title or TITLES.get(ctx.command, ctx.command)
     return render(f"multilat {ctx.command}: {head}", sections, subtitle=uncertainty_note())
 

@@ -4,8 +4,6 @@ figures. Called by :func:`multilat.report.job.build_report`."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from multilat.report.html import Num, Section
@@ -70,131 +68,21 @@ def _worst(items, key, n=MAX_ROWS):
 
 
 # ---------------------------------------------------------------------------------------- adjust
-def _sigma0_line(doc: dict) -> str:
-    """The σ0 check in one line: the verdict, and for an implausible σ0 the σ source."""
-    from multilat.network.sigma_source import describe
-
-    c = doc.get("sigma0_check") or {}
-    v = c.get("verdict", "-")
-    if v in ("too low", "too high"):
-        how = "accepted (--variance-factor unknown)" if c.get("accepted") else "IMPLAUSIBLE"
-        return f"{how}: σ0 {v} ({describe(doc.get('sigma_source') or {})})"
-    return v
-
-
 def adjust(doc: dict, result=None, options=None) -> list[Section]:
-    sec = Section("Adjustment")
-    gt = doc.get("global_test") or {}
-    sec.table(("quantity", "value"), [
-        ("datum", doc["datum"]), ("cost", doc["cost"]), ("solver", doc.get("solver", "-")),
-        ("distances used / given", f"{doc['n_used']} / {doc['n_obs']}"),
-        ("convergence", f"{doc['convergence']['iterations']} iterations, {doc['convergence']['reason']}"),
-        ("σ0 (ratio to the a-priori σ)" if doc["cost"] != "squared" else "σ0 (m², eq. 6)",
-         _plain(doc, "sigma0", digits=4)),
-        ("degrees of freedom", doc["dof"]),
-        ("global χ² test statistic", _plain(doc, "global_test", "statistic", digits=3)
-         if gt.get("statistic") is not None else "-"),
-        ("critical value", _plain(doc, "global_test", "critical", digits=3)
-         if gt.get("critical") is not None else "-"),
-        ("lower-tail critical value (α = %g)" % gt.get("alpha_low", float("nan")),
-         _plain(doc, "global_test", "critical_low", digits=3) if gt.get("critical_low") is not None else "-"),
-        ("global test (α = %g, both tails) passed" % gt.get("alpha", float("nan")),
-         _verdict(gt.get("passed")) + (f" ({gt['failed_tail']} tail)" if gt.get("failed_tail") else "")),
-        ("test procedure", (doc.get("tests") or {}).get("rule", "-")),
-        ("σ0 plausibility", _sigma0_line(doc)),
-    ], caption="Statistics")
-    rows = []
-    for sid, s in doc["stations"].items():
-        ku, _ = _get(s, "offset_std_m")
-        rows.append((sid, *(_m(doc, "stations", sid, "xyz_m", i) for i in range(3)),
-                     *(_um(doc, "stations", sid, "cov_m2", i, i, op="sqrt", digits=1) for i in range(3)),
-                     _um(doc, "stations", sid, "offset_m", digits=1, sign=True),
-                     _um(doc, "stations", sid, ku, digits=1),
-                     _um(doc, "stations", sid, ku, digits=1, k=K),
-                     "estimated" if s.get("offset_estimated", True) else "held"))
-    sec.table(("station", "x (m)", "y (m)", "z (m)", "u_x (µm)", "u_y (µm)", "u_z (µm)", "offset (µm)",
-               "u(offset) (µm)", f"U(offset), k = {K:g} (µm)", "offset"), rows,
-              caption="Stations: coordinates, standard uncertainties (k = 1), offsets with u and U")
-    tids = list(doc["targets"])
-    keep = _worst(tids, lambda t: max(np.diag(np.asarray(doc["targets"][t]["cov_m2"], float))))
-    rows = []
-    for j in keep:
-        t = tids[j]
-        tgt = doc["targets"][t]
-        rows.append((t, *(_m(doc, "targets", t, "xyz_m", i) for i in range(3)),
-                     *(_um(doc, "targets", t, "cov_m2", i, i, op="sqrt", digits=1) for i in range(3)),
-                     *(_um(doc, "targets", t, "cov_m2", i, i, op="sqrt", digits=1, k=K) for i in range(3)),
-                     tgt.get("n_obs", "-"),
-                     _plain(doc, "targets", t, "redundancy", digits=3) if "redundancy" in tgt else "-"))
-    more = "" if len(keep) == len(tids) else f" ({len(keep)} of {len(tids)}: the largest u shown)"
-    sec.table(("target", "x (m)", "y (m)", "z (m)", "u_x", "u_y", "u_z", "U_x", "U_y", "U_z",
-               "distances", "redundancy"), rows,
-              caption=f"Targets: u and U (k = {K:g}) in µm{more}")
-    sections = [sec, _adjust_reliability(doc)]
-    if doc.get("reference_lengths"):
-        sections.append(_reference_lengths(doc))
-    if result is not None:
-        sections.append(_network_figures(result))
-    return sections
+    """The adjust report: verdicts first, then reliability, heads, angles, bars and control, frame
+    and datum, coordinates, figures (:mod:`multilat.report.adjust_sections`)."""
+    from multilat.report import adjust_sections
 
-
-def _adjust_reliability(doc) -> Section:
-    sec = Section("Reliability and data snooping")
-    red = [t.get("redundancy") for t in doc["targets"].values() if t.get("redundancy") is not None]
-    if red:
-        sec.paragraph(f"Smallest redundancy number of a target's distances: {min(red):.3f} (0: the "
-                      "distance is not checked by the others; 1: fully checked).")
-    if not doc.get("snooping"):
-        sec.paragraph("Data snooping was not done.")
-    if doc.get("snooping") and doc.get("outliers"):
-        sec.table(("station", "target", "w", "residual (µm)"),
-                  [(o["station"], o["target"], _plain(doc, "outliers", i, "w", digits=2),
-                    _um(doc, "outliers", i, "residual_m", digits=1, sign=True))
-                   for i, o in enumerate(doc["outliers"])],
-                  caption=f"Rejected by data snooping (α = {doc['alpha']:g})")
-    if doc.get("angle_outliers"):
-        sec.table(("station", "target", "kind", "w", "residual (µrad)"),
-                  [(o["station"], o["target"], o["kind"], _plain(doc, "angle_outliers", i, "w", digits=2),
-                    _urad(doc, "angle_outliers", i, "residual_rad")) for i, o in enumerate(doc["angle_outliers"])],
-                  caption=f"Angles rejected by data snooping (α = {doc['alpha']:g})")
-    if doc.get("snooping") and not doc.get("outliers") and not doc.get("angle_outliers"):
-        sec.paragraph(f"No observation rejected by data snooping (α = {doc['alpha']:g}).")
-    if doc.get("unlocated"):
-        sec.paragraph("w-test failure that could not be located: " + ", ".join(
-            f"{o['station']}->{o['target']}" for o in doc["unlocated"]) + f"; {doc.get('unlocated_reason', '')}")
-    if doc.get("excluded"):
-        sec.items([f"{e.get('kind')} {e.get('id')}: {e.get('reason')}" for e in doc["excluded"]])
-    return sec
-
-
-def _reference_lengths(doc) -> Section:
-    sec = Section("Interpoint distances against reference lengths")
-    rows = []
-    for i, c in enumerate(doc["reference_lengths"]):
-        ku, u = _get(c, "length_std_m")
-        kr, ur = _get(c, "reference_std_m")
-        comb = math.sqrt(u ** 2 + (ur or 0.0) ** 2)
-        ok = abs(c["difference_m"]) <= K * comb
-        rows.append((f"{c['target_a']}-{c['target_b']}", _m(doc, "reference_lengths", i, "length_m"),
-                     _um(doc, "reference_lengths", i, ku, digits=1),
-                     _um(doc, "reference_lengths", i, ku, digits=1, k=K),
-                     _m(doc, "reference_lengths", i, "reference_m"),
-                     _um(doc, "reference_lengths", i, kr, digits=1) if ur is not None else "-",
-                     _um(doc, "reference_lengths", i, "difference_m", digits=1, sign=True),
-                     f"{abs(c['difference_m']) / comb:.2f}" if comb > 0 else "-",
-                     _verdict(ok)))
-    sec.table(("points", "adjusted (m)", "u (µm)", f"U, k = {K:g} (µm)", "reference (m)", "u ref (µm)",
-               "difference (µm)", "|d| / u_c", f"|d| <= {K:g} u_c"), rows,
-              caption="u_c = sqrt(u² + u_ref²); the verdict is computed from the numbers in the row")
-    return sec
+    return adjust_sections.sections(doc, result, options)
 
 
 def _network_figures(result) -> Section:
     from multilat.report import network_figures as nf
 
-    sec = Section("Figures")
+    sec = Section("Figures", key="figures")
     ax = nf.plot_residuals(result)
-    sec.figure(ax.figure, caption="Residuals (measured − adjusted) per target and head")
+    sec.figure(ax.figure, caption="Residuals (measured − adjusted) per target, one marker per station "
+                                  "(its head in brackets where a head occupied several stations)")
     ax = nf.plot_top_view(result)
     sec.figure(ax.figure, caption="Top view with the 95 % ellipses, magnified separately for stations and "
                                   "targets (factors in the legend)")
@@ -220,7 +108,7 @@ def _view_3d(sec: Section, result) -> None:
 
 # ------------------------------------------------------------------------------------- propagate
 def propagate(doc: dict, result=None, options=None) -> list[Section]:
-    sec = Section("Monte Carlo")
+    sec = Section("Monte Carlo", key="montecarlo")
     sec.table(("quantity", "value"), [
         ("source", doc["source"]), ("trials kept", doc["trials"]), ("failed to converge", doc["n_failed"]),
         ("noise", doc["noise"]), ("coverage probability", _plain(doc, "coverage", digits=2)),
@@ -241,20 +129,8 @@ def propagate(doc: dict, result=None, options=None) -> list[Section]:
                "a3 95 %", "in MC ellipsoid"), rows,
               caption="Points (µm): MC and linear standard uncertainties; semi-axes of the MC 95 % ellipsoid; "
                       "fraction of the trials inside it")
-    rows = []
-    for group in ("parameters", "distances"):
-        for i, r in enumerate(doc[group]):
-            if group == "parameters" and not r["label"].endswith((".offset", ".scale")):
-                continue
-            p_lo, p_hi = ptr(group, i, "interval_symmetric_m", 0), ptr(group, i, "interval_symmetric_m", 1)
-            rows.append((r["label"], _m(doc, group, i, "nominal_m"), _um(doc, group, i, "std_mc_m"),
-                         _um(doc, group, i, "std_mc_se_m", digits=3), _um(doc, group, i, "std_lin_m"),
-                         Num(resolve(doc, p_lo), p_lo, 1.0, 6), Num(resolve(doc, p_hi), p_hi, 1.0, 6),
-                         _verdict(r["agrees"])))
-    sec.table(("quantity", "nominal (m)", "u MC (µm)", "s.e. (µm)", "u lin (µm)", "95 % low (m)",
-               "95 % high (m)", "MC agrees with linear"), rows[:MAX_ROWS],
-              caption="Offsets and interpoint distances: the 95 % interval is probabilistically symmetric "
-                      "(JCGM 101); 'agrees': |u MC − u lin| within 3 MC standard errors")
+    _propagate_parameters(sec, doc)
+    _propagate_distances(sec, doc)
     out = [sec]
     if result is not None and getattr(result, "samples", None) is not None:
         from multilat.report.propagate_figures import clouds_figure
@@ -266,6 +142,42 @@ def propagate(doc: dict, result=None, options=None) -> list[Section]:
                          "MC (solid) and linear (dashed) 95 % ellipsoids; red: stations, blue: targets")
         out.append(f)
     return out
+
+
+AGREES = "'agrees': |u MC − u lin| within 3 MC standard errors"
+
+
+def _propagate_parameters(sec: Section, doc: dict) -> None:
+    """Offsets (µm) and scale factors (µm/m): nominal, u, s.e. and the 95 % interval in one unit."""
+    for suffix, unit, what in ((".offset", "µm", "Offsets"), (".scale", "µm/m", "Scale factors")):
+        rows = []
+        for i, r in enumerate(doc["parameters"]):
+            if not r["label"].endswith(suffix):
+                continue
+            rows.append((r["label"], _um(doc, "parameters", i, "nominal_m", sign=True),
+                         _um(doc, "parameters", i, "std_mc_m"), _um(doc, "parameters", i, "std_mc_se_m", digits=3),
+                         _um(doc, "parameters", i, "std_lin_m"),
+                         _um(doc, "parameters", i, "interval_symmetric_m", 0, sign=True),
+                         _um(doc, "parameters", i, "interval_symmetric_m", 1, sign=True), _verdict(r["agrees"])))
+        if rows:
+            sec.table(("quantity", f"nominal ({unit})", f"u MC ({unit})", f"s.e. ({unit})", f"u lin ({unit})",
+                       f"95 % low ({unit})", f"95 % high ({unit})", "MC agrees with linear"), rows[:MAX_ROWS],
+                      caption=f"{what} ({unit}): the 95 % interval is probabilistically symmetric (JCGM 101); "
+                              + AGREES, name=what.lower().replace(" ", "-"))
+
+
+def _propagate_distances(sec: Section, doc: dict) -> None:
+    """Interpoint distances: lengths and their interval in m (0.1 µm), uncertainties in µm."""
+    rows = [(r["label"], _m(doc, "distances", i, "nominal_m", digits=7), _um(doc, "distances", i, "std_mc_m"),
+             _um(doc, "distances", i, "std_mc_se_m", digits=3), _um(doc, "distances", i, "std_lin_m"),
+             _m(doc, "distances", i, "interval_symmetric_m", 0, digits=7),
+             _m(doc, "distances", i, "interval_symmetric_m", 1, digits=7), _verdict(r["agrees"]))
+            for i, r in enumerate(doc["distances"][:MAX_ROWS])]
+    if rows:
+        sec.table(("points", "length (m)", "u MC (µm)", "s.e. (µm)", "u lin (µm)", "95 % low (m)", "95 % high (m)",
+                   "MC agrees with linear"), rows,
+                  caption="Interpoint distances: lengths and the 95 % interval in m, their uncertainties in µm; "
+                          + AGREES, name="distances")
 
 
 def _split_ids(text):
@@ -340,6 +252,15 @@ def design(doc: dict, result=None, options=None) -> list[Section]:
                 *(_um(doc, "targets", t, "cov_m2", i, i, op="sqrt") for i in range(3)),
                 _um(doc, "targets", t, "u95_max_m"), doc["targets"][t]["seen_by"]) for t in
                (tids[j] for j in keep)], caption="Targets")
+    pc = doc.get("poorly_controlled")
+    if pc and pc["n_targets"]:
+        sec.table(("target", "poorly controlled distances", "smallest redundancy", "largest MDB (µm)", "MDB / σ"),
+                  [(t["id"], t["n_obs"], f"{t['redundancy']:.3g}",       # MDB null: infinite (r = 0)
+                    "∞" if t["mdb_m"] is None else f"{t['mdb_m'] * UM:.1f}",
+                    "∞" if t["mdb_sigma"] is None else f"{t['mdb_sigma']:.3g}")
+                   for t in pc["targets"]],
+                  caption=f"Warning: {pc['n_targets']} targets poorly controlled (redundancy < {pc['r_min']:g} or "
+                          f"MDB > {pc['mdb_limit_sigma']:g} σ): a blunder in their distances would not show")
     if doc.get("lengths"):
         sec.table(("a", "b", "length (m)", "u (µm)", f"U, k = {K:g} (µm)"),
                   [(L["a"], L["b"], _m(doc, "lengths", i, "length_m"), _um(doc, "lengths", i, "length_std_m"),
@@ -431,7 +352,7 @@ def lbb_simulate(doc: dict, result=None, options=None) -> list[Section]:
               caption=f"Points (µm unless stated), the {len(keep)} with the largest std; U with k = {K:g}")
     if result is not None:
         from multilat.lbb.simulate import base_xyz
-        from multilat.report import lbb_figures as F
+        from multilat.lbb import figures as F
 
         sim, cfg = result
         sec.figure(F.volume_map(sim, base_xyz(cfg), quantity="std"),
@@ -454,7 +375,7 @@ def lbb_compare(doc: dict, result=None, options=None) -> list[Section]:
                   "mean ± 2σ" + (" (x / y / z: " + " / ".join(f"{per[c]:.0%}" for c in "xyz" if c in per) + ")"
                                  if per else "") + ".")
     if result is not None:
-        from multilat.report import lbb_figures as F
+        from multilat.lbb import figures as F
 
         s = result.simulation
         sec.figure(F.reference_comparison(result.points, result.difference_m, s.mean_error_m, s.std_m),
@@ -466,6 +387,11 @@ SECTIONS = {"adjust": adjust, "propagate": propagate, "simulate": simulate, "des
             "budget": budget, "correct": correct, "lbb simulate": lbb_simulate, "lbb compare": lbb_compare}
 
 
-def sections(command: str, doc: dict, *, result=None, options=None) -> list[Section]:
-    """The results sections of ``command``'s report."""
+def sections(command: str, doc: dict, *, result=None, options=None, warnings=()) -> list[Section]:
+    """The results sections of ``command``'s report (``warnings``: every warning of the job, which
+    the adjust report counts among its verdicts)."""
+    if command == "adjust":
+        from multilat.report import adjust_sections
+
+        return adjust_sections.sections(doc, result, options, warnings=warnings)
     return SECTIONS[command](doc, result, options)

@@ -26,7 +26,7 @@ def section(*, seed: int, quick: bool) -> Section:
     from multilat.lbb.config import load_config
     from multilat.lbb.model import pose_distributions
     from multilat.lbb.simulate import base_xyz, l0_distribution, run_direct, run_procedure, volume_points
-    from multilat.report import lbb_figures as F
+    from multilat.lbb import figures as F
 
     cfg = load_config()
     sec = Section("Laser ball bar: trilateration uncertainty through an HTM model (seed 003)")

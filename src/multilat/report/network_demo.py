@@ -85,13 +85,14 @@ def _one_dataset(sec, cfg, seed):
     from multilat.network.adjust import adjust
     from multilat.network.data import Observations
     from multilat.network.initial import initial_values
+    from multilat.network.sigma_source import DEFAULT_SIGMA_M
 
     rng = np.random.default_rng(seed)
     s, t = cfg.n_stations, cfg.n_targets
     si, ti = np.meshgrid(np.arange(s), np.arange(t), indexing="ij")
     si, ti = si.ravel(), ti.ravel()
-    d = cfg.geometric_distances_m()[si, ti] + cfg.offset_m[si] + rng.normal(0.0, 4.7e-6, si.size)
-    obs = Observations(cfg.station_ids, cfg.target_ids, si, ti, d, np.full(si.size, 4.7e-6))
+    d = cfg.geometric_distances_m()[si, ti] + cfg.offset_m[si] + rng.normal(0.0, DEFAULT_SIGMA_M, si.size)
+    obs = Observations(cfg.station_ids, cfg.target_ids, si, ti, d, np.full(si.size, DEFAULT_SIGMA_M))
     iv = initial_values(obs, rng=rng)
     res = adjust(obs, initial=iv)
     gt = res.global_test

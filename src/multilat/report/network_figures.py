@@ -1,4 +1,4 @@
-"""Figures of a network adjustment: residuals per target and head (seed 000 Fig. 13), top and 3-D
+"""Figures of a network adjustment: residuals per target and station (seed 000 Fig. 13), top and 3-D
 views of heads, targets and their 95 % confidence ellipsoids (Figs. 11-12).
 
 Plot functions take ``ax=None`` and return the axes; :func:`save_figures` writes PNGs atomically.
@@ -16,7 +16,7 @@ import numpy as np
 
 from multilat.network.statistics import chi2_ppf
 
-__all__ = ["plot_residuals", "plot_top_view", "plot_3d", "save_figures", "auto_magnify",
+__all__ = ["plot_residuals", "station_label", "plot_top_view", "plot_3d", "save_figures", "auto_magnify",
            "class_magnifications", "place_labels"]
 
 
@@ -35,8 +35,9 @@ LARGE_PLOT_POINTS = 20_000
 
 
 def plot_residuals(result, ax=None):
-    """Residuals (µm) of every observation against the target position, one marker per head;
-    rejected observations as crosses. Above :data:`LARGE_PLOT_POINTS` used observations: their
+    """Residuals (µm) of every observation against the target position, one marker per station
+    (labelled "station S1", with "head T1" where the head is not the station itself); rejected
+    observations as crosses. Above :data:`LARGE_PLOT_POINTS` used observations: their
     density (observations per cell, log colour scale, all heads), rejected ones still as crosses."""
     plt = _plt()
     if ax is None:
@@ -45,10 +46,11 @@ def plot_residuals(result, ax=None):
     if int(np.count_nonzero(result.used)) > LARGE_PLOT_POINTS:
         return _residual_density(result, ax)
     markers = "os^vD<>ph*"
+    heads = o.head_of_station
     for i, sid in enumerate(o.station_ids):
         m = (o.station_index == i) & result.used
         ax.plot(o.target_index[m] + 1, result.residuals_m[m] * 1e6, markers[i % len(markers)],
-                ms=4, label=f"head {sid}", alpha=0.85)
+                ms=4, label=station_label(sid, heads[i]), alpha=0.85)
     bad = ~result.used
     if bad.any():
         ax.plot(o.target_index[bad] + 1, result.residuals_m[bad] * 1e6, "kx", ms=7, label="rejected")
@@ -59,9 +61,15 @@ def plot_residuals(result, ax=None):
     if t <= 30:
         ax.set_xticks(np.arange(1, t + 1))
         ax.set_xticklabels(o.target_ids, rotation=90 if t > 14 else 0, fontsize=8)
-    ax.set_title(f"residuals per target and head (σ0 = {result.sigma0:.3g}, dof {result.dof})")
+    ax.set_title(f"residuals per target and station (σ0 = {result.sigma0:.3g}, dof {result.dof})")
     ax.legend(fontsize=7, ncol=min(o.n_stations + 1, 6), loc="best")
     return ax
+
+
+def station_label(station_id: str, head_id: str) -> str:
+    """A station's legend entry: "station S1", and "station S1 (head T1)" when another head id
+    occupies it (a station is a set-up, a head the instrument on it)."""
+    return f"station {station_id}" + ("" if head_id == station_id else f" (head {head_id})")
 
 
 def _residual_density(result, ax):
@@ -155,7 +163,7 @@ def _scale_bar(ax, mag: float, length_m: float, col: str, label: str, row: int) 
 
 
 def plot_top_view(result, ax=None, *, magnify=None):
-    """Top view (x, y) of heads and targets with the shadows of their 95 % ellipsoids on the
+    """Top view (x, y) of stations and targets with the shadows of their 95 % ellipsoids on the
     xy-plane (the projection of ``{x: x^T C^-1 x <= chi2_3(0.95)}`` is the ellipse of the 2x2
     marginal with the same bound), magnified per class (``magnify``: one factor, a pair
     (stations, targets), or None for :func:`class_magnifications`); a scale bar per class gives the
@@ -167,7 +175,7 @@ def plot_top_view(result, ax=None, *, magnify=None):
         _, ax = plt.subplots(figsize=(6, 6))
     mags = _as_pair(magnify, result)
     k = np.sqrt(chi2_ppf(0.95, 3))
-    classes = ((result.station_xyz_m, result.station_cov_m2, "^", "C3", "heads"),
+    classes = ((result.station_xyz_m, result.station_cov_m2, "^", "C3", "stations"),
                (result.target_xyz_m, result.target_cov_m2, "o", "C0", "targets"))
     for (xyz, cov, style, col, name), mag in zip(classes, mags):
         xyz = np.asarray(xyz, float)
@@ -194,7 +202,7 @@ def plot_top_view(result, ax=None, *, magnify=None):
     ax.legend(fontsize=7, loc="upper right")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(f"top view: heads (▲) ×{mags[0]:g}, targets (●) ×{mags[1]:g}; 95 % ellipses", fontsize=10)
+    ax.set_title(f"top view: stations (▲) ×{mags[0]:g}, targets (●) ×{mags[1]:g}; 95 % ellipses", fontsize=10)
     return ax
 
 
@@ -252,7 +260,7 @@ def place_labels(ax, xy, names, *, fontsize: float = 7, colors=None) -> list:
 
 
 def plot_3d(result, ax=None, *, magnify: float | None = None):
-    """3-D view of heads and targets with their 95 % confidence ellipsoids (wireframes), magnified."""
+    """3-D view of stations and targets with their 95 % confidence ellipsoids (wireframes), magnified."""
     plt = _plt()
 
     if ax is None:
@@ -278,7 +286,7 @@ def plot_3d(result, ax=None, *, magnify: float | None = None):
     ax.set_zlabel("z (m)")
     n_t = len(result.target_xyz_m)
     shown = "" if step == 1 else f"\n(1 target in {step} shown: {len(range(0, n_t, step)):,} of {n_t:,})"
-    ax.set_title(f"95 % ellipsoids: heads (▲) ×{mags[0]:g}, targets (●) ×{mags[1]:g}{shown}")
+    ax.set_title(f"95 % ellipsoids: stations (▲) ×{mags[0]:g}, targets (●) ×{mags[1]:g}{shown}")
     return ax
 
 

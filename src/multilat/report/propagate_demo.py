@@ -20,6 +20,7 @@ def _per_trial_std(res) -> np.ndarray:
 def section(*, seed: int, quick: bool) -> Section:
     from multilat.network.configs import small_volume
     from multilat.network.propagate import problem_from_config, propagate
+    from multilat.network.sigma_source import DEFAULT_SIGMA_M
     from multilat.report.propagate_figures import clouds_figure
 
     trials = 2000 if quick else 40_000
@@ -32,7 +33,7 @@ def section(*, seed: int, quick: bool) -> Section:
         "noise model. The paper (§4.4) ran 50 simulations with gaussian 4.7 µm noise and reported, per "
         "simulation, the standard deviation of the interpoint-distance errors; the same statistic over our "
         "trials is beside it (first 50 trials for min/max, all trials for the mean and the 95 % range).")
-    pb_g = problem_from_config(cfg, sigma_m=4.7e-6, source="small-volume")
+    pb_g = problem_from_config(cfg, sigma_m=DEFAULT_SIGMA_M, source="small-volume")
     res_g = propagate(pb_g, trials=trials, rng=seed, noise="gaussian")
     from multilat import instrument
 

@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from multilat.network.statistics import CHI2_3_95
 from multilat.report.network_figures import class_magnifications
 
-_K95 = float(np.sqrt(7.814727903251178))     # sqrt(chi2_3(0.95))
+_K95 = float(np.sqrt(CHI2_3_95))     # sqrt(chi2_3(0.95))
 
 
 def available() -> bool:

@@ -2,7 +2,7 @@
 
 ``load(command)`` returns the schema of ``multilat <command> --json`` (``lbb-simulate`` for
 ``multilat lbb simulate``); every document carries ``"schema": "multilat.<command>/<version>"``
-(:func:`multilat.vocabulary.stamp`). The files are written by :mod:`multilat.schemas.infer` from the
+(:func:`multilat.vocabulary.stamp`). The files are written by ``tools/schema_infer.py`` (a developer tool) from the
 documents of the sample runs listed there and then read by a person before they are committed; the
 tests validate every command's output against them (``tests/test_output_schema.py``), so a renamed,
 removed or undeclared key fails until the schema (and :data:`multilat.vocabulary.SCHEMA_VERSION`,

@@ -31,8 +31,6 @@ from multilat.network.model import Q
 
 __all__ = ["BlockedCovariance", "blocked_covariance", "blocked_criterion"]
 
-_CHI2_3_95 = 7.814727903251178      # chi-square quantile, 3 degrees of freedom, 0.95
-
 
 @dataclass(frozen=True, eq=False)
 class BlockedCovariance:
@@ -152,7 +150,7 @@ def blocked_criterion(name: str, layout, sigma_m, *, offsets=True, datum="free",
         return float("inf")
     if name == "max_u95":
         ev = np.linalg.eigvalsh(bc.target_cov_m2())[:, -1]
-        return float(np.sqrt(_CHI2_3_95 * max(ev.max(), 0.0)))
+        return float(np.sqrt(st.CHI2_3_95 * max(ev.max(), 0.0)))
     if name == "rms_u":
         tc = bc.target_cov_m2()
         return float(np.sqrt(np.trace(tc, axis1=1, axis2=2).mean()))

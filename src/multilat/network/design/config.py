@@ -41,14 +41,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from multilat.errors import MultilatError, validation_error_line
-from multilat.network.design.preanalysis import CRITERIA, Layout, PreAnalysis, SigmaModel, preanalyse
-from multilat.network.design.search import (DesignResult, choose_candidates, head_ids, min_heads,
+from multilat.network.design.preanalysis import (CRITERIA, Layout, PreAnalysis, SigmaModel, design_head_names,
+                                                 preanalyse)
+from multilat.network.design.search import (PENALTY_M, DesignResult, choose_candidates, head_ids, min_heads,
                                             optimise_heads, visibility)
 
 __all__ = ["DesignConfig", "parse_design_config", "load_design_config", "run_design", "DesignRun",
+           "poorly_controlled_targets",
            "MAX_DESIGN_TARGETS", "MAX_DESIGN_HEADS", "design_memory_bytes"]
 
 
@@ -75,10 +77,14 @@ def _box(lo, hi, what):
 
 
 class TargetsCfg(_Model):
-    file: str | None = None
-    box_min_m: list[float] | None = None
-    box_max_m: list[float] | None = None
-    grid: list[int] | None = None
+    file: str | None = Field(None, json_schema_extra={"constraint": "either file or box_min_m/box_max_m/grid"},
+                             description="CSV of the targets (point,x_m,y_m,z_m), relative to the config")
+    box_min_m: list[float] | None = Field(None, json_schema_extra={"constraint": "3 values, below box_max_m"},
+                                          description="lower corner (x, y, z) of the targets' grid box")
+    box_max_m: list[float] | None = Field(None, json_schema_extra={"constraint": "3 values, above box_min_m"},
+                                          description="upper corner (x, y, z) of the targets' grid box")
+    grid: list[int] | None = Field(None, json_schema_extra={"constraint": "3 counts >= 1; product <= 200 000"},
+                                   description="points per axis (x, y, z) of the grid")
 
     @model_validator(mode="after")
     def _one(self):
@@ -96,15 +102,28 @@ class TargetsCfg(_Model):
 
 
 class HeadsCfg(_Model):
-    count: int | None = None
-    box_min_m: list[float] | None = None
-    box_max_m: list[float] | None = None
-    file: str | None = None
-    fixed: str | None = None
-    start: str | None = None
-    min_range_m: float = 0.0
-    max_range_m: float | None = None
-    hidden: dict[str, list[str]] = {}
+    count: int | None = Field(None, json_schema_extra={"constraint": ">= 4; <= 200"},
+                              description="number of heads to place (box or candidates)")
+    box_min_m: list[float] | None = Field(None, json_schema_extra={"constraint": "exactly one of box, file, fixed"},
+                                          description="lower corner (x, y, z) of the box heads may stand in")
+    box_max_m: list[float] | None = Field(None, json_schema_extra={"constraint": "3 values, above box_min_m"},
+                                          description="upper corner (x, y, z) of the box heads may stand in")
+    file: str | None = Field(None,
+                             description="CSV of candidate positions (point,x_m,y_m,z_m): the search chooses count of"
+                                         " them")
+    fixed: str | None = Field(None,
+                              description="CSV of given heads (point,x_m,y_m,z_m): score this layout only, as "
+                                          "--evaluate")
+    start: str | None = Field(None,
+                              description="CSV of the box search's start layout (count rows; default: alternate box "
+                                          "corners)")
+    min_range_m: float = Field(0.0, json_schema_extra={"constraint": ">= 0"},
+                               description="shortest distance a head measures")
+    max_range_m: float | None = Field(None, json_schema_extra={"constraint": "> min_range_m"},
+                                      description="longest distance a head measures (none: unlimited)")
+    hidden: dict[str, list[str]] = Field({}, json_schema_extra={"constraint": "known ids"},
+                                         description="targets a head cannot see: head id (or candidate id) -> list of"
+                                                     " target ids")
 
     @model_validator(mode="after")
     def _one(self):
@@ -127,9 +146,12 @@ class HeadsCfg(_Model):
 
 
 class InstrumentCfg(_Model):
-    preset: str | None = None
-    file: str | None = None
-    sigma_um: float | None = None
+    preset: str | None = Field(None, json_schema_extra={"constraint": "exactly one of preset, file, sigma_um"},
+                               description="a shipped instrument preset (seed2020)")
+    file: str | None = Field(None, description="an instrument TOML (the instrument file above), relative to the config")
+    sigma_um: float | None = Field(None, json_schema_extra={"constraint": "> 0"},
+                                   description="one standard uncertainty for every distance, instead of a distance "
+                                               "model")
 
     @model_validator(mode="after")
     def _one(self):
@@ -141,9 +163,13 @@ class InstrumentCfg(_Model):
 
 
 class CriterionCfg(_Model):
-    name: str = "max_u95"
-    lengths: list[tuple[str, str]] = []
-    target_u95_m: float | None = None
+    name: str = Field("max_u95", json_schema_extra={"constraint": "one of the four"},
+                      description="what the search minimises: max_u95, rms_u, length_u or max_mdb (docs/design.md)")
+    lengths: list[tuple[str, str]] = Field([], json_schema_extra={"constraint": "needed by length_u"},
+                                           description="interpoint lengths for length_u, as pairs of point ids")
+    target_u95_m: float | None = Field(None, json_schema_extra={"constraint": "> 0"},
+                                       description="keep the fewest targets whose work-volume 95 % semi-axis stays at"
+                                                   " or below this")
 
     @field_validator("target_u95_m")
     @classmethod
@@ -167,9 +193,9 @@ class CriterionCfg(_Model):
 
 
 class ScaleBarCfg(_Model):
-    a: str
-    b: str
-    u_um: float
+    a: str = Field(description="point id of one end of the bar")
+    b: str = Field(description="point id of the other end")
+    u_um: float = Field(description="standard uncertainty of the bar's length", json_schema_extra={"constraint": "> 0"})
 
     @field_validator("u_um")
     @classmethod
@@ -180,8 +206,9 @@ class ScaleBarCfg(_Model):
 
 
 class ControlCfg(_Model):
-    point: str
-    s_um: list[float]
+    point: str = Field(description="the control point's id (a target)")
+    s_um: list[float] = Field(json_schema_extra={"constraint": "3 values > 0"},
+                              description="standard uncertainties of its x, y, z")
 
     @field_validator("s_um")
     @classmethod
@@ -192,17 +219,25 @@ class ControlCfg(_Model):
 
 
 class NetworkCfg(_Model):
-    offsets: bool = True
-    datum: str | None = None          # free, free:P,.., 321:A,B,C or control (default: control with
-    scale_bars: list[ScaleBarCfg] = []  # weighted control points, else free)
-    control: list[ControlCfg] = []
+    offsets: bool = Field(True, description="estimate one additive offset per head (self-calibration)")
+    datum: str | None = Field(None,
+                              description="free, free:P,.., 321:A,B,C or control (default: control with control "
+                                          "points, else free)")
+    scale_bars: list[ScaleBarCfg] = Field([],
+                                          description="reference lengths between two targets (pre-analysis of given "
+                                                      "heads only)")
+    control: list[ControlCfg] = Field([],
+                                      description="control points observed with standard uncertainties (given heads "
+                                                  "only)")
 
 
 class SearchCfg(_Model):
-    method: str = "multistart"
-    starts: int = 8
-    max_evaluations: int = 20_000
-    evaluation: str = "auto"
+    method: str = Field("multistart", description="multistart (Powell from several starts) or differential_evolution")
+    starts: int = Field(8, description="local searches of multistart", json_schema_extra={"constraint": ">= 1"})
+    max_evaluations: int = Field(20_000, json_schema_extra={"constraint": ">= 1"},
+                                 description="criterion evaluations in all")
+    evaluation: str = Field("auto",
+                            description="how a criterion is computed: auto, fast, dense or blocked (docs/design.md)")
 
     @field_validator("evaluation")
     @classmethod
@@ -227,8 +262,10 @@ class SearchCfg(_Model):
 
 
 class OccluderCfg(_Model):
-    box_min_m: list[float]
-    box_max_m: list[float]
+    box_min_m: list[float] = Field(json_schema_extra={"constraint": "3 values, below box_max_m"},
+                                   description="lower corner (x, y, z) of a box blocking the line of sight")
+    box_max_m: list[float] = Field(json_schema_extra={"constraint": "3 values, above box_min_m"},
+                                   description="upper corner (x, y, z) of the box")
 
     @model_validator(mode="after")
     def _b(self):
@@ -237,13 +274,16 @@ class OccluderCfg(_Model):
 
 
 class DesignConfig(_Model):
-    targets: TargetsCfg
-    heads: HeadsCfg
-    occluders: list[OccluderCfg] = []
-    instrument: InstrumentCfg = InstrumentCfg(preset="seed2020")
-    criterion: CriterionCfg = CriterionCfg()
-    network: NetworkCfg = NetworkCfg()
-    search: SearchCfg = SearchCfg()
+    targets: TargetsCfg = Field(description="the targets to measure: a file, or a grid in a box")
+    heads: HeadsCfg = Field(description="where the heads go: a box to search, candidate positions, or fixed heads")
+    occluders: list[OccluderCfg] = Field([],
+                                         description="boxes blocking lines of sight (a blocked target is not observed"
+                                                     " from that head)")
+    instrument: InstrumentCfg = Field(InstrumentCfg(preset="seed2020"),
+                                      description="the distance model: a preset, an instrument file or a constant σ")
+    criterion: CriterionCfg = Field(CriterionCfg(), description="what the search minimises")
+    network: NetworkCfg = Field(NetworkCfg(), description="the adjustment's model: offsets, datum, scale bars, control")
+    search: SearchCfg = Field(SearchCfg(), description="the global search's method and budget")
 
 
 def parse_design_config(data: dict, *, source: str = "<dict>") -> DesignConfig:
@@ -358,7 +398,9 @@ def design_memory_bytes(cfg: DesignConfig) -> float | None:
 class DesignRun:
     """What ``multilat design`` computed: the search (None with fixed or evaluated heads), the
     pre-analysis of the returned layout and of the start (or given) layout; ``selection``: the
-    fewest targets for ``[criterion] target_u95_m`` (:class:`~.targets.TargetSelection`) or None."""
+    fewest targets for ``[criterion] target_u95_m`` (:class:`~.targets.TargetSelection`) or None;
+    ``heads``: the instrument head measuring from each station of ``best``; ``poorly_controlled``:
+    :func:`poorly_controlled_targets` of ``best``."""
 
     criterion: str
     search: DesignResult | None
@@ -366,22 +408,19 @@ class DesignRun:
     start: PreAnalysis
     sigma: SigmaModel
     selection: object = None
+    heads: tuple = ()
+    poorly_controlled: tuple = ()
 
 
 def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, rng=None,
                source: str = "config") -> DesignRun:
     """Run a validated config: optimise (box or candidates) or, with fixed heads or ``evaluate``
     (a :class:`~multilat.network.data.Points` of heads), score the given layout only."""
-    from multilat import instrument as _inst
-
     base = Path(base_dir)
     tid, tx = _targets(cfg.targets, base)
     h = cfg.heads
     rmin, rmax = h.min_range_m, (math.inf if h.max_range_m is None else h.max_range_m)
-    ic = cfg.instrument
-    sigma = SigmaModel(ic.sigma_um * 1e-6) if ic.sigma_um is not None else \
-        SigmaModel(instrument=_inst.load_instrument(ic.preset or str(base / ic.file)),
-                   max_distance_m=max(100.0, 2 * rmax if np.isfinite(rmax) else 100.0))
+    sigma = _sigma_model(cfg.instrument, base, rmax)
     c = cfg.criterion
     net = cfg.network
     coupled = bool(net.scale_bars or net.control)
@@ -395,18 +434,13 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
         if len(fixed.ids) < min_heads(cfg.network.offsets):
             raise MultilatError(f"{source}: heads: self-calibration needs at least "
                                 f"{min_heads(cfg.network.offsets)} heads, got {len(fixed.ids)}")
-        known |= set(fixed.ids)
+        ids = tuple(fixed.ids)
+        _check_heads(sigma, ids, f"{source}: " + ("--evaluate" if evaluate is not None else "heads.fixed"))
     else:
-        known |= set(head_ids(h.count))
-    n_heads = len(fixed.ids) if fixed is not None else h.count
-    per = 4 if cfg.network.offsets else 3
-    n_unknown = per * n_heads + 3 * len(tid) - 6
-    if n_heads * len(tid) < n_unknown:
-        t_min = per * n_heads - 6
-        t_min = -(-t_min // (n_heads - 3))
-        raise MultilatError(f"{source}: targets: {len(tid)} targets and {n_heads} heads give at most "
-                            f"{n_heads * len(tid)} distances for {n_unknown} unknowns: need at least "
-                            f"{t_min} targets")
+        ids = head_ids(h.count, design_head_names(sigma.instrument))
+        _check_heads(sigma, ids, f"{source}: heads.count")
+    known |= set(ids)
+    _check_counts(len(ids), len(tid), cfg.network.offsets, source)
     for a, b in c.lengths:
         for p in (a, b):
             if p not in known:
@@ -415,23 +449,12 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
     search = None
     occ = tuple((o.box_min_m, o.box_max_m) for o in cfg.occluders)
     if fixed is not None:
-        hid = _hidden(cfg, tuple(fixed.ids), tid, source)
-        _check_reach(tid, tx, fixed.xyz_m, None, rmin, rmax, source, hid, occ, tuple(fixed.ids))
+        hid = _hidden(cfg, ids, tid, source)
+        _check_reach(tid, tx, fixed.xyz_m, None, rmin, rmax, source, hid, occ, ids)
         lay = Layout(fixed.ids, fixed.xyz_m, tid, tx,
                      visibility(fixed.xyz_m, tx, min_range_m=rmin, max_range_m=rmax, hidden=hid,
                                 occluders=occ))
-        if coupled:
-            from multilat.network.design.couplings import preanalyse_coupled
-
-            if c.target_u95_m is not None:
-                raise MultilatError(f"{source}: criterion.target_u95_m (fewest targets) does not use scale "
-                                    "bars or control points yet: leave them out for that search")
-            pa = preanalyse_coupled(lay, sigma, scale_bars=[(b.a, b.b, b.u_um * 1e-6) for b in net.scale_bars],
-                                    control=[(k.point, *(v * 1e-6 for v in k.s_um)) for k in net.control],
-                                    **kw)
-            return DesignRun(c.name, None, pa, pa, sigma, None)
-        pa = preanalyse(lay, sigma, **kw)
-        return DesignRun(c.name, None, pa, pa, sigma, _select(c, pa, sigma, kw))
+        return _evaluate(cfg, lay, sigma, kw, source)
     if coupled:
         raise MultilatError(f"{source}: network.scale_bars / network.control are used in the pre-analysis of "
                             "given heads (heads.fixed or --evaluate); the optimisation does not model them yet")
@@ -439,10 +462,10 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
     if h.file is not None:
         cand = _read_points(base, h.file)
         hid = _hidden(cfg, tuple(cand.ids), tid, source)
-        _check_reach(tid, tx, cand.xyz_m, None, rmin, rmax, source, hid, occ)
+        _check_reach(tid, tx, cand.xyz_m, None, rmin, rmax, source, hid, occ, tuple(cand.ids))
         search = choose_candidates(tx, cand.xyz_m, count=h.count, sigma=sigma, target_ids=tid,
                                    candidate_ids=cand.ids, criterion=c.name, min_range_m=rmin,
-                                   hidden=hid, occluders=occ,
+                                   hidden=hid, occluders=occ, head_names=ids,
                                    max_range_m=rmax, max_evaluations=s.max_evaluations, rng=rng, **skw)
     else:
         _check_reach(tid, tx, None, (h.box_min_m, h.box_max_m), rmin, rmax, source)
@@ -454,18 +477,95 @@ def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, 
             start = sp.xyz_m
         search = optimise_heads(tx, count=h.count, box_min_m=h.box_min_m, box_max_m=h.box_max_m,
                                 sigma=sigma, target_ids=tid, criterion=c.name, start=start,
-                                hidden=_hidden(cfg, head_ids(h.count), tid, source), occluders=occ,
+                                hidden=_hidden(cfg, ids, tid, source), occluders=occ, head_names=ids,
                                 min_range_m=rmin, max_range_m=rmax, method=s.method, starts=s.starts,
                                 max_evaluations=s.max_evaluations, rng=rng, **skw)
-    if search.criterion_m >= 1e3:
+    if search.criterion_m >= PENALTY_M:
         raise MultilatError(f"{source}: no solvable layout found (every head layout tried leaves a "
                             "target seen by too few heads): widen the heads box or the range limits")
+    if h.file is not None:      # the i-th chosen candidate holds the i-th design head
+        sigma = sigma.with_station_heads({**dict(zip(search.start_layout.station_ids, ids)),
+                                          **dict(zip(search.layout.station_ids, ids))})
     try:
         start_pa = preanalyse(search.start_layout, sigma, **kw)
     except MultilatError:
         start_pa = None
     best = preanalyse(search.layout, sigma, **kw)
-    return DesignRun(c.name, search, best, start_pa, sigma, _select(c, best, sigma, kw))
+    return _run(c.name, search, best, start_pa, sigma, _select(c, best, sigma, kw))
+
+
+def _sigma_model(ic: InstrumentCfg, base: Path, rmax: float) -> SigmaModel:
+    """The distance model of ``[instrument]``: a constant σ, or a preset's or file's model tabulated up
+    to twice the heads' range (at least 100 m)."""
+    from multilat import instrument as _inst
+
+    if ic.sigma_um is not None:
+        return SigmaModel(ic.sigma_um * 1e-6)
+    return SigmaModel(instrument=_inst.load_instrument(ic.preset or str(base / ic.file)),
+                      max_distance_m=max(100.0, 2 * rmax if np.isfinite(rmax) else 100.0))
+
+
+def _check_counts(n_heads: int, n_targets: int, offsets: bool, source: str) -> None:
+    """Enough distances for the unknowns (one line naming the fewest targets if not)."""
+    per = 4 if offsets else 3
+    n_unknown = per * n_heads + 3 * n_targets - 6
+    if n_heads * n_targets < n_unknown:
+        t_min = -(-(per * n_heads - 6) // (n_heads - 3))
+        raise MultilatError(f"{source}: targets: {n_targets} targets and {n_heads} heads give at most "
+                            f"{n_heads * n_targets} distances for {n_unknown} unknowns: need at least "
+                            f"{t_min} targets")
+
+
+def _evaluate(cfg: DesignConfig, lay: Layout, sigma: SigmaModel, kw: dict, source: str) -> DesignRun:
+    """The pre-analysis of given heads (with the config's scale bars and control, if any)."""
+    c, net = cfg.criterion, cfg.network
+    if net.scale_bars or net.control:
+        from multilat.network.design.couplings import preanalyse_coupled
+
+        if c.target_u95_m is not None:
+            raise MultilatError(f"{source}: criterion.target_u95_m (fewest targets) does not use scale "
+                                "bars or control points yet: leave them out for that search")
+        pa = preanalyse_coupled(lay, sigma, scale_bars=[(b.a, b.b, b.u_um * 1e-6) for b in net.scale_bars],
+                                control=[(k.point, *(v * 1e-6 for v in k.s_um)) for k in net.control], **kw)
+        return _run(c.name, None, pa, pa, sigma, None)
+    pa = preanalyse(lay, sigma, **kw)
+    return _run(c.name, None, pa, pa, sigma, _select(c, pa, sigma, kw))
+
+
+def _check_heads(sigma: SigmaModel, ids, where: str) -> None:
+    """Every design station resolves to a head of the instrument (one line naming ``where`` if not)."""
+    for sid in ids:
+        try:
+            sigma.head_of(sid)
+        except MultilatError as exc:
+            raise MultilatError(f"{where}: {exc}") from None
+
+
+def _run(criterion, search, best, start, sigma, selection) -> DesignRun:
+    return DesignRun(criterion, search, best, start, sigma, selection,
+                     tuple(sigma.head_of(sid) for sid in best.station_ids), poorly_controlled_targets(best))
+
+
+def poorly_controlled_targets(pa: PreAnalysis, *, r_min: float | None = None,
+                              mdb_limit_sigma: float | None = None) -> tuple:
+    """The targets owning a poorly controlled distance (redundancy number below ``r_min`` or MDB
+    above ``mdb_limit_sigma`` σ; the adjustment's defaults :data:`~multilat.network.reliability.R_MIN`
+    and :data:`~multilat.network.reliability.MDB_LIMIT_SIGMA`): a blunder in such a distance would
+    not show in the residuals. One dict per target (``id``, ``n_obs`` poorly controlled, smallest
+    ``redundancy``, largest ``mdb_m`` and ``mdb_sigma``), smallest redundancy first."""
+    from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
+
+    r_min = R_MIN if r_min is None else r_min
+    lim = MDB_LIMIT_SIGMA if mdb_limit_sigma is None else mdb_limit_sigma
+    red, mdb = pa.redundancy, pa.mdb_m
+    mdb_sig = mdb / pa.sigma_m
+    poor = (red < r_min) | ~(mdb_sig <= lim)
+    out = []
+    for j in np.unique(pa.target_index[poor]):
+        k = poor & (pa.target_index == j)
+        out.append({"id": pa.target_ids[j], "n_obs": int(k.sum()), "redundancy": float(red[k].min()),
+                    "mdb_m": float(mdb[k].max()), "mdb_sigma": float(mdb_sig[k].max())})
+    return tuple(sorted(out, key=lambda d: d["redundancy"]))
 
 
 def _select(c: CriterionCfg, pa: PreAnalysis, sigma, kw):

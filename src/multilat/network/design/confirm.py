@@ -16,10 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network import statistics as st
 
 __all__ = ["DesignSimulation", "simulate_design"]
-
-_CHI2_3_95 = 7.814727903251178
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,8 +108,8 @@ def simulate_design(pa, *, trials: int = 4000, rng=None, noise: str = "gaussian"
         z = np.where(se > 0, (mc - pred) / se, 0.0)
     pid = {p: k for k, p in enumerate(res.point_ids)}
     Cmc = np.stack([res.point_cov_mc[pid[t]] for t in lay.target_ids])
-    u_mc = np.sqrt(_CHI2_3_95 * np.clip(np.linalg.eigvalsh(Cmc)[:, -1], 0, None))
-    u_pred = np.sqrt(_CHI2_3_95 * np.clip(np.linalg.eigvalsh(C)[:, -1], 0, None))
+    u_mc = np.sqrt(st.CHI2_3_95 * np.clip(np.linalg.eigvalsh(Cmc)[:, -1], 0, None))
+    u_pred = np.sqrt(st.CHI2_3_95 * np.clip(np.linalg.eigvalsh(C)[:, -1], 0, None))
     # coverage of the predicted ellipsoid: trials whose target deviation has d^T C^-1 d <= chi2(3)
     samples = res.samples                           # (n, k) float32 deviations
     cov_frac = np.full(lay.n_targets, np.nan)
@@ -121,6 +120,6 @@ def simulate_design(pa, *, trials: int = 4000, rng=None, noise: str = "gaussian"
                 m2 = np.einsum("ni,ij,nj->n", dv, np.linalg.inv(C[j]), dv)
             except np.linalg.LinAlgError:
                 continue
-            cov_frac[j] = float(np.mean(m2 <= _CHI2_3_95))
+            cov_frac[j] = float(np.mean(m2 <= st.CHI2_3_95))
     return DesignSimulation(noise, int(res.trials), int(res.n_failed), lay.target_ids, pred, mc, se, z,
                             u_pred, u_mc, cov_frac, res.lin_std[rows], float(res.input_std_ratio), res)

@@ -83,7 +83,6 @@ def preanalyse_coupled(layout, sigma, *, scale_bars=(), control=None, offsets: b
     fixed = None if offsets else {sid: 0.0 for sid in layout.station_ids}
     res = adjust(obs, initial=start, datum=dat, points=points, scale_bars=refs, offsets=fixed,
                  snooping=False, alpha=alpha, power=power, solver="dense")
-    s = layout.n_stations
     tcov = res.target_cov_m2
     lens_out = []
     for pa, pb in lengths:

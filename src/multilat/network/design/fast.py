@@ -31,8 +31,6 @@ from multilat.network.model import Q, inv3
 
 __all__ = ["fast_criterion", "fast_target_cov_m2"]
 
-_CHI2_3_95 = 7.814727903251178
-
 
 def _datum_GH(layout, datum, s, t, p):
     """Rigid motions ``G`` and ``H = E_d (Gᵀ E_d)⁻¹`` on the head rows (sp, 6) and per target (t, 3, 6)."""
@@ -128,7 +126,7 @@ def fast_criterion(name: str, layout, sig_mat, *, offsets=True, datum="free", al
     except MultilatError:
         return float("inf")
     if name == "max_u95":
-        return float(np.sqrt(_CHI2_3_95 * max(np.linalg.eigvalsh(P["cov"])[:, -1].max(), 0.0)))
+        return float(np.sqrt(st.CHI2_3_95 * max(np.linalg.eigvalsh(P["cov"])[:, -1].max(), 0.0)))
     if name == "rms_u":
         return float(np.sqrt(np.trace(P["cov"], axis1=1, axis2=2).mean()))
     if name == "max_mdb":

@@ -30,7 +30,7 @@ from multilat.network.data import Observations
 from multilat.network.datum import Datum, helmert_basis, parse_datum
 from multilat.network.model import Q, residuals_and_jacobian
 
-__all__ = ["Layout", "SigmaModel", "PreAnalysis", "preanalyse", "covariance", "CRITERIA",
+__all__ = ["Layout", "SigmaModel", "design_head_names", "PreAnalysis", "preanalyse", "covariance", "CRITERIA",
            "criterion_value", "layout_observations", "probe_cov_m2", "DENSE_MAX_PARAMS"]
 
 #: optimisation criteria (docs/design.md): name -> description
@@ -40,8 +40,6 @@ CRITERIA = {
     "length_u": "largest standard uncertainty of the chosen interpoint lengths (m)",
     "max_mdb": "largest minimal detectable bias over the distances (m)",
 }
-
-_CHI2_3_95 = 7.814727903251178      # chi-square quantile, 3 degrees of freedom, 0.95
 
 
 # ---------------------------------------------------------------------------------------------
@@ -107,11 +105,14 @@ class SigmaModel:
     0.01 m to ``max_distance_m`` and interpolated: relative error below 1e-6 of the model, whose own
     Monte Carlo precision is ~0.3 %).
 
-    ``heads``: the instrument head of each station (station ids that name a head use it, the others
-    head ``"A"``).
+    The instrument head of a station (:meth:`head_of`): ``station_heads[id]`` when given (a chosen
+    candidate position: the design head it holds), else the station id when the instrument has a
+    head of that name, else head ``"A"`` (or ``[heads.default]``); an instrument with neither
+    refuses the station by name.
     """
 
-    def __init__(self, sigma_m: float | None = None, *, instrument=None, max_distance_m: float = 100.0):
+    def __init__(self, sigma_m: float | None = None, *, instrument=None, max_distance_m: float = 100.0,
+                 station_heads: dict | None = None):
         if (sigma_m is None) == (instrument is None):
             raise MultilatError("give either sigma_m or an instrument")
         self.sigma_m = None if sigma_m is None else float(sigma_m)
@@ -120,6 +121,14 @@ class SigmaModel:
         self.instrument = instrument
         self._grid = np.geomspace(0.01, max(max_distance_m, 1.0), 400)
         self._tables: dict[str, np.ndarray] = {}
+        self.station_heads = dict(station_heads or {})
+
+    def with_station_heads(self, station_heads: dict) -> "SigmaModel":
+        """This model with ``station_heads`` (station id -> instrument head) added; tables shared."""
+        out = SigmaModel.__new__(SigmaModel)
+        out.__dict__.update(self.__dict__)
+        out.station_heads = {**self.station_heads, **station_heads}
+        return out
 
     def describe(self) -> str:
         if self.sigma_m is not None:
@@ -127,8 +136,17 @@ class SigmaModel:
         return f"instrument {getattr(self.instrument, 'name', 'model')}"
 
     def head_of(self, station_id: str) -> str:
-        names = set(getattr(self.instrument, "heads", {}) or {})
-        return station_id if station_id in names else "A"
+        """The instrument head measuring from ``station_id`` (see the class)."""
+        inst = self.instrument
+        if station_id in self.station_heads:
+            return self.station_heads[station_id]
+        if inst is None or inst.has_head(station_id):
+            return station_id
+        if inst.has_head("A"):
+            return "A"
+        raise MultilatError(f"station {station_id!r} is not a head of instrument {inst.name!r} (heads: "
+                            f"{', '.join(design_head_names(inst))}): name the station after a head, or "
+                            "add a [heads.default] block")
 
     def __call__(self, distance_m, station_index, station_ids) -> np.ndarray:
         d = np.asarray(distance_m, float)
@@ -144,6 +162,14 @@ class SigmaModel:
             sel = station_index == i
             out[sel] = np.interp(np.log(d[sel]), np.log(self._grid), self._tables[h])
         return out
+
+
+def design_head_names(instrument) -> tuple[str, ...]:
+    """The heads an instrument names, in its file's order (``[heads.X]`` blocks but ``default``, then
+    the ``[head_map]`` entries); () with no instrument."""
+    if instrument is None:
+        return ()
+    return tuple(h for h in instrument.heads if h != "default") + tuple(instrument.head_map)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -251,7 +277,7 @@ def _point_blocks(cov, s, t):
 
 
 def _u95_max(cov3):
-    return np.sqrt(_CHI2_3_95 * np.clip(np.linalg.eigvalsh(cov3)[..., -1], 0.0, None))
+    return np.sqrt(st.CHI2_3_95 * np.clip(np.linalg.eigvalsh(cov3)[..., -1], 0.0, None))
 
 
 def _length_u(layout: Layout, cov, pairs):

@@ -44,9 +44,17 @@ def min_heads(offsets: bool) -> int:
     return 4
 
 
-def head_ids(count: int) -> tuple[str, ...]:
-    """``A, B, C, ...`` (the instrument's head names), then ``H27, H28, ...``."""
-    return tuple(chr(65 + i) if i < 26 else f"H{i + 1}" for i in range(count))
+def head_ids(count: int, names=()) -> tuple[str, ...]:
+    """The design's head ids: ``names`` (the instrument's head names, :func:`design_head_names`)
+    first, then ``A, B, C, ...``, ``H27, H28, ...`` not already taken."""
+    out = list(names)[:count]
+    k = 0
+    while len(out) < count:
+        g = chr(65 + k) if k < 26 else f"H{k + 1}"
+        k += 1
+        if g not in out:
+            out.append(g)
+    return tuple(out)
 
 
 def visibility(station_xyz_m, target_xyz_m, *, min_range_m=0.0, max_range_m=math.inf, hidden=None,
@@ -95,11 +103,25 @@ def corner_start(count: int, box_min_m, box_max_m, rng) -> np.ndarray:
 
 @dataclass(frozen=True)
 class SearchStart:
-    """One local search: its start and end criterion (m) and evaluations used."""
+    """One local search: its start and end criterion (m; None where that layout is unsolvable: a
+    target seen by fewer than 3 heads or a singular geometry, which the search scores
+    :data:`PENALTY_M`) and the evaluations used."""
 
-    start_criterion_m: float
-    end_criterion_m: float
+    start_criterion_m: float | None
+    end_criterion_m: float | None
     evaluations: int
+
+    @classmethod
+    def of(cls, start: float, end: float, evaluations: int) -> "SearchStart":
+        """From the objective's values: a penalised (unsolvable) value becomes None."""
+        def real(v):
+            return None if v >= PENALTY_M else float(v)
+
+        return cls(real(start), real(end), int(evaluations))
+
+    @property
+    def start_unsolvable(self) -> bool:
+        return self.start_criterion_m is None
 
 
 @dataclass(frozen=True, eq=False)
@@ -180,7 +202,7 @@ def optimise_heads(target_xyz_m, *, count: int, box_min_m, box_max_m, sigma, tar
                    criterion: str = "max_u95", start=None, offsets: bool = True, datum="free",
                    lengths=(), min_range_m: float = 0.0, max_range_m: float = math.inf, hidden=None,
                    occluders=(), method: str = "multistart", starts: int = 8, max_evaluations: int = 20_000,
-                   rng=None, evaluation: str = "auto") -> DesignResult:
+                   rng=None, evaluation: str = "auto", head_names=()) -> DesignResult:
     """Head positions in a box that minimise a design criterion for the given targets.
 
     Parameters
@@ -200,6 +222,7 @@ def optimise_heads(target_xyz_m, *, count: int, box_min_m, box_max_m, sigma, tar
     rng : Generator, int or None
     evaluation : "auto", "dense" or "blocked"  how the criterion is computed
         (:func:`~multilat.network.design.preanalysis.criterion_value`'s ``method``)
+    head_names : sequence of str  the heads' ids (default ``A, B, ...``; :func:`head_ids`)
 
     Returns
     -------
@@ -215,7 +238,7 @@ def optimise_heads(target_xyz_m, *, count: int, box_min_m, box_max_m, sigma, tar
     if not np.all(hi > lo):
         raise MultilatError("heads box: box_max_m must exceed box_min_m in every axis")
     x0 = corner_start(count, lo, hi, rng) if start is None else np.asarray(start, float).reshape(count, 3)
-    obj = _Objective(tid, tx, head_ids(count), _sigma(sigma), criterion,
+    obj = _Objective(tid, tx, head_ids(count, head_names), _sigma(sigma), criterion,
                      dict(offsets=offsets, datum=datum, lengths=tuple(lengths), method=evaluation),
                      (min_range_m, max_range_m), hidden, occluders)
     bounds = list(zip(np.tile(lo, count), np.tile(hi, count)))
@@ -230,7 +253,7 @@ def optimise_heads(target_xyz_m, *, count: int, box_min_m, box_max_m, sigma, tar
             res = optimize.minimize(obj, np.clip(xs, np.tile(lo, count), np.tile(hi, count)),
                                     method="Powell", bounds=bounds,
                                     options=dict(maxfev=per, xtol=1e-4, ftol=1e-7))
-            runs.append(SearchStart(float(fs), float(res.fun), obj.n - n_before))
+            runs.append(SearchStart.of(fs, res.fun, obj.n - n_before))
             hist.append(obj.best[0])
             if obj.n >= max_evaluations:
                 break
@@ -243,7 +266,7 @@ def optimise_heads(target_xyz_m, *, count: int, box_min_m, box_max_m, sigma, tar
         n_before = obj.n
         pol = optimize.minimize(obj, obj.best[1], method="Powell", bounds=bounds,
                                 options=dict(maxfev=max(200, max_evaluations // 10), xtol=1e-4, ftol=1e-7))
-        runs.append(SearchStart(float(res.fun), float(pol.fun), obj.n - n_before))
+        runs.append(SearchStart.of(res.fun, pol.fun, obj.n - n_before))
         hist.append(obj.best[0])
     else:
         raise MultilatError(f"method must be multistart or differential_evolution, got {method!r}")
@@ -256,10 +279,12 @@ def choose_candidates(target_xyz_m, candidates_xyz_m, *, count: int, sigma, targ
                       candidate_ids=None, criterion: str = "max_u95", offsets: bool = True,
                       datum="free", lengths=(), min_range_m: float = 0.0,
                       max_range_m: float = math.inf, max_evaluations: int = 20_000,
-                      rng=None, evaluation: str = "auto", hidden=None, occluders=()) -> DesignResult:
+                      rng=None, evaluation: str = "auto", hidden=None, occluders=(),
+                      head_names=()) -> DesignResult:
     """The ``count`` candidate positions (c, 3) that minimise the criterion (exhaustive when the
     combinations fit in ``max_evaluations``, else random combinations then single swaps). The
-    returned layout's station ids are the chosen candidates' ids. ``hidden`` (c, t): targets each
+    returned layout's station ids are the chosen candidates' ids (the i-th chosen is head
+    ``head_ids(count, head_names)[i]`` of the instrument). ``hidden`` (c, t): targets each
     candidate cannot see; ``occluders`` as :func:`optimise_heads`."""
     _check(criterion, count, offsets, lengths)
     rng = np.random.default_rng(rng)
@@ -270,7 +295,7 @@ def choose_candidates(target_xyz_m, candidates_xyz_m, *, count: int, sigma, targ
         raise MultilatError(f"count: {count} heads but only {c} candidate positions")
     tx = np.asarray(target_xyz_m, float).reshape(-1, 3)
     tid = tuple(str(i + 1) for i in range(len(tx))) if target_ids is None else tuple(target_ids)
-    obj = _Objective(tid, tx, head_ids(count), _sigma(sigma), criterion,
+    obj = _Objective(tid, tx, head_ids(count, head_names), _sigma(sigma), criterion,
                      dict(offsets=offsets, datum=datum, lengths=tuple(lengths), method=evaluation),
                      (min_range_m, max_range_m), None, occluders)
     hid = None if hidden is None else np.asarray(hidden, bool).reshape(c, len(tx))
@@ -316,4 +341,4 @@ def choose_candidates(target_xyz_m, candidates_xyz_m, *, count: int, sigma, targ
         return Layout(tuple(cid[i] for i in sub), base.station_xyz_m, tid, tx, base.visible)
 
     return DesignResult(criterion, lay(best), float(cache[best]), lay(first), float(f0), method, obj.n,
-                        (SearchStart(float(f0), float(cache[best]), obj.n),), np.array(hist))
+                        (SearchStart.of(f0, cache[best], obj.n),), np.array(hist))

@@ -20,8 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.design.preanalysis import (_CHI2_3_95, DENSE_MAX_PARAMS, Layout, covariance,
+from multilat.network.design.preanalysis import (DENSE_MAX_PARAMS, Layout, covariance,
                                                  probe_cov_m2)
+from multilat.network import statistics as st
 from multilat.network.model import Q
 
 __all__ = ["TargetSelection", "select_targets", "work_volume_u95_m"]
@@ -71,7 +72,7 @@ def work_volume_u95_m(layout: Layout, sigma_m, probe_xyz_m, probe_visible, *, of
                      visible=probe_visible)
     if not np.all(np.isfinite(c)):
         return float("inf")
-    return float(np.sqrt(_CHI2_3_95 * max(np.linalg.eigvalsh(c)[:, -1].max(), 0.0)))
+    return float(np.sqrt(st.CHI2_3_95 * max(np.linalg.eigvalsh(c)[:, -1].max(), 0.0)))
 
 
 def select_targets(layout: Layout, sigma, wanted_u95_m: float, *, offsets: bool = True,

@@ -20,7 +20,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.general.points import PointSet
 
-__all__ = ["Block", "Network", "without_points"]
+__all__ = ["Block", "Network", "without_points", "without_rows", "point_keys"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,27 +103,54 @@ def without_points(network: Network, ids) -> tuple[Network, int]:
     new_index = np.cumsum(~gone) - 1                      # old point index -> new one
     blocks, removed = [], 0
     for b in network.blocks:
-        point_keys = [k for k in b.index if k not in b.names and k not in ("axis", "component")]
         keep = np.ones(b.n_rows, bool)
-        for k in point_keys:
+        for k in point_keys(b):
             keep &= ~gone[np.asarray(b.index[k], int)]
         removed += int((~keep).sum())
-        if not keep.any():
-            continue
-        index = {k: (new_index[np.asarray(v, int)[keep]] if k in point_keys else np.asarray(v)[keep])
-                 for k, v in b.index.items()}
-        names = {}
-        for k, nm in b.names.items():                     # compact sets / instruments / set-ups still used
-            used = sorted(set(int(i) for i in index[k] if i >= 0))
-            remap = {o: n for n, o in enumerate(used)}
-            index[k] = np.array([remap.get(int(i), -1) for i in index[k]], int)
-            names[k] = tuple(nm[o] for o in used)
-        data = {k: np.asarray(v)[keep] for k, v in b.data.items()}
-        labels = tuple(np.asarray(b.labels, object)[keep]) if len(b.labels) == b.n_rows else b.labels
-        cov = None if b.cov is None else np.asarray(b.cov)[np.ix_(keep, keep)]
-        blocks.append(Block(b.kind, np.asarray(b.value)[keep], np.asarray(b.sigma)[keep], cov, index, data,
-                            labels, names, b.options))
+        if keep.any():
+            blocks.append(_subset_block(b, keep, new_index))
     k = ~gone
     p = PointSet(tuple(np.array(pts.ids, object)[k]), pts.xyz_m[k], pts.status[k], pts.sigma_m[k],
                  pts.constrained[k])
     return Network(p, tuple(blocks), network.notes), removed
+
+
+def without_rows(network: Network, drop: dict) -> Network:
+    """The network without some observation rows: ``drop`` {block position in ``network.blocks``: (R,)
+    bool mask or row indices of the rows to remove}. A correlated block keeps the covariance of its
+    remaining rows; a block left without rows is dropped, and so are direction sets, instruments and
+    set-ups left without rows (as :func:`without_points`). The points stay."""
+    same = np.arange(network.points.n)
+    blocks = []
+    for q, b in enumerate(network.blocks):
+        keep = np.ones(b.n_rows, bool)
+        if q in drop:
+            keep[np.asarray(drop[q])] = False
+        if keep.all():
+            blocks.append(b)
+        elif keep.any():
+            blocks.append(_subset_block(b, keep, same))
+    return Network(network.points, tuple(blocks), network.notes)
+
+
+def point_keys(b: Block) -> list:
+    """The keys of ``b.index`` that refer to points (``from``, ``to``, ``bs``, ``fs``, ``point``)."""
+    return [k for k in b.index if k not in b.names and k not in ("axis", "component")]
+
+
+def _subset_block(b: Block, keep: np.ndarray, new_index: np.ndarray) -> Block:
+    """The rows ``keep`` of ``b``, point references renumbered by ``new_index`` (old -> new)."""
+    pkeys = point_keys(b)
+    index = {k: (new_index[np.asarray(v, int)[keep]] if k in pkeys else np.asarray(v)[keep])
+             for k, v in b.index.items()}
+    names = {}
+    for k, nm in b.names.items():                     # compact sets / instruments / set-ups still used
+        used = sorted(set(int(i) for i in index[k] if i >= 0))
+        remap = {o: n for n, o in enumerate(used)}
+        index[k] = np.array([remap.get(int(i), -1) for i in index[k]], int)
+        names[k] = tuple(nm[o] for o in used)
+    data = {k: np.asarray(v)[keep] for k, v in b.data.items()}
+    labels = tuple(np.asarray(b.labels, object)[keep]) if len(b.labels) == b.n_rows else b.labels
+    cov = None if b.cov is None else np.asarray(b.cov)[np.ix_(keep, keep)]
+    return Block(b.kind, np.asarray(b.value)[keep], np.asarray(b.sigma)[keep], cov, index, data, labels, names,
+                 b.options)

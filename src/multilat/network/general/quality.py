@@ -21,8 +21,12 @@ beyond (the global test then the variance factor's, at ``alpha_family``); ``"b-m
 ``"sidak"`` force one, ``"fixed"`` takes ``alpha_global``. MDBs stay at Baarda's reference
 (``alpha``, power 80 %), as on the distance-only path. ``variance_factor="known"``: the global χ² test
 decides and each row's w-test uses the a-priori σ; ``"unknown"``: σ0 is estimated, the global test is information only, each row gets
-Pope's τ = w / σ̂0, and the covariances and MDBs are scaled by σ̂0². No observation is rejected here
-(no data snooping on the general path yet): the failing tests are listed.
+Pope's τ = w / σ̂0, and the covariances and MDBs are scaled by σ̂0². No observation is rejected here:
+data snooping (:mod:`.snooping`) calls this once per round with the levels fixed at its start
+(``levels``).
+
+External reliability (``external=True``, the default): each row's largest point shift caused by a bias
+of its MDB, and which point (:func:`.reliability.external_shifts`, ``∇x = Q Jᵀ P ∇l``).
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ import numpy as np
 
 from multilat.network import statistics as st
 from multilat.network.general import kinds as kinds_registry
+from multilat.network.general import reliability as rel
 
 __all__ = ["GeneralStatistics", "statistics", "POWER"]
 
@@ -47,7 +52,9 @@ class GeneralStatistics:
     r = 0), ``statistic`` (w, or τ = w / σ̂0 with the variance factor unknown), ``passed``,
     ``mdb`` (SI; inf where r = 0), ``mdb_sigma`` (MDB / σ), ``bias_to_noise``.
     Per point (n,): ``cov_m2`` (n, 3, 3) (a posteriori with the variance factor unknown),
-    ``semi_axes_95_m`` (n, 3) ascending, ``axes_95`` (n, 3, 3).
+    ``semi_axes_95_m`` (n, 3) ascending, ``axes_95`` (n, 3, 3). ``shift_max_m`` (R,): the largest point shift caused by the row's MDB (inf
+    where r = 0; NaN when not computed), ``shift_point`` its point's id. ``levels``: the test
+    procedure (:class:`~multilat.network.statistics.TestLevels`).
     """
 
     sigma0: float
@@ -74,21 +81,27 @@ class GeneralStatistics:
     cov_m2: np.ndarray
     semi_axes_95_m: np.ndarray
     axes_95: np.ndarray
+    shift_max_m: np.ndarray
+    shift_point: tuple
+    levels: st.TestLevels
 
 
 def statistics(system, result, *, alpha: float = 0.001, variance_factor: str = "known",
                alpha_global: float | None = None, power: float = POWER, method: str | None = None,
-               alpha_family: float = st.ALPHA_FAMILY) -> GeneralStatistics:
+               alpha_family: float = st.ALPHA_FAMILY, levels: st.TestLevels | None = None,
+               external: bool = True) -> GeneralStatistics:
     """The statistics of ``result`` (a :class:`~.adjust.GeneralResult` of ``system``); the tests'
     levels by :func:`~multilat.network.statistics.test_levels` (``method`` None: ``"fixed"`` when
-    ``alpha_global`` is given, else ``"auto"``)."""
+    ``alpha_global`` is given, else ``"auto"``), or ``levels`` as given (data snooping keeps those of
+    its first round)."""
     rw = system.whiten(result.residuals)
     vtpv = float(rw @ rw)
     dof = result.dof
     red = result.redundancy
     method = method or ("fixed" if alpha_global is not None else "auto")
-    levels = st.test_levels(int(np.count_nonzero(red > 1e-9)), alpha0=alpha, power=power, method=method,
-                            alpha_global=alpha_global, alpha_family=alpha_family)
+    if levels is None:
+        levels = st.test_levels(int(np.count_nonzero(red > st.R_ZERO)), alpha0=alpha, power=power,
+                                method=method, alpha_global=alpha_global, alpha_family=alpha_family)
     lam = st.noncentrality(alpha, power)
     gt = st.global_test(vtpv, dof, alpha=levels(dof), lambda0=lam)
     alpha_w = levels.alpha0                                # each row's test: Šidák's α0 on large networks
@@ -101,15 +114,20 @@ def statistics(system, result, *, alpha: float = 0.001, variance_factor: str = "
         stat, crit, test = w / scale, st.tau_critical(alpha_w, dof), "tau"
     else:
         stat, crit, test = w, st.w_critical(alpha_w), "w"
-    controlled = red > 1e-9
+    controlled = red > st.R_ZERO
     passed = ~controlled | ~(np.abs(stat) > crit)          # an uncontrolled row cannot fail (nor pass a real test)
     mdb = st.minimal_detectable_bias_m(sigma * scale, red, alpha=alpha, power=power)
     cov = np.stack([result.point_cofactor(p) for p in result.ids]) * scale ** 2 if result.ids else np.zeros((0, 3, 3))
     semi, axes = st.confidence_ellipsoid(cov, level=0.95)
+    if external:
+        jw = rel.whitened_jacobian(system, result)
+        shift, where = rel.external_shifts(result, jw, rel.mdb_whitened(red, alpha=alpha, power=power, scale=scale))
+    else:
+        shift, where = np.full(red.shape, np.nan), ("",) * red.size
     return GeneralStatistics(
         sigma0=result.sigma0, dof=dof, test_method=levels.method, vtpv=vtpv,
         global_test=gt, alpha0=alpha_w, critical=float(crit), test=test,
         variance_factor=variance_factor, lambda0=lam, rule=levels.rule, residual=result.residuals, sigma=sigma, angular=angular,
         redundancy=red, w=w, statistic=stat, passed=passed, mdb=mdb, mdb_sigma=mdb / sigma,
         bias_to_noise=st.bias_to_noise_ratio(red, alpha=alpha, power=power), cov_m2=cov, semi_axes_95_m=semi,
-        axes_95=axes)
+        axes_95=axes, shift_max_m=shift, shift_point=tuple(where), levels=levels)

@@ -9,7 +9,7 @@ import numpy as np
 
 from multilat.network.general.points import FIXED, FREE, WEIGHTED
 
-__all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "SETUP_KINDS"]
+__all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "row_record", "external_reliability", "SETUP_KINDS"]
 
 #: kinds whose ``from`` point carries an instrument set-up (the others: levelling, vectors)
 SETUP_KINDS = ("slope_distance", "direction", "zenith_angle", "horizontal_distance", "horizontal_angle",
@@ -83,36 +83,81 @@ def datum_words(points, result) -> str:
 def observation_rows(system, stats) -> list[dict]:
     """One dict per row of the adjusted system (the ``observations`` table of the JSON)."""
     ids = system.network.points.ids
-    out = []
-    for b, sl in zip(system.blocks, system.rows):
-        labels = b.labels if len(b.labels) == b.n_rows else ("",) * b.n_rows
-        for k in range(b.n_rows):
-            row = {"kind": b.kind}
-            for key in ("from", "to", "bs", "fs", "point"):
-                if key in b.index:
-                    row[key] = ids[int(b.index[key][k])]
-            if "axis" in b.index:
-                row["axis"] = "xyz"[int(b.index["axis"][k])]
-            if "component" in b.index:
-                row["component"] = ("azimuth", "elevation")[int(b.index["component"][k])]
-            if "set" in b.index:
-                row["set"] = b.names["set"][int(b.index["set"][k])]
-            i = sl.start + k
-            row.update(label=str(labels[k]), unit=_UNIT[bool(stats.angular[i])], value=float(b.value[k]),
-                       sigma=float(stats.sigma[i]), residual=float(stats.residual[i]),
-                       redundancy=float(stats.redundancy[i]), w=float(stats.w[i]),
-                       statistic=float(stats.statistic[i]), passed=bool(stats.passed[i]),
-                       mdb=_finite(stats.mdb[i]), mdb_sigma=_finite(stats.mdb_sigma[i]))
-            out.append(row)
-    return out
+    return [_row(b, k, sl.start + k, ids, stats) for b, sl in zip(system.blocks, system.rows) for k in range(b.n_rows)]
+
+
+def row_record(system, stats, i: int) -> dict:
+    """The ``observations`` entry of row ``i`` of ``system`` (one row: data snooping's records)."""
+    q = int(np.searchsorted([sl.stop for sl in system.rows], i, side="right"))
+    return _row(system.blocks[q], i - system.rows[q].start, i, system.network.points.ids, stats)
+
+
+def _row(b, k: int, i: int, ids, stats) -> dict:
+    """Row ``k`` of block ``b``, row ``i`` of the system."""
+    row = {"kind": b.kind}
+    for key in ("from", "to", "bs", "fs", "point"):
+        if key in b.index:
+            row[key] = ids[int(b.index[key][k])]
+    if "axis" in b.index:
+        row["axis"] = "xyz"[int(b.index["axis"][k])]
+    if "component" in b.index:
+        row["component"] = ("azimuth", "elevation")[int(b.index["component"][k])]
+    if "set" in b.index:
+        row["set"] = b.names["set"][int(b.index["set"][k])]
+    label = str(b.labels[k]) if len(b.labels) == b.n_rows else ""
+    row.update(label=label, unit=_UNIT[bool(stats.angular[i])], value=float(b.value[k]),
+               sigma=float(stats.sigma[i]), residual=float(stats.residual[i]),
+               redundancy=float(stats.redundancy[i]), w=float(stats.w[i]),
+               statistic=float(stats.statistic[i]), passed=bool(stats.passed[i]),
+               mdb=_finite(stats.mdb[i]), mdb_sigma=_finite(stats.mdb_sigma[i]),
+               bias_to_noise=_finite(stats.bias_to_noise[i]), shift_max_m=_finite(stats.shift_max_m[i]),
+               shift_point=str(stats.shift_point[i]))
+    return row
 
 
 def _finite(v):
     return float(v) if np.isfinite(v) else None
 
 
-def to_json(adjustment, stats, *, source: str) -> dict:
-    """The document (without its schema stamp): points map, observations table, statistics."""
+def _plain(d: dict) -> dict:
+    """A record with numpy scalars as Python numbers and non-finite numbers as None."""
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, (bool, np.bool_)):
+            out[k] = bool(v)
+        elif isinstance(v, (int, np.integer)):
+            out[k] = int(v)
+        elif isinstance(v, (float, np.floating)):
+            out[k] = _finite(v)
+        elif isinstance(v, list):
+            out[k] = [_finite(x) if isinstance(x, (float, np.floating)) else x for x in v]
+        else:
+            out[k] = v
+    return out
+
+
+#: rows listed in ``external_reliability.largest`` (the full list: each row's ``shift_max_m``)
+WORST_SHIFTS = 10
+
+
+def external_reliability(system, stats, n: int = WORST_SHIFTS) -> dict:
+    """The rows whose MDB moves a point most (``∇x = Q Jᵀ P ∇l``), largest first, and the largest
+    shift of all; uncontrolled rows (r = 0, no MDB) are counted apart."""
+    sh = np.asarray(stats.shift_max_m, float)
+    computed = bool(np.any(~np.isnan(sh))) or sh.size == 0
+    fin = np.flatnonzero(np.isfinite(sh))
+    order = fin[np.argsort(-sh[fin], kind="stable")][:n]
+    keys = ("label", "kind", "from", "to", "bs", "fs", "point", "axis", "component", "redundancy", "mdb",
+            "mdb_sigma", "bias_to_noise", "shift_max_m", "shift_point")
+    rows = [{k: v for k, v in row_record(system, stats, int(i)).items() if k in keys} for i in order]
+    return {"computed": computed, "n_uncontrolled": int(np.count_nonzero(np.isinf(sh))),
+            "shift_max_m": _finite(sh[order[0]]) if order.size else None, "largest": rows}
+
+
+def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> dict:
+    """The document (without its schema stamp): points map, observations table, statistics; with
+    ``snooping`` (a :class:`~.snooping.Snooping`) its rejections, and ``variance`` (the
+    :class:`~.variance.GeneralVarianceComponents`) the estimated factors."""
     net, res = adjustment.network, adjustment.result
     pts = net.points
     rl = roles(net)
@@ -152,7 +197,15 @@ def to_json(adjustment, stats, *, source: str) -> dict:
                         "dof": gt.dof, "power": gt.power, "lambda0": gt.lambda0,
                         "decides": stats.variance_factor == "known", "method": stats.test_method},
         "tests": {"test": stats.test, "alpha0": stats.alpha0, "critical": stats.critical,
-                  "lambda0": stats.lambda0, "n_failed": len(failing), "snooping": False, "rule": stats.rule},
+                  "lambda0": stats.lambda0, "n_failed": len(failing), "snooping": bool(snooping and snooping.snooping),
+                  "rule": stats.rule, "steps": [_plain(s) for s in snooping.steps] if snooping else [],
+                  "snooping_note": snooping.note if snooping else ""},
+        "snooping": bool(snooping and snooping.snooping),
+        "outliers": [_plain(r) for r in snooping.rejected] if snooping else [],
+        "unlocated": [_plain(r) for r in snooping.unlocated] if snooping else [],
+        "unlocated_reason": snooping.unlocated_reason if snooping else "",
+        "external_reliability": external_reliability(adjustment.system, stats),
+        "variance_components": variance.to_json() if variance is not None else None,
         "sigma_source": {"kind": "file", "file": source,
                          "description": "a-priori σ of the gama-local input: each observation's stdev=, else the "
                                         "<points-observations> defaults (distance-stdev, direction-stdev, "

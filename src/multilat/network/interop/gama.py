@@ -26,10 +26,12 @@ values, docs/interop.md); ``cov-band="-1"``: the full covariance of the adjusted
 there is a band of 1). ``axes-xy="en"``: Gama's x is east, y north, z up, the same
 right-handed axes as multilat's x, y, z; on import any ``axes-xy`` is turned to those axes.
 
-Gama has **no additive constant per instrument**: the export writes ``d - o_i`` with the offsets
-fixed at given values (:func:`~.common.apply_offsets`), records them in ``<description>`` as
-``multilat-offsets-m: A=.. B=..``, and the importer adds them back when it finds that line
-(any other Gama file is read as distances without offsets).
+Gama has **no additive constant per instrument** (and no scale): the export writes
+``(d - o) / (1 + k)`` with each head's offset o (and scale k, when one was estimated) fixed at given
+values (:func:`~.common.apply_offsets`) and records in ``<description>`` the lines
+``multilat-offsets-m: S1=.. S2=..``, ``multilat-heads: S1=T1 S2=T2 ..`` (which head stood on each
+station) and ``multilat-scales: T1=..``; the importer restores the distances and the heads when it
+finds them (any other Gama file is read as distances without offsets, every station its own head).
 
 The adjusted output (``gama-local --xml``) is read by :mod:`.gama_adjusted`.
 """
@@ -37,20 +39,20 @@ The adjusted output (``gama-local --xml``) is read by :mod:`.gama_adjusted`.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 
 import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.io import write_text_atomic
 from multilat.network.data import Observations, Points
-from multilat.network.interop.common import (Network, apply_offsets, build_network, check_ids, fmt_m,
-                                              parse_xml, xml_escape, xml_float)
+from multilat.network.interop.angles import angle_sigmas, join_angles
+from multilat.network.interop.common import (ModelTags, Network, apply_offsets, build_network, check_ids, fmt_m,
+                                              model_lines, parse_xml, refuse_weighted_points, restore_model,
+                                              xml_escape, xml_float)
 
 __all__ = ["write_gama_local", "gama_local_text", "read_gama_local", "NAMESPACE", "GON_PER_RAD"]
 
 NAMESPACE = "http://www.gnu.org/software/gama/gama-local"
-_OFFSETS_TAG = "multilat-offsets-m:"
 #: gama-local's observation elements that multilat does not read (refused, named)
 _UNSUPPORTED = {"distance": "horizontal distances",
                 "angle": "horizontal angles", "azimuth": "azimuths",
@@ -91,12 +93,15 @@ ATTRIBUTES = {
 
 # ============================================================================ write
 def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=(),
-                    description: str = "") -> str:
+                    description: str = "", scales=None) -> str:
     """The gama-local XML of the network (see the module docstring). ``offsets``: fixed values
-    (mapping station -> m, or a number) subtracted from the distances; ``fixed``: point ids held
-    fixed (``fix="XYZ"``), the others are constrained datum points of a free network."""
+    (a number, or a mapping by head or station, m) subtracted from the distances; ``scales``: fixed
+    head scales divided out; ``fixed``: point ids held fixed (``fix="XYZ"``), the others are
+    constrained datum points of a free network. The heads, offsets and scales are recorded in
+    ``<description>`` (:func:`~.common.model_lines`)."""
     check_ids(obs, points, "gama")
-    corrected, notes = apply_offsets(obs, offsets, "GNU Gama")
+    refuse_weighted_points(points, "gama")
+    corrected, notes = apply_offsets(obs, offsets, "GNU Gama", scales)
     ids = list(obs.station_ids) + list(obs.target_ids)
     missing = [i for i in ids if points.get(i) is None]
     if missing:
@@ -105,10 +110,7 @@ def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=()
     for f in fixed:
         if f not in ids:
             raise MultilatError(f"gama: fixed point {f!r} is in no observation")
-    o = np.array([offsets[s] if isinstance(offsets, Mapping) else float(offsets)
-                  for s in obs.station_ids])
-    off_line = _OFFSETS_TAG + " " + " ".join(f"{s}={fmt_m(v, 10)}" for s, v in zip(obs.station_ids, o))
-    desc = "\n".join([description or "multilat network", off_line, *notes])
+    desc = "\n".join([description or "multilat network", *model_lines(obs, offsets, scales, "gama"), *notes])
     out = ['<?xml version="1.0" encoding="UTF-8"?>',
            f'<gama-local xmlns="{NAMESPACE}">',
            '<network axes-xy="en" angles="right-handed">',
@@ -122,7 +124,7 @@ def gama_local_text(obs: Observations, points: Points, *, offsets=None, fixed=()
         flag = 'fix="XYZ"' if i in fixed else 'adj="XYZ"'
         out.append(f'<point id="{xml_escape(i)}" x="{fmt_m(x)}" y="{fmt_m(y)}" z="{fmt_m(z)}" {flag} />')
     d, sig = corrected.distance_m, corrected.sigma_m
-    sa, se = _angle_sigmas(obs)
+    sa, se = angle_sigmas(obs, "gama", "gama-local")
     for si, sid in enumerate(obs.station_ids):
         ks = np.flatnonzero(obs.station_index == si)
         out.append(f'<obs from="{xml_escape(sid)}">')
@@ -153,23 +155,6 @@ def _gon(a_rad: float) -> str:
 
 def _cc(s_rad: float) -> str:
     return f"{float(s_rad) * GON_PER_RAD * 1e4:.9f}"      # 1e-9 cc = 1.6e-15 rad
-
-
-def _angle_sigmas(obs: Observations) -> tuple[np.ndarray, np.ndarray]:
-    """The σ of the azimuths and elevations that are observations (NaN elsewhere); an angle on a
-    station that is not levelled is refused: gama-local's directions and zenith angles are read
-    from a levelled instrument (one orientation unknown per station, the vertical known)."""
-    nan = np.full(obs.n_obs, np.nan)
-    sa = nan if obs.sigma_azimuth_rad is None else np.asarray(obs.sigma_azimuth_rad, float)
-    se = nan if obs.sigma_elevation_rad is None else np.asarray(obs.sigma_elevation_rad, float)
-    has = np.isfinite(sa) | np.isfinite(se)
-    for k in np.flatnonzero(has):
-        sid = obs.station_ids[obs.station_index[k]]
-        if sid not in obs.levelled:
-            raise MultilatError(f"gama: station {sid!r} reads angles (observation {obs.label(int(k))}) but is "
-                                "not levelled: gama-local's directions and zenith angles need a levelled "
-                                f"instrument (declare it with --levelled {sid}, or drop its angle columns)")
-    return sa, se
 
 
 def write_gama_local(path, obs: Observations, points: Points, **kw) -> None:
@@ -238,11 +223,10 @@ def read_gama_local(path) -> Network:
         raise MultilatError(f"{path}:{net.line}: angles={sense!r} must be left-handed or right-handed")
     declared, coords, fixed, rows, notes = {}, {}, [], [], []
     arows, dir_sets, dir_heights = [], {}, 0
-    offsets = None
-    desc = net.child_text("description", "")
-    for line in desc.splitlines():
-        if line.strip().startswith(_OFFSETS_TAG):
-            offsets = _parse_offsets(path, net.find("description"), line.strip()[len(_OFFSETS_TAG):])
+    tags = ModelTags()
+    desc_el = net.find("description")
+    for k, line in enumerate([] if desc_el is None else desc_el.text.split("\n")):
+        tags.read(f"{path}:{desc_el.line + k}", line.strip())
     for po in net.findall("points-observations"):
         model = _stdev_model(path, po)
         angle_sd = {"direction": xml_float(path, po, "direction-stdev", positive=True, required=False),
@@ -267,16 +251,9 @@ def read_gama_local(path) -> Network:
     if dir_heights:
         notes.append(f"instrument/target heights on {dir_heights} direction(s) ignored, as gama-local ignores "
                      "them on directions")
-    if offsets is not None:
-        unknown = [s for s in offsets if s not in {r[1] for r in rows}]
-        if unknown:
-            raise MultilatError(f"{path}: {_OFFSETS_TAG} names {unknown[0]!r}, a station with no "
-                                "distances")
-        rows = [(ln, s, t, d + offsets.get(s, 0.0), sg) for ln, s, t, d, sg in rows]
-        notes.append("per-station offsets restored from the description: "
-                     + ", ".join(f"{s} {v * 1e6:.4f} um" for s, v in offsets.items()))
-    network = build_network(path, rows, declared, coords, fixed, notes, "Gama")
-    return _with_angles(path, network, arows) if arows else network
+    rows, heads = restore_model(path, rows, tags, notes)
+    network = build_network(path, rows, declared, coords, fixed, notes, "Gama", heads)
+    return join_angles(path, network, arows) if arows else network
 
 
 def _network(path, root):
@@ -351,47 +328,6 @@ def _read_angle(path, o, obs_el, default_sd, sense, dir_sets):
     if not 0.0 <= val <= math.pi:
         raise MultilatError(f"{path}:{o.line}: <z-angle> {s}->{t} val is outside 0..200 gon")
     return (o.line, s, t, "elevation", math.pi / 2 - val, sigma)
-
-
-def _with_angles(path, network: Network, arows) -> Network:
-    """The network's observations with the angles joined to the slope distances of their rows."""
-    obs = network.obs
-    row = {obs.label(k): k for k in range(obs.n_obs)}
-    n = obs.n_obs
-    val = {"azimuth": np.full(n, np.nan), "elevation": np.full(n, np.nan)}
-    sig = {"azimuth": np.full(n, np.nan), "elevation": np.full(n, np.nan)}
-    seen = {}
-    for line, s, t, kind, v, sg in arows:
-        k = row.get(f"{s}->{t}")
-        if k is None:
-            raise MultilatError(f"{path}:{line}: {'direction' if kind == 'azimuth' else 'zenith angle'} {s}->{t} "
-                                "has no slope distance: multilat's observation rows are distances with "
-                                "optional angles")
-        if (k, kind) in seen:
-            raise MultilatError(f"{path}:{line}: a second {kind} {s}->{t} (the first at line {seen[(k, kind)]})")
-        seen[(k, kind)] = line
-        val[kind][k], sig[kind][k] = v, sg
-    # an azimuth without an elevation (or the reverse) on a row: the other stays an empty cell
-    levelled = tuple(dict.fromkeys(s for _, s, _, _, _, _ in arows))
-    angles = Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
-                          obs.sigma_m, val["azimuth"], val["elevation"], obs.station_heads, sig["azimuth"],
-                          sig["elevation"], levelled)
-    note = (f"{int(np.isfinite(sig['azimuth']).sum())} directions and {int(np.isfinite(sig['elevation']).sum())} "
-            f"zenith angles read as azimuths and elevations; levelled stations: {', '.join(levelled)}")
-    return Network(angles, network.points, network.fixed, network.notes + (note,))
-
-
-def _parse_offsets(path, node, text):
-    out = {}
-    for item in text.split():
-        key, sep, val = item.partition("=")
-        try:
-            out[key] = float(val)
-        except ValueError:
-            raise MultilatError(f"{path}:{node.line}: {_OFFSETS_TAG} item {item!r} is not ID=metres") from None
-        if not sep or not key or not math.isfinite(out[key]):
-            raise MultilatError(f"{path}:{node.line}: {_OFFSETS_TAG} item {item!r} is not ID=metres")
-    return out
 
 
 def _refuse(path, el):

@@ -11,10 +11,13 @@ any later back end use only this):
     adds the parameters the block needs besides point coordinates (an instrument's constant and
     scale, a set's orientation, a set-up's frame) to the :class:`~..layout.Layout` and returns the
     block's column arrays.
-``evaluate(block, layout, cols, x) -> (computed, values, columns)``
+``evaluate(block, layout, cols, x, jacobian=True) -> (computed, values, columns)``
     the model at the full parameter vector ``x``: computed observations (R,), and the Jacobian rows
     as values (R, k) with their full-layout columns (R, k) (``-1`` = no parameter), so a dense and a
-    sparse back end assemble the same blocks.
+    sparse back end assemble the same blocks. ``x`` may carry leading axes (``(T, n)``: one vector
+    per Monte Carlo trial): ``computed`` is then (T, R) and ``values`` (T, R, k) (the columns do not
+    change); ``jacobian=False`` returns ``(computed, None, None)`` (the Monte Carlo's chord steps
+    need the model alone).
 
 A new kind is one new module and one line in :data:`KINDS`.
 """

@@ -26,9 +26,38 @@ def register(block, layout) -> dict:
     return {}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
+    x = np.asarray(x, float)
     axis = np.asarray(block.index["axis"], int)
     cf = layout.point_cols[np.asarray(block.index["from"], int), axis]
     ct = layout.point_cols[np.asarray(block.index["to"], int), axis]
-    values = np.tile([-1.0, 1.0], (len(cf), 1))
-    return x[ct] - x[cf], values, np.stack([cf, ct], 1)
+    computed = x[..., ct] - x[..., cf]
+    if not jacobian:
+        return computed, None, None
+    values = np.broadcast_to(np.array([-1.0, 1.0]), computed.shape + (2,)).copy()
+    return computed, values, np.stack([cf, ct], 1)
+
+
+# ---------------------------------------------------------------------------------------------------
+# multilat's files: this kind's columns in observations.csv (kinds/columns.py, general/files.py)
+from multilat.network.general.kinds.columns import Column, block_from_rows, rows_from_block, value_sigma  # noqa: E402
+
+UNIT = "m"
+#: this kind's columns of observations.csv (besides kind, block, unit)
+COLUMNS = (
+    *value_sigma(UNIT, "component of P_to - P_from"),
+    Column("from", "point", "the vector's start", required=True),
+    Column("to", "point", "the vector's end", required=True),
+    Column("axis", "enum", "the component: x (east), y (north) or z (up); a vector is 3 rows of one block, "
+           "its covariance in covariances.csv", required=True, choices=("x", "y", "z")),
+)
+
+
+def from_rows(rows):
+    """This kind's rows of ``observations.csv`` (:class:`~.columns.Rows`) -> its Block."""
+    return block_from_rows(NAME, COLUMNS, rows)
+
+
+def to_rows(block, point_ids) -> dict:
+    """This kind's cells of ``observations.csv`` (column -> one str per row) for ``block``."""
+    return rows_from_block(block, COLUMNS, point_ids)

@@ -28,10 +28,39 @@ def register(block, layout) -> dict:
     return {"orientation": layout.columns("orientation", block.names["set"])[np.asarray(block.index["set"], int)]}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
+    x = np.asarray(x, float)
     d = sight(block, layout, x)
     g = bearing_partials(d, block)
-    values = np.concatenate([-g, g, -np.ones((len(d), 1))], 1)
+    computed = np.arctan2(d[..., 1], d[..., 0]) - x[..., cols["orientation"]]
+    if not jacobian:
+        return computed, None, None
+    values = np.concatenate([-g, g, -np.ones(g.shape[:-1] + (1,))], -1)
     cols_ = np.concatenate([columns(layout, block.index["from"], (0, 1)), columns(layout, block.index["to"], (0, 1)),
                             cols["orientation"][:, None]], 1)
-    return np.arctan2(d[:, 1], d[:, 0]) - x[cols["orientation"]], values, cols_
+    return computed, values, cols_
+
+
+# ---------------------------------------------------------------------------------------------------
+# multilat's files: this kind's columns in observations.csv (kinds/columns.py, general/files.py)
+from multilat.network.general.kinds.columns import Column, block_from_rows, rows_from_block, value_sigma  # noqa: E402
+
+UNIT = "rad"
+#: this kind's columns of observations.csv (besides kind, block, unit)
+COLUMNS = (
+    *value_sigma(UNIT, "direction, counter-clockwise from +x (east) towards +y (north)"),
+    Column("from", "point", "the point the instrument stands on", required=True),
+    Column("to", "point", "the sighted point", required=True),
+    Column("set", "name", "the direction set: one orientation unknown per set (several sets on one point "
+           "have different ids)", required=True),
+)
+
+
+def from_rows(rows):
+    """This kind's rows of ``observations.csv`` (:class:`~.columns.Rows`) -> its Block."""
+    return block_from_rows(NAME, COLUMNS, rows)
+
+
+def to_rows(block, point_ids) -> dict:
+    """This kind's cells of ``observations.csv`` (column -> one str per row) for ``block``."""
+    return rows_from_block(block, COLUMNS, point_ids)

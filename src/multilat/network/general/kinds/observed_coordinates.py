@@ -23,6 +23,33 @@ def register(block, layout) -> dict:
     return {}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
+    x = np.asarray(x, float)
     c = layout.point_cols[np.asarray(block.index["point"], int), np.asarray(block.index["axis"], int)]
-    return x[c], np.ones((len(c), 1)), c[:, None]
+    computed = x[..., c]
+    if not jacobian:
+        return computed, None, None
+    return computed, np.ones(computed.shape + (1,)), c[:, None]
+
+
+# ---------------------------------------------------------------------------------------------------
+# multilat's files: this kind's columns in observations.csv (kinds/columns.py, general/files.py)
+from multilat.network.general.kinds.columns import Column, block_from_rows, rows_from_block, value_sigma  # noqa: E402
+
+UNIT = "m"
+#: this kind's columns of observations.csv (besides kind, block, unit)
+COLUMNS = (
+    *value_sigma(UNIT, "observed coordinate"),
+    Column("point", "point", "the observed point", required=True),
+    Column("axis", "enum", "the coordinate: x (east), y (north) or z (up)", required=True, choices=("x", "y", "z")),
+)
+
+
+def from_rows(rows):
+    """This kind's rows of ``observations.csv`` (:class:`~.columns.Rows`) -> its Block."""
+    return block_from_rows(NAME, COLUMNS, rows)
+
+
+def to_rows(block, point_ids) -> dict:
+    """This kind's cells of ``observations.csv`` (column -> one str per row) for ``block``."""
+    return rows_from_block(block, COLUMNS, point_ids)

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.general.kinds.geometry import columns, sight
+from multilat.network.general.kinds.geometry import columns, first_bad, sight
 
 NAME = "slope_distance"
 ANGULAR = False
@@ -42,17 +42,51 @@ def register(block, layout) -> dict:
     return {"offset": np.where(has, off[np.maximum(inst, 0)], -1), "scale": np.where(has, sca[np.maximum(inst, 0)], -1)}
 
 
-def evaluate(block, layout, cols, x):
+def evaluate(block, layout, cols, x, jacobian=True):
+    x = np.asarray(x, float)
     d = sight(block, layout, x)
-    rho = np.linalg.norm(d, axis=1)
-    if np.any(rho <= 0):
-        k = int(np.flatnonzero(rho <= 0)[0])
-        raise MultilatError(f"slope distance {block.labels[k] if block.labels else k + 1}: its two ends coincide")
-    c = np.where(cols["offset"] >= 0, x[cols["offset"]], 0.0)
-    k = np.where(cols["scale"] >= 0, x[cols["scale"]], 0.0)
-    u = d / rho[:, None]
-    g = (1.0 + k)[:, None] * u
-    values = np.concatenate([-g, g, np.ones((len(rho), 1)), rho[:, None]], 1)
+    rho = np.sqrt(np.einsum("...i,...i->...", d, d))
+    bad = first_bad(rho <= 0)
+    if bad is not None:
+        raise MultilatError(f"slope distance {block.labels[bad] if block.labels else bad + 1}: its two ends "
+                            "coincide")
+    c = np.where(cols["offset"] >= 0, x[..., cols["offset"]], 0.0)
+    k = np.where(cols["scale"] >= 0, x[..., cols["scale"]], 0.0)
+    computed = (1.0 + k) * rho + c
+    if not jacobian:
+        return computed, None, None
+    g = ((1.0 + k) / rho)[..., None] * d
+    values = np.concatenate([-g, g, np.ones(rho.shape + (1,)), rho[..., None]], -1)
     cols_ = np.concatenate([columns(layout, block.index["from"]), columns(layout, block.index["to"]),
                             cols["offset"][:, None], cols["scale"][:, None]], 1)
-    return (1.0 + k) * rho + c, values, cols_
+    return computed, values, cols_
+
+
+# ---------------------------------------------------------------------------------------------------
+# multilat's files: this kind's columns in observations.csv (kinds/columns.py, general/files.py)
+from multilat.network.general.kinds.columns import Column, block_from_rows, rows_from_block, value_sigma  # noqa: E402
+
+UNIT = "m"
+#: this kind's columns of observations.csv (besides kind, block, unit)
+COLUMNS = (
+    *value_sigma(UNIT, "slope distance", within=(5e-324, float("inf"), "(0, inf)")),
+    Column("from", "point", "the point the instrument stands on", required=True),
+    Column("to", "point", "the target's point", required=True),
+    Column("instrument", "name", "the instrument (head) whose additive constant and scale the distance shares "
+           "(empty: none)"),
+    Column("from_dh_m", "number", "instrument height above `from` along z, m (empty: 0)", key="from_dh"),
+    Column("to_dh_m", "number", "target (reflector) height above `to` along z, m (empty: 0)", key="to_dh"),
+    Column("estimate_offset", "option", "estimate the block's instruments' additive constants (default false: "
+           "held at 0)"),
+    Column("estimate_scale", "option", "estimate the block's instruments' scales (default false: held at 0)"),
+)
+
+
+def from_rows(rows):
+    """This kind's rows of ``observations.csv`` (:class:`~.columns.Rows`) -> its Block."""
+    return block_from_rows(NAME, COLUMNS, rows)
+
+
+def to_rows(block, point_ids) -> dict:
+    """This kind's cells of ``observations.csv`` (column -> one str per row) for ``block``."""
+    return rows_from_block(block, COLUMNS, point_ids)

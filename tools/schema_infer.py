@@ -1,6 +1,7 @@
-"""Write the shipped JSON Schemas from the documents of sample runs (developer tool).
+"""Write the shipped JSON Schemas from the documents of sample runs (developer tool, outside the package:
+it runs the CLI and reads the repository's examples and test data).
 
-    python -m multilat.schemas.infer            # rewrites src/multilat/schemas/<command>.json
+    python tools/schema_infer.py            # rewrites src/multilat/schemas/<command>.json
 
 Each command is run on the shipped examples with the options in :data:`SAMPLES` (several runs per
 command, so that keys that appear only with some options are declared); the schema of a command is
@@ -27,9 +28,10 @@ from multilat.vocabulary import ID_MAPS, SCHEMA_VERSION
 
 __all__ = ["SAMPLES", "run_sample", "infer", "merge"]
 
-_EX = Path(__file__).resolve().parents[3] / "examples"
+_ROOT = Path(__file__).resolve().parents[1]
+_EX = _ROOT / "examples"
 _N = _EX / "network"
-_TESTDATA = Path(__file__).resolve().parents[3] / "tests" / "data"
+_TESTDATA = _ROOT / "tests" / "data"
 _INTEROP = _TESTDATA / "interop"
 
 #: command -> list of argument lists (paths relative to the repository's ``examples/``)
@@ -154,7 +156,7 @@ def infer(command: str, docs: list) -> dict:
 def main() -> None:  # pragma: no cover - developer tool
     import tempfile
 
-    here = Path(__file__).resolve().parent
+    here = _ROOT / "src" / "multilat" / "schemas"
     with tempfile.TemporaryDirectory() as t:
         for cmd, runs in SAMPLES.items():
             docs = []

@@ -1,0 +1,219 @@
+"""Compiled chord steps of :mod:`.propagate`: the same arithmetic as :func:`.propagate.solve`'s numpy
+path (the kinds' models and Jacobians, ``P r``, ``dx = Q J^T P r``), one trial at a time, trials in
+parallel (``prange``). The tests compare it with the numpy path and the kinds.
+
+Rows are a small program: a kind code per row, its full-layout columns (at most 9: the kind's
+Jacobian columns, in the kind's order), its Jacobian slots that are free parameters (CSR: ``s_ptr``,
+the slot ``s_j`` and free column ``s_col`` of each), per-row numbers (the height difference along z,
+the tracker component, the set-up of a tracker row: its frame is computed once per set-up and
+trial). The columns are static, so only the values change per trial. ``P`` is a CSR matrix (the
+blocks' ``C^-1``). Codes: :data:`CODES`.
+
+IEEE division (``multilat._numba.njit``): a zero divisor gives inf or nan, never an exception; the
+trial then does not converge and goes to full Gauss-Newton in numpy.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from multilat._numba import boundary, njit, prange
+
+#: kind name -> row code of the kernel
+CODES = {"slope_distance": 0, "direction": 1, "zenith_angle": 2, "horizontal_distance": 3,
+         "horizontal_angle": 4, "height_difference": 5, "coordinate_difference": 5, "observed_coordinates": 6,
+         "tracker_angles": 7}
+
+
+@njit(cache=True, inline="always")
+def _rot(w, p, k, out):  # pragma: no cover - jit
+    """``out[0]`` = R = Rz(k) Ry(p) Rx(w), ``out[1..3]`` its derivatives by w, p, k (written in place:
+    no allocation per row)."""
+    cw, sw, cp, sp, ck, sk = math.cos(w), math.sin(w), math.cos(p), math.sin(p), math.cos(k), math.sin(k)
+    R, W, P, K = out[0], out[1], out[2], out[3]
+    R[0, 0], R[0, 1], R[0, 2] = ck * cp, ck * sp * sw - sk * cw, ck * sp * cw + sk * sw
+    R[1, 0], R[1, 1], R[1, 2] = sk * cp, sk * sp * sw + ck * cw, sk * sp * cw - ck * sw
+    R[2, 0], R[2, 1], R[2, 2] = -sp, cp * sw, cp * cw
+    W[0, 0], W[0, 1], W[0, 2] = 0.0, ck * sp * cw + sk * sw, -ck * sp * sw + sk * cw
+    W[1, 0], W[1, 1], W[1, 2] = 0.0, sk * sp * cw - ck * sw, -sk * sp * sw - ck * cw
+    W[2, 0], W[2, 1], W[2, 2] = 0.0, cp * cw, -cp * sw
+    P[0, 0], P[0, 1], P[0, 2] = -ck * sp, ck * cp * sw, ck * cp * cw
+    P[1, 0], P[1, 1], P[1, 2] = -sk * sp, sk * cp * sw, sk * cp * cw
+    P[2, 0], P[2, 1], P[2, 2] = -cp, -sp * sw, -sp * cw
+    K[0, 0], K[0, 1], K[0, 2] = -sk * cp, -sk * sp * sw - ck * cw, -sk * sp * cw + ck * sw
+    K[1, 0], K[1, 1], K[1, 2] = ck * cp, ck * sp * sw - sk * cw, ck * sp * cw + sk * sw
+    K[2, 0], K[2, 1], K[2, 2] = 0.0, 0.0, 0.0
+
+
+@njit(cache=True, inline="always")
+def _row(code, c, hz, comp, x, val, rot):  # pragma: no cover - jit
+    """Model of one row at ``x`` and its Jacobian values ``val[:9]`` (in the kind's column order);
+    ``rot`` (4, 3, 3): the row's set-up frame and its derivatives (tracker rows, :func:`_rotations`)."""
+    if code == 5:                     # x[c1] - x[c0]
+        val[0] = -1.0
+        val[1] = 1.0
+        return x[c[1]] - x[c[0]]
+    if code == 6:
+        val[0] = 1.0
+        return x[c[0]]
+    if code == 4:                     # horizontal angle: from, bs, fs (x, y each)
+        fx, fy = x[c[4]] - x[c[0]], x[c[5]] - x[c[1]]
+        bx, by = x[c[2]] - x[c[0]], x[c[3]] - x[c[1]]
+        hf, hb = fx * fx + fy * fy, bx * bx + by * by
+        gfx, gfy, gbx, gby = -fy / hf, fx / hf, -by / hb, bx / hb
+        val[0], val[1], val[2], val[3], val[4], val[5] = gbx - gfx, gby - gfy, -gbx, -gby, gfx, gfy
+        return math.atan2(fy, fx) - math.atan2(by, bx)
+    if code == 1 or code == 3:        # from xy, to xy
+        dx, dy = x[c[2]] - x[c[0]], x[c[3]] - x[c[1]]
+        h2 = dx * dx + dy * dy
+        if code == 3:
+            h = math.sqrt(h2)
+            val[0], val[1], val[2], val[3] = -dx / h, -dy / h, dx / h, dy / h
+            return h
+        val[0], val[1], val[2], val[3], val[4] = dy / h2, -dx / h2, -dy / h2, dx / h2, -1.0
+        return math.atan2(dy, dx) - x[c[4]]
+    dx, dy, dz = x[c[3]] - x[c[0]], x[c[4]] - x[c[1]], x[c[5]] - x[c[2]] + hz
+    if code == 0:
+        rho = math.sqrt(dx * dx + dy * dy + dz * dz)
+        off = x[c[6]] if c[6] >= 0 else 0.0
+        k1 = 1.0 + (x[c[7]] if c[7] >= 0 else 0.0)
+        f = k1 / rho
+        val[0], val[1], val[2], val[3], val[4], val[5] = -f * dx, -f * dy, -f * dz, f * dx, f * dy, f * dz
+        val[6], val[7] = 1.0, rho
+        return k1 * rho + off
+    if code == 2:
+        h2 = dx * dx + dy * dy
+        h = math.sqrt(h2)
+        r2 = h2 + dz * dz
+        gx, gy, gz = dz * dx / (h * r2), dz * dy / (h * r2), -h / r2
+        val[0], val[1], val[2], val[3], val[4], val[5] = -gx, -gy, -gz, gx, gy, gz
+        return math.atan2(h, dz)
+    # code 7: tracker angles, v = R^T d
+    R = rot[0]
+    v0 = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
+    v1 = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
+    v2 = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
+    h2 = v0 * v0 + v1 * v1
+    h = math.sqrt(h2)
+    if comp == 0:
+        a0, a1, a2 = -v1 / h2, v0 / h2, 0.0
+        f = math.atan2(v1, v0)
+    else:
+        n2 = h2 + v2 * v2
+        a0, a1, a2 = -v2 * v0 / (h * n2), -v2 * v1 / (h * n2), h / n2
+        f = math.atan2(v2, h)
+    for j in range(3):                # d/dT = a R^T
+        t = a0 * R[j, 0] + a1 * R[j, 1] + a2 * R[j, 2]
+        val[3 + j] = t
+        val[j] = -t
+    for p in range(1, 4):             # d/dp = a (dR_p)^T d
+        val[5 + p] = ((a0 * rot[p, 0, 0] + a1 * rot[p, 0, 1] + a2 * rot[p, 0, 2]) * dx
+                      + (a0 * rot[p, 1, 0] + a1 * rot[p, 1, 1] + a2 * rot[p, 1, 2]) * dy
+                      + (a0 * rot[p, 2, 0] + a1 * rot[p, 2, 1] + a2 * rot[p, 2, 2]) * dz)
+    return f
+
+
+@njit(cache=True)
+def _rotations(frames, x, rot):  # pragma: no cover - jit
+    """Each set-up's frame (its omega, phi, kappa columns ``frames`` (U, 3)) at ``x``: ``rot`` (U, 4, 3, 3)."""
+    for u in range(len(frames)):
+        _rot(x[frames[u, 0]], x[frames[u, 1]], x[frames[u, 2]], rot[u])
+
+
+@njit(cache=True)
+def model_rows(code, cols, hz, comp, setup, frames, x, out_f, out_val):  # pragma: no cover - jit
+    """Model and Jacobian values of every row at one ``x`` (for the tests)."""
+    rot = np.empty((max(len(frames), 1), 4, 3, 3))
+    _rotations(frames, x, rot)
+    for i in range(len(code)):
+        out_f[i] = _row(code[i], cols[i], hz[i], comp[i], x, out_val[i], rot[max(setup[i], 0)])
+
+
+@njit(cache=True, inline="always")
+def _trial_gradient(obs_t, xt, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val,
+                    val, r, rot, g):  # pragma: no cover - jit
+    """``g = J(x_t)^T P r`` with ``r = obs_t - f(x_t)`` (angles wrapped); returns ``r^T P r``."""
+    two_pi = 2.0 * math.pi
+    _rotations(frames, xt, rot)
+    for i in range(len(code)):
+        e = obs_t[i] - _row(code[i], cols[i], hz[i], comp[i], xt, val[i], rot[max(setup[i], 0)])
+        if angular[i] and not -math.pi <= e < math.pi:     # wrap_angle (e unchanged inside [-pi, pi))
+            e = (e + math.pi) % two_pi - math.pi
+        r[i] = e
+    v = 0.0
+    g[:] = 0.0
+    for i in range(len(code)):
+        s = 0.0
+        for k in range(p_ptr[i], p_ptr[i + 1]):
+            s += p_val[k] * r[p_idx[k]]
+        v += s * r[i]
+        for k in range(s_ptr[i], s_ptr[i + 1]):
+            g[s_col[k]] += val[i, s_j[k]] * s
+    return v
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def _chord(obs, x, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val, free, q,
+           computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
+    """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place, from ``x̂``), the rule of
+    :func:`.propagate.solve`: the first ``K (l - f(x̂))`` (``kt`` = K^T (R, n_free), ``computed`` =
+    f(x̂)); converged when the largest step, or its bound on the error left ``step c / (1 - c)``
+    (c = this step / the one before), is below ``tol``; ``far`` when a step is larger than
+    ``contraction`` times the one before, or after ``max_iter`` steps."""
+    t_n, r_n = obs.shape
+    nf = len(free)
+    two_pi = 2.0 * math.pi
+    for t in prange(t_n):
+        xt = x[t]
+        val = np.zeros((r_n, 9))
+        r = np.empty(r_n)
+        g = np.empty(nf)
+        dx = np.zeros(nf)
+        rot = np.empty((max(len(frames), 1), 4, 3, 3))
+        for i in range(r_n):                  # the first step, linear in the noise: K (l - f(x̂))
+            e = obs[t, i] - computed[i]
+            if angular[i] and not -math.pi <= e < math.pi:
+                e = (e + math.pi) % two_pi - math.pi
+            ki = kt[i]
+            for a in range(nf):
+                dx[a] += ki[a] * e
+        prev = 0.0
+        for a in range(nf):
+            xt[free[a]] += dx[a]
+            s = abs(dx[a])
+            if not s <= prev:
+                prev = s if s == s else np.inf
+        iters[t] = 1
+        for it in range(1, max_iter):
+            v = _trial_gradient(obs[t], xt, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr,
+                                p_idx, p_val, val, r, rot, g)
+            dx[:] = 0.0
+            for b in range(nf):               # dx = Q g, by rows of the symmetric Q (independent sums: vectorised)
+                gb = g[b]
+                qb = q[b]
+                for a in range(nf):
+                    dx[a] += qb[a] * gb
+            step = 0.0
+            for a in range(nf):
+                v -= g[a] * dx[a]             # vTPv after the step, to second order: v - g^T Q g
+                xt[free[a]] += dx[a]
+                s = abs(dx[a])
+                if not s <= step:
+                    step = s if s == s else np.inf
+            iters[t] = it + 1
+            c = step / prev                   # the contraction of the last step
+            if step < tol or (c <= contraction and step * c < tol * (1.0 - c)):
+                converged[t] = True
+                vtpv[t] = v
+                break
+            if c > contraction:
+                far[t] = True
+                break
+            prev = step
+        if not converged[t]:
+            far[t] = True
+
+
+chord = boundary(_chord)

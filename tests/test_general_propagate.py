@@ -1,0 +1,289 @@
+"""The general Monte Carlo (``multilat.network.general.propagate``): the adjustment's system frozen at
+its solution, against independent values.
+
+* the kinds over a trial axis equal the kinds one trial at a time (bit for bit: the same arithmetic);
+* the compiled kernel's model and Jacobian equal the kinds' (1e-12 relative), its solutions the numpy
+  engine's (1e-12 m: both iterate to a 1e-10 step, from the same start, by the same rule);
+* each trial's solution is the least-squares solution of its observations: ``adjust`` run on the
+  trial's observations gives the same parameters (1e-9 m: the step tolerance 1e-10 and the
+  conditioning of the normal equations);
+* the MC covariance equals the adjustment's cofactor matrix Q (σ0 a priori = 1: the trials are drawn
+  from the a-priori covariance, so no σ0² enters) within the Monte Carlo standard error: for a
+  variance from N gaussian trials the relative standard error is sqrt(2/(N-1)), of a standard
+  deviation sqrt(1/(2(N-1))); every standard deviation must agree within 4 of its standard errors
+  (a 4σ bound, so that among ~100 quantities none fails by chance: P(|z|>4) = 6e-5 each), and the
+  point covariances' correlations within 4/sqrt(N);
+* the distance-only Monte Carlo of today (``multilat.network.propagate``, compiled) and this one give
+  the same standard deviations on a network both take (examples/network/sequential, gaussian), within
+  4 combined MC standard errors; the datum differs only at second order (the old path's Kabsch fit on
+  all points against the minimum-trace inner constraints over all points: the same to first order);
+* bit-identical results across chunk sizes and maps;
+* a far trial (observations moved by 100 σ: metres, on this network of 0.1 m σ) goes to full Gauss-Newton and still equals ``adjust``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from multilat.network.general import adjust_network, read_gama_input
+from multilat.network.general.adjust import adjust
+from multilat.network.general.kinds import KINDS
+from multilat.network.general.observations import Network
+from multilat.network.general.propagate import SCHEMA, draw, freeze, propagate, solve
+
+sys.path.insert(0, str(Path(__file__).parent))
+from general_tracker_network import tracker_network  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+GAMA = ROOT / "tests" / "data" / "gama3d"
+NSIG = 4.0
+
+
+def _gama(name):
+    return adjust_network(read_gama_input(GAMA / f"{name}.xml"))
+
+
+@pytest.fixture(scope="module")
+def tracker():
+    net, _ = tracker_network()
+    return adjust_network(net)
+
+
+def _with_observations(network: Network, obs: np.ndarray, system) -> Network:
+    """The network with its blocks' values replaced by one trial's observations (system row order)."""
+    blocks = []
+    n = len(network.blocks)
+    for b, sl in zip(system.blocks[:n], system.rows[:n]):
+        blocks.append(dataclasses.replace(b, value=obs[sl]))
+    pts = network.points
+    if len(system.blocks) > n:                   # weighted coordinates: their observed values
+        from multilat.network.general.points import WEIGHTED
+
+        xyz = pts.xyz_m.copy()
+        i, c = np.nonzero(pts.status == WEIGHTED)
+        xyz[i, c] = obs[system.rows[n]]
+        pts = dataclasses.replace(pts, xyz_m=xyz)
+    return Network(pts, tuple(blocks), network.notes)
+
+
+@pytest.mark.parametrize("name", ["two_trackers", "direction_sets", "angles_hdist", "heights", "vectors"])
+def test_kinds_over_trial_axis_equal_one_at_a_time(name):
+    adj = _gama(name)
+    s = adj.system
+    x = adj.result.parameters + np.random.default_rng(1).standard_normal((4, s.layout.n)) * 1e-4
+    for b, cols in zip(s.blocks, s.cols):
+        mod = KINDS[b.kind]
+        f, v, c = mod.evaluate(b, s.layout, cols, x)
+        assert f.shape == (4, b.n_rows) and v.shape[:2] == (4, b.n_rows)
+        for t in range(4):
+            f1, v1, c1 = mod.evaluate(b, s.layout, cols, x[t])
+            assert np.array_equal(f[t], f1) and np.array_equal(v[t], v1) and np.array_equal(c, c1)
+        assert np.array_equal(mod.evaluate(b, s.layout, cols, x, jacobian=False)[0], f)
+
+
+@pytest.mark.parametrize("name", ["two_trackers", "station_control", "direction_sets", "angles_hdist",
+                                  "heights", "height_differences", "vectors", "trilateration_free"])
+def test_compiled_rows_equal_the_kinds(name):
+    from multilat.network.general._frozen_numba import model_rows
+
+    adj = _gama(name)
+    fr = freeze(adj.system, adj.result)
+    p = fr.program
+    x = fr.x_hat + np.random.default_rng(2).standard_normal(fr.x_hat.size) * 1e-3
+    f, v = np.empty(fr.n_rows), np.zeros((fr.n_rows, 9))
+    model_rows(p["code"], p["cols"], p["hz"], p["comp"], p["setup"], p["frames"], x, f, v)
+    s = adj.system
+    for b, cols, sl in zip(s.blocks, s.cols, s.rows):
+        f1, v1, _ = KINDS[b.kind].evaluate(b, s.layout, cols, x)
+        np.testing.assert_allclose(f[sl], f1, rtol=1e-12, atol=1e-14)
+        np.testing.assert_allclose(v[sl, :v1.shape[1]], v1, rtol=1e-11, atol=1e-13 * np.abs(v1).max())
+    obs = draw(fr, 300, np.random.default_rng(3))
+    a, b = solve(fr, obs, engine="numpy"), solve(fr, obs, engine="numba")
+    assert a.converged.all() and b.converged.all()
+    assert np.abs(a.x - b.x).max() < 1e-12
+
+
+def test_tracker_network_compiled_equals_numpy(tracker):
+    fr = freeze(tracker.system, tracker.result)
+    obs = draw(fr, 200, np.random.default_rng(4))
+    a, b = solve(fr, obs, engine="numpy"), solve(fr, obs, engine="numba")
+    assert a.converged.all() and b.converged.all() and not b.full_gauss_newton.any()
+    assert np.abs(a.x - b.x).max() < 1e-12
+    np.testing.assert_allclose(a.vtpv, b.vtpv, rtol=1e-9)
+
+
+@pytest.mark.parametrize("name", ["tracker", "trilateration_free", "direction_sets"])
+def test_each_trial_is_the_least_squares_solution(name, tracker):
+    adj = tracker if name == "tracker" else _gama(name)
+    fr = freeze(adj.system, adj.result)
+    obs = draw(fr, 3, np.random.default_rng(5))
+    sol = solve(fr, obs)
+    from multilat.network.general.adjust import AdjustOptions
+
+    datum = "free" if adj.result.determinability.constraints is not None else "fixed"
+    for t in range(3):
+        net = _started(_with_observations(adj.network, obs[t], adj.system), adj.result)
+        if datum == "fixed":
+            res = adjust(net)
+            assert np.abs(res.parameters - sol.x[t]).max() < 1e-9
+        else:
+            # a free network: the same solution up to the datum; compare datum-free quantities (distances)
+            res = adjust(net, options=AdjustOptions(datum="free"))
+            xa = res.xyz_m
+            xb = sol.x[t][adj.system.layout.point_cols]
+            da = np.linalg.norm(xa[:, None] - xa[None], axis=-1)
+            db = np.linalg.norm(xb[:, None] - xb[None], axis=-1)
+            assert np.abs(da - db).max() < 1e-9
+        assert abs(res.sigma0 ** 2 * res.dof - sol.vtpv[t]) < 1e-8 * max(1.0, sol.vtpv[t])
+
+
+def _started(net: Network, result) -> Network:
+    """The network with its free coordinates started at the adjusted ones (held and weighted as given)."""
+    from multilat.network.general.points import FREE
+
+    pts = net.points
+    xyz = np.where(pts.status == FREE, result.xyz_m, pts.xyz_m)
+    return Network(dataclasses.replace(pts, xyz_m=xyz), net.blocks, net.notes)
+
+
+def _check_against_q(res, n):
+    se_rel = np.sqrt(1.0 / (2 * (n - 1)))                          # of a standard deviation (gaussian)
+    k = res.n_params
+    z = (res.mc_std[:k] / res.lin_std[:k] - 1) / se_rel
+    assert np.abs(z).max() < NSIG, (res.labels[int(np.argmax(np.abs(z)))], z.max(), z.min())
+    assert np.all(np.abs(res.mc_std - res.lin_std) <= NSIG * res.mc_std_se)
+    for c_mc, c_lin in zip(res.point_cov_mc, res.point_cov_lin):
+        s = np.sqrt(np.diag(c_lin))
+        keep = s > 0
+        r_mc = c_mc[np.ix_(keep, keep)] / np.outer(s[keep], s[keep])
+        r_lin = c_lin[np.ix_(keep, keep)] / np.outer(s[keep], s[keep])
+        assert np.abs(r_mc - r_lin).max() < NSIG * 2.0 / np.sqrt(n)     # a covariance element: SE <= sqrt(2/N)
+
+
+@pytest.mark.parametrize("name", ["two_trackers", "station_control", "partly_fixed", "heights", "traverse",
+                                  "direction_sets", "angles_hdist", "height_differences", "vectors",
+                                  "trilateration_fixed", "trilateration_free"])
+def test_mc_covariance_equals_cofactor_gama3d(name):
+    adj = _gama(name)
+    n = 4000
+    res = propagate(adj.system, adj.result, trials=n, rng=11)
+    assert res.trials == n and res.n_failed == 0
+    _check_against_q(res, n)
+    # trials drawn from the a-priori covariance: E[vTPv] = dof, so sigma0_rms^2 ~ 1 within sqrt(2/(N dof))
+    assert abs(res.sigma0_rms ** 2 - 1) < NSIG * np.sqrt(2.0 / (n * res.dof))
+
+
+def test_mc_covariance_equals_cofactor_tracker_network(tracker):
+    kinds = {b.kind for b in tracker.system.blocks}
+    assert kinds == {"slope_distance", "tracker_angles", "observed_coordinates"}
+    n = 6000
+    res = propagate(tracker.system, tracker.result, trials=n, rng=12)
+    assert res.n_failed == 0 and res.n_full_gauss_newton == 0
+    assert {"offset:H1", "offset:H2", "kappa:A", "omega:D"} <= set(res.labels)
+    _check_against_q(res, n)
+
+
+def test_bit_identical_across_chunks_and_maps(tracker):
+    from multilat.parallel import process_map
+
+    kw = dict(trials=2500, rng=7, keep_samples=True)
+    a = propagate(tracker.system, tracker.result, **kw)
+    b = propagate(tracker.system, tracker.result, chunk_size=1, map=map, **kw)
+    c = propagate(tracker.system, tracker.result, chunk_size=2000, map=map, **kw)
+    with process_map(2) as pm:
+        d = propagate(tracker.system, tracker.result, chunk_size=1000, map=pm, **kw)
+    for other in (b, c, d):
+        assert np.array_equal(a.samples, other.samples)
+        assert np.array_equal(a.mc_std, other.mc_std) and np.array_equal(a.interval_shortest, other.interval_shortest)
+
+
+def test_far_trial_goes_to_full_gauss_newton():
+    adj = _gama("trilateration_fixed")
+    fr = freeze(adj.system, adj.result)
+    obs = draw(fr, 4, np.random.default_rng(8))
+    s = adj.system
+    far = obs[1].copy()
+    far += 100 * np.concatenate([b.sigma for b in s.blocks]) * np.random.default_rng(9).standard_normal(len(far))
+    obs[1] = far
+    sol = solve(fr, obs)
+    assert sol.full_gauss_newton.tolist() == [False, True, False, False]
+    assert sol.converged.all()
+    res = adjust(_started(_with_observations(adj.network, far, s), adj.result))
+    assert np.abs(res.parameters - sol.x[1]).max() < 1e-9
+    assert abs(res.sigma0 ** 2 * res.dof - sol.vtpv[1]) < 1e-8 * sol.vtpv[1]
+
+
+def test_equals_todays_propagate_on_a_network_both_take():
+    from multilat.network.files import read_observations
+    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.propagate import problem_from_observations
+    from multilat.network.propagate import propagate as old_propagate
+
+    path = ROOT / "examples" / "network" / "sequential" / "obs.csv"
+    obs = read_observations(path)
+    net, opts = network_from_tables(obs, datum="free")
+    adj = adjust_network(net, options=opts)
+    n = 6000
+    new = propagate(adj.system, adj.result, trials=n, rng=3, pairs=())
+    old = old_propagate(problem_from_observations(obs, datum="free"), trials=n, rng=4, noise="gaussian")
+    compared = 0
+    for lab_old, s_old, se_old in zip(old.labels, old.mc_std, old.mc_std_se):
+        pid, _, c = lab_old.rpartition(".")
+        name = f"{c}:{pid}" if c in "xyz" else (f"offset:{pid}" if c == "offset" else None)
+        if name not in new.labels:
+            continue
+        i = new.labels.index(name)
+        assert abs(new.mc_std[i] - s_old) <= NSIG * np.hypot(new.mc_std_se[i], se_old), (name, new.mc_std[i], s_old)
+        compared += 1
+    assert compared >= 0.9 * new.n_params
+
+
+def test_json_document(tracker):
+    res = propagate(tracker.system, tracker.result, trials=1000, rng=1)
+    doc = json.loads(json.dumps(res.to_dict()))
+    assert doc["schema"] == SCHEMA and doc["model"] == "general" and doc["trials"] == 1000
+    assert {"parameters", "distances", "points", "summary", "n_full_gauss_newton", "n_failed"} <= set(doc)
+    p = doc["parameters"][0]
+    assert {"label", "unit", "nominal", "std_mc", "std_mc_se", "std_lin", "interval_symmetric"} <= set(p)
+    assert set(doc["points"]) == set(tracker.result.ids)
+
+
+def _cli(*args, cwd=ROOT):
+    import os
+    import subprocess
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src"))
+    return subprocess.run([sys.executable, "-c", "from multilat.cli import run; run()", "propagate", *map(str, args)],
+                          capture_output=True, text=True, cwd=cwd, env=env, timeout=600)
+
+
+def test_cli_gama_local_and_csv(tmp_path):
+    xml = ROOT / "examples" / "general" / "station_control.xml"
+    p = _cli(xml, "--trials", "1500", "--seed", "3", "--json")
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    assert doc["schema"] == SCHEMA and doc["format"] == "gama-local" and doc["trials"] == 1500
+    # the same numbers from Python (same seed, same blocks)
+    res = propagate(*(lambda a: (a.system, a.result))(adjust_network(read_gama_input(xml))), trials=1500, rng=3)
+    assert [r["std_mc"] for r in doc["parameters"]] == res.mc_std[:res.n_params].tolist()
+    csv = ROOT / "examples" / "network" / "mixed" / "obs.csv"
+    p = _cli(csv, "--model", "general", "--trials", "500", "--out", tmp_path / "o", "--json")
+    assert p.returncode == 0, p.stderr
+    doc = json.loads(p.stdout)
+    assert doc["format"] == "multilat-csv" and any(r["label"].startswith("kappa:") for r in doc["parameters"])
+    assert sorted(x.name for x in (tmp_path / "o").iterdir()) == ["parameters.csv", "result.json"]
+
+
+@pytest.mark.parametrize("args, word", [(("--adaptive",), "--adaptive"), (("--noise", "model"), "--noise model"),
+                                        (("--datum", "free"), "--datum"), (("--report", "r.html"), "--report")])
+def test_cli_refuses_what_does_not_apply(args, word, tmp_path):
+    p = _cli(ROOT / "examples" / "general" / "station_control.xml", *args, cwd=tmp_path)
+    assert p.returncode == 2 and p.stdout == ""
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {word} does not apply"), p.stderr
