@@ -43,6 +43,7 @@ from multilat.errors import MultilatError
 from multilat.montecarlo import (AdaptiveRule, resolve_map, block_generator, block_trials, chunk_ranges,
                                  resolve_seed)
 from multilat.network import batched as bt
+from multilat.network.propagate_pairs import default_pairs as _default_pairs  # noqa: F401 (general layer)
 from multilat.network.propagate_pairs import pairs_and_refs, parse_pairs
 from multilat.network.propagate_result import PropagationResult, chi2_3_95
 from multilat.network.propagate_summary import linear_std, summarise
