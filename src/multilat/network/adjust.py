@@ -58,19 +58,27 @@ def _head_stations(key, obs: Observations, what: str) -> np.ndarray:
 
 
 def _fixed_offsets(offsets, obs: Observations, what: str = "offsets"):
-    """(offset_free (s,) bool, fixed values (s,)) from the validated ``offsets_m`` option (None, one
-    value, or a mapping whose keys are head ids)."""
+    """(offset_free (s,) bool, fixed values (s,)) from the ``offsets_m`` option (None/"estimate", one
+    value, or a mapping whose keys are head ids; also called by the general layer's table reader)."""
     s = obs.n_stations
     free = np.ones(s, bool)
     val = np.zeros(s)
-    if offsets is None:
+    if offsets is None or (isinstance(offsets, str) and offsets == "estimate"):
         return free, val
     if isinstance(offsets, Mapping):
         for k, v in offsets.items():
             m = _head_stations(k, obs, what)
+            if not np.isfinite(v):
+                raise MultilatError(f"{what}: value for {k!r} must be finite")
             free[m], val[m] = False, float(v)
         return free, val
-    return np.zeros(s, bool), np.full(s, float(offsets))
+    try:
+        v = float(offsets)
+    except (TypeError, ValueError):
+        raise MultilatError(f"{what} must be None/'estimate', a number or a mapping, got {offsets!r}") from None
+    if not np.isfinite(v):
+        raise MultilatError(f"{what} must be finite")
+    return np.zeros(s, bool), np.full(s, v)
 
 
 def _scale_flags(scales, obs, what: str = "scales"):

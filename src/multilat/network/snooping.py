@@ -348,7 +348,13 @@ def angle_outliers(obs, rejected: list[dict], res) -> tuple:
 def detection_step(core, w_max, unknown, alpha, alpha_g, lam0, crit) -> dict:
     """One round of detection and identification: the global test (variance factor known; the largest
     |w| when ``alpha_g`` is a :class:`~.statistics.TestLevels` detecting by ``"max |w|"``) or Pope's
-    τ-test of the largest |τ| (unknown), and whether the largest |w| (|τ|) exceeds its critical value."""
+    τ-test of the largest |τ| (unknown), and whether the largest |w| (|τ|) exceeds its critical value.
+    ``core``: a :class:`Fit` or :class:`RoundStats`, or a mapping with ``dof``, ``sigma0``, ``vtpv``
+    (the general layer's rounds, :mod:`multilat.network.general.snooping`)."""
+    if isinstance(core, dict):
+        from types import SimpleNamespace
+
+        core = SimpleNamespace(**core)
     dof = core.dof
     if unknown:
         tau = float(w_max / core.sigma0) if core.sigma0 > 0 else 0.0
