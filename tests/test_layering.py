@@ -39,7 +39,8 @@ NETWORK_TIERS = [
                         "multilat.network.variance_components", "multilat.network.general"]),
     ("network propagate/design", ["multilat.network.propagate", "multilat.network.propagate_result",
                                   "multilat.network.propagate_summary", "multilat.network.design",
-                                  "multilat.network.general.propagate"]),
+                                  "multilat.network.general.propagate", "multilat.network.general.propagate_result",
+                                  "multilat.network.general._frozen_numba"]),
 ]
 
 
