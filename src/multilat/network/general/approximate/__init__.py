@@ -7,7 +7,8 @@ Given coordinates are kept. Each pass, in this order, until a pass places nothin
 2. **frames** (:mod:`.frames`): set-ups on placed points oriented on placed targets (κ, or ω φ κ for
    an unlevelled tracker); set-ups on unplaced points placed by **resection** (2D from directions
    and distances, two placed targets; an unlevelled tracker fitted rigidly to three);
-3. **polar points** from oriented set-ups on placed points;
+3. **polar points** from oriented set-ups on placed points (also a horizontal reading and a slope
+   distance on a point whose height is given or levelled from a placed point);
 4. **intersection** of the sights from two or more oriented set-ups (near-parallel rays flagged);
 5. **multilateration** from four or more placed ends, **trilateration** from three where another
    observation picks the side (:mod:`.ranging`).
@@ -40,7 +41,9 @@ __all__ = ["approximate", "unreachable", "reasons", "chain", "Chain"]
 @dataclass
 class Chain:
     """The chain's state: xyz (n, 3), known (n,), frames {set-up index: R}, notes, and per point the
-    sights ``reads`` [(set-up, reading)], its own set-ups ``own``, distance rows ``drows``, rises."""
+    sights ``reads`` [(set-up, reading)], its own set-ups ``own``, its distance rows (``drows``: CSR
+    order and pointers), ``rises``;
+    ``method`` {point index: how it was placed}."""
 
     ids: tuple
     sights: Sights
@@ -48,10 +51,11 @@ class Chain:
     known: np.ndarray
     frames: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
-    reads: list = field(default_factory=list)
-    own: list = field(default_factory=list)
-    drows: list = field(default_factory=list)
-    rises: list = field(default_factory=list)
+    reads: dict = field(default_factory=dict)
+    own: dict = field(default_factory=dict)
+    drows: tuple = ()
+    rises: dict = field(default_factory=dict)
+    method: dict = field(default_factory=dict)
 
 
 def chain(network: Network, *, extra=(), rng=0) -> Chain:
@@ -73,13 +77,16 @@ def chain(network: Network, *, extra=(), rng=0) -> Chain:
             if first is not None:
                 su = st.sights.setups[first]
                 st.xyz[su.station], st.known[su.station] = 0.0, True
+                st.method[int(su.station)] = "origin"
                 st.frames[first] = np.eye(3)
                 st.notes.append(f"no point has coordinates: the {su.key} on {pts.ids[su.station]!r} is the origin, "
                                 "its axes the world's")
                 continue
         if not searched:
             searched = True
+            before = st.known.copy()
             n, note = distance_search(network, st.xyz, st.known, rng)
+            _record(st, before, "distance-only search")
             if note:
                 st.notes.append(note)
             if n:
@@ -89,23 +96,39 @@ def chain(network: Network, *, extra=(), rng=0) -> Chain:
 
 
 def _index(st: Chain, n: int) -> None:
-    st.reads, st.own, st.drows, st.rises = ([[] for _ in range(n)] for _ in range(4))
+    st.reads, st.own, st.rises = {}, {}, {}               # point -> list (absent: empty)
     for s, su in enumerate(st.sights.setups):
-        st.own[su.station].append(s)
+        st.own.setdefault(su.station, []).append(s)
         for k, j in enumerate(su.to):
-            st.reads[j].append((s, k))
-    d = st.sights.dist
-    for r in range(len(d)):
-        st.drows[int(d[r, 0])].append(r)
-        st.drows[int(d[r, 1])].append(r)
+            st.reads.setdefault(int(j), []).append((s, k))
+    ends = st.sights.dist[:, :2].astype(int).T.ravel()    # rows of each point, grouped (CSR)
+    order = np.argsort(ends, kind="stable")
+    st.drows = (order % len(st.sights.dist), np.searchsorted(ends[order], np.arange(n + 1)))
     for (i, j), dh in st.sights.rise.items():
-        st.rises[j].append((i, dh))
+        st.rises.setdefault(j, []).append((i, dh))
+
+
+def _rows_of(st: Chain, j):
+    order, ptr = st.drows
+    return order[ptr[j]:ptr[j + 1]]
+
+
+def _tried(st: Chain) -> np.ndarray:
+    """The unplaced points some method might place now: sighted, or with 3+ distances to placed points."""
+    known, d = st.known, st.sights.dist
+    f, t = d[:, 0].astype(int), d[:, 1].astype(int)
+    ranged = np.bincount(np.r_[t[known[f]], f[known[t]]], minlength=len(known)) >= 3
+    sighted = np.zeros(len(known), bool)
+    sighted[list(st.reads)] = True
+    return np.flatnonzero(~known & (ranged | sighted))
 
 
 def _pass(st: Chain) -> int:
-    """One pass of the chain; the number of points placed."""
+    """One pass of the chain; the number of points placed (each one's method in ``st.method``)."""
     xyz, known, setups = st.xyz, st.known, st.sights.setups
-    n = place.by_vector(st.sights.vec, st.sights.coord, xyz, known)
+    before = known.copy()
+    place.by_vector(st.sights.vec, st.sights.coord, xyz, known)
+    _record(st, before, "vector")
     for s, su in enumerate(setups):
         if s in st.frames:
             continue
@@ -117,38 +140,49 @@ def _pass(st: Chain) -> int:
                 continue
             xyz[su.station], R = got
             known[su.station] = True
-            n += 1
         if R is not None:
             st.frames[s] = R
+    _record(st, before, "resection")
     for s, R in st.frames.items():
         if known[setups[s].station]:
-            n += place.polar(setups[s], R, xyz, known)
-    for j in np.flatnonzero(~known):
-        got = place.intersect(setups, st.frames, st.reads[j], st.rises[j], xyz, known) if st.reads[j] else None
-        if got is None:
-            got = _ranged(st, j)
-        elif got[1] < place.WEAK_RAD:
-            st.notes.append(f"point {st.ids[j]!r}: intersected by rays {np.degrees(got[1]):.2g} degrees from "
-                            "parallel (weak)")
+            place.polar(setups[s], R, xyz, known)
+    _record(st, before, "polar")
+    for j in _tried(st):
+        reads, rises = st.reads.get(j, ()), st.rises.get(j, ())
+        got = place.intersect(setups, st.frames, reads, rises, xyz, known) if reads else None
+        if got is not None:
+            how = "intersection"
+            if got[1] < place.WEAK_RAD:
+                st.notes.append(f"point {st.ids[j]!r}: intersected by rays {np.degrees(got[1]):.2g} degrees from "
+                                "parallel (weak)")
+        else:
+            p = place.polar_on_height(setups, st.frames, reads, rises, xyz, known, j)
+            got, how = ((p, None), "polar") if p is not None else _ranged(st, j)
         if got is not None:
             xyz[j], known[j] = got[0], True
-            n += 1
-    return n
+            st.method[j] = how
+    return int((known & ~before).sum())
+
+
+def _record(st: Chain, before, how: str) -> None:
+    for j in np.flatnonzero(st.known & ~before):
+        st.method.setdefault(int(j), how)
 
 
 def _ranged(st: Chain, j):
-    if len(st.drows[j]) < 3:
-        return None
-    anchors, d, n_ends = ranging.ends(st.sights.dist, st.drows[j], j, st.xyz, st.known)
+    rows = _rows_of(st, j)
+    if len(rows) < 3:
+        return None, None
+    anchors, d, n_ends = ranging.ends(st.sights.dist, rows, j, st.xyz, st.known)
     cand = ranging.candidates(anchors, d, n_ends)
     if len(cand) == 1:
-        return cand[0], None
+        return (cand[0], None), "multilateration"
     if len(cand) == 2:
-        m = [ranging.side_misfit(p, st.sights, st.frames, st.reads[j], st.own[j], st.rises[j], st.xyz, st.known)
-             for p in cand]
+        m = [ranging.side_misfit(p, st.sights, st.frames, st.reads.get(j, ()), st.own.get(j, ()),
+                                 st.rises.get(j, ()), st.xyz, st.known) for p in cand]
         if m[0][1] and m[0][0] != m[1][0]:
-            return cand[int(m[1][0] < m[0][0])], None
-    return None
+            return (cand[int(m[1][0] < m[0][0])], None), "trilateration"
+    return None, None
 
 
 def reasons(network: Network, *, extra=(), rng=0) -> dict:
@@ -178,7 +212,11 @@ def approximate(network: Network, *, extra=(), rng=0, partial: bool = False) -> 
     given = np.all(np.isfinite(pts.xyz_m), 1)
     placed = int((st.known & ~given).sum())
     xyz = np.where(np.isfinite(pts.xyz_m), pts.xyz_m, st.xyz)
-    notes = tuple(st.notes) + ((f"approximate coordinates computed for {placed} point(s)",) if placed else ())
+    count = {}
+    for how in st.method.values():
+        count[how] = count.get(how, 0) + 1
+    by = ", ".join(f"{n} {how}" for how, n in count.items())
+    notes = tuple(st.notes) + ((f"approximate coordinates computed for {placed} point(s) ({by})",) if placed else ())
     return Network(pts.with_xyz(xyz), network.blocks, network.notes + notes)
 
 
@@ -186,15 +224,15 @@ def _why(st: Chain, j) -> str:
     """What the observations give point ``j`` and what would place it, one line."""
     known, setups = st.known, st.sights.setups
     have = []
-    if st.drows[j]:
-        _, _, n_ends = ranging.ends(st.sights.dist, st.drows[j], j, st.xyz, known)
+    if len(_rows_of(st, j)):
+        _, _, n_ends = ranging.ends(st.sights.dist, _rows_of(st, j), j, st.xyz, known)
         have.append(f"distances to {n_ends} placed point(s) (multilateration needs 4 not in one plane, "
                     "trilateration 3 and another observation to pick the side)")
-    if st.reads[j]:
-        oriented = {setups[s].station for s, _ in st.reads[j] if s in st.frames and known[setups[s].station]}
+    if st.reads.get(j, ()):
+        oriented = {setups[s].station for s, _ in st.reads.get(j, ()) if s in st.frames and known[setups[s].station]}
         have.append(f"sighted from {len(oriented)} oriented set-up(s) on placed points without a distance to it "
                     "(a polar point needs the distance with the zenith angle or elevation, intersection 2 set-ups)")
-    for s in st.own[j]:
+    for s in st.own.get(j, ()):
         su = setups[s]
         n = int(len(set(su.to[known[su.to] & np.all(np.isfinite(su.v), 1)].tolist())))
         have.append(f"its {su.key} reads {n} placed point(s) with distance and height (resection needs "

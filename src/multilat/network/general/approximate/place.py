@@ -4,6 +4,9 @@ coordinate differences and observed coordinates.
 * **Polar point**: one reading with its vector ``v`` from an oriented set-up on a placed point:
   ``P_j = P_i + dz e_z + R v`` (direction or tracker azimuth/elevation with a slope distance and a
   zenith angle or elevation; a horizontal distance with a height difference).
+* **Polar point on a height**: a horizontal reading and a slope distance from an oriented levelled
+  set-up, the point's height given or levelled from a placed point (a height difference):
+  ``hz = sqrt(s^2 - up^2)`` with ``up`` the rise from instrument to reflector.
 * **Intersection**: sights to ``j`` from two or more oriented set-ups on placed points (different
   points): a sight with its elevation (zenith angle, tracker elevation) is a ray, ``j`` on it; a
   direction alone is a vertical plane; a height difference from a placed point is a horizontal
@@ -18,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["polar", "intersect", "by_vector", "WEAK_RAD", "SINGULAR"]
+__all__ = ["polar", "polar_on_height", "intersect", "by_vector", "WEAK_RAD", "SINGULAR"]
 
 #: intersection angle below which the rays meeting at a point are flagged as near-parallel (1 degree)
 WEAK_RAD = np.radians(1.0)
@@ -40,6 +43,23 @@ def polar(setup, R, xyz, known) -> int:
             known[j] = True
             n += 1
     return n
+
+
+def polar_on_height(setups, frames, reads, rises, xyz, known, j):
+    """P_j from a horizontal reading and a slope distance of an oriented levelled set-up on a placed
+    point and the height of ``j`` (given, or from a height difference off a placed point); or None."""
+    z = xyz[j, 2] if np.isfinite(xyz[j, 2]) else next((xyz[p, 2] + dh for p, dh in rises if known[p]), None)
+    if z is None:
+        return None
+    for s, k in reads:
+        su, R = setups[s], frames.get(s)
+        if R is None or not su.levelled or not known[su.station] or not np.isfinite(su.s[k]):
+            continue
+        up = z - xyz[su.station, 2] - su.sdz[k]
+        if su.s[k] > abs(up):
+            hz = np.sqrt(su.s[k] ** 2 - up ** 2)
+            return np.array([*(xyz[su.station, :2] + hz * (R[:2, :2] @ [np.cos(su.t[k]), np.sin(su.t[k])])), z])
+    return None
 
 
 def sight_equations(setups, frames, reads, xyz, known):
@@ -84,13 +104,12 @@ def intersect(setups, frames, reads, rises, xyz, known):
     if sv.size < 3 or sv[2] <= SINGULAR * sv[0]:
         return None
     p, *_ = np.linalg.lstsq(A, b, rcond=None)
-    d = np.array(dirs)
-    by_station = [d[[k for k, s in enumerate(st) if s == s0]][0] for s0 in dict.fromkeys(st)]
-    best = 0.0
-    for a in range(len(by_station)):
-        for c in range(a + 1, len(by_station)):
-            cos = abs(float(by_station[a] @ by_station[c])) / (np.linalg.norm(by_station[a]) * np.linalg.norm(by_station[c]))
-            best = max(best, float(np.arccos(min(1.0, cos))))
+    first = {}                                            # one direction per station
+    for s, w in zip(st, dirs):
+        first.setdefault(s, w / np.linalg.norm(w))
+    u = np.array(list(first.values()))
+    cos = np.clip(np.abs(u @ u.T), 0.0, 1.0)
+    best = float(np.arccos(cos[np.triu_indices(len(u), 1)]).max())
     return p, best
 
 

@@ -65,11 +65,11 @@ def candidates(anchors, d, n_ends):
 
 
 def side_misfit(p, sights, frames, reads, own, rises, xyz, known):
-    """Misfit (metres, root sum of squares) of position ``p`` of point ``j`` to its observations
-    besides distances, and how many there were: sights ``reads`` [(set-up, reading)] from oriented set-ups on placed points
-    (distance to the ray or plane), elevations read by levelled set-ups from or to placed points
-    (times the range; ``own``: the set-ups on the point), height differences ``rises`` [(placed
-    point, dh)]."""
+    """Misfit (metres, root sum of squares) of a position ``p`` of a point to its observations
+    besides distances, and how many there were: its sights ``reads`` [(set-up, reading)] from
+    oriented set-ups on placed points (distance to the ray or plane), elevations read by levelled
+    set-ups from or to placed points (times the range; ``own``: the set-ups on the point), height
+    differences ``rises`` [(placed point, dh)]."""
     A, b, _, _ = sight_equations(sights.setups, frames, reads, xyz, known)
     res = [np.concatenate([np.atleast_2d(a) @ p - np.atleast_1d(bb) for a, bb in zip(A, b)])] if A else []
     for s, k in reads:                                    # elevations of levelled set-ups, not oriented

@@ -9,8 +9,11 @@ Targets seen by three or more stations keep their rows, and the distance path's 
 (:func:`multilat.network.starts.initial_for`: the mirror search and multilateration of the targets
 seen by three) place them. Placed points of the network fix the frame: with three or more of them
 among the searched points the search is fitted onto them rigidly (a mirror image allowed: distances
-cannot tell one from the other); with none placed anywhere its frame is the network's; otherwise
-the search is not used (its frame would be arbitrary).
+cannot tell one from the other), and then only its stations are kept: the chain places the targets
+from them, by multilateration or, where the stations are near one plane (two mirror positions), by
+trilateration where another observation picks the side, never by the search's guess of the side.
+With no point placed anywhere its frame is the network's and every point is kept (the distance
+path's guarantees); otherwise the search is not used (its frame would be arbitrary).
 """
 
 from __future__ import annotations
@@ -22,70 +25,148 @@ from multilat.network.datum import apply_rigid, rigid_fit
 
 __all__ = ["distance_search"]
 
+#: Levenberg-Marquardt iterations of the refit on every distance when the search left rows out
+POLISH_ITERATIONS = 100
+#: searches (from one random generator) when the search left rows out; the lowest refit cost is kept
+SEARCHES = 8
+
 
 def _tables(network):
-    """(Observations of the instrument distances, their point indices) or (None, None)."""
-    from multilat.network.data import Observations
+    """(Observations of the instrument distances, their points, the (from, to) rows left out) or None."""
+    from multilat.network.data import Observations, distinct_pair_codes
 
-    f, t, d, s, h = [], [], [], [], []
     ids = network.points.ids
+    f, t, d, s, h, names = [], [], [], [], [], []
     for b in network.blocks:
         if b.kind != "slope_distance":
             continue
-        inst = b.index.get("instrument")
-        names = b.names.get("instrument", ())
-        for k, (i, j) in enumerate(zip(b.index["from"], b.index["to"])):
-            hi = -1 if inst is None else int(inst[k])
-            f.append(int(i))
-            t.append(int(j))
-            d.append(b.value[k])
-            s.append(b.sigma[k])
-            h.append(names[hi] if hi >= 0 else "station " + ids[int(i)])
+        m = len(b.value)
+        inst = np.asarray(b.index.get("instrument", np.full(m, -1)), int)
+        f.append(np.asarray(b.index["from"], int))
+        t.append(np.asarray(b.index["to"], int))
+        d.append(b.value)
+        s.append(b.sigma)
+        h.append(np.where(inst >= 0, inst + len(names), -1))
+        names += list(b.names.get("instrument", ()))
     if not f:
-        return None, None
-    f, t = np.array(f), np.array(t)
-    n_from = np.bincount(f, minlength=len(ids))
-    n_to = np.bincount(t, minlength=len(ids))
+        return None
+    f, t, d, s, h = (np.concatenate(a) for a in (f, t, d, s, h))
+    n = len(ids)
+    n_from, n_to = np.bincount(f, minlength=n), np.bincount(t, minlength=n)
     keep = (n_from[f] >= n_to[f]) & (n_to[t] > n_from[t])
-    pairs = {(a, c) for a, c in zip(f[keep], t[keep])}
-    seen = np.bincount([c for _, c in pairs], minlength=len(ids))
+    seen = np.bincount(distinct_pair_codes(f[keep], t[keep], n) % n, minlength=n)
     keep &= seen[t] >= 3
     if not keep.any():
-        return None, None
-    k = np.flatnonzero(keep)
-    obs = Observations.from_labels([ids[i] for i in f[k]], [ids[j] for j in t[k]], np.array(d)[k], np.array(s)[k],
-                                   head=[h[q] for q in k])
-    return obs, ids
+        return None
+    dropped = np.c_[f[~keep], t[~keep]]
+    f, t, d, s, h = (a[keep] for a in (f, t, d, s, h))
+    st, si = np.unique(f, return_inverse=True)
+    tg, ti = np.unique(t, return_inverse=True)
+    first = np.zeros(len(st), int)
+    first[si[::-1]] = np.arange(len(f))[::-1]             # a station's first row names its head
+    heads = tuple(names[h[r]] if h[r] >= 0 else f"station {ids[st[k]]}" for k, r in enumerate(first))
+    obs = Observations(tuple(ids[i] for i in st), tuple(ids[j] for j in tg), si, ti, d, s, station_heads=heads)
+    return obs, np.concatenate([st, tg]), dropped
 
 
 def distance_search(network, xyz, known, rng):
     """Places the points of the distance sub-network: (number placed, note or None). ``xyz``,
     ``known`` are updated in place."""
+    got = _tables(network)
+    if got is None:
+        return 0, None
+    obs, sub, dropped = got
+    anchors = sub[known[sub]]
+    if known[sub].all() or (known.any() and len(anchors) < 3):
+        return 0, None
+    new = ~known[sub]
+    if len(anchors):                      # in a placed frame: its stations only (module docstring)
+        new[obs.n_stations:] = False
+    if not new.any():
+        return 0, None
+    placed = sub[new]
+    left_out = len(dropped) and np.isin(dropped, sub).all(1).any()
+    gen = np.random.default_rng(rng)
+    best, how = None, None
+    for _ in range(SEARCHES if left_out else 1):
+        got, how = _search(obs, sub, anchors, xyz, gen)
+        if got is None:
+            break
+        trial = xyz.copy()
+        trial[placed] = got[new]
+        cost = _polish(network, trial, known | np.isin(np.arange(len(known)), placed), placed) if left_out else 0.0
+        if best is None or cost < best[0]:
+            best = (cost, trial[placed])
+    if best is None:
+        return 0, how
+    xyz[placed], known[placed] = best[1], True
+    return len(placed), (f"approximate coordinates of {len(placed)} point(s) from the distance-only search "
+                         f"({how})")
+
+
+def _search(obs, sub, anchors, xyz, gen):
+    """One run of the distance path's search: (coordinates of ``sub`` in the placed frame, method),
+    or (None, why not)."""
     from multilat.network.starts import initial_for
 
-    obs, ids = _tables(network)
-    if obs is None:
-        return 0, None
-    ix = {p: k for k, p in enumerate(ids)}
-    sub = np.array([ix[p] for p in obs.station_ids + obs.target_ids])
-    if known[sub].all():
-        return 0, None
-    anchors = sub[known[sub]]
-    if known.any() and len(anchors) < 3:
-        return 0, None
     try:
-        start, how = initial_for(obs, None, None, rng)
+        start, how = initial_for(obs, None, None, gen)
     except MultilatError as e:
-        return 0, f"the distance-only search failed: {e}"
+        return None, f"the distance-only search failed: {e}"
     got = np.vstack([start.station_xyz_m, start.target_xyz_m])
     if len(anchors):
         try:
-            R, t = rigid_fit(got[known[sub]], xyz[anchors], allow_reflection=True)
+            R, t = rigid_fit(got[np.isin(sub, anchors)], xyz[anchors], allow_reflection=True)
         except MultilatError:
-            return 0, None
+            return None, None
         got = apply_rigid(R, t, got)
-    new = ~known[sub]
-    xyz[sub[new]] = got[new]
-    known[sub[new]] = True
-    return int(new.sum()), (f"approximate coordinates of {int(new.sum())} point(s) from the distance-only search "
-                            f"({how.get('method', '?')})")
+    return got, how.get("method", "?")
+
+
+def _polish(network, xyz, known, placed) -> float:
+    """Least squares of every slope distance between placed points over the coordinates of
+    ``placed`` (the others held; instrument constants ignored), from the search's values
+    (:func:`multilat.network.initial_refine.levenberg_marquardt`, Marquardt-damped: the datum
+    defect of a free network is harmless); its cost (sum of squared weighted residuals). The search saw only station-to-target rows; the rows
+    between two stations or two targets (mutual sights, scale bars) would otherwise first act in
+    the adjustment, whose Gauss-Newton steps are undamped."""
+    import scipy.sparse
+
+    from multilat.network.initial_refine import levenberg_marquardt
+
+    rows = [np.c_[b.index["from"], b.index["to"], b.value, b.sigma] for b in network.blocks
+            if b.kind == "slope_distance"]
+    r = np.vstack(rows)
+    f, t = r[:, 0].astype(int), r[:, 1].astype(int)
+    use = known[f] & known[t]
+    f, t, d, w = f[use], t[use], r[use, 2], 1.0 / r[use, 3]
+    col = np.full(len(known), -1)
+    col[placed] = np.arange(len(placed))
+    base = xyz.copy()
+
+    def at(x):
+        p = base.copy()
+        p[placed] = x.reshape(-1, 3)
+        return p
+
+    def fun(x):
+        p = at(x)
+        return w * (d - np.linalg.norm(p[t] - p[f], axis=1))
+
+    def jac(x):
+        p = at(x)
+        u = (p[t] - p[f]) / np.linalg.norm(p[t] - p[f], axis=1)[:, None]
+        m = len(d)
+        ri, ci, vi = [], [], []
+        for end, sign in ((t, -1.0), (f, 1.0)):           # d r / d P = -w d|.|/dP
+            ok = col[end] >= 0
+            for a in range(3):
+                ri.append(np.flatnonzero(ok))
+                ci.append(3 * col[end[ok]] + a)
+                vi.append(sign * w[ok] * u[ok, a])
+        return scipy.sparse.csr_matrix((np.concatenate(vi), (np.concatenate(ri), np.concatenate(ci))),
+                                       shape=(m, 3 * len(placed)))
+
+    x, _ = levenberg_marquardt(fun, jac, xyz[placed].ravel(), max_iter=POLISH_ITERATIONS)
+    xyz[placed] = x.reshape(-1, 3)
+    return float(np.sum(fun(x) ** 2))

@@ -31,7 +31,8 @@ __all__ = ["Setup", "Sights", "gather"]
 @dataclass
 class Setup:
     """One frame of readings. key : for messages; station : point index; levelled : the frame is a
-    rotation about z; to, t, el (k,), v (k, 3), dz (k,) = from_dh - to_dh: per reading (NaN unknown)."""
+    rotation about z; to, t, el (k,), v (k, 3), dz (k,) = from_dh - to_dh: per reading (NaN unknown);
+    s (k,), sdz (k,): the slope distance of the sight and its from_dh - to_dh (NaN: none)."""
 
     key: str
     station: int
@@ -41,6 +42,8 @@ class Setup:
     el: np.ndarray
     v: np.ndarray
     dz: np.ndarray
+    s: np.ndarray = None
+    sdz: np.ndarray = None
 
     def __post_init__(self):
         n = np.linalg.norm(self.v, axis=1)
@@ -48,6 +51,8 @@ class Setup:
         ang = polar_to_xyz(np.zeros(3), np.zeros(3), 1.0, self.t, self.el).reshape(-1, 3)
         #: (k, 3) unit vectors of the sights in the set-up's frame; NaN where the elevation is unknown
         self.u = np.where(np.isfinite(u), u, ang)
+        if self.s is None:
+            self.s, self.sdz = np.full(len(self.to), np.nan), np.zeros(len(self.to))
 
 
 @dataclass
@@ -82,12 +87,12 @@ def gather(blocks) -> Sights:
         (f, t), (fh, th) = _rows(b, "from", "to"), _heights(b, len(b.value))
         for k in range(len(f)):
             zen.setdefault((f[k], t[k]), (b.value[k], fh[k], th[k]))
-    dist = []
-    for b in by.get("slope_distance", ()):
-        (f, t), (fh, th) = _rows(b, "from", "to"), _heights(b, len(b.value))
-        for k in range(len(f)):
-            slope.setdefault((f[k], t[k]), (b.value[k], fh[k], th[k]))
-            dist.append((f[k], t[k], b.value[k], fh[k], th[k]))
+    dist = [np.column_stack([*_rows(b, "from", "to"), b.value, *_heights(b, len(b.value))])
+            for b in by.get("slope_distance", ())]
+    dist = np.vstack(dist) if dist else np.zeros((0, 5))
+    if any(k in by for k in ("direction", "horizontal_angle", "tracker_angles")):     # readings need them
+        for r in dist[::-1]:                                                              # the first wins
+            slope[(int(r[0]), int(r[1]))] = (r[2], r[3], r[4])
     for b in by.get("horizontal_distance", ()):
         for i, j, h in zip(*_rows(b, "from", "to"), b.value):
             hdist.setdefault((i, j), h)
@@ -98,7 +103,7 @@ def gather(blocks) -> Sights:
             rise.setdefault((j, i), -h)
     look = (zen, slope, hdist, rise)
     setups = _direction_sets(by, look) + _angle_sets(by, look) + _tracker_setups(by, slope)
-    return Sights(setups, np.array(dist, float).reshape(-1, 5), rise, *_vectors(by))
+    return Sights(setups, dist, rise, *_vectors(by))
 
 
 def _reading(i, j, t, look):
@@ -129,12 +134,23 @@ def _reading(i, j, t, look):
     return np.nan, nan3, 0.0
 
 
+def _slope(i, j, slope):
+    """(s, from_dh - to_dh) of the slope distance between i and j (either way), NaN if none."""
+    s = slope.get((i, j))
+    if s is not None:
+        return s[0], s[1] - s[2]
+    s = slope.get((j, i))
+    return (s[0], s[2] - s[1]) if s is not None else (np.nan, 0.0)
+
+
 def _setup(key, station, levelled, readings, look) -> Setup:
     to = np.array([j for j, _ in readings], int)
     t = np.array([a for _, a in readings], float)
     got = [_reading(station, j, a, look) for j, a in readings]
+    sl = np.array([_slope(station, j, look[1]) for j in to], float).reshape(-1, 2)
     return Setup(key, station, levelled, to, t, np.array([g[0] for g in got], float),
-                 np.array([g[1] for g in got], float).reshape(-1, 3), np.array([g[2] for g in got], float))
+                 np.array([g[1] for g in got], float).reshape(-1, 3), np.array([g[2] for g in got], float),
+                 sl[:, 0], sl[:, 1])
 
 
 def _direction_sets(by, look) -> list:
