@@ -389,3 +389,33 @@ def test_gama3d_from_blanked_free_points(name):
         assert np.abs(da - db).max() < 1e-8
     else:
         assert np.abs(a.xyz_m - b.xyz_m).max() < 1e-8
+
+
+# ----------------------------------------------------------------------------- multilat's tables
+
+
+def test_tables_angles_without_sigma_serve_the_approximations():
+    """``network_from_tables``: two unlevelled trackers whose azimuths and elevations have no σ (not
+    observations: the blocks hold distances only) still give the chain its readings: T1 the origin,
+    its polar points, T2 placed from them (multilateration comes first in the pass); noise-free, the
+    shape is the truth's to 1e-9 m."""
+    from multilat.network.angles import rotation_matrix
+    from multilat.network.data import Observations
+    from multilat.network.general.from_tables import network_from_tables
+
+    rng = np.random.default_rng(9)
+    st = np.array([[0.0, 0.0, 0.0], [8.0, 1.0, 0.5]])
+    ori = np.array([[0.02, -0.01, 0.4], [-0.03, 0.02, 2.6]])
+    tg = rng.uniform([-4, 3, -1], [12, 10, 3], (12, 3))
+    s, t = np.repeat([0, 1], 12), np.tile(np.arange(12), 2)
+    v = np.einsum("kji,kj->ki", rotation_matrix(ori[s]), tg[t] - st[s])          # R^T (T - H)
+    obs = Observations.from_labels([f"T{i + 1}" for i in s], [f"P{j:02d}" for j in t], np.linalg.norm(v, axis=1),
+                                   SD, azimuth_rad=np.arctan2(v[:, 1], v[:, 0]),
+                                   elevation_rad=np.arctan2(v[:, 2], np.hypot(v[:, 0], v[:, 1])))
+    net, _ = network_from_tables(obs)
+    assert {b.kind for b in net.blocks} == {"slope_distance"}
+    x = net.points.xyz_m
+    truth = np.vstack([st, tg])
+    da, db = (np.linalg.norm(p[:, None] - p[None], axis=-1) for p in (x, truth))
+    assert np.abs(da - db).max() < TOL
+    assert any("(1 origin, 12 polar, 1 multilateration)" in n for n in net.notes)   # T2 from its 12 distances

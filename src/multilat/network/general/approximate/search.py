@@ -27,7 +27,8 @@ __all__ = ["distance_search"]
 
 #: Levenberg-Marquardt iterations of the refit on every distance when the search left rows out
 POLISH_ITERATIONS = 100
-#: searches (from one random generator) when the search left rows out; the lowest refit cost is kept
+#: searches (from one random generator) when the search left rows out: the first whose refit cost
+#: the noise explains (χ² below dof + 5 sqrt(2 dof)) is kept, else the lowest
 SEARCHES = 8
 
 
@@ -94,9 +95,12 @@ def distance_search(network, xyz, known, rng):
             break
         trial = xyz.copy()
         trial[placed] = got[new]
-        cost = _polish(network, trial, known | np.isin(np.arange(len(known)), placed), placed) if left_out else 0.0
+        cost, dof = _polish(network, trial, known | np.isin(np.arange(len(known)), placed), placed,
+                            free=not len(anchors)) if left_out else (0.0, 0)
         if best is None or cost < best[0]:
             best = (cost, trial[placed])
+        if cost <= dof + 5 * np.sqrt(2 * max(dof, 1)):     # a χ² the noise explains: the minimum
+            break
     if best is None:
         return 0, how
     xyz[placed], known[placed] = best[1], True
@@ -123,11 +127,12 @@ def _search(obs, sub, anchors, xyz, gen):
     return got, how.get("method", "?")
 
 
-def _polish(network, xyz, known, placed) -> float:
+def _polish(network, xyz, known, placed, free: bool) -> tuple[float, int]:
     """Least squares of every slope distance between placed points over the coordinates of
     ``placed`` (the others held; instrument constants ignored), from the search's values
     (:func:`multilat.network.initial_refine.levenberg_marquardt`, Marquardt-damped: the datum
-    defect of a free network is harmless); its cost (sum of squared weighted residuals). The search saw only station-to-target rows; the rows
+    defect of a free network is harmless); its cost (sum of squared weighted residuals) and degrees
+    of freedom (rows - 3 x placed, + 6 when ``free``: no placed point outside). The search saw only station-to-target rows; the rows
     between two stations or two targets (mutual sights, scale bars) would otherwise first act in
     the adjustment, whose Gauss-Newton steps are undamped."""
     import scipy.sparse
@@ -169,4 +174,4 @@ def _polish(network, xyz, known, placed) -> float:
 
     x, _ = levenberg_marquardt(fun, jac, xyz[placed].ravel(), max_iter=POLISH_ITERATIONS)
     xyz[placed] = x.reshape(-1, 3)
-    return float(np.sum(fun(x) ** 2))
+    return float(np.sum(fun(x) ** 2)), len(d) - 3 * len(placed) + (6 if free else 0)
