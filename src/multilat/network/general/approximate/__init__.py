@@ -15,8 +15,9 @@ Given coordinates are kept. Each pass, in this order, until a pass places nothin
 
 When a pass places nothing: with no point placed at all, the first set-up with a reading vector is
 the origin with the world's axes; otherwise the distance-only search of self-calibrating
-multilateration places the distance sub-network (:mod:`.search`, once). A point still not placed is
-named in one line saying what would reach it.
+multilateration places the distance sub-network (:mod:`.search`, once; inside a placed frame its
+stations, its targets only as the last resort, when the passes place nothing more). A point still
+not placed is named in one line saying what would reach it.
 
 The kinds' model is not needed: this is a separate step (JAG3D's ``approximation/`` package), and
 :func:`..adjust.adjust` iterates from its result.
@@ -68,31 +69,44 @@ def chain(network: Network, *, extra=(), rng=0) -> Chain:
         return st
     _index(st, pts.n)
     seeded = searched = False
+    last = None                                           # the search's targets, offered last
     while not st.known.all():
         if _pass(st):
             continue
         if not st.known.any() and not seeded:
             seeded = True
-            first = next((s for s, su in enumerate(st.sights.setups) if np.isfinite(su.v).all(1).any()), None)
-            if first is not None:
-                su = st.sights.setups[first]
-                st.xyz[su.station], st.known[su.station] = 0.0, True
-                st.method[int(su.station)] = "origin"
-                st.frames[first] = np.eye(3)
-                st.notes.append(f"no point has coordinates: the {su.key} on {pts.ids[su.station]!r} is the origin, "
-                                "its axes the world's")
+            if _seed(st):
                 continue
         if not searched:
             searched = True
-            before = st.known.copy()
-            n, note = distance_search(network, st.xyz, st.known, rng)
-            _record(st, before, "distance-only search")
-            if note:
-                st.notes.append(note)
-            if n:
+            placed, last, note = distance_search(network, st.xyz, st.known, rng)
+            st.notes += [note] if note else []
+            st.method.update({int(j): "distance-only search" for j in placed})
+            if len(placed):
                 continue
+        if last is not None and (~st.known[last[0]]).any():
+            for j, p in zip(*last):
+                if not st.known[j]:
+                    st.xyz[j], st.known[j] = p, True
+                    st.method[int(j)] = "distance-only search"
+            last = None
+            continue
         break
     return st
+
+
+def _seed(st: Chain) -> bool:
+    """No point placed: the first set-up with a reading vector is the origin, its axes the world's."""
+    first = next((s for s, su in enumerate(st.sights.setups) if np.isfinite(su.v).all(1).any()), None)
+    if first is None:
+        return False
+    su = st.sights.setups[first]
+    st.xyz[su.station], st.known[su.station] = 0.0, True
+    st.method[int(su.station)] = "origin"
+    st.frames[first] = np.eye(3)
+    st.notes.append(f"no point has coordinates: the {su.key} on {st.ids[su.station]!r} is the origin, its axes "
+                    "the world's")
+    return True
 
 
 def _index(st: Chain, n: int) -> None:

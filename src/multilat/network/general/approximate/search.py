@@ -9,11 +9,12 @@ Targets seen by three or more stations keep their rows, and the distance path's 
 (:func:`multilat.network.starts.initial_for`: the mirror search and multilateration of the targets
 seen by three) place them. Placed points of the network fix the frame: with three or more of them
 among the searched points the search is fitted onto them rigidly (a mirror image allowed: distances
-cannot tell one from the other), and then only its stations are kept: the chain places the targets
-from them, by multilateration or, where the stations are near one plane (two mirror positions), by
-trilateration where another observation picks the side, never by the search's guess of the side.
-With no point placed anywhere its frame is the network's and every point is kept (the distance
-path's guarantees); otherwise the search is not used (its frame would be arbitrary).
+cannot tell one from the other), and its stations are placed: the chain places the targets from
+them (multilateration, or trilateration where another observation picks the side) and only the
+targets it still cannot place take the search's values, as the last resort (the search picks their
+side from the whole network jointly). With no point placed anywhere its frame is the network's and
+every point is placed (the distance path's guarantees); otherwise the search is not used (its frame
+would be arbitrary).
 """
 
 from __future__ import annotations
@@ -71,22 +72,23 @@ def _tables(network):
 
 
 def distance_search(network, xyz, known, rng):
-    """Places the points of the distance sub-network: (number placed, note or None). ``xyz``,
-    ``known`` are updated in place."""
+    """The distance-only search on the unplaced points of the distance sub-network: (points placed,
+    (points, coordinates) offered as the last resort, note or None). ``xyz``, ``known`` are updated
+    in place for the points placed."""
+    none = (np.zeros(0, int), (np.zeros(0, int), np.zeros((0, 3))), None)
     got = _tables(network)
     if got is None:
-        return 0, None
+        return none
     obs, sub, dropped = got
     anchors = sub[known[sub]]
-    if known[sub].all() or (known.any() and len(anchors) < 3):
-        return 0, None
-    new = ~known[sub]
-    if len(anchors):                      # in a placed frame: its stations only (module docstring)
+    unknown = ~known[sub]
+    if not unknown.any() or (known.any() and len(anchors) < 3):
+        return none
+    new = unknown.copy()
+    if len(anchors):                      # in a placed frame: its stations now, its targets last
         new[obs.n_stations:] = False
-    if not new.any():
-        return 0, None
     placed = sub[new]
-    left_out = len(dropped) and np.isin(dropped, sub).all(1).any()
+    left_out = bool(len(dropped)) and bool(np.isin(dropped, sub).all(1).any()) and bool(new.any())
     gen = np.random.default_rng(rng)
     best, how = None, None
     for _ in range(SEARCHES if left_out else 1):
@@ -98,14 +100,13 @@ def distance_search(network, xyz, known, rng):
         cost, dof = _polish(network, trial, known | np.isin(np.arange(len(known)), placed), placed,
                             free=not len(anchors)) if left_out else (0.0, 0)
         if best is None or cost < best[0]:
-            best = (cost, trial[placed])
+            best = (cost, trial[placed], got[unknown & ~new])
         if cost <= dof + 5 * np.sqrt(2 * max(dof, 1)):     # a χ² the noise explains: the minimum
             break
     if best is None:
-        return 0, how
+        return none[0], none[1], how
     xyz[placed], known[placed] = best[1], True
-    return len(placed), (f"approximate coordinates of {len(placed)} point(s) from the distance-only search "
-                         f"({how})")
+    return placed, (sub[unknown & ~new], best[2]), f"distance-only search: {how}"
 
 
 def _search(obs, sub, anchors, xyz, gen):
@@ -124,7 +125,7 @@ def _search(obs, sub, anchors, xyz, gen):
         except MultilatError:
             return None, None
         got = apply_rigid(R, t, got)
-    return got, how.get("method", "?")
+    return got, how.get("method", "?").removeprefix("distances: ")
 
 
 def _polish(network, xyz, known, placed, free: bool) -> tuple[float, int]:
