@@ -149,7 +149,7 @@ def _pass(st: Chain) -> int:
         if known[su.station]:
             R = _frames.orient(su, xyz, known)
         else:
-            got = _frames.resect(su, xyz, known)
+            got = _frames.resect(su, xyz, known) or _frames.resect_directions(su, xyz, known)
             if got is None:
                 continue
             xyz[su.station], R = got
