@@ -14,7 +14,9 @@ them (multilateration, or trilateration where another observation picks the side
 targets it still cannot place take the search's values, as the last resort (the search picks their
 side from the whole network jointly). With no point placed anywhere its frame is the network's and
 every point is placed (the distance path's guarantees); otherwise the search is not used (its frame
-would be arbitrary).
+would be arbitrary). Where the search left rows out between its points (mutual distances, scale
+bars), each of up to :data:`SEARCHES` runs is refitted on every distance (:func:`_polish`) and the
+first whose cost the noise explains is kept (else the lowest).
 """
 
 from __future__ import annotations
@@ -133,9 +135,10 @@ def _polish(network, xyz, known, placed, free: bool) -> tuple[float, int]:
     ``placed`` (the others held; instrument constants ignored), from the search's values
     (:func:`multilat.network.initial_refine.levenberg_marquardt`, Marquardt-damped: the datum
     defect of a free network is harmless); its cost (sum of squared weighted residuals) and degrees
-    of freedom (rows - 3 x placed, + 6 when ``free``: no placed point outside). The search saw only station-to-target rows; the rows
-    between two stations or two targets (mutual sights, scale bars) would otherwise first act in
-    the adjustment, whose Gauss-Newton steps are undamped."""
+    of freedom (rows - 3 x placed, + 6 when ``free``: no placed point outside). The search saw
+    only station-to-target rows; the rows between two stations or two targets (mutual sights,
+    scale bars) would otherwise first act in the adjustment, whose Gauss-Newton steps are
+    undamped."""
     import scipy.sparse
 
     from multilat.network.initial_refine import levenberg_marquardt
