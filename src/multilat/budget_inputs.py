@@ -11,7 +11,7 @@ input quantities of :func:`multilat.budget.group_errors` one per row, with
 * the **Monte Carlo one-at-a-time contribution** ``u_mc``: the standard deviation of the group's error
   with only this input varying, the others held at their expectation
   (:func:`multilat.montecarlo.budget`, pooled over the distances as ``sqrt(mean_L var_L)``);
-* its **share of the group's mean-square error** (``variance_share_m2``): the Shapley effect of the
+* its **share of the group's mean-square error** (``share_var_m2``): the Shapley effect of the
   input on the within-distance variance (Owen 2014; Song, Nelson & Staum 2016), estimated by
   pick-freeze (the closed index ``Var(E[e | x_S, L])`` from two independent input draws A, B sharing
   ``x_S`` and the distance). Shapley shares add up exactly to the variance, whatever the interactions
@@ -176,7 +176,7 @@ def _describe(d) -> dict:
         return {"type": "constant", "value": float(d.value)}
     if isinstance(d, _Misalignment):
         return {"type": "uniform over the cone's solid angle" if d.cone else "independent uniforms",
-                "half_angle": d.half_rad}
+                "half_angle_rad": d.half_rad}
     raise MultilatError(f"no description for {type(d).__name__}")  # pragma: no cover
 
 
@@ -229,42 +229,47 @@ class InputBudget:
     ----------
     rows : list of dict
         One per input quantity (order :data:`QUANTITIES`) and one ``bias`` row per group; keys
-        ``quantity, symbol, description, group, unit, source, distribution, estimate,
-        standard_uncertainty, sensitivity, sensitivity_unit, u_gum_m, u_mc_m, variance_share_m2,
-        variance_share_se_m2, u_share_m`` (``u_share_m = sign * sqrt(|share|)``).
+        ``quantity, symbol, description, group, unit, source, distribution, estimate, estimate_std``
+        (in ``unit``), ``sensitivity`` (m per ``unit``), ``sensitivity_unit``, ``contribution_std_lin_m``
+        (``|c| u(x)``), ``contribution_std_mc_m`` (this input alone), ``share_var_m2`` (its share of
+        the group's u^2), ``share_var_se_m2`` (Monte Carlo standard error), ``share_std_m``
+        (``sign * sqrt(|share|)``).
     groups : dict group -> dict
-        ``u_m`` (root of the sum of its rows' shares), ``u_se_m``, ``mean_m``, ``variance_m2``, ``bias_ms_m2``.
-    combined_u_m, combined_u_se_m : float
-        Root of the sum of the included groups' variance shares plus the square of their summed mean.
+        ``error_rms_m`` (root of the sum of its rows' shares), ``error_rms_se_m``, ``error_mean_m``,
+        ``error_var_m2``, ``error_mean_square_m2`` (the bias row).
+    error_rms_m, error_rms_se_m : float
+        Root of the sum of the included groups' variance shares plus the square of their summed mean
+        (the combined error, as in :class:`multilat.budget.DistanceBudget`).
     include_air : bool
     trials_per_distance, batches : int
     """
 
     rows: list
     groups: dict
-    combined_u_m: float
-    combined_u_se_m: float
+    error_rms_m: float
+    error_rms_se_m: float
     include_air: bool
     trials_per_distance: int
     batches: int
 
     def to_dict(self) -> dict:
-        return {"method": METHOD, "trials_per_distance": self.trials_per_distance, "batches": self.batches,
+        return {"method": METHOD, "trials_per_distance": self.trials_per_distance, "n_batches": self.batches,
                 "include_air": self.include_air, "rows": [dict(r) for r in self.rows],
                 "groups": {g: dict(v) for g, v in self.groups.items()},
-                "combined_u_m": self.combined_u_m, "combined_u_se_m": self.combined_u_se_m}
+                "error_rms_m": self.error_rms_m, "error_rms_se_m": self.error_rms_se_m}
 
     def ranked(self, groups=None) -> list:
         """Rows of ``groups`` (default: those in the combined), largest share first."""
         gs = groups or [g for g in GROUPS if g != "air" or self.include_air]
-        return sorted((r for r in self.rows if r["group"] in gs), key=lambda r: -abs(r["variance_share_m2"]))
+        return sorted((r for r in self.rows if r["group"] in gs), key=lambda r: -abs(r["share_var_m2"]))
 
 
 METHOD = ("rows per input quantity; sensitivity: partial derivative at the expectations (central differences), "
-          "RMS over the distances; u_gum_m = |sensitivity| x standard_uncertainty; u_mc_m: std of the group's "
-          "error with only this input varying (JCGM 101 one at a time), sqrt of the mean over distances of the "
-          "variance; variance_share_m2: Shapley share of the within-distance variance (pick-freeze), plus one "
-          "bias row per group (mean square of the mean error): a group's rows add up to u^2")
+          "RMS over the distances; contribution_std_lin_m = |sensitivity| x estimate_std (first order); "
+          "contribution_std_mc_m: std of the group's error with only this input varying (JCGM 101 one at a "
+          "time), sqrt of the mean over distances of the variance; share_var_m2: Shapley share of the "
+          "within-distance variance (pick-freeze), plus one bias row per group (mean square of the mean "
+          "error): the shares of a group's rows add up to its error_rms_m squared")
 
 
 def _draw(dists: dict, names, rng, n) -> dict:
@@ -374,10 +379,10 @@ def _row(key, group, sym, desc, unit, dist, a, idx, src) -> dict:
     share = a["v"][:, idx]
     sh = float(share.mean())
     return {"quantity": key, "symbol": sym, "description": desc, "group": group, "unit": unit, "source": src,
-            "distribution": _describe(dist), "estimate": est, "standard_uncertainty": u,
-            "sensitivity": sens, "sensitivity_unit": "m" if unit == "1" else f"m/{unit}", "u_gum_m": ugum,
-            "u_mc_m": float(math.sqrt(a["oat"][key])), "variance_share_m2": sh,
-            "variance_share_se_m2": _se(share), "u_share_m": math.copysign(math.sqrt(abs(sh)), sh)}
+            "distribution": _describe(dist), "estimate": est, "estimate_std": u,
+            "sensitivity": sens, "sensitivity_unit": "m" if unit == "1" else f"m/{unit}", "contribution_std_lin_m": ugum,
+            "contribution_std_mc_m": float(math.sqrt(a["oat"][key])), "share_var_m2": sh,
+            "share_var_se_m2": _se(share), "share_std_m": math.copysign(math.sqrt(abs(sh)), sh)}
 
 
 def _assemble(inst, head, p, dists, acc, means, air, n, batches) -> InputBudget:
@@ -392,21 +397,22 @@ def _assemble(inst, head, p, dists, acc, means, air, n, batches) -> InputBudget:
         b = float(a["bias"].mean())
         rows.append({"quantity": "bias", "symbol": "ē", "group": g, "unit": "m", "source": None,
                      "description": f"mean error of the {g} group (not corrected), mean square over the distances",
-                     "distribution": None, "estimate": None, "standard_uncertainty": None, "sensitivity": None,
-                     "sensitivity_unit": None, "u_gum_m": None, "u_mc_m": None, "variance_share_m2": b,
-                     "variance_share_se_m2": _se(a["bias"]), "u_share_m": math.copysign(math.sqrt(abs(b)), b)})
+                     "distribution": None, "estimate": None, "estimate_std": None, "sensitivity": None,
+                     "sensitivity_unit": None, "contribution_std_lin_m": None, "contribution_std_mc_m": None,
+                     "share_var_m2": b, "share_var_se_m2": _se(a["bias"]),
+                     "share_std_m": math.copysign(math.sqrt(abs(b)), b)})
         tot = a["v"].sum(axis=1) + a["bias"]                # per batch: the group's mean square
         u = math.sqrt(max(float(tot.mean()), 0.0))
-        groups[g] = {"u_m": u, "u_se_m": _se(tot) / (2 * u) if u > 0 else 0.0,
-                     "mean_m": float(means[:, GROUPS.index(g)].mean()),
-                     "variance_m2": float(a["v"].sum(axis=1).mean()), "bias_ms_m2": b}
+        groups[g] = {"error_rms_m": u, "error_rms_se_m": _se(tot) / (2 * u) if u > 0 else 0.0,
+                     "error_mean_m": float(means[:, GROUPS.index(g)].mean()),
+                     "error_var_m2": float(a["v"].sum(axis=1).mean()), "error_mean_square_m2": b}
     inc = [j for j, g in enumerate(GROUPS) if g != "air" or air]
     tot = sum(acc[GROUPS[j]]["v"].sum(axis=1) + acc[GROUPS[j]]["bias"] for j in inc)
     for x, j in enumerate(inc):                          # cross terms of the groups' means (independent draws)
         for k in inc[x + 1:]:
             tot = tot + 2.0 * (means[:, j] * means[:, k]).mean(axis=0)
     cu = math.sqrt(max(float(tot.mean()), 0.0))
-    return InputBudget(rows=rows, groups=groups, combined_u_m=cu, combined_u_se_m=_se(tot) / (2 * cu) if cu else 0.0,
+    return InputBudget(rows=rows, groups=groups, error_rms_m=cu, error_rms_se_m=_se(tot) / (2 * cu) if cu else 0.0,
                        include_air=air, trials_per_distance=n, batches=batches)
 
 
@@ -438,7 +444,7 @@ def row_text(row: dict) -> dict:
     def um(v):
         return "-" if v is None else f"{v * 1e6:.2f}"
 
-    share = f"{row['u_share_m'] * 1e6:.2f}"
+    share = f"{row['share_std_m'] * 1e6:.2f}"
     if row["quantity"] == "bias":
         return {"quantity": "bias", "short": f"{row['group']} bias", "dist_short": "mean error", "sens_short": "-",
                 "distribution": "mean error", "u": "-", "sensitivity": "-",
@@ -454,14 +460,14 @@ def row_text(row: dict) -> dict:
     elif d["type"] == "constant":
         dist = short = f"constant {d['value'] * f:.3g} {du}"
     else:
-        dist = f"{d['type']}, half-angle {d['half_angle'] * _DEG:.3g}°"
-        short = ("U cone" if d["type"].endswith("solid angle") else "U square") + f" {d['half_angle'] * _DEG:.3g}°"
-    u = row["standard_uncertainty"]
+        dist = f"{d['type']}, half-angle {d['half_angle_rad'] * _DEG:.3g}°"
+        short = ("U cone" if d["type"].endswith("solid angle") else "U square") + f" {d['half_angle_rad'] * _DEG:.3g}°"
+    u = row["estimate_std"]
     s = row["sensitivity"]
     uu = [x * f for x in u] if isinstance(u, list) else u * f
     ss = "-" if s is None else _g([x * 1e6 / f for x in s] if isinstance(s, list) else s * 1e6 / f)
     sens_short = ss.strip("()")
     return {"quantity": f"{row['symbol']} {row['description']}", "short": _SHORT[row["quantity"]],
             "distribution": dist, "dist_short": short, "sens_short": sens_short, "u": f"{_g(uu)} {du}",
-            "sensitivity": f"{ss} µm/{du}" if s is not None else "-", "u_gum": um(row["u_gum_m"]),
-            "u_mc": um(row["u_mc_m"]), "u_share": share}
+            "sensitivity": f"{ss} µm/{du}" if s is not None else "-", "u_gum": um(row["contribution_std_lin_m"]),
+            "u_mc": um(row["contribution_std_mc_m"]), "u_share": share}

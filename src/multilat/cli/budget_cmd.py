@@ -84,7 +84,7 @@ def budget_command(
         d["seed"] = seed
         d["plot"] = plot
         d["unit"] = "m"
-        d["inputs"] = inputs.to_dict()
+        d["input_budget"] = inputs.to_dict()
         d["definition"] = ("standard uncertainty = sqrt(mean^2 + variance) of the error (uncorrected "
                            "biases count, seed section 3.4); coverage_95_m: probabilistically symmetric "
                            "interval of the combined error")
@@ -138,8 +138,8 @@ def _print_inputs(ib, paper: bool) -> None:
         x = row_text(r)
         t.add_row(x["short"], x["dist_short"], x["sens_short"], x["u_gum"], x["u_mc"], x["u_share"])
     console.print(t)
-    parts = [f"{g} {v['u_m'] * 1e6:.2f}" + (f" (paper {PAPER_UM[g]:.1f})" if paper else "")
+    parts = [f"{g} {v['error_rms_m'] * 1e6:.2f}" + (f" (paper {PAPER_UM[g]:.1f})" if paper else "")
              for g, v in ib.groups.items() if g != "air" or ib.include_air]
     console.print("rows summed (root of the sum of shares²): " + ", ".join(parts) + f", combined "
-                  f"{ib.combined_u_m * 1e6:.2f}" + (f" (paper {PAPER_UM['combined']:.1f})" if paper and
+                  f"{ib.error_rms_m * 1e6:.2f}" + (f" (paper {PAPER_UM['combined']:.1f})" if paper and
                                                     not ib.include_air else "") + " µm", markup=False)
