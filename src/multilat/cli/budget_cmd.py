@@ -29,7 +29,7 @@ def budget_command(
                                             "(default from the instrument; the seed excludes it)."),
     input_trials: Optional[int] = typer.Option(
         None, "--input-trials", help="Trials per distance of the per-input budget (each one-at-a-time run and "
-                                     "each pick-freeze evaluation; default the smaller of --trials and 4000)."),
+                                     "each pick-freeze evaluation; default the smaller of --trials and 2000)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
     plot: Optional[str] = typer.Option(None, "--plot", help="Write the error histograms (Figs. 9-10) to this PNG."),
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
@@ -63,7 +63,7 @@ def budget_command(
                                    progress=lambda done, tot: bar.update(task, completed=done))
     from multilat.budget_inputs import input_budget
 
-    n_in = max(16, min(n, 4000)) if input_trials is None else input_trials
+    n_in = max(16, min(n, 2000)) if input_trials is None else input_trials
     inputs = input_budget(inst, head=head, trials=n_in, rng=seed, include_air=air)
     if plot is not None:
         from multilat.io import atomic_path
