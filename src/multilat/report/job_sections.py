@@ -375,7 +375,7 @@ def budget(doc: dict, result=None, options=None) -> list[Section]:
     if doc.get("input_budget"):
         from multilat.report.budget_tables import input_budget_table
 
-        input_budget_table(sec, doc["input_budget"])
+        input_budget_table(sec, doc)
     sec.table(("interval", "low (µm)", "high (µm)"),
               [("95 % probabilistically symmetric", _um(doc, "coverage_95_m", 0, sign=True),
                 _um(doc, "coverage_95_m", 1, sign=True)),
