@@ -469,5 +469,5 @@ def row_text(row: dict) -> dict:
     sens_short = ss.strip("()")
     return {"quantity": f"{row['symbol']} {row['description']}", "short": _SHORT[row["quantity"]],
             "distribution": dist, "dist_short": short, "sens_short": sens_short, "u": f"{_g(uu)} {du}",
-            "sensitivity": f"{ss} µm/{du}" if s is not None else "-", "u_gum": um(row["contribution_std_lin_m"]),
+            "sensitivity": f"{ss} µm/{'(' + du + ')' if '/' in du else du}" if s is not None else "-", "u_gum": um(row["contribution_std_lin_m"]),
             "u_mc": um(row["contribution_std_mc_m"]), "u_share": share}
