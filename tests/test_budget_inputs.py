@@ -212,3 +212,37 @@ def test_cli_bad_input_trials(capsys):
     assert main(["budget", "--trials", "100", "--input-trials", "5"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error:") and "--input-trials" in err and "\n" not in err
+
+
+def test_other_readings_of_the_instrument(inst):
+    """Per-head beam offsets, a square misalignment and an exact received power: the rows follow the
+    file (sources, laws, u(theta'') = h / sqrt(3) for the square) and still add up to their groups."""
+    d = inst.model_dump()
+    d["budget"]["beam_offset_model"] = "per_head"
+    d["target"]["misalignment_shape"] = "square"
+    d["adm"]["power_variation_db"] = 0.0
+    other = type(inst).model_validate(d)
+    ib2 = input_budget(other, head="B", trials=64, rng=3, distance_m=[1.0, 10.0])
+    rows = _rows(ib2)
+    assert rows["a"]["source"] == "heads.B.a_limit_m"
+    assert rows["a"]["distribution"] == {"type": "uniform", "low": -310e-6, "high": 310e-6}
+    h = math.radians(inst.target.misalignment_half_angle_deg)
+    assert rows["misalignment"]["estimate_std"] == pytest.approx([h / math.sqrt(3)] * 2, rel=1e-12)
+    assert rows["misalignment"]["distribution"]["type"] == "independent uniforms"
+    p = rows["power_db"]
+    assert p["distribution"]["type"] == "constant" and p["sensitivity"] is None
+    assert p["contribution_std_lin_m"] == 0.0 and p["contribution_std_mc_m"] == 0.0
+    assert abs(p["share_var_m2"]) < 1e-20
+    for g, v in ib2.groups.items():
+        tot = sum(r["share_var_m2"] for r in _rows(ib2, g).values())
+        assert tot == pytest.approx(v["error_rms_m"] ** 2, rel=1e-9)
+
+
+def test_cone_misalignment_std_against_sampling(inst):
+    """u(theta''), u(phi'') of the cone by quadrature against 10^6 draws (SE ~0.07 %)."""
+    from multilat.budget_inputs import _Misalignment
+
+    m = _Misalignment(True, math.radians(15.0))
+    x = m.sample(np.random.default_rng(5), 1_000_000)
+    assert np.allclose(m.stds(), x.std(axis=0), rtol=3e-3)
+    assert abs(np.corrcoef(x.T)[0, 1]) < 3e-3                     # uncorrelated

@@ -370,7 +370,9 @@ def _row(key, group, sym, desc, unit, dist, a, idx, src) -> dict:
     else:
         u, est = float(dist.std), float(dist.mean)
     s2, s1 = a["sens"].get(key, (None, None))
-    if s2 is None:
+    if isinstance(dist, Constant):            # exact: no derivative taken (a zero step), no contribution
+        sens, ugum = None, 0.0
+    elif s2 is None:
         sens = ugum = None
     else:
         sens_arr = np.copysign(np.sqrt(s2), s1)
