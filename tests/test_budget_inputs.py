@@ -246,3 +246,15 @@ def test_cone_misalignment_std_against_sampling(inst):
     x = m.sample(np.random.default_rng(5), 1_000_000)
     assert np.allclose(m.stds(), x.std(axis=0), rtol=3e-3)
     assert abs(np.corrcoef(x.T)[0, 1]) < 3e-3                     # uncorrelated
+
+
+@pytest.mark.parametrize("key,kurtosis", [("xt_phase", 1.5), ("phase_noise", 3.0), ("power_db", 1.8),
+                                          ("d_t", 3.0), ("d_p", 3.0)])
+def test_shares_of_an_additive_group_are_the_one_at_a_time_variances(ib, key, kurtosis):
+    """Telemetric and air errors are sums of one term per input: the Shapley share of each input is then
+    its own variance, the one-at-a-time Monte Carlo's (two estimators on independent draws: within 4
+    combined standard errors; the std's variance has SE var sqrt((kurtosis - 1) / N))."""
+    r = _rows(ib)[key]
+    var = r["contribution_std_mc_m"] ** 2
+    se = math.hypot(r["share_var_se_m2"], var * math.sqrt((kurtosis - 1) / (26 * ib.trials_per_distance)))
+    assert abs(r["share_var_m2"] - var) <= 4 * se, (key, r["share_var_m2"], var, se)
