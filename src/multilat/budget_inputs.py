@@ -7,9 +7,9 @@ input quantities of :func:`multilat.budget.group_errors` one per row, with
 * its **sensitivity coefficient** ``c_i``: the model's partial derivative at the nominal point (every
   input at its expectation), central differences of :func:`multilat.montecarlo.gum_linear`; where it
   depends on the distance (the clock: ``c = -L``) the root mean square over the distances, signed;
-* the **first-order contribution** ``u_gum = |c_i| u(x_i)`` (JCGM 100 §5.1);
-* the **Monte Carlo one-at-a-time contribution** ``u_mc``: the standard deviation of the group's error
-  with only this input varying, the others held at their expectation
+* the **first-order contribution** ``contribution_std_lin_m = |c_i| u(x_i)`` (JCGM 100 §5.1);
+* the **Monte Carlo one-at-a-time contribution** ``contribution_std_mc_m``: the standard deviation of
+  the group's error with only this input varying, the others held at their expectation
   (:func:`multilat.montecarlo.budget`, pooled over the distances as ``sqrt(mean_L var_L)``);
 * its **share of the group's mean-square error** (``share_var_m2``): the Shapley effect of the
   input on the within-distance variance (Owen 2014; Song, Nelson & Staum 2016), estimated by
@@ -188,8 +188,7 @@ def _shapley_weights(d: int) -> np.ndarray:
 def _closed_indices(p, L, col, fixed, factors, A, B, batches):
     """Per batch: v(S) = mean(yA yS) - mean(yA yB) for every subset mask S of the factors (yS: the
     factors in S from A, the others from B; the difference cancels most of the noise of small effects),
-    the bias estimate mean(yA) mean(yB), the batch mean of yA and mean(yA^2). Arrays (batches, 2^d),
-    (batches,) x 3."""
+    the bias estimate mean(yA) mean(yB) and the batch mean of yA. Arrays (batches, 2^d), (batches,) x 2."""
     d = len(factors)
     n = next(iter(A.values())).shape[0]
     ys = []
@@ -205,7 +204,7 @@ def _closed_indices(p, L, col, fixed, factors, A, B, batches):
     # the mean square of the mean: the product of two independent sample means (unbiased, and far less
     # noisy than mean(yA yB) for a group whose mean is zero)
     bias = ya.mean(axis=1) * y[0].reshape(batches, n // batches).mean(axis=1)
-    return prod - prod[:, :1], bias, ya.mean(axis=1), (ya**2).mean(axis=1)
+    return prod - prod[:, :1], bias, ya.mean(axis=1)
 
 
 def _shapley(v: np.ndarray, d: int) -> np.ndarray:
@@ -329,7 +328,7 @@ def input_budget(inst: Instrument | str = "seed2020", *, head: str = "A", distan
     dists = group_inputs(inst, head)
     fixed = _nominal(dists, p)
     root = resolve_seed(rng)
-    acc = {g: {"v": 0.0, "bias": 0.0, "ms": 0.0, "oat": {}, "sens": {}} for g in GROUPS}
+    acc = {g: {"v": 0.0, "bias": 0.0, "oat": {}, "sens": {}} for g in GROUPS}
     means = np.zeros((d.size, len(GROUPS), batches))
     for i, L in enumerate(d):
         ss_oat = np.random.SeedSequence(root.entropy, spawn_key=tuple(root.spawn_key) + (0xB1, i))
@@ -341,11 +340,10 @@ def input_budget(inst: Instrument | str = "seed2020", *, head: str = "A", distan
             factors = [raw for key, gg, _, _, raw, _ in QUANTITIES if gg == g]
             names = [nm for f in factors for nm in f]
             fx = {k: v for k, v in fixed.items() if k not in names}
-            v, bias, mean_a, ms = _closed_indices(p, float(L), j, fx, factors, A, B, batches)
+            v, bias, mean_a = _closed_indices(p, float(L), j, fx, factors, A, B, batches)
             a = acc[g]
             a["v"] = a["v"] + _shapley(v, len(factors)) / d.size
             a["bias"] = a["bias"] + bias / d.size
-            a["ms"] = a["ms"] + ms / d.size
             means[i, j] = mean_a
             std, sens = _oat_at(p, L, g, dists, fx, n, oat_seeds[j])
             for k in std:
