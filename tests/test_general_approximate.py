@@ -87,7 +87,6 @@ class Design:
 
     def network(self, rng=None, blank=True) -> Network:
         """The network: values from the truth (plus noise with ``rng``), free points blanked."""
-        n = len(self.ids)
         status = np.array([FIXED if p in self.fixed else FREE for p in self.ids])
         sys_ = System(Network(PointSet.build(self.ids, self.truth, status=status), tuple(self.blocks)))
         for name, v in self.params.items():
