@@ -245,3 +245,15 @@ def test_cli_refuses_search_options(capsys, args, word):
 def test_cli_names_a_point_without_coordinates(capsys):
     rc, out, err = _cli(capsys, ["design", "--evaluate", GAMA3D / "station_control.xml"])
     assert rc == 2 and "station_control.xml: point 'S' has no planned coordinates" in err and not out
+
+
+def test_cli_refuses_two_inputs(capsys, tmp_path):
+    xml = GAMA3D / "two_trackers.xml"
+    rc, out, err = _cli(capsys, ["design", xml, "--evaluate", xml])
+    assert rc == 2 and "a planned network is evaluated on its own" in err and err.count("\n") == 1
+    heads = tmp_path / "heads.csv"
+    heads.write_text("point,x_m,y_m,z_m\nA,0,0,0\n")
+    rc, out, err = _cli(capsys, ["design", xml, "--evaluate", heads])
+    assert rc == 2 and "does not apply to a planned network" in err
+    rc, out, err = _cli(capsys, ["design"])
+    assert rc == 2 and "design needs a config TOML" in err

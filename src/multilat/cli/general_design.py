@@ -42,6 +42,9 @@ def wants_general(config, evaluate) -> bool:
     if ev and config is not None:
         raise MultilatError(f"--evaluate {evaluate}: a planned network is evaluated on its own; leave out the "
                             f"design config {config}")
+    if cf and evaluate is not None:
+        raise MultilatError(f"--evaluate {evaluate} does not apply to a planned network ({config}): its points "
+                            "carry the coordinates")
     return ev or cf
 
 
