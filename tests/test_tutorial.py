@@ -56,8 +56,10 @@ def _run(argv: list[str]) -> tuple[int, str, str]:
 @pytest.fixture(scope="module")
 def ran(tmp_path_factory):
     """Copy the example, run every command of the page in it; (directory, {command: stdout})."""
-    work = tmp_path_factory.mktemp("tutorial") / "my-network"
+    root = tmp_path_factory.mktemp("tutorial")  # the reader's checkout: my-network beside examples/
+    work = root / "my-network"
     shutil.copytree(EX, work, ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(ROOT / "examples" / "instruments", root / "examples" / "instruments")
     cwd = os.getcwd()
     os.chdir(work)
     outputs = {}
@@ -108,6 +110,26 @@ def test_every_command_runs_and_the_outputs_exist(ran):
         assert (work / rel).is_file(), rel
     doc = json.loads(outputs["multilat adjust obs.csv --json"])
     assert doc["sigma0"] == pytest.approx(_json(work, "free/result.json")["sigma0"], rel=1e-12)
+
+
+def _sigma0_printed(stdout: str) -> str:
+    return re.search(r"σ0 = (\S+) \(ratio", stdout).group(1)
+
+
+def test_step1_sigma_sources(ran):
+    work, outputs = ran
+    free = _json(work, "free/result.json")
+    out = " ".join(outputs["multilat adjust obs_no_sigma.csv --sigma-um 5"].split())
+    assert "σ: 5 µm for every distance (--sigma-um)" in out
+    _said("The first says `σ: 5 µm for every distance (--sigma-um)` and gives the σ0 of step 2")
+    assert _sigma0_printed(out) == f"{free['sigma0']:.3f}"  # the file's sigma_m column is 5 µm throughout
+    out = " ".join(outputs["multilat adjust obs_no_sigma.csv --instrument "
+                           "../examples/instruments/heads_and_trackers.toml"].split())
+    assert "σ: distance model of instrument" in out and "H6→H6" in out
+    _said(f"gives σ0 = {_sigma0_printed(out)}.")
+    rc, out, err = _run(["adjust", str(work / "obs.csv"), "--sigma-um", "10", "--json"])
+    assert rc == 0 and "ignoring the sigma option" in err
+    assert json.loads(out)["sigma0"] == pytest.approx(free["sigma0"], rel=1e-12)
 
 
 def test_step2_free_network_numbers(ran):
@@ -180,6 +202,9 @@ def test_step5_trackers_numbers(ran):
     o1, o2 = p["offset:T1"], p["offset:T2"]
     _said(f"σ0 = {d['sigma0']:.3f}, dof = {d['dof']}; the additive constants are "
           f"T1 {_um(o1['value']):+.1f} ± {_um(o1['std']):.1f} µm and T2 {_um(o2['value']):+.1f} ± {_um(o2['std']):.1f} µm")
+    truth = dict(line.split(",") for line in (EX / "offsets_truth.csv").read_text().splitlines()[1:])
+    _said(f"simulated {float(truth['T1']):+.0f} and {float(truth['T2']):.0f} µm: T1 is "
+          f"{abs(_um(o1['value']) - float(truth['T1'])) / _um(o1['std']):.1f} u off")
     _said(f"T2's heading relative to T1 is {p['kappa:T2']['value'] - p['kappa:T1']['value']:.5f} rad")
     assert np.abs(d["points"]["T1"]["xyz_m"]).max() < 1e-3  # T1's frame (minimum trace moves it by µm)
     assert d["global_test"]["passed"]

@@ -4,7 +4,8 @@
 
 A hall 8 x 5 x 3 m (x east, y north, z up, floor at z = 0, metres). Six multilateration heads H1..H6
 on tripods around 15 targets P01..P15 (four of them on the floor), each head reading every target
-once: ``obs.csv`` (distance, σ 5 µm; each head has an additive offset). ``points.csv``: four
+once: ``obs.csv`` (distance, σ 5 µm; each head has an additive offset; ``obs_no_sigma.csv`` the
+same without the σ column). ``points.csv``: four
 targets (P01, P02 on the floor, P05, P09 raised) measured in the hall's frame to 1 µm, as a surveyor
 would hand them over, and every other head and target to about 2 cm (a tape, a drawing).
 ``trackers.csv``: two levelled laser trackers T1, T2 on the same 15 targets, distance + azimuth +
@@ -57,6 +58,7 @@ def main(out: Path = Path(__file__).resolve().parent) -> None:
             d = np.linalg.norm(t - np.array(xyz)) + off + SIG_D * rng.standard_normal()
             obs.append([h, n, f"{d:.9f}", f"{SIG_D:.1e}"])
     _write(out / "obs.csv", ["station", "target", "distance_m", "sigma_m"], obs)
+    _write(out / "obs_no_sigma.csv", ["station", "target", "distance_m"], [r[:3] for r in obs])
     trk = []
     for s, (xyz, kappa, off) in TRACKERS.items():
         for n, t in zip(names, tg):
