@@ -149,6 +149,8 @@ def test_step2_free_network_numbers(ran):
     h = d["heads"]
     _said(f"`H1` {_um(h['H1']['offset_m']):+.1f} ± {_um(h['H1']['offset_std_m']):.1f} µm, "
           f"`H2` {_um(h['H2']['offset_m']):+.1f} ± {_um(h['H2']['offset_std_m']):.1f} µm")
+    ratio = sorted(v["offset_std_m"] / 5e-6 for v in h.values())
+    _said(f"their u is here {ratio[0]:.0f} to {ratio[-1]:.0f} times the distances' σ")
     # the frame of three heads: H1 at the origin, H2 on +x, H4 in the xy-plane
     s = {k: np.array(v["xyz_m"]) for k, v in d["stations"].items()}
     assert np.abs(s["H1"]).max() < 1e-9 and np.abs(s["H2"][1:]).max() < 1e-9 and abs(s["H4"][2]) < 1e-9
@@ -206,6 +208,14 @@ def test_step5_trackers_numbers(ran):
     _said(f"simulated {float(truth['T1']):+.0f} and {float(truth['T2']):.0f} µm: T1 is "
           f"{abs(_um(o1['value']) - float(truth['T1'])) / _um(o1['std']):.1f} u off")
     _said(f"T2's heading relative to T1 is {p['kappa:T2']['value'] - p['kappa:T1']['value']:.5f} rad")
+    c = _json(work, "trackers-hall/result.json")
+    t1 = c["parameters"]["offset:T1"]
+    assert c["datum"] == f"given by 4 fixed point(s) ({CONTROL.replace(',', ', ')})"
+    _said(f"hall's frame: `{c['datum'].split(' (')[0]}` in the `datum:` line, dof = {c['dof']}, "
+          f"T1 {_um(t1['value']):+.1f} ± {_um(t1['std']):.1f} µm")
+    assert c["dof"] - d["dof"] == 12 - 4  # 12 control coordinates; the free datum's defect was 4
+    for p_id, xyz in (line.split(",", 1) for line in (EX / "points.csv").read_text().splitlines()[1:5]):
+        assert c["points"][p_id]["xyz_m"] == pytest.approx([float(v) for v in xyz.split(",")], abs=1e-12)
     assert np.abs(d["points"]["T1"]["xyz_m"]).max() < 1e-3  # T1's frame (minimum trace moves it by µm)
     assert d["global_test"]["passed"]
 
