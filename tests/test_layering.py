@@ -28,7 +28,7 @@ LAYERS = [
     [("network", ["multilat.network"])],
     [("lbb", ["multilat.lbb"]), ("campaign", ["multilat.campaign"])],
     [("report", ["multilat.report"])],
-    [("cli", ["multilat.cli", "multilat.warmup"])],
+    [("cli", ["multilat.cli", "multilat.warmup", "multilat.__main__"])],
 ]
 
 #: Inside ``multilat.network``, lowest first: the model (data, model, datum, solve, fit, statistics,
