@@ -23,11 +23,12 @@ LAYERS = [
     [("probability", ["multilat.fast_normal", "multilat.distributions", "multilat.montecarlo",
                       "multilat.parallel"])],
     [("distance model", ["multilat.air", "multilat.adm", "multilat.gimbal", "multilat.tracker",
-                         "multilat.instrument", "multilat.budget", "multilat.distance_errors"])],
+                         "multilat.instrument", "multilat.budget", "multilat.budget_inputs",
+                         "multilat.distance_errors"])],
     [("network", ["multilat.network"])],
     [("lbb", ["multilat.lbb"]), ("campaign", ["multilat.campaign"])],
     [("report", ["multilat.report"])],
-    [("cli", ["multilat.cli", "multilat.warmup"])],
+    [("cli", ["multilat.cli", "multilat.warmup", "multilat.__main__"])],
 ]
 
 #: Inside ``multilat.network``, lowest first: the model (data, model, datum, solve, fit, statistics,
@@ -39,7 +40,8 @@ NETWORK_TIERS = [
                         "multilat.network.variance_components", "multilat.network.general"]),
     ("network propagate/design", ["multilat.network.propagate", "multilat.network.propagate_result",
                                   "multilat.network.propagate_summary", "multilat.network.design",
-                                  "multilat.network.general.propagate"]),
+                                  "multilat.network.general.propagate", "multilat.network.general.propagate_result",
+                                  "multilat.network.general._frozen_numba"]),
 ]
 
 

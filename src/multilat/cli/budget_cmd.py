@@ -27,6 +27,9 @@ def budget_command(
     air: Optional[bool] = typer.Option(None, "--air/--no-air",
                                        help="Include the air-index group in the combined error "
                                             "(default from the instrument; the seed excludes it)."),
+    input_trials: Optional[int] = typer.Option(
+        None, "--input-trials", help="Trials per distance of the per-input budget (each one-at-a-time run and "
+                                     "each pick-freeze evaluation; default the smaller of --trials and 2000)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a table."),
     plot: Optional[str] = typer.Option(None, "--plot", help="Write the error histograms (Figs. 9-10) to this PNG."),
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
@@ -39,6 +42,7 @@ def budget_command(
 
     checks.seed(seed)
     checks.trials(trials, lo=2)
+    checks.trials(input_trials, "--input-trials", lo=16)
     report_opt.check_report_path(report, [instrument if str(instrument).endswith(".toml") else None])
     if plot is not None:
         from multilat.io import check_not_input
@@ -57,6 +61,10 @@ def budget_command(
         res = bmod.distance_budget(inst, head=head, trials=n, rng=seed, include_air=air,
                                    keep_samples=plot is not None or report is not None,
                                    progress=lambda done, tot: bar.update(task, completed=done))
+    from multilat.budget_inputs import input_budget
+
+    n_in = max(16, min(n, 2000)) if input_trials is None else input_trials
+    inputs = input_budget(inst, head=head, trials=n_in, rng=seed, include_air=air)
     if plot is not None:
         from multilat.io import atomic_path
         from multilat.report.distance_figures import plot_budget
@@ -76,6 +84,7 @@ def budget_command(
         d["seed"] = seed
         d["plot"] = plot
         d["unit"] = "m"
+        d["input_budget"] = inputs.to_dict()
         d["definition"] = ("standard uncertainty = sqrt(mean^2 + variance) of the error (uncorrected "
                            "biases count, seed section 3.4); coverage_95_m: probabilistically symmetric "
                            "interval of the combined error")
@@ -107,7 +116,30 @@ def budget_command(
         row.append("- (excl. air: 4.7)" if res.include_air else f"{PAPER_UM['combined']:.1f}")
     t.add_row(*row)
     console.print(t)
+    _print_inputs(inputs, paper)
     lo, hi = res.coverage_95_m
     console.print(f"95 % coverage interval of the combined error: [{lo * 1e6:.2f}, {hi * 1e6:.2f}] µm")
     if plot is not None:
         console.print(f"figure written to {plot}")
+
+
+def _print_inputs(ib, paper: bool) -> None:
+    """The per-input table, largest share first, and the groups as sums of its rows."""
+    from rich import box
+
+    from multilat.budget_inputs import row_text
+
+    t = Table(title=f"per input ({ib.trials_per_distance:,} trials per distance), largest first; µm, k = 1: "
+                    "|c|u first order, MC this input alone; the squared shares of a group add up to its u²", title_justify="left",
+              box=box.SIMPLE_HEAD, pad_edge=False)
+    for c in ("input", "distribution", "c (µm/unit)", "|c|u", "MC", "share"):
+        t.add_column(c, justify="left" if c in ("input", "distribution") else "right")
+    for r in ib.ranked():
+        x = row_text(r)
+        t.add_row(x["short"], x["dist_short"], x["sens_short"], x["u_gum"], x["u_mc"], x["u_share"])
+    console.print(t)
+    parts = [f"{g} {v['error_rms_m'] * 1e6:.2f}" + (f" (paper {PAPER_UM[g]:.1f})" if paper else "")
+             for g, v in ib.groups.items() if g != "air" or ib.include_air]
+    console.print("rows summed (root of the sum of shares²): " + ", ".join(parts) + f", combined "
+                  f"{ib.error_rms_m * 1e6:.2f}" + (f" (paper {PAPER_UM['combined']:.1f})" if paper and
+                                                    not ib.include_air else "") + " µm", markup=False)

@@ -92,9 +92,11 @@ def simulation_document(sim) -> dict:
 
 @app.command("design")
 def design_cmd(
-    config: Path = typer.Argument(..., help="Design TOML (targets, heads, instrument, criterion)."),
+    config: Optional[Path] = typer.Argument(None, help="Design TOML (targets, heads, instrument, criterion), or a "
+                                            "planned general network (gama-local XML or network directory)."),
     evaluate: Optional[Path] = typer.Option(None, "--evaluate",
-                                            help="Heads CSV (point,x_m,y_m,z_m): score this layout, no search."),
+                                            help="Heads CSV (point,x_m,y_m,z_m): score this layout, no search; or "
+                                                 "a planned general network: its pre-analysis."),
     seed: int = typer.Option(1, "--seed", help="Seed of the search."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
     out: Optional[Path] = typer.Option(None, "--out", "-o", help="Directory for design.json, stations.csv (where "
@@ -107,6 +109,13 @@ def design_cmd(
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """Predict a layout's uncertainty (pre-analysis) and optimise where the heads go."""
+    from multilat.cli import general_design
+    if general_design.wants_general(config, evaluate):    # a planned general network: cli/general_design.py
+        return general_design.run(**locals())
+    if config is None:
+        from multilat.errors import MultilatError
+
+        raise MultilatError("design needs a config TOML (or --evaluate NET.xml: a planned general network)")
     from multilat.cli import checks
     from multilat.network.design.config import design_memory_bytes, load_design_config, run_design
 

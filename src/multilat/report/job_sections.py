@@ -293,6 +293,10 @@ def budget(doc: dict, result=None, options=None) -> list[Section]:
               caption=f"{doc['instrument']}, head {doc['head']}, {doc['trials']:,} trials over "
                       f"{len(doc['distances_m'])} distances; u = sqrt(mean² + variance): an uncorrected bias "
                       "counts (Guillory et al. 2020, Precision Engineering 66, §3.4)")
+    if doc.get("input_budget"):
+        from multilat.report.budget_tables import input_budget_table
+
+        input_budget_table(sec, doc)
     sec.table(("interval", "low (µm)", "high (µm)"),
               [("95 % probabilistically symmetric", _um(doc, "coverage_95_m", 0, sign=True),
                 _um(doc, "coverage_95_m", 1, sign=True)),

@@ -6,6 +6,8 @@
 - :mod:`.targets`      the fewest targets for a wanted work-volume uncertainty (greedy heuristic)
 - :mod:`.confirm`      Monte Carlo confirmation through ``propagate``
 - :mod:`.config`       the validated TOML of ``multilat design``
+- :mod:`.evaluate`     ``evaluate_layout(design, backend)``: the general layer's pre-analysis and the
+  distance-only evaluators behind one call
 """
 
 from multilat.network.design.preanalysis import (CRITERIA, Layout, PreAnalysis, SigmaModel,  # noqa: F401

@@ -22,13 +22,11 @@ The mapping keeps the conventions of the distance path exactly (``docs/conventio
   observes them (``WEIGHTED``); the other rows of ``--points`` are approximate coordinates.
   ``321:A,B,C`` is refused (not available on this path).
 
-Approximate coordinates: the ``--points`` rows; then, for a network without angles, the distance
-path's own initial values (:func:`multilat.network.starts.initial_for`); then a chain: polar points
-from set-ups of known position and frame (``polar_to_xyz``), set-ups placed and oriented by a rigid
-fit of their polar readings to three or more known points (the first set-up of a network with no
-known point at the origin, axes the world's), points multilaterated from four or more known ends.
-A point none of these reaches keeps NaN and is left out and named by
-:func:`~.run.adjust_network` (``no approximate coordinates``).
+Approximate coordinates: the ``--points`` rows, then the general chain (:mod:`.approximate`: polar
+points, resection, intersection, multilateration, the distance-only search of
+:func:`multilat.network.starts.initial_for`; the first set-up of a network with no known point at
+the origin, axes the world's), the angles read without σ serving it as readings. A point it does not
+reach keeps NaN and is left out and named by :func:`~.run.adjust_network`.
 """
 
 from __future__ import annotations
@@ -93,7 +91,7 @@ def network_from_tables(obs, *, points=None, datum="free", offsets=None, scales=
     if not np.all(off_free):
         notes.append("held head offsets subtracted from their heads' distances (the constant held at 0)")
     net = Network(pts, tuple(blocks), tuple(notes))
-    net = _with_approximations(net, obs, points, rng)
+    net = _with_approximations(net, obs, rng)
     opts = AdjustOptions(datum="auto" if (d.kind == "control" or d.points is not None) else "free")
     return net, opts
 
@@ -195,107 +193,32 @@ def _angle_blocks(obs) -> list:
 # ----------------------------------------------------------------------------- approximate coordinates
 
 
-def _with_approximations(net: Network, obs, points, rng) -> Network:
-    pts = net.points
-    xyz = pts.xyz_m.copy()
-    notes = list(net.notes)
-    known = np.all(np.isfinite(xyz), 1)
-    if known.all():
-        return net
-    has_angles = obs.azimuth_rad is not None and obs.elevation_rad is not None and bool(
-        np.any(np.isfinite(obs.azimuth_rad) & np.isfinite(obs.elevation_rad)))
-    if not has_angles:
-        xyz, how = _distance_start(obs, points, rng, xyz, known)
-        if how is not None:
-            notes.append(how)
-        known = np.all(np.isfinite(xyz), 1)
-        if known.all():
-            return Network(pts.with_xyz(xyz), net.blocks, tuple(notes))
-    n_before = int((~known).sum())
-    xyz = _chain(obs, xyz)
-    placed = n_before - int((~np.all(np.isfinite(xyz), 1)).sum())
-    notes.append(f"approximate coordinates of {placed} point(s) chained from polar readings, set-ups fitted to "
-                 "known points and multilateration")
-    return Network(PointSet(pts.ids, xyz, pts.status, pts.sigma_m, pts.constrained), net.blocks, tuple(notes))
+def _with_approximations(net: Network, obs, rng) -> Network:
+    """The approximate coordinates of the general chain (:func:`..approximate.approximate`), with the
+    angles read without σ as readings for it alone; a point it does not reach keeps NaN."""
+    from multilat.network.general.approximate import approximate
+
+    return approximate(net, extra=_angle_readings(obs), rng=rng, partial=True)
 
 
-def _distance_start(obs, points, rng, xyz, known):
-    """The distance path's initial values (:func:`multilat.network.starts.initial_for`) on the targets
-    three or more stations see (the others are left to the chain, or left out): (xyz, note or None)."""
-    from multilat.network.data import distinct_pair_codes
-    from multilat.network.starts import initial_for
-
-    pairs = distinct_pair_codes(obs.station_index, obs.target_index, obs.n_targets)
-    seen_by = np.bincount(pairs % obs.n_targets, minlength=obs.n_targets)
-    keep = seen_by[obs.target_index] >= 3
-    try:
-        sub = obs if keep.all() else obs.subset(keep)
-        start, how = initial_for(sub, None, points, rng)
-    except MultilatError as e:
-        return xyz, f"the distance path's initial values failed ({e}); chained instead"
-    xyz = xyz.copy()
-    ids = obs.station_ids + obs.target_ids
-    got = dict(zip(sub.station_ids + sub.target_ids, np.vstack([start.station_xyz_m, start.target_xyz_m])))
-    fill = [k for k, p in enumerate(ids) if not known[k] and p in got]
-    for k in fill:
-        xyz[k] = got[ids[k]]
-    return xyz, (f"approximate coordinates of {len(fill)} point(s) from the distance path's initial values "
-                 f"({how.get('method', '?')})")
-
-
-def _polar_local(obs):
-    """Per row: the target in its station's frame from distance, azimuth, elevation (NaN without angles)."""
-    from multilat.network.angles import polar_to_xyz
-
-    m = obs.n_obs
-    az = obs.azimuth_rad if obs.azimuth_rad is not None else np.full(m, np.nan)
-    el = obs.elevation_rad if obs.elevation_rad is not None else np.full(m, np.nan)
-    return polar_to_xyz(np.zeros(3), np.zeros(3), obs.distance_m, az, el)
-
-
-def _chain(obs, xyz):
-    """Polar points, fitted set-ups and multilateration, pass by pass until nothing new is placed."""
-    from multilat.network.datum import rigid_fit
-    from multilat.network.initial import multilaterate
-
-    s = obs.n_stations
-    xyz = xyz.copy()
-    local = _polar_local(obs)
-    polar = np.all(np.isfinite(local), 1)
-    frame: dict = {}
-    si, ti = obs.station_index, s + obs.target_index
-    angle_st = [i for i in range(s) if np.any(polar & (si == i))]
-    if angle_st and not np.any(np.all(np.isfinite(xyz), 1)):
-        xyz[angle_st[0]] = 0.0                      # the first set-up: origin, the world's axes
-        frame[angle_st[0]] = np.eye(3)
-    changed = True
-    while changed:
-        changed = False
-        known = np.all(np.isfinite(xyz), 1)
-        for i in angle_st:
-            rows = np.flatnonzero(polar & (si == i))
-            if i not in frame:
-                ok = rows[known[ti[rows]]]
-                if len(ok) < 3:
-                    continue
-                try:
-                    if known[i]:
-                        R, _ = rigid_fit(local[ok], xyz[ti[ok]] - xyz[i])
-                    else:
-                        R, t = rigid_fit(local[ok], xyz[ti[ok]])
-                        xyz[i], known[i] = t, True
-                except MultilatError:
-                    continue
-                frame[i], changed = R, True
-            new = rows[~known[ti[rows]]]
-            if new.size:
-                xyz[ti[new]] = xyz[i] + local[new] @ frame[i].T
-                known[ti[new]], changed = True, True
-        for p in np.flatnonzero(~known):            # multilateration from >= 4 known other ends
-            rows = np.flatnonzero((si == p) | (ti == p))
-            other = np.where(si[rows] == p, ti[rows], si[rows])
-            ok = known[other]
-            if len(set(other[ok].tolist())) >= 4:
-                xyz[p], _ = multilaterate(xyz[other[ok]], obs.distance_m[rows][ok])
-                known[p], changed = True, True
-    return xyz
+def _angle_readings(obs) -> tuple:
+    """Every row's azimuth and elevation (with or without σ) as ``tracker_angles`` blocks of the
+    stations' set-ups, for the approximations only (σ 1 rad: not used)."""
+    if obs.azimuth_rad is None or obs.elevation_rad is None:
+        return ()
+    k = np.flatnonzero(np.isfinite(obs.azimuth_rad) & np.isfinite(obs.elevation_rad))
+    out = []
+    lev = np.array([obs.station_ids[i] in obs.levelled for i in obs.station_index[k]], bool)
+    for flag in (True, False):
+        r = k[lev == flag]
+        if not r.size:
+            continue
+        st = obs.station_index[r]
+        used = sorted(set(st.tolist()))
+        remap = {s: q for q, s in enumerate(used)}
+        m = r.size
+        out.append(Block("tracker_angles", np.concatenate([obs.azimuth_rad[r], obs.elevation_rad[r]]), np.ones(2 * m),
+                         None, {"from": np.tile(st, 2), "to": np.tile(obs.n_stations + obs.target_index[r], 2),
+                                "setup": np.tile([remap[s] for s in st], 2), "component": np.repeat([0, 1], m)},
+                         names={"setup": tuple(obs.station_ids[s] for s in used)}, options={"levelled": flag}))
+    return tuple(out)

@@ -22,7 +22,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.general.adjust import AdjustOptions, GeneralResult, System, UndeterminedError, adjust
-from multilat.network.general.approximate import approximate, unreachable
+from multilat.network.general.approximate import approximate, reasons
 from multilat.network.general.observations import Network, without_points
 from multilat.network.general.points import FREE
 
@@ -58,11 +58,9 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
     """Approximate coordinates, adjustment, undetermined points left out and named (module docstring)."""
     given, net, excluded = network, network, []
     for rnd in range(1, max_rounds + 1):
-        missing = unreachable(net)
+        missing = reasons(net)                      # {id: what would reach it}
         if missing and not strict:
-            net = _leave_out(net, {p: "no approximate coordinates can be computed from the observations (no polar "
-                                      "reading from an oriented set-up, no resection on two known points)"
-                                   for p in missing}, rnd, excluded)
+            net = _leave_out(net, missing, rnd, excluded)
         try:
             ready = approximate(net)
             res = adjust(ready, options=options)
