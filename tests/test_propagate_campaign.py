@@ -260,13 +260,17 @@ def _adjust_json(path, capsys):
 
 def test_cli_raw_campaign_json(capsys):
     assert main(["propagate", str(RAW), "-e", str(ENV), "--heights", str(HTS), "--trials", "2000",
-                 "--noise", "gaussian", "--json"]) == 0
+                 "--noise", "gaussian", "--instrument", "seed2020", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     rd = doc["readings"]
     assert rd["n_readings"] == 56 and rd["n_sensor_errors"] == 16 and rd["sensors"] == ["S1", "S2", "S3", "S4"]
     assert "linearised" in rd["air_sensitivity"]
-    assert main(["propagate", str(RAW), "-e", str(ENV), "--heights", str(HTS), "--trials", "2000"]) == 0
+    assert main(["propagate", str(RAW), "-e", str(ENV), "--heights", str(HTS), "--trials", "2000",
+                 "--instrument", "seed2020"]) == 0
     assert "16 sensor errors" in capsys.readouterr().out
+    # raw readings take their σ from an instrument: never a quiet default (issue 28)
+    assert main(["propagate", str(RAW), "-e", str(ENV), "--heights", str(HTS), "--trials", "200"]) == 2
+    assert "--instrument" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("args, msg", [

@@ -155,7 +155,7 @@ def test_model_noise_on_heads_over_stations():
     runs, converges, and the MC agrees with the linear sandwich of the drawn errors' std."""
     obs = read_observations(EXAMPLE / "obs.csv")
     prob = pr.problem_from_observations(obs)
-    r = pr.propagate(prob, trials=3000, rng=2, noise="model")
+    r = pr.propagate(prob, trials=3000, rng=2, noise="model", instrument="seed2020")
     k = prob.network.n_params
     ratio = r.mc_std[:k] / r.lin_std[:k]
     # non-gaussian inputs: the SE of a std uses the sample kurtosis (mc_std_se)
@@ -317,4 +317,4 @@ def test_cli_propagate_levelled(tmp_path, capsys):
     assert doc["solver"] == "batched-coupled" and doc["n_failed"] == 0
     assert main(["propagate", str(p), "--trials", "300", "--noise", "gaussian", "--levelled", "NOPE"]) != 0
     err = capsys.readouterr().err.strip()
-    assert "levelled: 'NOPE' is not a station" in err and len(err.splitlines()) == 1
+    assert "--levelled: unknown station 'NOPE'" in err and len(err.splitlines()) == 1   # as `adjust` says it

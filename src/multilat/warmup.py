@@ -58,7 +58,8 @@ def _steps():
         from multilat.network.propagate import problem_from_config, propagate
         from multilat.network.sigma_source import DEFAULT_SIGMA_M
 
-        propagate(problem_from_config(small_volume(), sigma_m=DEFAULT_SIGMA_M), trials=2000, rng=1)
+        propagate(problem_from_config(small_volume(), sigma_m=DEFAULT_SIGMA_M), trials=2000, rng=1,
+                  noise="model", instrument="seed2020")      # the draws' kernels: named (never a default)
 
     def normals():
         """numba's bit-identical standard normal draws (used past a size threshold)."""

@@ -71,17 +71,20 @@ def _has_repeats(obs) -> bool:
     return np.unique(key).size < obs.n_obs
 
 
-def campaign_problem(path, *, datum: str = "free", references=None, instrument="seed2020",
+def campaign_problem(path, options=None, *, references=None, instrument="seed2020",
                      sigma_m=None, environment=None, heights=None, formula: str = "ciddor",
                      extrapolate: bool = False, max_gap_s=None, average: bool = False, pairs=None,
-                     sigma_source: dict | None = None, scale_bars: bool = False, points=None,
-                     scales: bool = False, levelled=()):
+                     sigma_source: dict | None = None, points=None, pairs_option: str = "interpoint distance",
+                     **option_fields):
     """The :class:`multilat.network.propagate.Problem` of a campaign file (module docstring).
 
     Parameters
     ----------
     path : observations CSV or raw-readings CSV
-    datum, references, pairs : as :func:`multilat.network.propagate.problem_from_observations`
+    options : NetworkOptions, optional
+        The network model, as ``adjust`` takes it (datum, offsets, scales, levelled, scale bars, ...);
+        its fields may also come as keywords (``datum=``, ``scales=``, ``levelled=``, ``scale_bars=``).
+    references, pairs, pairs_option : as :func:`multilat.network.propagate.problem_from_observations`
     instrument : preset name, TOML path or Instrument
     sigma_m : float, optional
         Every distance's sigma (observation files without a sigma_m column).
@@ -91,16 +94,9 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
         Average the repeated readings of each pair (weighted means) instead of keeping them.
     sigma_source : dict, optional
         Filled with where the distances' σ came from (as ``adjust`` records it).
-    scale_bars : bool
-        The ``references`` are scale bars (observations with their ``u_m``, drawn in every trial).
     points : Points, optional
         Approximate coordinates, or control under ``datum="control"`` (weighted rows drawn in every
         trial, hard rows held).
-    scales : bool
-        Estimate a scale per head (the scale datum: scale bars).
-    levelled : sequence of str
-        Stations on their level besides those the instrument's trackers declare (their angles observe
-        the vertical; the trials' datum then turns about z only).
 
     Returns
     -------
@@ -122,8 +118,10 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
     if average:
         av = average_repeats(obs)
         obs, matrix, scatter = av.obs, av.matrix, av.scatter_json()
-    if levelled:
-        obs = dataclasses.replace(obs, levelled=tuple(dict.fromkeys(tuple(obs.levelled) + tuple(levelled))))
+    from multilat.network.options import NetworkOptions
+
+    opts = NetworkOptions.of(options, **option_fields)
+    obs = opts.prepare(obs, source=str(path))         # levelled stations; distance-only ones checked
     if corrected is not None:
         rd = Readings(np.asarray(readings_obs.station_index), np.asarray(corrected.distance_m, float),
                       np.asarray(corrected.sigma_model_m, float), air_jacobian_m=corrected.air_jacobian_m,
@@ -134,12 +132,10 @@ def campaign_problem(path, *, datum: str = "free", references=None, instrument="
                       np.asarray(readings_obs.sigma_m, float), matrix=matrix, scatter=scatter)
     else:
         rd = None                 # one independent error per observation: the plain path
-    if scale_bars and references is None:
+    if opts.scale_bars and references is None:
         raise MultilatError("--scale-bars needs --references FILE (the bars' lengths with u_m)")
-    prob = pr.problem_from_observations(obs, datum=datum, references=references, instrument=inst,
-                                        source=str(path), pairs=pairs,
-                                        scale_bars=references if scale_bars else None, points=points,
-                                        scales=scales)
+    prob = pr.problem_from_observations(obs, opts, references=references, instrument=inst, source=str(path),
+                                        pairs=pairs, points=points, pairs_option=pairs_option)
     return dataclasses.replace(prob, readings=rd), corrected
 
 

@@ -13,7 +13,7 @@ from multilat.report.demo import DEMO_SECTIONS  # noqa: F401  (re-exported: test
 
 @app.command()
 def demo(
-    out: Path = typer.Option(Path("demo-report"), "--out", help="Directory for report.html."),
+    out: Path = typer.Option(Path("demo-report"), "--out", "-o", help="Directory for report.html."),
     seed: int = typer.Option(20200808, "--seed", help="Seed of every Monte Carlo in the report."),
     quick: bool = typer.Option(False, "--quick", help="Smaller Monte Carlo sample sizes (for tests)."),
 ) -> None:

@@ -99,8 +99,8 @@ def design_cmd(
                                                  "a planned general network: its pre-analysis."),
     seed: int = typer.Option(1, "--seed", help="Seed of the search."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Directory for design.json, stations.csv (where "
-                                                          "each head stands, for the crew) and the figures."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Directory for design.json, stations.csv (where "
+                                                                "each head stands, for the crew) and the figures."),
     simulate: int = typer.Option(0, "--simulate", min=0,
                                  help="Confirm the returned layout by a Monte Carlo of this many trials (propagate)."),
     noise: Optional[str] = typer.Option(None, "--noise",

@@ -92,7 +92,7 @@ def simulate(
     method: str = typer.Option("procedure", "--method", help="procedure (the paper's steps 1-8) or direct."),
     where: str = typer.Option("volume", "--where", help="volume (Fig. 8 lattice) or comparison (75 points)."),
     json_out: bool = typer.Option(False, "--json", help="Print JSON (points, max_std_m, trials, ...)."),
-    out: Path = typer.Option(None, "--out", help="Directory for points.csv, sides.csv, summary.json, "
+    out: Path = typer.Option(None, "--out", "-o", help="Directory for points.csv, sides.csv, summary.json, "
                              "fig8_*.png, fig9_cdf.png."),
     report: Path = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
@@ -149,7 +149,7 @@ def compare(
     seed: int = typer.Option(20070101, "--seed", help="Seed of the Monte Carlo."),
     method: str = typer.Option("procedure", "--method", help="procedure or direct."),
     json_out: bool = typer.Option(False, "--json", help="Print JSON."),
-    out: Path = typer.Option(None, "--out", help="Directory for comparison.csv and fig7_comparison.png."),
+    out: Path = typer.Option(None, "--out", "-o", help="Directory for comparison.csv and fig7_comparison.png."),
     report: Path = typer.Option(None, "--report", help=report_opt.HELP),
 ) -> None:
     """LBB coordinates vs reference coordinates with simulated 2σ bars (the paper's Fig. 7)."""

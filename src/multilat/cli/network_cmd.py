@@ -15,25 +15,53 @@ from multilat.cli import checks, report_opt
 from multilat.io import check_output_dir, staging_dir
 
 
+#: The CLI parameters of ``adjust`` (and ``propagate``) that are fields of :class:`NetworkOptions`
+#: under another name.
+_CLI_FIELDS = {"scale_bar": "scale_bars"}
+_MODEL_FIELDS = ("datum", "cost", "scales", "fixed_scale", "levelled", "distance_only", "scale_bar", "scale_bars",
+                 "instrument",
+                 "alpha", "alpha_global", "test_method", "alpha_family", "variance_factor", "mdb_limit_sigma",
+                 "snooping", "strict", "variance_components", "solver")
+
+
+def model_options(params: dict):
+    """The :class:`~multilat.network.options.NetworkOptions` of a command's parameters (``locals()``
+    of ``adjust`` or ``propagate``; the ones a command lacks keep their defaults), validated before any
+    file is read: a bad value is one line naming the option. ``--fix-offsets-um`` names heads of the
+    file: added by :func:`with_fixed_offsets` once it is read."""
+    from multilat.network.options import NetworkOptions
+
+    fields = {_CLI_FIELDS.get(k, k): params[k] for k in _MODEL_FIELDS if params.get(k) is not None}
+    if params.get("sigma_um") is not None:
+        fields["sigma_m"] = params["sigma_um"] * 1e-6
+    return NetworkOptions.from_cli(**fields)
+
+
+def with_fixed_offsets(opts, text: str | None, obs):
+    """``opts`` with ``--fix-offsets-um TEXT`` parsed against the heads of ``obs`` (None: the ids are
+    checked by the adjustment, which names the option)."""
+    if text is None:
+        return opts
+    what = "station" if obs is None or obs.station_heads is None else "head"
+    return type(opts).of(opts, offsets_m=parse_fixed_offsets(text, None if obs is None else obs.head_ids,
+                                                             what=what))
+
+
 def with_levelled(obs, levelled: str | None):
     """``obs`` with the stations of ``--levelled ID,ID,...`` levelled too (one-line error for an unknown id)."""
     if not levelled:
         return obs
-    import dataclasses
+    from multilat.network.options import NetworkOptions
 
-    ids = [x.strip() for x in levelled.split(",") if x.strip()]
-    for x in ids:
-        if x not in obs.station_ids:
-            raise MultilatError(f"--levelled: unknown station {x!r} (stations: {', '.join(obs.station_ids)})")
-    return dataclasses.replace(obs, levelled=tuple(dict.fromkeys(obs.levelled + tuple(ids))))
+    return NetworkOptions.from_cli(levelled=levelled).prepare(obs)
 
 
 def parse_fixed_offsets(text: str, station_ids, *, what: str = "station") -> float | dict:
     """``--fix-offsets-um``: ``"X"`` (every head, µm) -> metres; ``"A=1234,B=-871"`` -> {head id: metres}.
 
     ``station_ids`` are the ids that may be named (the head ids; a head is its station when the
-    observations name no heads). Raises :class:`MultilatError` (one line) on a malformed value or an
-    unknown id.
+    observations name no heads; None: not checked here). Raises :class:`MultilatError` (one line) on a
+    malformed value or an unknown id.
     """
     text = text.strip()
     if "=" not in text:
@@ -50,7 +78,7 @@ def parse_fixed_offsets(text: str, station_ids, *, what: str = "station") -> flo
         key = key.strip()
         if not sep or not key:
             raise MultilatError(f"--fix-offsets-um: expected STATION=µm, got {item.strip()!r}")
-        if key not in station_ids:
+        if station_ids is not None and key not in station_ids:
             raise MultilatError(f"--fix-offsets-um: unknown {what} id {key!r} "
                                 f"({what}s: {', '.join(station_ids)})")
         if key in out:
@@ -132,7 +160,7 @@ def adjust_command(
                                   help="Iteratively reject the worst w-test failure."),
     seed: int = typer.Option(0, "--seed", help="Seed for the initial-value search (if used)."),
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a summary."),
-    out: Optional[Path] = typer.Option(None, "--out",
+    out: Optional[Path] = typer.Option(None, "--out", "-o",
                                        help="Directory for result CSVs and figures (written atomically)."),
     tables: str = typer.Option("csv", "--tables",
                                help="With --out: the per-point tables (stations, targets, residuals, "
@@ -199,20 +227,15 @@ def adjust_command(
     checks.sigma_um(sigma_um)
     checks.seed(seed)
     report_opt.check_report_path(report, [observations, references, points, environment, heights])
-    if test_method is None:
-        test_method = "fixed" if alpha_global is not None else "auto"
-    _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma, alpha_family)
-    if solver not in ("auto", "dense", "sparse"):
-        raise MultilatError(f"--solver must be auto, dense or sparse, got {solver!r}")
+    opts = model_options(locals())
     if out is not None:
         check_output_dir(out, inputs=[observations, references, points, environment, heights])
     from multilat.campaign.propagation import read_campaign
 
     src: dict = {}
-    obs, corrected = read_campaign(observations, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
-                                   instrument=instrument, environment=environment, heights=heights,
-                                   formula=formula, extrapolate=extrapolate, max_gap_s=max_gap_s,
-                                   sigma_source=src)
+    obs, corrected = read_campaign(observations, sigma_m=opts.sigma_m, instrument=instrument,
+                                   environment=environment, heights=heights, formula=formula,
+                                   extrapolate=extrapolate, max_gap_s=max_gap_s, sigma_source=src)
     if corrected is not None:
         src["defaulted"] = instrument is None
     _check_instrument_used(instrument, observations, obs, src, corrected)
@@ -222,48 +245,20 @@ def adjust_command(
 
         averaged = _average(obs)
         obs = averaged.obs
-    if distance_only:
-        for x in (v.strip() for v in distance_only.split(",") if v.strip()):
-            if x not in obs.station_ids:
-                raise MultilatError(f"--distance-only: unknown station {x!r} (stations: {', '.join(obs.station_ids)})")
-            i = obs.station_ids.index(x)
-            for name in ("sigma_azimuth_rad", "sigma_elevation_rad"):
-                sig = getattr(obs, name)
-                k = np.flatnonzero((obs.station_index == i) & np.isfinite(sig)) if sig is not None else []
-                if len(k):
-                    raise MultilatError(f"{observations}: station {x!r} is declared distance-only (--distance-only) "
-                                        f"but observation {obs.label(int(k[0]))} has {name}")
-    obs = with_levelled(obs, levelled)
+    obs = opts.prepare(obs, source=str(observations))
     refs = read_reference_lengths(references) if references is not None else None
     if refs is not None:
         refs.check_ids(obs.station_ids + obs.target_ids, what=str(references))
     pts = read_points(points) if points is not None else None
-    what = "station" if obs.station_heads is None else "head"
-    offsets = None if fix_offsets_um is None else parse_fixed_offsets(fix_offsets_um, obs.head_ids, what=what)
-    if fixed_scale is not None and not scales:
-        raise MultilatError("--fixed-scale goes with --scales")
-    if scale_bar and refs is None:
+    opts = with_fixed_offsets(opts, fix_offsets_um, obs)
+    if opts.scale_bars and refs is None:
         raise MultilatError("--scale-bars needs --references FILE (the bars' lengths with u_m)")
-    if fixed_scale is not None:
-        if fixed_scale not in obs.head_ids:
-            raise MultilatError(f"--fixed-scale: unknown {what} id {fixed_scale!r} "
-                                f"({what}s: {', '.join(obs.head_ids)})")
-        scales = [hid for hid in obs.head_ids if hid != fixed_scale]
+    opts.scale_heads(obs)                       # --fixed-scale names a head of the file
     vc = None
-    if variance_components is not None:
-        from multilat.network.variance_components import GROUPINGS
-
-        if variance_components not in GROUPINGS:
-            raise MultilatError(f"--variance-components must be one of {', '.join(GROUPINGS)}, "
-                                f"got {variance_components!r}")
-        if corrected is not None:
-            raise MultilatError("--variance-components applies to an observation file: raw readings get "
-                                "their σ from the distance model and the sensors")
-    options = dict(datum=datum, points=pts, cost=cost, offsets=offsets, scales=scales, alpha=alpha,
-                   alpha_global=alpha_global, test_method=test_method, variance_factor=variance_factor,
-                   alpha_family=alpha_family,
-                   mdb_limit_sigma=mdb_limit_sigma, sigma_source=src, snooping=snooping, solver=solver,
-                   strict=strict, scale_bars=refs if scale_bar else None, rng=seed)
+    if opts.variance_components is not None and corrected is not None:
+        raise MultilatError("--variance-components applies to an observation file: raw readings get "
+                            "their σ from the distance model and the sensors")
+    data = dict(points=pts, references=refs, sigma_source=src, rng=seed)
     from rich.markup import escape
 
     from multilat.errors import printable
@@ -279,12 +274,13 @@ def adjust_command(
 
         try:
             with reporting(step):
-                if variance_components is None:
-                    res = adjust(obs, **options)
+                if opts.variance_components is None:
+                    res = adjust(obs, opts, **data)
                 else:
                     from multilat.network.variance_components import estimate_variance_components
 
-                    vc = estimate_variance_components(obs, grouping=variance_components, **options)
+                    vc = estimate_variance_components(obs, grouping=opts.variance_components, options=opts,
+                                                      snooping=opts.snooping, **data)
                     res = vc.result
         except UnitSlipError as exc:      # name the file at fault
             raise MultilatError(f"{points if exc.source == 'points' else observations}: {exc}") from None
@@ -329,19 +325,12 @@ def adjust_command(
 
 
 def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma, alpha_family=0.01):
-    """The test options, before any work."""
-    if test_method not in ("auto", "b-method", "sidak", "fixed"):
-        raise MultilatError(f"--test-method must be auto, b-method, sidak or fixed, got {test_method!r}")
-    if variance_factor not in ("known", "unknown"):
-        raise MultilatError(f"--variance-factor must be known or unknown, got {variance_factor!r}")
-    if alpha_global is not None and test_method != "fixed":
-        raise MultilatError(f"--alpha-global goes with --test-method fixed (--test-method {test_method} derives "
-                            "it)")
-    for name, v in (("--alpha", alpha), ("--alpha-global", alpha_global), ("--alpha-family", alpha_family)):
-        if v is not None and not (0 < v < 1):
-            raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
-    if not (np.isfinite(mdb_limit_sigma) and mdb_limit_sigma > 0):
-        raise MultilatError(f"--mdb-limit-sigma must be > 0, got {mdb_limit_sigma!r}")
+    """The test options, before any work (the checks of :class:`NetworkOptions`)."""
+    from multilat.network.options import NetworkOptions
+
+    NetworkOptions.from_cli(alpha=alpha, alpha_global=alpha_global, test_method=test_method,
+                            variance_factor=variance_factor, mdb_limit_sigma=mdb_limit_sigma,
+                            alpha_family=alpha_family)
 
 
 def _print_summary(res, doc, out):

@@ -16,28 +16,34 @@ from multilat.errors import MultilatError
 BUILTIN = ("small-volume", "large-volume")
 
 
-def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_um: float | None,
+def load_problem(source: str, opts, *, noise: str | None, instrument: str | None, sigma_um: float | None,
                  references: Path | None, environment: Path | None = None, heights: Path | None = None,
                  formula: str = "ciddor", extrapolate: bool = False, max_gap_s: float | None = None,
                  average_repeats: bool = False, sigma_source: dict | None = None,
-                 points: Path | None = None, scale_bars: bool = False, scales: bool = False,
-                 levelled: str | None = None):
-    """The propagation problem for ``source``: a built-in configuration name, or what ``adjust``
-    reads (an observations CSV, or raw readings with their environment log; repeated readings kept
-    or averaged), :func:`multilat.campaign.propagation.campaign_problem`. ``sigma_source`` (a dict) is
-    filled with where the weights' σ came from."""
+                 points: Path | None = None, fix_offsets_um: str | None = None, pairs: str | None = None):
+    """``(problem, noise)``: the propagation problem for ``source`` — a built-in configuration name, or
+    what ``adjust`` reads (an observations CSV, or raw readings with their environment log; repeated
+    readings kept or averaged), :func:`multilat.campaign.propagation.campaign_problem` — with the network
+    model ``opts`` (:class:`~multilat.network.options.NetworkOptions`, as ``adjust`` takes it), and the
+    noise drawn (:func:`multilat.network.propagate.noise_choice`: the distance model only with an
+    instrument named; otherwise gaussian with the σ the file gives). A file whose σ would come from an
+    instrument nobody named (no ``sigma_m`` column, no ``--sigma-um``; raw readings) is refused in one
+    line naming the options. ``sigma_source`` (a dict) is filled with where the weights' σ came from."""
     from multilat import instrument as _inst
     from multilat.network import propagate as pr
     from multilat.network import sigma_source as ss
 
     src = {} if sigma_source is None else sigma_source
-
-    inst = _inst.load_instrument(instrument)
+    noise, _ = pr.noise_choice(noise, instrument, cli=True)
+    inst = None if instrument is None else _inst.load_instrument(instrument)
+    pair_list = None if pairs is None else pr.parse_pairs(pairs)
     if source in BUILTIN:
-        if environment is not None or heights is not None or extrapolate or max_gap_s is not None \
-                or average_repeats or points is not None or scale_bars or scales or levelled:
-            raise MultilatError(f"--environment/--heights/--extrapolate/--max-gap-s/--average-repeats/"
-                                f"--points/--scale-bars/--scales/--levelled apply to a campaign file, not to the "
+        used = [o for o, v in (("--environment", environment), ("--heights", heights), ("--extrapolate", extrapolate),
+                               ("--max-gap-s", max_gap_s), ("--average-repeats", average_repeats),
+                               ("--points", points), ("--fix-offsets-um", fix_offsets_um)) if v]
+        used += [opts.name(f) for f in opts.non_default() if f not in ("datum", "instrument", "sigma_m")]
+        if used:
+            raise MultilatError(f"{used[0]}: the model and file options apply to a campaign file, not to the "
                                 f"built-in {source!r}")
         try:
             from multilat.network import configs
@@ -47,22 +53,48 @@ def load_problem(source: str, *, datum: str, noise: str, instrument: str, sigma_
         sigma = None if noise == "model" else (sigma_um * 1e-6 if sigma_um else ss.DEFAULT_SIGMA_M)
         src.update(ss.distance_model(cfg.station_ids, inst) if sigma is None else
                    ss.option(sigma, "--sigma-um" if sigma_um else "default 4.7 µm (the paper's σ)"))
-        return pr.problem_from_config(cfg, sigma_m=sigma, instrument=inst if noise == "model" else None,
-                                      datum=datum, source=source)
+        return pr.problem_from_config(cfg, sigma_m=sigma, instrument=inst, datum=opts.datum, source=source,
+                                      pairs=pair_list, pairs_option="--pairs"), noise
     from multilat.campaign.propagation import campaign_problem
+    from multilat.campaign.raw import is_raw_file
+    from multilat.cli.network_cmd import with_fixed_offsets
     from multilat.network.files import read_points, read_reference_lengths
 
     if not Path(source).exists():
         raise MultilatError(f"{source}: no such file (and not a built-in: {', '.join(BUILTIN)})")
+    if inst is None and sigma_um is None and not is_raw_file(source) and "sigma_m" not in _header(source):
+        raise MultilatError(f"{source}: no sigma_m column: give --sigma-um, or --instrument for the σ of its distance "
+                            "model (a Monte Carlo never draws from an instrument nobody named)")
     refs = read_reference_lengths(references) if references is not None else None
-    problem, _ = campaign_problem(source, datum=datum, references=refs, instrument=inst,
+    opts = with_fixed_offsets(opts, fix_offsets_um, None)      # head ids checked by the adjustment
+    problem, _ = campaign_problem(source, opts, references=refs, instrument=inst,
                                   sigma_m=None if sigma_um is None else sigma_um * 1e-6,
                                   environment=environment, heights=heights, formula=formula,
                                   extrapolate=extrapolate, max_gap_s=max_gap_s, average=average_repeats,
-                                  sigma_source=src, scale_bars=scale_bars, scales=scales,
-                                  points=read_points(points) if points is not None else None,
-                                  levelled=tuple(x.strip() for x in (levelled or "").split(",") if x.strip()))
-    return problem
+                                  sigma_source=src, points=read_points(points) if points is not None else None,
+                                  pairs=pair_list, pairs_option="--pairs")
+    if inst is None and src.get("kind") == "raw readings":    # after the reader's own checks of the file
+        raise MultilatError(f"{source}: raw readings are corrected and weighted by an instrument's distance model: "
+                            "name it with --instrument (e.g. seed2020)")
+    if src.get("kind") == "distance model" and src.get("defaulted"):
+        raise MultilatError(f"{source}: no sigma_m column: give --sigma-um, or --instrument for the σ of its distance "
+                            "model (a Monte Carlo never draws from an instrument nobody named)")
+    return problem, noise
+
+
+def _header(path) -> list[str]:
+    """The column names of a CSV file (its first line that is not a ``#`` comment); [] when unreadable
+    (the reader then names the fault)."""
+    import csv
+
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            for row in csv.reader(fh):
+                if row and not row[0].lstrip().startswith("#"):
+                    return [c.strip() for c in row]
+    except (OSError, UnicodeDecodeError, csv.Error):
+        pass
+    return []
 
 
 def keep_freed_memory() -> None:
@@ -93,17 +125,39 @@ def propagate_cmd(
     adaptive: bool = typer.Option(False, "--adaptive", help="JCGM 101 7.9 adaptive number of trials."),
     seed: int = typer.Option(1, "--seed",
                              help="Root seed (fixed blocks of 1000 trials get SeedSequence spawn children)."),
-    instrument: str = typer.Option("seed2020", "--instrument", help="Instrument preset or TOML file."),
-    noise: str = typer.Option("model", "--noise", help="model (distance model, non-gaussian) or gaussian."),
+    instrument: Optional[str] = typer.Option(None, "--instrument",
+                                             help="Instrument preset or TOML file: its distance model gives the "
+                                                  "errors drawn (--noise model, the default with it) and the σ a "
+                                                  "file without sigma_m lacks. Default: none (errors gaussian "
+                                                  "with the file's σ)."),
+    noise: Optional[str] = typer.Option(None, "--noise",
+                                        help="model (the --instrument's distance model, non-gaussian) or "
+                                             "gaussian (the weights' σ). Default: model with --instrument, "
+                                             "else gaussian."),
     sigma_um: Optional[float] = typer.Option(None, "--sigma-um",
-                                             help="Gaussian sigma / weights in um (default: file or 4.7)."),
+                                             help="σ of every distance in µm, for a file without sigma_m "
+                                                  "(built-ins: default 4.7, the paper's)."),
     datum: str = typer.Option("free", "--datum", help="free[:P,..], 321:A,B,C or control[:P,..] (--points; "
                                                       "the same in every trial)."),
     references: Optional[Path] = typer.Option(None, "--references", help="Reference lengths CSV."),
     scale_bars: bool = typer.Option(False, "--scale-bars", "--scale-bar",
                                     help="The --references are scale bars: observations weighted by their "
                                          "u_m, drawn from it in every trial (with --scales: the scale datum)."),
-    scales: bool = typer.Option(False, "--scales", help="Estimate a scale per head (needs --scale-bars)."),
+    scales: bool = typer.Option(False, "--scales", help="Estimate a scale per head (needs --scale-bars or "
+                                "--fixed-scale)."),
+    fixed_scale: Optional[str] = typer.Option(None, "--fixed-scale",
+                                              help="With --scales: hold this head's scale (as in `adjust`)."),
+    fix_offsets_um: Optional[str] = typer.Option(None, "--fix-offsets-um",
+                                                 help="Hold head offsets fixed, µm: one value for every head, or "
+                                                      "A=1234,B=-871 (as in `adjust`); held in every trial."),
+    distance_only: Optional[str] = typer.Option(None, "--distance-only",
+                                                help="Stations that read no angles, ID,ID,... (as in `adjust`)."),
+    strict: bool = typer.Option(False, "--strict", help="Refuse a weakly observed point instead of leaving "
+                                "it out (as in `adjust`; a propagation refuses a network with points left out)."),
+    pairs: Optional[str] = typer.Option(None, "--pairs",
+                                        help="Interpoint distances to report: P1-P2,P3-P4,... or a CSV file "
+                                             "point_a,point_b. Default: the --references pairs, else every "
+                                             "target pair (up to 20 targets), else consecutive targets."),
     levelled: Optional[str] = typer.Option(None, "--levelled", help="Stations on their level (κ only; their "
                                            "angles observe the vertical), ID,ID,... as in `adjust`."),
     points: Optional[Path] = typer.Option(None, "--points",
@@ -127,7 +181,7 @@ def propagate_cmd(
     workers: Optional[int] = typer.Option(None, "--workers", help="Start a local Dask cluster of N workers."),
     scheduler: Optional[str] = typer.Option(None, "--scheduler", help="Address of an existing Dask scheduler."),
     as_json: bool = typer.Option(False, "--json", help="Print the result as JSON."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Directory for CSVs, JSON and the figure."),
+    out: Optional[Path] = typer.Option(None, "--out", "-o", help="Directory for CSVs, JSON and the figure."),
     cloud_points: Optional[str] = typer.Option(None, "--cloud-points",
                                                help="Points whose Monte Carlo clouds clouds.png (and the "
                                                     "report) show, ID,ID,... (default: the stations and "
@@ -143,8 +197,6 @@ def propagate_cmd(
     from multilat.network.propagate import propagate
     from multilat.parallel import map_from_options
 
-    if noise not in ("model", "gaussian"):
-        raise MultilatError(f"--noise must be model or gaussian, got {noise!r}")
     checks.sigma_um(sigma_um)
     checks.seed(seed)
     checks.trials(trials, lo=2)
@@ -159,13 +211,16 @@ def propagate_cmd(
         from multilat.io import check_output_dir
 
         check_output_dir(out, inputs=[source, references, environment, heights, points])
+    from multilat.cli.network_cmd import model_options
+
+    opts = model_options(locals())        # the network model, as `adjust` takes it
     keep_freed_memory()
     src: dict = {}
-    problem = load_problem(source, datum=datum, noise=noise, instrument=instrument, sigma_um=sigma_um,
-                           references=references, environment=environment, heights=heights,
-                           formula=formula, extrapolate=extrapolate, max_gap_s=max_gap_s,
-                           average_repeats=average_repeats, sigma_source=src, points=points,
-                           scale_bars=scale_bars, scales=scales, levelled=levelled)
+    problem, noise = load_problem(source, opts, noise=noise, instrument=instrument, sigma_um=sigma_um,
+                                  references=references, environment=environment, heights=heights,
+                                  formula=formula, extrapolate=extrapolate, max_gap_s=max_gap_s,
+                                  average_repeats=average_repeats, sigma_source=src, points=points,
+                                  fix_offsets_um=fix_offsets_um, pairs=pairs)
     total = None if adaptive else trials
     with map_from_options(workers=workers, scheduler=scheduler) as m, progress() as bar:
         task = bar.add_task("Monte Carlo", total=total)

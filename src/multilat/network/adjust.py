@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Mapping
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -25,20 +25,23 @@ from multilat.network.exclusion import (UndeterminedTargets, exclude_weak_points
                                         raise_undetermined, zero_redundancy_warnings)
 from multilat.network.fit import (as_start, check_control, check_network, control_ids, fit_once, raise_if_flat,
                                   raise_unconverged, station_map, target_map)
-from multilat.network.model import COSTS
-from multilat.network.problem import Params
+from multilat.network.adjust_steps import (coupling_results, scaled_cov, start_as_partial, w_failure_groups,
+                                           search_minimum as _search_minimum)
+from multilat.network.fit_state import Fit
+from multilat.network.options import NetworkOptions
 from multilat.network.result import (AdjustmentResult, InterpointDistance, Outlier, Start,
                                      build_result)
 from multilat.network.search import P_MIN, p_value
 from multilat.network.sigma_source import describe as describe_sigma
 from multilat.network.couplings import coupling_spec
 from multilat.network.angle_rows import angle_results
-from multilat.network.snooping import LINEAR_W_MAX, LinearRounds, angle_outliers, n_tested, snooping_round
+from multilat.network.snooping import (LINEAR_W_MAX, LinearRounds, Procedure, Rounds, angle_outliers, n_tested,
+                                       snooping_round)
 from multilat.network.scale_datum import check_scale_datum
-from multilat.network.starts import PARTIAL_RESTARTS, initial_for
+from multilat.network.starts import initial_for
 from multilat.network.unit_slip import check_unit_slip, noise_free
 
-__all__ = ["adjust", "AdjustmentResult", "Outlier", "InterpointDistance", "Start"]
+__all__ = ["adjust", "AdjustmentResult", "Model", "NetworkOptions", "Outlier", "InterpointDistance", "Start"]
 
 
 def _head_stations(key, obs: Observations, what: str) -> np.ndarray:
@@ -54,8 +57,9 @@ def _head_stations(key, obs: Observations, what: str) -> np.ndarray:
     return np.array([h == key for h in hos])
 
 
-def _fixed_offsets(offsets, obs: Observations):
-    """(offset_free (s,) bool, fixed values (s,)) from the ``offsets`` option (keys: head ids)."""
+def _fixed_offsets(offsets, obs: Observations, what: str = "offsets"):
+    """(offset_free (s,) bool, fixed values (s,)) from the ``offsets_m`` option (None/"estimate", one
+    value, or a mapping whose keys are head ids; also called by the general layer's table reader)."""
     s = obs.n_stations
     free = np.ones(s, bool)
     val = np.zeros(s)
@@ -63,21 +67,21 @@ def _fixed_offsets(offsets, obs: Observations):
         return free, val
     if isinstance(offsets, Mapping):
         for k, v in offsets.items():
-            m = _head_stations(k, obs, "offsets")
+            m = _head_stations(k, obs, what)
             if not np.isfinite(v):
-                raise MultilatError(f"offsets: value for {k!r} must be finite")
+                raise MultilatError(f"{what}: value for {k!r} must be finite")
             free[m], val[m] = False, float(v)
         return free, val
     try:
         v = float(offsets)
     except (TypeError, ValueError):
-        raise MultilatError(f"offsets must be None/'estimate', a number or a mapping, got {offsets!r}") from None
+        raise MultilatError(f"{what} must be None/'estimate', a number or a mapping, got {offsets!r}") from None
     if not np.isfinite(v):
-        raise MultilatError("offsets must be finite")
+        raise MultilatError(f"{what} must be finite")
     return np.zeros(s, bool), np.full(s, v)
 
 
-def _scale_flags(scales, obs):
+def _scale_flags(scales, obs, what: str = "scales"):
     s = obs.n_stations
     if scales is False or scales is None:
         return np.zeros(s, bool)
@@ -85,20 +89,43 @@ def _scale_flags(scales, obs):
         return np.ones(s, bool)
     out = np.zeros(s, bool)
     for k in scales:
-        out |= _head_stations(k, obs, "scales")
+        out |= _head_stations(k, obs, what)
     return out
 
 
 # ====================================================================== public
-def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=None,
-           points: Points | None = None, cost: str = "distance", offsets=None, scales=False,
-           alpha: float = 0.001, power: float = 0.80, alpha_global: float | None = None,
-           test_method: str | None = None, variance_factor: str = "known", mdb_limit_sigma: float = 10.0,
-           alpha_family: float = st.ALPHA_FAMILY,
-           r_min: float = 0.1, sigma_source: dict | None = None, snooping: bool = True,
-           max_rejections: int | None = None, max_iter: int = 100, solver: str = "auto", strict: bool = False,
+@dataclass(frozen=True, eq=False)
+class Model:
+    """The network model of one adjustment, resolved against its observations: what every solve of
+    it needs (the first, the minimum search's, the control test's, the snooping rounds', the mirror
+    test's). ``off_free``, ``off_val``, ``sc_free``: (s,) per station of ``obs``."""
+
+    datum: Datum
+    points: Points | None
+    cost: str
+    off_free: np.ndarray
+    off_val: np.ndarray
+    sc_free: np.ndarray
+    max_iter: int
+    solver: str
+    chunk_targets: int
+    couplings: object = None
+
+    def fit(self, sub, start, ref_start, obs, used, *, warn: bool, partial_ok: bool = False,
+            cost: str | None = None, held_offsets: bool = False) -> Fit:
+        """One adjustment of ``sub`` (rows ``used`` of ``obs``) from ``start``
+        (:func:`multilat.network.fit.fit_once`); ``held_offsets``: every offset held at zero."""
+        of, ov = ((np.zeros_like(self.off_free), np.zeros_like(self.off_val)) if held_offsets
+                  else (self.off_free, self.off_val))
+        return fit_once(sub, self.datum, start, ref_start, obs, used, self.points, cost or self.cost, of, ov,
+                        self.sc_free, self.max_iter, self.solver, self.chunk_targets, warn=warn,
+                        partial_ok=partial_ok, couplings=self.couplings)
+
+
+def adjust(obs: Observations, options: NetworkOptions | None = None, *, initial=None,
+           points: Points | None = None, references: ReferenceLengths | None = None,
            scale_bars: ReferenceLengths | None = None, scale_bar: ReferenceLengths | None = None,
-           chunk_targets: int = 20000, rng=0, _undetermined: dict | None = None) -> AdjustmentResult:
+           sigma_source: dict | None = None, rng=0, **option_fields) -> AdjustmentResult:
     """Adjust a self-calibrating multilateration network.
 
     Unknowns: station coordinates, target coordinates, one additive offset per station (estimated
@@ -106,10 +133,18 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     Solved by Gauss-Newton with Levenberg-Marquardt damping on the normal equations reduced by the
     Schur complement over the 3x3 target blocks (cost linear in the number of targets).
 
+    The options are one :class:`~multilat.network.options.NetworkOptions` (``options``), or its fields
+    as keywords (``datum="321:A,B,C"``, ``alpha=0.01``, ...; given with ``options`` they replace its
+    values); a bad value is one line naming the option. The data are ``obs``, ``points``,
+    ``references`` (with ``scale_bars=True`` in the options: the scale bars), ``initial`` and
+    ``sigma_source``; ``rng`` seeds the initial values.
+
     Parameters
     ----------
     obs : Observations
         Distances with a-priori uncertainties ``sigma_m``.
+    options : NetworkOptions, optional
+        Every option below (defaults: those of ``multilat adjust``).
     datum : Datum or str
         ``"free"`` (inner constraints over all points; ``"free:P1,P2,.."`` over chosen points),
         ``"321:A,B,C"`` (A at origin, B on +x, C in xy-plane), or ``"control"`` /
@@ -125,13 +160,15 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         ``"distance"``: residuals in metres weighted by ``1/sigma``; ``"squared"``: the paper's
         eq. (6), unweighted squared-distance differences (covariance scaled by the a-posteriori
         variance; no global test or data snooping, which need known weights).
-    offsets : None, "estimate", float or mapping head -> metres
+    offsets_m (alias offsets) : None, "estimate", float or mapping head -> metres
         Estimate all offsets (default), fix all to one value, or fix the named heads' ones (a head
         is its station when ``obs`` names no heads; a head occupying several stations has one offset).
     scales : bool or iterable of head ids
         Estimate a scale per head (all, or the named ones). Default: none. With every station's
         scale estimated the network's scale is a 7th datum defect: give ``scale_bar``.
-    scale_bars : ReferenceLengths, optional
+    references : ReferenceLengths, optional
+        With the option ``scale_bars=True``: the scale bars (below).
+    scale_bars : ReferenceLengths (or, as an option, bool), optional
         Reference lengths between points used as **observations** (scale bars), each weighted by its
         standard uncertainty ``u_m`` (> 0): they take part in the adjustment (residuals, redundancy,
         the global test) and are enough to be the scale datum when every head's scale is estimated
@@ -196,48 +233,57 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         inconsistent with the distances (``datum="control"``, tested before data snooping), bad
         options, or no convergence — one line naming the cause.
     """
-    if _undetermined is None:   # a target found undetermined is left out and the network adjusted again
-        args = dict(locals())
-        return leaving_out_undetermined(lambda u: adjust(**{**args, "_undetermined": u}), strict=strict)
+    bars_given = scale_bars if not isinstance(scale_bars, bool) else None
+    if isinstance(scale_bars, bool):      # the option (the data then come as references)
+        option_fields["scale_bars"] = scale_bars
+    if bars_given is not None and scale_bar is not None:
+        raise MultilatError("give scale_bars or scale_bar (the same), not both")
+    bars = bars_given if bars_given is not None else scale_bar
+    opts = NetworkOptions.of(options, **option_fields)
+    if bars is None and opts.scale_bars:
+        if references is None:
+            raise MultilatError(f"{opts.name('scale_bars')} needs the reference lengths (references=; "
+                                "--references FILE): the bars' lengths with u_m")
+        bars = references
     if not isinstance(obs, Observations):
         raise MultilatError("adjust: obs must be an Observations")
-    if cost not in COSTS:
-        raise MultilatError(f"cost must be one of {', '.join(COSTS)}, got {cost!r}")
-    if test_method is None:     # alpha_global given: a fixed global test; otherwise the rule of test_levels
-        test_method = "fixed" if alpha_global is not None else "auto"
-    if test_method not in st.TEST_METHODS:
-        raise MultilatError(f"test_method must be one of {', '.join(st.TEST_METHODS)}, got {test_method!r}")
-    if variance_factor not in st.VARIANCE_FACTORS:
-        raise MultilatError(f"variance_factor must be known or unknown, got {variance_factor!r}")
-    if alpha_global is not None and test_method != "fixed":
-        raise MultilatError(f"alpha_global is derived by test_method={test_method!r}: give test_method='fixed' "
-                            "to set it")
-    if alpha_global is None and test_method == "fixed":
-        alpha_global = 0.05
-    for name, v in (("alpha", alpha), ("power", power), ("alpha_global", alpha_global),
-                    ("alpha_family", alpha_family)):
-        if v is not None and not (0 < v < 1):
-            raise MultilatError(f"{name} must be in (0, 1), got {v!r}")
-    if not (np.isfinite(mdb_limit_sigma) and mdb_limit_sigma > 0):
-        raise MultilatError(f"mdb_limit_sigma must be > 0, got {mdb_limit_sigma!r}")
-    # the tests' levels (alpha_g(dof): the global test's); alpha is from here on the w-tests' (Šidák's)
-    alpha_g = st.test_levels(n_tested(obs), alpha0=alpha, power=power, method=test_method,
-                             alpha_global=alpha_global, alpha_family=alpha_family)
-    alpha = alpha_g.alpha0
-    # MDBs: Baarda's reference at the given alpha0 (as the design's); the w-tests' own: tests.lambda0_w
-    lam0 = st.noncentrality(alpha_g.alpha0_given, power)
-    datum = parse_datum(datum)
-    if scale_bars is not None and scale_bar is not None:
-        raise MultilatError("give scale_bars or scale_bar (the same), not both")
-    bars = scale_bars if scale_bars is not None else scale_bar
+    obs = opts.prepare(obs)
+
+    def once(undetermined):       # a target found undetermined is left out and the network adjusted again
+        return _adjust(obs, opts, initial=initial, points=points, bars=bars, sigma_source=sigma_source,
+                       rng=rng, undetermined=undetermined)
+
+    return leaving_out_undetermined(once, strict=opts.strict)
+
+
+@dataclass(frozen=True, eq=False)
+class Prepared:
+    """An adjustment before its first solve: the observations kept (weak points left out, named in
+    ``excluded``), the network ``model``, the ``start`` and how it was found (``how``), the warnings so
+    far (``notes``) and the control points (``ctrl``)."""
+
+    obs: Observations
+    model: Model
+    start: Start
+    how: dict
+    excluded: tuple
+    notes: list
+    ctrl: set
+
+
+def _prepare(obs: Observations, opts: NetworkOptions, *, initial, points, bars, rng, undetermined) -> Prepared:
+    """The options resolved against ``obs`` (held offsets, scales, datum, couplings), weak points left
+    out, the network checked and the initial values: everything before the first solve."""
+    cost, strict = opts.cost, opts.strict
+    datum = parse_datum(opts.datum)
     if bars is not None and cost != "distance":
         raise MultilatError("scale bars need the distance cost (weighted observations)")
     if points is not None and points.std_m is not None and datum.kind != "control":
         warnings.warn("points: the standard uncertainties (sx_m, sy_m, sz_m) make weighted control under "
                       "--datum control only; here the points are approximate coordinates", UserWarning,
-                      stacklevel=2)
-    off_free, off_val = _fixed_offsets(offsets, obs)
-    sc_free = _scale_flags(scales, obs)
+                      stacklevel=3)
+    off_free, off_val = _fixed_offsets(opts.offsets_m, obs, opts.name("offsets_m"))
+    sc_free = _scale_flags(opts.scale_heads(obs), obs, opts.name("scales"))
     if datum.kind == "control" and points is None:
         raise MultilatError("datum control needs control coordinates (points)")
     if points is not None:
@@ -246,7 +292,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         if stray:
             warnings.warn(f"points: {len(stray)} id(s) not in the observations, ignored: "
                           f"{', '.join(stray[:8])}{'...' if len(stray) > 8 else ''}",
-                          UserWarning, stacklevel=2)
+                          UserWarning, stacklevel=3)
     given = None if initial is None else as_start(initial, obs)
     if obs.n_stations < 3:
         raise MultilatError(f"a self-calibrating network needs at least 3 stations, got {obs.n_stations} "
@@ -254,7 +300,7 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     # weak points are left out (named), not a reason to refuse the network
     ctrl = control_ids(obs, datum, points) if datum.kind == "control" else set()
     keep, excluded = exclude_weak_points(obs, offset_free=off_free, scale_free=sc_free, fixed_targets=ctrl,
-                                         strict=strict, undetermined=_undetermined)
+                                         strict=strict, undetermined=undetermined)
     if excluded:
         if not keep.any():
             raise MultilatError(f"nothing left to adjust: {excluded[0].kind} {excluded[0].id!r} "
@@ -267,6 +313,8 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         if given is not None:
             given = Start(given.station_xyz_m[smap], given.target_xyz_m[tmap], given.offset_m[smap])
     cspec = coupling_spec(obs, bars=bars, points=points, control=datum.kind == "control")
+    model = Model(datum, points, cost, off_free, off_val, sc_free, opts.max_iter, opts.solver, opts.chunk_targets,
+                  cspec)
     n_bars = 0 if cspec is None else len(cspec.bars)
     check_scale_datum(obs, sc_free, datum, bars=n_bars > 0)
     try:
@@ -286,13 +334,36 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
         raise_if_flat(obs, start.station_xyz_m, start.target_xyz_m, "initial coordinates")
     start = Start(start.station_xyz_m, start.target_xyz_m,
                   np.where(off_free, start.offset_m, off_val))
+    return Prepared(obs, model, start, how, excluded, notes, ctrl)
+
+
+def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, sigma_source, rng,
+            undetermined) -> AdjustmentResult:
+    """:func:`adjust` with the options validated and the undetermined targets of the earlier tries."""
+    cost, alpha, power, alpha_family = opts.cost, opts.alpha, opts.power, opts.alpha_family
+    test_method, alpha_global = opts.test_method_resolved, opts.alpha_global_resolved
+    variance_factor, mdb_limit_sigma, r_min = opts.variance_factor, opts.mdb_limit_sigma, opts.r_min
+    snooping, max_rejections, strict = opts.snooping, opts.max_rejections, opts.strict
+    # the tests' levels (alpha_g(dof): the global test's); alpha is from here on the w-tests' (Šidák's)
+    alpha_g = st.test_levels(n_tested(obs), alpha0=alpha, power=power, method=test_method,
+                             alpha_global=alpha_global, alpha_family=alpha_family)
+    alpha = alpha_g.alpha0
+    # MDBs: Baarda's reference at the given alpha0 (as the design's); the w-tests' own: tests.lambda0_w
+    lam0 = st.noncentrality(alpha_g.alpha0_given, power)
+    prep = _prepare(obs, opts, initial=initial, points=points, bars=bars, rng=rng, undetermined=undetermined)
+    obs, model, start, how, excluded, notes, ctrl = (prep.obs, prep.model, prep.start, prep.how, prep.excluded,
+                                                     prep.notes, prep.ctrl)
+    datum, off_free, off_val, sc_free = model.datum, model.off_free, model.off_val, model.sc_free
+    cspec = model.couplings
+    n_bars = 0 if cspec is None else len(cspec.bars)
     do_snoop = snooping and cost == "distance"
     used = np.ones(obs.n_obs, bool)
-    rejected: list[tuple[int, float]] = []
-    steps: list[dict] = []
+    rounds = Rounds()
+    rejected, steps, ang_rejected = rounds.rejected, rounds.steps, rounds.ang_rejected
     limit = obs.n_obs if max_rejections is None else int(max_rejections)
     crit = st.w_critical(alpha)
     unknown = variance_factor == "unknown"
+    proc = Procedure(do_snoop, limit, unknown, alpha, alpha_g, lam0, crit)
     warn = True
     guess = start
     unlocated: tuple = ()
@@ -301,7 +372,6 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     search_ok = cost == "distance" and datum.kind != "control"
     search = None
     obs_w = obs                      # the observations with the rejected angles left out (σ NaN)
-    ang_rejected: list[dict] = []
     lin = None                       # rounds downdated since the last adjustment (large networks)
     refit = True
     while True:
@@ -310,16 +380,14 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
             core = lin = None
             sub = obs_w if used.all() else obs_w.subset(used)
             try:
-                core = fit_once(sub, datum, guess, start, obs, used, points, cost, off_free, off_val,
-                                sc_free, max_iter, solver, chunk_targets, warn=warn,
-                                partial_ok=first and search_ok, couplings=cspec)
+                core = model.fit(sub, guess, start, obs, used, warn=warn, partial_ok=first and search_ok)
             except MultilatError as exc:
                 # computed initial values can make a solvable network look degenerate (a collapsed
                 # start): the search's restarts get their chance before the error is final
                 if not (first and search_ok and how["method"].startswith("distances")
                         and ("near-degenerate" in str(exc) or isinstance(exc, UndeterminedTargets))):
                     raise
-                core = _start_as_partial(obs, start, exc)
+                core = start_as_partial(obs, start, exc)
             slip = first and cost == "distance" and not unknown    # a unit slip stops (unit_slip.py)
             if slip and how.get("far_minimum_again"):   # the restarts found this minimum twice: no search
                 check_unit_slip(obs, core, sigma_source)
@@ -327,31 +395,29 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                 # a converged result failing the global test by far may be a wrong minimum: search
                 # (not under control points: they give the frame and the start; a failing test there
                 # is tested as inconsistent control just below)
-                core, search = _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free,
-                                               max_iter, solver, chunk_targets, rng, cspec)
+                core, search = _search_minimum(obs, core, start, model, rng)
                 how["search"] = search.as_dict()
-            if first and not core.get("partial"):   # coplanar lines of sight: left out, adjusted again
+            if first and not core.partial:   # coplanar lines of sight: left out, adjusted again
                 raise_undetermined(obs, core, side_fixed_targets(obs, ctrl, cspec))
             if first and datum.kind == "control" and cost == "distance":
                 # a failed global test under control may be the control coordinates, not the distances:
                 # test them (against the free network) before data snooping blames the distances
-                check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core["dof"]),
-                               max_iter, solver, chunk_targets, datum, cspec)
+                check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core.dof),
+                              model.max_iter, model.solver, model.chunk_targets, datum, cspec)
             if slip:    # after the search (its best solution) and the control test (control at fault)
                 check_unit_slip(obs, core, sigma_source)
             first = False
             # the next adjustment (after a rejection) starts from this solution
             gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
-            gs[core["smap"]], gt_[core["tmap"]], go[core["smap"]] = core["sx"], core["tx"], core["off"]
+            gs[core.smap], gt_[core.tmap], go[core.smap] = core.sx, core.tx, core.off
             guess = Start(gs, gt_, go)
             warn = False
             refit = False
             lin = (LinearRounds(core, np.flatnonzero(used), sub.station_index, sub.target_index,
                                 sub.n_stations, sub.n_targets)
-                   if do_snoop and not core.get("partial") and LinearRounds.applies(core, sub, datum) else None)
+                   if do_snoop and not core.partial and LinearRounds.applies(core, sub, datum) else None)
         n_steps = len(steps)
-        go_on = snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop,
-                                unknown, alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec)
+        go_on = snooping_round(obs, obs_w, used, core, lin, rounds, proc, model)
         if lin is not None and lin.pending and go_on[0] == "stop":
             # the procedure would stop on downdated statistics: adjust again and decide on exact ones
             del steps[n_steps:]
@@ -371,11 +437,11 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
     # the rounds' state and the last adjustment's copy of the observations are not needed for the
     # result (at 1.6 M distances ~80 MB, live at the command's peak)
     lin = sub = None
-    if search is not None and p_value(core["vtpv"], core["dof"]) < P_MIN:
+    if search is not None and p_value(core.vtpv, core.dof) < P_MIN:
         # still failing by far after data snooping: a possible false minimum, never passed as ordinary
         msg = search.warning or (
             f"possible false minimum: the global test fails by far (sigma0 "
-            f"{core['sigma0']:.3g}, chi-square p {p_value(core['vtpv'], core['dof']):.1e}): check for gross "
+            f"{core.sigma0:.3g}, chi-square p {p_value(core.vtpv, core.dof):.1e}): check for gross "
             "errors, a-priori sigma too small, or give approximate coordinates")
         notes.append(msg)
         warnings.warn(msg, UserWarning, stacklevel=2)
@@ -384,18 +450,18 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                               "points": [cspec.bars[0][0], cspec.bars[0][1]]}
     if unlocated and steps:
         steps[-1]["action"] = f"not rejected: {reason}"
-    s0 = core["sigma0"] if unknown and cost == "distance" and np.isfinite(core["sigma0"]) else 1.0
+    s0 = core.sigma0 if unknown and cost == "distance" and np.isfinite(core.sigma0) else 1.0
     if s0 != 1.0:
-        core = dict(core, cov=_scaled_cov(core["cov"], s0 ** 2))
-    final_crit = st.tau_critical(alpha, core["dof"]) * s0 if unknown else crit
+        core = replace(core, cov=scaled_cov(core.cov, s0 ** 2))
+    final_crit = st.tau_critical(alpha, core.dof) * s0 if unknown else crit
     res = build_result(obs, used, rejected, unlocated, core, datum, cost, alpha_g.alpha0_given, power,
-                       alpha_g(core["dof"]), reason=reason, snooped=do_snoop, sigma_scale=s0,
+                       alpha_g(core.dof), reason=reason, snooped=do_snoop, sigma_scale=s0,
                        mdb_limit_sigma=mdb_limit_sigma, r_min=r_min)
-    groups = _w_failure_groups(core, used, final_crit) if cost == "distance" else ()
+    groups = w_failure_groups(core, used, final_crit) if cost == "distance" else ()
     tests = {"method": alpha_g.method, "variance_factor": variance_factor, "alpha0": alpha, "power": power,
              "lambda0": lam0, "lambda0_w": st.noncentrality(alpha, power), "w_critical": crit,
-             "tau_critical": st.tau_critical(alpha, core["dof"]) if unknown else None,
-             "alpha_global": alpha_g(core["dof"]), **alpha_g.as_dict(), "steps": steps}
+             "tau_critical": st.tau_critical(alpha, core.dof) if unknown else None,
+             "alpha_global": alpha_g(core.dof), **alpha_g.as_dict(), "steps": steps}
     judged = cost == "distance" and not noise_free(obs, res.residuals_m[used])   # σ0 in m² for eq. 6
     check = st.sigma0_check(res.sigma0 if judged else float("nan"), res.dof,
                             variance_factor=variance_factor, source=describe_sigma(sigma_source or {}))
@@ -408,178 +474,12 @@ def adjust(obs: Observations, *, datum: Datum | str | None = "free", initial=Non
                   sigma0_check=check,
                    scale_bars=bars_out, weighted_control=ctrl_out, tests=tests,
                    sigma_source=dict(sigma_source or {}), angles=ang_out, orientations=orient,
-                   angle_design_w=None if core.get("angles") is None else core["angles"]["design_w"])
+                   angle_design_w=None if core.angles is None else core.angles["design_w"])
     # geometry distances cannot fix: a flat network is refused, mirror-ambiguous points named
-    amb, note = check_geometry(res, lambda st_: fit_once(
-        obs_w if used.all() else obs_w.subset(used), datum, st_, start, obs, used, points, cost, off_free,
-        off_val, sc_free, max_iter, solver, chunk_targets, warn=False, couplings=cspec),
+    amb, note = check_geometry(res, lambda st_: model.fit(
+        obs_w if used.all() else obs_w.subset(used), st_, start, obs, used, warn=False),
         lambda0=lam0, strict=strict, control=ctrl, couplings=cspec)
     if note:
         warnings.warn(note, UserWarning, stacklevel=2)
         res = replace(res, ambiguous=amb, warnings=res.warnings + (note,))
     return replace(res, angle_outliers=angle_outliers(obs, ang_rejected, res))
-
-
-def coupling_results(core) -> tuple[tuple, tuple]:
-    """The scale bars' and weighted control points' residuals and redundancy numbers (JSON-ready)."""
-    c = core.get("coupled")
-    if c is None:
-        return (), ()
-    cp, res, red = c["couplings"], c["residual_m"], c["redundancy"]
-    k = cp.bar_a.size
-    w = st.w_statistics(res, cp.sigma_m, red)          # Baarda w, as the distances' (v / σ√r)
-    bars = tuple({"target_a": a, "target_b": b, "length_m": float(cp.bar_length_m[q]), "sigma_m": float(cp.bar_sigma_m[q]),
-                  "adjusted_m": float(cp.bar_length_m[q] - res[q]), "residual_m": float(res[q]),
-                  "redundancy": float(red[q]), "w": float(w[q])} for q, (a, b) in enumerate(cp.bar_ids))
-    ctrl = tuple({"point": pid, "xyz_m": cp.prior_value_m[3 * q:3 * q + 3].tolist(),
-                  "std_m": cp.prior_sigma_m[3 * q:3 * q + 3].tolist(),
-                  "residual_m": res[k + 3 * q:k + 3 * q + 3].tolist(),
-                  "redundancy": red[k + 3 * q:k + 3 * q + 3].tolist(),
-                  "w": w[k + 3 * q:k + 3 * q + 3].tolist()} for q, pid in enumerate(cp.prior_ids))
-    return bars, ctrl
-
-
-def _scaled_cov(cov, f: float):
-    """The covariance ``cov`` times ``f`` (σ̂0² with an unknown variance factor); a low-rank ``extra``
-    term (a reference length's own uncertainty) is not scaled."""
-    import copy
-
-    c = copy.copy(cov)
-    c.factor = cov.factor * f
-    if cov.G is not None:
-        c.CHt = cov.CHt * f
-        c.HCHt = cov.HCHt * f
-    return c
-
-
-def _search_minimum(obs, core, start, points, datum, off_free, off_val, sc_free, max_iter, solver,
-                    chunk_targets, rng, cspec=None):
-    """:func:`multilat.network.search.find_minimum` from the first adjustment (converged or the
-    lowest-cost point it reached); returns the best core and the search record. Raises the
-    non-convergence error when no start converges."""
-    from types import SimpleNamespace
-
-    from multilat.network.search import Candidate, find_minimum
-
-    used = np.ones(obs.n_obs, bool)
-
-    def wrap(c):
-        return SimpleNamespace(station_xyz_m=c["sx"], target_xyz_m=c["tx"], offset_m=c["off"],
-                               vtpv=c["vtpv"], dof=c["dof"], core=c)
-
-    def solve(st_, *, held_offsets=False):
-        of, ov = (np.zeros_like(off_free), np.zeros_like(off_val)) if held_offsets else (off_free, off_val)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return wrap(fit_once(obs, datum, st_, start, obs, used, points, "distance", of,
-                                     ov, sc_free, max_iter, solver, chunk_targets, warn=False,
-                                     couplings=cspec))
-
-    def continuation(st_):
-        """Offsets held at zero first (a better conditioned problem for weak, flat networks), then
-        the full problem from there."""
-        return solve(solve(st_, held_offsets=True))
-
-    gen = np.random.default_rng(rng)
-    restarts = []
-    if core.get("partial"):
-        # the first solve did not converge: the same start by continuation, then other initial
-        # values (the random starts of initial_values), before searching around the lowest-cost
-        # point it reached
-        from multilat.network.bounds import RESTART_SECONDS, Bound, report
-        from multilat.network.initial import initial_values
-
-        bound = Bound("restarts after a first solve that did not converge", max_work=PARTIAL_RESTARTS,
-                      max_seconds=RESTART_SECONDS)
-
-        def starts():
-            yield "the first start, offsets held then freed", lambda: continuation(start)
-            while not bound.exhausted():       # bounded by work and wall time (network/bounds.py)
-                bound.spend()
-                report(f"first solve did not converge: random start {bound.work} of {PARTIAL_RESTARTS}")
-                yield (f"initial values, random start {bound.work}, offsets held then freed",
-                       lambda: continuation(initial_values(obs, rng=gen, deadline=bound.deadline)))
-
-        for label, attempt in starts():
-            try:
-                cand = attempt()
-            except MultilatError as exc:
-                restarts.append({"label": label, "cost": None, "note": str(exc)[:200]})
-                continue
-            restarts.append({"label": label, "cost": cand.vtpv})
-            core = cand.core
-            break
-        bound.warn_if_timed_out()
-    first = wrap(core)
-    if not core.get("partial") and _one_gross_error(core):
-        # one observation carries most of the excess: a gross error, for data snooping, not a wrong
-        # minimum (which spreads its misfit over many distances); the search is not run
-        res = _without_core(find_minimum(obs, solve, first, rng=gen, max_rounds=0))
-        return core, replace(res, warning=None, candidates=(Candidate(
-            "not searched: one observation carries most of the excess (a gross error)", None, None,
-            False),))
-    res = find_minimum(obs, solve, first, rng=gen)
-    if restarts:
-        res = replace(res, candidates=tuple(Candidate(r["label"], r["cost"], None, r["cost"] is not None,
-                                                      r.get("note", "")) for r in restarts) + res.candidates)
-    best = res.solution.core
-    if best.get("partial"):
-        if best.get("error") is not None:
-            raise best["error"]
-        conv = best["convergence"]
-        raise_unconverged(obs, Params(best["sx"], best["tx"], best["off"], np.zeros(obs.n_stations)), conv)
-    return best, _without_core(res)
-
-
-def _without_core(res):
-    """The search record without its solution's adjustment (the caller holds that one as ``core``;
-    the record, kept to the end of :func:`adjust`, would otherwise keep the first adjustment's
-    arrays alive through every later one: ~300 MB at 1.6 M distances)."""
-    from types import SimpleNamespace
-
-    sol = SimpleNamespace(**{k: v for k, v in vars(res.solution).items() if k != "core"})
-    return replace(res, solution=sol)
-
-
-def _start_as_partial(obs: Observations, start: Start, error: MultilatError) -> dict:
-    """A start that the solver refused (near-degenerate there) as the lowest-cost point of a first
-    solve: the minimum search restarts from other initial values; ``error`` is raised if none works."""
-    from multilat.network.solve import Convergence
-
-    rho = np.linalg.norm(start.station_xyz_m[obs.station_index] - start.target_xyz_m[obs.target_index], axis=1)
-    v = (obs.distance_m - rho - start.offset_m[obs.station_index]) / obs.sigma_m
-    n_unknown = 4 * obs.n_stations + 3 * obs.n_targets - 6
-    return dict(partial=True, sx=start.station_xyz_m, tx=start.target_xyz_m, off=start.offset_m,
-                vtpv=float(v @ v), dof=obs.n_obs - n_unknown, error=error,
-                convergence=Convergence(False, 0, float("inf"), str(error)))
-
-
-def _one_gross_error(core) -> bool:
-    """Whether one observation explains the failure: without its squared normalised residual
-    ``w_k^2`` (its contribution to vtpv when rejected) the global test no longer fails by far. A single
-    blunder does; a wrong minimum spreads its misfit over many distances and does not."""
-    red = core["redundancy"]
-    w = st.w_statistics(core["residual_w"], None, red)
-    w2 = float(np.max(w ** 2, initial=0.0))
-    return core["dof"] > 1 and p_value(core["vtpv"] - w2, core["dof"] - 1) >= P_MIN
-
-
-def _w_failure_groups(core, used, crit, limit: int = 50) -> tuple:
-    """Every w-test failing at the end (|w| > crit), grouped by perfect correlation (|rho| > 1 - 1e-6):
-    a group of several is a fault the data cannot locate. Indices into the full observations; at
-    most ``limit`` groups, largest |w| first."""
-    red = core["redundancy"]
-    w = st.w_statistics(core["residual_w"], None, red)
-    fail = np.flatnonzero(np.abs(w) > crit)
-    fail = fail[np.argsort(-np.abs(w[fail]))]
-    idx = np.flatnonzero(used)
-    seen: set[int] = set()
-    groups = []
-    for k in fail:
-        if int(k) in seen or len(groups) >= limit:
-            continue
-        members = [int(q) for q in core["cov"].perfectly_correlated(int(k), red)]
-        members = [int(k)] + [q for q in members if q != k]
-        seen.update(members)
-        groups.append(tuple(int(idx[q]) for q in members))
-    return tuple(groups)

@@ -148,9 +148,9 @@ def mirror_ambiguities(res, readjust, *, lambda0: float, skip_targets=()) -> tup
     Parameters
     ----------
     res : AdjustmentResult (coordinates, covariances, ``obs`` and ``used``)
-    readjust : callable(Start) -> dict or None
-        The adjustment from another start (the core dict with ``sx``, ``tx``, ``vtpv``), None when
-        it fails; used for stations.
+    readjust : callable(Start) -> Fit or None
+        The adjustment from another start (a :class:`~multilat.network.fit_state.Fit`: ``sx``, ``tx``,
+        ``vtpv``), None when it fails; used for stations.
     lambda0 : float   the tests' non-centrality: a mirror with ``Δ vᵀPv < lambda0`` is not detected
     skip_targets : collection of str   targets whose side is fixed otherwise (control, angles, bars)
 
@@ -190,10 +190,10 @@ def mirror_ambiguities(res, readjust, *, lambda0: float, skip_targets=()) -> tup
         # station over the largest triangle of its targets, in each solution
         tri = by_s[i][list(pick_321_stations(tx[by_s[i]]))]
         side0 = _signed_height(sx[i], tx[tri])
-        side1 = _signed_height(alt["sx"][i], alt["tx"][tri])
+        side1 = _signed_height(alt.sx[i], alt.tx[tri])
         if not (side0 * side1 < 0 and abs(side1) > k * _sigma_along(scov[i], n)):
             continue
-        delta = (float(alt["vtpv"]) - base) / unit
+        delta = (float(alt.vtpv) - base) / unit
         if delta < lambda0:
             out.append(Ambiguous(obs.station_ids[i], "station", "mirror", (
                 f"its {len(by_s[i])} targets lie in one plane within their uncertainty and it is "
@@ -295,7 +295,7 @@ def check_geometry(res, readjust, *, lambda0: float, strict: bool = False, contr
     Parameters
     ----------
     res : AdjustmentResult
-    readjust : callable(Start) -> core dict   the same adjustment from another start (may raise)
+    readjust : callable(Start) -> Fit   the same adjustment from another start (may raise)
     lambda0 : float   the tests' non-centrality (the detection threshold of a mirror's Δ vᵀPv)
     strict : bool   refuse ambiguous points instead of naming them
     control, couplings : control point ids and the scale bars / weighted control

@@ -288,7 +288,7 @@ def _w_and_mdb(a: dict, lam0: float):
 
 def angle_w(core, lam0: float) -> np.ndarray:
     """Baarda's w of each angle observation of an adjustment's core (one per angle row)."""
-    w, _ = _w_and_mdb(core["angles"], lam0)
+    w, _ = _w_and_mdb(core.angles, lam0)
     return w
 
 
@@ -296,7 +296,7 @@ def angle_results(core, lam0: float, crit: float) -> tuple[tuple, dict]:
     """Per angle observation (station, target, kind, value_rad, sigma_rad, residual_rad, redundancy,
     w, mdb_rad, w_test_passed) and per oriented station its orientation (ω, φ, κ) and standard
     uncertainties, in the adjustment's datum (JSON-ready)."""
-    a = core.get("angles")
+    a = core.angles
     if a is None:
         return (), {}
     rows = a["rows"]

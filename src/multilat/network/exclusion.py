@@ -31,6 +31,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.data import Observations, distinct_pair_codes
 from multilat.network.result import Excluded
+from multilat.network.fit_state import Fit
 
 __all__ = ["UndeterminedTargets", "exclude_weak_points", "leaving_out_undetermined", "raise_undetermined",
            "undetermined_targets",
@@ -215,16 +216,16 @@ def undetermined_targets(obs: Observations, station_xyz_m, target_xyz_m, skip=()
     return out
 
 
-def raise_undetermined(obs: Observations, core: dict, skip=()) -> None:
+def raise_undetermined(obs: Observations, core: Fit, skip=()) -> None:
     """Raise :class:`UndeterminedTargets` for the targets of an adjustment (``core``: its points
     ``sx``, ``tx`` and their indices ``smap``, ``tmap`` in ``obs``) that :func:`undetermined_targets`
     finds, if any. When it finds every target tested, the network is flat, not one target weak: left
     to the flat-network test (:func:`multilat.network.ambiguity.flat_network`), which names it."""
     H = np.full((obs.n_stations, 3), np.nan)
     T = np.full((obs.n_targets, 3), np.nan)
-    H[core["smap"]], T[core["tmap"]] = core["sx"], core["tx"]
+    H[core.smap], T[core.tmap] = core.sx, core.tx
     found = undetermined_targets(obs, H, T, skip)
-    tested = {obs.target_ids[j] for j in np.asarray(core["tmap"])} - set(skip)
+    tested = {obs.target_ids[j] for j in np.asarray(core.tmap)} - set(skip)
     if found and not tested <= set(found):
         raise UndeterminedTargets(found)
 

@@ -17,6 +17,7 @@ from multilat.network.couplings import flatten_params
 from multilat.network.covariance import CoupledCovariance, NetworkCovariance
 from multilat.network.data import Observations
 from multilat.network import statistics as st
+from multilat.network.fit_state import Fit
 from multilat.network.datum import ABOUT_Z_COLUMNS, apply_rigid, datum_matrices, frame_321, parse_datum, rigid_fit
 from multilat.network.model import Q
 from multilat.network.problem import Params, Problem, head_mean
@@ -197,7 +198,7 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
     """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
     ``ref_start`` gives the reference coordinates of the free datum; ``couplings`` (a
     :class:`~multilat.network.couplings.CouplingSpec`) adds scale bars and weighted control.
-    Returns a dict of arrays in ``sub``'s order plus the maps back."""
+    Returns a :class:`~multilat.network.fit_state.Fit` in ``sub``'s order with the maps back."""
     smap, tmap = station_map(obs, used), target_map(obs, used)
     off_free, off_val, sc_free = off_free_all[smap], off_val_all[smap], sc_free_all[smap]
     check_network(sub, datum, points, off_free, sc_free, warn=False, couplings=couplings)
@@ -263,8 +264,8 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
     p, conv = gauss_newton(pb, Params(sx0, tx0, off0, sc0, o0), backend, max_iter=max_iter)
     if not conv.converged:
         if partial_ok:      # the lowest-cost point reached: a start for the minimum search
-            return dict(partial=True, sx=p.station_xyz_m, tx=p.target_xyz_m, off=p.offset_m,
-                        vtpv=weighted_cost(pb, p), dof=pb.dof, convergence=conv)
+            return Fit(partial=True, sx=p.station_xyz_m, tx=p.target_xyz_m, off=p.offset_m,
+                       vtpv=weighted_cost(pb, p), dof=pb.dof, convergence=conv)
         raise_unconverged(sub, p, conv)
     sx, tx, off, sc = p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale
     # final normal equations at the solution
@@ -337,10 +338,10 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
                       redundancy=r_a, orientation_rad=rotate_orientations(ang, p.orientation_rad, R),
                       orientation_cov=o_cov, station_ids=sub.station_ids, target_ids=sub.target_ids,
                       design_w=A_rows * free_all)
-    return dict(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free, angles=angles,
-                chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
-                vtpv=vtpv, iterations=conv.iterations, cond=cond, cov=cov, convergence=conv,
-                solver=backend.name, coupled=coupled)
+    return Fit(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free, angles=angles,
+               chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
+               vtpv=vtpv, iterations=conv.iterations, cond=cond, cov=cov, convergence=conv,
+               solver=backend.name, coupled=coupled)
 
 
 def check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_global, max_iter,
@@ -352,12 +353,12 @@ def check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_gl
     control gives ``Omega_c - Omega_f ~ chi2(dof_c - dof_f)`` independent of the distances' own
     misfit (a blunder inflates both). Only run when the global test under control fails.
     """
-    gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global)
+    gt = st.global_test(core.vtpv, core.dof, alpha=alpha_global)
     if gt.side != "upper":
         return
     used = np.ones(obs.n_obs, bool)
     ctrl = sorted(control_ids(obs, datum, points))
-    guess = Start(core["sx"], core["tx"], core["off"])
+    guess = Start(core.sx, core.tx, core.off)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -367,23 +368,23 @@ def check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_gl
                             couplings=bars_only)
     except MultilatError:
         return            # not solvable without the control: nothing to compare; snooping goes on
-    k = core["dof"] - free["dof"]
+    k = core.dof - free.dof
     if k <= 0:
         return
-    stat = core["vtpv"] - free["vtpv"]
+    stat = core.vtpv - free.vtpv
     crit = st.chi2_ppf(1.0 - alpha_global, k)
     if not stat > crit:
         return
     ids = obs.station_ids + obs.target_ids
-    xyz = dict(zip(ids, np.vstack([free["sx"], free["tx"]])))
+    xyz = dict(zip(ids, np.vstack([free.sx, free.tx])))
     src = np.array([xyz[i] for i in ctrl])
     dst = np.array([points.get(i) for i in ctrl])
     R, t = rigid_fit(src, dst)
     mis = np.linalg.norm(apply_rigid(R, t, src) - dst, axis=1)
     w = int(np.argmax(mis))
     raise MultilatError(
-        f"control coordinates inconsistent with the distances (σ0 = {core['sigma0']:.3g} with the "
-        f"control held fixed, {free['sigma0']:.3g} free; global test {gt.statistic:.1f} > "
+        f"control coordinates inconsistent with the distances (σ0 = {core.sigma0:.3g} with the "
+        f"control held fixed, {free.sigma0:.3g} free; global test {gt.statistic:.1f} > "
         f"{gt.critical:.1f}; control test χ² = {stat:.1f} > {crit:.1f} on {k} dof; largest misfit "
         f"{ctrl[w]!r} {mis[w] * 1e3:.2f} mm after a rigid fit): check the control points or use "
         "--datum free")

@@ -43,12 +43,14 @@ from multilat.errors import MultilatError
 from multilat.montecarlo import (AdaptiveRule, resolve_map, block_generator, block_trials, chunk_ranges,
                                  resolve_seed)
 from multilat.network import batched as bt
+from multilat.network.propagate_pairs import default_pairs as _default_pairs  # noqa: F401 (general layer)
+from multilat.network.propagate_pairs import pairs_and_refs, parse_pairs
 from multilat.network.propagate_result import PropagationResult, chi2_3_95
 from multilat.network.propagate_summary import linear_std, summarise
 from multilat.network.sigma_source import DEFAULT_SIGMA_M
 
-__all__ = ["BLOCK", "Problem", "problem_from_observations", "problem_from_truth", "problem_from_config",
-           "propagate", "PropagationResult", "chi2_3_95"]
+__all__ = ["BLOCK", "NOT_PROPAGATED", "Problem", "noise_choice", "parse_pairs", "problem_from_observations",
+           "problem_from_truth", "problem_from_config", "propagate", "PropagationResult", "chi2_3_95"]
 
 #: Trials per seeded block (a constant of the seeding, like :data:`multilat.montecarlo.BLOCK` for
 #: ``run_mc``, smaller because every trial solves a whole network): block ``b`` draws from
@@ -83,6 +85,10 @@ class Problem:
         The readings behind the observations (shared environment sensors, repeated readings): each
         trial draws the readings' and the sensors' errors (:meth:`Readings.draw`); None: one
         independent error per observation.
+    instrument : Instrument or None
+        The instrument the heads were resolved with: the distance model :func:`propagate` draws from
+        with ``noise="model"`` unless it is given one; None: no instrument was named (the errors are
+        then drawn gaussian with the observations' σ).
     """
 
     station_ids: tuple
@@ -95,6 +101,7 @@ class Problem:
     source: str = ""
     sigma0_nominal: float = 0.0
     readings: object = None
+    instrument: object = None
 
     def point_xyz(self, ident: str) -> np.ndarray:
         k, i = self.point_index(ident)
@@ -126,16 +133,10 @@ def _heads_for(head_names, instrument, head: str | None):
                  for n in head_names)
 
 
-def _default_pairs(target_ids, limit=20):
-    """All target pairs for small networks, consecutive pairs otherwise."""
-    if len(target_ids) <= limit:
-        return tuple((a, b) for i, a in enumerate(target_ids) for b in target_ids[i + 1:])
-    return tuple(zip(target_ids[:-1], target_ids[1:]))
-
-
 def problem_from_truth(station_ids, target_ids, station_index, target_index, sigma_m, station_xyz_m,
                        offset_m, target_xyz_m, *, datum="free", pairs=None, references=None,
-                       instrument=None, head: str | None = None, source: str = "") -> Problem:
+                       instrument=None, head: str | None = None, source: str = "",
+                       pairs_option: str = "interpoint distance") -> Problem:
     """A problem whose nominal distances are the exact distances of a known truth.
 
     With a ``321:A,B,C`` datum the truth is first expressed in that frame (A at the origin, B on +x,
@@ -158,57 +159,65 @@ def problem_from_truth(station_ids, target_ids, station_index, target_index, sig
         rot, shift = frame_321(x[a], x[b], x[c])
         h, tg = apply_rigid(rot, shift, h), apply_rigid(rot, shift, tg)
     net = bt.BatchedNetwork(station_index, target_index, sigma_m, h, offset_m, tg, datum=dt)
-    pairs_, ref = _pairs_and_refs(pairs, references, target_ids, station_ids)
+    pairs_, ref = pairs_and_refs(pairs, references, target_ids, station_ids, pairs_option)
     return Problem(station_ids, target_ids, net, net.nominal_distance_m(),
-                   _heads_for(station_ids, instrument, head), pairs_, ref, source)
+                   _heads_for(station_ids, instrument, head), pairs_, ref, source, instrument=instrument)
 
 
-def _pairs_and_refs(pairs, references, target_ids, station_ids):
-    refmap = {}
-    if references is not None:
-        if hasattr(references, "target_a"):
-            refmap = {(a, b): float(L) for a, b, L in zip(references.target_a, references.target_b,
-                                                          references.length_m)}
-        else:
-            refmap = {tuple(k): float(v) for k, v in dict(references).items()}
-    if pairs is None:
-        pairs = tuple(refmap) if refmap else _default_pairs(target_ids)
-    pairs = tuple((str(a), str(b)) for a, b in pairs)
-    known = set(target_ids) | set(station_ids)
-    for a, b in pairs:
-        for p in (a, b):
-            if p not in known:
-                raise MultilatError(f"interpoint distance: unknown point id {p!r}")
-        if a == b:
-            raise MultilatError(f"interpoint distance from {a!r} to itself")
-    ref = np.array([refmap.get((a, b), refmap.get((b, a), np.nan)) for a, b in pairs], float)
-    return pairs, ref
+#: Options of the adjustment a propagation does not take, refused by name when set: its nominal
+#: adjustment keeps every observation (no data snooping: every trial solves the same network) and the
+#: weighted distance model; the tests judge one adjustment, not the scatter of its trials.
+NOT_PROPAGATED = ("cost", "variance_components", "snooping", "max_rejections", "alpha", "power", "alpha_global",
+                  "test_method", "alpha_family", "variance_factor", "mdb_limit_sigma", "r_min")
 
 
-def problem_from_observations(obs, *, datum="free", pairs=None, references=None, instrument=None,
+def refuse_not_propagated(opts) -> None:
+    """One line naming the first option of :data:`NOT_PROPAGATED` that ``opts`` sets."""
+    for f in NOT_PROPAGATED:
+        if f in opts.model_fields_set and getattr(opts, f) != type(opts).model_fields[f].default:
+            raise MultilatError(f"{opts.name(f)} does not apply to a propagation: its nominal adjustment keeps "
+                                "every observation (no data snooping) with the weighted distance model")
+
+
+def problem_from_observations(obs, options=None, *, pairs=None, references=None, instrument=None,
                               head: str | None = None, source: str = "", adjustment=None,
-                              scale_bars=None, points=None, scales=False) -> Problem:
+                              scale_bars=None, points=None, pairs_option: str = "interpoint distance",
+                              **option_fields) -> Problem:
     """A problem centred on the adjustment of measured observations.
 
-    ``obs`` is :class:`multilat.network.data.Observations`; the nominal solution is
-    ``adjust(obs, datum=datum, points=points, scale_bars=scale_bars, scales=scales, snooping=False)``
-    (or ``adjustment`` if already computed), the weights are ``obs.sigma_m`` and the nominal distances
-    the measured ones.
+    ``obs`` is :class:`multilat.network.data.Observations`; the network model is ``options`` (a
+    :class:`~multilat.network.options.NetworkOptions`, the one ``adjust`` takes; or its fields as
+    keywords: ``datum=``, ``scales=``, ``offsets_m=``, ``levelled=``, ...). The nominal solution is
+    ``adjust(obs, options, points=points, scale_bars=..., snooping=False)`` (or ``adjustment`` if
+    already computed), the weights are ``obs.sigma_m`` and the nominal distances the measured ones.
+    Options that do not apply to a propagation (:data:`NOT_PROPAGATED`) are refused by name.
 
     What the batched solver (:class:`multilat.network.batched.BatchedNetwork`: one offset per
     station, distances only) cannot hold goes to :class:`multilat.network.batched_coupled.
-    CoupledBatchedNetwork`: heads occupying several stations, scale bars (``scale_bars``, each drawn
-    from its length and ``u_m`` in every trial), control points (``points`` under ``datum="control"``:
-    weighted ones drawn from their ``sx_m, sy_m, sz_m``, hard ones held) and per-head scales.
+    CoupledBatchedNetwork`: heads occupying several stations, held offsets (``offsets_m``), scale bars
+    (``scale_bars``, or ``references`` with the option ``scale_bars=True``; each drawn from its
+    length and ``u_m`` in every trial), control points (``points`` under ``datum="control"``: weighted
+    ones drawn from their ``sx_m, sy_m, sz_m``, hard ones held) and per-head scales.
+
+    ``pairs``: the interpoint distances to report ((a, b) point ids; default: the reference pairs,
+    else every target pair up to 20 targets, else consecutive ones); ``pairs_option`` names them in
+    errors (``--pairs``).
     """
     from multilat.network.datum import parse_datum
+    from multilat.network.options import NetworkOptions
 
-    dat = parse_datum(datum)
+    opts = NetworkOptions.of(options, **option_fields)
+    refuse_not_propagated(opts)
+    if scale_bars is None and opts.scale_bars:
+        if references is None:
+            raise MultilatError(f"{opts.name('scale_bars')} needs the reference lengths (--references FILE; "
+                                "the bars' lengths with u_m)")
+        scale_bars = references
+    dat = parse_datum(opts.datum)
     if adjustment is None:
         from multilat.network.adjust import adjust
 
-        adjustment = adjust(obs, datum=datum, points=points, scale_bars=scale_bars, scales=scales,
-                            snooping=False)
+        adjustment = adjust(obs, opts, points=points, scale_bars=scale_bars, snooping=False)
     res = adjustment
     if res.excluded:
         e = res.excluded[0]
@@ -217,18 +226,19 @@ def problem_from_observations(obs, *, datum="free", pairs=None, references=None,
     obs = res.obs
     station_ids = tuple(obs.station_ids)
     target_ids = tuple(obs.target_ids)
-    pairs_, ref = _pairs_and_refs(pairs, references, target_ids, station_ids)
+    pairs_, ref = pairs_and_refs(pairs, references, target_ids, station_ids, pairs_option)
     heads = _heads_for(obs.head_of_station, instrument, head)
     general = (obs.shares_heads or scale_bars is not None or dat.kind == "control"
-               or bool(np.any(res.scale_estimated)) or obs.has_angle_observations)
+               or bool(np.any(res.scale_estimated)) or obs.has_angle_observations
+               or not bool(np.all(res.offset_estimated)))
     if general:
         net = _coupled_network(obs, res, dat, scale_bars, points)
     else:
-        dt = bt.TrialDatum.from_datum(datum, station_ids, target_ids)
+        dt = bt.TrialDatum.from_datum(opts.datum, station_ids, target_ids)
         net = bt.BatchedNetwork(obs.station_index, obs.target_index, obs.sigma_m, res.station_xyz_m,
                                 res.offset_m, res.target_xyz_m, datum=dt)
     return Problem(station_ids, target_ids, net, np.asarray(obs.distance_m, float), heads, pairs_, ref,
-                   source, sigma0_nominal=float(res.sigma0))
+                   source, sigma0_nominal=float(res.sigma0), instrument=instrument)
 
 
 def _coupled_network(obs, res, dat, scale_bars, points):
@@ -276,7 +286,7 @@ def _coupled_network(obs, res, dat, scale_bars, points):
 
 
 def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pairs=None,
-                        source: str = "") -> Problem:
+                        source: str = "", pairs_option: str = "interpoint distance") -> Problem:
     """A problem from a built-in configuration (``network.configs.small_volume()`` etc.).
 
     Every station observes every target. ``sigma_m``: weights' standard uncertainty (scalar or (m,));
@@ -307,7 +317,7 @@ def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pai
     refs = getattr(cfg, "reference_lengths", None)
     return problem_from_truth(sid, tid, si, ti, sig, h, off, tg, datum=datum, pairs=pairs,
                               references=refs, instrument=instrument,
-                              source=source or getattr(cfg, "name", ""))
+                              source=source or getattr(cfg, "name", ""), pairs_option=pairs_option)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -397,8 +407,23 @@ def _noise_std(problem: Problem, noise: str, instrument) -> np.ndarray:
     return out
 
 
-def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str = "model",
-              instrument="seed2020", adaptive: bool = False, ndigits: int = 2,
+def noise_choice(noise: str | None, instrument, *, cli: bool = False) -> tuple[str, object]:
+    """``(noise, instrument)`` by the rule of :func:`propagate`: the distance model only when asked
+    with an instrument, or when an instrument is given; otherwise gaussian with the σ the
+    observations carry. One line naming the option otherwise."""
+    n_opt, i_opt = ("--noise", "--instrument") if cli else ("noise", "instrument")
+    if noise is None:
+        return ("model" if instrument is not None else "gaussian"), instrument
+    if noise not in ("model", "gaussian"):
+        raise MultilatError(f"{n_opt} must be model or gaussian, got {noise!r}")
+    if noise == "model" and instrument is None:
+        raise MultilatError(f"{n_opt} model draws from an instrument's distance model: name it with {i_opt} "
+                            f"(e.g. seed2020), or draw gaussian with the observations' σ ({n_opt} gaussian)")
+    return noise, instrument
+
+
+def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str | None = None,
+              instrument=None, adaptive: bool = False, ndigits: int = 2,
               max_trials: int = 2_000_000, chunk_size: int = 10_000, map=None,
               progress: Callable[[int], None] | None = None, keep_samples: bool = True,
               max_memory_bytes: int = 1_500_000_000, batches_per_round: int | None = None) -> PropagationResult:
@@ -413,10 +438,13 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
         Root seed (:func:`multilat.montecarlo.resolve_seed`). Trials are drawn in fixed blocks of
         :data:`BLOCK` trials; block ``b`` draws from :func:`multilat.montecarlo.block_generator`
         ``(entropy, spawn_key, b)`` (the ``b``-th spawn child of the root) and is solved as one batch.
-    noise : {"model", "gaussian"}
-        Distance errors from the distance model (non-gaussian) or gaussian with ``sigma_m``.
-    instrument : Instrument or preset name
-        For ``noise="model"``.
+    noise : {"model", "gaussian"} or None
+        Distance errors from an instrument's distance model (non-gaussian) or gaussian with the
+        observations' ``sigma_m`` (the weights). None: ``model`` when an instrument is known (given
+        here, or the one the problem was built with), else ``gaussian``. ``model`` without an
+        instrument is refused: a Monte Carlo never draws from an instrument nobody named.
+    instrument : Instrument, preset name or TOML path, optional
+        For ``noise="model"``; default the problem's (:attr:`Problem.instrument`).
     adaptive : bool
         JCGM 101 §7.9 adaptive procedure, the engine's :class:`multilat.montecarlo.AdaptiveRule`:
         batches of 10^4 trials (10 blocks) until twice the standard deviation of the batch averages
@@ -442,8 +470,7 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str =
     PropagationResult
     """
     t0 = time.perf_counter()
-    if noise not in ("model", "gaussian"):
-        raise MultilatError(f"noise must be 'model' or 'gaussian', got {noise!r}")
+    noise, instrument = noise_choice(noise, instrument if instrument is not None else problem.instrument)
     for name, v, lo in (("trials", trials, 2), ("chunk_size", chunk_size, 1), ("max_trials", max_trials, 2)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
             raise MultilatError(f"{name} must be an integer >= {lo}, got {v!r}")

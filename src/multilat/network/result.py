@@ -309,23 +309,23 @@ RESIDUAL_SLICE = 1 << 16
 def build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power, alpha_global, *,
                   reason="", snooped=True, sigma_scale=1.0, mdb_limit_sigma=10.0, r_min=0.1):
     s, t, m = obs.n_stations, obs.n_targets, obs.n_obs
-    smap, tmap = core["smap"], core["tmap"]
+    smap, tmap = core.smap, core.tmap
     sx = np.full((s, 3), np.nan)
     tx = np.full((t, 3), np.nan)
     off = np.full(s, np.nan)
     sc = np.zeros(s)
-    sx[smap], tx[tmap], off[smap], sc[smap] = core["sx"], core["tx"], core["off"], core["sc"]
+    sx[smap], tx[tmap], off[smap], sc[smap] = core.sx, core.tx, core.off, core.sc
     if len(smap) != s or len(tmap) != t:
         lost = [obs.station_ids[i] for i in range(s) if i not in smap] + \
                [obs.target_ids[j] for j in range(t) if j not in tmap]
         raise MultilatError(f"data snooping removed every observation of {', '.join(lost)}")
-    cov = core["cov"]
+    cov = core.cov
     gcov = cov.global_block()
     scov = np.stack([gcov[Q * i:Q * i + 3, Q * i:Q * i + 3] for i in range(s)])
-    tcov = cov.target_blocks(core["chunk_targets"])
+    tcov = cov.target_blocks(core.chunk_targets)
     off_est = np.zeros(s, bool)
     sc_est = np.zeros(s, bool)
-    off_est[smap], sc_est[smap] = core["off_free"], core["sc_free"]
+    off_est[smap], sc_est[smap] = core.off_free, core.sc_free
     # residuals of all observations (rejected ones against the final solution), in slices: the same
     # numbers without (m, 3) temporaries of the whole network (115 MB at 1.6 M distances)
     r_all = np.empty(m)
@@ -335,22 +335,22 @@ def build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power
         r_all[lo:hi] = obs.distance_m[lo:hi] - ((1 + sc[si_]) * np.linalg.norm(sx[si_] - tx[ti_], axis=1)
                                                 + off[si_])
     red = np.zeros(m)
-    red[used] = core["redundancy"]
+    red[used] = core.redundancy
     if cost == "distance":
         w = st.w_statistics(r_all, obs.sigma_m, red)
         w[~used] = 0.0
         from multilat.network.reliability import reliability as _reliability
 
-        rel = _reliability(obs, used, red, obs.sigma_m, core["cov"], obs.station_ids, obs.target_ids,
+        rel = _reliability(obs, used, red, obs.sigma_m, core.cov, obs.station_ids, obs.target_ids,
                            alpha=alpha, power=power, r_min=r_min, mdb_limit_sigma=mdb_limit_sigma,
                            sigma_scale=sigma_scale)
         mdb = st.minimal_detectable_bias_m(obs.sigma_m * sigma_scale, red, alpha=alpha, power=power)
-        gt = st.global_test(core["vtpv"], core["dof"], alpha=alpha_global,
+        gt = st.global_test(core.vtpv, core.dof, alpha=alpha_global,
                             lambda0=st.noncentrality(alpha, power))
     else:
         w = np.zeros(m)
         mdb = np.full(m, np.nan)
-        gt = st.GlobalTest(None, None, None, None, alpha_global, core["dof"])
+        gt = st.GlobalTest(None, None, None, None, alpha_global, core.dof)
         rel = None
     outliers = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
                              wk, float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"),
@@ -359,17 +359,17 @@ def build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power
     unloc = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
                           float(w[k]), float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"))
                   for k in unlocated)
-    cov = core["cov"]
+    cov = core.cov
     gd = np.diag(gcov).reshape(s, Q)
     return AdjustmentResult(
         obs=obs, used=used, datum=datum, cost=cost, station_xyz_m=sx, target_xyz_m=tx, offset_m=off,
         offset_estimated=off_est, scale=sc, scale_estimated=sc_est, station_cov_m2=scov,
         target_cov_m2=tcov, global_cov=gcov, offset_std_m=np.sqrt(np.clip(gd[:, 3], 0, None)),
         scale_std=np.sqrt(np.clip(gd[:, 4], 0, None)), residuals_m=r_all, redundancy=red, w=w,
-        mdb_m=mdb, sigma0=core["sigma0"], dof=core["dof"], global_test=gt, outliers=outliers,
+        mdb_m=mdb, sigma0=core.sigma0, dof=core.dof, global_test=gt, outliers=outliers,
         unlocated=unloc, unlocated_reason=reason if unloc else "", snooping=bool(snooped),
-        alpha=alpha, power=power, iterations=core["iterations"], condition=core["cond"], covariance=cov,
-        convergence=core["convergence"], solver=core["solver"], reliability=rel,
+        alpha=alpha, power=power, iterations=core.iterations, condition=core.cond, covariance=cov,
+        convergence=core.convergence, solver=core.solver, reliability=rel,
         variance_factor="unknown" if sigma_scale != 1.0 else "known")
 
 

@@ -37,14 +37,18 @@ full adjustment; only the statistics recorded for the intermediate rounds are th
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field
+
 import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.angle_rows import KIND_NAMES, angle_rows, angle_w
 from multilat.network.fit import check_network, control_ids, station_map
+from multilat.network.fit_state import Fit
 
-__all__ = ["LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers",
+__all__ = ["Procedure", "Rounds",
+           "LinearRounds", "LINEAR_MIN_OBS", "LINEAR_W_MAX", "snooping_round", "detection_step", "angle_outliers",
            "n_tested"]
 
 #: networks with at least this many distances use the downdated rounds (smaller ones are re-adjusted
@@ -59,18 +63,30 @@ LINEAR_W_MAX = 10.0
 MAX_DOWNDATES = 64
 
 
+@dataclass(frozen=True)
+class RoundStats:
+    """What the detection step reads of a round downdated from the last fit (a :class:`Fit` has the
+    same fields)."""
+
+    residual_w: np.ndarray
+    redundancy: np.ndarray
+    vtpv: float
+    dof: int
+    sigma0: float
+
+
 class LinearRounds:
-    """The state of the rounds since the last adjustment ``core`` (a dict of
+    """The state of the rounds since the last adjustment ``core`` (a :class:`Fit` of
     :func:`multilat.network.fit.fit_once`) of the observations ``global_index`` (their rows in the
     caller's observations). Indices ``k`` below are positions in that adjustment's observations."""
 
-    def __init__(self, core: dict, global_index: np.ndarray, station_index, target_index,
+    def __init__(self, core: Fit, global_index: np.ndarray, station_index, target_index,
                  n_stations: int, n_targets: int):
-        self.cov = core["cov"]
-        self.v = np.array(core["residual_w"], float, copy=True)
-        self.red = np.array(core["redundancy"], float, copy=True)
-        self.vtpv = float(core["vtpv"])
-        self.dof = int(core["dof"])
+        self.cov = core.cov
+        self.v = np.array(core.residual_w, float, copy=True)
+        self.red = np.array(core.redundancy, float, copy=True)
+        self.vtpv = float(core.vtpv)
+        self.dof = int(core.dof)
         self.gidx = np.asarray(global_index)
         self.si = np.asarray(station_index)
         self.ti = np.asarray(target_index)
@@ -86,10 +102,10 @@ class LinearRounds:
         self.incidence = inc
 
     @staticmethod
-    def applies(core: dict, sub, datum) -> bool:
+    def applies(core: Fit, sub, datum) -> bool:
         """Distances only (no angles, bars or weighted control), one reading per pair, a free or 3-2-1
         datum, and a network large enough to need it."""
-        if sub.n_obs < LINEAR_MIN_OBS or core.get("angles") is not None or core.get("coupled") is not None:
+        if sub.n_obs < LINEAR_MIN_OBS or core.angles is not None or core.coupled is not None:
             return False
         if datum.kind == "control":
             return False
@@ -104,11 +120,10 @@ class LinearRounds:
     def full(self) -> bool:
         return len(self.gens) >= self.cap
 
-    def stats(self) -> dict:
+    def stats(self) -> "RoundStats":
         """What the detection step reads: residual_w, redundancy (0 for the left-out), vtpv, dof, sigma0."""
         sigma0 = float(np.sqrt(self.vtpv / self.dof)) if self.dof > 0 else float("nan")
-        return {"residual_w": self.v, "redundancy": self.red, "vtpv": self.vtpv, "dof": self.dof,
-                "sigma0": sigma0}
+        return RoundStats(self.v, self.red, self.vtpv, self.dof, sigma0)
 
     def w(self) -> np.ndarray:
         return st.w_statistics(self.v, None, self.red)
@@ -193,19 +208,47 @@ def n_tested(obs) -> int:
                                                                          obs.sigma_elevation_rad) if a is not None)
 
 
-def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, limit, do_snoop, unknown,
-                    alpha, alpha_g, lam0, crit, datum, points, off_free, sc_free, cspec):
+@dataclass(frozen=True)
+class Procedure:
+    """The test procedure of the snooping rounds: whether to snoop, at most ``limit`` rejections, the
+    variance factor unknown (τ-test), the w-tests' ``alpha``, the levels ``alpha_g``
+    (:class:`multilat.network.statistics.TestLevels`), Baarda's ``lam0`` and the critical value ``crit``."""
+
+    do_snoop: bool
+    limit: int
+    unknown: bool
+    alpha: float
+    alpha_g: object
+    lam0: float
+    crit: float
+
+
+@dataclass
+class Rounds:
+    """What the rounds have done: one record per round (``steps``), the rejected distances
+    ``(k, w, statistic, critical, test)`` and the rejected angles (dicts), in order."""
+
+    steps: list = field(default_factory=list)
+    rejected: list = field(default_factory=list)
+    ang_rejected: list = field(default_factory=list)
+
+
+def snooping_round(obs, obs_w, used, core: Fit, lin, rounds: Rounds, proc: Procedure, model):
     """One round of detection, identification and adaptation on the last adjustment ``core`` (or its
-    downdate ``lin``). Appends the round to ``steps`` and a rejection to ``rejected`` /
-    ``ang_rejected``. Returns ``("stop", (unlocated, reason))``, ``("distance", new used mask)`` or
-    ``("angle", observations without the rejected angle)``."""
-    if not do_snoop or len(rejected) + len(ang_rejected) >= limit:
+    downdate ``lin``) of the network ``model`` (:class:`multilat.network.adjust.Model`: datum, points,
+    held offsets and scales, couplings). Appends the round to ``rounds.steps`` and a rejection to
+    ``rounds.rejected`` / ``rounds.ang_rejected``. Returns ``("stop", (unlocated, reason))``,
+    ``("distance", new used mask)`` or ``("angle", observations without the rejected angle)``."""
+    steps, rejected, ang_rejected = rounds.steps, rounds.rejected, rounds.ang_rejected
+    unknown, alpha, alpha_g, lam0, crit = proc.unknown, proc.alpha, proc.alpha_g, proc.lam0, proc.crit
+    datum, points = model.datum, model.points
+    if not proc.do_snoop or len(rejected) + len(ang_rejected) >= proc.limit:
         return "stop", ((), "")
     state = core if lin is None else lin.stats()
     to_global = np.flatnonzero(used) if lin is None else lin.gidx
-    w_sub = st.w_statistics(state["residual_w"], None, state["redundancy"])
+    w_sub = st.w_statistics(state.residual_w, None, state.redundancy)
     k_sub = int(np.argmax(np.abs(w_sub)))
-    w_ang = angle_w(core, lam0) if core.get("angles") is not None else np.zeros(0)
+    w_ang = angle_w(core, lam0) if core.angles is not None else np.zeros(0)
     angle_first = w_ang.size > 0 and np.max(np.abs(w_ang)) > abs(w_sub[k_sub])
     w_top = w_ang[int(np.argmax(np.abs(w_ang)))] if angle_first else w_sub[k_sub]
     step = detection_step(state, w_top, unknown, alpha, alpha_g, lam0, crit)
@@ -231,7 +274,7 @@ def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, l
     # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
     # correlated with this one would show the same |w|: the data cannot tell which is wrong
     if lin is None:
-        twins = core["cov"].perfectly_correlated(k_sub, core["redundancy"])
+        twins = core.cov.perfectly_correlated(k_sub, core.redundancy)
         twins = twins[twins != k_sub]
     else:
         c = lin.hat_row(k_sub)
@@ -246,8 +289,8 @@ def snooping_round(obs, obs_w, used, core, lin, steps, rejected, ang_rejected, l
         return "stop", ((k,), why)
     if lin is None or not lin.keeps_structure(k_sub):
         try:
-            check_network(obs.subset(trial), datum, points, off_free[station_map(obs, trial)],
-                          sc_free[station_map(obs, trial)], warn=False, couplings=cspec)
+            check_network(obs.subset(trial), datum, points, model.off_free[station_map(obs, trial)],
+                          model.sc_free[station_map(obs, trial)], warn=False, couplings=model.couplings)
         except MultilatError as exc:
             # rejecting it would make the network unsolvable: keep it, report it as not rejected
             return "stop", ((k,), f"rejecting it would leave the network unsolvable ({exc})")
@@ -262,7 +305,7 @@ def _angle_to_reject(core, w, obs_w, used) -> tuple[int, str, float, str]:
     """The angle with the largest |w| (``w`` per angle row of ``core``): its row in the observations,
     its kind, its w, and why it must not be rejected ("" when it may): its station would keep too few
     angles for its orientation."""
-    rows = core["angles"]["rows"]
+    rows = core.angles["rows"]
     q = int(np.argmax(np.abs(w)))
     k = int(np.flatnonzero(used)[rows.obs_index[q]])
     kind = KIND_NAMES[rows.kind[q]]
@@ -305,14 +348,20 @@ def angle_outliers(obs, rejected: list[dict], res) -> tuple:
 def detection_step(core, w_max, unknown, alpha, alpha_g, lam0, crit) -> dict:
     """One round of detection and identification: the global test (variance factor known; the largest
     |w| when ``alpha_g`` is a :class:`~.statistics.TestLevels` detecting by ``"max |w|"``) or Pope's
-    τ-test of the largest |τ| (unknown), and whether the largest |w| (|τ|) exceeds its critical value."""
-    dof = core["dof"]
+    τ-test of the largest |τ| (unknown), and whether the largest |w| (|τ|) exceeds its critical value.
+    ``core``: a :class:`Fit` or :class:`RoundStats`, or a mapping with ``dof``, ``sigma0``, ``vtpv``
+    (the general layer's rounds, :mod:`multilat.network.general.snooping`)."""
+    if isinstance(core, dict):
+        from types import SimpleNamespace
+
+        core = SimpleNamespace(**core)
+    dof = core.dof
     if unknown:
-        tau = float(w_max / core["sigma0"]) if core["sigma0"] > 0 else 0.0
+        tau = float(w_max / core.sigma0) if core.sigma0 > 0 else 0.0
         tc = st.tau_critical(alpha, dof)
         failed = bool(abs(tau) > tc) if np.isfinite(tc) else None
         return {"dof": dof, "test": "tau-max", "statistic": abs(tau), "critical": tc, "alpha": alpha,
-                "sigma0": core["sigma0"], "detection_passed": None if failed is None else not failed,
+                "sigma0": core.sigma0, "detection_passed": None if failed is None else not failed,
                 "identified": bool(failed), "statistic_k": tau, "critical_k": tc, "test_k": "tau",
                 "action": "none"}
     if getattr(alpha_g, "detection", "global chi2") == "max |w|":
@@ -321,12 +370,12 @@ def detection_step(core, w_max, unknown, alpha, alpha_g, lam0, crit) -> dict:
         # in the result) starts nothing
         failed = bool(abs(w_max) > crit)
         return {"dof": dof, "test": "max |w|", "statistic": abs(float(w_max)), "critical": crit,
-                "alpha": alpha_g.alpha_family, "power": alpha_g.power, "sigma0": core["sigma0"],
+                "alpha": alpha_g.alpha_family, "power": alpha_g.power, "sigma0": core.sigma0,
                 "detection_passed": not failed, "identified": failed, "statistic_k": float(w_max),
                 "critical_k": crit, "test_k": "w", "action": "none"}
-    gt = st.global_test(core["vtpv"], dof, alpha=alpha_g(dof), lambda0=lam0)
+    gt = st.global_test(core.vtpv, dof, alpha=alpha_g(dof), lambda0=lam0)
     return {"dof": dof, "test": "global chi2", "statistic": gt.statistic, "critical": gt.critical,
-            "alpha": gt.alpha, "power": gt.power, "sigma0": core["sigma0"],
+            "alpha": gt.alpha, "power": gt.power, "sigma0": core.sigma0,
             "detection_passed": gt.passed, "identified": bool(abs(w_max) > crit),
             "statistic_k": float(w_max), "critical_k": crit, "test_k": "w", "action": "none"}
 

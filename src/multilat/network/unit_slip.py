@@ -38,6 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.fit_state import Fit
 
 __all__ = ["SLIP_FACTOR", "R_MIN", "SPREAD_MIN", "NOISE_FREE_REL", "UnitSlipError", "noise_free", "check_unit_slip", "likely_unit", "slip_message"]
 
@@ -121,24 +122,24 @@ def slip_message(sigma0: float, dof: int, sigma_m: float, sigma_source: dict | N
             f"{guess} {accept}")
 
 
-def check_unit_slip(obs, core: dict, sigma_source: dict | None = None) -> None:
+def check_unit_slip(obs, core: Fit, sigma_source: dict | None = None) -> None:
     """Raise :class:`UnitSlipError` when the adjustment ``core`` (``vtpv``, ``dof``, ``residual_w``,
     ``redundancy``; a partial one is not judged) shows a unit slip by the module's rule."""
     from scipy.special import chdtr, chdtrc
 
     from multilat.network.search import P_MIN
 
-    if core.get("partial") or core.get("redundancy") is None:
+    if core.partial or core.redundancy is None:
         return
-    dof, vtpv = int(core["dof"]), float(core["vtpv"])
+    dof, vtpv = int(core.dof), float(core.vtpv)
     if dof < 1 or not np.isfinite(vtpv):
         return
     s0 = float(np.sqrt(vtpv / dof))
     if s0 >= SLIP_FACTOR:
         if not chdtrc(dof, vtpv) < P_MIN:
             return
-        red = np.asarray(core["redundancy"], float)
-        v = np.asarray(core["residual_w"], float)[: red.size]
+        red = np.asarray(core.redundancy, float)
+        v = np.asarray(core.residual_w, float)[: red.size]
         ok = red >= R_MIN
         if not ok.any():
             return
@@ -149,7 +150,7 @@ def check_unit_slip(obs, core: dict, sigma_source: dict | None = None) -> None:
         if not chdtr(dof, vtpv) < P_MIN:
             return
         n = obs.n_obs
-        if noise_free(obs, np.asarray(core["residual_w"], float)[:n] * np.asarray(obs.sigma_m, float)[:n]):
+        if noise_free(obs, np.asarray(core.residual_w, float)[:n] * np.asarray(obs.sigma_m, float)[:n]):
             return
     else:
         return

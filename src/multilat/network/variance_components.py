@@ -147,7 +147,7 @@ def estimate_variance_components(obs: Observations, *, grouping: str = "head", g
         observations (``names`` the groups' names); of length m when there are no angles
     max_iter, tol : the iteration stops when every new factor is within ``1 ± tol``
     snooping : data snooping in the final adjustment (never during the estimation)
-    adjust_options : passed to :func:`multilat.network.adjust.adjust` (datum, points, scale_bars, ...)
+    adjust_options : passed to :func:`multilat.network.adjust.adjust` (``options``, datum, points, ...)
 
     Raises
     ------
@@ -158,7 +158,8 @@ def estimate_variance_components(obs: Observations, *, grouping: str = "head", g
     from multilat.network.adjust import adjust
     from multilat.network.angle_rows import angle_rows
 
-    if adjust_options.get("cost", "distance") != "distance":
+    cost = adjust_options.get("cost", getattr(adjust_options.get("options"), "cost", "distance"))
+    if cost != "distance":
         raise MultilatError("variance components need the distance cost (weighted observations)")
     ar = angle_rows(obs)
     n_rows = obs.n_obs + (0 if ar is None else ar.n_rows)
