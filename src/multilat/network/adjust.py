@@ -24,7 +24,7 @@ from multilat.network.datum import Datum, parse_datum
 from multilat.network.exclusion import (UndeterminedTargets, exclude_weak_points, leaving_out_undetermined,
                                         raise_undetermined, zero_redundancy_warnings)
 from multilat.network.fit import (as_start, check_control, check_network, control_ids, fit_once, raise_if_flat,
-                                  raise_unconverged, station_map, target_map)
+                                  station_map, target_map)
 from multilat.network.adjust_steps import (coupling_results, scaled_cov, start_as_partial, w_failure_groups,
                                            search_minimum as _search_minimum)
 from multilat.network.fit_state import Fit
