@@ -62,7 +62,8 @@ def load_problem(source: str, opts, *, noise: str | None, instrument: str | None
 
     if not Path(source).exists():
         raise MultilatError(f"{source}: no such file (and not a built-in: {', '.join(BUILTIN)})")
-    if inst is None and sigma_um is None and not is_raw_file(source) and "sigma_m" not in _header(source):
+    header = _header(source)                   # None: unreadable, the reader names the fault by FILE:LINE
+    if inst is None and sigma_um is None and not is_raw_file(source) and header is not None and "sigma_m" not in header:
         raise MultilatError(f"{source}: no sigma_m column: give --sigma-um, or --instrument for the σ of its distance "
                             "model (a Monte Carlo never draws from an instrument nobody named)")
     refs = read_reference_lengths(references) if references is not None else None
@@ -82,18 +83,19 @@ def load_problem(source: str, opts, *, noise: str | None, instrument: str | None
     return problem, noise
 
 
-def _header(path) -> list[str]:
-    """The column names of a CSV file (its first line that is not a ``#`` comment); [] when unreadable
-    (the reader then names the fault)."""
+def _header(path) -> list[str] | None:
+    """The column names of a CSV file (its first line that is not a ``#`` comment); None when the file
+    does not read whole as UTF-8 text (the reader then names the fault by FILE:LINE, before the σ)."""
     import csv
 
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            for row in csv.reader(fh):
-                if row and not row[0].lstrip().startswith("#"):
-                    return [c.strip() for c in row]
+            text = fh.read()
+        for row in csv.reader(text.splitlines()):
+            if row and not row[0].lstrip().startswith("#"):
+                return [c.strip() for c in row]
     except (OSError, UnicodeDecodeError, csv.Error):
-        pass
+        return None
     return []
 
 
