@@ -197,15 +197,15 @@ def test_step4_control_alone_gives_the_hall_as_the_page_says(ran, tmp_path):
                        "--datum", f"control:{CONTROL}", "--out", str(tmp_path / "ctl")])
     assert rc == 0, err
     c = _json(tmp_path, "ctl/result.json")
-    h = c["initial"]["handedness"]
-    assert h["decided"] and h["points"] == CONTROL.split(",") and not c["ambiguous"]
-    _said(f"the right hand fits them to {h['misfit_rms_m'] * 1e6:.1f} µm RMS, its mirror image to "
-          f"{h['mirror_misfit_rms_m'] * 1e3:.0f} mm")
     truth = {r[0]: np.array(r[1:], float) for r in
              (line.split(",") for line in (EX / "truth.csv").read_text().splitlines()[1:])}
     for sid, st in c["stations"].items():   # where they stood, within 4 u (the hall's frame held)
         u = np.sqrt(np.diag(st["cov_m2"]))
         assert np.all(np.abs(np.array(st["xyz_m"]) - truth[sid]) < 4 * u + 1e-9), sid
+    h = c["initial"]["handedness"]
+    assert h["decided"] and h["points"] == CONTROL.split(",") and not c["ambiguous"]
+    _said(f"the right hand fits them to {h['misfit_rms_m'] * 1e6:.1f} µm RMS, its mirror image to "
+          f"{h['mirror_misfit_rms_m'] * 1e3:.0f} mm")
     x, y, z = c["stations"]["H1"]["xyz_m"]
     _said(f"`H1` at ({x:.3f}, {y:.3f}, {z:.3f}) m as before")
 
