@@ -185,16 +185,29 @@ def test_step4_control_numbers(ran):
     assert d["dof"] - free["dof"] == 6  # 12 control coordinates, 6 of them the datum
 
 
-def test_step4_control_alone_is_refused_as_the_page_says(ran, tmp_path):
-    """The page's caution: control points without rough coordinates of the rest are refused (a mirror
-    of the initial values). When this is fixed, the test fails: update docs/tutorial.md's step 4."""
+def test_step4_control_alone_gives_the_hall_as_the_page_says(ran, tmp_path):
+    """The page's note: the four control points alone (no rough coordinates of the rest) give the same
+    network, in the right hand: the distances' initial values are fitted onto the points as they are
+    and as their mirror image, the smaller misfit taken (before the fix: refused as 'inconsistent ...
+    P01 342.82 mm', and H1 at z = -5.93 m under the free datum)."""
     work, _ = ran
     lines = (work / "points.csv").read_text().splitlines()
     (tmp_path / "control.csv").write_text("\n".join(lines[:5]) + "\n")
     rc, _, err = _run(["adjust", str(work / "obs.csv"), "--points", str(tmp_path / "control.csv"),
-                       "--datum", f"control:{CONTROL}"])
-    assert rc == 2 and "inconsistent" in err
-    _said("this version then refuses the (correct) control as inconsistent")
+                       "--datum", f"control:{CONTROL}", "--out", str(tmp_path / "ctl")])
+    assert rc == 0, err
+    c = _json(tmp_path, "ctl/result.json")
+    truth = {r[0]: np.array(r[1:], float) for r in
+             (line.split(",") for line in (EX / "truth.csv").read_text().splitlines()[1:])}
+    for sid, st in c["stations"].items():   # where they stood, within 4 u (the hall's frame held)
+        u = np.sqrt(np.diag(st["cov_m2"]))
+        assert np.all(np.abs(np.array(st["xyz_m"]) - truth[sid]) < 4 * u + 1e-9), sid
+    h = c["initial"]["handedness"]
+    assert h["decided"] and h["points"] == CONTROL.split(",") and not c["ambiguous"]
+    _said(f"the right hand fits them to {h['misfit_rms_m'] * 1e6:.1f} µm RMS, its mirror image to "
+          f"{h['mirror_misfit_rms_m'] * 1e3:.0f} mm")
+    x, y, z = c["stations"]["H1"]["xyz_m"]
+    _said(f"`H1` at ({x:.3f}, {y:.3f}, {z:.3f}) m as before")
 
 
 def test_step5_trackers_numbers(ran):

@@ -40,7 +40,7 @@ import numpy as np
 
 from multilat.network.large import refit_point
 
-__all__ = ["K_PLANE", "Ambiguous", "flat_network", "mirror_ambiguities", "plane_spread"]
+__all__ = ["K_PLANE", "Ambiguous", "flat_network", "handedness_ambiguity", "mirror_ambiguities", "plane_spread"]
 
 #: a point set is coplanar within its uncertainty when its RMS out-of-plane spread is below
 #: K_PLANE times the RMS standard uncertainty of its points along the plane's normal
@@ -284,6 +284,23 @@ def side_fixed_targets(obs, control=(), couplings=None) -> set:
     return fixed
 
 
+def handedness_ambiguity(res) -> Ambiguous | None:
+    """The whole network's hand when the given points did not decide it (initial values from the
+    distances fitted onto ``--points`` that lie in one plane, or only 3 of them: the network and its
+    mirror image through their plane fit them equally; :func:`multilat.network.starts.onto_points`)."""
+    h = (res.initial or {}).get("handedness")
+    if not h or h["decided"]:
+        return None
+    ids = h["points"]
+    n = h["plane_normal"]
+    reason = (f"the {len(ids)} given point(s) ({_listed(ids)}) lie within {h['plane_spread_rms_m'] * 1e3:.3g} mm "
+              f"RMS of one plane (normal ({n[0]:+.3f}, {n[1]:+.3f}, {n[2]:+.3f})): the network fits them "
+              f"with RMS misfit {h['misfit_rms_m'] * 1e3:.3g} mm and its mirror image through that plane "
+              f"with {h['mirror_misfit_rms_m'] * 1e3:.3g} mm ({h['ratio_needed']:g} times is needed to "
+              "decide); the smaller was taken")
+    return Ambiguous("network", "network", "mirror", reason, 0.0)
+
+
 def _listed(items, n: int = 8) -> str:
     items = list(items)
     return ", ".join(items[:n]) + (f" and {len(items) - n} more" if len(items) > n else "")
@@ -326,8 +343,15 @@ def check_geometry(res, readjust, *, lambda0: float, strict: bool = False, contr
 
     amb = mirror_ambiguities(res, quiet, lambda0=lambda0,
                              skip_targets=side_fixed_targets(res.obs, control, couplings))
+    hand = handedness_ambiguity(res)
+    if hand is not None:
+        hand_note = (f"ambiguous handedness: {hand.reason}; these coordinates may be the mirror image of the "
+                     "network in the points' frame: give rough coordinates of a point off that plane in --points "
+                     "(listed in 'ambiguous' as 'network')")
+        if strict:
+            raise MultilatError(f"{hand_note} (--strict: refused)")
     if not amb:
-        return (), None
+        return ((hand,), hand_note) if hand is not None else ((), None)
     st_ = [a.id for a in amb if a.kind == "station"]
     tg = [a.id for a in amb if a.kind == "target"]
     parts = ([f"{len(st_)} station(s) ({_listed(st_)})"] if st_ else []) + \
@@ -338,4 +362,6 @@ def check_geometry(res, readjust, *, lambda0: float, strict: bool = False, contr
             "equally good solutions, listed in 'ambiguous': add targets off that plane, angles or control")
     if strict:
         raise MultilatError(f"{note} (--strict: refused)")
-    return amb, note
+    if hand is None:
+        return amb, note
+    return (hand,) + tuple(amb), f"{hand_note}; {note}"

@@ -14,11 +14,15 @@ from multilat.network.fit import as_start
 from multilat.network.result import Start
 from multilat.network.solvability import flat_geometry
 
-__all__ = ["initial_for", "initial_from_distances", "PARTIAL_RESTARTS", "LARGE_TARGETS"]
+__all__ = ["initial_for", "initial_from_distances", "onto_points", "PARTIAL_RESTARTS", "LARGE_TARGETS",
+           "HANDEDNESS_RATIO"]
 
 
 PARTIAL_RESTARTS = 6   # random initial-value starts tried when the first solve does not converge
 LARGE_TARGETS = 500   # above: initial values from a seed network + multilateration (network.large)
+#: the RMS misfit of the wrong hand must be this many times the right one's for the given points to
+#: decide the handedness of initial values from distances (see :func:`onto_points`)
+HANDEDNESS_RATIO = 3.0
 
 
 def initial_for(obs: Observations, given: Start | None, points: Points | None, rng) -> tuple[Start, dict]:
@@ -42,17 +46,55 @@ def initial_for(obs: Observations, given: Start | None, points: Points | None, r
         raw, how = initial_from_distances(obs, rng)
     iv = as_start(raw, obs)
     if points is not None:
-        ids = [i for i in obs.station_ids + obs.target_ids if points.get(i) is not None]
-        if len(ids) >= 3:
-            allx = np.vstack([iv.station_xyz_m, iv.target_xyz_m])
-            allids = obs.station_ids + obs.target_ids
-            src = np.array([allx[allids.index(i)] for i in ids])
-            try:
-                R, t = rigid_fit(src, np.array([points.get(i) for i in ids]))
-            except MultilatError:
-                R, t = np.eye(3), np.zeros(3)
-            iv = Start(apply_rigid(R, t, iv.station_xyz_m), apply_rigid(R, t, iv.target_xyz_m), iv.offset_m)
+        iv = onto_points(iv, obs, points, how)
     return iv, how
+
+
+def onto_points(iv: Start, obs: Observations, points: Points, how: dict) -> Start:
+    """Initial values from distances moved onto the given ``points`` (>= 3 of them) by a rigid fit of
+    the solution **and of its mirror image** (distances cannot tell them apart); the hand with the
+    smaller RMS misfit is taken. ``how["handedness"]`` records both misfits and whether the points
+    decided it.
+
+    Decided when the wrong hand's RMS misfit is at least ``HANDEDNESS_RATIO`` (3) times the right
+    one's. Why 3: with the misfit of the right hand noise of unknown scale ε on the 3n fitted
+    coordinates (rough coordinates, control σ, the initial values' own error), the likelihood ratio
+    of the two hands is ``(e_wrong / e_right)^(3n)``: 3 gives 3^12 ≈ 5e5 for the fewest (n = 4)
+    non-coplanar points, a margin kept for errors that are not Gaussian. The geometry sets the
+    difference: the mirror fits the given points only as well as they lie in one plane (its misfit
+    is about twice their RMS spread off their best-fit plane), so 3 asks for the points to stand
+    out of their plane by about 1.4 times the misfit level. Coplanar points (or only 3) give equal
+    misfits: not decided, named by :func:`multilat.network.ambiguity.check_geometry` (``ambiguous``
+    and a warning), the smaller misfit kept."""
+    allids = obs.station_ids + obs.target_ids
+    ids = [i for i in allids if points.get(i) is not None]
+    if len(ids) < 3:
+        return iv
+    allx = np.vstack([iv.station_xyz_m, iv.target_xyz_m])
+    src = np.array([allx[allids.index(i)] for i in ids])
+    dst = np.array([points.get(i) for i in ids])
+    mirror = np.diag([1.0, 1.0, -1.0])
+    fits = []
+    for m in (np.eye(3), mirror):
+        try:
+            R, t = rigid_fit(src @ m, dst)
+        except MultilatError:      # collinear points: no rotation from them, the frame as computed
+            return iv
+        e = float(np.sqrt(np.mean(np.sum((apply_rigid(R, t, src @ m) - dst) ** 2, axis=1))))
+        fits.append((e, R @ m, t))
+    k = int(fits[1][0] < fits[0][0])
+    e_in, e_out = fits[k][0], fits[1 - k][0]
+    extent = float(np.sqrt(np.mean(np.sum((dst - dst.mean(axis=0)) ** 2, axis=1))))
+    floor = 1e-9 * max(extent, 1e-300)
+    decided = e_out >= HANDEDNESS_RATIO * max(e_in, floor)
+    c = dst.mean(axis=0)
+    n = np.linalg.svd(dst - c, full_matrices=False)[2][-1]
+    how["handedness"] = {"decided": bool(decided), "mirrored": bool(k), "points": ids,
+                         "misfit_rms_m": e_in, "mirror_misfit_rms_m": e_out, "ratio_needed": HANDEDNESS_RATIO,
+                         "plane_spread_rms_m": float(np.sqrt(np.mean(((dst - c) @ n) ** 2))),
+                         "plane_normal": [float(v) for v in n], "plane_point_m": [float(v) for v in c]}
+    R, t = fits[k][1], fits[k][2]
+    return Start(apply_rigid(R, t, iv.station_xyz_m), apply_rigid(R, t, iv.target_xyz_m), iv.offset_m)
 
 
 def initial_from_distances(obs: Observations, rng):
