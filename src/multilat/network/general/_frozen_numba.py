@@ -48,53 +48,56 @@ def _rot(w, p, k, out):  # pragma: no cover - jit
 
 
 @njit(cache=True, inline="always")
-def _row(code, c, hz, comp, x, val, rot):  # pragma: no cover - jit
-    """Model of one row at ``x`` and its Jacobian values ``val[:9]`` (in the kind's column order);
-    ``rot`` (4, 3, 3): the row's set-up frame and its derivatives (tracker rows, :func:`_rotations`)."""
+def _row(code, i, cols, hz, comp, x, val, rot, u):  # pragma: no cover - jit
+    """Model of row ``i`` at ``x`` and its Jacobian values ``val[i, :9]`` (in the kind's column order);
+    ``rot[u]`` (4, 3, 3): the row's set-up frame and its derivatives (tracker rows, :func:`_rotations`).
+    Arrays are indexed element by element (no row views: a view per row cost ~20 ns in reference
+    counting, more than most rows' arithmetic)."""
     if code == 5:                     # x[c1] - x[c0]
-        val[0] = -1.0
-        val[1] = 1.0
-        return x[c[1]] - x[c[0]]
+        val[i, 0] = -1.0
+        val[i, 1] = 1.0
+        return x[cols[i, 1]] - x[cols[i, 0]]
     if code == 6:
-        val[0] = 1.0
-        return x[c[0]]
+        val[i, 0] = 1.0
+        return x[cols[i, 0]]
     if code == 4:                     # horizontal angle: from, bs, fs (x, y each)
-        fx, fy = x[c[4]] - x[c[0]], x[c[5]] - x[c[1]]
-        bx, by = x[c[2]] - x[c[0]], x[c[3]] - x[c[1]]
+        fx, fy = x[cols[i, 4]] - x[cols[i, 0]], x[cols[i, 5]] - x[cols[i, 1]]
+        bx, by = x[cols[i, 2]] - x[cols[i, 0]], x[cols[i, 3]] - x[cols[i, 1]]
         hf, hb = fx * fx + fy * fy, bx * bx + by * by
         gfx, gfy, gbx, gby = -fy / hf, fx / hf, -by / hb, bx / hb
-        val[0], val[1], val[2], val[3], val[4], val[5] = gbx - gfx, gby - gfy, -gbx, -gby, gfx, gfy
+        val[i, 0], val[i, 1], val[i, 2], val[i, 3], val[i, 4], val[i, 5] = gbx - gfx, gby - gfy, -gbx, -gby, gfx, gfy
         return math.atan2(fy, fx) - math.atan2(by, bx)
     if code == 1 or code == 3:        # from xy, to xy
-        dx, dy = x[c[2]] - x[c[0]], x[c[3]] - x[c[1]]
+        dx, dy = x[cols[i, 2]] - x[cols[i, 0]], x[cols[i, 3]] - x[cols[i, 1]]
         h2 = dx * dx + dy * dy
         if code == 3:
             h = math.sqrt(h2)
-            val[0], val[1], val[2], val[3] = -dx / h, -dy / h, dx / h, dy / h
+            val[i, 0], val[i, 1], val[i, 2], val[i, 3] = -dx / h, -dy / h, dx / h, dy / h
             return h
-        val[0], val[1], val[2], val[3], val[4] = dy / h2, -dx / h2, -dy / h2, dx / h2, -1.0
-        return math.atan2(dy, dx) - x[c[4]]
-    dx, dy, dz = x[c[3]] - x[c[0]], x[c[4]] - x[c[1]], x[c[5]] - x[c[2]] + hz
+        val[i, 0], val[i, 1], val[i, 2], val[i, 3], val[i, 4] = dy / h2, -dx / h2, -dy / h2, dx / h2, -1.0
+        return math.atan2(dy, dx) - x[cols[i, 4]]
+    dx = x[cols[i, 3]] - x[cols[i, 0]]
+    dy = x[cols[i, 4]] - x[cols[i, 1]]
+    dz = x[cols[i, 5]] - x[cols[i, 2]] + hz
     if code == 0:
         rho = math.sqrt(dx * dx + dy * dy + dz * dz)
-        off = x[c[6]] if c[6] >= 0 else 0.0
-        k1 = 1.0 + (x[c[7]] if c[7] >= 0 else 0.0)
+        off = x[cols[i, 6]] if cols[i, 6] >= 0 else 0.0
+        k1 = 1.0 + (x[cols[i, 7]] if cols[i, 7] >= 0 else 0.0)
         f = k1 / rho
-        val[0], val[1], val[2], val[3], val[4], val[5] = -f * dx, -f * dy, -f * dz, f * dx, f * dy, f * dz
-        val[6], val[7] = 1.0, rho
+        val[i, 0], val[i, 1], val[i, 2], val[i, 3], val[i, 4], val[i, 5] = -f * dx, -f * dy, -f * dz, f * dx, f * dy, f * dz
+        val[i, 6], val[i, 7] = 1.0, rho
         return k1 * rho + off
     if code == 2:
         h2 = dx * dx + dy * dy
         h = math.sqrt(h2)
         r2 = h2 + dz * dz
         gx, gy, gz = dz * dx / (h * r2), dz * dy / (h * r2), -h / r2
-        val[0], val[1], val[2], val[3], val[4], val[5] = -gx, -gy, -gz, gx, gy, gz
+        val[i, 0], val[i, 1], val[i, 2], val[i, 3], val[i, 4], val[i, 5] = -gx, -gy, -gz, gx, gy, gz
         return math.atan2(h, dz)
     # code 7: tracker angles, v = R^T d
-    R = rot[0]
-    v0 = R[0, 0] * dx + R[1, 0] * dy + R[2, 0] * dz
-    v1 = R[0, 1] * dx + R[1, 1] * dy + R[2, 1] * dz
-    v2 = R[0, 2] * dx + R[1, 2] * dy + R[2, 2] * dz
+    v0 = rot[u, 0, 0, 0] * dx + rot[u, 0, 1, 0] * dy + rot[u, 0, 2, 0] * dz
+    v1 = rot[u, 0, 0, 1] * dx + rot[u, 0, 1, 1] * dy + rot[u, 0, 2, 1] * dz
+    v2 = rot[u, 0, 0, 2] * dx + rot[u, 0, 1, 2] * dy + rot[u, 0, 2, 2] * dz
     h2 = v0 * v0 + v1 * v1
     h = math.sqrt(h2)
     if comp == 0:
@@ -104,15 +107,42 @@ def _row(code, c, hz, comp, x, val, rot):  # pragma: no cover - jit
         n2 = h2 + v2 * v2
         a0, a1, a2 = -v2 * v0 / (h * n2), -v2 * v1 / (h * n2), h / n2
         f = math.atan2(v2, h)
-    for j in range(3):                # d/dT = a R^T
-        t = a0 * R[j, 0] + a1 * R[j, 1] + a2 * R[j, 2]
-        val[3 + j] = t
-        val[j] = -t
-    for p in range(1, 4):             # d/dp = a (dR_p)^T d
-        val[5 + p] = ((a0 * rot[p, 0, 0] + a1 * rot[p, 0, 1] + a2 * rot[p, 0, 2]) * dx
-                      + (a0 * rot[p, 1, 0] + a1 * rot[p, 1, 1] + a2 * rot[p, 1, 2]) * dy
-                      + (a0 * rot[p, 2, 0] + a1 * rot[p, 2, 1] + a2 * rot[p, 2, 2]) * dz)
+    _angle_jacobian(i, a0, a1, a2, dx, dy, dz, val, rot, u)
     return f
+
+
+@njit(cache=True, inline="always")
+def _angle_jacobian(i, a0, a1, a2, dx, dy, dz, val, rot, u):  # pragma: no cover - jit
+    """``val[i]`` of a tracker angle with ``d angle / d v = a``: ``a R^T`` (target; the station the
+    negative), ``a (dR_p)^T d`` (the set-up's omega, phi, kappa)."""
+    for j in range(3):
+        t = a0 * rot[u, 0, j, 0] + a1 * rot[u, 0, j, 1] + a2 * rot[u, 0, j, 2]
+        val[i, 3 + j] = t
+        val[i, j] = -t
+    for p in range(1, 4):
+        val[i, 5 + p] = ((a0 * rot[u, p, 0, 0] + a1 * rot[u, p, 0, 1] + a2 * rot[u, p, 0, 2]) * dx
+                         + (a0 * rot[u, p, 1, 0] + a1 * rot[u, p, 1, 1] + a2 * rot[u, p, 1, 2]) * dy
+                         + (a0 * rot[u, p, 2, 0] + a1 * rot[u, p, 2, 1] + a2 * rot[u, p, 2, 2]) * dz)
+
+
+@njit(cache=True, inline="always")
+def _tracker_pair(i, j, cols, hz, x, val, rot, u, f):  # pragma: no cover - jit
+    """Azimuth row ``i`` and elevation row ``j`` of the same station, target and set-up together
+    (``v = R^T d`` once): models into ``f[0], f[1]``, Jacobians into ``val[i], val[j]``; the same
+    arithmetic as :func:`_row` for each."""
+    dx = x[cols[i, 3]] - x[cols[i, 0]]
+    dy = x[cols[i, 4]] - x[cols[i, 1]]
+    dz = x[cols[i, 5]] - x[cols[i, 2]] + hz
+    v0 = rot[u, 0, 0, 0] * dx + rot[u, 0, 1, 0] * dy + rot[u, 0, 2, 0] * dz
+    v1 = rot[u, 0, 0, 1] * dx + rot[u, 0, 1, 1] * dy + rot[u, 0, 2, 1] * dz
+    v2 = rot[u, 0, 0, 2] * dx + rot[u, 0, 1, 2] * dy + rot[u, 0, 2, 2] * dz
+    h2 = v0 * v0 + v1 * v1
+    h = math.sqrt(h2)
+    n2 = h2 + v2 * v2
+    f[0] = math.atan2(v1, v0)
+    f[1] = math.atan2(v2, h)
+    _angle_jacobian(i, -v1 / h2, v0 / h2, 0.0, dx, dy, dz, val, rot, u)
+    _angle_jacobian(j, -v2 * v0 / (h * n2), -v2 * v1 / (h * n2), h / n2, dx, dy, dz, val, rot, u)
 
 
 @njit(cache=True)
@@ -123,40 +153,70 @@ def _rotations(frames, x, rot):  # pragma: no cover - jit
 
 
 @njit(cache=True)
-def model_rows(code, cols, hz, comp, setup, frames, x, out_f, out_val):  # pragma: no cover - jit
-    """Model and Jacobian values of every row at one ``x`` (for the tests)."""
+def model_rows(code, cols, hz, comp, setup, frames, x, out_f, out_val, pair=None):  # pragma: no cover - jit
+    """Model and Jacobian values of every row at one ``x`` (for the tests); with ``pair`` (the
+    program's), azimuth and elevation rows together as in the solver."""
     rot = np.empty((max(len(frames), 1), 4, 3, 3))
+    f2 = np.empty(2)
     _rotations(frames, x, rot)
     for i in range(len(code)):
-        out_f[i] = _row(code[i], cols[i], hz[i], comp[i], x, out_val[i], rot[max(setup[i], 0)])
+        if pair is not None and pair[i] != -1:
+            if pair[i] >= 0:
+                _tracker_pair(i, pair[i], cols, hz[i], x, out_val, rot, max(setup[i], 0), f2)
+                out_f[i] = f2[0]
+                out_f[pair[i]] = f2[1]
+            continue
+        out_f[i] = _row(code[i], i, cols, hz[i], comp[i], x, out_val, rot, max(setup[i], 0))
 
 
 @njit(cache=True, inline="always")
-def _trial_gradient(obs_t, xt, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val,
-                    val, r, rot, g):  # pragma: no cover - jit
-    """``g = J(x_t)^T P r`` with ``r = obs_t - f(x_t)`` (angles wrapped); returns ``r^T P r``."""
-    two_pi = 2.0 * math.pi
+def _residual(e, angular):  # pragma: no cover - jit
+    """``e`` wrapped to [-pi, pi) when ``angular`` (wrap_angle; unchanged inside)."""
+    if angular and not -math.pi <= e < math.pi:
+        e = (e + math.pi) % (2.0 * math.pi) - math.pi
+    return e
+
+
+@njit(cache=True, inline="always")
+def _trial_gradient(obs, t, xt, code, cols, pair, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, wdiag, p_ptr,
+                    p_idx, p_val, val, r, rot, f2, g):  # pragma: no cover - jit
+    """``g = J(x_t)^T P r`` with ``r = obs[t] - f(x_t)`` (angles wrapped); returns ``r^T P r``. A row
+    with a diagonal weight (``wdiag[i] > 0``) takes ``(P r)_i = wdiag[i] r_i``, others their CSR row
+    of ``P``; tracker rows paired by ``pair`` (:func:`_tracker_pair`)."""
     _rotations(frames, xt, rot)
     for i in range(len(code)):
-        e = obs_t[i] - _row(code[i], cols[i], hz[i], comp[i], xt, val[i], rot[max(setup[i], 0)])
-        if angular[i] and not -math.pi <= e < math.pi:     # wrap_angle (e unchanged inside [-pi, pi))
-            e = (e + math.pi) % two_pi - math.pi
-        r[i] = e
+        k = pair[i]
+        if k == -1:
+            r[i] = _residual(obs[t, i] - _row(code[i], i, cols, hz[i], comp[i], xt, val, rot, max(setup[i], 0)),
+                             angular[i])
+        elif k >= 0:
+            _tracker_pair(i, k, cols, hz[i], xt, val, rot, max(setup[i], 0), f2)
+            r[i] = _residual(obs[t, i] - f2[0], angular[i])
+            r[k] = _residual(obs[t, k] - f2[1], angular[k])
     v = 0.0
     g[:] = 0.0
     for i in range(len(code)):
-        s = 0.0
-        for k in range(p_ptr[i], p_ptr[i + 1]):
-            s += p_val[k] * r[p_idx[k]]
+        w = wdiag[i]
+        if w > 0.0:
+            s = w * r[i]
+        else:
+            s = 0.0
+            for k in range(p_ptr[i], p_ptr[i + 1]):
+                s += p_val[k] * r[p_idx[k]]
         v += s * r[i]
         for k in range(s_ptr[i], s_ptr[i + 1]):
             g[s_col[k]] += val[i, s_j[k]] * s
     return v
 
 
+#: Trials per unit of the parallel loop (work arrays allocated once per unit; each trial's arithmetic
+#: is its own, so the numbers never depend on it).
+UNIT = 32
+
+
 @njit(cache=True, parallel=True, nogil=True)
-def _chord(obs, x, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr, p_idx, p_val, free, q,
-           computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
+def _chord(obs, x, code, cols, pair, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, wdiag, p_ptr, p_idx, p_val,
+           free, q, computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
     """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place, from ``x̂``), the rule of
     :func:`.propagate.solve`: the first ``K (l - f(x̂))`` (``kt`` = K^T (R, n_free), ``computed`` =
     f(x̂)); converged when the largest step, or its bound on the error left ``step c / (1 - c)``
@@ -164,56 +224,54 @@ def _chord(obs, x, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angul
     ``contraction`` times the one before, or after ``max_iter`` steps."""
     t_n, r_n = obs.shape
     nf = len(free)
-    two_pi = 2.0 * math.pi
-    for t in prange(t_n):
-        xt = x[t]
+    for unit in prange((t_n + UNIT - 1) // UNIT):
         val = np.zeros((r_n, 9))
         r = np.empty(r_n)
         g = np.empty(nf)
-        dx = np.zeros(nf)
+        dx = np.empty(nf)
+        f2 = np.empty(2)
         rot = np.empty((max(len(frames), 1), 4, 3, 3))
-        for i in range(r_n):                  # the first step, linear in the noise: K (l - f(x̂))
-            e = obs[t, i] - computed[i]
-            if angular[i] and not -math.pi <= e < math.pi:
-                e = (e + math.pi) % two_pi - math.pi
-            ki = kt[i]
-            for a in range(nf):
-                dx[a] += ki[a] * e
-        prev = 0.0
-        for a in range(nf):
-            xt[free[a]] += dx[a]
-            s = abs(dx[a])
-            if not s <= prev:
-                prev = s if s == s else np.inf
-        iters[t] = 1
-        for it in range(1, max_iter):
-            v = _trial_gradient(obs[t], xt, code, cols, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, p_ptr,
-                                p_idx, p_val, val, r, rot, g)
+        for t in range(unit * UNIT, min(t_n, unit * UNIT + UNIT)):
+            xt = x[t]
             dx[:] = 0.0
-            for b in range(nf):               # dx = Q g, by rows of the symmetric Q (independent sums: vectorised)
-                gb = g[b]
-                qb = q[b]
+            for i in range(r_n):              # the first step, linear in the noise: K (l - f(x̂))
+                e = _residual(obs[t, i] - computed[i], angular[i])
                 for a in range(nf):
-                    dx[a] += qb[a] * gb
-            step = 0.0
+                    dx[a] += kt[i, a] * e
+            prev = 0.0
             for a in range(nf):
-                v -= g[a] * dx[a]             # vTPv after the step, to second order: v - g^T Q g
                 xt[free[a]] += dx[a]
                 s = abs(dx[a])
-                if not s <= step:
-                    step = s if s == s else np.inf
-            iters[t] = it + 1
-            c = step / prev                   # the contraction of the last step
-            if step < tol or (c <= contraction and step * c < tol * (1.0 - c)):
-                converged[t] = True
-                vtpv[t] = v
-                break
-            if c > contraction:
+                if not s <= prev:
+                    prev = s if s == s else np.inf
+            iters[t] = 1
+            for it in range(1, max_iter):
+                v = _trial_gradient(obs, t, xt, code, cols, pair, s_ptr, s_j, s_col, hz, comp, setup, frames,
+                                    angular, wdiag, p_ptr, p_idx, p_val, val, r, rot, f2, g)
+                dx[:] = 0.0
+                for b in range(nf):           # dx = Q g, by rows of the symmetric Q (independent sums: vectorised)
+                    gb = g[b]
+                    for a in range(nf):
+                        dx[a] += q[b, a] * gb
+                step = 0.0
+                for a in range(nf):
+                    v -= g[a] * dx[a]         # vTPv after the step, to second order: v - g^T Q g
+                    xt[free[a]] += dx[a]
+                    s = abs(dx[a])
+                    if not s <= step:
+                        step = s if s == s else np.inf
+                iters[t] = it + 1
+                c = step / prev               # the contraction of the last step
+                if step < tol or (c <= contraction and step * c < tol * (1.0 - c)):
+                    converged[t] = True
+                    vtpv[t] = v
+                    break
+                if c > contraction:
+                    far[t] = True
+                    break
+                prev = step
+            if not converged[t]:
                 far[t] = True
-                break
-            prev = step
-        if not converged[t]:
-            far[t] = True
 
 
 chord = boundary(_chord)
