@@ -99,7 +99,7 @@ def test_compiled_rows_equal_the_kinds(name, tracker):
     f, v = np.empty(fr.n_rows), np.zeros((fr.n_rows, 9))
     model_rows(p["code"], p["cols"], p["hz"], p["comp"], p["setup"], p["frames"], x, f, v)
     fp, vp = np.empty(fr.n_rows), np.zeros((fr.n_rows, 9))      # azimuth and elevation rows together
-    model_rows(p["code"], p["cols"], p["hz"], p["comp"], p["setup"], p["frames"], x, fp, vp, p["pair"])
+    model_rows(p["code"], p["cols"], p["hz"], p["comp"], p["setup"], p["frames"], x, fp, vp, p["pair"], p["ref"])
     assert (p["pair"] >= 0).sum() == (p["pair"] == -2).sum() == (28 if name == "tracker" else 0)
     s = adj.system
     for b, cols, sl in zip(s.blocks, s.cols, s.rows):

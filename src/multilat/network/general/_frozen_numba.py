@@ -126,10 +126,24 @@ def _angle_jacobian(i, a0, a1, a2, dx, dy, dz, val, rot, u):  # pragma: no cover
 
 
 @njit(cache=True, inline="always")
-def _tracker_pair(i, j, cols, hz, x, val, rot, u, f):  # pragma: no cover - jit
+def _small_atan2(y, x):  # pragma: no cover - jit
+    """``atan2(y, x)`` for a small angle: ``atan(z)``, ``z = y / x``, by its series to z^7 when
+    |z| < 1e-2 (the first term left out, z^9/9, is below 1.2e-17 |z|: the rounding of the result);
+    ``math.atan2`` otherwise."""
+    if x > 0.0:
+        z = y / x
+        if -1e-2 < z < 1e-2:
+            z2 = z * z
+            return z * (1.0 - z2 * (1.0 / 3.0 - z2 * (0.2 - z2 / 7.0)))
+    return math.atan2(y, x)
+
+
+@njit(cache=True, inline="always")
+def _tracker_pair(i, j, cols, hz, x, val, rot, u, ref, f):  # pragma: no cover - jit
     """Azimuth row ``i`` and elevation row ``j`` of the same station, target and set-up together
-    (``v = R^T d`` once): models into ``f[0], f[1]``, Jacobians into ``val[i], val[j]``; the same
-    arithmetic as :func:`_row` for each."""
+    (``v = R^T d`` and ``(dR_p)^T d`` once): models into ``f[0], f[1]``, Jacobians into ``val[i],
+    val[j]`` (the derivatives of :func:`_row`). Each angle is its value at x̂ plus the angle from
+    there (``ref[i]``: cos and sin of the value at x̂), a small angle (:func:`_small_atan2`)."""
     dx = x[cols[i, 3]] - x[cols[i, 0]]
     dy = x[cols[i, 4]] - x[cols[i, 1]]
     dz = x[cols[i, 5]] - x[cols[i, 2]] + hz
@@ -139,10 +153,23 @@ def _tracker_pair(i, j, cols, hz, x, val, rot, u, f):  # pragma: no cover - jit
     h2 = v0 * v0 + v1 * v1
     h = math.sqrt(h2)
     n2 = h2 + v2 * v2
-    f[0] = math.atan2(v1, v0)
-    f[1] = math.atan2(v2, h)
-    _angle_jacobian(i, -v1 / h2, v0 / h2, 0.0, dx, dy, dz, val, rot, u)
-    _angle_jacobian(j, -v2 * v0 / (h * n2), -v2 * v1 / (h * n2), h / n2, dx, dy, dz, val, rot, u)
+    f[0] = ref[i, 2] + _small_atan2(ref[i, 0] * v1 - ref[i, 1] * v0, ref[i, 0] * v0 + ref[i, 1] * v1)
+    f[1] = ref[j, 2] + _small_atan2(ref[j, 0] * v2 - ref[j, 1] * h, ref[j, 0] * h + ref[j, 1] * v2)
+    a0, a1 = -v1 / h2, v0 / h2                      # d az / d v (third 0)
+    b0, b1, b2 = -v2 * v0 / (h * n2), -v2 * v1 / (h * n2), h / n2
+    for c in range(3):                              # d/dT = a R^T (the station: minus)
+        ta = a0 * rot[u, 0, c, 0] + a1 * rot[u, 0, c, 1]
+        tb = b0 * rot[u, 0, c, 0] + b1 * rot[u, 0, c, 1] + b2 * rot[u, 0, c, 2]
+        val[i, 3 + c] = ta
+        val[i, c] = -ta
+        val[j, 3 + c] = tb
+        val[j, c] = -tb
+    for p in range(1, 4):                           # d/dp = a (dR_p)^T d
+        w0 = rot[u, p, 0, 0] * dx + rot[u, p, 1, 0] * dy + rot[u, p, 2, 0] * dz
+        w1 = rot[u, p, 0, 1] * dx + rot[u, p, 1, 1] * dy + rot[u, p, 2, 1] * dz
+        w2 = rot[u, p, 0, 2] * dx + rot[u, p, 1, 2] * dy + rot[u, p, 2, 2] * dz
+        val[i, 5 + p] = a0 * w0 + a1 * w1
+        val[j, 5 + p] = b0 * w0 + b1 * w1 + b2 * w2
 
 
 @njit(cache=True)
@@ -153,16 +180,17 @@ def _rotations(frames, x, rot):  # pragma: no cover - jit
 
 
 @njit(cache=True)
-def model_rows(code, cols, hz, comp, setup, frames, x, out_f, out_val, pair=None):  # pragma: no cover - jit
+def model_rows(code, cols, hz, comp, setup, frames, x, out_f, out_val, pair=None,
+               ref=None):  # pragma: no cover - jit
     """Model and Jacobian values of every row at one ``x`` (for the tests); with ``pair`` (the
-    program's), azimuth and elevation rows together as in the solver."""
+    program's, with its ``ref``), azimuth and elevation rows together as in the solver."""
     rot = np.empty((max(len(frames), 1), 4, 3, 3))
     f2 = np.empty(2)
     _rotations(frames, x, rot)
     for i in range(len(code)):
         if pair is not None and pair[i] != -1:
             if pair[i] >= 0:
-                _tracker_pair(i, pair[i], cols, hz[i], x, out_val, rot, max(setup[i], 0), f2)
+                _tracker_pair(i, pair[i], cols, hz[i], x, out_val, rot, max(setup[i], 0), ref, f2)
                 out_f[i] = f2[0]
                 out_f[pair[i]] = f2[1]
             continue
@@ -178,11 +206,13 @@ def _residual(e, angular):  # pragma: no cover - jit
 
 
 @njit(cache=True, inline="always")
-def _trial_gradient(obs, t, xt, code, cols, pair, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, wdiag, p_ptr,
-                    p_idx, p_val, val, r, rot, f2, g):  # pragma: no cover - jit
+def _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames, angular, wdiag,
+                    p_ptr, p_idx, p_val, val, r, pr, rot, f2, g):  # pragma: no cover - jit
     """``g = J(x_t)^T P r`` with ``r = obs[t] - f(x_t)`` (angles wrapped); returns ``r^T P r``. A row
     with a diagonal weight (``wdiag[i] > 0``) takes ``(P r)_i = wdiag[i] r_i``, others their CSR row
-    of ``P``; tracker rows paired by ``pair`` (:func:`_tracker_pair`)."""
+    of ``P``; tracker rows paired by ``pair`` (:func:`_tracker_pair`). ``g`` is gathered column by
+    column (CSC of the Jacobian slots: ``c_ptr``, each slot's row ``c_row`` and place ``c_j``): one
+    running sum per column, no scattered stores."""
     _rotations(frames, xt, rot)
     for i in range(len(code)):
         k = pair[i]
@@ -190,11 +220,10 @@ def _trial_gradient(obs, t, xt, code, cols, pair, s_ptr, s_j, s_col, hz, comp, s
             r[i] = _residual(obs[t, i] - _row(code[i], i, cols, hz[i], comp[i], xt, val, rot, max(setup[i], 0)),
                              angular[i])
         elif k >= 0:
-            _tracker_pair(i, k, cols, hz[i], xt, val, rot, max(setup[i], 0), f2)
+            _tracker_pair(i, k, cols, hz[i], xt, val, rot, max(setup[i], 0), ref, f2)
             r[i] = _residual(obs[t, i] - f2[0], angular[i])
             r[k] = _residual(obs[t, k] - f2[1], angular[k])
     v = 0.0
-    g[:] = 0.0
     for i in range(len(code)):
         w = wdiag[i]
         if w > 0.0:
@@ -203,9 +232,13 @@ def _trial_gradient(obs, t, xt, code, cols, pair, s_ptr, s_j, s_col, hz, comp, s
             s = 0.0
             for k in range(p_ptr[i], p_ptr[i + 1]):
                 s += p_val[k] * r[p_idx[k]]
+        pr[i] = s
         v += s * r[i]
-        for k in range(s_ptr[i], s_ptr[i + 1]):
-            g[s_col[k]] += val[i, s_j[k]] * s
+    for a in range(len(g)):
+        s = 0.0
+        for k in range(c_ptr[a], c_ptr[a + 1]):
+            s += val[c_row[k], c_j[k]] * pr[c_row[k]]
+        g[a] = s
     return v
 
 
@@ -215,8 +248,8 @@ UNIT = 32
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def _chord(obs, x, code, cols, pair, s_ptr, s_j, s_col, hz, comp, setup, frames, angular, wdiag, p_ptr, p_idx, p_val,
-           free, q, computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
+def _chord(obs, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames, angular, wdiag, p_ptr, p_idx,
+           p_val, free, q, computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
     """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place, from ``x̂``), the rule of
     :func:`.propagate.solve`: the first ``K (l - f(x̂))`` (``kt`` = K^T (R, n_free), ``computed`` =
     f(x̂)); converged when the largest step, or its bound on the error left ``step c / (1 - c)``
@@ -227,6 +260,7 @@ def _chord(obs, x, code, cols, pair, s_ptr, s_j, s_col, hz, comp, setup, frames,
     for unit in prange((t_n + UNIT - 1) // UNIT):
         val = np.zeros((r_n, 9))
         r = np.empty(r_n)
+        pr = np.empty(r_n)
         g = np.empty(nf)
         dx = np.empty(nf)
         f2 = np.empty(2)
@@ -246,8 +280,8 @@ def _chord(obs, x, code, cols, pair, s_ptr, s_j, s_col, hz, comp, setup, frames,
                     prev = s if s == s else np.inf
             iters[t] = 1
             for it in range(1, max_iter):
-                v = _trial_gradient(obs, t, xt, code, cols, pair, s_ptr, s_j, s_col, hz, comp, setup, frames,
-                                    angular, wdiag, p_ptr, p_idx, p_val, val, r, rot, f2, g)
+                v = _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames,
+                                    angular, wdiag, p_ptr, p_idx, p_val, val, r, pr, rot, f2, g)
                 dx[:] = 0.0
                 for b in range(nf):           # dx = Q g, by rows of the symmetric Q (independent sums: vectorised)
                     gb = g[b]

@@ -144,6 +144,7 @@ def freeze(system: System, result: GeneralResult) -> Frozen:
     fr = Frozen(system, x, computed, np.ascontiguousarray(result.cofactor, float), np.flatnonzero(lay.free), angular,
                 tuple(weight), scatter, np.concatenate(repeat), result.determinability, int(result.dof),
                 _program(system, x, weight))
+    fr.program["ref"] = np.column_stack([np.cos(computed), np.sin(computed), computed])
     _, jac = system.evaluate(x)
     gain = fr.q @ fr.weighted(np.ascontiguousarray(jac.T))
     fr.program["kt"] = np.ascontiguousarray(gain.T)
@@ -180,9 +181,11 @@ def _program(system: System, x: np.ndarray, weight) -> dict:
     one = np.flatnonzero(n_in_row == 1)
     one = one[p.indices[p.indptr[one]] == one]
     wdiag[one] = p.data[p.indptr[one]]
+    row, j = np.nonzero(have)                   # the Jacobian slots on free columns, column by column
+    order = np.argsort(rcols[have], kind="stable")
     return {"code": code, "cols": cols, "pair": _tracker_pairs(code, cols, hz, comp), "wdiag": wdiag,
-            "s_ptr": np.concatenate([[0], np.cumsum(have.sum(1))]).astype(np.int64),
-            "s_j": np.nonzero(have)[1].astype(np.int64), "s_col": rcols[have].astype(np.int64), "hz": hz, "comp": comp,
+            "c_ptr": np.searchsorted(rcols[have][order], np.arange(system.n_free + 1)).astype(np.int64),
+            "c_row": row[order].astype(np.int64), "c_j": j[order].astype(np.int64), "hz": hz, "comp": comp,
             "setup": setup, "frames": np.array(list(frames), np.int64).reshape(-1, 3),
             "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
 
@@ -239,7 +242,7 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
         from multilat.network.general._frozen_numba import chord
 
         p = frozen.program
-        chord(obs, x, p["code"], p["cols"], p["pair"], p["s_ptr"], p["s_j"], p["s_col"], p["hz"], p["comp"],
+        chord(obs, x, p["code"], p["cols"], p["pair"], p["ref"], p["c_ptr"], p["c_row"], p["c_j"], p["hz"], p["comp"],
               p["setup"], p["frames"], frozen.angular, p["wdiag"], p["p_ptr"], p["p_idx"], p["p_val"],
               frozen.free.astype(np.int64), frozen.q,
               frozen.computed, p["kt"], float(tol), int(max_iter), CONTRACTION, done, iters, far, vtpv)
