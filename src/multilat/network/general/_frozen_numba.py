@@ -207,12 +207,12 @@ def _residual(e, angular):  # pragma: no cover - jit
 
 @njit(cache=True, inline="always")
 def _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames, angular, wdiag,
-                    p_ptr, p_idx, p_val, val, r, pr, rot, f2, g):  # pragma: no cover - jit
+                    p_ptr, p_idx, p_val, val, valf, r, pr, rot, f2, g):  # pragma: no cover - jit
     """``g = J(x_t)^T P r`` with ``r = obs[t] - f(x_t)`` (angles wrapped); returns ``r^T P r``. A row
     with a diagonal weight (``wdiag[i] > 0``) takes ``(P r)_i = wdiag[i] r_i``, others their CSR row
     of ``P``; tracker rows paired by ``pair`` (:func:`_tracker_pair`). ``g`` is gathered column by
-    column (CSC of the Jacobian slots: ``c_ptr``, each slot's row ``c_row`` and place ``c_j``): one
-    running sum per column, no scattered stores."""
+    column (CSC of the Jacobian slots: ``c_ptr``, each slot's row ``c_row`` and flat place ``c_j`` in
+    ``valf``, ``val`` flattened): one running sum per column, no scattered stores."""
     _rotations(frames, xt, rot)
     for i in range(len(code)):
         k = pair[i]
@@ -237,7 +237,7 @@ def _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, co
     for a in range(len(g)):
         s = 0.0
         for k in range(c_ptr[a], c_ptr[a + 1]):
-            s += val[c_row[k], c_j[k]] * pr[c_row[k]]
+            s += valf[c_j[k]] * pr[c_row[k]]
         g[a] = s
     return v
 
@@ -259,6 +259,7 @@ def _chord(obs, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, fr
     nf = len(free)
     for unit in prange((t_n + UNIT - 1) // UNIT):
         val = np.zeros((r_n, 9))
+        valf = val.reshape(r_n * 9)
         r = np.empty(r_n)
         pr = np.empty(r_n)
         g = np.empty(nf)
@@ -281,7 +282,7 @@ def _chord(obs, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, fr
             iters[t] = 1
             for it in range(1, max_iter):
                 v = _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames,
-                                    angular, wdiag, p_ptr, p_idx, p_val, val, r, pr, rot, f2, g)
+                                    angular, wdiag, p_ptr, p_idx, p_val, val, valf, r, pr, rot, f2, g)
                 dx[:] = 0.0
                 for b in range(nf):           # dx = Q g, by rows of the symmetric Q (independent sums: vectorised)
                     gb = g[b]

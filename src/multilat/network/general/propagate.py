@@ -185,7 +185,7 @@ def _program(system: System, x: np.ndarray, weight) -> dict:
     order = np.argsort(rcols[have], kind="stable")
     return {"code": code, "cols": cols, "pair": _tracker_pairs(code, cols, hz, comp), "wdiag": wdiag,
             "c_ptr": np.searchsorted(rcols[have][order], np.arange(system.n_free + 1)).astype(np.int64),
-            "c_row": row[order].astype(np.int64), "c_j": j[order].astype(np.int64), "hz": hz, "comp": comp,
+            "c_row": row[order].astype(np.int64), "c_j": (9 * row + j)[order].astype(np.int64), "hz": hz, "comp": comp,
             "setup": setup, "frames": np.array(list(frames), np.int64).reshape(-1, 3),
             "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
 
