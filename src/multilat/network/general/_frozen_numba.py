@@ -3,11 +3,18 @@ path (the kinds' models and Jacobians, ``P r``, ``dx = Q J^T P r``), one trial a
 parallel (``prange``). The tests compare it with the numpy path and the kinds.
 
 Rows are a small program: a kind code per row, its full-layout columns (at most 9: the kind's
-Jacobian columns, in the kind's order), its Jacobian slots that are free parameters (CSR: ``s_ptr``,
-the slot ``s_j`` and free column ``s_col`` of each), per-row numbers (the height difference along z,
-the tracker component, the set-up of a tracker row: its frame is computed once per set-up and
-trial). The columns are static, so only the values change per trial. ``P`` is a CSR matrix (the
-blocks' ``C^-1``). Codes: :data:`CODES`.
+Jacobian columns, in the kind's order), per-row numbers (the height difference along z, the tracker
+component, the set-up of a tracker row: its frame is computed once per set-up and trial; ``pair``:
+the elevation row computed with an azimuth row, :func:`_tracker_pair`; ``ref``: cos, sin and value
+of each row at x̂), and the Jacobian slots on free parameters column by column (CSC: ``c_ptr``, the
+row ``c_row`` and flat place ``c_j`` of each), so ``J^T P r`` is one running sum per free column.
+The columns are static, so only the values change per trial. ``P`` is the diagonal ``wdiag`` for
+rows of uncorrelated blocks, a CSR matrix (the blocks' ``C^-1``) for the others. Codes: :data:`CODES`.
+
+Speed (``benchmarks/bench_general_propagate.py``): arrays are indexed element by element, never
+through a view per row (a view's reference counting cost more than most rows' arithmetic), and the
+work arrays are allocated once per :data:`UNIT` trials. No ``fastmath``: a trial's bits do not
+depend on how the trials are split.
 
 IEEE division (``multilat._numba.njit``): a zero divisor gives inf or nan, never an exception; the
 trial then does not converge and goes to full Gauss-Newton in numpy.
