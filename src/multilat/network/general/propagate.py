@@ -331,8 +331,12 @@ def draw(frozen: Frozen, n: int, rng: np.random.Generator) -> np.ndarray:
     e = rng.standard_normal((n, frozen.n_rows))
     s = frozen.system
     for L, b, sl in zip(s.chol, s.blocks, s.rows):
-        e[:, sl] = e[:, sl] * b.sigma if b.cov is None else e[:, sl] @ L.T
-    return frozen.computed + e
+        if b.cov is None:
+            e[:, sl] *= b.sigma
+        else:
+            e[:, sl] = e[:, sl] @ L.T
+    e += frozen.computed          # in place: a fresh (n, R) array costs its page faults (~3 ms per 1000 x 130)
+    return e
 
 
 @dataclass(frozen=True, eq=False)
