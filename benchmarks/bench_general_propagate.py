@@ -14,6 +14,10 @@ Rows (trials/s; ``ratio`` = general trials/s / distance-only trials/s; the goal 
 * ``general_solve_distance_only_network``: the general solver on the distance-only small volume itself
   (the same 56 distances, one head per station, free network), against the same baseline: the price
   of the general kernel alone, without the 74 extra observation rows.
+* ``general_solve_vs_distance_only_same_rows``: the same general solve against the compiled
+  distance-only solver on a network with as many observation rows: the small volume's 4 stations
+  and 33 targets (its 14 and 19 more drawn in the same volume, seed 7): 132 distances, 115 unknowns
+  ("a network of the same size" read as the same number of rows; the first row reads it as the same points).
 * ``general_propagate_vs_distance_only``: the whole in-process ``propagate`` of each (drawing, solving,
   summaries; gaussian noise; default map: threads), same trials.
 
@@ -51,6 +55,17 @@ def _row(name, t_new, t_old, trials, baseline, **extra):
                       **extra}}
 
 
+def _same_rows(cfg):
+    """The small volume with 19 more targets drawn uniformly in its targets' bounding box (seed 7):
+    4 x 33 = 132 distances, about the general network's 130 rows."""
+    import dataclasses
+
+    lo, hi = cfg.target_xyz_m.min(0), cfg.target_xyz_m.max(0)
+    extra = lo + np.random.default_rng(7).random((19, 3)) * (hi - lo)
+    return dataclasses.replace(cfg, target_ids=cfg.target_ids + tuple(f"x{k}" for k in range(19)),
+                               target_xyz_m=np.vstack([cfg.target_xyz_m, extra]))
+
+
 def run(quick: bool = False) -> list[dict]:
     from general_tracker_network import tracker_network
 
@@ -82,6 +97,17 @@ def run(quick: bool = False) -> list[dict]:
     rows.append(_row("general_solve_vs_distance_only", t_new, t_old, trials,
                      "compiled distance-only BatchedNetwork.solve, small volume (same points)", load_avg_1min=load,
                      goal_ratio=0.8, runs_s=ta, baseline_runs_s=tb, **size))
+
+    pb_rows = problem_from_config(_same_rows(small_volume()), sigma_m=4.7e-6)
+    dist_rows = pb_rows.distance_m + np.random.default_rng(4).standard_normal((trials, pb_rows.distance_m.size)) * 4.7e-6
+    pb_rows.network.solve(dist_rows[:100])
+    load = load_avg()
+    t_new, t_old, ta, tb = _interleaved(lambda: solve(fr, obs), lambda: pb_rows.network.solve(dist_rows), reps)
+    rows.append(_row("general_solve_vs_distance_only_same_rows", t_new, t_old, trials,
+                     "compiled distance-only BatchedNetwork.solve, 4 stations x 33 targets (same number of rows)",
+                     load_avg_1min=load, goal_ratio=0.8, runs_s=ta, baseline_runs_s=tb, rows_general=fr.n_rows,
+                     rows_distance_only=int(pb_rows.network.n_obs), unknowns_distance_only=int(pb_rows.network.n_params),
+                     distance_only_iterations_mean=float(pb_rows.network.solve(dist_rows[:2000]).iterations.mean())))
 
     plain = adjust_network(tracker_network(extras=False)[0], options=AdjustOptions(datum="free"))
     fp = freeze(plain.system, plain.result)

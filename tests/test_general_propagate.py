@@ -88,21 +88,25 @@ def test_kinds_over_trial_axis_equal_one_at_a_time(name):
 
 
 @pytest.mark.parametrize("name", ["two_trackers", "station_control", "direction_sets", "angles_hdist",
-                                  "heights", "height_differences", "vectors", "trilateration_free"])
-def test_compiled_rows_equal_the_kinds(name):
+                                  "heights", "height_differences", "vectors", "trilateration_free", "tracker"])
+def test_compiled_rows_equal_the_kinds(name, tracker):
     from multilat.network.general._frozen_numba import model_rows
 
-    adj = _gama(name)
+    adj = tracker if name == "tracker" else _gama(name)
     fr = freeze(adj.system, adj.result)
     p = fr.program
     x = fr.x_hat + np.random.default_rng(2).standard_normal(fr.x_hat.size) * 1e-3
     f, v = np.empty(fr.n_rows), np.zeros((fr.n_rows, 9))
     model_rows(p["code"], p["cols"], p["hz"], p["comp"], p["setup"], p["frames"], x, f, v)
+    fp, vp = np.empty(fr.n_rows), np.zeros((fr.n_rows, 9))      # azimuth and elevation rows together
+    model_rows(p["code"], p["cols"], p["hz"], p["comp"], p["setup"], p["frames"], x, fp, vp, p["pair"], p["ref"])
+    assert (p["pair"] >= 0).sum() == (p["pair"] == -2).sum() == (28 if name == "tracker" else 0)
     s = adj.system
     for b, cols, sl in zip(s.blocks, s.cols, s.rows):
         f1, v1, _ = KINDS[b.kind].evaluate(b, s.layout, cols, x)
-        np.testing.assert_allclose(f[sl], f1, rtol=1e-12, atol=1e-14)
-        np.testing.assert_allclose(v[sl, :v1.shape[1]], v1, rtol=1e-11, atol=1e-13 * np.abs(v1).max())
+        for ff, vv in ((f, v), (fp, vp)):
+            np.testing.assert_allclose(ff[sl], f1, rtol=1e-12, atol=1e-14)
+            np.testing.assert_allclose(vv[sl, :v1.shape[1]], v1, rtol=1e-11, atol=1e-13 * np.abs(v1).max())
     obs = draw(fr, 300, np.random.default_rng(3))
     a, b = solve(fr, obs, engine="numpy"), solve(fr, obs, engine="numba")
     assert a.converged.all() and b.converged.all()

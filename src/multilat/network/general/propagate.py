@@ -144,6 +144,7 @@ def freeze(system: System, result: GeneralResult) -> Frozen:
     fr = Frozen(system, x, computed, np.ascontiguousarray(result.cofactor, float), np.flatnonzero(lay.free), angular,
                 tuple(weight), scatter, np.concatenate(repeat), result.determinability, int(result.dof),
                 _program(system, x, weight))
+    fr.program["ref"] = np.column_stack([np.cos(computed), np.sin(computed), computed])
     _, jac = system.evaluate(x)
     gain = fr.q @ fr.weighted(np.ascontiguousarray(jac.T))
     fr.program["kt"] = np.ascontiguousarray(gain.T)
@@ -175,10 +176,35 @@ def _program(system: System, x: np.ndarray, weight) -> dict:
                                  for w in weight], format="csr")
     rcols = np.where(cols >= 0, red[cols], -1)
     have = rcols >= 0
-    return {"code": code, "cols": cols, "s_ptr": np.concatenate([[0], np.cumsum(have.sum(1))]).astype(np.int64),
-            "s_j": np.nonzero(have)[1].astype(np.int64), "s_col": rcols[have].astype(np.int64), "hz": hz, "comp": comp,
+    n_in_row = np.diff(p.indptr)
+    wdiag = np.zeros(R)
+    one = np.flatnonzero(n_in_row == 1)
+    one = one[p.indices[p.indptr[one]] == one]
+    wdiag[one] = p.data[p.indptr[one]]
+    row, j = np.nonzero(have)                   # the Jacobian slots on free columns, column by column
+    order = np.argsort(rcols[have], kind="stable")
+    return {"code": code, "cols": cols, "pair": _tracker_pairs(code, cols, hz, comp), "wdiag": wdiag,
+            "c_ptr": np.searchsorted(rcols[have][order], np.arange(system.n_free + 1)).astype(np.int64),
+            "c_row": row[order].astype(np.int64), "c_j": (9 * row + j)[order].astype(np.int64), "hz": hz, "comp": comp,
             "setup": setup, "frames": np.array(list(frames), np.int64).reshape(-1, 3),
             "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
+
+
+def _tracker_pairs(code, cols, hz, comp) -> np.ndarray:
+    """Per row: the row of its elevation for a tracker azimuth with one (same station, target, set-up
+    and heights: the kernel computes the two together), -2 for that elevation, -1 otherwise."""
+    from multilat.network.general._frozen_numba import CODES
+
+    pair = np.full(len(code), -1, np.int64)
+    az = {}
+    for i in np.flatnonzero((code == CODES["tracker_angles"]) & (comp == 0)):
+        az.setdefault((tuple(cols[i]), hz[i]), []).append(i)
+    for j in np.flatnonzero((code == CODES["tracker_angles"]) & (comp == 1)):
+        waiting = az.get((tuple(cols[j]), hz[j]))
+        if waiting:
+            i = waiting.pop(0)
+            pair[i], pair[j] = j, -2
+    return pair
 
 
 # ---------------------------------------------------------------------------------------------- solving
@@ -216,8 +242,9 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
         from multilat.network.general._frozen_numba import chord
 
         p = frozen.program
-        chord(obs, x, p["code"], p["cols"], p["s_ptr"], p["s_j"], p["s_col"], p["hz"], p["comp"], p["setup"],
-              p["frames"], frozen.angular, p["p_ptr"], p["p_idx"], p["p_val"], frozen.free.astype(np.int64), frozen.q,
+        chord(obs, x, p["code"], p["cols"], p["pair"], p["ref"], p["c_ptr"], p["c_row"], p["c_j"], p["hz"], p["comp"],
+              p["setup"], p["frames"], frozen.angular, p["wdiag"], p["p_ptr"], p["p_idx"], p["p_val"],
+              frozen.free.astype(np.int64), frozen.q,
               frozen.computed, p["kt"], float(tol), int(max_iter), CONTRACTION, done, iters, far, vtpv)
         return _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback)
     # the first step is linear in the noise (at x̂ the model and Jacobian are the adjustment's): one
@@ -304,8 +331,12 @@ def draw(frozen: Frozen, n: int, rng: np.random.Generator) -> np.ndarray:
     e = rng.standard_normal((n, frozen.n_rows))
     s = frozen.system
     for L, b, sl in zip(s.chol, s.blocks, s.rows):
-        e[:, sl] = e[:, sl] * b.sigma if b.cov is None else e[:, sl] @ L.T
-    return frozen.computed + e
+        if b.cov is None:
+            e[:, sl] *= b.sigma
+        else:
+            e[:, sl] = e[:, sl] @ L.T
+    e += frozen.computed          # in place: a fresh (n, R) array costs its page faults (~3 ms per 1000 x 130)
+    return e
 
 
 @dataclass(frozen=True, eq=False)
