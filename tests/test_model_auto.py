@@ -92,3 +92,11 @@ def test_null_space_economy_svd_equals_the_full_one(n_rows):
     ref = vt[np.r_[s, np.zeros(24 - len(s))] < 1e-9 * s.max()].T
     proj = lambda b: b @ np.linalg.pinv(b)          # noqa: E731
     np.testing.assert_allclose(proj(g), proj(ref), atol=1e-9)
+
+
+def test_network_directory_honours_no_snooping(_adjust):
+    """``multilat adjust DIR --no-snooping`` (multilat's files): the option was dropped on the way to
+    the adjustment (snooping ran, the JSON said ``snooping: true``)."""
+    r = _adjust("examples/general/station_control_files", "--json", "--no-snooping")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["snooping"] is False
