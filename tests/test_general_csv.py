@@ -294,7 +294,7 @@ def test_refused_tracker_networks_against_independent_solution(name, tmp_path):
         if o.get("to", "").startswith("Q"):
             assert abs(o["redundancy"]) < 1e-8
     # the old path refuses (two trackers, one tracker) or leaves the polar points out, naming --model general
-    old = _cli(*args, "--json", "--no-snooping")
+    old = _cli(*args, "--json", "--no-snooping", "--model", "multilateration")
     if name == "tracker_on_weighted_control":
         assert {doc["points"][k]["status"] for k in case.control} == {"weighted"}
     if name == "heads_tracker_polar":
@@ -305,6 +305,14 @@ def test_refused_tracker_networks_against_independent_solution(name, tmp_path):
         assert old.returncode == 2
         assert "needs at least 3 stations" in old.stderr and "--model general adjusts" in old.stderr
         assert len(old.stderr.strip().splitlines()) == 1
+        # the default, --model auto: the general layer adjusts what the counting rules refuse, and says so
+        auto = _cli(*args, "--json")
+        assert auto.returncode == 0, auto.stderr
+        said = [ln for ln in auto.stderr.splitlines() if "adjusted by the general model" in ln]
+        assert len(said) == 1 and "needs at least 3 stations" in said[0]
+        adoc = json.loads(auto.stdout)
+        assert adoc["schema"].startswith("multilat.adjust-general/") and adoc["notes"][0].startswith("--model auto")
+        assert adoc["dof"] == doc["dof"] and adoc["sigma0"] == pytest.approx(doc["sigma0"], rel=1e-12)
 
 
 # ----------------------------------------------------------------------------- (c) options and schema

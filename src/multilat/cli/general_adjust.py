@@ -41,8 +41,10 @@ APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offse
                          "scale_bar", "references", "levelled", "seed")
 #: the test procedures' names in the summary (statistics.test_levels)
 _METHOD_NAMES = {"b-method": "B-method", "sidak": "Šidák", "fixed": "fixed α"}
-#: ``--model``: the default distance-only self-calibrating path, or the general network layer
-MODELS = ("multilateration", "general")
+#: ``--model``: ``auto`` (the default: the distance-only self-calibrating path, and the general layer
+#: for a network its counting rules refuse, said in a warning), the distance-only path alone, or the
+#: general network layer
+MODELS = ("auto", "multilateration", "general")
 _OPTION = {"as_json": "--json", "fix_offsets_um": "--fix-offsets-um", "scale_bar": "--scale-bars",
            "snooping": "--snooping/--no-snooping"}
 #: why an option of the distance-only path is refused here (the default reason for the others)
@@ -83,15 +85,37 @@ def wants_general(observations, model: str) -> bool:
     if model not in MODELS:
         raise MultilatError(f"--model must be {' or '.join(MODELS)}, got {model!r}")
     if is_general_input(observations):
-        if model != "general" and "model" in _given_options({"model": model}):
+        if model == "multilateration" and "model" in _given_options({"model": model}):
             raise MultilatError(f"--model {model} does not read a gama-local input ({observations}): "
                                 "it is adjusted by --model general")
         return True
     return model == "general"
 
 
+class CountRuleRefusal(MultilatError):
+    """The distance path refused the network by a counting rule, under ``--model auto``: the caller
+    adjusts it by the general layer instead (:func:`fall_back`)."""
+
+
+def fall_back(params: dict, refusal: CountRuleRefusal):
+    """``--model auto``: the network the distance path refuses by its counting rules is adjusted by the
+    general layer, said in one warning line and in the JSON's ``notes``; refused (with the hint) when
+    an option given has no meaning there."""
+    params = {k: v for k, v in params.items() if k != "general_adjust"}
+    other = [n for n in _given_options(params) if n not in APPLIES_CSV]
+    if other:
+        raise MultilatError(f"{refusal}{_HINT} ({', '.join(_option_name(n) for n in other)} "
+                            "not available there)") from None
+    params["model"] = "general"
+    params["fallback"] = str(refusal)
+    warnings.warn(f"{params['observations']}: the self-calibrating model refuses this network ({refusal}); "
+                  "adjusted by the general model (--model general, docs/general-network.md); "
+                  "--model multilateration refuses it", stacklevel=2)
+    return run(**params)
+
+
 @contextlib.contextmanager
-def refusal_hint(obs=None):
+def refusal_hint(obs=None, *, auto: bool = False):
     """Around the distance path's adjustment: a refusal (or, on a network with angle observations, a
     left-out point) by one of its counting rules gets the hint that ``--model general``
     adjusts the network by what the observations determine. Nothing else changes: the model is not
@@ -103,6 +127,8 @@ def refusal_hint(obs=None):
     except MultilatError as e:
         msg = str(e)
         if any(r.search(msg) for r in _COUNT_RULES) and "--model general" not in msg:
+            if auto:
+                raise CountRuleRefusal(msg) from e
             raise MultilatError(msg + _HINT) from e
         raise
     finally:
@@ -153,6 +179,7 @@ def _option_name(name: str) -> str:
 def run(**params) -> None:
     """The general path of ``multilat adjust`` (``params``: the adjust command's parameters)."""
     params.pop("general_adjust", None)                 # the hook's own import, passed with locals()
+    fallback = params.pop("fallback", None)            # --model auto: the distance path's refusal
     path, out = Path(params["observations"]), params["out"]
     xml = is_general_input(path)
     applies, why_not = (APPLIES, WHY_NOT) if xml else (APPLIES_CSV, WHY_NOT_CSV)
@@ -189,6 +216,9 @@ def run(**params) -> None:
                 doc, adj, stats = compute(path, **tests)
             else:
                 doc, adj, stats = compute_tables(params, **tests)
+    if fallback is not None:
+        doc["notes"] = [f"--model auto: the self-calibrating model refused the network ({fallback}); adjusted "
+                        "by the general model", *doc["notes"]]
     for e in adj.excluded:
         warnings.warn(f"point {e['id']!r} left out: {e['reason']} ({e['n_obs']} observation row(s) removed)",
                       stacklevel=2)
@@ -215,7 +245,8 @@ def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_glo
                "correlated blocks' covariances.csv"}
         return _finish(read_network_dir(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
                        strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family,
-                       fmt="multilat-files", sigma_source=src)
+                       fmt="multilat-files", sigma_source=src, snooping=snooping,
+                       variance_components=variance_components)
     return _finish(read_gama_input(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
                    strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family,
                    snooping=snooping, variance_components=variance_components)

@@ -209,9 +209,11 @@ def adjust_command(
                                                            "always a group of their own), Förstner's iterated "
                                                            "estimator, and adjust with the re-weighted σ."),
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
-    model: str = typer.Option("multilateration", "--model",
-                              help="multilateration (self-calibrating, the default) or general (any point in any "
-                                   "role, by what the observations determine: docs/general-network.md)."),
+    model: str = typer.Option("auto", "--model",
+                              help="auto (the default): multilateration, and general for a network its counting "
+                                   "rules refuse (said in a warning); multilateration (self-calibrating, "
+                                   "distance-only rules, any size); general (any point in any role, by what the "
+                                   "observations determine: docs/general-network.md)."),
 ) -> None:
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
@@ -219,7 +221,7 @@ def adjust_command(
     from multilat.cli import general_adjust
     if general_adjust.wants_general(observations, model):  # --model general, or a gama-local XML input
         return general_adjust.run(**locals())
-    from multilat.network.adjust import adjust
+    given = dict(locals())                                 # for --model auto's fall-back
     from multilat.network.files import read_points, read_reference_lengths, write_result_tables
     from multilat.network.result import result_to_json
 
@@ -254,36 +256,14 @@ def adjust_command(
     if opts.scale_bars and refs is None:
         raise MultilatError("--scale-bars needs --references FILE (the bars' lengths with u_m)")
     opts.scale_heads(obs)                       # --fixed-scale names a head of the file
-    vc = None
     if opts.variance_components is not None and corrected is not None:
         raise MultilatError("--variance-components applies to an observation file: raw readings get "
                             "their σ from the distance model and the sensors")
     data = dict(points=pts, references=refs, sigma_source=src, rng=seed)
-    from rich.markup import escape
-
-    from multilat.errors import printable
-    from multilat.network.bounds import reporting
-    from multilat.network.unit_slip import UnitSlipError
-
-    with progress() as p, general_adjust.refusal_hint(obs):     # count-rule refusals name --model general
-        what = f"adjusting {obs.n_obs:,} distances"
-        task = p.add_task(what, total=None)
-
-        def step(text):      # the search's current start (ids from the files: shown literally)
-            p.update(task, description=f"{what}: {escape(printable(text, keep_newlines=False))}")
-
-        try:
-            with reporting(step):
-                if opts.variance_components is None:
-                    res = adjust(obs, opts, **data)
-                else:
-                    from multilat.network.variance_components import estimate_variance_components
-
-                    vc = estimate_variance_components(obs, grouping=opts.variance_components, options=opts,
-                                                      snooping=opts.snooping, **data)
-                    res = vc.result
-        except UnitSlipError as exc:      # name the file at fault
-            raise MultilatError(f"{points if exc.source == 'points' else observations}: {exc}") from None
+    try:
+        res, vc = _adjust_with_progress(obs, opts, data, auto=model == "auto", files=(observations, points))
+    except general_adjust.CountRuleRefusal as refusal:     # --model auto: the general layer adjusts it
+        return general_adjust.fall_back(given, refusal)
     from multilat.vocabulary import stamp
 
     doc = stamp(result_to_json(res, refs), "adjust")
@@ -322,6 +302,40 @@ def adjust_command(
         console.print(f"with the sensors' correlations (G C Gᵀ): u(offset) µm: {offs}; largest target "
                       f"std {wc['target_std_max_m'] * 1e6:.1f} µm (diagonal weights only: "
                       f"{wc['target_std_diagonal_max_m'] * 1e6:.1f} µm)", markup=False)
+
+
+def _adjust_with_progress(obs, opts, data, *, auto: bool, files):
+    """The distance path's adjustment (and variance components) under a progress line: (result, vc).
+    A counting-rule refusal names ``--model general`` (or, ``auto``, raises ``CountRuleRefusal``)."""
+    from rich.markup import escape
+
+    from multilat.cli import general_adjust
+    from multilat.errors import printable
+    from multilat.network.adjust import adjust
+    from multilat.network.bounds import reporting
+    from multilat.network.unit_slip import UnitSlipError
+
+    vc = None
+    with progress() as p, general_adjust.refusal_hint(obs, auto=auto):  # count-rule refusals: --model general
+        what = f"adjusting {obs.n_obs:,} distances"
+        task = p.add_task(what, total=None)
+
+        def step(text):      # the search's current start (ids from the files: shown literally)
+            p.update(task, description=f"{what}: {escape(printable(text, keep_newlines=False))}")
+
+        try:
+            with reporting(step):
+                if opts.variance_components is None:
+                    res = adjust(obs, opts, **data)
+                else:
+                    from multilat.network.variance_components import estimate_variance_components
+
+                    vc = estimate_variance_components(obs, grouping=opts.variance_components, options=opts,
+                                                      snooping=opts.snooping, **data)
+                    res = vc.result
+        except UnitSlipError as exc:      # name the file at fault
+            raise MultilatError(f"{files[1] if exc.source == 'points' else files[0]}: {exc}") from None
+    return res, vc
 
 
 def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma, alpha_family=0.01):

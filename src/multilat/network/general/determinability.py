@@ -45,7 +45,9 @@ def null_space(jw: np.ndarray, rtol: float = RTOL) -> tuple[np.ndarray, np.ndarr
     norms = np.linalg.norm(jw, axis=0)
     scale = np.where(norms > 0, 1.0 / np.where(norms > 0, norms, 1.0), 1.0)
     js = jw * scale
-    _, s, vt = scipy.linalg.svd(js, full_matrices=True, lapack_driver="gesvd")
+    # the full V only: U is (R, R) with full_matrices, R² memory (3.2 GB at 20 000 rows), and only
+    # the null space's rows of V are used; with R >= n the economy V is already (n, n)
+    _, s, vt = scipy.linalg.svd(js, full_matrices=js.shape[0] < js.shape[1], lapack_driver="gesvd")
     s_full = np.zeros(js.shape[1])
     s_full[:len(s)] = s
     smax = s_full.max() if s_full.size else 0.0
@@ -70,7 +72,7 @@ def analyse(jw: np.ndarray, datum_mask: np.ndarray, *, rtol: float = RTOL) -> De
         left = g
         b = None
     else:
-        u, sv, vt = np.linalg.svd(gs, full_matrices=True)
+        _, sv, vt = np.linalg.svd(gs, full_matrices=False)      # gs is (n, d), n >= d: vt is (d, d)
         sv_full = np.zeros(d)
         sv_full[:len(sv)] = sv
         ok = sv_full > 1e-6 * max(sv_full.max(), 1e-300)

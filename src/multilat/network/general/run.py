@@ -21,7 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.general.adjust import AdjustOptions, GeneralResult, System, UndeterminedError, adjust
+from multilat.network.general.adjust import (AdjustOptions, GeneralResult, System, UndeterminedError, adjust,
+                                             check_size)
 from multilat.network.general.approximate import approximate, reasons
 from multilat.network.general.observations import Network, without_points
 from multilat.network.general.points import FREE
@@ -57,6 +58,7 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
                    max_rounds: int = MAX_ROUNDS) -> NetworkAdjustment:
     """Approximate coordinates, adjustment, undetermined points left out and named (module docstring)."""
     given, net, excluded = network, network, []
+    check_size(System(network))                     # before the approximations: refused in one line
     for rnd in range(1, max_rounds + 1):
         missing = reasons(net)                      # {id: what would reach it}
         if missing and not strict:
