@@ -83,7 +83,7 @@ def wants_general(observations, model: str) -> bool:
     """Whether ``multilat adjust`` takes the general path: ``--model general``, or a gama-local input
     (which the distance path cannot read: ``--model multilateration`` on one is refused)."""
     if model not in MODELS:
-        raise MultilatError(f"--model must be {' or '.join(MODELS)}, got {model!r}")
+        raise MultilatError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     if is_general_input(observations):
         if model == "multilateration" and "model" in _given_options({"model": model}):
             raise MultilatError(f"--model {model} does not read a gama-local input ({observations}): "

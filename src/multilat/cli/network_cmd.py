@@ -261,7 +261,10 @@ def adjust_command(
                             "their σ from the distance model and the sensors")
     data = dict(points=pts, references=refs, sigma_source=src, rng=seed)
     try:
-        res, vc = _adjust_with_progress(obs, opts, data, auto=model == "auto", files=(observations, points))
+        # auto: the general layer can do better only with what the counting rules do not count: angles
+        # or control (a distance-only network it cannot place either keeps the old refusal)
+        auto = model == "auto" and (obs.has_angle_observations or pts is not None)
+        res, vc = _adjust_with_progress(obs, opts, data, auto=auto, files=(observations, points))
     except general_adjust.CountRuleRefusal as refusal:     # --model auto: the general layer adjusts it
         return general_adjust.fall_back(given, refusal)
     from multilat.vocabulary import stamp
