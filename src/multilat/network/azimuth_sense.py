@@ -1,0 +1,78 @@
+"""The sense of the azimuths in an observation file: ``ccw`` (multilat's, the default: from +x towards
++y, ``atan2(dy, dx)``) or ``cw`` (from +x towards -y, as many laser trackers report them).
+
+A clockwise file read as counter-clockwise is not detected by the data of a free network: the whole
+hall mirrored (y -> -y) fits the same distances and the negated azimuths exactly (same σ0, same dof).
+The sense is therefore declared (``--azimuth-sense`` or ``azimuth_sense`` in the instrument file) and
+converted once, where the file is read (:func:`to_ccw_rad`): inside, every azimuth is counter-clockwise.
+
+Reference: ``docs/conventions.md`` (angles).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+
+import numpy as np
+
+from multilat.errors import MultilatError
+
+__all__ = ["SENSES", "DEFAULT", "to_ccw_rad", "resolve", "apply"]
+
+SENSES = ("ccw", "cw")
+DEFAULT = "ccw"
+#: ``--azimuth-sense`` of ``adjust`` and ``propagate``
+HELP = ("ccw or cw: the sense of the file's azimuth_rad (ccw, the default: from +x towards +y; cw: from +x "
+        "towards -y, as many trackers report). Default: the --instrument file's azimuth_sense, else ccw. A cw "
+        "file read as ccw gives the same σ0 and a mirrored hall.")
+
+
+def to_ccw_rad(azimuth_rad, sense: str):
+    """Azimuths (rad) read in ``sense`` as multilat's counter-clockwise azimuths (rad): negated for
+    ``cw`` (an azimuth of -θ clockwise is θ counter-clockwise), unchanged for ``ccw``; NaN stays NaN."""
+    if sense not in SENSES:
+        raise MultilatError(f"azimuth sense must be one of {', '.join(SENSES)}, got {sense!r}")
+    if azimuth_rad is None:
+        return None
+    az = np.asarray(azimuth_rad, float)
+    return -az if sense == "cw" else az
+
+
+def resolve(option: str | None, instrument=None, *, option_name: str = "--azimuth-sense") -> tuple[str, str]:
+    """``(sense, where it came from)``: the option, else the instrument file's ``azimuth_sense``, else
+    the default ``ccw``. An option that contradicts the file is refused in one line naming both."""
+    if option is not None and option not in SENSES:
+        raise MultilatError(f"{option_name} must be one of {', '.join(SENSES)}, got {option!r}")
+    from_file = None
+    if instrument is not None:
+        from multilat import instrument as _instr
+
+        inst = _instr.load_instrument(instrument) if isinstance(instrument, (str, os.PathLike)) else instrument
+        from_file = getattr(inst, "azimuth_sense", None)
+        instrument = instrument if isinstance(instrument, (str, os.PathLike)) else getattr(inst, "name", "")
+    if option is not None and from_file is not None and option != from_file:
+        raise MultilatError(f"{option_name} {option} contradicts azimuth_sense = \"{from_file}\" of the "
+                            f"instrument {instrument} (drop one)")
+    if option is not None:
+        return option, option_name
+    if from_file is not None:
+        return from_file, f"instrument {instrument} (azimuth_sense)"
+    return DEFAULT, "default (counter-clockwise; not declared)"
+
+
+def apply(obs, sense: str):
+    """``obs`` with its azimuths converted from ``sense`` to counter-clockwise (the same ``obs`` for
+    ``ccw`` or without azimuths)."""
+    if sense == DEFAULT or obs.azimuth_rad is None:
+        to_ccw_rad(None, sense)                    # the sense checked all the same
+        return obs
+    return dataclasses.replace(obs, azimuth_rad=to_ccw_rad(obs.azimuth_rad, sense))
+
+
+def record(obs, sense: str, source: str) -> dict | None:
+    """The JSON record of the sense used (None when the file has no azimuths)."""
+    if obs.azimuth_rad is None or not np.isfinite(obs.azimuth_rad).any():
+        return None
+    return {"sense": sense, "source": source,
+            "convention": "counter-clockwise from +x towards +y inside (cw readings negated on reading)"}
