@@ -238,9 +238,9 @@ def propagate_cmd(
         doc["readings"] = problem.readings.to_json()
     doc["sigma_source"] = src
     if source not in BUILTIN and "azimuth_rad" in (_header(source) or ()):
-        from multilat.network.azimuth_sense import resolve
+        from multilat.network.azimuth_sense import as_json, resolve
 
-        doc["azimuth_sense"] = dict(zip(("sense", "source"), resolve(opts.azimuth_sense, instrument)))
+        doc["azimuth_sense"] = as_json(*resolve(opts.azimuth_sense, instrument))
     doc["noise_source"] = ({"kind": "distance model", "instrument": str(instrument)} if noise == "model"
                            else {"kind": "gaussian", "sigma": "the weights' σ (sigma_source)"})
     if out is not None:

@@ -18,7 +18,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["SENSES", "DEFAULT", "to_ccw_rad", "resolve", "apply"]
+__all__ = ["SENSES", "DEFAULT", "HELP", "to_ccw_rad", "resolve", "apply", "record", "as_json"]
 
 SENSES = ("ccw", "cw")
 DEFAULT = "ccw"
@@ -74,5 +74,10 @@ def record(obs, sense: str, source: str) -> dict | None:
     """The JSON record of the sense used (None when the file has no azimuths)."""
     if obs.azimuth_rad is None or not np.isfinite(obs.azimuth_rad).any():
         return None
+    return as_json(sense, source)
+
+
+def as_json(sense: str, source: str) -> dict:
+    """``{"sense", "source", "convention"}``: the sense used, where it came from, and what it means."""
     return {"sense": sense, "source": source,
             "convention": "counter-clockwise from +x towards +y inside (cw readings negated on reading)"}
