@@ -149,3 +149,24 @@ def test_propagate_takes_the_option(tmp_path, capsys):
     assert main(["propagate", str(cw), "--azimuth-sense", "cw", "--trials", "200", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["azimuth_sense"]["sense"] == "cw" and doc["azimuth_sense"]["source"] == "--azimuth-sense"
+
+
+def test_a_datum_that_sees_the_mirror_names_the_option(tmp_path, capsys):
+    """Control points fix the hall's handedness: read counter-clockwise, the clockwise file is refused
+    (control inconsistent, σ0 ~ 1e4); the refusal names --azimuth-sense cw because the azimuths
+    negated fit (σ0 ~ 1, global test passed; the rule: 10 times better and passed)."""
+    net, obs, _ = mixed_with_angles(seed=3)
+    _, cw = _files(tmp_path)
+    pts = tmp_path / "control.csv"
+    rows = zip(obs.target_ids[:4], net.target_xyz_m[:4].tolist())
+    pts.write_text("point,x_m,y_m,z_m\n" + "".join(f"{t},{x!r},{y!r},{z!r}\n" for t, (x, y, z) in rows))
+    capsys.readouterr()
+    args = ["adjust", str(cw), "--model", "multilateration", "--datum", "control", "--points", str(pts),
+            "--no-snooping"]
+    assert main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "control coordinates inconsistent" in err
+    assert "give --azimuth-sense cw" in err
+    assert main(args + ["--azimuth-sense", "cw", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["global_test"]["passed"] and doc["sigma0"] < 1.5

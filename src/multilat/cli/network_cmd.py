@@ -268,6 +268,14 @@ def adjust_command(
         res, vc = _adjust_with_progress(obs, opts, data, auto=model == "auto", files=(observations, points))
     except general_adjust.CountRuleRefusal as refusal:     # --model auto: the general layer adjusts it
         return general_adjust.fall_back(given, refusal)
+    except MultilatError as exc:                          # a mirrored hall (cw azimuths read ccw)? named
+        hint = _mirror_hint(obs, None, opts, data, instrument)
+        raise (MultilatError(f"{exc}; {hint}") if hint else exc) from None
+    if getattr(res.global_test, "passed", True) is False and (hint := _mirror_hint(obs, res.sigma0, opts, data,
+                                                                                   instrument)):
+        import warnings
+
+        warnings.warn(hint, UserWarning, stacklevel=1)
     from multilat.vocabulary import stamp
 
     doc = stamp(result_to_json(res, refs), "adjust")
@@ -313,6 +321,15 @@ def adjust_command(
         console.print(f"with the sensors' correlations (G C Gᵀ): u(offset) µm: {offs}; largest target "
                       f"std {wc['target_std_max_m'] * 1e6:.1f} µm (diagonal weights only: "
                       f"{wc['target_std_diagonal_max_m'] * 1e6:.1f} µm)", markup=False)
+
+
+def _mirror_hint(obs, sigma0, opts, data, instrument):
+    """:func:`multilat.network.azimuth_sense.mirror_hint` when the sense was not declared (else None)."""
+    from multilat.network import azimuth_sense as _az
+
+    if opts.azimuth_sense is not None or _az.resolve(None, instrument)[1] != _az.UNDECLARED:
+        return None
+    return _az.mirror_hint(obs, sigma0, opts, data)
 
 
 def _adjust_with_progress(obs, opts, data, *, auto: bool, files):

@@ -22,6 +22,8 @@ __all__ = ["SENSES", "DEFAULT", "HELP", "to_ccw_rad", "resolve", "apply", "recor
 
 SENSES = ("ccw", "cw")
 DEFAULT = "ccw"
+#: the source of the sense when nobody declared it
+UNDECLARED = "default (counter-clockwise; not declared)"
 #: ``--azimuth-sense`` of ``adjust`` and ``propagate``
 HELP = ("ccw or cw: the sense of the file's azimuth_rad (ccw, the default: from +x towards +y; cw: from +x "
         "towards -y, as many trackers report). Default: the --instrument file's azimuth_sense, else ccw. A cw "
@@ -58,7 +60,7 @@ def resolve(option: str | None, instrument=None, *, option_name: str = "--azimut
         return option, option_name
     if from_file is not None:
         return from_file, f"instrument {instrument} (azimuth_sense)"
-    return DEFAULT, "default (counter-clockwise; not declared)"
+    return DEFAULT, UNDECLARED
 
 
 def apply(obs, sense: str):
@@ -81,3 +83,30 @@ def as_json(sense: str, source: str) -> dict:
     """``{"sense", "source", "convention"}``: the sense used, where it came from, and what it means."""
     return {"sense": sense, "source": source,
             "convention": "counter-clockwise from +x towards +y inside (cw readings negated on reading)"}
+
+
+#: The rule of :func:`mirror_hint`: the azimuths negated must fit at least this many times better (σ0)
+#: and pass the global test, before the sense is named as the likely fault.
+MIRROR_SIGMA0_RATIO = 10.0
+
+
+def mirror_hint(obs, sigma0: float | None, options, data: dict) -> str | None:
+    """When the azimuths' sense was not declared and the adjustment failed (refused, ``sigma0`` None,
+    or its global test failed), whether the same network with its azimuths negated fits: re-adjusted
+    (no data snooping), σ0 at least :data:`MIRROR_SIGMA0_RATIO` times smaller and the global test
+    passed. Then the text naming ``--azimuth-sense cw`` (else None). A free network cannot tell (the
+    mirrored hall fits exactly as well); control points, a 321 datum or levelled stations can."""
+    if obs.sigma_azimuth_rad is None or not np.isfinite(obs.sigma_azimuth_rad).any():
+        return None
+    from multilat.network.adjust import adjust
+
+    try:
+        flipped = adjust(apply(obs, "cw"), options, **{**data, "snooping": False})
+    except MultilatError:
+        return None
+    if not flipped.global_test.passed or (sigma0 is not None and flipped.sigma0 * MIRROR_SIGMA0_RATIO > sigma0):
+        return None
+    was = "do not fit" if sigma0 is None else f"give σ0 = {sigma0:.3g}"
+    return (f"the azimuths read counter-clockwise (the default) {was}; negated (clockwise) they fit "
+            f"(σ0 = {flipped.sigma0:.3g}, global test passed): clockwise azimuths? give --azimuth-sense cw "
+            "(or azimuth_sense = \"cw\" in the instrument file)")
