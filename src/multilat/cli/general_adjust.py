@@ -360,6 +360,8 @@ def print_summary(doc, adj, stats, out) -> None:
         + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in kinds.items())
         + f") of {doc['input']} ({doc['format']}; general model)")
     say(f"  datum: {doc['datum']}")
+    if "azimuth_sense" in doc:
+        say(f"  azimuths read {doc['azimuth_sense']['sense']} ({doc['azimuth_sense']['source']})")
     gt, t = doc["global_test"], doc["tests"]
     if gt["statistic"] is None:
         say(f"  σ0 = {doc['sigma0']:.4g}, dof = {doc['dof']} (no global test without redundancy)")
