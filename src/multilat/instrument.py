@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 from importlib import resources
 from pathlib import Path
-from typing import Literal
+from typing import Literal, Optional
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
@@ -455,6 +455,10 @@ class Instrument(_Model):
                                                description="laser trackers beside the heads, by name")
     target: TargetConfig = Field(description="the target (Table IV)")
     budget: BudgetConfig = Field(BudgetConfig(), description="Monte Carlo set-up of the distance budget (section 3.4)")
+    azimuth_sense: Optional[Literal["ccw", "cw"]] = Field(
+        None, description="sense of the azimuths its observation files give: ccw (from +x towards +y, multilat's) "
+                          "or cw (from +x towards -y, as many trackers report); unset: ccw; --azimuth-sense "
+                          "must agree with it (a contradiction is refused)")
 
     @model_validator(mode="after")
     def _some(self):

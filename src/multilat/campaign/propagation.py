@@ -31,14 +31,27 @@ __all__ = ["campaign_problem", "read_campaign", "shifted_sensor_distances"]
 
 def read_campaign(path, *, sigma_m=None, instrument="seed2020", environment=None, heights=None,
                   formula: str = "ciddor", extrapolate: bool = False, max_gap_s=None,
-                  sigma_source: dict | None = None):
+                  sigma_source: dict | None = None, azimuth_sense: str | None = None):
     """Observations of ``path`` as ``adjust`` reads them: ``(obs, corrected)``, ``corrected`` the
     :class:`multilat.campaign.correct.CorrectedObservations` of a raw file (else None).
 
     One-line errors: raw options on an observation file, ``sigma_m`` on raw readings, a raw file
     without environment (from :func:`correct_raw`). ``sigma_source`` (a dict) is filled with where
-    the distances' σ came from (:mod:`multilat.network.sigma_source`).
+    the distances' σ came from (:mod:`multilat.network.sigma_source`). ``azimuth_sense`` (``ccw``,
+    ``cw`` or None: the instrument file's, else ``ccw``): the azimuths converted to counter-clockwise
+    here, once, for every reader (:mod:`multilat.network.azimuth_sense`).
     """
+    from multilat.network import azimuth_sense as _az
+
+    sense, _ = _az.resolve(azimuth_sense, instrument)
+    obs, corrected = _read_campaign(path, sigma_m=sigma_m, instrument=instrument, environment=environment,
+                                    heights=heights, formula=formula, extrapolate=extrapolate,
+                                    max_gap_s=max_gap_s, sigma_source=sigma_source)
+    return _az.apply(obs, sense), corrected
+
+
+def _read_campaign(path, *, sigma_m, instrument, environment, heights, formula, extrapolate, max_gap_s,
+                   sigma_source):
     from multilat.campaign.raw import is_raw_file
 
     if is_raw_file(path):
@@ -107,10 +120,14 @@ def campaign_problem(path, options=None, *, references=None, instrument="seed202
     from multilat.network.readings import Readings
     from multilat.network.repeats import average_repeats
 
+    from multilat.network.options import NetworkOptions
+
     inst = _inst.load_instrument(instrument) if isinstance(instrument, (str, os.PathLike)) else instrument
+    opts = NetworkOptions.of(options, **option_fields)
     obs, corrected = read_campaign(path, sigma_m=sigma_m, instrument=inst, environment=environment,
                                    heights=heights, formula=formula, extrapolate=extrapolate,
-                                   max_gap_s=max_gap_s, sigma_source=sigma_source)
+                                   max_gap_s=max_gap_s, sigma_source=sigma_source,
+                                   azimuth_sense=opts.azimuth_sense)
     if hasattr(references, "check_ids"):      # unknown ids named with the reference file (and its line)
         references.check_ids(tuple(obs.station_ids) + tuple(obs.target_ids))
     readings_obs = obs
@@ -118,9 +135,6 @@ def campaign_problem(path, options=None, *, references=None, instrument="seed202
     if average:
         av = average_repeats(obs)
         obs, matrix, scatter = av.obs, av.matrix, av.scatter_json()
-    from multilat.network.options import NetworkOptions
-
-    opts = NetworkOptions.of(options, **option_fields)
     obs = opts.prepare(obs, source=str(path))         # levelled stations; distance-only ones checked
     if corrected is not None:
         rd = Readings(np.asarray(readings_obs.station_index), np.asarray(corrected.distance_m, float),

@@ -38,7 +38,7 @@ APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict
            "alpha_family", "model", "snooping", "variance_components")
 #: ... and on a multilat CSV network (``--model general``)
 APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offsets_um", "scales", "fixed_scale",
-                         "scale_bar", "references", "levelled", "seed")
+                         "scale_bar", "references", "levelled", "seed", "azimuth_sense")
 #: the test procedures' names in the summary (statistics.test_levels)
 _METHOD_NAMES = {"b-method": "B-method", "sidak": "Šidák", "fixed": "fixed α"}
 #: ``--model``: ``auto`` (the default: the distance-only self-calibrating path, and the general layer
@@ -297,7 +297,8 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
     checks.seed(seed)
     src: dict = {}
     obs, _ = read_campaign(path, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
-                           instrument=params.get("instrument"), sigma_source=src)
+                           instrument=params.get("instrument"), sigma_source=src,
+                           azimuth_sense=params.get("azimuth_sense"))
     obs = with_levelled(obs, params.get("levelled"))
     refs = read_reference_lengths(params["references"]) if params.get("references") is not None else None
     if refs is not None and not params.get("scale_bar"):
@@ -322,9 +323,16 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
                                        scales=scales, scale_bars=refs, rng=seed, source=str(path))
     src_doc = {"kind": str(src.get("kind", "file column")), "file": str(path),
                "description": describe(src) if src else "the file's sigma_m column"}
-    return _finish(net, options, str(path), alpha=alpha, variance_factor=variance_factor, strict=strict,
-                   alpha_global=alpha_global, fmt="multilat-csv", sigma_source=src_doc, method=method,
-                   alpha_family=alpha_family, snooping=snooping, variance_components=variance_components)
+    doc, adj, stats = _finish(net, options, str(path), alpha=alpha, variance_factor=variance_factor,
+                              strict=strict, alpha_global=alpha_global, fmt="multilat-csv", sigma_source=src_doc,
+                              method=method, alpha_family=alpha_family, snooping=snooping,
+                              variance_components=variance_components)
+    from multilat.network import azimuth_sense as _az
+
+    az_rec = _az.record(obs, *_az.resolve(params.get("azimuth_sense"), params.get("instrument")))
+    if az_rec is not None:
+        doc["azimuth_sense"] = az_rec
+    return doc, adj, stats
 
 
 def write_out(out, inputs, doc) -> None:
@@ -352,6 +360,8 @@ def print_summary(doc, adj, stats, out) -> None:
         + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in kinds.items())
         + f") of {doc['input']} ({doc['format']}; general model)")
     say(f"  datum: {doc['datum']}")
+    if "azimuth_sense" in doc:
+        say(f"  azimuths read {doc['azimuth_sense']['sense']} ({doc['azimuth_sense']['source']})")
     gt, t = doc["global_test"], doc["tests"]
     if gt["statistic"] is None:
         say(f"  σ0 = {doc['sigma0']:.4g}, dof = {doc['dof']} (no global test without redundancy)")

@@ -13,13 +13,14 @@ from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
 from multilat.cli import checks, report_opt
 from multilat.io import check_output_dir, staging_dir
+from multilat.network.azimuth_sense import HELP as AZIMUTH_SENSE_HELP
 
 
 #: The CLI parameters of ``adjust`` (and ``propagate``) that are fields of :class:`NetworkOptions`
 #: under another name.
 _CLI_FIELDS = {"scale_bar": "scale_bars"}
 _MODEL_FIELDS = ("datum", "cost", "scales", "fixed_scale", "levelled", "distance_only", "scale_bar", "scale_bars",
-                 "instrument",
+                 "instrument", "azimuth_sense",
                  "alpha", "alpha_global", "test_method", "alpha_family", "variance_factor", "mdb_limit_sigma",
                  "snooping", "strict", "variance_components", "solver")
 
@@ -115,6 +116,8 @@ def adjust_command(
     instrument: Optional[str] = typer.Option(None, "--instrument",
                                              help="Instrument preset or TOML for the distance model's "
                                                   "uncertainties (default seed2020) when no sigma is given."),
+    azimuth_sense: Optional[str] = typer.Option(None, "--azimuth-sense",
+                                                help=AZIMUTH_SENSE_HELP),
     alpha: float = typer.Option(0.001, "--alpha", help="alpha0: significance of each observation's test "
                                 "(w-test; τ-test with --variance-factor unknown); an upper bound under "
                                 "--test-method auto."),
@@ -237,7 +240,8 @@ def adjust_command(
     src: dict = {}
     obs, corrected = read_campaign(observations, sigma_m=opts.sigma_m, instrument=instrument,
                                    environment=environment, heights=heights, formula=formula,
-                                   extrapolate=extrapolate, max_gap_s=max_gap_s, sigma_source=src)
+                                   extrapolate=extrapolate, max_gap_s=max_gap_s, sigma_source=src,
+                                   azimuth_sense=opts.azimuth_sense)
     if corrected is not None:
         src["defaulted"] = instrument is None
     _check_instrument_used(instrument, observations, obs, src, corrected)
@@ -267,9 +271,21 @@ def adjust_command(
         res, vc = _adjust_with_progress(obs, opts, data, auto=auto, files=(observations, points))
     except general_adjust.CountRuleRefusal as refusal:     # --model auto: the general layer adjusts it
         return general_adjust.fall_back(given, refusal)
+    except MultilatError as exc:                          # a mirrored hall (cw azimuths read ccw)? named
+        hint = _mirror_hint(obs, None, opts, data, instrument)
+        raise (MultilatError(f"{exc}; {hint}") if hint else exc) from None
+    if getattr(res.global_test, "passed", True) is False and (hint := _mirror_hint(obs, res.sigma0, opts, data,
+                                                                                   instrument)):
+        import warnings
+
+        warnings.warn(hint, UserWarning, stacklevel=1)
     from multilat.vocabulary import stamp
 
     doc = stamp(result_to_json(res, refs), "adjust")
+    from multilat.network import azimuth_sense as _az
+
+    if (az_rec := _az.record(obs, *_az.resolve(opts.azimuth_sense, instrument))) is not None:
+        doc["azimuth_sense"] = az_rec
     if vc is not None:
         doc["variance_components"] = vc.to_json()
     if corrected is not None:
@@ -294,6 +310,9 @@ def adjust_command(
         emit_json(doc, "adjust", indent=indent)
         return
     _print_summary(res, doc, out)
+    if "azimuth_sense" in doc:
+        console.print(f"azimuths read {doc['azimuth_sense']['sense']} ({doc['azimuth_sense']['source']})",
+                      markup=False)
     if vc is not None:
         console.print(f"variance components by {vc.grouping} (Förstner, {vc.iterations} iterations): "
                       + "; ".join(f"{c.group} σ × {c.sigma_scale:.3f} (factor {c.variance_factor:.3f} ± "
@@ -305,6 +324,15 @@ def adjust_command(
         console.print(f"with the sensors' correlations (G C Gᵀ): u(offset) µm: {offs}; largest target "
                       f"std {wc['target_std_max_m'] * 1e6:.1f} µm (diagonal weights only: "
                       f"{wc['target_std_diagonal_max_m'] * 1e6:.1f} µm)", markup=False)
+
+
+def _mirror_hint(obs, sigma0, opts, data, instrument):
+    """:func:`multilat.network.azimuth_sense.mirror_hint` when the sense was not declared (else None)."""
+    from multilat.network import azimuth_sense as _az
+
+    if opts.azimuth_sense is not None or _az.resolve(None, instrument)[1] != _az.UNDECLARED:
+        return None
+    return _az.mirror_hint(obs, sigma0, opts, data)
 
 
 def _adjust_with_progress(obs, opts, data, *, auto: bool, files):

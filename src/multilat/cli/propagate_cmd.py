@@ -12,6 +12,7 @@ from rich.table import Table
 from multilat.cli import checks, report_opt
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
+from multilat.network.azimuth_sense import HELP as AZIMUTH_SENSE_HELP
 
 BUILTIN = ("small-volume", "large-volume")
 
@@ -132,6 +133,7 @@ def propagate_cmd(
                                                   "errors drawn (--noise model, the default with it) and the σ a "
                                                   "file without sigma_m lacks. Default: none (errors gaussian "
                                                   "with the file's σ)."),
+    azimuth_sense: Optional[str] = typer.Option(None, "--azimuth-sense", help=AZIMUTH_SENSE_HELP),
     noise: Optional[str] = typer.Option(None, "--noise",
                                         help="model (the --instrument's distance model, non-gaussian) or "
                                              "gaussian (the weights' σ). Default: model with --instrument, "
@@ -235,6 +237,10 @@ def propagate_cmd(
     if problem.readings is not None:
         doc["readings"] = problem.readings.to_json()
     doc["sigma_source"] = src
+    if source not in BUILTIN and "azimuth_rad" in (_header(source) or ()):
+        from multilat.network.azimuth_sense import as_json, resolve
+
+        doc["azimuth_sense"] = as_json(*resolve(opts.azimuth_sense, instrument))
     doc["noise_source"] = ({"kind": "distance model", "instrument": str(instrument)} if noise == "model"
                            else {"kind": "gaussian", "sigma": "the weights' σ (sigma_source)"})
     if out is not None:

@@ -69,6 +69,10 @@ class NetworkOptions(BaseModel):
     σ of the observations (read with the file)
         ``sigma_m`` one σ for every distance without a ``sigma_m`` column; ``instrument`` preset or
         TOML whose distance model gives the σ (and, for ``propagate``, the errors drawn).
+    Angles (read with the file)
+        ``azimuth_sense`` ``ccw`` or ``cw``: the sense of the file's azimuths (None: the instrument
+        file's ``azimuth_sense``, else ``ccw``); converted to counter-clockwise on reading
+        (:mod:`multilat.network.azimuth_sense`).
     Tests
         ``alpha`` (α0 of each observation's test), ``power``, ``alpha_global``, ``test_method``
         (None: ``fixed`` with ``alpha_global``, else ``auto``), ``alpha_family``, ``variance_factor``,
@@ -91,6 +95,7 @@ class NetworkOptions(BaseModel):
     scale_bars: bool = False
     sigma_m: Optional[float] = None
     instrument: Optional[str] = None
+    azimuth_sense: Optional[Literal["ccw", "cw"]] = None
     alpha: float = 0.001
     power: float = 0.80
     alpha_global: Optional[float] = None
