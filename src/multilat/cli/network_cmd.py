@@ -241,6 +241,13 @@ def adjust_command(
     if corrected is not None:
         src["defaulted"] = instrument is None
     _check_instrument_used(instrument, observations, obs, src, corrected)
+    import warnings
+
+    from multilat.network.sigma_source import default_warning
+
+    sigma_note = default_warning(src, observations)      # the default σ is said, once
+    if sigma_note:
+        warnings.warn(sigma_note, UserWarning, stacklevel=1)
     averaged = None
     if average_repeats:
         from multilat.network.repeats import average_repeats as _average
@@ -267,6 +274,8 @@ def adjust_command(
     from multilat.vocabulary import stamp
 
     doc = stamp(result_to_json(res, refs), "adjust")
+    if sigma_note:
+        doc["warnings"] = [sigma_note, *doc["warnings"]]
     if vc is not None:
         doc["variance_components"] = vc.to_json()
     if corrected is not None:
@@ -354,6 +363,8 @@ def _print_summary(res, doc, out):
     cv = res.convergence
     console.print(f"  {res.solver} solver: {cv.iterations} iterations, {cv.reason}; initial values: "
                   f"{res.initial.get('method', '?')}", markup=False)
+    console.print(f"  frame: {doc['frame']['axes']}", markup=False, soft_wrap=True)   # frame_words.py
+    console.print(f"  scale: {doc['frame']['scale']}", markup=False, soft_wrap=True)
     if res.excluded:
         console.print("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
                                                                for e in res.excluded), markup=False)
