@@ -123,3 +123,27 @@ def test_default_sigma_is_named_once(tmp_path, extra, warned):
     assert sum(SIGMA_WARNING in w for w in doc["warnings"]) == (1 if warned else 0)
     rc, out, err = _run(["adjust", str(path), *(extra or [])])          # the summary run: once too
     assert rc == 0 and sum(SIGMA_WARNING in ln for ln in err.splitlines()) == (1 if warned else 0)
+
+
+GAMA = Path(__file__).resolve().parent / "data" / "gama3d"
+
+
+@pytest.mark.parametrize("name, kind, words", [
+    ("trilateration_free", "free", "approximate coordinates given for the datum points"),
+    ("trilateration_fixed", "control", "the frame of the coordinates given: given by"),
+])
+def test_general_path_frame_in_the_same_vocabulary(name, kind, words):
+    """The general path's JSON carries ``frame`` with the same keys, worded in frame_words.py; its
+    ``datum`` sentence is the one of the control words (not a second wording)."""
+    rc, out, err = _run(["adjust", str(GAMA / f"{name}.xml"), "--json"])
+    assert rc == 0, err
+    doc = json.loads(out)
+    assert set(doc["frame"]) == {"kind", "axes", "scale"} and doc["frame"]["kind"] == kind
+    assert words in doc["frame"]["axes"], doc["frame"]
+    if kind == "control":
+        assert doc["frame"]["axes"].endswith(doc["datum"])
+    schema = json.loads((Path(__file__).resolve().parents[1] / "src" / "multilat" / "schemas"
+                         / "adjust-general.json").read_text("utf-8"))
+    assert "frame" in schema["required"]
+    jsonschema = pytest.importorskip("jsonschema")
+    jsonschema.validate(doc, schema)
