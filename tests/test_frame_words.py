@@ -130,7 +130,7 @@ GAMA = Path(__file__).resolve().parent / "data" / "gama3d"
 
 @pytest.mark.parametrize("name, kind, words", [
     ("trilateration_free", "free", "approximate coordinates given for the datum points"),
-    ("trilateration_fixed", "control", "the frame of the coordinates given: given by"),
+    ("trilateration_fixed", "control", "the frame of the given coordinates (datum given by"),
 ])
 def test_general_path_frame_in_the_same_vocabulary(name, kind, words):
     """The general path's JSON carries ``frame`` with the same keys, worded in frame_words.py; its
@@ -141,7 +141,7 @@ def test_general_path_frame_in_the_same_vocabulary(name, kind, words):
     assert set(doc["frame"]) == {"kind", "axes", "scale"} and doc["frame"]["kind"] == kind
     assert words in doc["frame"]["axes"], doc["frame"]
     if kind == "control":
-        assert doc["frame"]["axes"].endswith(doc["datum"])
+        assert doc["frame"]["axes"].endswith(f"(datum {doc['datum']})")
     schema = json.loads((Path(__file__).resolve().parents[1] / "src" / "multilat" / "schemas"
                          / "adjust-general.json").read_text("utf-8"))
     assert "frame" in schema["required"]

@@ -88,5 +88,5 @@ def general_frame_words(points, result) -> dict:
             f"the frame (origin and axes) is that of the approximate coordinates given for the datum points "
             f"({_names(dp)}): the solution fits them with the minimum trace over their free coordinates "
             f"(datum defect {result.defect}). " + _INVARIANT), "scale": scale}
-    return {"kind": "control", "axes": f"the frame of the coordinates given: {datum_words(points, result)}",
+    return {"kind": "control", "axes": f"the frame of the given coordinates (datum {datum_words(points, result)})",
             "scale": scale}
