@@ -70,10 +70,20 @@ def runs(tmp_path_factory):
 
 
 def _line(text: str, key: str) -> str:
-    """The summary line ``  key: ...`` (one line: printed without wrapping)."""
-    hits = [ln[len(f"  {key}: "):] for ln in text.splitlines() if ln.startswith(f"  {key}: ")]
+    """The summary item ``  key: ...``: its line and the lines the console wrapped it onto (at a
+    space, or after a hyphen; unindented), joined again."""
+    lines = text.splitlines()
+    hits = [k for k, ln in enumerate(lines) if ln.startswith(f"  {key}: ")]
     assert len(hits) == 1, (key, text[:2000])
-    return hits[0]
+    k = hits[0]
+    out = [lines[k][len(f"  {key}: "):]]
+    for ln in lines[k + 1:]:
+        if not ln or ln.startswith(" "):
+            break
+        out.append(ln)
+    # a wrapped line keeps its trailing space, except where it filled the width (then it was dropped)
+    return "".join(p + ("" if p.endswith(("-", " ")) or k == len(out) - 1 else " ")
+                   for k, p in enumerate(out))
 
 
 @pytest.mark.parametrize("name", list(CASES))

@@ -363,8 +363,8 @@ def _print_summary(res, doc, out):
     cv = res.convergence
     console.print(f"  {res.solver} solver: {cv.iterations} iterations, {cv.reason}; initial values: "
                   f"{res.initial.get('method', '?')}", markup=False)
-    console.print(f"  frame: {doc['frame']['axes']}", markup=False, soft_wrap=True)   # frame_words.py
-    console.print(f"  scale: {doc['frame']['scale']}", markup=False, soft_wrap=True)
+    console.print(f"  frame: {doc['frame']['axes']}", markup=False)      # the JSON's words (frame_words.py)
+    console.print(f"  scale: {doc['frame']['scale']}", markup=False)
     if res.excluded:
         console.print("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
                                                                for e in res.excluded), markup=False)
