@@ -364,8 +364,9 @@ def test_frame_and_datum_in_words(pages, name):
     if name == "bars":
         assert "frame: the frame of the control coordinates" in text and "scale bars" in text
     else:
-        assert "frame: the frame (origin and axes) is fixed by" in text
+        assert "frame: the frame (origin and axes) is that of" in text
         assert f"the initial values ({doc['initial']['method']})" in text and "minimum-trace" in text
+    assert f"frame: {doc['frame']['axes']}" in text and f"scale: {doc['frame']['scale']}" in text
 
 
 def test_residual_plot_and_views_name_stations_not_heads():
@@ -435,7 +436,7 @@ def test_321_frame_and_estimated_scales_without_a_browser(tmp_path):
     frame = text[text.index('<h2 id="frame">'):]
     frame = frame[:frame.index("</section>")]
     assert "datum: 3-2-1: A at origin, B on +x, C in the xy-plane" in frame
-    assert "the first point is the origin" in frame and "scale factors estimated for heads A, B, C, D" in frame
+    assert "A is the origin, B is on the +x axis" in frame and "scale factors estimated for heads A, B, C, D" in frame
     heads = text[text.index('<table data-table="heads">'):]
     heads = heads[:heads.index("</table>")]
     assert "<th>scale (µm/m)</th><th>u(scale) (µm/m)</th>" in heads

@@ -245,6 +245,13 @@ def adjust_command(
     if corrected is not None:
         src["defaulted"] = instrument is None
     _check_instrument_used(instrument, observations, obs, src, corrected)
+    import warnings
+
+    from multilat.network.sigma_source import default_warning
+
+    sigma_note = default_warning(src, observations)      # the default σ is said, once
+    if sigma_note:
+        warnings.warn(sigma_note, UserWarning, stacklevel=1)
     averaged = None
     if average_repeats:
         from multilat.network.repeats import average_repeats as _average
@@ -286,6 +293,8 @@ def adjust_command(
 
     if (az_rec := _az.record(obs, *_az.resolve(opts.azimuth_sense, instrument))) is not None:
         doc["azimuth_sense"] = az_rec
+    if sigma_note:
+        doc["warnings"] = [sigma_note, *doc["warnings"]]
     if vc is not None:
         doc["variance_components"] = vc.to_json()
     if corrected is not None:
@@ -385,6 +394,8 @@ def _print_summary(res, doc, out):
     cv = res.convergence
     console.print(f"  {res.solver} solver: {cv.iterations} iterations, {cv.reason}; initial values: "
                   f"{res.initial.get('method', '?')}", markup=False)
+    console.print(f"  frame: {doc['frame']['axes']}", markup=False)      # the JSON's words (frame_words.py)
+    console.print(f"  scale: {doc['frame']['scale']}", markup=False)
     if res.excluded:
         console.print("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
                                                                for e in res.excluded), markup=False)

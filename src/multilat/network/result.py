@@ -379,6 +379,8 @@ def _obs_label(obs: Observations, k: int) -> dict:
 
 def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) -> dict:
     """The ``--json`` document of an adjustment, the same keys whichever back end ran."""
+    from multilat.network.frame_words import result_frame_words
+
     stations = {}
     corr = res.offset_correlations()
     o_heads = res.obs.head_of_station
@@ -412,6 +414,7 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
     observations = JsonRows(cols)
     doc = {
         "datum": res.datum.describe(),
+        "frame": result_frame_words(res),
         "cost": res.cost,
         "solver": res.solver,
         "convergence": res.convergence.to_json() if res.convergence is not None else None,

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["file_column", "option", "distance_model", "describe"]
+__all__ = ["file_column", "option", "distance_model", "describe", "default_warning"]
 
 DEFAULT_INSTRUMENT = "seed2020"
 #: σ of one distance where neither the file, nor ``--sigma-um``, nor a distance model gives one: the
@@ -83,3 +83,20 @@ def describe(src: dict) -> str:
     if "sigma_m" in src:
         return f"σ: {src['sigma_m'] * 1e6:g} µm for every distance ({k})"
     return f"σ: {k}"
+
+
+def default_warning(src: dict, path) -> str | None:
+    """The warning when no σ source was given (no ``sigma_m`` column, no ``--sigma-um``, no
+    ``--instrument``) and the default instrument's distance model weighted the distances (or, for raw
+    readings, corrected and weighted them): a default that changes the numbers is never quiet. None
+    when a source was given."""
+    if not src.get("defaulted"):
+        return None
+    if src.get("kind") == "distance model":
+        return (f"{path}: no σ given (no sigma_m column, no --sigma-um, no --instrument): the distances are "
+                f"weighted by the distance model of the default instrument {src['instrument']!r}; give "
+                "--sigma-um or --instrument to choose")
+    if src.get("kind") == "raw readings":
+        return (f"{path}: no --instrument: the raw readings are corrected and weighted by the distance model "
+                f"of the default instrument {src['instrument']!r}; give --instrument to choose")
+    return None

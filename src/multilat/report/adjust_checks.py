@@ -1,6 +1,7 @@
 """The adjust report's sections on angles and orientations, on scale bars and control (observations
 of the adjustment, with their residuals and w) against the independent reference lengths (checks
-not in the adjustment), and on the coordinate frame and datum in words.
+not in the adjustment), and on the coordinate frame and datum in words (the JSON's ``frame``, worded
+once in :mod:`multilat.network.frame_words`).
 
 As in :mod:`multilat.report.adjust_sections`: numbers from the JSON document, verdicts from the
 numbers printed beside them, no statistic computed here.
@@ -140,53 +141,15 @@ def _reference_table(sec: Section, doc: dict) -> None:
 
 
 # ------------------------------------------------------------------------------- frame and datum
-def datum_kind(doc: dict, options: dict) -> str:
-    """``free``, ``321`` or ``control``: from the --datum option, else from the datum's words."""
-    opt = options.get("datum")
-    if opt:
-        from multilat.network.datum import parse_datum
-
-        return parse_datum(opt if isinstance(opt, str) else getattr(opt, "value", opt)).kind
-    words = doc["datum"]
-    return "321" if words.startswith("3-2-1") else "control" if words.startswith("fixed control") else "free"
-
-
-def _words(v) -> str:
-    """A JSON value in words: a list as its items joined by commas."""
-    return ", ".join(str(x) for x in v) if isinstance(v, (list, tuple)) else str(v)
-
-
 def frame_section(doc: dict, options: dict) -> Section:
+    """The frame and the scale in the JSON's words (``frame``, :mod:`multilat.network.frame_words`)."""
     sec = Section("Frame and datum", key="frame")
-    kind = datum_kind(doc, options)
-    pts = options.get("points")
+    fr = doc.get("frame") or {"axes": "not recorded (a result written before the key frame)",
+                              "scale": "not recorded"}
     init = (doc.get("initial") or {}).get("method", "not recorded")
-    frame = {
-        "free": ("the frame (origin and axes) is fixed by the reference coordinates of the datum points: "
-                 + (f"those of --points {pts}" if pts else f"the initial values ({init})")
-                 + ", fitted in least squares; the covariance is the minimum-trace one over those points. "
-                 "Coordinates depend on this choice; distances between points, offsets, scales and σ0 do "
-                 "not."),
-        "321": "the first point is the origin, the second on the +x axis, the third in the xy-plane (y > 0); "
-               "those 6 coordinates have zero variance.",
-        "control": "the frame of the control coordinates" + (f" of --points {pts}" if pts else "")
-                   + ": hard control points are held fixed, weighted ones are observations with their σ "
-                   "(residuals in Scale bars and control).",
-    }[kind]
-    heads = doc.get("heads") or {}
-    scaled = [h for h, v in heads.items() if v.get("scale_estimated")]
-    sd = (doc.get("initial") or {}).get("scale_datum")
-    if scaled:
-        scale = (f"scale factors estimated for heads {', '.join(scaled)}; the scale from "
-                 + (", ".join(f"{k}: {_words(v)}" for k, v in sd.items()) if isinstance(sd, dict)
-                    else "the scale bars"))
-    elif doc.get("scale_bars"):
-        scale = "the distances and the scale bars (observations); no head has a scale factor"
-    else:
-        scale = "the distances (no head has a scale factor)"
     from multilat.network.sigma_source import describe
 
-    items = [f"datum: {doc['datum']}", f"frame: {frame}", f"scale: {scale}",
+    items = [f"datum: {doc['datum']}", f"frame: {fr['axes']}", f"scale: {fr['scale']}",
              f"initial values: {init}",
              "units: coordinates in metres in a right-handed x, y, z frame; uncertainties in µm; angles in µrad",
              f"variance factor: {doc.get('variance_factor', 'known')}"
@@ -198,4 +161,4 @@ def frame_section(doc: dict, options: dict) -> Section:
     return sec
 
 
-__all__ = ["angles_section", "bars_and_control_section", "frame_section", "datum_kind"]
+__all__ = ["angles_section", "bars_and_control_section", "frame_section"]

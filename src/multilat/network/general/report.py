@@ -158,6 +158,8 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
     """The document (without its schema stamp): points map, observations table, statistics; with
     ``snooping`` (a :class:`~.snooping.Snooping`) its rejections, and ``variance`` (the
     :class:`~.variance.GeneralVarianceComponents`) the estimated factors."""
+    from multilat.network.frame_words import general_frame_words
+
     net, res = adjustment.network, adjustment.result
     pts = net.points
     rl = roles(net)
@@ -183,6 +185,7 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
         "input": source,
         "format": "gama-local",
         "datum": datum_words(pts, res),
+        "frame": general_frame_words(pts, res),              # the adjust JSON's vocabulary
         "defect": res.defect,
         "n_points": pts.n,
         "n_obs": int(sum(b.n_rows for b in adjustment.system.blocks)),
