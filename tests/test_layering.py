@@ -37,7 +37,8 @@ LAYERS = [
 NETWORK_TIERS = [
     ("network model", ["multilat.network"]),
     ("network adjust", ["multilat.network.adjust", "multilat.network.costs", "multilat.network.simulate",
-                        "multilat.network.variance_components", "multilat.network.general"]),
+                        "multilat.network.variance_components", "multilat.network.general",
+                        "multilat.network.azimuth_sense"]),
     ("network propagate/design", ["multilat.network.propagate", "multilat.network.propagate_result",
                                   "multilat.network.propagate_summary", "multilat.network.design",
                                   "multilat.network.general.propagate", "multilat.network.general.propagate_result",

@@ -12,9 +12,9 @@ the given points), so e.g. floor targets may come out at z = -0.9 m. The words s
 
 from __future__ import annotations
 
-__all__ = ["frame_words", "result_frame_words", "general_frame_words"]
+__all__ = ["frame_words", "result_frame_words", "INVARIANT"]
 
-_INVARIANT = ("Coordinates depend on this choice; distances between points, offsets, scales and σ0 do not.")
+INVARIANT = ("Coordinates depend on this choice; distances between points, offsets, scales and σ0 do not.")
 
 
 def _list(v) -> str:
@@ -30,11 +30,11 @@ def _axes(kind: str, points, initial: dict) -> str:
                if init.startswith("distances") else f"the initial values ({init})")
         over = "all points" if points is None else f"the datum points {_list(points)}"
         return (f"the frame (origin and axes) is that of {ref}: the solution is fitted to them in least "
-                f"squares over {over}, the covariance is the minimum-trace one over {over}. " + _INVARIANT)
+                f"squares over {over}, the covariance is the minimum-trace one over {over}. " + INVARIANT)
     if kind == "321":
         a, b, c = points
         return (f"{a} is the origin, {b} is on the +x axis, {c} is in the xy-plane (y > 0); those 6 "
-                "coordinates have zero variance. " + _INVARIANT)
+                "coordinates have zero variance. " + INVARIANT)
     return ("the frame of the control coordinates (points file)"
             + ("" if points is None else f" of {_list(points)}")
             + ": hard control points are held fixed, weighted ones are observations with their σ "
@@ -68,25 +68,3 @@ def frame_words(datum, *, initial: dict | None = None, heads: dict | None = None
 def result_frame_words(res) -> dict:
     """:func:`frame_words` of an :class:`~multilat.network.result.AdjustmentResult`."""
     return frame_words(res.datum, initial=dict(res.initial), heads=res.heads(), n_bars=len(res.scale_bars))
-
-
-def general_frame_words(points, result) -> dict:
-    """The same ``{"kind", "axes", "scale"}`` for the general network layer
-    (:mod:`multilat.network.general`): ``points`` its points (ids, status, constrained), ``result``
-    its adjustment (determinability, defect, free parameter names). A free network (inner
-    constraints) is in the frame of the approximate coordinates given for its datum points; a network
-    with fixed or weighted coordinates in the frame of those coordinates."""
-    from multilat.network.general.report import _names, datum_words
-
-    scaled = [n.split(":", 1)[1] for n in result.free_names if n.startswith("scale:")]
-    scale = (f"scale factors estimated for {', '.join(scaled)}; the scale from the other observations and "
-             "the given coordinates" if scaled else
-             "the observed distances (and vectors), no scale factor")
-    if result.determinability.constraints is not None:
-        dp = [p for p, c in zip(points.ids, points.constrained) if c] or list(points.ids)
-        return {"kind": "free", "axes": (
-            f"the frame (origin and axes) is that of the approximate coordinates given for the datum points "
-            f"({_names(dp)}): the solution fits them with the minimum trace over their free coordinates "
-            f"(datum defect {result.defect}). " + _INVARIANT), "scale": scale}
-    return {"kind": "control", "axes": f"the frame of the given coordinates (datum {datum_words(points, result)})",
-            "scale": scale}

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.network.general.points import FIXED, FREE, WEIGHTED
+from multilat.network.frame_words import INVARIANT
 
 __all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "row_record", "external_reliability", "SETUP_KINDS"]
 
@@ -158,7 +159,6 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
     """The document (without its schema stamp): points map, observations table, statistics; with
     ``snooping`` (a :class:`~.snooping.Snooping`) its rejections, and ``variance`` (the
     :class:`~.variance.GeneralVarianceComponents`) the estimated factors."""
-    from multilat.network.frame_words import general_frame_words
 
     net, res = adjustment.network, adjustment.result
     pts = net.points
@@ -218,3 +218,23 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
         "iterations": [{"step_max": s, "vtpv": v} for s, v in res.iterations],
         "notes": list(net.notes),
     }
+
+
+def general_frame_words(points, result) -> dict:
+    """The same ``{"kind", "axes", "scale"}`` for the general network layer
+    (:mod:`multilat.network.general`): ``points`` its points (ids, status, constrained), ``result``
+    its adjustment (determinability, defect, free parameter names). A free network (inner
+    constraints) is in the frame of the approximate coordinates given for its datum points; a network
+    with fixed or weighted coordinates in the frame of those coordinates."""
+    scaled = [n.split(":", 1)[1] for n in result.free_names if n.startswith("scale:")]
+    scale = (f"scale factors estimated for {', '.join(scaled)}; the scale from the other observations and "
+             "the given coordinates" if scaled else
+             "the observed distances (and vectors), no scale factor")
+    if result.determinability.constraints is not None:
+        dp = [p for p, c in zip(points.ids, points.constrained) if c] or list(points.ids)
+        return {"kind": "free", "axes": (
+            f"the frame (origin and axes) is that of the approximate coordinates given for the datum points "
+            f"({_names(dp)}): the solution fits them with the minimum trace over their free coordinates "
+            f"(datum defect {result.defect}). " + INVARIANT), "scale": scale}
+    return {"kind": "control", "axes": f"the frame of the given coordinates (datum {datum_words(points, result)})",
+            "scale": scale}
