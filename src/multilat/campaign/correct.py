@@ -214,47 +214,11 @@ def _group_index(env: dict, formula: str, wavelength_m: float, **delta) -> np.nd
                            co2_ppm=v["co2_ppm"], wavelength_m=wavelength_m, formula=formula)
 
 
-def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = None,
-                instrument="seed2020", formula: str = "ciddor",
-                heights: Mapping[str, float] | None = None, extrapolate: bool = False,
-                max_gap_s: float | None = None,
-                sensor_std: Mapping[str, float] | None = None) -> CorrectedObservations:
-    """Correct raw readings into geometric distances with their covariance (module docstring).
-
-    Parameters
-    ----------
-    raw : RawObservations
-    environment : EnvironmentLog, optional
-        Sensor log; without it the raw rows' own environment columns are used (one sensor, the
-        same for every row, so its errors are fully correlated between rows).
-    instrument : str, path or instrument object
-        Preset name (``"seed2020"``) or TOML path for :func:`multilat.instrument.load_instrument`.
-    formula : {"ciddor", "edlen"}
-        Group index formula (``"edlen"``: Bönsch-Potulski 1998).
-    heights : mapping id -> height (m), optional
-        Station/target heights in the sensors' frame, where the raw file has no height columns.
-    extrapolate : bool
-        Allow readings outside the log's time span (linear extrapolation, warned) or in a sensor's
-        gap longer than ``max_gap_s`` (interpolated across, warned).
-    max_gap_s : float, optional
-        Longest gap of a sensor's log bridged by interpolation (s); default 3 x its median logging
-        interval (:func:`multilat.campaign.environment.beam_environment`).
-    sensor_std : mapping quantity -> standard uncertainty, optional
-        Overrides the instrument's sensor uncertainties (keys of :data:`QUANTITIES`).
-
-    Returns
-    -------
-    CorrectedObservations
-    """
-    from multilat import adm, budget, gimbal
-
-    if formula not in ("ciddor", "edlen"):
-        raise MultilatError(f"formula must be 'ciddor' or 'edlen', got {formula!r}")
-    inst = _load_instrument(instrument)
+def _beam_air(raw: RawObservations, environment: EnvironmentLog | None, *, heights, extrapolate: bool,
+              max_gap_s, notes: list[str]):
+    """The air along each beam, from the log or from the raw rows' own columns (one sensor; a note
+    added to ``notes``): ``(env, weights, sensor ids, gradient °C/m, extrapolated)``."""
     m = raw.size
-    notes: list[str] = []
-
-    # 1. the air along each beam
     if environment is not None and raw.environment is not None:
         raise MultilatError(f"{raw.path}: has per-row environment columns and an environment log was "
                             f"given; use one or the other")
@@ -272,17 +236,16 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
     else:
         raise MultilatError(f"{raw.path}: no environment: give an environment log (--environment) or "
                             f"temperature_c,pressure_hpa,humidity_pct columns")
+    return env, weights, sensors, grad, extrap
 
-    # 2. group index, 3. distance in air
-    lam = _wavelength_m(inst)
-    n = _group_index(env, formula, lam)
-    phase_rows = ~np.isnan(raw.phase_rad)
-    d_air = raw.optical_path_m / n
-    if phase_rows.any():
-        d_air[phase_rows] = adm.distance_from_phase(raw.phase_rad[phase_rows], raw.k[phase_rows],
-                                                    raw.frequency_hz[phase_rows], n[phase_rows])
 
-    # 4. transit offsets, eq. (2)
+def _transit_corrections(raw: RawObservations, inst, d_air, notes: list[str]):
+    """Eq. (2): the head and target transit offsets applied to the distances in air ``d_air``;
+    readings without the elevation they need are named in ``notes``. Returns ``(d, head
+    correction, target correction)`` (m)."""
+    from multilat import gimbal
+
+    m = raw.size
     d = d_air.copy()
     head_corr = np.zeros(m)
     tgt_corr = np.zeros(m)
@@ -315,16 +278,25 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
         d = d_t
     else:
         notes.append("no elevation columns: target transit offset not corrected")
-    if extrap.any():
-        notes.append(f"{int(extrap.sum())} observation(s) with extrapolated environment")
+    return d, head_corr, tgt_corr
 
-    # 5. uncertainty: exact sensitivity to each sensor's calibration error
+
+def _sensor_std(inst, sensor_std: Mapping[str, float] | None) -> dict[str, float]:
+    """The sensors' standard uncertainties: the instrument's, or all of ``sensor_std``."""
     u = dict(sensor_std_from_instrument(inst)) if sensor_std is None else {}
     if sensor_std is not None:
         for q in QUANTITIES:
             if q not in sensor_std:
                 raise MultilatError(f"sensor_std lacks key {q!r}")
             u[q] = float(sensor_std[q])
+    return u
+
+
+def _air_jacobian(env, formula: str, lam, d_air, n, weights, sensors, u: Mapping[str, float]):
+    """The exact sensitivity of each distance to each sensor's calibration error (central
+    differences of the group index): ``(jacobian m per unit, labels "sensor:quantity", their
+    standard uncertainties)``."""
+    m = len(d_air)
     S = len(sensors)
     jac = np.empty((m, S * len(QUANTITIES)))
     labels, ustd = [], []
@@ -337,9 +309,73 @@ def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = No
         for q in QUANTITIES:
             labels.append(f"{s}:{q}")
             ustd.append(u[q])
-    ustd_arr = np.array(ustd)
+    return jac, labels, np.array(ustd)
+
+
+def correct_raw(raw: RawObservations, *, environment: EnvironmentLog | None = None,
+                instrument="seed2020", formula: str = "ciddor",
+                heights: Mapping[str, float] | None = None, extrapolate: bool = False,
+                max_gap_s: float | None = None,
+                sensor_std: Mapping[str, float] | None = None) -> CorrectedObservations:
+    """Correct raw readings into geometric distances with their covariance (module docstring).
+
+    Parameters
+    ----------
+    raw : RawObservations
+    environment : EnvironmentLog, optional
+        Sensor log; without it the raw rows' own environment columns are used (one sensor, the
+        same for every row, so its errors are fully correlated between rows).
+    instrument : str, path or instrument object
+        Preset name (``"seed2020"``) or TOML path for :func:`multilat.instrument.load_instrument`.
+    formula : {"ciddor", "edlen"}
+        Group index formula (``"edlen"``: Bönsch-Potulski 1998).
+    heights : mapping id -> height (m), optional
+        Station/target heights in the sensors' frame, where the raw file has no height columns.
+    extrapolate : bool
+        Allow readings outside the log's time span (linear extrapolation, warned) or in a sensor's
+        gap longer than ``max_gap_s`` (interpolated across, warned).
+    max_gap_s : float, optional
+        Longest gap of a sensor's log bridged by interpolation (s); default 3 x its median logging
+        interval (:func:`multilat.campaign.environment.beam_environment`).
+    sensor_std : mapping quantity -> standard uncertainty, optional
+        Overrides the instrument's sensor uncertainties (keys of :data:`QUANTITIES`).
+
+    Returns
+    -------
+    CorrectedObservations
+    """
+    from multilat import adm, budget
+
+    if formula not in ("ciddor", "edlen"):
+        raise MultilatError(f"formula must be 'ciddor' or 'edlen', got {formula!r}")
+    inst = _load_instrument(instrument)
+    m = raw.size
+    notes: list[str] = []
+
+    # 1. the air along each beam
+    env, weights, sensors, grad, extrap = _beam_air(raw, environment, heights=heights, extrapolate=extrapolate,
+                                                    max_gap_s=max_gap_s, notes=notes)
+
+    # 2. group index, 3. distance in air
+    lam = _wavelength_m(inst)
+    n = _group_index(env, formula, lam)
+    phase_rows = ~np.isnan(raw.phase_rad)
+    d_air = raw.optical_path_m / n
+    if phase_rows.any():
+        d_air[phase_rows] = adm.distance_from_phase(raw.phase_rad[phase_rows], raw.k[phase_rows],
+                                                    raw.frequency_hz[phase_rows], n[phase_rows])
+
+    # 4. transit offsets, eq. (2)
+    d, head_corr, tgt_corr = _transit_corrections(raw, inst, d_air, notes)
+    if extrap.any():
+        notes.append(f"{int(extrap.sum())} observation(s) with extrapolated environment")
+
+    # 5. uncertainty: exact sensitivity to each sensor's calibration error
+    jac, labels, ustd_arr = _air_jacobian(env, formula, lam, d_air, n, weights, sensors,
+                                          _sensor_std(inst, sensor_std))
     cov_air = (jac * ustd_arr**2) @ jac.T
     sig_model = np.empty(m)
+    row_heads = raw.heads
     st = np.array(row_heads, dtype=object)
     for s in dict.fromkeys(row_heads):
         rows = st == s

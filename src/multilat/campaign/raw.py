@@ -176,6 +176,53 @@ def _opt_floats(t: CsvTable, name: str, **kw) -> np.ndarray | None:
 _RAW_NUMBERS = ("optical_path_m", "phase_rad", "frequency_hz", "k", "approx_distance_m")
 
 
+def _resolve_paths(opt, phase, freq, kk, approx, where) -> None:
+    """Check each row's reading and complete it in place: an optical path as given (> 0), or one
+    from the phase, frequency and integer ``k`` (resolved from ``approx`` where ``k`` is missing).
+    ``where(i)`` names row ``i`` in the errors."""
+    m = len(opt)
+    for i in range(m):
+        if not np.isnan(opt[i]):
+            if not np.isnan(phase[i]):
+                raise MultilatError(f"{where(i)}: give optical_path_m or phase_rad, not both")
+            if not opt[i] > 0:
+                raise MultilatError(f"{where(i)}: column 'optical_path_m': must be > 0, got {float(opt[i])!r}")
+            continue
+        if np.isnan(phase[i]):
+            raise MultilatError(f"{where(i)}: neither optical_path_m nor phase_rad given")
+        if not 0.0 <= phase[i] < 2 * math.pi:
+            raise MultilatError(f"{where(i)}: column 'phase_rad': must be in [0, 2π), got {float(phase[i])!r}")
+        if np.isnan(freq[i]) or not freq[i] > 0:
+            raise MultilatError(f"{where(i)}: column 'frequency_hz': must be > 0, got {float(freq[i])!r}")
+        if np.isnan(kk[i]):
+            if np.isnan(approx[i]):
+                raise MultilatError(f"{where(i)}: k missing and no approx_distance_m to resolve it")
+            if not approx[i] > 0:
+                raise MultilatError(f"{where(i)}: column 'approx_distance_m': must be > 0")
+            try:
+                kk[i] = float(adm.resolve_integer(phase[i], approx[i], freq[i], NOMINAL_GROUP_INDEX))
+            except MultilatError as exc:
+                raise MultilatError(f"{where(i)}: {exc}") from None
+        elif kk[i] < 0 or kk[i] != round(kk[i]):
+            raise MultilatError(f"{where(i)}: column 'k': must be an integer >= 0, got {float(kk[i])!r}")
+        opt[i] = float(adm.distance_from_phase(phase[i], int(kk[i]), freq[i], 1.0))
+        if not opt[i] > 0:
+            raise MultilatError(f"{where(i)}: phase and k give a zero distance")
+
+
+def _row_times(t, where) -> np.ndarray:
+    """The ``time`` column as seconds (ISO 8601, :func:`parse_time`)."""
+    m = len(t.rows)
+    col = t.column("time")
+    time_s = np.empty(m)
+    for i, s in enumerate(col):
+        try:
+            time_s[i] = parse_time(s)
+        except ValueError:
+            raise MultilatError(f"{where(i)}: column 'time': not an ISO 8601 time: {s!r}") from None
+    return time_s
+
+
 def read_raw(path: str | os.PathLike) -> RawObservations:
     """Read and validate a raw-reading file (format in the module docstring).
 
@@ -215,43 +262,9 @@ def read_raw(path: str | os.PathLike) -> RawObservations:
     kk = t.floats("k", required=False) if t.has("k") else nan.copy()
     approx = t.floats("approx_distance_m", required=False) if t.has("approx_distance_m") else nan.copy()
 
-    for i in range(m):
-        if not np.isnan(opt[i]):
-            if not np.isnan(phase[i]):
-                raise MultilatError(f"{where(i)}: give optical_path_m or phase_rad, not both")
-            if not opt[i] > 0:
-                raise MultilatError(f"{where(i)}: column 'optical_path_m': must be > 0, got {float(opt[i])!r}")
-            continue
-        if np.isnan(phase[i]):
-            raise MultilatError(f"{where(i)}: neither optical_path_m nor phase_rad given")
-        if not 0.0 <= phase[i] < 2 * math.pi:
-            raise MultilatError(f"{where(i)}: column 'phase_rad': must be in [0, 2π), got {float(phase[i])!r}")
-        if np.isnan(freq[i]) or not freq[i] > 0:
-            raise MultilatError(f"{where(i)}: column 'frequency_hz': must be > 0, got {float(freq[i])!r}")
-        if np.isnan(kk[i]):
-            if np.isnan(approx[i]):
-                raise MultilatError(f"{where(i)}: k missing and no approx_distance_m to resolve it")
-            if not approx[i] > 0:
-                raise MultilatError(f"{where(i)}: column 'approx_distance_m': must be > 0")
-            try:
-                kk[i] = float(adm.resolve_integer(phase[i], approx[i], freq[i], NOMINAL_GROUP_INDEX))
-            except MultilatError as exc:
-                raise MultilatError(f"{where(i)}: {exc}") from None
-        elif kk[i] < 0 or kk[i] != round(kk[i]):
-            raise MultilatError(f"{where(i)}: column 'k': must be an integer >= 0, got {float(kk[i])!r}")
-        opt[i] = float(adm.distance_from_phase(phase[i], int(kk[i]), freq[i], 1.0))
-        if not opt[i] > 0:
-            raise MultilatError(f"{where(i)}: phase and k give a zero distance")
+    _resolve_paths(opt, phase, freq, kk, approx, where)
 
-    time_s = None
-    if t.has("time"):
-        col = t.column("time")
-        time_s = np.empty(m)
-        for i, s in enumerate(col):
-            try:
-                time_s[i] = parse_time(s)
-            except ValueError:
-                raise MultilatError(f"{where(i)}: column 'time': not an ISO 8601 time: {s!r}") from None
+    time_s = _row_times(t, where) if t.has("time") else None
 
     env = None
     present = [c for c in ENV_COLUMNS if t.has(c)]

@@ -167,6 +167,24 @@ class TwoFaceResult:
     scaled: bool
 
 
+def _reference_per_target(data, tix, n_targets: int) -> np.ndarray:
+    """The known distance of each target (the largest given on its rows; NaN where none is)."""
+    return np.array([np.nanmax(np.r_[data.reference_distance_m[tix == j], np.nan])
+                     if np.any(np.isfinite(data.reference_distance_m[tix == j])) else np.nan
+                     for j in range(n_targets)])
+
+
+def _require_both_faces(data, tix, n_targets: int) -> None:
+    """Raise unless some target is read in both faces at an elevation whose cosine is away from 0
+    (else the transit offset is not observable)."""
+    both = [j for j in range(n_targets)
+            if {1, -1} <= set(data.face[tix == j].tolist())
+            and np.any(np.abs(np.cos(data.elevation_rad[tix == j])) > 0.01)]
+    if not both:
+        raise MultilatError("transit offset not observable: no target measured in both faces at an "
+                            "elevation with cos(elevation) away from 0")
+
+
 def estimate_two_face(data: TwoFaceData, *, sigma_m=None) -> TwoFaceResult:
     """Weighted least squares of the two-face model (module docstring) by Gauss-Newton.
 
@@ -189,16 +207,9 @@ def estimate_two_face(data: TwoFaceData, *, sigma_m=None) -> TwoFaceResult:
     sig = np.ones(m) if sig is None else np.broadcast_to(np.asarray(sig, dtype=float), (m,)).copy()
     targets = tuple(dict.fromkeys(data.target_ids))
     tix = np.array([targets.index(s) for s in data.target_ids])
-    ref_t = np.array([np.nanmax(np.r_[data.reference_distance_m[tix == j], np.nan])
-                      if np.any(np.isfinite(data.reference_distance_m[tix == j])) else np.nan
-                      for j in range(len(targets))])
+    ref_t = _reference_per_target(data, tix, len(targets))
     has_ref = np.isfinite(ref_t)
-    both = [j for j in range(len(targets))
-            if {1, -1} <= set(data.face[tix == j].tolist())
-            and np.any(np.abs(np.cos(data.elevation_rad[tix == j])) > 0.01)]
-    if not both:
-        raise MultilatError("transit offset not observable: no target measured in both faces at an "
-                            "elevation with cos(elevation) away from 0")
+    _require_both_faces(data, tix, len(targets))
     free = [j for j in range(len(targets)) if not has_ref[j]]
     labels = ["toh"] + (["constant"] if has_ref.any() else []) + [f"R:{targets[j]}" for j in free]
     p = len(labels)

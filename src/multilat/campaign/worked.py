@@ -183,6 +183,41 @@ def _group_index(env, formula, wavelength_m):
                            co2_ppm=env["co2_ppm"], wavelength_m=wavelength_m, formula=formula)
 
 
+def _beam_group_index(c, tb, pb, za, zb, true_env, formula: str, lam, *, exact_path: bool):
+    """The group index averaged along each beam from height ``za`` to ``zb`` (16-point Gauss-Legendre
+    over the true profile of ``c`` at base temperature ``tb`` and pressure ``pb``), or the index of
+    the true environment ``true_env`` when ``exact_path``."""
+    if exact_path:
+        return _group_index(true_env, formula, lam)
+    x, w = np.polynomial.legendre.leggauss(16)
+    s = 0.5 * (x + 1.0)
+    z = za[:, None] + (zb - za)[:, None] * s[None, :]
+    env_q = {"temperature_c": tb[:, None] + c.temperature_profile_c(z),
+             "pressure_hpa": np.broadcast_to(pb[:, None], z.shape),
+             "humidity_pct": np.full(z.shape, c.humidity_pct), "co2_ppm": np.full(z.shape, c.co2_ppm)}
+    return (_group_index(env_q, formula, lam) * (0.5 * w)[None, :]).sum(axis=1)
+
+
+def _sensor_log(c, u, rng, *, sensor_errors: bool):
+    """The simulated sensors' log under conditions ``c``, each sensor with one calibration error drawn
+    from its standard uncertainty ``u`` (zero without ``sensor_errors``). Returns ``(log, errors)``."""
+    S = len(c.sensor_heights_m)
+    err = {q: (rng.normal(0.0, u[q], S) if sensor_errors else np.zeros(S)) for q in QUANTITIES}
+    lt = np.arange(-c.log_interval_s, c.duration_s + 1.5 * c.log_interval_s, c.log_interval_s)
+    ltb, lpb = c.base(lt)
+    times, readings = [], []
+    for k, h in enumerate(c.sensor_heights_m):
+        times.append(START_TIME + lt)
+        readings.append({"temperature_c": ltb + c.temperature_profile_c(h) + err["temperature_c"][k],
+                         "pressure_hpa": lpb + err["pressure_hpa"][k],
+                         "humidity_pct": np.full(lt.size, c.humidity_pct) + err["humidity_pct"][k],
+                         "co2_ppm": np.full(lt.size, c.co2_ppm) + err["co2_ppm"][k]})
+    log = EnvironmentLog(path="<simulated log>", sensor_ids=tuple(f"S{k + 1}" for k in range(S)),
+                         height_m=np.array(c.sensor_heights_m, float), times_s=tuple(times),
+                         readings=tuple(readings), has_co2=True)
+    return log, err
+
+
 def simulate_campaign(station_ids, station_xyz_m, target_ids, target_xyz_m, *, offset_m=None,
                       conditions: CampaignConditions = PAPER_CONDITIONS, instrument="seed2020",
                       formula: str = "ciddor", rng=None, sensor_errors: bool = False,
@@ -252,16 +287,7 @@ def simulate_campaign(station_ids, station_xyz_m, target_ids, target_xyz_m, *, o
     true_env = {"temperature_c": tb + c.beam_profile_c(za, zb), "pressure_hpa": pb,
                 "humidity_pct": np.full(m, c.humidity_pct), "co2_ppm": np.full(m, c.co2_ppm)}
     lam = _wavelength_m(inst)
-    if exact_path:
-        n = _group_index(true_env, formula, lam)
-    else:
-        x, w = np.polynomial.legendre.leggauss(16)
-        s = 0.5 * (x + 1.0)
-        z = za[:, None] + (zb - za)[:, None] * s[None, :]
-        env_q = {"temperature_c": tb[:, None] + c.temperature_profile_c(z),
-                 "pressure_hpa": np.broadcast_to(pb[:, None], z.shape),
-                 "humidity_pct": np.full(z.shape, c.humidity_pct), "co2_ppm": np.full(z.shape, c.co2_ppm)}
-        n = (_group_index(env_q, formula, lam) * (0.5 * w)[None, :]).sum(axis=1)
+    n = _beam_group_index(c, tb, pb, za, zb, true_env, formula, lam, exact_path=exact_path)
 
     # distance the ADM sees: target transit offset (eq. 5 convention), head transit offset (eq. 2)
     model_err = np.zeros(m)
@@ -278,21 +304,7 @@ def simulate_campaign(station_ids, station_xyz_m, target_ids, target_xyz_m, *, o
     L = n * (d_mech + off[si])
 
     # sensor log
-    u = sensor_std_from_instrument(inst)
-    S = len(c.sensor_heights_m)
-    err = {q: (rng.normal(0.0, u[q], S) if sensor_errors else np.zeros(S)) for q in QUANTITIES}
-    lt = np.arange(-c.log_interval_s, c.duration_s + 1.5 * c.log_interval_s, c.log_interval_s)
-    ltb, lpb = c.base(lt)
-    times, readings = [], []
-    for k, h in enumerate(c.sensor_heights_m):
-        times.append(START_TIME + lt)
-        readings.append({"temperature_c": ltb + c.temperature_profile_c(h) + err["temperature_c"][k],
-                         "pressure_hpa": lpb + err["pressure_hpa"][k],
-                         "humidity_pct": np.full(lt.size, c.humidity_pct) + err["humidity_pct"][k],
-                         "co2_ppm": np.full(lt.size, c.co2_ppm) + err["co2_ppm"][k]})
-    log = EnvironmentLog(path="<simulated log>", sensor_ids=tuple(f"S{k + 1}" for k in range(S)),
-                         height_m=np.array(c.sensor_heights_m, float), times_s=tuple(times),
-                         readings=tuple(readings), has_co2=True)
+    log, err = _sensor_log(c, sensor_std_from_instrument(inst), rng, sensor_errors=sensor_errors)
 
     nan = np.full(m, np.nan)
     if phase:

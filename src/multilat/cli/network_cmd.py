@@ -226,7 +226,6 @@ def adjust_command(
         return general_adjust.run(**locals())
     given = dict(locals())                                 # for --model auto's fall-back
     from multilat.network.files import read_points, read_reference_lengths, write_result_tables
-    from multilat.network.result import result_to_json
 
     checks.table_format(tables, out)
     checks.sigma_um(sigma_um)
@@ -286,24 +285,7 @@ def adjust_command(
         import warnings
 
         warnings.warn(hint, UserWarning, stacklevel=1)
-    from multilat.vocabulary import stamp
-
-    doc = stamp(result_to_json(res, refs), "adjust")
-    from multilat.network import azimuth_sense as _az
-
-    if (az_rec := _az.record(obs, *_az.resolve(opts.azimuth_sense, instrument))) is not None:
-        doc["azimuth_sense"] = az_rec
-    if sigma_note:
-        doc["warnings"] = [sigma_note, *doc["warnings"]]
-    if vc is not None:
-        doc["variance_components"] = vc.to_json()
-    if corrected is not None:
-        from multilat.campaign.correlated import correlated_json
-
-        c = corrected.covariance_m2 if averaged is None else averaged.matrix @ corrected.covariance_m2 @ averaged.matrix.T
-        doc["with_correlations"] = correlated_json(res, c, refs)
-    if averaged is not None:
-        doc["repeats"] = averaged.scatter_json()
+    doc = _adjust_document(res, refs, obs, opts, instrument, sigma_note, vc, corrected, averaged)
     from multilat.io import INDENT_MAX_ROWS, write_json_atomic
 
     indent = res.obs.n_obs <= INDENT_MAX_ROWS          # 10^5-10^6 observations: compact
@@ -319,6 +301,35 @@ def adjust_command(
         emit_json(doc, "adjust", indent=indent)
         return
     _print_summary(res, doc, out)
+    _print_extras(doc, vc)
+
+
+def _adjust_document(res, refs, obs, opts, instrument, sigma_note, vc, corrected, averaged) -> dict:
+    """The ``adjust --json`` document: the result's, with the azimuth sense, the default-σ warning,
+    variance components, the sensors' correlations and the repeats' scatter where they apply."""
+    from multilat.network import azimuth_sense as _az
+    from multilat.network.result import result_to_json
+    from multilat.vocabulary import stamp
+
+    doc = stamp(result_to_json(res, refs), "adjust")
+    if (az_rec := _az.record(obs, *_az.resolve(opts.azimuth_sense, instrument))) is not None:
+        doc["azimuth_sense"] = az_rec
+    if sigma_note:
+        doc["warnings"] = [sigma_note, *doc["warnings"]]
+    if vc is not None:
+        doc["variance_components"] = vc.to_json()
+    if corrected is not None:
+        from multilat.campaign.correlated import correlated_json
+
+        c = corrected.covariance_m2 if averaged is None else averaged.matrix @ corrected.covariance_m2 @ averaged.matrix.T
+        doc["with_correlations"] = correlated_json(res, c, refs)
+    if averaged is not None:
+        doc["repeats"] = averaged.scatter_json()
+    return doc
+
+
+def _print_extras(doc: dict, vc) -> None:
+    """The summary's last lines: the azimuth sense, variance components, the sensors' correlations."""
     if "azimuth_sense" in doc:
         console.print(f"azimuths read {doc['azimuth_sense']['sense']} ({doc['azimuth_sense']['source']})",
                       markup=False)
@@ -327,7 +338,7 @@ def adjust_command(
                       + "; ".join(f"{c.group} σ × {c.sigma_scale:.3f} (factor {c.variance_factor:.3f} ± "
                                   f"{c.variance_factor_std:.3f}, r = {c.redundancy:.1f})" for c in vc.components),
                       markup=False)
-    if corrected is not None:
+    if "with_correlations" in doc:
         wc = doc["with_correlations"]
         offs = ", ".join(f"{sid} {v['offset_std_m'] * 1e6:.1f}" for sid, v in wc["stations"].items())
         console.print(f"with the sensors' correlations (G C Gᵀ): u(offset) µm: {offs}; largest target "
@@ -387,6 +398,19 @@ def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_si
                             alpha_family=alpha_family)
 
 
+def _left_out_lines(res) -> list[str]:
+    """The summary's lines for what was left out before solving and for mirror-ambiguous points."""
+    lines = []
+    if res.excluded:
+        lines.append("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
+                                                             for e in res.excluded))
+    if res.ambiguous:
+        lines.append(f"  warning: ambiguous geometry, {len(res.ambiguous)} point(s) placed only up to a mirror "
+                     f"that fits equally: {', '.join(a.id for a in res.ambiguous[:8])}"
+                     f"{' ...' if len(res.ambiguous) > 8 else ''} (JSON 'ambiguous')")
+    return lines
+
+
 def _print_summary(res, doc, out):
     console.print(f"adjusted {res.obs.n_stations} stations, {res.obs.n_targets} targets from "
                   f"{int(res.used.sum())}/{res.obs.n_obs} distances ({res.cost} cost; {res.datum.describe()})",
@@ -396,13 +420,8 @@ def _print_summary(res, doc, out):
                   f"{res.initial.get('method', '?')}", markup=False)
     console.print(f"  frame: {doc['frame']['axes']}", markup=False)      # the JSON's words (frame_words.py)
     console.print(f"  scale: {doc['frame']['scale']}", markup=False)
-    if res.excluded:
-        console.print("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
-                                                               for e in res.excluded), markup=False)
-    if res.ambiguous:
-        console.print(f"  warning: ambiguous geometry, {len(res.ambiguous)} point(s) placed only up to a mirror "
-                      f"that fits equally: {', '.join(a.id for a in res.ambiguous[:8])}"
-                      f"{' ...' if len(res.ambiguous) > 8 else ''} (JSON 'ambiguous')", markup=False)
+    for line in _left_out_lines(res):
+        console.print(line, markup=False)
     if res.cost == "squared":
         console.print(f"  σ0 = {res.sigma0:.4g} m² (unweighted squared-distance residuals, eq. 6), "
                       f"dof = {res.dof}; no global test for this cost")

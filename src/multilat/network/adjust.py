@@ -342,8 +342,7 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
     """:func:`adjust` with the options validated and the undetermined targets of the earlier tries."""
     cost, alpha, power, alpha_family = opts.cost, opts.alpha, opts.power, opts.alpha_family
     test_method, alpha_global = opts.test_method_resolved, opts.alpha_global_resolved
-    variance_factor, mdb_limit_sigma, r_min = opts.variance_factor, opts.mdb_limit_sigma, opts.r_min
-    snooping, max_rejections, strict = opts.snooping, opts.max_rejections, opts.strict
+    variance_factor, snooping, max_rejections = opts.variance_factor, opts.snooping, opts.max_rejections
     # the tests' levels (alpha_g(dof): the global test's); alpha is from here on the w-tests' (Šidák's)
     alpha_g = st.test_levels(n_tested(obs), alpha0=alpha, power=power, method=test_method,
                              alpha_global=alpha_global, alpha_family=alpha_family)
@@ -351,15 +350,11 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
     # MDBs: Baarda's reference at the given alpha0 (as the design's); the w-tests' own: tests.lambda0_w
     lam0 = st.noncentrality(alpha_g.alpha0_given, power)
     prep = _prepare(obs, opts, initial=initial, points=points, bars=bars, rng=rng, undetermined=undetermined)
-    obs, model, start, how, excluded, notes, ctrl = (prep.obs, prep.model, prep.start, prep.how, prep.excluded,
-                                                     prep.notes, prep.ctrl)
-    datum, off_free, off_val, sc_free = model.datum, model.off_free, model.off_val, model.sc_free
-    cspec = model.couplings
-    n_bars = 0 if cspec is None else len(cspec.bars)
+    obs, model, start, how, datum = prep.obs, prep.model, prep.start, prep.how, prep.model.datum
     do_snoop = snooping and cost == "distance"
     used = np.ones(obs.n_obs, bool)
     rounds = Rounds()
-    rejected, steps, ang_rejected = rounds.rejected, rounds.steps, rounds.ang_rejected
+    rejected, steps = rounds.rejected, rounds.steps
     limit = obs.n_obs if max_rejections is None else int(max_rejections)
     crit = st.w_critical(alpha)
     unknown = variance_factor == "unknown"
@@ -379,33 +374,11 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
             # the last adjustment and its downdates go before the next is built (peak memory)
             core = lin = None
             sub = obs_w if used.all() else obs_w.subset(used)
-            try:
-                core = model.fit(sub, guess, start, obs, used, warn=warn, partial_ok=first and search_ok)
-            except MultilatError as exc:
-                # computed initial values can make a solvable network look degenerate (a collapsed
-                # start): the search's restarts get their chance before the error is final
-                if not (first and search_ok and how["method"].startswith("distances")
-                        and ("near-degenerate" in str(exc) or isinstance(exc, UndeterminedTargets))):
-                    raise
-                core = start_as_partial(obs, start, exc)
-            slip = first and cost == "distance" and not unknown    # a unit slip stops (unit_slip.py)
-            if slip and how.get("far_minimum_again"):   # the restarts found this minimum twice: no search
-                check_unit_slip(obs, core, sigma_source)
-            if first and search_ok:
-                # a converged result failing the global test by far may be a wrong minimum: search
-                # (not under control points: they give the frame and the start; a failing test there
-                # is tested as inconsistent control just below)
-                core, search = _search_minimum(obs, core, start, model, rng)
-                how["search"] = search.as_dict()
-            if first and not core.partial:   # coplanar lines of sight: left out, adjusted again
-                raise_undetermined(obs, core, side_fixed_targets(obs, ctrl, cspec))
-            if first and datum.kind == "control" and cost == "distance":
-                # a failed global test under control may be the control coordinates, not the distances:
-                # test them (against the free network) before data snooping blames the distances
-                check_control(obs, core, start, points, off_free, off_val, sc_free, alpha_g(core.dof),
-                              model.max_iter, model.solver, model.chunk_targets, datum, cspec)
-            if slip:    # after the search (its best solution) and the control test (control at fault)
-                check_unit_slip(obs, core, sigma_source)
+            core = _fit_or_partial(model, sub, guess, start, obs, used, warn=warn, partial_ok=first and search_ok,
+                                   how=how)
+            if first:
+                core, search = _check_first_fit(obs, core, prep, opts, points=points, alpha_g=alpha_g,
+                                                sigma_source=sigma_source, rng=rng, search_ok=search_ok)
             first = False
             # the next adjustment (after a rejection) starts from this solution
             gs, gt_, go = guess.station_xyz_m.copy(), guess.target_xyz_m.copy(), guess.offset_m.copy()
@@ -437,6 +410,66 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
     # the rounds' state and the last adjustment's copy of the observations are not needed for the
     # result (at 1.6 M distances ~80 MB, live at the command's peak)
     lin = sub = None
+    return _finish(core, prep, opts, obs_w=obs_w, used=used, rounds=rounds, proc=proc, search=search,
+                   unlocated=unlocated, reason=reason, sigma_source=sigma_source)
+
+
+def _fit_or_partial(model, sub, guess, start, obs, used, *, warn, partial_ok, how):
+    """One adjustment of the observations ``sub`` (``used`` of ``obs``) from ``guess``; on the first one
+    with the minimum search to come (``partial_ok``), a start computed from distances that looks
+    degenerate gives the start as a partial result instead of the error."""
+    try:
+        return model.fit(sub, guess, start, obs, used, warn=warn, partial_ok=partial_ok)
+    except MultilatError as exc:
+        # computed initial values can make a solvable network look degenerate (a collapsed
+        # start): the search's restarts get their chance before the error is final
+        if not (partial_ok and how["method"].startswith("distances")
+                and ("near-degenerate" in str(exc) or isinstance(exc, UndeterminedTargets))):
+            raise
+        return start_as_partial(obs, start, exc)
+
+
+def _check_first_fit(obs, core, prep, opts, *, points, alpha_g, sigma_source, rng, search_ok):
+    """The checks of the first adjustment, before any rejection: a unit slip, the search for a false
+    minimum (``search_ok``), coplanar lines of sight, inconsistent control. Raises on a failure;
+    returns the (searched) adjustment and the search (None without one)."""
+    model, start, how = prep.model, prep.start, prep.how
+    datum, cspec, cost = model.datum, model.couplings, opts.cost
+    search = None
+    slip = cost == "distance" and opts.variance_factor != "unknown"    # a unit slip stops (unit_slip.py)
+    if slip and how.get("far_minimum_again"):   # the restarts found this minimum twice: no search
+        check_unit_slip(obs, core, sigma_source)
+    if search_ok:
+        # a converged result failing the global test by far may be a wrong minimum: search
+        # (not under control points: they give the frame and the start; a failing test there
+        # is tested as inconsistent control just below)
+        core, search = _search_minimum(obs, core, start, model, rng)
+        how["search"] = search.as_dict()
+    if not core.partial:   # coplanar lines of sight: left out, adjusted again
+        raise_undetermined(obs, core, side_fixed_targets(obs, prep.ctrl, cspec))
+    if datum.kind == "control" and cost == "distance":
+        # a failed global test under control may be the control coordinates, not the distances:
+        # test them (against the free network) before data snooping blames the distances
+        check_control(obs, core, start, points, model.off_free, model.off_val, model.sc_free, alpha_g(core.dof),
+                      model.max_iter, model.solver, model.chunk_targets, datum, cspec)
+    if slip:    # after the search (its best solution) and the control test (control at fault)
+        check_unit_slip(obs, core, sigma_source)
+    return core, search
+
+
+def _finish(core, prep, opts, *, obs_w, used, rounds, proc, search, unlocated, reason, sigma_source):
+    """The result of the last adjustment ``core`` after the snooping rounds: the false-minimum and
+    σ0 warnings, the variance factor applied, the tests' record, the couplings, angles and
+    mirror-ambiguous points."""
+    obs, model, start, how, excluded, notes, ctrl = (prep.obs, prep.model, prep.start, prep.how, prep.excluded,
+                                                     prep.notes, prep.ctrl)
+    datum, sc_free, cspec = model.datum, model.sc_free, model.couplings
+    n_bars = 0 if cspec is None else len(cspec.bars)
+    cost, power, variance_factor, strict = opts.cost, opts.power, opts.variance_factor, opts.strict
+    mdb_limit_sigma, r_min = opts.mdb_limit_sigma, opts.r_min
+    alpha, alpha_g, lam0, crit, unknown = proc.alpha, proc.alpha_g, proc.lam0, proc.crit, proc.unknown
+    do_snoop = proc.do_snoop
+    rejected, steps, ang_rejected = rounds.rejected, rounds.steps, rounds.ang_rejected
     if search is not None and p_value(core.vtpv, core.dof) < P_MIN:
         # still failing by far after data snooping: a possible false minimum, never passed as ordinary
         msg = search.warning or (
@@ -444,7 +477,7 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
             f"{core.sigma0:.3g}, chi-square p {p_value(core.vtpv, core.dof):.1e}): check for gross "
             "errors, a-priori sigma too small, or give approximate coordinates")
         notes.append(msg)
-        warnings.warn(msg, UserWarning, stacklevel=2)
+        warnings.warn(msg, UserWarning, stacklevel=3)
     if n_bars and datum.kind != "control" and np.all(sc_free):
         how["scale_datum"] = {"kind": "scale bars", "n_bars": n_bars,
                               "points": [cspec.bars[0][0], cspec.bars[0][1]]}
@@ -467,7 +500,7 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
                             variance_factor=variance_factor, source=describe_sigma(sigma_source or {}))
     if check["message"]:
         notes.append(check["message"])
-        warnings.warn(check["message"], UserWarning, stacklevel=2)
+        warnings.warn(check["message"], UserWarning, stacklevel=3)
     bars_out, ctrl_out = coupling_results(core)
     ang_out, orient = angle_results(core, lam0, final_crit)
     res = replace(res, excluded=excluded, warnings=tuple(notes), w_failure_groups=groups, initial=how,
@@ -480,6 +513,6 @@ def _adjust(obs: Observations, opts: NetworkOptions, *, initial, points, bars, s
         obs_w if used.all() else obs_w.subset(used), st_, start, obs, used, warn=False),
         lambda0=lam0, strict=strict, control=ctrl, couplings=cspec)
     if note:
-        warnings.warn(note, UserWarning, stacklevel=2)
+        warnings.warn(note, UserWarning, stacklevel=3)
         res = replace(res, ambiguous=amb, warnings=res.warnings + (note,))
     return replace(res, angle_outliers=angle_outliers(obs, ang_rejected, res))

@@ -44,6 +44,53 @@ POINT_STD = ("sx_m", "sy_m", "sz_m")
 POINT_NUMBERS = {"x_m": {}, "y_m": {}, "z_m": {}, **{c: dict(required=False) for c in POINT_STD}}
 
 
+def _head_column(tab, st):
+    """The head of each row (the station where the cell is empty), or None without a head column;
+    a station with two heads is refused at the row."""
+    if not tab.has("head"):
+        return None
+    hd = [h if h else s_ for h, s_ in zip(tab.column("head"), st)]
+    first: dict[str, int] = {}
+    for k, (s_, h) in enumerate(zip(st, hd)):
+        k0 = first.setdefault(s_, k)
+        if hd[k0] != h:
+            raise tab.error(k, f"station {s_!r} has head {h!r} here but {hd[k0]!r} at line "
+                               f"{tab.line_numbers[k0]} (one head per station)")
+    return hd
+
+
+def _angle_columns(tab, path):
+    """``(azimuth, elevation, σ azimuth, σ elevation)`` (rad; None where not given): elevation from
+    ``elevation_rad`` or ``zenith_rad``, both angles or neither, a σ only beside its angle."""
+    az = el = saz = sel = None
+    if tab.has("elevation_rad") and tab.has("zenith_rad"):
+        raise MultilatError(f"{path}: give elevation_rad or zenith_rad (zenith = π/2 − elevation), not both")
+    has_el = tab.has("elevation_rad") or tab.has("zenith_rad")
+    if tab.has("azimuth_rad") != has_el:
+        raise MultilatError(f"{path}: give both azimuth_rad and elevation_rad (or zenith_rad) columns, or neither")
+    if tab.has("azimuth_rad"):
+        az = tab.floats("azimuth_rad", **OBS_NUMBERS["azimuth_rad"])
+        if tab.has("zenith_rad"):
+            el = np.pi / 2 - tab.floats("zenith_rad", **OBS_NUMBERS["zenith_rad"])
+        else:
+            el = tab.floats("elevation_rad", **OBS_NUMBERS["elevation_rad"])
+    for name in ("sigma_azimuth_rad", "sigma_elevation_rad"):
+        if tab.has(name):
+            if az is None:
+                raise MultilatError(f"{path}: column {name} without the angle columns (azimuth_rad, "
+                                    "elevation_rad or zenith_rad)")
+            v = tab.floats(name, **OBS_NUMBERS[name])
+            ang = az if name == "sigma_azimuth_rad" else el
+            miss = np.flatnonzero(np.isfinite(v) & ~np.isfinite(ang))
+            if miss.size:
+                raise tab.error(int(miss[0]), f"column '{name}': a σ for an empty angle")
+            if name == "sigma_azimuth_rad":
+                saz = v
+            else:
+                sel = v
+    return az, el, saz, sel
+
+
 def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
                       instrument=None, sigma_source: dict | None = None) -> Observations:
     """Read an observations CSV.
@@ -80,46 +127,13 @@ def read_observations(path: str | os.PathLike, *, sigma_m: float | None = None,
     st = tab.ids("station")
     tg = tab.ids("target")
     d = tab.floats("distance_m", **OBS_NUMBERS["distance_m"])
-    hd = None
-    if tab.has("head"):
-        hd = [h if h else s_ for h, s_ in zip(tab.column("head"), st)]
-        first: dict[str, int] = {}
-        for k, (s_, h) in enumerate(zip(st, hd)):
-            k0 = first.setdefault(s_, k)
-            if hd[k0] != h:
-                raise tab.error(k, f"station {s_!r} has head {h!r} here but {hd[k0]!r} at line "
-                                   f"{tab.line_numbers[k0]} (one head per station)")
+    hd = _head_column(tab, st)
     both = set(st) & set(tg)
     if both:
         v = sorted(both)[0]
         k = st.index(v)
         raise tab.error(k, f"id {v!r} is used both as a station and as a target")
-    az = el = saz = sel = None
-    if tab.has("elevation_rad") and tab.has("zenith_rad"):
-        raise MultilatError(f"{path}: give elevation_rad or zenith_rad (zenith = π/2 − elevation), not both")
-    has_el = tab.has("elevation_rad") or tab.has("zenith_rad")
-    if tab.has("azimuth_rad") != has_el:
-        raise MultilatError(f"{path}: give both azimuth_rad and elevation_rad (or zenith_rad) columns, or neither")
-    if tab.has("azimuth_rad"):
-        az = tab.floats("azimuth_rad", **OBS_NUMBERS["azimuth_rad"])
-        if tab.has("zenith_rad"):
-            el = np.pi / 2 - tab.floats("zenith_rad", **OBS_NUMBERS["zenith_rad"])
-        else:
-            el = tab.floats("elevation_rad", **OBS_NUMBERS["elevation_rad"])
-    for name in ("sigma_azimuth_rad", "sigma_elevation_rad"):
-        if tab.has(name):
-            if az is None:
-                raise MultilatError(f"{path}: column {name} without the angle columns (azimuth_rad, "
-                                    "elevation_rad or zenith_rad)")
-            v = tab.floats(name, **OBS_NUMBERS[name])
-            ang = az if name == "sigma_azimuth_rad" else el
-            miss = np.flatnonzero(np.isfinite(v) & ~np.isfinite(ang))
-            if miss.size:
-                raise tab.error(int(miss[0]), f"column '{name}': a σ for an empty angle")
-            if name == "sigma_azimuth_rad":
-                saz = v
-            else:
-                sel = v
+    az, el, saz, sel = _angle_columns(tab, path)
     if tab.has("sigma_m"):
         sig = tab.floats("sigma_m", **OBS_NUMBERS["sigma_m"])
         _record(sigma_source, "column", path)

@@ -193,32 +193,13 @@ def _levelled_frame(sub, ang, sx0, tx0, a):
     return R0, -R0 @ sx0[a], b
 
 
-def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
-                 sc_free_all, max_iter, solver, chunk_targets, *, warn, partial_ok=False, couplings=None):
-    """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
-    ``ref_start`` gives the reference coordinates of the free datum; ``couplings`` (a
-    :class:`~multilat.network.couplings.CouplingSpec`) adds scale bars and weighted control.
-    Returns a :class:`~multilat.network.fit_state.Fit` in ``sub``'s order with the maps back."""
-    smap, tmap = station_map(obs, used), target_map(obs, used)
-    off_free, off_val, sc_free = off_free_all[smap], off_val_all[smap], sc_free_all[smap]
-    check_network(sub, datum, points, off_free, sc_free, warn=False, couplings=couplings)
-    cpl = None if couplings is None else couplings.resolve(sub)
-    from multilat.network.angle_rows import angle_rows, initial_orientations
-
-    ang = angle_rows(sub)
-    levelled = ang is not None and ang.any_levelled
-    s, t = sub.n_stations, sub.n_targets
-    sx0 = start.station_xyz_m[smap].copy()
-    tx0 = start.target_xyz_m[tmap].copy()
-    # heads that occupy several stations: one offset and scale each (the tie, problem.py); the
-    # initial values may have treated the stations independently, so start from their mean
-    off0 = head_mean(np.where(off_free, start.offset_m[smap], off_val), sub)
-    sc0 = head_mean(np.asarray(getattr(start, "scale", np.zeros(len(start.offset_m))), float)[smap], sub)
-    gfree = np.ones((s, Q), bool)
-    gfree[:, 3] = off_free
-    gfree[:, 4] = sc_free
-    tfree = np.ones(t, bool)
+def _hold_frame(sub, datum, points, sx0, tx0, gfree, tfree, ang):
+    """The initial coordinates ``sx0``, ``tx0`` in the datum's frame and the coordinates it holds
+    (cleared in ``gfree``/``tfree`` in place): the control points' (a rigid fit on them; weighted
+    control stays free), or the 3-2-1 frame of three stations (4 held coordinates under a rotation
+    about z when the vertical is observed). Returns the moved ``sx0``, ``tx0``."""
     all_ids = sub.station_ids + sub.target_ids
+    levelled = ang is not None and ang.any_levelled
     if datum.kind == "control":
         ctrl = control_ids(sub, datum, points)
         check_control_scale(sub, ctrl, points, sx0, tx0)
@@ -235,7 +216,6 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
             if tid in ctrl:
                 tx0[j] = points.get(tid)
                 tfree[j] = points.std(tid) is not None
-        R0, t0 = np.eye(3), np.zeros(3)
     else:
         if datum.kind == "321":
             for p in datum.points:
@@ -256,34 +236,16 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
             gfree[a, :3] = False
             gfree[b, 1:3] = False
             gfree[c, 2] = False
-    if ang is not None and cost != "distance":
-        raise MultilatError("angle observations need the distance cost (weighted observations)")
-    o0 = None if ang is None else initial_orientations(sub, ang, sx0, tx0)
-    pb = Problem(sub, cost, gfree, tfree, couplings=cpl, angles=ang)
-    backend = make_backend(pb, choose_backend(pb, solver), chunk_targets=chunk_targets)
-    p, conv = gauss_newton(pb, Params(sx0, tx0, off0, sc0, o0), backend, max_iter=max_iter)
-    if not conv.converged:
-        if partial_ok:      # the lowest-cost point reached: a start for the minimum search
-            return Fit(partial=True, sx=p.station_xyz_m, tx=p.target_xyz_m, off=p.offset_m,
-                       vtpv=weighted_cost(pb, p), dof=pb.dof, convergence=conv)
-        raise_unconverged(sub, p, conv)
-    sx, tx, off, sc = p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale
-    # final normal equations at the solution
-    fin = backend.assemble(p, 0.0)
-    check_target_blocks(fin.Ntt, pb)
-    _, Qgg, cond = solve_reduced(fin.N, fin.b, gfree.ravel(), pb, p)
-    r_w, Js_w, Jt_w = whitened(pb, p)
-    dof = pb.dof
-    vtpv = float(r_w @ r_w)
-    if cpl is not None:
-        e_w, E_rows = cpl.whitened(flatten_params(p))
-        vtpv += float(e_w @ e_w)
-    if ang is not None:
-        a_w, A_rows = ang.whitened(p.station_xyz_m, p.target_xyz_m, p.orientation_rad, s, t)
-        vtpv += float(a_w @ a_w)
-    sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")
-    factor = 1.0 if cost == "distance" else (sigma0 ** 2 if dof > 0 else float("nan"))
-    # move to the requested datum
+    return sx0, tx0
+
+
+def _move_to_datum(sub, datum, points, ref_start, smap, tmap, sx, tx, *, levelled):
+    """The adjusted coordinates ``sx``, ``tx`` moved to the requested datum (control: as they are;
+    3-2-1: the frame of its three points; free: a rigid fit to the reference coordinates ``ref_start``
+    (rows ``smap``, ``tmap``), or the given points' where there are some, about z only when levelled). Returns
+    ``(sx, tx, R, G, E)``: the rotation applied and the datum's constraint matrices (None under
+    control)."""
+    all_ids = sub.station_ids + sub.target_ids
     if datum.kind == "control":
         R, tr, G, E = np.eye(3), np.zeros(3), None, None
     else:
@@ -311,6 +273,79 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
         G, E = datum_matrices(datum, sub.station_ids, sub.target_ids, sx, tx)
         if levelled:      # 4 defects: the translations and the rotation about z
             G, E = G[:, ABOUT_Z_COLUMNS], E[:, ABOUT_Z_COLUMNS]
+    return sx, tx, R, G, E
+
+
+def _angle_fit(sub, ang, pb, p, cov, A_rows, R, G, E, *, levelled):
+    """The angles' part of the adjustment at the solution ``p``: residuals, redundancy numbers and the
+    orientations with their covariance in the datum (rotation ``R``, constraints ``G``, ``E``)."""
+    from multilat.network.angle_rows import orientation_covariance, rotate_orientations
+
+    s, t = sub.n_stations, sub.n_targets
+    free_all = np.concatenate([pb.station_free.ravel(), np.repeat(pb.target_free, 3), ang.orientation_free])
+    r_a = np.clip(1.0 - cov.quadratic(A_rows * free_all), 0.0, 1.0)
+    o_cov = orientation_covariance(cov, ang, p.orientation_rad, R, G, E, s, t,
+                                   rotation_axes=(2,) if levelled else (0, 1, 2))
+    return dict(rows=ang, residual_rad=ang.residuals(p.station_xyz_m, p.target_xyz_m, p.orientation_rad),
+                redundancy=r_a, orientation_rad=rotate_orientations(ang, p.orientation_rad, R),
+                orientation_cov=o_cov, station_ids=sub.station_ids, target_ids=sub.target_ids,
+                design_w=A_rows * free_all)
+
+
+def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
+                 sc_free_all, max_iter, solver, chunk_targets, *, warn, partial_ok=False, couplings=None):
+    """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
+    ``ref_start`` gives the reference coordinates of the free datum; ``couplings`` (a
+    :class:`~multilat.network.couplings.CouplingSpec`) adds scale bars and weighted control.
+    Returns a :class:`~multilat.network.fit_state.Fit` in ``sub``'s order with the maps back."""
+    smap, tmap = station_map(obs, used), target_map(obs, used)
+    off_free, off_val, sc_free = off_free_all[smap], off_val_all[smap], sc_free_all[smap]
+    check_network(sub, datum, points, off_free, sc_free, warn=False, couplings=couplings)
+    cpl = None if couplings is None else couplings.resolve(sub)
+    from multilat.network.angle_rows import angle_rows, initial_orientations
+
+    ang = angle_rows(sub)
+    levelled = ang is not None and ang.any_levelled
+    s, t = sub.n_stations, sub.n_targets
+    sx0 = start.station_xyz_m[smap].copy()
+    tx0 = start.target_xyz_m[tmap].copy()
+    # heads that occupy several stations: one offset and scale each (the tie, problem.py); the
+    # initial values may have treated the stations independently, so start from their mean
+    off0 = head_mean(np.where(off_free, start.offset_m[smap], off_val), sub)
+    sc0 = head_mean(np.asarray(getattr(start, "scale", np.zeros(len(start.offset_m))), float)[smap], sub)
+    gfree = np.ones((s, Q), bool)
+    gfree[:, 3] = off_free
+    gfree[:, 4] = sc_free
+    tfree = np.ones(t, bool)
+    sx0, tx0 = _hold_frame(sub, datum, points, sx0, tx0, gfree, tfree, ang)
+    if ang is not None and cost != "distance":
+        raise MultilatError("angle observations need the distance cost (weighted observations)")
+    o0 = None if ang is None else initial_orientations(sub, ang, sx0, tx0)
+    pb = Problem(sub, cost, gfree, tfree, couplings=cpl, angles=ang)
+    backend = make_backend(pb, choose_backend(pb, solver), chunk_targets=chunk_targets)
+    p, conv = gauss_newton(pb, Params(sx0, tx0, off0, sc0, o0), backend, max_iter=max_iter)
+    if not conv.converged:
+        if partial_ok:      # the lowest-cost point reached: a start for the minimum search
+            return Fit(partial=True, sx=p.station_xyz_m, tx=p.target_xyz_m, off=p.offset_m,
+                       vtpv=weighted_cost(pb, p), dof=pb.dof, convergence=conv)
+        raise_unconverged(sub, p, conv)
+    sx, tx, off, sc = p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale
+    # final normal equations at the solution
+    fin = backend.assemble(p, 0.0)
+    check_target_blocks(fin.Ntt, pb)
+    _, Qgg, cond = solve_reduced(fin.N, fin.b, gfree.ravel(), pb, p)
+    r_w, Js_w, Jt_w = whitened(pb, p)
+    dof = pb.dof
+    vtpv = float(r_w @ r_w)
+    if cpl is not None:
+        e_w, E_rows = cpl.whitened(flatten_params(p))
+        vtpv += float(e_w @ e_w)
+    if ang is not None:
+        a_w, A_rows = ang.whitened(p.station_xyz_m, p.target_xyz_m, p.orientation_rad, s, t)
+        vtpv += float(a_w @ a_w)
+    sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")
+    factor = 1.0 if cost == "distance" else (sigma0 ** 2 if dof > 0 else float("nan"))
+    sx, tx, R, G, E = _move_to_datum(sub, datum, points, ref_start, smap, tmap, sx, tx, levelled=levelled)
     if fin.coupled is not None:
         cov = CoupledCovariance(Qgg, fin.coupled, fin.Ntt_inv, Js_w, Jt_w, sub.station_index,
                                 sub.target_index, factor=factor, R=R, G=G, E=E)
@@ -326,18 +361,7 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
         r_c = 1.0 - cov.quadratic(E_rows * free_full)
         coupled = dict(couplings=cpl, residual_m=cpl.residuals(flatten_params(p)),
                        redundancy=np.clip(r_c, 0.0, 1.0))
-    angles = None
-    if ang is not None:
-        from multilat.network.angle_rows import orientation_covariance, rotate_orientations
-
-        free_all = np.concatenate([pb.station_free.ravel(), np.repeat(pb.target_free, 3), ang.orientation_free])
-        r_a = np.clip(1.0 - cov.quadratic(A_rows * free_all), 0.0, 1.0)
-        o_cov = orientation_covariance(cov, ang, p.orientation_rad, R, G, E, s, t,
-                                       rotation_axes=(2,) if levelled else (0, 1, 2))
-        angles = dict(rows=ang, residual_rad=ang.residuals(p.station_xyz_m, p.target_xyz_m, p.orientation_rad),
-                      redundancy=r_a, orientation_rad=rotate_orientations(ang, p.orientation_rad, R),
-                      orientation_cov=o_cov, station_ids=sub.station_ids, target_ids=sub.target_ids,
-                      design_w=A_rows * free_all)
+    angles = None if ang is None else _angle_fit(sub, ang, pb, p, cov, A_rows, R, G, E, levelled=levelled)
     return Fit(smap=smap, tmap=tmap, sx=sx, tx=tx, off=off, sc=sc, off_free=off_free, sc_free=sc_free, angles=angles,
                chunk_targets=chunk_targets, residual_w=r_w, redundancy=red, sigma0=sigma0, dof=dof,
                vtpv=vtpv, iterations=conv.iterations, cond=cond, cov=cov, convergence=conv,

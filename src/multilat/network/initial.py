@@ -357,6 +357,101 @@ def _grow(D, W, H, T, o, placedH, placedT):
 # ----------------------------------------------------------------------------- refinement
 
 
+def _check_coverage(obs, seen) -> None:
+    """Raise unless every target is seen by 4 stations and every station sees 4 targets (``seen``:
+    stations x targets)."""
+    s, t = seen.shape
+    for j in range(t):
+        if seen[:, j].sum() < 4:
+            raise MultilatError(f"target {obs.target_ids[j]!r} is seen by {int(seen[:, j].sum())} "
+                                "station(s); at least 4 are needed")
+    for i in range(s):
+        if seen[i].sum() < 4:
+            raise MultilatError(f"station {obs.station_ids[i]!r} sees {int(seen[i].sum())} "
+                                "target(s); at least 4 are needed")
+
+
+def _from_angles(obs, D, W, *, refine: bool) -> InitialValues | None:
+    """The angles route: the station with the most azimuth/elevation readings (at least 4) places its
+    targets by polar coordinates, the rest grows from them by multilateration (refined unless not
+    ``refine``), in that station's frame. None where the angles cannot place the whole network."""
+    s, t = len(obs.station_ids), len(obs.target_ids)
+    az, el = getattr(obs, "azimuth_rad", None), getattr(obs, "elevation_rad", None)
+    if az is None or el is None:
+        return None
+    ok = np.isfinite(az) & np.isfinite(el)
+    if not ok.any():
+        return None
+    counts = np.bincount(obs.station_index[ok], minlength=s)
+    h = int(np.argmax(counts))
+    if counts[h] < 4:
+        return None
+    H = np.full((s, 3), np.nan)
+    T = np.full((t, 3), np.nan)
+    o = np.zeros(s)
+    k = np.flatnonzero(ok & (obs.station_index == h))
+    j = obs.target_index[k]
+    dd = obs.distance_m[k]
+    u = np.column_stack([np.cos(el[k]) * np.cos(az[k]), np.cos(el[k]) * np.sin(az[k]),
+                         np.sin(el[k])])
+    H[h] = 0.0
+    T[j] = dd[:, None] * u
+    placedH = np.zeros(s, bool)
+    placedH[h] = True
+    placedT = np.zeros(t, bool)
+    placedT[j] = True
+    _grow(D, W, H, T, o, placedH, placedT)
+    if not (placedH.all() and placedT.all()):
+        return None
+    angle_frame = (H.copy(), T.copy())
+    frame = choose_frame(H)
+    H, T = to_frame(H, T, frame)
+    rms = float("nan")
+    if refine:
+        H, T, o, rms, _, conv = refine_fit(D, W, H, T, o, frame)
+    Hs, Ts = angle_frame
+    R, tr = rigid_fit(np.vstack([H, T]), np.vstack([Hs, Ts]))
+    return InitialValues(H @ R.T + tr, T @ R.T + tr, o, "angles", rms, conv if refine else None)
+
+
+def _best_block(D, W, seen, *, rng, good: float):
+    """Distances alone: complete blocks (best first) solved algebraically, grown to the whole network
+    and refined, until two reach the same RMS at the noise level ``good`` or three reach it.
+    Returns the best ``(H, T, o, frame, rms, robust, "algebraic", convergence)`` or None."""
+    s, t = seen.shape
+    best = None
+    n_good = 0
+    blocks = _blocks(seen)
+    for st, tg in blocks:
+        out = _block_solve(D[np.ix_(st, tg)], rng=rng)
+        if out is None:
+            continue
+        H = np.full((s, 3), np.nan)
+        T = np.full((t, 3), np.nan)
+        o = np.zeros(s)
+        H[st], T[tg], o[st], _ = out
+        placedH = np.zeros(s, bool)
+        placedH[st] = True
+        placedT = np.zeros(t, bool)
+        placedT[tg] = True
+        _grow(D, W, H, T, o, placedH, placedT)
+        if not (placedH.all() and placedT.all()):
+            continue
+        frame = choose_frame(H)
+        H, T = to_frame(H, T, frame)
+        H, T, o, rms, rob, conv = refine_unmirrored(D, W, H, T, o, frame)
+        # a second block reaching the same RMS confirms the minimum; a lower one replaces it
+        # (a false minimum can fit the noise level too: seen in ~0.5 % of gappy networks)
+        confirmed = best is not None and best[4] <= good and abs(rms - best[4]) <= 1e-6 * best[4]
+        if best is None or rms < best[4]:
+            best = (H, T, o, frame, rms, rob, "algebraic", conv)
+        if rms <= good:
+            n_good += 1
+        if confirmed or n_good >= 3:
+            break
+    return best
+
+
 def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20,
                    deadline: float | None = None) -> InitialValues:
     """Approximate station and target coordinates and station offsets of a network.
@@ -391,93 +486,22 @@ def initial_values(obs, *, rng=None, refine: bool = True, restarts: int = 20,
         Fewer than 4 stations, a target seen by fewer than 4 stations, a station seeing fewer than
         4 targets, or a network nothing could place.
     """
-    s, t = len(obs.station_ids), len(obs.target_ids)
+    s = len(obs.station_ids)
     if s < 4:
         raise MultilatError(f"initial values need at least 4 stations, got {s}")
     D, W = distance_matrix(obs)
     seen = np.isfinite(D)
-    for j in range(t):
-        if seen[:, j].sum() < 4:
-            raise MultilatError(f"target {obs.target_ids[j]!r} is seen by {int(seen[:, j].sum())} "
-                                "station(s); at least 4 are needed")
-    for i in range(s):
-        if seen[i].sum() < 4:
-            raise MultilatError(f"station {obs.station_ids[i]!r} sees {int(seen[i].sum())} "
-                                "target(s); at least 4 are needed")
+    _check_coverage(obs, seen)
 
-    H = np.full((s, 3), np.nan)
-    T = np.full((t, 3), np.nan)
-    o = np.zeros(s)
-    method = None
-    angle_frame = None
-
-    az, el = getattr(obs, "azimuth_rad", None), getattr(obs, "elevation_rad", None)
-    if az is not None and el is not None:
-        ok = np.isfinite(az) & np.isfinite(el)
-        if ok.any():
-            counts = np.bincount(obs.station_index[ok], minlength=s)
-            h = int(np.argmax(counts))
-            if counts[h] >= 4:
-                k = np.flatnonzero(ok & (obs.station_index == h))
-                j = obs.target_index[k]
-                dd = obs.distance_m[k]
-                u = np.column_stack([np.cos(el[k]) * np.cos(az[k]), np.cos(el[k]) * np.sin(az[k]),
-                                     np.sin(el[k])])
-                H[h] = 0.0
-                T[j] = dd[:, None] * u
-                placedH = np.zeros(s, bool)
-                placedH[h] = True
-                placedT = np.zeros(t, bool)
-                placedT[j] = True
-                _grow(D, W, H, T, o, placedH, placedT)
-                if placedH.all() and placedT.all():
-                    method = "angles"
-                    angle_frame = (H.copy(), T.copy())
-
-    if method is not None:
-        frame = choose_frame(H)
-        H, T = to_frame(H, T, frame)
-        rms = float("nan")
-        if refine:
-            H, T, o, rms, _, conv = refine_fit(D, W, H, T, o, frame)
-        Hs, Ts = angle_frame
-        R, tr = rigid_fit(np.vstack([H, T]), np.vstack([Hs, Ts]))
-        return InitialValues(H @ R.T + tr, T @ R.T + tr, o, method, rms, conv if refine else None)
+    from_angles = _from_angles(obs, D, W, refine=refine)
+    if from_angles is not None:
+        return from_angles
 
     # distances alone: complete blocks, best first, until the fit reaches the noise level
     gen = np.random.default_rng(rng)
     sig = np.sqrt(1.0 / W[seen])
     good = 10.0 * float(np.sqrt(np.mean(sig ** 2)))   # RMS residual of a converged network
-    best = None
-    n_good = 0
-    blocks = _blocks(seen)
-    for st, tg in blocks:
-        out = _block_solve(D[np.ix_(st, tg)], rng=gen)
-        if out is None:
-            continue
-        H = np.full((s, 3), np.nan)
-        T = np.full((t, 3), np.nan)
-        o = np.zeros(s)
-        H[st], T[tg], o[st], _ = out
-        placedH = np.zeros(s, bool)
-        placedH[st] = True
-        placedT = np.zeros(t, bool)
-        placedT[tg] = True
-        _grow(D, W, H, T, o, placedH, placedT)
-        if not (placedH.all() and placedT.all()):
-            continue
-        frame = choose_frame(H)
-        H, T = to_frame(H, T, frame)
-        H, T, o, rms, rob, conv = refine_unmirrored(D, W, H, T, o, frame)
-        # a second block reaching the same RMS confirms the minimum; a lower one replaces it
-        # (a false minimum can fit the noise level too: seen in ~0.5 % of gappy networks)
-        confirmed = best is not None and best[4] <= good and abs(rms - best[4]) <= 1e-6 * best[4]
-        if best is None or rms < best[4]:
-            best = (H, T, o, frame, rms, rob, "algebraic", conv)
-        if rms <= good:
-            n_good += 1
-        if confirmed or n_good >= 3:
-            break
+    best = _best_block(D, W, seen, rng=gen, good=good)
     bound = None
     again = False
     if best is None or best[4] > good:

@@ -422,6 +422,78 @@ def noise_choice(noise: str | None, instrument, *, cli: bool = False) -> tuple[s
     return noise, instrument
 
 
+def _model_instrument(problem: Problem, instrument):
+    """The instrument whose distance model the errors are drawn from (a preset name or path is
+    loaded); a laser tracker among the stations is refused (it has no such model)."""
+    from multilat import instrument as _instrument
+
+    inst = _instrument.load_instrument(instrument) if isinstance(instrument, str) else instrument
+    for sid, hd in zip(problem.station_ids, problem.heads):
+        if getattr(inst, "is_tracker", lambda _: False)(hd):
+            raise MultilatError(f"--noise model: station {sid!r} is the laser tracker {hd!r}, which has no "
+                                "error model to draw from here; use --noise gaussian (its σ from the MPE)")
+    return inst
+
+
+def _pair_columns(problem: Problem) -> np.ndarray:
+    """``(n_pairs, 2)`` point columns (stations first, then targets) of the interpoint distances."""
+    s = len(problem.station_ids)
+    pidx = []
+    for a, b in problem.pairs:
+        ka, ia = problem.point_index(a)
+        kb, ib = problem.point_index(b)
+        pidx.append((ia if ka == "station" else s + ia, ib if kb == "station" else s + ib))
+    return np.array(pidx, np.int64).reshape(-1, 2)
+
+
+def _run_adaptive(problem: Problem, items, mapper, noise_std, obs_cov, *, ndigits: int, max_trials: int,
+                  progress, batches_per_round: int):
+    """The adaptive run (:class:`multilat.montecarlo.AdaptiveRule`): batches of blocks (``items``
+    gives the work of a trial range, ``mapper`` runs it) until the watched quantities' estimates are
+    stable to ``ndigits`` digits or ``max_trials``. Returns ``(block results, trials done, the
+    adaptive record)``."""
+    blocks = []
+    done = 0
+    rule = AdaptiveRule(0.95, ndigits, max_trials, block=BLOCK)
+    # the criterion watches the quantities that vary: not those held by the datum (3-2-1), whose
+    # samples are rounding noise (same rule as PropagationResult.fixed)
+    lin0, _ = linear_std(problem, noise_std, obs_cov)
+    watch = lin0 > 1e-9 * np.max(lin0)
+
+    def evaluate_round(h0, h1):
+        """Chunks of batches h0..h1-1 submitted together; yields each batch's block results."""
+        work, owner = [], []
+        for h in range(h0, h1):
+            b0, b1 = rule.batch_range(h)
+            for it in items(b1 * BLOCK, first_block=b0):
+                work.append(it)
+                owner.append(h)
+        batch, current = [], h0
+        for h, res in zip(owner, mapper(_run_chunk, work)):
+            if h != current:
+                yield batch
+                batch, current = [], h
+            batch.extend(res)
+        yield batch
+
+    for batch in rule.batches(evaluate_round, batches_per_round):
+        blocks.extend(batch)
+        done += sum(r["n"] for r in batch)
+        if progress:
+            progress(done)
+        dev_b = np.concatenate([r["dev"] for r in batch])
+        if dev_b.shape[0] < 2:
+            raise MultilatError(f"only {dev_b.shape[0]} trials of adaptive batch {rule.h} converged: the "
+                                "network is too weak for a Monte Carlo from its nominal solution")
+        if rule.add(dev_b[:, watch]):
+            break
+    tol = rule.tolerance
+    adaptive_info = {"converged": rule.converged, "batches": rule.h, "batch_trials": rule.batch_trials,
+                     "tolerance_m_min": None if tol is None else float(np.min(tol)),
+                     "n_fixed_by_datum": int((~watch).sum())}
+    return blocks, done, adaptive_info
+
+
 def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str | None = None,
               instrument=None, adaptive: bool = False, ndigits: int = 2,
               max_trials: int = 2_000_000, chunk_size: int = 10_000, map=None,
@@ -474,25 +546,11 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str |
     for name, v, lo in (("trials", trials, 2), ("chunk_size", chunk_size, 1), ("max_trials", max_trials, 2)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
             raise MultilatError(f"{name} must be an integer >= {lo}, got {v!r}")
-    inst = None
-    if noise == "model":
-        from multilat import instrument as _instrument
-
-        inst = _instrument.load_instrument(instrument) if isinstance(instrument, str) else instrument
-        for sid, hd in zip(problem.station_ids, problem.heads):
-            if getattr(inst, "is_tracker", lambda _: False)(hd):
-                raise MultilatError(f"--noise model: station {sid!r} is the laser tracker {hd!r}, which has no "
-                                    "error model to draw from here; use --noise gaussian (its σ from the MPE)")
+    inst = _model_instrument(problem, instrument) if noise == "model" else None
     ss = resolve_seed(rng)
     entropy, key = ss.entropy, tuple(ss.spawn_key)
     net = problem.network
-    s = len(problem.station_ids)
-    pidx = []
-    for a, b in problem.pairs:
-        ka, ia = problem.point_index(a)
-        kb, ib = problem.point_index(b)
-        pidx.append((ia if ka == "station" else s + ia, ib if kb == "station" else s + ib))
-    pidx = np.array(pidx, np.int64).reshape(-1, 2)
+    pidx = _pair_columns(problem)
     obs_cov = None if problem.readings is None else \
         problem.readings.covariance_m2(noise, inst, problem.heads)
     noise_std = _noise_std(problem, noise, inst) if obs_cov is None else np.sqrt(np.diag(obs_cov))
@@ -529,43 +587,9 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str |
             if progress:
                 progress(done)
     else:
-        rule = AdaptiveRule(0.95, ndigits, max_trials, block=BLOCK)
-        # the criterion watches the quantities that vary: not those held by the datum (3-2-1), whose
-        # samples are rounding noise (same rule as PropagationResult.fixed)
-        lin0, _ = linear_std(problem, noise_std, obs_cov)
-        watch = lin0 > 1e-9 * np.max(lin0)
         if batches_per_round is None:
             batches_per_round = 1 if map is None else 4
-
-        def evaluate_round(h0, h1):
-            """Chunks of batches h0..h1-1 submitted together; yields each batch's block results."""
-            work, owner = [], []
-            for h in range(h0, h1):
-                b0, b1 = rule.batch_range(h)
-                for it in items(b1 * BLOCK, first_block=b0):
-                    work.append(it)
-                    owner.append(h)
-            batch, current = [], h0
-            for h, res in zip(owner, mapper(_run_chunk, work)):
-                if h != current:
-                    yield batch
-                    batch, current = [], h
-                batch.extend(res)
-            yield batch
-
-        for batch in rule.batches(evaluate_round, batches_per_round):
-            blocks.extend(batch)
-            done += sum(r["n"] for r in batch)
-            if progress:
-                progress(done)
-            dev_b = np.concatenate([r["dev"] for r in batch])
-            if dev_b.shape[0] < 2:
-                raise MultilatError(f"only {dev_b.shape[0]} trials of adaptive batch {rule.h} converged: the "
-                                    "network is too weak for a Monte Carlo from its nominal solution")
-            if rule.add(dev_b[:, watch]):
-                break
-        tol = rule.tolerance
-        adaptive_info = {"converged": rule.converged, "batches": rule.h, "batch_trials": rule.batch_trials,
-                         "tolerance_m_min": None if tol is None else float(np.min(tol)),
-                         "n_fixed_by_datum": int((~watch).sum())}
+        blocks, done, adaptive_info = _run_adaptive(problem, items, mapper, noise_std, obs_cov, ndigits=ndigits,
+                                                    max_trials=max_trials, progress=progress,
+                                                    batches_per_round=batches_per_round)
     return summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done, obs_cov)

@@ -377,10 +377,9 @@ def _obs_label(obs: Observations, k: int) -> dict:
     return {"station": obs.station_ids[obs.station_index[k]], "target": obs.target_ids[obs.target_index[k]]}
 
 
-def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) -> dict:
-    """The ``--json`` document of an adjustment, the same keys whichever back end ran."""
-    from multilat.network.frame_words import result_frame_words
-
+def _stations_json(res) -> dict:
+    """One object per station: coordinates, offset (and scale, orientation where estimated), their
+    covariance and the offset's correlations with the coordinates."""
     stations = {}
     corr = res.offset_correlations()
     o_heads = res.obs.head_of_station
@@ -394,11 +393,12 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
             stations[sid]["scale_std"] = res.scale_std[i]
         if sid in res.orientations:
             stations[sid].update(res.orientations[sid])
-    # one object per target, written from the columns (no Python object per target)
-    targets = JsonKeyedRows(res.target_ids, {"xyz_m": res.target_xyz_m, "cov_m2": res.target_cov_m2,
-                                             "n_obs": np.asarray(res.target_n_obs(), np.int64),
-                                             "redundancy": np.asarray(res.target_redundancy(), float)})
-    gt = res.global_test
+    return stations
+
+
+def _observation_rows(res) -> JsonRows:
+    """One row per observation (written from the columns, no Python object per row): the
+    observation, its residual, redundancy, w, MDB, rejection and, with reliability, its shifts."""
     o = res.obs
     si, ti = o.station_index, o.target_index
     # one row per observation, written from the columns (no Python object per row)
@@ -411,7 +411,21 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         labels, index = np.unique(np.asarray(rel.shift_point, dtype=str), return_inverse=True)
         cols.update(mdb_sigma=rel.mdb_sigma, bias_to_noise=rel.bnr, shift_max_m=rel.shift_max_m,
                     shift_point=(tuple(str(x) for x in labels), index))
-    observations = JsonRows(cols)
+    return JsonRows(cols)
+
+
+def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) -> dict:
+    """The ``--json`` document of an adjustment, the same keys whichever back end ran."""
+    from multilat.network.frame_words import result_frame_words
+
+    stations = _stations_json(res)
+    # one object per target, written from the columns (no Python object per target)
+    targets = JsonKeyedRows(res.target_ids, {"xyz_m": res.target_xyz_m, "cov_m2": res.target_cov_m2,
+                                             "n_obs": np.asarray(res.target_n_obs(), np.int64),
+                                             "redundancy": np.asarray(res.target_redundancy(), float)})
+    gt = res.global_test
+    o, rel = res.obs, res.reliability
+    observations = _observation_rows(res)
     doc = {
         "datum": res.datum.describe(),
         "frame": result_frame_words(res),

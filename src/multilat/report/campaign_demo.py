@@ -20,14 +20,9 @@ def section(*, seed: int, quick: bool) -> Section:
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    from multilat import gimbal, instrument
-    from multilat.campaign.correct import correct_raw
-    from multilat.campaign.twoface import TwoFaceData, estimate_two_face
-    from multilat.campaign.worked import (CampaignConditions, gradient_study,
-                                          large_volume_geometry, simulate_campaign)
-    from multilat.report.campaign_figures import correction_figure
+    from multilat import instrument
+    from multilat.campaign.worked import gradient_study, large_volume_geometry
 
     inst = instrument.load_instrument("seed2020")
     sec = Section("Measurement campaign: from raw readings to corrected distances (seed 000 §3.2, §4.2)")
@@ -39,11 +34,21 @@ def section(*, seed: int, quick: bool) -> Section:
         "group index of the air interpolated at its time and averaged along its beam, then for the transit "
         "offsets of head (Table III) and target (Table IV). The truth integrates the index along each beam.")
 
-    sids, sxyz, tids, txyz, off, floor = large_volume_geometry()
+    geometry = large_volume_geometry()
+    sids, sxyz, tids, txyz, off, floor = geometry
     study = gradient_study(sids, sxyz, tids, txyz, offset_m=off, instrument=inst, adjust=not quick, rng=seed,
                            floor_offset_m=floor)
-    camp = study.campaign
+    _conditions_table(sec, study)
+    _errors(sec, study, quick=quick)
+    _error_figures(sec, study)
+    _pipeline_checks(sec, study, inst, geometry, seed=seed, quick=quick)
+    _two_face_check(sec, inst, seed=seed, quick=quick)
+    return sec
 
+
+def _conditions_table(sec, study) -> None:
+    """The simulated log's conditions beside the paper's, and the paper's gradient error check."""
+    camp = study.campaign
     # conditions of the simulated log beside the paper's
     log = camp.log
     low = [k for k, h in enumerate(log.height_m) if h < 2.0]
@@ -71,6 +76,12 @@ def section(*, seed: int, quick: bool) -> Section:
           f"{abs(s_t) * 0.5 * PAPER_LONGEST_M * 1e6:.2f}"]],
         caption="The campaign's conditions and the paper's gradient error check (Ciddor group index, 1550 nm)")
 
+
+def _errors(sec, study, *, quick: bool) -> None:
+    """The distance errors of each correction and the coordinates after the adjustment (not when
+    ``quick``), with why the paper could ignore the gradient."""
+    camp = study.campaign
+    long_m = float(camp.true_distance_m[study.longest])
     rows = []
     for name in study.methods:
         e = study.distance_error_m[name]
@@ -97,6 +108,14 @@ def section(*, seed: int, quick: bool) -> Section:
         f"exact for a linear profile but not for this knee profile. The self-calibration absorbs part of the "
         f"distance errors in the head offsets, so the coordinate errors are not the distance errors.")
 
+
+def _error_figures(sec, study) -> None:
+    """The distance error of each reading against its beam's mid-height; the environment log."""
+    import matplotlib.pyplot as plt
+
+    from multilat.report.campaign_figures import correction_figure
+
+    camp = study.campaign
     # figure: per-reading distance error vs beam mid-height
     fig, ax = plt.subplots(figsize=(7.5, 3.4))
     zmid = 0.5 * (camp.raw.station_height_m + camp.raw.target_height_m)
@@ -112,6 +131,15 @@ def section(*, seed: int, quick: bool) -> Section:
                caption="The environment log per sensor, and each reading's index correction (µm/m) with its "
                        "sensor uncertainty (0.1 °C, 0.1 hPa, 2 %RH, 50 ppm per sensor, correlated)")
 
+
+def _pipeline_checks(sec, study, inst, geometry, *, seed: int, quick: bool) -> None:
+    """The round trip with the environment known exactly, and the χ² of the stated covariance over
+    simulated campaigns with sensor and instrument errors (linear profile), on the campaign's
+    ``geometry`` (:func:`multilat.campaign.worked.large_volume_geometry`)."""
+    from multilat.campaign.correct import correct_raw
+    from multilat.campaign.worked import CampaignConditions, simulate_campaign
+
+    sids, sxyz, tids, txyz, off, floor = geometry
     # round trip and uncertainty check
     lin = CampaignConditions(profile="linear", gradient_c_per_m=0.6)
     c_exact = simulate_campaign(sids, sxyz, tids, txyz, offset_m=off, conditions=lin, instrument=inst, phase=True,
@@ -137,6 +165,12 @@ def section(*, seed: int, quick: bool) -> Section:
                 f"{_um(r.sigma_air_m[study.longest])} / {_um(r.sigma_model_m[study.longest])} / "
                 f"{_um(r.sigma_m[study.longest])}"]],
               caption="Pipeline checks (linear profile, which the correction models exactly)")
+
+
+def _two_face_check(sec, inst, *, seed: int, quick: bool) -> None:
+    """Double-centering of head A from distances alone over simulated sessions (3D gimbal)."""
+    from multilat import gimbal
+    from multilat.campaign.twoface import TwoFaceData, estimate_two_face
 
     # two-face on head A: explicit 3D gimbal with Table III-size beam offset and tilt
     kw = dict(a_m=150e-6, c_m=-200e-6, alpha_rad=np.radians(0.1), gamma_rad=np.radians(-0.05))
@@ -173,4 +207,3 @@ def section(*, seed: int, quick: bool) -> Section:
               caption="Double-centering from distances alone: 3 targets x 2 faces x 5 readings (σ = 1 µm), "
                       "the explicit 3D head of multilat.gimbal with a = 150 µm, c = -200 µm, α = 0.1°, γ = -0.05°; "
                       "one target of known distance. a, c, α, γ themselves are not observable from distances.")
-    return sec

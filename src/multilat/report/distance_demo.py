@@ -41,6 +41,20 @@ def section(*, seed: int, quick: bool) -> Section:
         "physical parameter (SCR, phase noise, AM/PM coefficient, clock ageing), not typed in; the budget is our "
         "own Monte Carlo of eqs. (3)-(5) over 0.2-20.2 m. Interpretations: docs/distance-model.md.")
 
+    _telemetric_table(sec, inst)
+    _air_table(sec)
+    res = _budget_table(sec, inst, seed=seed, quick=quick)
+    _variants_table(sec, inst, res, seed=seed, quick=quick)
+    sec.paragraph(
+        "Sign of the target transit offset: eq. (5) (-2 Tot Rt cos phi') is the geometric one for Table IV's "
+        "Tot = +11 µm (transit axis displaced towards the head, like b'); eq. (2) as printed for the target holds "
+        "only with the opposite sign convention, and would double the error (2 x 11 µm at horizontal sight) if "
+        "used as the correction. Elevation angles are measured from the horizontal.")
+    return sec
+
+
+def _telemetric_table(sec, inst) -> None:
+    """Eq. (1) and Table I: the telemetric error sources from their physical parameters."""
     # ---- eq. (1) and Table I
     n_g = float(air.group_index(20.0, 101325.0, humidity_pct=50.0, co2_ppm=450.0, wavelength_m=1550e-9))
     t = adm.telemetric_terms(inst.adm, n_g)
@@ -60,6 +74,9 @@ def section(*, seed: int, quick: bool) -> Section:
     sec.table(("quantity", "paper", "multilat", "same to paper's rounding"), rows,
               caption="Eq. (1) and Table I: telemetric error sources from physical parameters (k = 1)")
 
+
+def _air_table(sec) -> None:
+    """Table II: the group index's sensitivities (Edlén and Ciddor)."""
     # ---- Table II
     paper2 = {"temperature_c": (-0.95, 1.0, "µm/m per °C"), "pressure_hpa": (0.27, 1.0, "µm/m per hPa"),
               "humidity_pct": (-0.09, 10.0, "µm/m per +10 %RH"), "co2_ppm": (0.03, 200.0, "µm/m per +200 ppm")}
@@ -74,6 +91,10 @@ def section(*, seed: int, quick: bool) -> Section:
               caption="Table II: group-index sensitivities at 20 °C, 1013.25 hPa, 50 %RH, 450 ppm, 1550 nm "
                       "(computed by multilat.air)")
 
+
+def _budget_table(sec, inst, *, seed: int, quick: bool):
+    """Section 3.4: the budget of one distance with head A beside the paper's, and its figure.
+    Returns the budget (with its samples)."""
     # ---- the budget
     n_a = 1500 if quick else inst.budget.trials_per_distance
     res = budget.distance_budget(inst, head="A", trials=n_a, rng=seed, keep_samples=True)
@@ -97,7 +118,12 @@ def section(*, seed: int, quick: bool) -> Section:
                caption="Error distributions (68 % red, 95 % red + blue) of the three groups (Fig. 9) and of "
                        "their sum (Fig. 10): bimodal telemetric (crosstalk), Lorentzian-like head, near-gaussian "
                        "target and total.")
+    return res
 
+
+def _variants_table(sec, inst, res, *, seed: int, quick: bool) -> None:
+    """The other heads, the u of head A's budget ``res`` as a standard deviation, and the readings of
+    the paper not chosen."""
     # ---- other heads and the other readings
     n_o = 300 if quick else 20_000
     rows = []
@@ -125,9 +151,3 @@ def section(*, seed: int, quick: bool) -> Section:
     sec.table(("variant", "paper", "group u (µm)", "combined u (µm)"), rows,
               caption=f"Other heads, and the readings of the paper we did not choose ({n_o:,} trials per distance): "
                       "only the defaults reproduce 3.9 and 4.7 µm together")
-    sec.paragraph(
-        "Sign of the target transit offset: eq. (5) (-2 Tot Rt cos phi') is the geometric one for Table IV's "
-        "Tot = +11 µm (transit axis displaced towards the head, like b'); eq. (2) as printed for the target holds "
-        "only with the opposite sign convention, and would double the error (2 x 11 µm at horizontal sight) if "
-        "used as the correction. Elevation angles are measured from the horizontal.")
-    return sec

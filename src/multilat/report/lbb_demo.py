@@ -2,9 +2,15 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from multilat.report.html import Section
+
+if TYPE_CHECKING:
+    from multilat.lbb.simulate import LBBSimulation
 
 PAPER_MAX_MEAN_ERROR_UM = 0.7      # §6: Fig. 8 colour scale "from zero to 0.7 µm"
 PAPER_MAX_STD_UM = 3.8             # §6: "the uncertainty is highest, 3.8 µm, at low z heights"
@@ -21,12 +27,9 @@ def section(*, seed: int, quick: bool) -> Section:
     import matplotlib
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
     from multilat.lbb.config import load_config
-    from multilat.lbb.model import pose_distributions
-    from multilat.lbb.simulate import base_xyz, l0_distribution, run_direct, run_procedure, volume_points
-    from multilat.lbb import figures as F
+    from multilat.lbb.simulate import volume_points
 
     cfg = load_config()
     sec = Section("Laser ball bar: trilateration uncertainty through an HTM model (seed 003)")
@@ -45,6 +48,42 @@ def section(*, seed: int, quick: bool) -> Section:
     pts = volume_points(cfg, grid)
     if quick:
         cfg = cfg.replace(monte_carlo__init_draws=500)
+    r = _runs(cfg, pts, seed=seed, quick=quick)
+    _comparison(sec, cfg, r)
+    _contributions_table(sec, cfg, r, seed=seed, quick=quick)
+    _figures(sec, cfg, r)
+    return sec
+
+
+@dataclass
+class _Runs:
+    """The simulations behind the section: the procedure over the volume (``proc`` at ``pts``), the
+    direct propagation at its worst points, the std profile above the base centroid (``cx``, ``cy``)
+    at heights ``z`` with its log-log ``slope`` and the height ``z38`` of the paper's largest std, the
+    L0 distribution, the thermal sigma ``th``, the procedure without base drift, and the direct
+    propagation at the profile's point ``i200`` (200 mm up)."""
+
+    pts: np.ndarray
+    proc: LBBSimulation
+    direct: LBBSimulation
+    z: np.ndarray
+    cx: float
+    cy: float
+    prof: LBBSimulation
+    slope: float
+    z38: float
+    l0: object
+    th: float
+    no_base: LBBSimulation
+    i200: int
+    d200: LBBSimulation
+
+
+def _runs(cfg, pts, *, seed: int, quick: bool) -> _Runs:
+    """The simulations of the section (``quick``: small draws), each with its own seed."""
+    from multilat.lbb.model import pose_distributions
+    from multilat.lbb.simulate import base_xyz, l0_distribution, run_direct, run_procedure
+
     proc = run_procedure(cfg, pts, rng=seed)
     # true bias: many direct trials at the points with the largest procedure std
     worst = np.argsort(-np.max(proc.std_m, axis=1))[: (2 if quick else 4)]
@@ -65,6 +104,13 @@ def section(*, seed: int, quick: bool) -> Section:
     # procedure vs direct at the centroid 200 mm up (the procedure's value is the profile's z = 0.2 m)
     i200 = int(np.argmin(np.abs(z - 0.2)))
     d200 = run_direct(cfg, np.array([[cx, cy, z[i200]]]), trials=500 if quick else 20000, rng=seed + 5)
+    return _Runs(pts, proc, direct, z, cx, cy, prof, slope, z38, l0, th, no_base, i200, d200)
+
+
+def _comparison(sec, cfg, r: _Runs) -> None:
+    """The paper's numbers beside ours, the mean errors' Monte Carlo noise, procedure vs direct."""
+    pts, proc, direct, z, prof, slope, z38, l0, th, no_base, i200, d200 = (
+        r.pts, r.proc, r.direct, r.z, r.prof, r.slope, r.z38, r.l0, r.th, r.no_base, r.i200, r.d200)
     bc = cfg.base
     base_sigma = max(bc.l12_m, bc.l13_m, bc.l23_m) * bc.thermal_cte_per_c * bc.thermal_bound_c / np.sqrt(3.0)
     mc = cfg.monte_carlo
@@ -113,6 +159,11 @@ def section(*, seed: int, quick: bool) -> Section:
         f"(x, y, z) = ({', '.join(_um(v, 2) for v in d200.std_m[0])}) µm ({d200.trials} trials) against the "
         f"procedure's ({', '.join(_um(v, 2) for v in prof.std_m[i200])}) µm; linear propagation J S J^T "
         "vs J diag(S) J^T reproduces both (tests/test_lbb_simulate.py).")
+
+
+def _contributions_table(sec, cfg, r: _Runs, *, seed: int, quick: bool) -> None:
+    """Which error group sets the uncertainty above the base centroid (one group at a time)."""
+    cx, cy = r.cx, r.cy
     from multilat.lbb.contributions import contributions
 
     rows = []
@@ -125,6 +176,16 @@ def section(*, seed: int, quick: bool) -> Section:
     sec.table(["z (mm)", "error group alone", "std x (µm)", "std y (µm)", "std z (µm)"], rows,
               caption="Which source sets the uncertainty above the base centroid (direct propagation, one "
                       "group at a time)")
+
+
+def _figures(sec, cfg, r: _Runs) -> None:
+    """Fig. 8 (|mean error|), the largest std over the volume, Fig. 9 and the std profile."""
+    import matplotlib.pyplot as plt
+
+    from multilat.lbb import figures as F
+    from multilat.lbb.simulate import base_xyz
+
+    proc, z, prof, slope = r.proc, r.z, r.prof, r.slope
     b = base_xyz(cfg)
     sec.figure(F.volume_map(proc, b, quantity="mean", marks_m=cfg.comparison.points()),
                caption="Fig. 8 (ours): |mean error| (colour) and direction of its in-plane part (arrows) on "
@@ -139,4 +200,3 @@ def section(*, seed: int, quick: bool) -> Section:
     sec.figure(fig, caption="Left: Fig. 9 (ours), cumulative distributions of error magnitudes. Right: "
                             "coordinate std above the base centroid against height (dashed: the paper's "
                             f"{PAPER_MAX_STD_UM} µm).")
-    return sec
