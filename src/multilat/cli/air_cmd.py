@@ -31,7 +31,11 @@ def air_command(
     water_vapour_pa: Optional[float] = typer.Option(
         None, "--water-vapour-pa", help="Water-vapour partial pressure, Pa (instead of --humidity-pct)."),
     co2_ppm: float = typer.Option(450.0, "--co2-ppm", help="CO2 content, µmol/mol (ppm)."),
-    wavelength_nm: float = typer.Option(1550.0, "--wavelength-nm", help="Vacuum wavelength, nm."),
+    wavelength_nm: float = typer.Option(1550.0, "--wavelength-nm", help="Vacuum wavelength, nm (default: "
+                                        "the --instrument's, else 1550)."),
+    instrument: Optional[str] = typer.Option(None, "--instrument",
+                                             help="Instrument preset or TOML: its ADM's vacuum wavelength "
+                                                  "(adm.wavelength_nm), as budget and correct use it."),
     formula: str = typer.Option("ciddor", "--formula",
                                 help="ciddor (Ciddor 1996), edlen (Bönsch & Potulski 1998) or "
                                      "edlen-nist (NIST modified Edlén; CO2 fixed at 450 ppm)."),
@@ -39,6 +43,7 @@ def air_command(
 ) -> None:
     """Phase and group refractive index of air, and the relative distance sensitivity (µm/m per
     °C, hPa, %RH, ppm CO2; group index, seed paper Table II sign convention)."""
+    wavelength_nm = _wavelength_nm(wavelength_nm, instrument)
     n_given = sum(v is not None for v in (humidity_pct, dew_point_c, water_vapour_pa))
     if n_given > 1:
         raise MultilatError("give only one of --humidity-pct, --dew-point-c, --water-vapour-pa")
@@ -60,7 +65,7 @@ def air_command(
             "inputs": {"temperature_c": temperature_c, "pressure_hpa": pressure_hpa,
                        "humidity_pct": humidity_pct, "dew_point_c": dew_point_c,
                        "water_vapour_pa": water_vapour_pa, "co2_ppm": co2_ppm,
-                       "wavelength_nm": wavelength_nm},
+                       "wavelength_nm": wavelength_nm, "instrument": instrument},
             "phase_index": n,
             "group_index": ng,
             "sensitivity_um_per_m": sens,
@@ -87,3 +92,18 @@ def air_command(
     console.print(t)
     console.print("sign: the change of a reported distance when the air parameter rises by one unit "
                   "and the index is not updated (a sensor reading high gives the opposite sign).")
+
+
+def _wavelength_nm(wavelength_nm: float, instrument: str | None) -> float:
+    """The vacuum wavelength: ``--wavelength-nm`` as given, else the instrument's ADM wavelength; both
+    given and different is refused in one line naming both (never one silently ignored)."""
+    if instrument is None:
+        return wavelength_nm
+    from multilat.cli.general_adjust import _given_options
+    from multilat.instrument import load_instrument
+
+    inst_nm = float(load_instrument(instrument).adm.wavelength_nm)
+    if "wavelength_nm" in _given_options({"wavelength_nm": wavelength_nm}) and wavelength_nm != inst_nm:
+        raise MultilatError(f"--wavelength-nm {wavelength_nm:g} contradicts adm.wavelength_nm = {inst_nm:g} of the "
+                            f"instrument {instrument} (drop one)")
+    return inst_nm
