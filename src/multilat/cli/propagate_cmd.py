@@ -63,8 +63,9 @@ def load_problem(source: str, opts, *, noise: str | None, instrument: str | None
 
     if not Path(source).exists():
         raise MultilatError(f"{source}: no such file (and not a built-in: {', '.join(BUILTIN)})")
-    header = _header(source)                   # None: unreadable, the reader names the fault by FILE:LINE
-    if inst is None and sigma_um is None and not is_raw_file(source) and header is not None and "sigma_m" not in header:
+    # a file that does not read whole is named by the reader (FILE:LINE) before the σ is asked for
+    if (inst is None and sigma_um is None and not is_raw_file(source) and "sigma_m" not in (_header(source) or ())
+            and _reads_whole(source)):
         raise MultilatError(f"{source}: no sigma_m column: give --sigma-um, or --instrument for the σ of its distance "
                             "model (a Monte Carlo never draws from an instrument nobody named)")
     refs = read_reference_lengths(references) if references is not None else None
@@ -85,19 +86,29 @@ def load_problem(source: str, opts, *, noise: str | None, instrument: str | None
 
 
 def _header(path) -> list[str] | None:
-    """The column names of a CSV file (its first line that is not a ``#`` comment); None when the file
-    does not read whole as UTF-8 text (the reader then names the fault by FILE:LINE, before the σ)."""
+    """The column names of a CSV file (its first line that is not a ``#`` comment, read alone); None
+    when unreadable (the reader then names the fault)."""
     import csv
 
     try:
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            text = fh.read()
-        for row in csv.reader(text.splitlines()):
-            if row and not row[0].lstrip().startswith("#"):
-                return [c.strip() for c in row]
+            for row in csv.reader(fh):
+                if row and not row[0].lstrip().startswith("#"):
+                    return [c.strip() for c in row]
     except (OSError, UnicodeDecodeError, csv.Error):
         return None
     return []
+
+
+def _reads_whole(path) -> bool:
+    """Whether the file decodes as UTF-8 to its end (read in 1 MiB pieces; only on the refusal's path)."""
+    try:
+        with open(path, encoding="utf-8-sig") as fh:
+            while fh.read(1 << 20):
+                pass
+    except (OSError, UnicodeDecodeError):
+        return False
+    return True
 
 
 def keep_freed_memory() -> None:

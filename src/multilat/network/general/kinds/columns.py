@@ -31,12 +31,12 @@ Roles of a column (``Column.role``):
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.inputs import finite_number
 from multilat.network.general.observations import Block
 
 __all__ = ["Column", "Rows", "value_sigma", "block_from_rows", "rows_from_block", "BOOLEANS"]
@@ -145,12 +145,7 @@ def _choice(rows: Rows, k: int, col: Column, cell: str) -> int:
 def _number(rows: Rows, k: int, col: Column, cell: str) -> float:
     if cell == "":
         return 0.0
-    try:
-        v = float(cell)
-    except ValueError:
-        raise MultilatError(f"{rows.where[k]}: column '{col.name}': not a number: {cell!r}") from None
-    if not math.isfinite(v):
-        raise MultilatError(f"{rows.where[k]}: column '{col.name}': must be finite, got {cell!r}")
+    v = finite_number(cell, f"{rows.where[k]}: column '{col.name}'")
     if col.within is not None and not col.within[0] <= v <= col.within[1]:
         raise MultilatError(f"{rows.where[k]}: column '{col.name}': must be within {col.within[2]}, got {cell!r}")
     return v
