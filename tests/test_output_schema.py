@@ -291,6 +291,11 @@ def test_out_files_carry_the_schema(tmp_path, capsys):
     doc = json.loads((tmp_path / "l" / "summary.json").read_text())
     assert _validator("lbb-simulate").is_valid(doc)
     model("lbb-simulate").model_validate(doc)
+    xml = str(_G / "two_trackers.xml")                       # the general path's result.json
+    assert main(["adjust", xml, "--out", str(tmp_path / "g")]) == 0
+    model("adjust-general").model_validate(json.loads((tmp_path / "g" / "result.json").read_text()))
+    assert main(["propagate", xml, "--trials", "200", "--out", str(tmp_path / "gp")]) == 0
+    model("propagate-general").model_validate(json.loads((tmp_path / "gp" / "result.json").read_text()))
     capsys.readouterr()
     # and every CSV column written follows the same convention
     bad = []
