@@ -71,7 +71,7 @@ SAMPLES = {
                        ["design", "--evaluate", f"{_G}/direction_sets.xml"],
                        ["design", "--evaluate", f"{_G}/vectors.xml"]],
     "budget": [["budget", "--trials", "2000"], ["budget", "--trials", "2000", "--air", "--seed", "3"]],
-    "air": [["air"]],
+    "air": [["air"], ["air", "--instrument", "seed2020", "--dew-point-c", "5"]],
     "correct": [["correct", f"{_EX}/campaign/raw.csv", "-e", f"{_EX}/campaign/environment.csv", "--heights",
                  f"{_EX}/campaign/heights.csv"]],
     "two-face": [["two-face", f"{_EX}/campaign/two_face.csv"]],
@@ -198,6 +198,8 @@ FAULTS = [
     ("design-general", ["reliability"], "n_weak", "0"),
     ("design", ["stations", "*"], "head", 1),
     ("budget", [], "seed", 1.5),
+    ("adjust-general", ["points", "*"], "cov_m2", [[None] * 3] * 3),     # null in a covariance
+    ("air", ["inputs"], "co2_ppm", "450"),
     ("import", [], "format", "other"),
     ("import", [], "dof", 3),                                             # gama-adjusted's key on starnet
 ]

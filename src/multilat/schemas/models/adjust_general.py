@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from multilat.schemas.models.base import Document, Excluded, Mat3, Num, Strict, Vec3
+from multilat.schemas.models.base import Cov3, Document, Excluded, Num, Strict, Vec3, XYZ
 
 __all__ = ["AdjustGeneralDocument", "RowRef", "RowReliability"]
 
@@ -80,9 +80,9 @@ class LargestShift(RowRef):
 
 
 class Point(Strict):
-    xyz_m: Vec3
+    xyz_m: XYZ
     xyz_std_m: Vec3
-    cov_m2: Mat3
+    cov_m2: Cov3
     semi_axes_95_m: Vec3
     roles: list[str]
     status: str

@@ -6,9 +6,23 @@ from typing import Literal
 
 from pydantic import Field
 
-from multilat.schemas.models.base import Document, Num, Strict
+from multilat.schemas.models.base import Document, Num, Real, Strict
 
 __all__ = ["AirDocument"]
+
+
+class AirInputs(Strict):
+    """The inputs as given: one of humidity, dew point or water-vapour pressure (the others null);
+    ``instrument`` the preset whose wavelength was used (``--instrument``), else null."""
+
+    temperature_c: Real
+    pressure_hpa: Real
+    humidity_pct: Real | None
+    dew_point_c: Real | None
+    water_vapour_pa: Real | None
+    co2_ppm: Real
+    wavelength_nm: Real
+    instrument: str | None
 
 
 class SensitivityUnits(Strict):
@@ -23,9 +37,9 @@ class AirDocument(Document):
 
     schema_: Literal["multilat.air/1"] = Field(alias="schema")
     formula: str
-    inputs: dict[str, Num]
-    phase_index: Num
-    group_index: Num
+    inputs: AirInputs
+    phase_index: Real
+    group_index: Real
     sensitivity_um_per_m: dict[str, Num]
     sensitivity_units: SensitivityUnits
     sign_convention: str

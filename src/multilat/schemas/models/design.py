@@ -7,22 +7,22 @@ from typing import Literal
 
 from pydantic import Field
 
-from multilat.schemas.models.base import Document, Mat3, Num, Strict, Vec3
+from multilat.schemas.models.base import Cov3, Document, Num, Strict, Vec3, XYZ
 
 __all__ = ["DesignDocument"]
 
 
 class Station(Strict):
     head: str
-    xyz_m: Vec3
-    cov_m2: Mat3
+    xyz_m: XYZ
+    cov_m2: Cov3
     offset_std_m: Num
     targets: list[str]
 
 
 class Target(Strict):
-    xyz_m: Vec3
-    cov_m2: Mat3
+    xyz_m: XYZ
+    cov_m2: Cov3
     u95_max_m: Num
     seen_by: int
 
@@ -86,7 +86,7 @@ class Start(Strict):
 
 
 class StartStation(Strict):
-    xyz_m: Vec3
+    xyz_m: XYZ
 
 
 class Search(Strict):

@@ -8,16 +8,16 @@ from typing import Literal
 from pydantic import Field
 
 from multilat.schemas.models.adjust_general import RowReliability
-from multilat.schemas.models.base import Document, Mat3, Num, Strict, Vec3
+from multilat.schemas.models.base import Cov3, Document, Num, Strict, Vec3, XYZ
 
 __all__ = ["DesignGeneralDocument"]
 
 
 class Point(Strict):
-    xyz_m: Vec3
+    xyz_m: XYZ
     status: str
     xyz_std_m: Vec3
-    cov_m2: Mat3
+    cov_m2: Cov3
     semi_axes_95_m: Vec3
 
 

@@ -6,16 +6,16 @@ from typing import Literal
 
 from pydantic import Field
 
-from multilat.schemas.models.base import Document, Mat3, Num, Strict, Vec3
+from multilat.schemas.models.base import Cov3, Document, Num, Strict, Vec3, XYZ
 
 __all__ = ["LbbSimulateDocument"]
 
 
 class Point(Strict):
-    nominal_m: Vec3
+    nominal_m: XYZ
     error_mean_m: Vec3
     std_m: Vec3
-    cov_m2: Mat3
+    cov_m2: Cov3
 
 
 class LbbSimulateDocument(Document):

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from multilat.schemas.models.base import Document, Num, Strict, Vec3
+from multilat.schemas.models.base import Document, Num, Strict, XYZ
 
 __all__ = ["LbbTrilaterateDocument"]
 
@@ -15,7 +15,7 @@ class Point(Strict):
     """A trilaterated point; ``xyz_m`` null and ``reason`` said where it is not valid."""
 
     point: str
-    xyz_m: Vec3 | None
+    xyz_m: XYZ | None
     valid: bool
     z_squared_m2: Num
     reason: str | None

@@ -6,7 +6,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from multilat.schemas.models.base import Document, Interval, Mat3, Num, SigmaSource, Strict, Vec3
+from multilat.schemas.models.base import Cov3, Document, Interval, Num, Real, SigmaSource, Strict, Vec3
 
 __all__ = ["PropagateDocument"]
 
@@ -15,7 +15,7 @@ class Row(Strict):
     """One propagated quantity (a parameter, or a distance in :class:`DistanceRow`), in m."""
 
     label: str
-    nominal_m: Num
+    nominal_m: Real
     mean_mc_m: Num
     std_mc_m: Num
     std_mc_se_m: Num = Field(description="Monte Carlo standard error of std_mc_m")
@@ -36,8 +36,8 @@ class DistanceRow(Row):
 
 class PointRow(Strict):
     id: str
-    cov_mc_m2: Mat3
-    cov_lin_m2: Mat3
+    cov_mc_m2: Cov3
+    cov_lin_m2: Cov3
     semi_axes_95_m: Vec3
     ellipsoid_coverage_mc: Num
     ellipsoid_coverage_lin: Num
@@ -102,13 +102,13 @@ class PropagateDocument(Document):
     noise: str
     solver: str
     seed: int
-    coverage: Num
+    coverage: Real
     sigma0_mean: Num
     sigma0_rms: Num
     sigma0_nominal: Num
     sigma0_noise_only: Num
     input_std_ratio: Num
-    elapsed_s: Num
+    elapsed_s: Real
     adaptive: Adaptive | None
     parameters: list[Row]
     distances: list[DistanceRow]

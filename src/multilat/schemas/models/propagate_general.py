@@ -7,7 +7,7 @@ from typing import Literal
 
 from pydantic import Field
 
-from multilat.schemas.models.base import Document, Excluded, Interval, Mat3, Num, Strict, Vec3
+from multilat.schemas.models.base import Cov3, Document, Excluded, Interval, Num, Real, Strict, Vec3
 
 __all__ = ["PropagateGeneralDocument"]
 
@@ -18,7 +18,7 @@ class Row(Strict):
 
     label: str
     unit: str
-    nominal: Num
+    nominal: Real
     mean_mc: Num
     std_mc: Num
     std_mc_se: Num = Field(description="Monte Carlo standard error of std_mc")
@@ -32,8 +32,8 @@ class Row(Strict):
 class Point(Strict):
     """A point with a free coordinate (held coordinates 0)."""
 
-    cov_mc_m2: Mat3
-    cov_lin_m2: Mat3
+    cov_mc_m2: Cov3
+    cov_lin_m2: Cov3
     std_mc_m: Vec3
     std_lin_m: Vec3
 
@@ -58,7 +58,7 @@ class PropagateGeneralDocument(Document):
     sigma0_rms: Num
     dof: int
     seed: int
-    elapsed_s: Num
+    elapsed_s: Real
     parameters: list[Row]
     distances: list[Row]
     points: dict[str, Point]
