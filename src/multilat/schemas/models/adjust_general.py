@@ -174,14 +174,12 @@ class VarianceComponents(Strict):
 
 
 class GeneralSigmaSource(Strict):
+    """Where the a-priori σ came from: ``kind`` (``file`` for gama-local's ``stdev=``; on a CSV ``file
+    column``, ``--sigma-um`` or ``distance model``), the input ``file``, and the sentence of the summary."""
+
     kind: str
-    file: str | None = None
-    description: str | None = None
-    column: str | None = None
-    sigma_m: Num = None
-    instrument: str | None = None
-    defaulted: bool | None = None
-    heads: dict[str, str] | None = None
+    file: str
+    description: str
 
 
 class Iteration(Strict):
