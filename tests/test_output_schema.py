@@ -229,6 +229,22 @@ def test_the_contract_refuses_unknown_keys_and_wrong_types(cmd, path, key, value
         assert not _validator(cmd).is_valid(doc)
 
 
+def test_validate_names_the_key_that_breaks_the_contract(tmp_path):
+    from multilat.errors import MultilatError
+    from multilat.schemas import validate
+
+    doc = copy.deepcopy(_doc("propagate-general", 0, tmp_path))
+    validate(doc)                                                # the command from its "schema"
+    doc["summary"]["n_agree"] = "all"
+    with pytest.raises(MultilatError, match=r"^propagate-general document, key summary\.n_agree: Input should be "
+                                            r"a valid integer"):
+        validate(doc)
+    with pytest.raises(MultilatError, match="not a multilat document"):
+        validate({"schema": "other/1"})
+    with pytest.raises(MultilatError, match="no document model for 'adjust'"):
+        validate({"schema": "multilat.adjust/1"})
+
+
 def test_a_renamed_or_undeclared_key_fails(tmp_path):
     doc = copy.deepcopy(_doc("adjust", 0, tmp_path))
     v = _validator("adjust")

@@ -9,7 +9,8 @@ The schemas are a contract written as typed models (:mod:`multilat.schemas.model
 module per command) and generated from them (:func:`generate`; ``python tools/write_schemas.py``
 rewrites the shipped files); ``tests/test_output_schema.py`` fails when a shipped file differs from its
 model's schema, and validates every command's documents on the shipped examples with the model
-(strict: undeclared keys and wrong types refused) and with the shipped file. A command's version (its
+(strict: undeclared keys and wrong types refused) and with the shipped file. From Python,
+:func:`validate` checks a document against its model. A command's version (its
 model's ``schema`` literal and :data:`multilat.vocabulary.SCHEMA_VERSIONS`) is bumped when the shape
 of its document changes. ``adjust`` (the distance path's document) has no model yet: its file is the
 one inferred from sample runs.
@@ -23,7 +24,7 @@ from importlib import resources
 
 from multilat.errors import MultilatError
 
-__all__ = ["COMMANDS", "load", "generate", "schema_id", "dumps"]
+__all__ = ["COMMANDS", "load", "generate", "schema_id", "dumps", "validate"]
 
 COMMANDS = ("adjust", "adjust-general", "propagate", "propagate-general", "simulate", "design", "design-general",
             "budget", "air", "correct", "two-face", "lbb-trilaterate", "lbb-simulate", "lbb-compare", "export",
@@ -68,6 +69,27 @@ def generate(command: str) -> dict:
     body.pop("title", None)
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": schema_id(m),
             "title": f"multilat {command.replace('-', ' ')} --json", **body}
+
+
+def validate(doc: dict, command: str | None = None) -> None:
+    """Check a document against its command's model (``command`` from its ``"schema"`` when not given):
+    a :class:`~multilat.errors.MultilatError` names the first key that breaks the contract and why."""
+    from pydantic import ValidationError
+
+    from multilat.schemas.models import model as model_of
+
+    if command is None:
+        sid = doc.get("schema") if isinstance(doc, dict) else None
+        if not isinstance(sid, str) or not sid.startswith("multilat.") or "/" not in sid:
+            raise MultilatError(f"schema: {sid!r} is not a multilat document's schema (multilat.<command>/<version>)")
+        command = sid[len("multilat."):].rsplit("/", 1)[0]
+    try:
+        model_of(command).model_validate(doc)
+    except ValidationError as e:
+        err = e.errors()[0]
+        where = ".".join(str(p) for p in err["loc"]) or "(document)"
+        more = f" (and {e.error_count() - 1} more)" if e.error_count() > 1 else ""
+        raise MultilatError(f"{command} document, key {where}: {err['msg']}{more}") from None
 
 
 def dumps(schema: dict) -> str:
