@@ -2,7 +2,7 @@
 
 Every sample run of :data:`SAMPLES` (each command on the shipped examples, with the options and inputs
 that add keys: blunders rejected and unlocatable, variance components, target selection, the adaptive
-Monte Carlo) must (a) carry ``"schema"`` first, equal to :func:`multilat.vocabulary.schema_id`,
+Monte Carlo, in Python: :func:`test_an_adaptive_propagation_follows_the_model`) must (a) carry ``"schema"`` first, equal to :func:`multilat.vocabulary.schema_id`,
 (b) validate with its typed model (:mod:`multilat.schemas.models`, strict: undeclared keys and wrong
 types refused) and against the shipped JSON Schema (jsonschema, draft 2020-12), and (c) use only names of
 the convention (:func:`multilat.vocabulary.document_problems`). The shipped schema files are what the
@@ -60,8 +60,7 @@ SAMPLES = {
                   ["propagate", f"{_EX}/campaign/raw.csv", "-e", f"{_EX}/campaign/environment.csv",
                    "--heights", f"{_EX}/campaign/heights.csv", "--trials", "1000",
                    "--average-repeats", "--instrument", "seed2020"],
-                  ["propagate", "small-volume", "--trials", "1000", "--instrument", "seed2020"],
-                  ["propagate", "small-volume", "--adaptive"]],
+                  ["propagate", "small-volume", "--trials", "1000", "--instrument", "seed2020"]],
     "propagate-general": [["propagate", f"{_G}/direction_sets.xml", "--trials", "300"],
                           ["propagate", f"{_EX}/general/two_trackers.xml", "--trials", "300"],
                           ["propagate", f"{_EX}/general/two_trackers_csv/obs.csv", "--model", "general",
@@ -158,8 +157,26 @@ def test_the_samples_reach_the_optional_parts(tmp_path):
     assert ag[2]["outliers"] and ag[3]["unlocated"] and ag[0]["variance_components"]
     assert "azimuth_sense" in ag[1]
     assert "target_selection" in _doc("design", 2, tmp_path) and "simulation" in _doc("design", 1, tmp_path)
-    assert _doc("propagate", 4, tmp_path)["adaptive"] and "readings" in _doc("propagate", 2, tmp_path)
+    assert "readings" in _doc("propagate", 2, tmp_path)
     assert {_doc("import", i, tmp_path)["format"] for i in (0, 2, 3)} == {"gama-adjusted", "starnet", "gama"}
+
+
+def test_an_adaptive_propagation_follows_the_model(tmp_path):
+    """``propagate --adaptive`` on the small volume takes ~40 s at ndigits 2: the same engine at ndigits 1
+    (3 batches), its document written as the CLI writes it (the CLI's keys around it)."""
+    from multilat.io import dumps_json
+    from multilat.network.configs import small_volume
+    from multilat.network.propagate import problem_from_config, propagate
+
+    res = propagate(problem_from_config(small_volume(), sigma_m=4.7e-6, source="small-volume"), adaptive=True,
+                    ndigits=1, rng=3, noise="gaussian", keep_samples=False)
+    doc = json.loads(dumps_json(dict(_doc("propagate", 1, tmp_path), **res.to_dict())))
+    assert doc["adaptive"]["converged"] and doc["adaptive"]["batches"] >= 2
+    model("propagate").model_validate(doc)
+    assert _validator("propagate").is_valid(doc)
+    doc["adaptive"]["batches"] = 2.5
+    with pytest.raises(ValidationError):
+        model("propagate").model_validate(doc)
 
 
 def test_every_command_has_a_schema_a_model_and_a_sample():
