@@ -36,7 +36,7 @@ SCHEMA = "adjust-general"
 
 #: the adjust command's parameters that the general path reads
 APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method",
-           "alpha_family", "model", "snooping", "variance_components")
+           "alpha_family", "model", "snooping", "variance_components", "report")
 #: ... and on a multilat CSV network (``--model general``)
 APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offsets_um", "scales", "fixed_scale",
                          "scale_bar", "references", "levelled", "seed", "azimuth_sense")
@@ -53,11 +53,9 @@ WHY_NOT = {
     "datum": "the datum of a gama-local file is its fix=/adj= attributes (upper-case adj = datum points)",
     "points": "the file's <point> elements carry the coordinates", "sigma_um": "the σ are the file's stdev=",
     "instrument": "the σ are the file's stdev=",
-    "report": "the HTML report is built from the distance path's result",
 }
 #: why an option is refused with ``--model general`` on a CSV network (the default reason for the others)
 WHY_NOT_CSV = {
-    "report": "the HTML report is built from the distance path's result",
     "cost": "the general path minimises the weighted distance residuals only",
     "solver": "the general path has one dense back end",
     "average_repeats": "repeated readings are kept as separate observations on the general path",
@@ -275,6 +273,9 @@ def run(**params) -> None:
     inputs = [path] + [params.get(k) for k in ("points", "references") if params.get(k) is not None]
     if out is not None:
         check_output_dir(out, inputs=inputs)
+    from multilat.cli import report_opt
+
+    report_opt.check_report_path(params.get("report"), inputs)
     tests = dict(alpha=alpha, variance_factor=vf, alpha_global=a_glob, strict=params["strict"], method=method,
                  alpha_family=params.get("alpha_family", 0.01), snooping=params.get("snooping", True),
                  variance_components=params.get("variance_components"))
@@ -299,6 +300,9 @@ def run(**params) -> None:
                       stacklevel=2)
     if out is not None:
         write_out(out, inputs, doc)
+    from multilat.report.general_sections import build_report
+
+    report_opt.write_report(params.get("report"), "adjust", doc, result=adj, build=build_report)
     from multilat.cli.app import emit_json
 
     if params["as_json"]:
