@@ -4,15 +4,18 @@ layer (:mod:`multilat.network.general`) from the command line: parse, call, prin
 Reached from the ``adjust`` command (:mod:`multilat.cli.network_cmd`) when its input is a gama-local
 file (suffix ``.xml`` / ``.gkf``, or a ``<gama-local>`` root element), or with ``--model general``
 on multilat's own observation CSV (:mod:`multilat.network.general.from_tables`). For a gama-local
-file the options that apply are ``--json``, ``--out DIR``, ``--alpha``, ``--variance-factor``,
-``--test-method``, ``--alpha-global`` and ``--strict``: the file itself carries the datum
+file the options that apply are ``--json``, ``--out DIR``, ``--report FILE.html``
+(:mod:`multilat.report.general_sections`), ``--alpha``, ``--variance-factor``, ``--test-method``,
+``--alpha-global`` and ``--strict``: the file itself carries the datum
 (``fix=``/``adj=``), the σ (``stdev=`` and ``<points-observations>``) and the approximate
 coordinates. A CSV network also takes ``--points``, ``--datum free|control``, ``--sigma-um``,
 ``--instrument``, ``--fix-offsets-um``, ``--scales``, ``--fixed-scale``, ``--references`` with
 ``--scale-bars``, ``--levelled``, ``--seed`` and ``--no-snooping``. Every other option is refused in
 one line naming it (never silently ignored). The model is never switched silently: the default
 (distance) path's refusals by station counts say that ``--model general`` adjusts by what the
-observations determine (:func:`refusal_hint`).
+observations determine (:func:`refusal_hint`). Under ``--model auto`` (the default) such a refusal,
+or polar points the distance path would leave out (:func:`polar_left_out`), takes the general path
+instead, said in one warning line and first in the JSON's notes (:func:`fall_back`).
 """
 
 from __future__ import annotations
