@@ -227,9 +227,9 @@ def is_general_input(path) -> bool:
 def given_options(params: dict | None = None) -> list[str]:
     """The names of the parameters (of ``params``; None: every parameter of the running command) given
     on the command line (click's parameter source); [] outside a command."""
-    from multilat.cli.report_opt import _current_context
+    from multilat.cli.report_opt import current_context
 
-    ctx = _current_context()
+    ctx = current_context()
     if ctx is None:
         return []
     given = []

@@ -34,7 +34,7 @@ def write_report(path, command: str, doc: dict, *, result=None, build=None) -> N
     from multilat.io import write_text_atomic
     from multilat.report.job import JobContext, build_report
 
-    ctx = _current_context()
+    ctx = current_context()
     options = dict(ctx.params) if ctx is not None else {}
     line = ctx.command_path if ctx is not None else f"multilat {command}"
     jc = JobContext.from_options(command, options, command_line=line, warnings=collected_warnings())
@@ -43,10 +43,13 @@ def write_report(path, command: str, doc: dict, *, result=None, build=None) -> N
         console.print(f"report written to {path}", markup=False)
 
 
-def _current_context():
+def current_context():
     """The running command's click context (typer >= 0.2x carries its own copy of click)."""
     try:
         from typer._click.globals import get_current_context
     except ImportError:  # pragma: no cover - typer on the public click
         from click import get_current_context
     return get_current_context(silent=True)
+
+
+_current_context = current_context      # the former private name
