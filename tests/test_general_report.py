@@ -105,6 +105,10 @@ def _controlled(o):
 def test_sections_in_the_auditors_order(pages, name):
     dom, _ = pages[name]
     assert [s["key"] for s in dom] == ORDER
+    opts = next(t for t in section(dom, "run")["tables"] if t["caption"] == "Options")
+    listed = {r[0]["text"] for r in opts["rows"]}
+    assert {"alpha", "strict"} <= listed and not listed & {"cost", "mdb_limit_sigma", "solver", "tables"}
+    assert ("points" in listed) == (name != "station_control")   # a gama-local file carries its points
 
 
 @pytest.mark.parametrize("name", ["polar", "station_control", "blunder"])

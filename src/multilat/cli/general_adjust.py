@@ -303,9 +303,12 @@ def run(**params) -> None:
                       stacklevel=2)
     if out is not None:
         write_out(out, inputs, doc)
+    import functools
+
     from multilat.report.general_sections import build_report
 
-    report_opt.write_report(params.get("report"), "adjust", doc, result=adj, build=build_report)
+    report_opt.write_report(params.get("report"), "adjust", doc, result=adj,
+                            build=functools.partial(build_report, applies=applies))
     from multilat.cli.app import emit_json
 
     if params["as_json"]:

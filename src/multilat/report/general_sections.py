@@ -63,14 +63,19 @@ def sections(doc: dict, *, warnings=()) -> list[Section]:
     return out
 
 
-def build_report(ctx, doc: dict, *, result=None) -> str:
+def build_report(ctx, doc: dict, *, result=None, applies=None) -> str:
     """The whole page: results (verdicts first), warnings, and last what was run (inputs with their
-    sha256, options, version) — the machinery of :mod:`multilat.report.job`."""
+    sha256, options, version) — the machinery of :mod:`multilat.report.job`. ``applies``: the names
+    of the options the general path reads (the others, the distance path's, are not listed)."""
+    import dataclasses
+
     from multilat.io import to_jsonable
     from multilat.report.html import render
     from multilat.report.job import job_warnings, meta_section, uncertainty_note, warnings_section
 
     doc = to_jsonable(doc)
+    if applies is not None:
+        ctx = dataclasses.replace(ctx, options={k: v for k, v in ctx.options.items() if k in applies})
     secs = [*sections(doc, warnings=job_warnings(ctx, doc)), warnings_section(ctx, doc), meta_section(ctx, doc)]
     return render(f"multilat {ctx.command}: {TITLE}", secs, subtitle=uncertainty_note())
 
