@@ -20,6 +20,11 @@
     the old path's refusals carry the hint ``--model general``; options the general layer cannot
     honour are refused by name; the JSON validates against the shipped schema
     (src/multilat/schemas/adjust-general.json) with ``points`` and ``parameters`` as id maps.
+(d) ``--model auto``'s rule for polar points (docs/general-network.md, "Polar points under auto"):
+    the polar network goes to the general layer (one warning line, first note, the same adjustment
+    as --model general, checked in (b) against the independent solution); a 2-distance target alone,
+    an option the general layer lacks, or a size above the dense bound keep the distance path; the
+    default-σ warning in the general JSON's ``warnings``; the frame words in the summary.
 """
 
 from __future__ import annotations
