@@ -306,3 +306,54 @@ def test_cli_result_with_estimated_scale_divides_it_out(capsys, tmp_path, seq):
     row = {got.obs.label(j): j for j in range(got.obs.n_obs)}
     d = got.obs.distance_m[[row[obs.label(j)] for j in range(obs.n_obs)]]
     assert np.max(np.abs(d - obs.distance_m)) <= E_ROUND * (1 + abs(k))
+
+
+@pytest.fixture(scope="module")
+def mixed_results(tmp_path_factory):
+    """``adjust --out`` of the mixed example as it is (trackers unlevelled: ω, φ, κ unknowns) and with
+    ``--levelled AT1,AT2`` (κ only)."""
+    d = tmp_path_factory.mktemp("mixed_results")
+    for name, extra in (("free", []), ("levelled", ["--levelled", "AT1,AT2"])):
+        assert main([str(a) for a in ["adjust", MIX, "--out", d / name, *extra]]) == 0
+    return d
+
+
+@pytest.mark.parametrize("fmt", ["gama", "jag3d", "starnet"])
+def test_unlevelled_trackers_of_a_result_exported_levelled_refused(capsys, tmp_path, fmt, mixed_results):
+    """An adjustment that estimated the trackers' tilt (ω, φ) exported with ``--levelled``: the format
+    would hold them level, a model other than the one adjusted. Before: written silently (the tilt,
+    -18382 µrad for AT2, dropped). Now one line naming the station, its estimated tilt and the format."""
+    out = tmp_path / "n.out"
+    rc, _, err = _run(capsys, ["export", fmt, MIX, "--result", mixed_results / "free", "--levelled", "AT1,AT2",
+                               "-o", out])
+    _one_line_error(rc, err, f"{fmt}: station 'AT1' is exported levelled", "estimated its tilt (omega = ",
+                    "µrad, phi = ", "--levelled AT1")
+    assert not list(tmp_path.iterdir())
+    rc, _, err = _run(capsys, ["export", fmt, MIX, "--result", mixed_results / "free", "-o", out])
+    _one_line_error(rc, err, f"{fmt}: station 'AT1' reads angles", "tilt (ω, φ) has no counterpart")
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("fmt", ["gama", "jag3d", "starnet"])
+def test_levelled_trackers_of_a_result_carried(capsys, tmp_path, fmt, mixed, mixed_results):
+    """The levelled adjustment's result exports (its heads and angles carried) and comes back with the
+    same heads, levelled stations, number of angles and dof as the direct adjustment."""
+    obs, res = mixed
+    out = tmp_path / ("n.xml" if fmt == "gama" else "n.txt" if fmt == "jag3d" else "n.dat")
+    rc, o, err = _run(capsys, ["export", fmt, MIX, "--result", mixed_results / "levelled", "--levelled", "AT1,AT2",
+                               "-o", out, "--json"])
+    assert rc == 0, err
+    doc = json.loads(o)
+    assert doc["n_angles"] == int(np.isfinite(obs.sigma_azimuth_rad).sum() + np.isfinite(obs.sigma_elevation_rad).sum())
+    if fmt == "gama":
+        net = read_gama_local(out)
+    elif fmt == "starnet":
+        net = read_starnet(out)
+    else:
+        files = [Path(f) for f in doc["files"]]
+        net = read_jag3d(files[-1], files[:-1])
+    got = net.obs
+    assert set(got.levelled) == {"AT1", "AT2"}
+    assert dict(zip(got.station_ids, got.head_of_station)) == dict(zip(obs.station_ids, obs.head_of_station))
+    assert np.isfinite(got.sigma_azimuth_rad).sum() == np.isfinite(obs.sigma_azimuth_rad).sum()
+    assert adjust(got, points=net.points, solver="dense").dof == res.dof == 47

@@ -68,7 +68,10 @@ def export_command(
     offsets, scales = None, None
     pts = read_points(points) if points is not None else None
     if result is not None:
+        from multilat.network.interop.angles import refuse_tilted_result
+
         pts, offsets, scales = read_result_dir(result)
+        refuse_tilted_result(obs, result, fmt)
         if fmt == "jag3d":
             offsets = None        # JAG3D estimates them itself (one zero-point offset per group = head)
     if offsets_um is not None:
