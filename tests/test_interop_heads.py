@@ -357,3 +357,36 @@ def test_levelled_trackers_of_a_result_carried(capsys, tmp_path, fmt, mixed, mix
     assert dict(zip(got.station_ids, got.head_of_station)) == dict(zip(obs.station_ids, obs.head_of_station))
     assert np.isfinite(got.sigma_azimuth_rad).sum() == np.isfinite(obs.sigma_azimuth_rad).sum()
     assert adjust(got, points=net.points, solver="dense").dof == res.dof == 47
+
+
+def test_import_gama_general_files_keep_the_heads(capsys, tmp_path):
+    """``import gama`` of a multilat export writes two readings: distances.csv (heads restored) and the
+    general network's observations.csv, which ``multilat adjust OUT`` takes. Before: observations.csv
+    held Gama's model (distances minus the fixed offsets, no heads), so ``adjust OUT`` gave dof 44
+    with the offsets silently held. Now it carries each head as an instrument with its offset
+    estimated: dof 42 and the offsets of the distances.csv adjustment (same numbers, two solvers:
+    1e-9 m), within the rounding bound of the direct adjustment."""
+    rc, _, e = _run(capsys, ["adjust", SEQ, "--out", tmp_path / "adj"])
+    assert rc == 0, e
+    rc, _, e = _run(capsys, ["export", "gama", SEQ, "--result", tmp_path / "adj", "-o", tmp_path / "n.xml"])
+    assert rc == 0, e
+    rc, o, e = _run(capsys, ["import", "gama", tmp_path / "n.xml", "-o", tmp_path / "imp", "--json"])
+    assert rc == 0, e
+    notes = json.loads(o)["notes"]
+    rc, o, e = _run(capsys, ["adjust", tmp_path / "imp", "--json"])
+    assert rc == 0, e
+    general = json.loads(o)
+    rc, o, e = _run(capsys, ["adjust", tmp_path / "imp" / "distances.csv", "--points", tmp_path / "imp" / "points.csv",
+                             "--json"])
+    assert rc == 0, e
+    dist = json.loads(o)
+    assert general["dof"] == dist["dof"] == 42
+    assert any("offsets are unknowns again" in n for n in notes)
+    for h, v in dist["heads"].items():
+        p = general["parameters"][f"offset:{h}"]
+        assert abs(p["value"] - v["offset_m"]) < SOLVER and p["std"] == pytest.approx(v["offset_std_m"], rel=1e-6)
+    direct = json.loads((tmp_path / "adj" / "result.json").read_text())
+    obs = read_observations(SEQ)
+    for h, v in direct["heads"].items():
+        bound = E_ROUND * np.sqrt(obs.n_obs) * v["offset_std_m"] / float(obs.sigma_m.min())
+        assert abs(general["parameters"][f"offset:{h}"]["value"] - v["offset_m"]) <= bound, h

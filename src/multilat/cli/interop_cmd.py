@@ -229,6 +229,25 @@ def import_command(
                       f"control:{','.join(net.fixed)} to keep them")
 
 
+def _restored_general(old, source: Path):
+    """The general network of a multilat export read back with its model restored (``old``: the
+    interop reader's network): one instrument per head with its offset estimated, levelled stations'
+    angles, the file's fixed points held (:func:`~multilat.network.general.from_tables.network_from_tables`,
+    the mapping ``adjust obs.csv --model general`` uses)."""
+    from multilat.network.general.from_tables import network_from_tables
+
+    import dataclasses
+
+    import numpy as np
+
+    datum = f"control:{','.join(old.fixed)}" if old.fixed else "free"
+    net = network_from_tables(old.obs, points=old.points, datum=datum, source=source.name)[0]
+    if not old.fixed:                                  # free: every point a datum point, as the file's reading
+        pts = dataclasses.replace(net.points, constrained=np.ones(net.points.n, bool))
+        net = dataclasses.replace(net, points=pts)
+    return net
+
+
 def _import_gama(source: Path, out: Path, as_json: bool) -> None:
     """``import gama``: the whole network as multilat's files for the general network
     (observations.csv, points.csv, covariances.csv: every kind, σ, heights, partly fixed points;
@@ -254,6 +273,10 @@ def _import_gama(source: Path, out: Path, as_json: bool) -> None:
     doc = {"format": "gama", "n_obs": net.n_rows, "n_points": net.points.n,
            "fixed": [p for p, s in zip(net.points.ids, net.points.status) if (s == FIXED).any()],
            "n_angles": sum(b.n_rows for b in net.blocks if KINDS[b.kind].UNIT == "rad"), "notes": list(net.notes)}
+    if old is not None and old.restored:               # a multilat export: its heads and offsets, not Gama's model
+        net = _restored_general(old, source)
+        doc["notes"].append("observations.csv: the file's multilat-heads/-offsets lines applied: the heads' "
+                            "offsets are unknowns again, as in distances.csv")
     with staging_dir(out, inputs=[source]) as tmp:
         written = write_network_files(net, tmp, comments=[f"imported from {source.name} by multilat import gama",
                                                           *net.notes])

@@ -43,12 +43,15 @@ class Network:
     points : Points      the points that have three coordinates in the file (may be empty)
     fixed : tuple of str the points the file holds fixed (control), in file order
     notes : tuple of str what the reader applied or ignored, one line each
+    restored : bool      the file's multilat lines (heads, offsets, scales) were applied: ``obs``
+                         is multilat's model again, not the file's corrected distances
     """
 
     obs: Observations
     points: Points
     fixed: tuple = ()
     notes: tuple = field(default=())
+    restored: bool = False
 
 
 def read_text(path) -> str:
@@ -246,13 +249,14 @@ def restore_model(path, rows, tags: ModelTags, notes: list) -> tuple[list, dict 
                 raise MultilatError(f"{tags.where['offsets']}: head {h!r} has two offsets ({other} "
                                     f"{offsets.get(other, 0.0)!r}, {s} {offsets.get(s, 0.0)!r}): one head has one offset")
         notes.append("per-station offsets restored from the file: "
-                     + ", ".join(f"{k} {v * 1e6:.4f} um" for k, v in offsets.items()))
+                     + ", ".join(f"{k} {v * 1e6:.4f} µm" for k, v in offsets.items()))
     if scales:
         notes.append("fixed scales restored from the file (the source divided them out): "
                      + ", ".join(f"{h} {k:.10g}" for h, k in scales.items())
                      + "; adjust with --scales to estimate them again")
     if heads is not None:
-        notes.append(f"{len(set(heads.values()))} heads over {len(stations)} stations restored from the file: "
+        n_h = len(set(heads.values()))
+        notes.append(f"{n_h} head{'s' if n_h > 1 else ''} over {len(stations)} stations restored from the file: "
                      + ", ".join(f"{h} ({' '.join(s for s in stations if heads[s] == h)})"
                                  for h in dict.fromkeys(heads[s] for s in stations)))
     o = offsets or {}
