@@ -390,3 +390,36 @@ def test_import_gama_general_files_keep_the_heads(capsys, tmp_path):
     for h, v in direct["heads"].items():
         bound = E_ROUND * np.sqrt(obs.n_obs) * v["offset_std_m"] / float(obs.sigma_m.min())
         assert abs(general["parameters"][f"offset:{h}"]["value"] - v["offset_m"]) <= bound, h
+
+
+TRACKERS = Path(__file__).resolve().parents[1] / "examples" / "tutorial" / "trackers.csv"
+
+
+def test_result_of_the_general_model_exports(capsys, tmp_path):
+    """``--result`` of ``adjust --model general`` (points.csv, result.json; before: ``stations.csv: no
+    such file``): its coordinates and each head's estimated constant ``offset:H`` are used; the levelled
+    trackers come back through Gama with the same dof 39 and constants within the file's rounding
+    (the bound of the module docstring); the unlevelled adjustment (ω, φ estimated) exported with
+    --levelled is refused naming the tilt."""
+    for name, extra in (("lev", ["--levelled", "T1,T2"]), ("free", [])):
+        rc, _, e = _run(capsys, ["adjust", TRACKERS, "--model", "general", "--out", tmp_path / name, *extra])
+        assert rc == 0, e
+    rc, _, e = _run(capsys, ["export", "gama", TRACKERS, "--result", tmp_path / "lev", "--levelled", "T1,T2",
+                             "-o", tmp_path / "t.xml"])
+    assert rc == 0, e
+    rc, _, e = _run(capsys, ["import", "gama", tmp_path / "t.xml", "-o", tmp_path / "imp"])
+    assert rc == 0, e
+    rc, o, e = _run(capsys, ["adjust", tmp_path / "imp", "--json"])
+    assert rc == 0, e
+    back, direct = json.loads(o), json.loads((tmp_path / "lev" / "result.json").read_text())
+    assert back["dof"] == direct["dof"] == 39
+    obs = read_observations(TRACKERS)
+    for h in ("T1", "T2"):
+        a, b = back["parameters"][f"offset:{h}"], direct["parameters"][f"offset:{h}"]
+        bound = E_ROUND * np.sqrt(obs.n_obs) * b["std"] / float(obs.sigma_m.min())
+        assert abs(a["value"] - b["value"]) <= bound and a["std"] == pytest.approx(b["std"], rel=1e-6), h
+    out = tmp_path / "x.xml"
+    rc, _, err = _run(capsys, ["export", "gama", TRACKERS, "--result", tmp_path / "free", "--levelled", "T1,T2",
+                               "-o", out])
+    _one_line_error(rc, err, "gama: station 'T1' is exported levelled", "estimated its tilt (omega = ")
+    assert not out.exists()

@@ -81,7 +81,8 @@ def export_command(
             missing = [s for s in obs.head_ids if s not in offsets][0]
             raise MultilatError(f"--offsets-um: no value for {what} {missing!r}; give every {what}'s")
     fixed = _fixed_ids(fix)
-    inputs = [observations, points] + ([result / "stations.csv", result / "targets.csv"] if result else [])
+    inputs = [observations, points] + ([result / n for n in ("stations.csv", "targets.csv", "points.csv", "result.json")]
+                                       if result else [])
     written = [out]
     if fmt == "gama":
         from multilat.network.interop.gama import write_gama_local

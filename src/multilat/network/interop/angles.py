@@ -42,6 +42,21 @@ def angle_sigmas(obs: Observations, fmt: str, tool: str) -> tuple[np.ndarray, np
     return sa, se
 
 
+def _general_setups(par: dict) -> dict:
+    """The set-ups' orientation in a general result's ``parameters`` (``omega:U``, ``phi:U``,
+    ``kappa:U``) in the distance path's shape: ``{U: {parameters, orientation_rad,
+    orientation_std_rad}}``."""
+    out: dict = {}
+    for key, v in par.items():
+        name, _, setup = key.partition(":")
+        if name in ("omega", "phi", "kappa"):
+            st = out.setdefault(setup, {"parameters": [], "orientation_rad": [], "orientation_std_rad": []})
+            st["parameters"].append(name)
+            st["orientation_rad"].append(float(v["value"]))
+            st["orientation_std_rad"].append(float(v["std"]))
+    return out
+
+
 def refuse_tilted_result(obs: Observations, directory, fmt: str) -> None:
     """Refuse (one line) a station exported as levelled whose adjustment in ``directory`` (the
     ``--out`` of ``multilat adjust``) estimated its tilt ω, φ: the format would hold it level, a
@@ -54,7 +69,8 @@ def refuse_tilted_result(obs: Observations, directory, fmt: str) -> None:
     if not obs.levelled or not path.is_file():
         return
     try:
-        stations = json.loads(decode_text(read_input_bytes(path), path)).get("stations") or {}
+        doc = json.loads(decode_text(read_input_bytes(path), path))
+        stations = doc.get("stations") or _general_setups(doc.get("parameters") or {})
         tilted = {}
         for sid in obs.levelled:
             st = stations.get(sid) or {}

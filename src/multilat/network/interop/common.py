@@ -412,6 +412,8 @@ def read_result_dir(directory) -> tuple[Points, dict[str, float], dict[str, floa
     if not d.is_dir():
         raise MultilatError(f"--result {directory}: not a directory (give the --out directory of "
                             "`multilat adjust`)")
+    if not (d / "stations.csv").exists() and (d / "points.csv").is_file():
+        return _read_general_result(d)
     st = read_csv_table(d / "stations.csv", required=("station", "x_m", "y_m", "z_m", "offset_m"),
                         warn_unknown=False)
     tg = read_csv_table(d / "targets.csv", required=("target", "x_m", "y_m", "z_m"), warn_unknown=False)
@@ -426,3 +428,23 @@ def read_result_dir(directory) -> tuple[Points, dict[str, float], dict[str, floa
         except (ValueError, AttributeError, TypeError) as exc:
             raise MultilatError(f"{d / 'result.json'}: not the result of `multilat adjust` ({exc})") from None
     return Points(tuple(ids), xyz), offsets, scales
+
+
+def _read_general_result(d: Path) -> tuple[Points, dict[str, float], dict[str, float]]:
+    """:func:`read_result_dir` of the ``--out`` of the general model (``adjust ... --model general``
+    or ``adjust DIR``): ``points.csv`` (point, x_m, y_m, z_m) and, from ``result.json``'s
+    ``parameters``, each instrument's estimated additive constant ``offset:H`` and scale ``scale:H``
+    (keyed by head; a head without one was not estimated there and must be given)."""
+    import json
+
+    from multilat.io import read_csv_table
+
+    pt = read_csv_table(d / "points.csv", required=("point", "x_m", "y_m", "z_m"), warn_unknown=False)
+    xyz = np.column_stack([pt.floats(c) for c in ("x_m", "y_m", "z_m")])
+    try:
+        par = json.loads(decode_text(read_input_bytes(d / "result.json"), d / "result.json"))["parameters"] or {}
+        offsets = {k.split(":", 1)[1]: float(v["value"]) for k, v in par.items() if k.startswith("offset:")}
+        scales = {k.split(":", 1)[1]: float(v["value"]) for k, v in par.items() if k.startswith("scale:")}
+    except (ValueError, KeyError, AttributeError, TypeError) as exc:
+        raise MultilatError(f"{d / 'result.json'}: not the result of `multilat adjust` ({exc})") from None
+    return Points(tuple(pt.ids("point")), xyz), offsets, {h: k for h, k in scales.items() if k != 0.0}
