@@ -132,7 +132,7 @@ class SigmaModel:
 
     def describe(self) -> str:
         if self.sigma_m is not None:
-            return f"sigma {self.sigma_m * 1e6:.3g} um"
+            return f"σ {self.sigma_m * 1e6:.3g} µm"
         return f"instrument {getattr(self.instrument, 'name', 'model')}"
 
     def head_of(self, station_id: str) -> str:
