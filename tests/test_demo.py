@@ -120,3 +120,37 @@ def test_demo_renders_in_headless_chromium(demo_html):
     r = render_in_chromium([demo_html])[str(demo_html)]
     assert not r["errors"], r["errors"]
     assert r["images"] and all(w > 0 for w in r["images"]), r["images"]
+
+
+def test_demo_budget_per_input_rows_add_up_to_the_groups(demo_html):
+    """The distance section carries the per-input budget (issue 28): every input quantity of the model
+    has a row, and each group's "sum of the rows" is √(Σ ± share²) of the shares printed above it,
+    within the rounding of the printed cells (each share ± 0.005 µm moves the root by at most
+    Σ|share| 0.005 / u, the printed sum ± 0.005); the groups' table beside the paper shows those sums."""
+    import math
+
+    from multilat.budget_inputs import QUANTITIES
+
+    p = _Tables()
+    p.feed(demo_html.read_text())
+    tab = next(t for t in p.tables if t and t[0][:2] == ["group", "input quantity"])
+    head = tab[0]
+    ig, ish = head.index("group"), head.index("share (µm)")
+    groups, sums = {}, {}
+    for row in tab[1:]:
+        g = row[ig].split(" (")[0]
+        if row[1].startswith("sum of the rows"):
+            sums[g] = float(row[ish])
+        elif g != "combined":
+            groups.setdefault(g, []).append(float(row[ish]))
+    assert set(groups) == {"telemetric", "head", "target", "air"}
+    for g, shares in groups.items():       # every input and the bias row
+        assert len(shares) == 1 + sum(q[1] == g for q in QUANTITIES), g
+        u = math.sqrt(sum(math.copysign(s * s, s) for s in shares))
+        bound = sum(abs(s) for s in shares) * 0.005 / u + 0.005
+        assert abs(u - sums[g]) <= bound, (g, u, sums[g], bound)
+    beside = next(t for t in p.tables if t and t[0][:3] == ["group", "paper", "multilat"]
+                  and "Monte Carlo standard error (µm)" in t[0])
+    shown = {r[0].split(" ")[0]: float(r[2]) for r in beside[1:]}
+    assert {g: shown[g] for g in ("telemetric", "head", "target")} == {g: sums[g] for g in ("telemetric", "head", "target")}
+    assert shown["combined"] == float(next(r for r in tab if r[ig] == "combined")[ish])

@@ -272,3 +272,84 @@ def test_search_record_names_unsolvable_starts_not_a_penalty(tmp_path, capsys):
             assert r[k] is None or r[k] < 1.0
         assert (r["start_criterion_m"] is None) == r["start_unsolvable"]
     assert all(v is None or v < PENALTY_M for v in s["history_m"])
+
+
+# ------------------------------------------------------------------------------------------ 4b
+PILLAR = ([2.0, 0.45, -0.5], [2.2, 0.55, 2.5])     # between head H (2.8, 0.5, 2.0) and the targets
+
+
+def _box_of(points) -> tuple:
+    """(min, max) corners of the points' bounding box."""
+    p = np.asarray(points, float).reshape(-1, 3)
+    return tuple(p.min(axis=0)), tuple(p.max(axis=0))
+
+
+def test_obstruction_in_the_3d_views(tmp_path):
+    """The 3-D views draw each declared box (issue 28: the maps did, the 3-D figure did not). Checked
+    on the figures' data, not their text: the static view's box is a collection of six faces whose
+    corners are the box's 8 corners, each face flat on one side of the box; the interactive view's
+    Mesh3d has the 8 corners and 12 triangles covering the box's surface (total area checked)."""
+    from multilat.report import design_figures as df
+    from multilat.report import view3d
+
+    from multilat.network.design.config import load_design_config
+
+    run = run_design(load_design_config(_fixed_cfg(tmp_path, EIGHT, occluders=[PILLAR])), base_dir=tmp_path)
+    assert run.occluders == (PILLAR,)
+    assert not run.best.layout.visible[7].all()                   # the pillar hides targets from H
+    lo, hi = np.array(PILLAR[0]), np.array(PILLAR[1])
+    ax = df.plot_layout_3d(run.best, run.occluders)
+    boxes = [c for c in ax.collections if c.get_gid() == "occluder"]
+    assert len(boxes) == 1
+    faces = np.asarray(boxes[0]._faces)                           # the 3-D polygons as given (matplotlib 3.x)
+    assert faces.shape == (6, 4, 3)
+    assert _box_of(faces) == (tuple(lo), tuple(hi))
+    assert sorted(map(tuple, np.unique(faces.reshape(-1, 3), axis=0))) == sorted(
+        (x, y, z) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2]))
+    for f in faces:                                               # every face on one side of the box
+        assert any(np.all(f[:, k] == v) for k in range(3) for v in (lo[k], hi[k])), f
+    lim = np.array([ax.get_xlim3d(), ax.get_ylim3d(), ax.get_zlim3d()])
+    assert np.all(lim[:, 0] <= lo) and np.all(lim[:, 1] >= hi)   # the box inside the view
+    if not view3d.available():
+        pytest.skip("plotly (the 'report' extra) not installed")
+    fig = view3d.figure(run.best, occluders=run.occluders)
+    mesh = [t for t in fig.data if t.type == "mesh3d"]
+    assert len(mesh) == 1 and mesh[0].name == "obstruction"
+    m = mesh[0]
+    c = np.column_stack([m.x, m.y, m.z])
+    assert _box_of(c) == (tuple(lo), tuple(hi)) and len(np.unique(c, axis=0)) == 8
+    tri = c[np.column_stack([m.i, m.j, m.k])]                      # (12, 3, 3)
+    area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+    e = hi - lo
+    assert len(tri) == 12 and area == pytest.approx(2 * (e[0] * e[1] + e[1] * e[2] + e[0] * e[2]), rel=1e-12)
+    assert not [t for t in view3d.figure(run.best).data if t.type == "mesh3d"]   # none declared: none drawn
+
+
+def test_design_report_and_out_draw_the_obstruction(tmp_path, capsys, monkeypatch):
+    """``design --report`` hands the declared boxes to the 3-D view and the top view; ``--out``'s
+    layout_3d.png is drawn with them (the figure functions are wrapped to record their input)."""
+    from multilat.report import design_figures as df
+    from multilat.report import view3d
+
+    seen = {"view": [], "static": []}
+    real_layout = df.plot_layout_3d
+
+    def fragment(result, occluders=()):        # record, then fall back to the static view
+        seen["view"].append(occluders)
+
+    def layout(pre, occluders=(), ax=None):
+        seen["static"].append(occluders)
+        return real_layout(pre, occluders, ax)
+
+    monkeypatch.setattr(view3d, "html_fragment", fragment)
+    monkeypatch.setattr(df, "plot_layout_3d", layout)
+    p = _fixed_cfg(tmp_path, EIGHT, occluders=[PILLAR])
+    rc, _, err = _run(capsys, ["design", str(p), "--report", str(tmp_path / "r.html"), "--out", str(tmp_path / "o")])
+    assert rc == 0, err
+    want = (tuple(map(float, PILLAR[0])), tuple(map(float, PILLAR[1])))
+    def boxes(calls):
+        return [[(tuple(map(float, lo)), tuple(map(float, hi))) for lo, hi in occ] for occ in calls]
+
+    assert boxes(seen["view"]) == [[want]]
+    assert boxes(seen["static"]) == [[want], [want]]            # --out's layout_3d.png, the report's view
+    assert (tmp_path / "o" / "layout_3d.png").stat().st_size > 0

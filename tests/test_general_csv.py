@@ -20,6 +20,11 @@
     the old path's refusals carry the hint ``--model general``; options the general layer cannot
     honour are refused by name; the JSON validates against the shipped schema
     (src/multilat/schemas/adjust-general.json) with ``points`` and ``parameters`` as id maps.
+(d) ``--model auto``'s rule for polar points (docs/general-network.md, "Polar points under auto"):
+    the polar network goes to the general layer (one warning line, first note, the same adjustment
+    as --model general, checked in (b) against the independent solution); a 2-distance target alone,
+    an option the general layer lacks, or a size above the dense bound keep the distance path; the
+    default-σ warning in the general JSON's ``warnings``; the frame words in the summary.
 """
 
 from __future__ import annotations
@@ -301,6 +306,19 @@ def test_refused_tracker_networks_against_independent_solution(name, tmp_path):
         assert old.returncode == 0, old.stderr
         assert "Q0' left out: has 1 observation(s); 3 are needed" in old.stderr
         assert "--model general adjusts" in old.stderr
+        # --model auto: the polar points are kept (the general layer), said in one warning line and
+        # first in the notes; the same adjustment as --model general
+        auto = _cli(*args, "--json")
+        assert auto.returncode == 0, auto.stderr
+        assert auto.stderr.strip().splitlines() == [ln for ln in auto.stderr.splitlines() if ln.strip()]
+        said = auto.stderr.strip().splitlines()
+        assert len(said) == 1 and "would leave out 5 polar point(s) (Q0, Q1, Q2, Q3, Q4" in said[0], auto.stderr
+        adoc = json.loads(auto.stdout)
+        assert adoc["model"] == "general" and adoc["notes"][0].startswith("--model auto: the self-calibrating "
+                                                                         "model would leave out 5 polar point(s)")
+        assert adoc["excluded"] == [] and adoc["dof"] == doc["dof"]
+        assert adoc["sigma0"] == pytest.approx(doc["sigma0"], rel=1e-12)
+        assert {p: v["xyz_m"] for p, v in adoc["points"].items()} == {p: v["xyz_m"] for p, v in doc["points"].items()}
     else:
         assert old.returncode == 2
         assert "needs at least 3 stations" in old.stderr and "--model general adjusts" in old.stderr
@@ -401,3 +419,109 @@ def test_refusal_hint_only_on_the_counting_rules():
                 warnings.warn(left, UserWarning)
         assert [str(w.message).startswith(left) for w in seen] == [True]
         assert ("--model general adjusts" in str(seen[0].message)) == hinted
+
+
+# ----------------------------------------------------------------------------- (d) --model auto's rule
+
+
+def _polar_case(tmp_path, *, polar=True, two_distance=False, seed=11):
+    """heads_tracker_polar's network: the 5 polar points (``polar``), and/or a target read by 2 heads
+    only (``two_distance``, no angles: undetermined on either path)."""
+    case = heads_tracker_polar(np.random.default_rng(seed))
+    if not polar:
+        case.pairs = [(s, t) for s, t in case.pairs if not t.startswith("Q")]
+        case.targets = {k: v for k, v in case.targets.items() if not k.startswith("Q")}
+    if two_distance:
+        case.targets["W"] = np.array([2.0, 1.5, 0.7])
+        case.pairs += [("H1", "W"), ("H2", "W")]
+    case.simulate(np.random.default_rng(seed + 1))
+    return case.write(tmp_path)
+
+
+def test_auto_stays_on_the_distance_path_without_polar_points(tmp_path):
+    """A target left out for lack of distances, with no polar reading, is left out by the general layer
+    too: the distance path's result stands (with the hint), the model is not switched."""
+    r = _cli(*_polar_case(tmp_path, polar=False, two_distance=True), "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["schema"].startswith("multilat.adjust/")
+    assert "target 'W' left out: has 2 observation(s); 3 are needed" in r.stderr
+    assert "--model general adjusts" in r.stderr and "adjusted by the general model" not in r.stderr
+
+
+def test_auto_keeps_polar_points_and_names_the_undetermined(tmp_path):
+    """Polar points and a 2-distance target: the general layer keeps the polar points, flags them
+    (zero redundancy, in the summary), and leaves the 2-distance target out, named."""
+    args = _polar_case(tmp_path, two_distance=True)
+    r = _cli(*args, "--json")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(r.stdout)
+    assert doc["model"] == "general" and [e["id"] for e in doc["excluded"]] == ["W"]
+    assert {f"Q{i}" for i in range(5)} <= set(doc["points"])
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 2 and "5 polar point(s)" in lines[0] and "point 'W' left out" in lines[1]
+    text = _cli(*args)
+    assert text.returncode == 0, text.stderr
+    flat = " ".join(text.stdout.split())          # rich wraps long lines
+    assert "kept without control (every row r = 0, e.g. one polar reading; a blunder cannot show): " \
+           "Q0, Q1, Q2, Q3, Q4" in flat
+
+
+def test_auto_keeps_the_distance_path_when_an_option_has_no_meaning_there(tmp_path):
+    """An accepted network stays on the distance path when a given option does not apply to the
+    general layer (here --mdb-limit-sigma): never a refusal where there was a result."""
+    r = _cli(*_polar_case(tmp_path), "--json", "--mdb-limit-sigma", "8")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["schema"].startswith("multilat.adjust/")
+    assert "Q0' left out: has 1 observation(s)" in r.stderr and "--model general adjusts" in r.stderr
+
+
+def test_auto_keeps_the_distance_path_above_the_dense_bound(tmp_path, monkeypatch, capsys):
+    """Polar points in a network larger than the general back end takes: the distance path's result
+    (points left out, with the hint), not the general layer's refusal."""
+    import importlib
+
+    from multilat.cli.app import main
+
+    gadjust = importlib.import_module("multilat.network.general.adjust")
+    args = _polar_case(tmp_path)
+    monkeypatch.setattr(gadjust, "MAX_DENSE_UNKNOWNS", 60)     # this network: 22 points, 66+ unknowns
+    assert main(["adjust", *map(str, args), "--json"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["schema"].startswith("multilat.adjust/")
+    assert "Q0' left out" in out.err and "adjusted by the general model" not in out.err
+
+
+def test_default_sigma_warning_is_in_the_general_json(tmp_path):
+    """No sigma_m column, no --sigma-um, no --instrument: the default-σ warning is in the general
+    JSON's ``warnings`` (the distance path's key and words) under --model general and auto, and on
+    stderr once."""
+    from multilat.network.sigma_source import default_warning
+
+    src = ROOT / "examples" / "general" / "two_trackers_csv" / "obs.csv"
+    with open(src, newline="") as f:
+        rows = list(csv.DictReader(f))
+    obs = tmp_path / "obs.csv"
+    with open(obs, "w", newline="") as f:
+        w = csv.DictWriter(f, [c for c in rows[0] if c != "sigma_m"], extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    expected = default_warning({"kind": "distance model", "defaulted": True, "instrument": "seed2020"}, obs)
+    for model in ("general", "auto"):
+        r = _cli(obs, "--levelled", "T1,T2", "--json", "--model", model)
+        assert r.returncode == 0, r.stderr
+        doc = json.loads(r.stdout)
+        assert doc["model"] == "general" and doc["warnings"] == [expected]
+        assert r.stderr.count(expected) == 1
+    sig = json.loads(_cli(src, "--levelled", "T1,T2", "--json", "--model", "general").stdout)
+    assert sig["warnings"] == []                       # a sigma_m column: no warning
+
+
+def test_general_summary_prints_the_frame_words():
+    r = _cli(ROOT / "examples" / "general" / "two_trackers_csv" / "obs.csv", "--levelled", "T1,T2", "--model",
+             "general")
+    assert r.returncode == 0, r.stderr
+    doc = json.loads(_cli(ROOT / "examples" / "general" / "two_trackers_csv" / "obs.csv", "--levelled", "T1,T2",
+                          "--model", "general", "--json").stdout)
+    flat = " ".join(r.stdout.split())
+    assert "frame: " + " ".join(doc["frame"]["axes"].split()) in flat
+    assert "scale: " + doc["frame"]["scale"] in flat

@@ -306,3 +306,120 @@ def test_cli_result_with_estimated_scale_divides_it_out(capsys, tmp_path, seq):
     row = {got.obs.label(j): j for j in range(got.obs.n_obs)}
     d = got.obs.distance_m[[row[obs.label(j)] for j in range(obs.n_obs)]]
     assert np.max(np.abs(d - obs.distance_m)) <= E_ROUND * (1 + abs(k))
+
+
+@pytest.fixture(scope="module")
+def mixed_results(tmp_path_factory):
+    """``adjust --out`` of the mixed example as it is (trackers unlevelled: ω, φ, κ unknowns) and with
+    ``--levelled AT1,AT2`` (κ only)."""
+    d = tmp_path_factory.mktemp("mixed_results")
+    for name, extra in (("free", []), ("levelled", ["--levelled", "AT1,AT2"])):
+        assert main([str(a) for a in ["adjust", MIX, "--out", d / name, *extra]]) == 0
+    return d
+
+
+@pytest.mark.parametrize("fmt", ["gama", "jag3d", "starnet"])
+def test_unlevelled_trackers_of_a_result_exported_levelled_refused(capsys, tmp_path, fmt, mixed_results):
+    """An adjustment that estimated the trackers' tilt (ω, φ) exported with ``--levelled``: the format
+    would hold them level, a model other than the one adjusted. Before: written silently (the tilt,
+    -18382 µrad for AT2, dropped). Now one line naming the station, its estimated tilt and the format."""
+    out = tmp_path / "n.out"
+    rc, _, err = _run(capsys, ["export", fmt, MIX, "--result", mixed_results / "free", "--levelled", "AT1,AT2",
+                               "-o", out])
+    _one_line_error(rc, err, f"{fmt}: station 'AT1' is exported levelled", "estimated its tilt (omega = ",
+                    "µrad, phi = ", "--levelled AT1")
+    assert not list(tmp_path.iterdir())
+    rc, _, err = _run(capsys, ["export", fmt, MIX, "--result", mixed_results / "free", "-o", out])
+    _one_line_error(rc, err, f"{fmt}: station 'AT1' reads angles", "tilt (ω, φ) has no counterpart")
+    assert not list(tmp_path.iterdir())
+
+
+@pytest.mark.parametrize("fmt", ["gama", "jag3d", "starnet"])
+def test_levelled_trackers_of_a_result_carried(capsys, tmp_path, fmt, mixed, mixed_results):
+    """The levelled adjustment's result exports (its heads and angles carried) and comes back with the
+    same heads, levelled stations, number of angles and dof as the direct adjustment."""
+    obs, res = mixed
+    out = tmp_path / ("n.xml" if fmt == "gama" else "n.txt" if fmt == "jag3d" else "n.dat")
+    rc, o, err = _run(capsys, ["export", fmt, MIX, "--result", mixed_results / "levelled", "--levelled", "AT1,AT2",
+                               "-o", out, "--json"])
+    assert rc == 0, err
+    doc = json.loads(o)
+    assert doc["n_angles"] == int(np.isfinite(obs.sigma_azimuth_rad).sum() + np.isfinite(obs.sigma_elevation_rad).sum())
+    if fmt == "gama":
+        net = read_gama_local(out)
+    elif fmt == "starnet":
+        net = read_starnet(out)
+    else:
+        files = [Path(f) for f in doc["files"]]
+        net = read_jag3d(files[-1], files[:-1])
+    got = net.obs
+    assert set(got.levelled) == {"AT1", "AT2"}
+    assert dict(zip(got.station_ids, got.head_of_station)) == dict(zip(obs.station_ids, obs.head_of_station))
+    assert np.isfinite(got.sigma_azimuth_rad).sum() == np.isfinite(obs.sigma_azimuth_rad).sum()
+    assert adjust(got, points=net.points, solver="dense").dof == res.dof == 47
+
+
+def test_import_gama_general_files_keep_the_heads(capsys, tmp_path):
+    """``import gama`` of a multilat export writes two readings: distances.csv (heads restored) and the
+    general network's observations.csv, which ``multilat adjust OUT`` takes. Before: observations.csv
+    held Gama's model (distances minus the fixed offsets, no heads), so ``adjust OUT`` gave dof 44
+    with the offsets silently held. Now it carries each head as an instrument with its offset
+    estimated: dof 42 and the offsets of the distances.csv adjustment (same numbers, two solvers:
+    1e-9 m), within the rounding bound of the direct adjustment."""
+    rc, _, e = _run(capsys, ["adjust", SEQ, "--out", tmp_path / "adj"])
+    assert rc == 0, e
+    rc, _, e = _run(capsys, ["export", "gama", SEQ, "--result", tmp_path / "adj", "-o", tmp_path / "n.xml"])
+    assert rc == 0, e
+    rc, o, e = _run(capsys, ["import", "gama", tmp_path / "n.xml", "-o", tmp_path / "imp", "--json"])
+    assert rc == 0, e
+    notes = json.loads(o)["notes"]
+    rc, o, e = _run(capsys, ["adjust", tmp_path / "imp", "--json"])
+    assert rc == 0, e
+    general = json.loads(o)
+    rc, o, e = _run(capsys, ["adjust", tmp_path / "imp" / "distances.csv", "--points", tmp_path / "imp" / "points.csv",
+                             "--json"])
+    assert rc == 0, e
+    dist = json.loads(o)
+    assert general["dof"] == dist["dof"] == 42
+    assert any("offsets are unknowns again" in n for n in notes)
+    for h, v in dist["heads"].items():
+        p = general["parameters"][f"offset:{h}"]
+        assert abs(p["value"] - v["offset_m"]) < SOLVER and p["std"] == pytest.approx(v["offset_std_m"], rel=1e-6)
+    direct = json.loads((tmp_path / "adj" / "result.json").read_text())
+    obs = read_observations(SEQ)
+    for h, v in direct["heads"].items():
+        bound = E_ROUND * np.sqrt(obs.n_obs) * v["offset_std_m"] / float(obs.sigma_m.min())
+        assert abs(general["parameters"][f"offset:{h}"]["value"] - v["offset_m"]) <= bound, h
+
+
+TRACKERS = Path(__file__).resolve().parents[1] / "examples" / "tutorial" / "trackers.csv"
+
+
+def test_result_of_the_general_model_exports(capsys, tmp_path):
+    """``--result`` of ``adjust --model general`` (points.csv, result.json; before: ``stations.csv: no
+    such file``): its coordinates and each head's estimated constant ``offset:H`` are used; the levelled
+    trackers come back through Gama with the same dof 39 and constants within the file's rounding
+    (the bound of the module docstring); the unlevelled adjustment (ω, φ estimated) exported with
+    --levelled is refused naming the tilt."""
+    for name, extra in (("lev", ["--levelled", "T1,T2"]), ("free", [])):
+        rc, _, e = _run(capsys, ["adjust", TRACKERS, "--model", "general", "--out", tmp_path / name, *extra])
+        assert rc == 0, e
+    rc, _, e = _run(capsys, ["export", "gama", TRACKERS, "--result", tmp_path / "lev", "--levelled", "T1,T2",
+                             "-o", tmp_path / "t.xml"])
+    assert rc == 0, e
+    rc, _, e = _run(capsys, ["import", "gama", tmp_path / "t.xml", "-o", tmp_path / "imp"])
+    assert rc == 0, e
+    rc, o, e = _run(capsys, ["adjust", tmp_path / "imp", "--json"])
+    assert rc == 0, e
+    back, direct = json.loads(o), json.loads((tmp_path / "lev" / "result.json").read_text())
+    assert back["dof"] == direct["dof"] == 39
+    obs = read_observations(TRACKERS)
+    for h in ("T1", "T2"):
+        a, b = back["parameters"][f"offset:{h}"], direct["parameters"][f"offset:{h}"]
+        bound = E_ROUND * np.sqrt(obs.n_obs) * b["std"] / float(obs.sigma_m.min())
+        assert abs(a["value"] - b["value"]) <= bound and a["std"] == pytest.approx(b["std"], rel=1e-6), h
+    out = tmp_path / "x.xml"
+    rc, _, err = _run(capsys, ["export", "gama", TRACKERS, "--result", tmp_path / "free", "--levelled", "T1,T2",
+                               "-o", out])
+    _one_line_error(rc, err, "gama: station 'T1' is exported levelled", "estimated its tilt (omega = ")
+    assert not out.exists()

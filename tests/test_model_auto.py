@@ -43,10 +43,20 @@ def test_multilateration_alone_still_refuses_with_the_hint(_adjust):
 
 
 def test_an_option_the_general_layer_lacks_keeps_the_refusal(_adjust, tmp_path):
-    r = _adjust(EX, "--levelled", "T1,T2", "--report", tmp_path / "rep.html")
+    r = _adjust(EX, "--levelled", "T1,T2", "--mdb-limit-sigma", "8", "--out", tmp_path / "res")
     assert r.exit_code == 2
-    assert "needs at least 3 stations" in r.output and "--report not available there" in r.output
-    assert not (tmp_path / "rep.html").exists()
+    assert "needs at least 3 stations" in r.output and "--mdb-limit-sigma not available there" in r.output
+    assert not (tmp_path / "res").exists()
+
+
+def test_auto_fallback_writes_the_general_report(_adjust, tmp_path):
+    """--report on the general layer (refused there before): the general report, its numbers the
+    JSON's (tests/test_general_report.py checks them cell by cell)."""
+    r = _adjust(EX, "--levelled", "T1,T2", "--report", tmp_path / "rep.html", "--json")
+    assert r.exit_code == 0, r.output
+    assert json.loads(r.stdout)["model"] == "general"
+    page = (tmp_path / "rep.html").read_text("utf-8")
+    assert "General network adjustment" in page and 'id="verdicts"' in page and 'id="parameters"' in page
 
 
 def test_an_accepted_network_stays_on_the_distance_path(_adjust):

@@ -99,11 +99,11 @@ def _wavelength_nm(wavelength_nm: float, instrument: str | None) -> float:
     given and different is refused in one line naming both (never one silently ignored)."""
     if instrument is None:
         return wavelength_nm
-    from multilat.cli.general_adjust import _given_options
+    from multilat.cli.general_adjust import given_options
     from multilat.instrument import load_instrument
 
     inst_nm = float(load_instrument(instrument).adm.wavelength_nm)
-    if "wavelength_nm" in _given_options({"wavelength_nm": wavelength_nm}) and wavelength_nm != inst_nm:
+    if "wavelength_nm" in given_options({"wavelength_nm": wavelength_nm}) and wavelength_nm != inst_nm:
         raise MultilatError(f"--wavelength-nm {wavelength_nm:g} contradicts adm.wavelength_nm = {inst_nm:g} of the "
                             f"instrument {instrument} (drop one)")
     return inst_nm

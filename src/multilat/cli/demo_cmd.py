@@ -19,7 +19,7 @@ def demo(
 ) -> None:
     """Reproduce the seed papers' numbers beside multilat's own, as DIR/report.html."""
     from multilat.cli import checks
-    from multilat.cli.report_opt import _current_context
+    from multilat.cli.report_opt import current_context
     from multilat.report.demo import build_demo
     from multilat.report.job import JobContext
 
@@ -28,7 +28,7 @@ def demo(
         from multilat.errors import MultilatError
 
         raise MultilatError(f"--out {out}: exists and is not a directory")
-    ctx = _current_context()
+    ctx = current_context()
     jc = JobContext.from_options("demo", dict(ctx.params) if ctx else {"seed": seed, "quick": quick},
                                  command_line=ctx.command_path if ctx else "multilat demo")
     with progress() as p:

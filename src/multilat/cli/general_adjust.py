@@ -4,15 +4,18 @@ layer (:mod:`multilat.network.general`) from the command line: parse, call, prin
 Reached from the ``adjust`` command (:mod:`multilat.cli.network_cmd`) when its input is a gama-local
 file (suffix ``.xml`` / ``.gkf``, or a ``<gama-local>`` root element), or with ``--model general``
 on multilat's own observation CSV (:mod:`multilat.network.general.from_tables`). For a gama-local
-file the options that apply are ``--json``, ``--out DIR``, ``--alpha``, ``--variance-factor``,
-``--test-method``, ``--alpha-global`` and ``--strict``: the file itself carries the datum
+file the options that apply are ``--json``, ``--out DIR``, ``--report FILE.html``
+(:mod:`multilat.report.general_sections`), ``--alpha``, ``--variance-factor``, ``--test-method``,
+``--alpha-global`` and ``--strict``: the file itself carries the datum
 (``fix=``/``adj=``), the σ (``stdev=`` and ``<points-observations>``) and the approximate
 coordinates. A CSV network also takes ``--points``, ``--datum free|control``, ``--sigma-um``,
 ``--instrument``, ``--fix-offsets-um``, ``--scales``, ``--fixed-scale``, ``--references`` with
 ``--scale-bars``, ``--levelled``, ``--seed`` and ``--no-snooping``. Every other option is refused in
 one line naming it (never silently ignored). The model is never switched silently: the default
 (distance) path's refusals by station counts say that ``--model general`` adjusts by what the
-observations determine (:func:`refusal_hint`).
+observations determine (:func:`refusal_hint`). Under ``--model auto`` (the default) such a refusal,
+or polar points the distance path would leave out (:func:`polar_left_out`), takes the general path
+instead, said in one warning line and first in the JSON's notes (:func:`fall_back`).
 """
 
 from __future__ import annotations
@@ -26,7 +29,8 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["is_general_input", "wants_general", "refusal_hint", "run", "APPLIES", "APPLIES_CSV", "WHY_NOT",
+__all__ = ["is_general_input", "wants_general", "refusal_hint", "run", "given_options", "option_name", "fall_back",
+           "CountRuleRefusal", "polar_left_out", "APPLIES", "APPLIES_CSV", "WHY_NOT",
            "WHY_NOT_CSV", "SCHEMA", "MODELS"]
 
 #: the document's schema name: ``"schema": "multilat.adjust-general/1"`` (not the distance path's
@@ -35,7 +39,7 @@ SCHEMA = "adjust-general"
 
 #: the adjust command's parameters that the general path reads
 APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method",
-           "alpha_family", "model", "snooping", "variance_components")
+           "alpha_family", "model", "snooping", "variance_components", "report")
 #: ... and on a multilat CSV network (``--model general``)
 APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offsets_um", "scales", "fixed_scale",
                          "scale_bar", "references", "levelled", "seed", "azimuth_sense")
@@ -52,11 +56,9 @@ WHY_NOT = {
     "datum": "the datum of a gama-local file is its fix=/adj= attributes (upper-case adj = datum points)",
     "points": "the file's <point> elements carry the coordinates", "sigma_um": "the σ are the file's stdev=",
     "instrument": "the σ are the file's stdev=",
-    "report": "the HTML report is built from the distance path's result",
 }
 #: why an option is refused with ``--model general`` on a CSV network (the default reason for the others)
 WHY_NOT_CSV = {
-    "report": "the HTML report is built from the distance path's result",
     "cost": "the general path minimises the weighted distance residuals only",
     "solver": "the general path has one dense back end",
     "average_repeats": "repeated readings are kept as separate observations on the general path",
@@ -85,7 +87,7 @@ def wants_general(observations, model: str) -> bool:
     if model not in MODELS:
         raise MultilatError(f"--model must be one of {', '.join(MODELS)}, got {model!r}")
     if is_general_input(observations):
-        if model == "multilateration" and "model" in _given_options({"model": model}):
+        if model == "multilateration" and "model" in given_options({"model": model}):
             raise MultilatError(f"--model {model} does not read a gama-local input ({observations}): "
                                 "it is adjusted by --model general")
         return True
@@ -93,34 +95,93 @@ def wants_general(observations, model: str) -> bool:
 
 
 class CountRuleRefusal(MultilatError):
-    """The distance path refused the network by a counting rule, under ``--model auto``: the caller
-    adjusts it by the general layer instead (:func:`fall_back`)."""
+    """The distance path refused the network by a counting rule, or would leave out polar points
+    (``left_out``: their ids), under ``--model auto``: the caller adjusts it by the general layer
+    instead (:func:`fall_back`)."""
+
+    def __init__(self, message: str, *, left_out: tuple = ()):
+        super().__init__(message)
+        self.left_out = tuple(left_out)
 
 
 def fall_back(params: dict, refusal: CountRuleRefusal):
-    """``--model auto``: the network the distance path refuses by its counting rules is adjusted by the
-    general layer, said in one warning line and in the JSON's ``notes``; refused (with the hint) when
-    an option given has no meaning there."""
+    """``--model auto``: the network the distance path refuses by its counting rules (or whose polar
+    points it would leave out) is adjusted by the general layer, said in one warning line and first
+    in the JSON's ``notes``; refused (with the hint) when an option given has no meaning there."""
     params = {k: v for k, v in params.items() if k != "general_adjust"}
-    other = [n for n in _given_options(params) if n not in APPLIES_CSV]
+    other = [n for n in given_options(params) if n not in APPLIES_CSV]
     if other:
-        raise MultilatError(f"{refusal}{_HINT} ({', '.join(_option_name(n) for n in other)} "
+        raise MultilatError(f"{refusal}{_HINT} ({', '.join(option_name(n) for n in other)} "
                             "not available there)") from None
     params["model"] = "general"
-    params["fallback"] = str(refusal)
-    warnings.warn(f"{params['observations']}: the self-calibrating model refuses this network ({refusal}); "
-                  "adjusted by the general model (--model general, docs/general-network.md); "
-                  "--model multilateration refuses it", stacklevel=2)
+    if refusal.left_out:
+        n, ids = len(refusal.left_out), _names(refusal.left_out)
+        params["fallback"] = (f"would leave out {n} polar point(s) ({ids}: {refusal}), which the general model "
+                              "determines from their polar readings")
+        says = "leaves them out"
+    else:
+        params["fallback"] = f"refused the network ({refusal})"
+        says = "refuses it"
+    warnings.warn(f"{params['observations']}: the self-calibrating model {params['fallback']}; adjusted by the "
+                  f"general model (--model general, docs/general-network.md); --model multilateration {says}",
+                  stacklevel=2)
     return run(**params)
+
+
+def _names(ids, limit: int = 5) -> str:
+    ids = list(ids)
+    return ", ".join(ids[:limit]) + (f" and {len(ids) - limit} more" if len(ids) > limit else "")
+
+
+#: the distance path's warnings of a point left out (:func:`multilat.network.adjust.adjust`)
+_LEFT_OUT = re.compile(r"^(target|station) '(.+?)' left out: ")
+
+
+def polar_left_out(obs, messages) -> list[str]:
+    """The targets the distance path left out by its counting rule (``messages``: its warnings) that
+    carry a polar reading: a distance with its azimuth and elevation as observations (σ given) from a
+    station it kept. Their three observations determine the point from the station's position and
+    orientation (zero redundancy): the general layer keeps them (``--model auto``, :func:`refusal_hint`)."""
+    if obs is None or obs.sigma_azimuth_rad is None or obs.sigma_elevation_rad is None:
+        return []
+    gone = {"station": set(), "target": set()}
+    counted = []
+    for msg in messages:
+        if (m := _LEFT_OUT.match(msg)) is not None:
+            gone[m.group(1)].add(m.group(2))
+            if m.group(1) == "target" and _COUNT_RULES[1].search(msg):
+                counted.append(m.group(2))
+    if not counted:
+        return []
+    polar = (np.isfinite(obs.distance_m) & np.isfinite(obs.sigma_azimuth_rad) & np.isfinite(obs.sigma_elevation_rad)
+             & (obs.sigma_azimuth_rad > 0) & (obs.sigma_elevation_rad > 0))
+    sid, tid = np.asarray(obs.station_ids, object), np.asarray(obs.target_ids, object)
+    read = {str(t) for t, s in zip(tid[obs.target_index[polar]], sid[obs.station_index[polar]])
+            if s not in gone["station"]}
+    return [t for t in counted if t in read]
+
+
+def _general_takes(obs) -> bool:
+    """Whether the general layer's back end takes a network of ``obs``'s size: its free unknowns at
+    most (3 per point, one constant per head, three angles per station with angles) within
+    :data:`multilat.network.general.adjust.MAX_DENSE_UNKNOWNS`."""
+    from multilat.network.general.adjust import MAX_DENSE_UNKNOWNS
+
+    n_angle = len(np.unique(obs.station_index[np.isfinite(obs.sigma_azimuth_rad)]))
+    n = 3 * (obs.n_stations + obs.n_targets) + len(obs.head_ids) + 3 * n_angle
+    return n <= MAX_DENSE_UNKNOWNS
 
 
 @contextlib.contextmanager
 def refusal_hint(obs=None, *, auto: bool = False):
     """Around the distance path's adjustment: a refusal (or, on a network with angle observations, a
     left-out point) by one of its counting rules gets the hint that ``--model general``
-    adjusts the network by what the observations determine. Nothing else changes: the model is not
-    switched."""
+    adjusts the network by what the observations determine. ``auto`` (``--model auto``): a
+    counting-rule refusal, or polar points left out (:func:`polar_left_out`) when every option given
+    applies to the general layer and its back end takes the network's size, raise
+    :class:`CountRuleRefusal` instead (the held-back warnings dropped) for :func:`fall_back`."""
     seen: list = []
+    switch = False
     try:
         with warnings.catch_warnings(record=True) as seen:      # held back, re-emitted below (outside)
             yield
@@ -131,8 +192,14 @@ def refusal_hint(obs=None, *, auto: bool = False):
                 raise CountRuleRefusal(msg) from e
             raise MultilatError(msg + _HINT) from e
         raise
+    else:
+        polar = polar_left_out(obs, [str(w.message) for w in seen]) if auto else []
+        if polar and _general_takes(obs) and all(n in APPLIES_CSV for n in given_options()):
+            switch = True
+            first = next(str(w.message) for w in seen if str(w.message).startswith(f"target '{polar[0]}'"))
+            raise CountRuleRefusal(first.split(" left out: ", 1)[1], left_out=polar)
     finally:
-        for w in seen:
+        for w in [] if switch else seen:
             msg = str(w.message)
             if (obs is not None and obs.has_angle_observations and any(r.search(msg) for r in _COUNT_RULES)
                     and "--model general" not in msg):
@@ -157,23 +224,29 @@ def is_general_input(path) -> bool:
     return head.startswith(b"<?xml") and b"<gama-local" in head or head.startswith(b"<gama-local")
 
 
-def _given_options(params: dict) -> list[str]:
-    """The names of the parameters given on the command line (click's parameter source)."""
-    from multilat.cli.report_opt import _current_context
+def given_options(params: dict | None = None) -> list[str]:
+    """The names of the parameters (of ``params``; None: every parameter of the running command) given
+    on the command line (click's parameter source); [] outside a command."""
+    from multilat.cli.report_opt import current_context
 
-    ctx = _current_context()
+    ctx = current_context()
     if ctx is None:
         return []
     given = []
-    for name in params:
+    for name in ctx.params if params is None else params:
         src = ctx.get_parameter_source(name)
         if src is not None and src.name not in ("DEFAULT", "DEFAULT_MAP"):
             given.append(name)
     return given
 
 
-def _option_name(name: str) -> str:
+def option_name(name: str) -> str:
+    """The command-line spelling of the parameter ``name`` (``as_json`` -> ``--json``)."""
     return _OPTION.get(name, "--" + name.replace("_", "-"))
+
+
+#: the former private names (cli/general_propagate.py still imports one)
+_given_options, _option_name = given_options, option_name
 
 
 def run(**params) -> None:
@@ -186,10 +259,10 @@ def run(**params) -> None:
     what = "a gama-local input" if xml else "--model general"
     if path.is_dir():                                  # multilat's files for the general network
         why_not, what = {**why_not, **WHY_NOT_DIR}, "a network directory"
-    for name in _given_options(params):
+    for name in given_options(params):
         if name not in applies:
             why = why_not.get(name, "it belongs to the distance-only adjustment")
-            raise MultilatError(f"{_option_name(name)} does not apply to {what} ({path}): {why}")
+            raise MultilatError(f"{option_name(name)} does not apply to {what} ({path}): {why}")
     alpha, vf, a_glob, method = (params[k] for k in ("alpha", "variance_factor", "alpha_global", "test_method"))
     if method is None:
         method = "fixed" if a_glob is not None else "auto"
@@ -203,6 +276,9 @@ def run(**params) -> None:
     inputs = [path] + [params.get(k) for k in ("points", "references") if params.get(k) is not None]
     if out is not None:
         check_output_dir(out, inputs=inputs)
+    from multilat.cli import report_opt
+
+    report_opt.check_report_path(params.get("report"), inputs)
     tests = dict(alpha=alpha, variance_factor=vf, alpha_global=a_glob, strict=params["strict"], method=method,
                  alpha_family=params.get("alpha_family", 0.01), snooping=params.get("snooping", True),
                  variance_components=params.get("variance_components"))
@@ -216,14 +292,23 @@ def run(**params) -> None:
                 doc, adj, stats = compute(path, **tests)
             else:
                 doc, adj, stats = compute_tables(params, **tests)
+    if fallback is None and doc["warnings"]:          # under auto the distance path said it already
+        for w in doc["warnings"]:
+            warnings.warn(w, UserWarning, stacklevel=2)
     if fallback is not None:
-        doc["notes"] = [f"--model auto: the self-calibrating model refused the network ({fallback}); adjusted "
-                        "by the general model", *doc["notes"]]
+        doc["notes"] = [f"--model auto: the self-calibrating model {fallback}; adjusted by the general model",
+                        *doc["notes"]]
     for e in adj.excluded:
         warnings.warn(f"point {e['id']!r} left out: {e['reason']} ({e['n_obs']} observation row(s) removed)",
                       stacklevel=2)
     if out is not None:
         write_out(out, inputs, doc)
+    import functools
+
+    from multilat.report.general_sections import build_report
+
+    report_opt.write_report(params.get("report"), "adjust", doc, result=adj,
+                            build=functools.partial(build_report, applies=applies))
     from multilat.cli.app import emit_json
 
     if params["as_json"]:
@@ -269,7 +354,7 @@ def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_globa
                alpha_global=alpha_global, alpha_family=alpha_family, snooping=snooping, adjustment=adj)
     adj, stats = sn.adjustment, sn.stats
     doc = to_json(adj, stats, source=source, snooping=sn, variance=vcomp)
-    doc = {"model": "general", **doc, "format": fmt}
+    doc = {"model": "general", **doc, "format": fmt, "warnings": []}
     if sigma_source is not None:
         doc["sigma_source"] = sigma_source
     return stamp(doc, SCHEMA), adj, stats
@@ -286,7 +371,7 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
     from multilat.cli.network_cmd import parse_fixed_offsets, with_levelled
     from multilat.network.files import read_points, read_reference_lengths
     from multilat.network.general.from_tables import network_from_tables
-    from multilat.network.sigma_source import describe
+    from multilat.network.sigma_source import default_warning, describe
 
     path = Path(params["observations"])
     if is_raw_file(path):
@@ -327,6 +412,8 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
                               strict=strict, alpha_global=alpha_global, fmt="multilat-csv", sigma_source=src_doc,
                               method=method, alpha_family=alpha_family, snooping=snooping,
                               variance_components=variance_components)
+    if note := default_warning(src, path):           # the distance path's words and key (JSON "warnings")
+        doc["warnings"] = [note, *doc["warnings"]]
     from multilat.network import azimuth_sense as _az
 
     az_rec = _az.record(obs, *_az.resolve(params.get("azimuth_sense"), params.get("instrument")))
@@ -351,6 +438,7 @@ def print_summary(doc, adj, stats, out) -> None:
     from rich.table import Table
 
     from multilat.cli.app import console
+    from multilat.network.general.report import zero_redundancy_points
 
     say = lambda s: console.print(s, markup=False)  # noqa: E731
     kinds = {}
@@ -360,6 +448,8 @@ def print_summary(doc, adj, stats, out) -> None:
         + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in kinds.items())
         + f") of {doc['input']} ({doc['format']}; general model)")
     say(f"  datum: {doc['datum']}")
+    say(f"  frame: {doc['frame']['axes']}")              # the JSON's words (general/report.py)
+    say(f"  scale: {doc['frame']['scale']}")
     if "azimuth_sense" in doc:
         say(f"  azimuths read {doc['azimuth_sense']['sense']} ({doc['azimuth_sense']['source']})")
     gt, t = doc["global_test"], doc["tests"]
@@ -385,6 +475,10 @@ def print_summary(doc, adj, stats, out) -> None:
             for n, v in doc["parameters"].items() if n.startswith("offset:")]
     if inst:
         say("  additive constants: " + "; ".join(inst))
+    zero = zero_redundancy_points(doc["observations"], doc["points"])
+    if zero:
+        say(f"  kept without control (every row r = 0, e.g. one polar reading; a blunder cannot show): "
+            f"{_names(zero, 8)}")
     for e in doc["excluded"]:
         say(f"  left out: point {e['id']} ({e['reason']}; {e['n_obs']} observation rows)")
     for note in doc["notes"]:

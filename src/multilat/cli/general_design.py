@@ -50,12 +50,12 @@ def wants_general(config, evaluate) -> bool:
 
 def run(**params) -> None:
     """The general pre-analysis of ``multilat design`` (``params``: the design command's parameters)."""
-    from multilat.cli.general_adjust import _given_options, _option_name
+    from multilat.cli.general_adjust import given_options, option_name
 
     params.pop("general_design", None)                 # the hook's own import, passed with locals()
-    for name in _given_options(params):
+    for name in given_options(params):
         if name not in _APPLIES:
-            raise MultilatError(f"{_option_name(name)} does not apply to the pre-analysis of a planned network: "
+            raise MultilatError(f"{option_name(name)} does not apply to the pre-analysis of a planned network: "
                                 "it belongs to the layout search of a design config")
     path = Path(params["evaluate"] if params["evaluate"] is not None else params["config"])
     doc, pred = compute(path)

@@ -68,7 +68,10 @@ def export_command(
     offsets, scales = None, None
     pts = read_points(points) if points is not None else None
     if result is not None:
+        from multilat.network.interop.angles import refuse_tilted_result
+
         pts, offsets, scales = read_result_dir(result)
+        refuse_tilted_result(obs, result, fmt)
         if fmt == "jag3d":
             offsets = None        # JAG3D estimates them itself (one zero-point offset per group = head)
     if offsets_um is not None:
@@ -78,7 +81,8 @@ def export_command(
             missing = [s for s in obs.head_ids if s not in offsets][0]
             raise MultilatError(f"--offsets-um: no value for {what} {missing!r}; give every {what}'s")
     fixed = _fixed_ids(fix)
-    inputs = [observations, points] + ([result / "stations.csv", result / "targets.csv"] if result else [])
+    inputs = [observations, points] + ([result / n for n in ("stations.csv", "targets.csv", "points.csv", "result.json")]
+                                       if result else [])
     written = [out]
     if fmt == "gama":
         from multilat.network.interop.gama import write_gama_local
@@ -226,6 +230,25 @@ def import_command(
                       f"control:{','.join(net.fixed)} to keep them")
 
 
+def _restored_general(old, source: Path):
+    """The general network of a multilat export read back with its model restored (``old``: the
+    interop reader's network): one instrument per head with its offset estimated, levelled stations'
+    angles, the file's fixed points held (:func:`~multilat.network.general.from_tables.network_from_tables`,
+    the mapping ``adjust obs.csv --model general`` uses)."""
+    from multilat.network.general.from_tables import network_from_tables
+
+    import dataclasses
+
+    import numpy as np
+
+    datum = f"control:{','.join(old.fixed)}" if old.fixed else "free"
+    net = network_from_tables(old.obs, points=old.points, datum=datum, source=source.name)[0]
+    if not old.fixed:                                  # free: every point a datum point, as the file's reading
+        pts = dataclasses.replace(net.points, constrained=np.ones(net.points.n, bool))
+        net = dataclasses.replace(net, points=pts)
+    return net
+
+
 def _import_gama(source: Path, out: Path, as_json: bool) -> None:
     """``import gama``: the whole network as multilat's files for the general network
     (observations.csv, points.csv, covariances.csv: every kind, σ, heights, partly fixed points;
@@ -251,6 +274,10 @@ def _import_gama(source: Path, out: Path, as_json: bool) -> None:
     doc = {"format": "gama", "n_obs": net.n_rows, "n_points": net.points.n,
            "fixed": [p for p, s in zip(net.points.ids, net.points.status) if (s == FIXED).any()],
            "n_angles": sum(b.n_rows for b in net.blocks if KINDS[b.kind].UNIT == "rad"), "notes": list(net.notes)}
+    if old is not None and old.restored:               # a multilat export: its heads and offsets, not Gama's model
+        net = _restored_general(old, source)
+        doc["notes"].append("observations.csv: the file's multilat-heads/-offsets lines applied: the heads' "
+                            "offsets are unknowns again, as in distances.csv")
     with staging_dir(out, inputs=[source]) as tmp:
         written = write_network_files(net, tmp, comments=[f"imported from {source.name} by multilat import gama",
                                                           *net.notes])

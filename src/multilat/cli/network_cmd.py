@@ -214,7 +214,9 @@ def adjust_command(
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
     model: str = typer.Option("auto", "--model",
                               help="auto (the default): multilateration, and general for a network its counting "
-                                   "rules refuse (said in a warning); multilateration (self-calibrating, "
+                                   "rules refuse or whose polar points (distance, azimuth, elevation from one "
+                                   "station) they would leave out (said in a warning); multilateration "
+                                   "(self-calibrating, "
                                    "distance-only rules, any size); general (any point in any role, by what the "
                                    "observations determine: docs/general-network.md)."),
 ) -> None:

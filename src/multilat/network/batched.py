@@ -51,9 +51,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.datum import helmert_basis
+from multilat.network.datum import helmert_basis, s_transform
 from multilat.network.trial_datum import TrialDatum
-from multilat.network.model import inv3
+from multilat.network.model import inv3, line_of_sight, range_m
 
 __all__ = [
     "TrialDatum",
@@ -226,18 +226,17 @@ class BatchedNetwork(NetworkSizes):
     def nominal_distance_m(self) -> np.ndarray:
         """Model distances at the nominal solution, shape (m,)."""
         d = self.station_xyz_m[self.station_index] - self.target_xyz_m[self.target_index]
-        return np.sqrt(np.einsum("mi,mi->m", d, d)) + self.offset_m[self.station_index]
+        return range_m(d) + self.offset_m[self.station_index]
 
     # -- precomputation --------------------------------------------------------------------
     def _precompute(self) -> dict:
         si, ti = self.station_index, self.target_index
         s, t, m = self.n_stations, self.n_targets, self.n_obs
         w = 1.0 / self.sigma_m**2
-        diff = self.station_xyz_m[si] - self.target_xyz_m[ti]
-        rho = np.sqrt(np.einsum("mi,mi->m", diff, diff))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            rho, u0 = line_of_sight(self.station_xyz_m[si] - self.target_xyz_m[ti])
         if np.any(rho <= 0):
             raise MultilatError("a station coincides with a target at the nominal solution")
-        u0 = diff / rho[:, None]
         # incidence matrices for scatter sums (dense for small networks)
         a_s = np.zeros((m, s))
         a_s[np.arange(m), si] = 1.0
@@ -309,7 +308,7 @@ class BatchedNetwork(NetworkSizes):
             c = np.asarray(sigma_m, float) ** 2
             jw = j.T * w
             q = q @ (jw @ (c[:, None] * jw.T)) @ q
-        strans = np.eye(self.n_params) - g @ np.linalg.solve(etg, e.T)
+        strans = s_transform(g, e)
         return strans @ q @ strans.T
 
     # -- batched solving -------------------------------------------------------------------
@@ -407,16 +406,14 @@ class BatchedNetwork(NetworkSizes):
 
     def _model(self, h, o, tg):
         diff = h[:, self.station_index] - tg[:, self.target_index]
-        return np.sqrt(np.einsum("nmi,nmi->nm", diff, diff)) + o[:, self.station_index]
+        return range_m(diff) + o[:, self.station_index]
 
     def _step(self, d, h, o, tg, method):
         """One step (dh (n,s,3), do (n,s), dt (n,t,3)) of the chosen method (numpy path)."""
         p = self._pre
         si, ti, w, a_s, a_t = self.station_index, self.target_index, p["w"], p["a_s"], p["a_t"]
         n, s = h.shape[0], h.shape[1]
-        diff = h[:, si] - tg[:, ti]                                   # (n, m, 3)
-        rho = np.sqrt(np.einsum("nmi,nmi->nm", diff, diff))
-        u = diff / rho[..., None]
+        rho, u = line_of_sight(h[:, si] - tg[:, ti])                  # (n, m), (n, m, 3)
         e = w * (d - rho - o[:, si])                                  # w r, (n, m)
         eu = e[..., None] * u
         g_h = np.einsum("nmc,ms->nsc", eu, a_s)                       # (n, s, 3)

@@ -40,7 +40,8 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.batched import BatchSolution, NetworkSizes
-from multilat.network.datum import ABOUT_Z_COLUMNS, helmert_basis
+from multilat.network.datum import ABOUT_Z_COLUMNS, helmert_basis, s_transform
+from multilat.network.model import line_of_sight, range_m
 
 __all__ = ["CoupledBatchedNetwork"]
 
@@ -223,8 +224,7 @@ class CoupledBatchedNetwork(NetworkSizes):
         H, o, k, T = self._split(x)
         si, ti = self.station_index, self.target_index
         hs = self.head_index[si]
-        diff = H[:, si] - T[:, ti]
-        rho = np.sqrt(np.einsum("nmi,nmi->nm", diff, diff))
+        rho = range_m(H[:, si] - T[:, ti])
         return (1.0 + k[:, hs]) * rho + o[:, hs]
 
     def _points(self, x):
@@ -234,7 +234,7 @@ class CoupledBatchedNetwork(NetworkSizes):
     def _coupling_model(self, x):
         X = self._points(x)
         dv = X[:, self.bar_a] - X[:, self.bar_b]
-        L = np.sqrt(np.einsum("nbi,nbi->nb", dv, dv))
+        L = range_m(dv)
         return np.concatenate([L, X[:, self.control_point, self.control_axis]], axis=1)
 
     def _angle_parts(self, x):
@@ -267,9 +267,7 @@ class CoupledBatchedNetwork(NetworkSizes):
         H, o, k, T = (a[0] for a in self._split(x1[None]))
         si, ti = self.station_index, self.target_index
         hs = self.head_index[si]
-        diff = H[si] - T[ti]
-        rho = np.linalg.norm(diff, axis=1)
-        u = diff / rho[:, None]
+        rho, u = line_of_sight(H[si] - T[ti])
         J = np.zeros((m + self.n_extra, P))
         r = np.arange(m)
         for c in range(3):
@@ -281,8 +279,7 @@ class CoupledBatchedNetwork(NetworkSizes):
         col = np.concatenate([3 * np.arange(s), 3 * s + 2 * h + 3 * np.arange(t)])   # point -> first column
         nb = len(self.bar_a)
         if nb:
-            dv = X[self.bar_a] - X[self.bar_b]
-            ub = dv / np.linalg.norm(dv, axis=1)[:, None]
+            _, ub = line_of_sight(X[self.bar_a] - X[self.bar_b])
             rb = m + np.arange(nb)
             for c in range(3):
                 J[rb, col[self.bar_a] + c] += ub[:, c]
@@ -377,9 +374,7 @@ class CoupledBatchedNetwork(NetworkSizes):
         si, ti = self.station_index, self.target_index
         hs = self.head_index[si]
         w = p["w_all"]
-        diff = H[:, si] - T[:, ti]
-        rho = np.sqrt(np.einsum("nmi,nmi->nm", diff, diff))
-        u = diff / rho[..., None]
+        rho, u = line_of_sight(H[:, si] - T[:, ti])
         r = d - (1.0 + k[:, hs]) * rho - o[:, hs]
         e = w[:m] * r
         vtpv = np.einsum("nm,nm->n", e, r)
@@ -396,8 +391,7 @@ class CoupledBatchedNetwork(NetworkSizes):
             ec = w[m:m + nb + nc] * rc
             vtpv = vtpv + np.einsum("nq,nq->n", ec, rc)
             if nb:
-                dv = X[:, self.bar_a] - X[:, self.bar_b]
-                ub = dv / np.sqrt(np.einsum("nbi,nbi->nb", dv, dv))[..., None]
+                _, ub = line_of_sight(X[:, self.bar_a] - X[:, self.bar_b])
                 gX = gX + np.einsum("nbc,bp->npc", ec[:, :nb, None] * ub, p["b_pm"])
             if nc:
                 gX = gX + (ec[:, nb:] @ p["c_in"]).reshape(n, s + t, 3)
@@ -502,7 +496,6 @@ class CoupledBatchedNetwork(NetworkSizes):
         """
         p = self._pre
         J, w = p["J0"], p["w_all"]
-        P = J.shape[1]
         q = p["Ninv"]
         if sigma_m is not None or cov_m2 is not None:
             m = self.n_obs
@@ -516,8 +509,7 @@ class CoupledBatchedNetwork(NetworkSizes):
             q = q @ (jw @ C @ jw.T) @ q
         if self.datum is not None:
             E, G = p["E"], p["G"]
-            etg = E.T @ G
-            S = np.eye(P) - G @ np.linalg.solve(etg, E.T)
+            S = s_transform(G, E)
             q = S @ q @ S.T
         M = self._layout_map()
         return M @ q @ M.T

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from multilat.network.datum import s_coefficients
 from multilat.network.model import Q, repeat_share, segment_sum, slot_gain, target_slots
 from multilat.network.statistics import correlated_with
 
@@ -89,7 +90,7 @@ class NetworkCovariance:
         self._csr = None
         self.G = G
         if G is not None:
-            H = np.linalg.solve(E.T @ G, E.T)            # (6, n)
+            H = s_coefficients(G, E)                     # (6, n)
             self.H = H
             self.CHt = self._rot_times(H.T)               # (n, 6)  C_rot H^T
             self.HCHt = H @ self.CHt

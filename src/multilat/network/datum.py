@@ -36,7 +36,7 @@ from multilat.errors import MultilatError
 from multilat.network.model import Q
 
 __all__ = ["Datum", "parse_datum", "helmert_basis", "rigid_fit", "frame_321", "frame_axes", "apply_rigid",
-           "datum_matrices", "RIGID_FIT_ITERATIONS", "ABOUT_Z_COLUMNS"]
+           "datum_matrices", "s_coefficients", "s_transform", "RIGID_FIT_ITERATIONS", "ABOUT_Z_COLUMNS"]
 
 #: the columns of :func:`helmert_basis` left when the vertical is observed (levelled stations): the
 #: three translations and the rotation about z
@@ -212,3 +212,15 @@ def datum_matrices(datum: Datum, station_ids, target_ids, sx, tx):
     return G, E
 
 
+def s_coefficients(G, E) -> np.ndarray:
+    """``H = (Eᵀ G)⁻¹ Eᵀ`` (d, n) of the S-transformation ``S = I - G H`` (:func:`s_transform`), for
+    products with ``S`` that never form it (the adjustment's covariance operator)."""
+    return np.linalg.solve(E.T @ G, E.T)
+
+
+def s_transform(G, E) -> np.ndarray:
+    """The S-transformation ``S = I - G (Eᵀ G)⁻¹ Eᵀ`` (n, n) onto the datum ``Eᵀ dx = 0``: ``G`` (n, d)
+    the datum defects (rigid motions, :func:`helmert_basis` / :func:`datum_matrices`), ``E`` (n, d)
+    the datum's constraints; a covariance in any datum becomes ``S C Sᵀ`` in this one. The one copy
+    (``tests/test_each_concept_once.py``)."""
+    return np.eye(G.shape[0]) - G @ s_coefficients(G, E)

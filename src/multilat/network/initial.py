@@ -57,6 +57,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.bounds import RESTART_SECONDS, Bound, report
 from multilat.network.datum import rigid_fit
+from multilat.network.model import line_of_sight, range_m
 from multilat.network.unit_slip import SLIP_FACTOR
 from multilat.network.initial_refine import (choose_frame, fix_mirror, levenberg_marquardt,
                                              refine as refine_fit, refine_unmirrored, to_frame)
@@ -128,10 +129,8 @@ def multilaterate(anchor_xyz_m, distance_m, *, with_offset: bool = False):
     p = sol[1:4]
     o = float(sol[4]) if with_offset else 0.0
     for _ in range(3):  # Gauss-Newton on the distances themselves
-        diff = p - a0
-        rho = np.linalg.norm(diff, axis=1)
+        rho, J = line_of_sight(p - a0, floor_m=1e-12)
         rho = np.where(rho > 0, rho, 1e-12)
-        J = diff / rho[:, None]
         if with_offset:
             J = np.column_stack([J, np.ones(len(d))])
         r = d - rho - o
@@ -199,7 +198,7 @@ def _affine_fit(D, Ut, Vv, A, delta, o):
             return np.full(p * q, 1e3)
         H = Ut @ Ax
         T = x[9:12] + Vv @ Ai.T
-        rho = np.linalg.norm(H[:, None, :] - T[None, :, :], axis=2)
+        rho = range_m(H[:, None, :] - T[None, :, :])
         return (D - rho - x[12:, None]).ravel()
 
     def jac(x):
@@ -211,8 +210,7 @@ def _affine_fit(D, Ut, Vv, A, delta, o):
         H = Ut @ Ax
         Wt = Vv @ Ai.T                                   # T_j - delta
         diff = H[:, None, :] - (x[9:12] + Wt)[None, :, :]
-        rho = np.linalg.norm(diff, axis=2)
-        U = diff / np.where(rho > 0, rho, 1e-12)[..., None]          # (p, q, 3)
+        _, U = line_of_sight(diff, floor_m=1e-12)                    # (p, q, 3)
         # d r_ij / d A_lk = -(u_ij,k ut_il + (u_ij . Ai[:, l]) w_jk)
         t1 = U[:, :, None, :] * Ut[:, None, :, None]
         t2 = (U @ Ai)[:, :, :, None] * Wt[None, :, None, :]

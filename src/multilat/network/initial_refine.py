@@ -12,6 +12,7 @@ import numpy as np
 import scipy.sparse
 import scipy.sparse.linalg
 
+from multilat.network.model import line_of_sight, range_m
 from multilat.network.solve.convergence import Convergence
 
 
@@ -44,9 +45,7 @@ def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200, deadline=None):
 
     def fun(x):
         Hx, Tx, ox = unpack(x)
-        diff = Hx[si] - Tx[tj]
-        rho = np.sqrt((diff ** 2).sum(1))
-        return w * (d - rho - ox[si])
+        return w * (d - range_m(Hx[si] - Tx[tj]) - ox[si])
 
     hcols = -np.ones((s, 3), int)
     hcols[free_h] = np.arange(nh)
@@ -57,9 +56,7 @@ def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200, deadline=None):
 
     def jac(x):
         Hx, Tx, ox = unpack(x)
-        diff = Hx[si] - Tx[tj]
-        rho = np.sqrt((diff ** 2).sum(1))
-        u = diff / np.where(rho > 0, rho, 1e-12)[:, None]
+        _, u = line_of_sight(Hx[si] - Tx[tj], floor_m=1e-12)
         rr, cc, vv = [], [], []
         for c in range(3):
             hc = hcols[si, c]
@@ -91,8 +88,7 @@ def refine(D, W, H, T, o, frame, *, robust=True, max_nfev=200, deadline=None):
                 x, conv = levenberg_marquardt(lambda z: hw * fun(z), lambda z: row_scale(jac(z), hw), x,  # noqa: B023
                                                max_iter=max_nfev, deadline=deadline)
     Hx, Tx, ox = unpack(x)
-    diff = Hx[si] - Tx[tj]
-    r = d - np.sqrt((diff ** 2).sum(1)) - ox[si]
+    r = d - range_m(Hx[si] - Tx[tj]) - ox[si]
     return Hx, Tx, ox, float(np.sqrt(np.mean(r ** 2))), float(1.4826 * np.median(np.abs(r))), conv
 
 
@@ -100,16 +96,14 @@ def point_fit(A, d, w, p, *, iters=8):
     """Gauss-Newton for one point ``p`` (3,) from anchors ``A`` (n, 3), offset-corrected distances
     ``d`` (n,) and weights ``w`` (n,); returns the point and its weighted cost ``sum w r^2``."""
     for _ in range(iters):
-        diff = p - A
-        rho = np.sqrt((diff ** 2).sum(1))
-        J = diff / np.where(rho > 0, rho, 1e-12)[:, None]
+        rho, J = line_of_sight(p - A, floor_m=1e-12)
         r = d - rho
         sw = np.sqrt(w)
         step, *_ = np.linalg.lstsq(sw[:, None] * J, sw * r, rcond=None)
         p = p + step
         if np.max(np.abs(step)) < 1e-12 * (1.0 + np.max(np.abs(p))):
             break
-    r = d - np.sqrt(((p - A) ** 2).sum(1))
+    r = d - range_m(p - A)
     return p, float(w @ r ** 2)
 
 
@@ -128,7 +122,7 @@ def mirror_sweep(D, W, H, T, o):
         if len(st) < 4:       # 3 stations: the two sides fit exactly, nothing to decide
             continue
         A, d, w = H[st], D[st, j] - o[st], W[st, j]
-        r0 = d - np.sqrt(((T[j] - A) ** 2).sum(1))
+        r0 = d - range_m(T[j] - A)
         c0 = float(w @ r0 ** 2)
         c = A.mean(0)
         n = np.linalg.svd(A - c)[2][2]

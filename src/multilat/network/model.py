@@ -35,7 +35,7 @@ import numpy as np
 Q = 5  # global parameters per station: x, y, z, offset, scale
 COSTS = ("distance", "squared")
 
-__all__ = ["Q", "COSTS", "segment_sum", "geometric_distance_m", "predicted_distance_m", "residuals",
+__all__ = ["Q", "COSTS", "segment_sum", "range_m", "line_of_sight", "geometric_distance_m", "predicted_distance_m", "residuals",
            "residuals_and_jacobian", "dense_jacobian", "target_slots", "slot_gain", "repeat_share",
            "ReducedSystem", "reduced_normal_equations", "back_substitute", "inv3"]
 
@@ -59,6 +59,26 @@ def segment_sum(index, values, n):
     return out.reshape((n,) + values.shape[1:])
 
 
+def range_m(diff_m):
+    """``|H - T|`` (...) of differences ``diff_m`` (..., 3), as :func:`line_of_sight` (without ``u``)."""
+    return np.sqrt(np.einsum("...i,...i->...", diff_m, diff_m))
+
+
+def line_of_sight(diff_m, *, floor_m=None):
+    """Ranges and unit vectors of station-minus-target differences: the distance model's Jacobian.
+
+    ``diff_m = H - T`` (..., 3), any leading axes (observations, trials). Returns ``rho = |H - T|``
+    (...) and ``u = (H - T) / rho`` (..., 3): one distance's Jacobian row is ``[(1 + k) u, 1, rho]`` on
+    its station's ``x, y, z, offset, scale`` and ``-(1 + k) u`` on its target. The one numpy copy
+    (``tests/test_each_concept_once.py``); each compiled kernel keeps its own inline one. ``floor_m``:
+    ``u`` divides by ``floor_m`` where ``rho`` is 0 (the starting-value solvers; ``rho`` is returned as
+    it is).
+    """
+    rho = range_m(diff_m)
+    den = rho if floor_m is None else np.where(rho > 0, rho, floor_m)
+    return rho, diff_m / den[..., None]
+
+
 def geometric_distance_m(station_xyz_m, target_xyz_m, station_index, target_index):
     """Euclidean distances ``|H_i - T_j|`` per observation.
 
@@ -74,7 +94,7 @@ def geometric_distance_m(station_xyz_m, target_xyz_m, station_index, target_inde
     diff_m : ndarray (m, 3), ``H_i - T_j``
     """
     diff = station_xyz_m[station_index] - target_xyz_m[target_index]
-    return np.sqrt(np.einsum("mi,mi->m", diff, diff)), diff
+    return range_m(diff), diff
 
 
 def predicted_distance_m(station_xyz_m, target_xyz_m, offset_m, scale, station_index, target_index):
@@ -135,8 +155,7 @@ def residuals_and_jacobian(distance_m, station_xyz_m, target_xyz_m, offset_m, sc
     J_target : ndarray (m, 3)
         Same with respect to the target's ``x, y, z``.
     """
-    rho, diff = geometric_distance_m(station_xyz_m, target_xyz_m, station_index, target_index)
-    u = diff / rho[:, None]
+    rho, u = line_of_sight(station_xyz_m[station_index] - target_xyz_m[target_index])
     k1 = 1.0 + scale[station_index]
     o = offset_m[station_index]
     m = rho.shape[0]

@@ -13,17 +13,22 @@ HEADER = ("group", "input quantity", "distribution", "u(x)", "sensitivity c", "|
 _UM = 1e6
 
 
-def _num(*path, doc):
+def _num_at(*path, doc, paths=True):
     from multilat.report.job_sections import ptr, resolve
 
     p = ptr(*path)
-    return Num(resolve(doc, p), p, _UM, 2)
+    return Num(resolve(doc, p), p if paths else "", _UM, 2)
 
 
-def input_budget_table(sec, doc: dict) -> None:
+def input_budget_table(sec, doc: dict, *, paths: bool = True) -> None:
     """Add the per-input table of ``doc["input_budget"]`` to the section ``sec``: every row, grouped,
-    largest share first within each group, then the groups as sums of their rows."""
+    largest share first within each group, then the groups as sums of their rows. ``paths``: the
+    cells name their place in ``doc`` (False where ``doc`` is no command's JSON, as in the demo)."""
+    import functools
+
     from multilat.budget_inputs import row_text
+
+    _num = functools.partial(_num_at, paths=paths)
 
     ib = doc["input_budget"]
     rows = []

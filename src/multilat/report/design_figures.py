@@ -2,8 +2,9 @@
 (the network figures, fed a :class:`~multilat.network.design.PreAnalysis`), and maps of the
 predicted uncertainty of a point measured anywhere in the volume, over horizontal slices (as seed
 003's work-volume maps). Declared obstructions (``[[occluders]]`` boxes) are drawn (hatched where a
-slice cuts the box, dashed outline elsewhere; outline in the top view) and used: a map point is
-measured only by the heads whose line of sight to it no box cuts.
+slice cuts the box, dashed outline elsewhere; outline in the top view; a grey box in the 3-D views,
+static and interactive, from the one geometry :func:`box_faces`) and used: a map point is measured
+only by the heads whose line of sight to it no box cuts.
 
 Plot functions take ``ax=None`` and return the axes; :func:`save_design_figures` writes PNGs atomically.
 """
@@ -18,7 +19,47 @@ import numpy as np
 from multilat.network.statistics import CHI2_3_95
 from multilat.report.network_figures import _plt, plot_3d, plot_top_view
 
-__all__ = ["plot_slice_maps", "save_design_figures", "draw_occluders"]
+__all__ = ["plot_slice_maps", "save_design_figures", "draw_occluders", "draw_occluders_3d", "box_corners",
+           "box_faces", "plot_layout_3d"]
+
+#: the six faces of a box as indices of :func:`box_corners` (corner k: x from bit 0, y bit 1, z bit 2)
+BOX_FACES = ((0, 1, 3, 2), (4, 5, 7, 6), (0, 1, 5, 4), (2, 3, 7, 6), (0, 2, 6, 4), (1, 3, 7, 5))
+
+
+def box_corners(box_min_m, box_max_m) -> np.ndarray:
+    """The 8 corners (8, 3) of the axis-aligned box: corner k takes x, y, z from ``box_max_m`` where
+    bit 0, 1, 2 of k is set, else from ``box_min_m``."""
+    lo, hi = np.asarray(box_min_m, float), np.asarray(box_max_m, float)
+    return np.array([[(hi if k >> i & 1 else lo)[i] for i in range(3)] for k in range(8)])
+
+
+def box_faces(box_min_m, box_max_m) -> np.ndarray:
+    """The six faces (6, 4, 3) of the box, each a quadrilateral of its corners in order round it."""
+    c = box_corners(box_min_m, box_max_m)
+    return c[np.array(BOX_FACES)]
+
+
+def draw_occluders_3d(ax, occluders):
+    """Each occluder box ``(box_min_m, box_max_m)`` as a grey translucent box (six faces, gid
+    ``occluder``) on the 3-D axes ``ax``."""
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    for i, (lo, hi) in enumerate(occluders):
+        ax.add_collection3d(Poly3DCollection(box_faces(lo, hi), facecolor="0.5", edgecolor="k", alpha=0.25,
+                                             lw=0.8, gid="occluder", label="obstruction" if i == 0 else None))
+    if len(occluders):
+        pts = np.vstack([box_corners(lo, hi) for lo, hi in occluders])
+        for get, put, j in ((ax.get_xlim3d, ax.set_xlim3d, 0), (ax.get_ylim3d, ax.set_ylim3d, 1),
+                            (ax.get_zlim3d, ax.set_zlim3d, 2)):
+            a, b = get()
+            put(min(a, pts[:, j].min()), max(b, pts[:, j].max()))
+    return ax
+
+
+def plot_layout_3d(pre, occluders=(), ax=None):
+    """The 3-D layout with predicted 95 % ellipsoids (:func:`~multilat.report.network_figures.plot_3d`)
+    and the declared obstructions."""
+    return draw_occluders_3d(plot_3d(pre, ax=ax), occluders)
 
 
 def draw_occluders(ax, occluders, *, z=None):
@@ -80,7 +121,7 @@ def save_design_figures(pre, out_dir: str | os.PathLike, *, box_min_m, box_max_m
 
     out = Path(out_dir)
     written = []
-    figs = [("layout_3d.png", plot_3d(pre).figure),
+    figs = [("layout_3d.png", plot_layout_3d(pre, occluders).figure),
             ("layout_top.png", draw_occluders(plot_top_view(pre), occluders).figure),
             ("uncertainty_slices.png",
              plot_slice_maps(pre, box_min_m, box_max_m, min_range_m=min_range_m,

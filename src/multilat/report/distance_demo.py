@@ -44,6 +44,7 @@ def section(*, seed: int, quick: bool) -> Section:
     _telemetric_table(sec, inst)
     _air_table(sec)
     res = _budget_table(sec, inst, seed=seed, quick=quick)
+    _input_table(sec, inst, seed=seed, quick=quick)
     _variants_table(sec, inst, res, seed=seed, quick=quick)
     sec.paragraph(
         "Sign of the target transit offset: eq. (5) (-2 Tot Rt cos phi') is the geometric one for Table IV's "
@@ -119,6 +120,29 @@ def _budget_table(sec, inst, *, seed: int, quick: bool):
                        "their sum (Fig. 10): bimodal telemetric (crosstalk), Lorentzian-like head, near-gaussian "
                        "target and total.")
     return res
+
+
+def _input_table(sec, inst, *, seed: int, quick: bool) -> None:
+    """The budget of head A per input quantity (:mod:`multilat.budget_inputs`, the table of
+    ``multilat budget --report``), and its groups as sums of their rows beside the paper's."""
+    from multilat.budget_inputs import input_budget
+    from multilat.report.budget_tables import input_budget_table
+
+    ib = input_budget(inst, head="A", trials=200 if quick else 2000, rng=seed, include_air=False)
+    doc = {"input_budget": ib.to_dict()}
+    input_budget_table(sec, doc, paths=False)
+    rows = []
+    for g in ("telemetric", "head", "target"):
+        u = ib.groups[g]["error_rms_m"] * 1e6
+        rows.append((g + (" A" if g == "head" else ""), f"{PAPER_BUDGET_UM[g]:.1f}", f"{u:.2f}",
+                     f"{ib.groups[g]['error_rms_se_m'] * 1e6:.2f}", _ok(u, PAPER_BUDGET_UM[g])))
+    u = ib.error_rms_m * 1e6
+    rows.append(("combined", f"{PAPER_BUDGET_UM['combined']:.1f}", f"{u:.2f}", f"{ib.error_rms_se_m * 1e6:.2f}",
+                 _ok(u, PAPER_BUDGET_UM["combined"])))
+    sec.table(("group", "paper", "multilat", "Monte Carlo standard error (µm)", "same to paper's rounding"), rows,
+              caption="The groups of section 3.4 (µm, k = 1) rebuilt from the per-input rows above: each is "
+                      "√(Σ share²) of its rows (a Monte Carlo run of its own, so it differs from the group table "
+                      "within the standard errors); combined: the three groups' rows and their summed mean")
 
 
 def _variants_table(sec, inst, res, *, seed: int, quick: bool) -> None:

@@ -90,14 +90,14 @@ def _network_figures(result) -> Section:
     return sec
 
 
-def _view_3d(sec: Section, result) -> None:
+def _view_3d(sec: Section, result, occluders=()) -> None:
     from multilat.report import view3d
 
-    frag = view3d.html_fragment(result)
+    frag = view3d.html_fragment(result, occluders)
     if frag is None:
-        from multilat.report import network_figures as nf
+        from multilat.report.design_figures import plot_layout_3d
 
-        ax = nf.plot_3d(result)
+        ax = plot_layout_3d(result, occluders)
         sec.figure(ax.figure, caption="3-D view (static: install the 'report' extra, plotly, for an "
                                       "interactive one)")
     else:
@@ -270,10 +270,14 @@ def design(doc: dict, result=None, options=None) -> list[Section]:
     if result is not None:
         from multilat.report import network_figures as nf
 
+        from multilat.report.design_figures import draw_occluders
+
         f = Section("Figures")
-        ax = nf.plot_top_view(result.best)
-        f.figure(ax.figure, caption="Top view with the predicted 95 % ellipses, magnified per class")
-        _view_3d(f, result.best)
+        occ = getattr(result, "occluders", ())
+        ax = draw_occluders(nf.plot_top_view(result.best), occ)
+        f.figure(ax.figure, caption="Top view with the predicted 95 % ellipses, magnified per class"
+                 + (" and the declared obstructions (dashed)" if occ else ""))
+        _view_3d(f, result.best, occ)
         out.append(f)
     return out
 

@@ -4,7 +4,8 @@ plotly is the optional ``report`` extra; without it :func:`html_fragment` return
 reports fall back to the static matplotlib view. The fragment carries plotly.js inline
 (``include_plotlyjs=True``, about 4.6 MB) so that the report stays one self-contained file.
 Ellipsoids are magnified per class (stations, targets) with the factors in the legend, as in
-:func:`multilat.report.network_figures.plot_top_view`.
+:func:`multilat.report.network_figures.plot_top_view`. Declared obstructions (a design's
+``[[occluders]]`` boxes) are drawn as grey boxes, one ``Mesh3d`` trace each.
 """
 
 from __future__ import annotations
@@ -25,8 +26,23 @@ def available() -> bool:
     return True
 
 
-def figure(result, *, max_ellipsoids: int = 300):
-    """A plotly Figure of ``result`` (anything with station/target ids, xyz and 3x3 covariances)."""
+def _occluder_traces(fig, occluders) -> None:
+    """One grey ``Mesh3d`` box per ``(box_min_m, box_max_m)``: its 8 corners, 12 triangles."""
+    import plotly.graph_objects as go
+
+    from multilat.report.design_figures import BOX_FACES, box_corners
+
+    tri = np.array([t for f in BOX_FACES for t in ((f[0], f[1], f[2]), (f[0], f[2], f[3]))])
+    for n, (lo, hi) in enumerate(occluders):
+        c = box_corners(lo, hi)
+        fig.add_trace(go.Mesh3d(x=c[:, 0], y=c[:, 1], z=c[:, 2], i=tri[:, 0], j=tri[:, 1], k=tri[:, 2],
+                                color="#7f7f7f", opacity=0.3, flatshading=True, name="obstruction",
+                                legendgroup="obstruction", showlegend=n == 0, hoverinfo="name"))
+
+
+def figure(result, *, max_ellipsoids: int = 300, occluders=()):
+    """A plotly Figure of ``result`` (anything with station/target ids, xyz and 3x3 covariances);
+    ``occluders``: boxes ``(box_min_m, box_max_m)`` drawn as obstructions."""
     import plotly.graph_objects as go
 
     mags = class_magnifications(result)
@@ -54,6 +70,7 @@ def figure(result, *, max_ellipsoids: int = 300):
                                      colorscale=[[0, col], [1, col]], name=f"{name} 95 % ×{mag:g}",
                                      legendgroup=name + "ell", showlegend=first, hoverinfo="skip"))
             first = False
+    _occluder_traces(fig, occluders)
     fig.update_layout(scene=dict(aspectmode="data", xaxis_title="x (m)", yaxis_title="y (m)",
                                  zaxis_title="z (m)"),
                       margin=dict(l=0, r=0, t=30, b=0), height=600,
@@ -61,11 +78,11 @@ def figure(result, *, max_ellipsoids: int = 300):
     return fig
 
 
-def html_fragment(result) -> str | None:
+def html_fragment(result, occluders=()) -> str | None:
     """The view as an HTML ``<div>`` with plotly.js inline, or ``None`` without plotly."""
     if not available():
         return None
-    return figure(result).to_html(include_plotlyjs=True, full_html=False,
+    return figure(result, occluders=occluders).to_html(include_plotlyjs=True, full_html=False,
                                   config={"displaylogo": False})
 
 

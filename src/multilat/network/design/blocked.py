@@ -27,7 +27,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.datum import Datum, apply_rigid, datum_matrices, frame_321, parse_datum
-from multilat.network.model import Q
+from multilat.network.model import Q, line_of_sight, range_m
 
 __all__ = ["BlockedCovariance", "blocked_covariance", "blocked_criterion"]
 
@@ -91,7 +91,7 @@ def blocked_covariance(layout, sigma_m, *, offsets: bool = True, datum="free",
     a, b, c = pick_321_stations(sx)
     R0, t0 = frame_321(sx[a], sx[b], sx[c])
     sx0, tx0 = apply_rigid(R0, t0, sx), apply_rigid(R0, t0, tx)
-    d = np.linalg.norm(sx0[si] - tx0[ti], axis=1)
+    d = range_m(sx0[si] - tx0[ti])
     sig = np.asarray(sigma_m, float)
     obs = Observations(layout.station_ids, layout.target_ids, si, ti, d, sig)
     gfree = np.ones((s, Q), bool)
@@ -120,8 +120,7 @@ def external_reliability_m(bc: BlockedCovariance, layout, mdb_m, *, offsets: boo
     datum (as the dense pre-analysis): ``N^+ a_k mdb_k / sigma_k`` with ``a_k`` the whitened row."""
     s, t = layout.n_stations, layout.n_targets
     si, ti, sig = bc.station_index, bc.target_index, bc.sigma_m
-    diff = layout.station_xyz_m[si] - layout.target_xyz_m[ti]
-    u = diff / np.linalg.norm(diff, axis=1)[:, None] / sig[:, None]
+    u = line_of_sight(layout.station_xyz_m[si] - layout.target_xyz_m[ti])[1] / sig[:, None]
     n = Q * s + 3 * t
     m = si.size
     scale = np.where(np.isfinite(mdb_m), mdb_m, 0.0) / sig
@@ -148,15 +147,11 @@ def blocked_criterion(name: str, layout, sigma_m, *, offsets=True, datum="free",
         bc = blocked_covariance(layout, sigma_m, offsets=offsets, datum=datum, solver=solver)
     except MultilatError:
         return float("inf")
-    if name == "max_u95":
-        ev = np.linalg.eigvalsh(bc.target_cov_m2())[:, -1]
-        return float(np.sqrt(st.CHI2_3_95 * max(ev.max(), 0.0)))
-    if name == "rms_u":
-        tc = bc.target_cov_m2()
-        return float(np.sqrt(np.trace(tc, axis1=1, axis2=2).mean()))
-    if name == "length_u":
-        from multilat.network.design.preanalysis import _length_u
+    from multilat.network.design.preanalysis import _length_u, target_criterion
 
+    if name in ("max_u95", "rms_u"):
+        return target_criterion(name, bc.target_cov_m2())
+    if name == "length_u":
         return float(max(u for _, u in _length_u(layout, bc.cov, lengths)))
     if name == "max_mdb":
         return float(st.minimal_detectable_bias_m(bc.sigma_m, bc.redundancy(), alpha=alpha,

@@ -400,7 +400,8 @@ class DesignRun:
     pre-analysis of the returned layout and of the start (or given) layout; ``selection``: the
     fewest targets for ``[criterion] target_u95_m`` (:class:`~.targets.TargetSelection`) or None;
     ``heads``: the instrument head measuring from each station of ``best``; ``poorly_controlled``:
-    :func:`poorly_controlled_targets` of ``best``."""
+    :func:`poorly_controlled_targets` of ``best``; ``occluders``: the declared obstruction boxes
+    ``(box_min_m, box_max_m)``, for the figures."""
 
     criterion: str
     search: DesignResult | None
@@ -410,12 +411,20 @@ class DesignRun:
     selection: object = None
     heads: tuple = ()
     poorly_controlled: tuple = ()
+    occluders: tuple = ()
 
 
 def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, rng=None,
                source: str = "config") -> DesignRun:
     """Run a validated config: optimise (box or candidates) or, with fixed heads or ``evaluate``
     (a :class:`~multilat.network.data.Points` of heads), score the given layout only."""
+    import dataclasses
+
+    run = _run_design(cfg, base_dir=base_dir, evaluate=evaluate, rng=rng, source=source)
+    return dataclasses.replace(run, occluders=tuple((o.box_min_m, o.box_max_m) for o in cfg.occluders))
+
+
+def _run_design(cfg: DesignConfig, *, base_dir, evaluate, rng, source) -> DesignRun:
     base = Path(base_dir)
     tid, tx = _targets(cfg.targets, base)
     h = cfg.heads

@@ -28,6 +28,7 @@ from multilat.network.datum import parse_datum
 from multilat.network.design.preanalysis import Layout, SigmaModel, preanalyse
 from multilat.network.general.observations import Block, Network
 from multilat.network.general.points import FREE, PointSet
+from multilat.network.model import range_m
 from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
 
 __all__ = ["Design", "Prediction", "design_from_layout", "evaluate_layout", "BACKENDS"]
@@ -93,7 +94,7 @@ def design_from_layout(layout: Layout, sigma, *, offsets: bool = True, datum: st
                             "a 321 or control datum is the distance-only evaluators' S-transform")
     si, ti = layout.pairs()
     s = layout.n_stations
-    d = np.linalg.norm(layout.station_xyz_m[si] - layout.target_xyz_m[ti], axis=1)
+    d = range_m(layout.station_xyz_m[si] - layout.target_xyz_m[ti])
     sig = sigma(d, si, layout.station_ids) if isinstance(sigma, SigmaModel) else \
         np.broadcast_to(np.asarray(sigma, float), d.shape).copy()
     ids = layout.station_ids + layout.target_ids

@@ -26,8 +26,8 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
-from multilat.network.datum import Datum, datum_matrices, helmert_basis, parse_datum
-from multilat.network.model import Q, inv3
+from multilat.network.datum import Datum, datum_matrices, helmert_basis, parse_datum, s_coefficients
+from multilat.network.model import Q, inv3, line_of_sight
 
 __all__ = ["fast_criterion", "fast_target_cov_m2"]
 
@@ -37,12 +37,12 @@ def _datum_GH(layout, datum, s, t, p):
     sx, tx = layout.station_xyz_m, layout.target_xyz_m
     if datum.kind == "free" and datum.points is None:          # inner constraints over all points
         Gp = helmert_basis(np.vstack([sx, tx]))                  # (3(s + t), 6)
-        Hp = Gp @ np.linalg.inv(Gp.T @ Gp)
+        Hp = s_coefficients(Gp, Gp).T
         Gs, Hs = np.zeros((s, p, 6)), np.zeros((s, p, 6))
         Gs[:, :3], Hs[:, :3] = Gp[:3 * s].reshape(s, 3, 6), Hp[:3 * s].reshape(s, 3, 6)
         return Gs.reshape(s * p, 6), Hs.reshape(s * p, 6), Gp[3 * s:].reshape(t, 3, 6), Hp[3 * s:].reshape(t, 3, 6)
     G, E = datum_matrices(datum, layout.station_ids, layout.target_ids, sx, tx)
-    Hm = np.linalg.solve(E.T @ G, E.T).T                                # (n, 6)
+    Hm = s_coefficients(G, E).T                                         # (n, 6)
     rows_s = (Q * np.arange(s)[:, None] + np.arange(p)).ravel()
     return G[rows_s], Hm[rows_s], G[Q * s:].reshape(t, 3, 6), Hm[Q * s:].reshape(t, 3, 6)
 
@@ -52,9 +52,7 @@ def _parts(layout, sig_mat, offsets, datum):
     s, t = vis.shape
     p = 4 if offsets else 3
     sp = s * p
-    diff = (sx[:, None, :] - tx[None]).transpose(1, 0, 2)             # (t, s, 3)
-    d = np.sqrt((diff * diff).sum(axis=2))
-    u = diff / d[..., None]
+    _, u = line_of_sight((sx[:, None, :] - tx[None]).transpose(1, 0, 2))   # (t, s, 3)
     w = np.where(vis, 1.0 / np.where(vis, sig_mat, 1.0) ** 2, 0.0).T    # (t, s)
     a = np.concatenate([u, np.ones((t, s, 1))], axis=2) if offsets else u   # (t, s, p)
     wu = w[..., None] * u
@@ -125,10 +123,10 @@ def fast_criterion(name: str, layout, sig_mat, *, offsets=True, datum="free", al
         P = _parts(layout, sig_mat, offsets, dat)
     except MultilatError:
         return float("inf")
-    if name == "max_u95":
-        return float(np.sqrt(st.CHI2_3_95 * max(np.linalg.eigvalsh(P["cov"])[:, -1].max(), 0.0)))
-    if name == "rms_u":
-        return float(np.sqrt(np.trace(P["cov"], axis1=1, axis2=2).mean()))
+    if name in ("max_u95", "rms_u"):
+        from multilat.network.design.preanalysis import target_criterion
+
+        return target_criterion(name, P["cov"])
     if name == "max_mdb":
         vis = layout.visible
         red = np.clip(1.0 - _hat(P).T[vis], 0.0, 1.0)

@@ -27,11 +27,11 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.data import Observations
-from multilat.network.datum import Datum, helmert_basis, parse_datum
-from multilat.network.model import Q, residuals_and_jacobian
+from multilat.network.datum import Datum, helmert_basis, parse_datum, s_transform
+from multilat.network.model import Q, line_of_sight, range_m, residuals_and_jacobian
 
 __all__ = ["Layout", "SigmaModel", "design_head_names", "PreAnalysis", "preanalyse", "covariance", "CRITERIA",
-           "criterion_value", "layout_observations", "probe_cov_m2", "DENSE_MAX_PARAMS"]
+           "criterion_value", "target_criterion", "layout_observations", "probe_cov_m2", "DENSE_MAX_PARAMS"]
 
 #: optimisation criteria (docs/design.md): name -> description
 CRITERIA = {
@@ -132,7 +132,7 @@ class SigmaModel:
 
     def describe(self) -> str:
         if self.sigma_m is not None:
-            return f"sigma {self.sigma_m * 1e6:.3g} um"
+            return f"σ {self.sigma_m * 1e6:.3g} µm"
         return f"instrument {getattr(self.instrument, 'name', 'model')}"
 
     def head_of(self, station_id: str) -> str:
@@ -227,7 +227,7 @@ def covariance(layout: Layout, sigma_m, *, offsets: bool = True, datum="free"):
     si, ti = layout.pairs()
     sx, tx = layout.station_xyz_m, layout.target_xyz_m
     zero = np.zeros(s)
-    d = np.linalg.norm(sx[si] - tx[ti], axis=1)
+    d = range_m(sx[si] - tx[ti])
     _, Js, Jt = residuals_and_jacobian(d, sx, tx, zero, zero, si, ti)
     m = si.size
     n = Q * s + 3 * t
@@ -263,7 +263,7 @@ def covariance(layout: Layout, sigma_m, *, offsets: bool = True, datum="free"):
     cov[np.ix_(free, free)] = Qplus
     E = _datum_E(parse_datum(datum), layout, G, point_rows)
     if E is not None:
-        S = np.eye(n) - G @ np.linalg.solve(E.T @ G, E.T)
+        S = s_transform(G, E)
         cov = S @ cov @ S.T
     return cov, A_w, free, Qplus
 
@@ -280,6 +280,16 @@ def _u95_max(cov3):
     return np.sqrt(st.CHI2_3_95 * np.clip(np.linalg.eigvalsh(cov3)[..., -1], 0.0, None))
 
 
+def target_criterion(name: str, target_cov_m2) -> float:
+    """``max_u95`` or ``rms_u`` (:data:`CRITERIA`, m) from the targets' covariances (t, 3, 3): the one
+    evaluation of both behind every method (dense, blocked, fast) and :meth:`PreAnalysis.criterion`."""
+    if name == "max_u95":
+        return float(_u95_max(target_cov_m2).max())
+    if name == "rms_u":
+        return float(np.sqrt(np.trace(target_cov_m2, axis1=1, axis2=2).mean()))
+    raise MultilatError(f"target_criterion: {name!r} is not a criterion of the targets' covariances alone")
+
+
 def _length_u(layout: Layout, cov, pairs):
     """``(length_m, standard uncertainty_m)`` of the distances between point pairs (ids); ``cov`` the
     full covariance matrix, or an object whose ``block(rows)`` gives the block of those rows (the
@@ -292,12 +302,11 @@ def _length_u(layout: Layout, cov, pairs):
     for a, b in pairs:
         ra, rb = (Q * pos[p] + np.arange(3) if pos[p] < s else Q * s + 3 * (pos[p] - s) + np.arange(3)
                   for p in (a, b))
-        dv = xyz[pos[a]] - xyz[pos[b]]
-        L = float(np.linalg.norm(dv))
-        g = np.concatenate([dv / L, -dv / L])
+        L, u = line_of_sight(xyz[pos[a]] - xyz[pos[b]])
+        g = np.concatenate([u, -u])
         r = np.concatenate([ra, rb])
         C = cov.block(r) if hasattr(cov, "block") else cov[np.ix_(r, r)]
-        out.append((L, float(np.sqrt(max(g @ C @ g, 0.0)))))
+        out.append((float(L), float(np.sqrt(max(g @ C @ g, 0.0)))))
     return out
 
 
@@ -337,7 +346,7 @@ def criterion_value(name: str, layout: Layout, sigma: SigmaModel, *, offsets=Tru
     if name not in CRITERIA:
         raise MultilatError(f"criterion must be one of {', '.join(CRITERIA)}, got {name!r}")
     si, ti = layout.pairs()
-    d = np.linalg.norm(layout.station_xyz_m[si] - layout.target_xyz_m[ti], axis=1)
+    d = range_m(layout.station_xyz_m[si] - layout.target_xyz_m[ti])
     sig = sigma(d, si, layout.station_ids)
     how = _method(method, layout, name)
     if how == "fast":
@@ -355,13 +364,8 @@ def criterion_value(name: str, layout: Layout, sigma: SigmaModel, *, offsets=Tru
         cov, A_w, _, Qplus = covariance(layout, sig, offsets=offsets, datum=datum)
     except MultilatError:
         return float("inf")
-    s, t = layout.n_stations, layout.n_targets
-    if name == "max_u95":
-        _, tt = _point_blocks(cov, s, t)
-        return float(_u95_max(tt).max())
-    if name == "rms_u":
-        o = Q * s
-        return float(np.sqrt(np.trace(cov[o:, o:]) / t))
+    if name in ("max_u95", "rms_u"):
+        return target_criterion(name, _point_blocks(cov, layout.n_stations, layout.n_targets)[1])
     if name == "length_u":
         return float(max(u for _, u in _length_u(layout, cov, lengths)))
     if name == "max_mdb":
@@ -448,10 +452,8 @@ class PreAnalysis:
 
     def criterion(self, name: str) -> float:
         """The value of criterion ``name`` for this layout (metres)."""
-        if name == "max_u95":
-            return float(self.u95_max_m.max())
-        if name == "rms_u":
-            return float(np.sqrt(np.trace(self.target_cov_m2, axis1=1, axis2=2).mean()))
+        if name in ("max_u95", "rms_u"):
+            return target_criterion(name, self.target_cov_m2)
         if name == "length_u":
             if not self.lengths:
                 raise MultilatError("criterion length_u needs lengths (pairs of point ids)")
@@ -465,7 +467,7 @@ def layout_observations(layout: Layout, sigma_m, offset_m=None) -> Observations:
     """The exact observations of a layout (distance = |H - T| + offset), for ``adjust``/``propagate``."""
     si, ti = layout.pairs()
     off = np.zeros(layout.n_stations) if offset_m is None else np.asarray(offset_m, float)
-    d = np.linalg.norm(layout.station_xyz_m[si] - layout.target_xyz_m[ti], axis=1) + off[si]
+    d = range_m(layout.station_xyz_m[si] - layout.target_xyz_m[ti]) + off[si]
     return Observations(layout.station_ids, layout.target_ids, si, ti, d,
                         np.broadcast_to(np.asarray(sigma_m, float), d.shape).copy())
 
@@ -491,7 +493,7 @@ def preanalyse(layout: Layout, sigma, *, offsets: bool = True, datum="free", len
     """
     si, ti = layout.pairs()
     s, t = layout.n_stations, layout.n_targets
-    d = np.linalg.norm(layout.station_xyz_m[si] - layout.target_xyz_m[ti], axis=1)
+    d = range_m(layout.station_xyz_m[si] - layout.target_xyz_m[ti])
     if isinstance(sigma, SigmaModel):
         sig = sigma(d, si, layout.station_ids)
     else:
@@ -570,9 +572,7 @@ def probe_cov_m2(station_xyz_m, global_cov, sigma_m: float, points_xyz_m, *, off
     p = np.asarray(points_xyz_m, float).reshape(-1, 3)
     sx = np.asarray(station_xyz_m, float)
     s = sx.shape[0]
-    diff = sx[None] - p[:, None]                                      # (p, s, 3)
-    d = np.linalg.norm(diff, axis=2)
-    u = diff / d[..., None]
+    d, u = line_of_sight(sx[None] - p[:, None])                       # (p, s), (p, s, 3)
     seen = (d >= max(min_range_m, 1e-9)) & (d <= max_range_m)
     if visible is not None:
         seen &= np.asarray(visible, bool)

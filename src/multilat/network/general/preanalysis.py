@@ -31,7 +31,7 @@ from multilat.network.general import kinds as kinds_registry
 from multilat.network.general.adjust import AdjustOptions, GeneralResult, System, UndeterminedError, _result
 from multilat.network.general.observations import Block, Network
 from multilat.network.general.quality import POWER, GeneralStatistics, statistics
-from multilat.network.general.run import MAX_ROUNDS, _leave_out, _reason
+from multilat.network.general.run import MAX_ROUNDS, leave_out, undetermined_reason
 from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
 
 __all__ = ["GeneralPrediction", "planned", "predict"]
@@ -94,7 +94,7 @@ def predict(network: Network, *, datum: str = "auto", alpha: float = 0.001, powe
         except UndeterminedError as e:
             if strict or not e.points:
                 raise
-            net = _leave_out(net, {p: _reason(c) for p, c in e.points.items()}, rnd, excluded, error=e)
+            net = leave_out(net, {p: undetermined_reason(c) for p, c in e.points.items()}, rnd, excluded, error=e)
             continue
         stats = statistics(system, result, alpha=alpha, power=power, variance_factor="known", external=external)
         weak = (stats.redundancy < r_min) | ~(stats.mdb_sigma <= mdb_limit_sigma)

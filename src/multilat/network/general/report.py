@@ -10,7 +10,8 @@ import numpy as np
 from multilat.network.general.points import FIXED, FREE, WEIGHTED
 from multilat.network.frame_words import INVARIANT
 
-__all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "row_record", "external_reliability", "SETUP_KINDS"]
+__all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "row_record", "external_reliability",
+           "SETUP_KINDS", "poorly_controlled", "zero_redundancy_points", "row_ends"]
 
 #: kinds whose ``from`` point carries an instrument set-up (the others: levelling, vectors)
 SETUP_KINDS = ("slope_distance", "direction", "zenith_angle", "horizontal_distance", "horizontal_angle",
@@ -238,3 +239,35 @@ def general_frame_words(points, result) -> dict:
             f"(datum defect {result.defect}). " + INVARIANT), "scale": scale}
     return {"kind": "control", "axes": f"the frame of the given coordinates (datum {datum_words(points, result)})",
             "scale": scale}
+
+
+def row_ends(row: dict) -> list[str]:
+    """The points an ``observations`` row references (``from``, ``to``, ``bs``, ``fs``, ``point``)."""
+    return [row[e] for e in ("from", "to", "point", "bs", "fs") if e in row]
+
+
+def poorly_controlled(rows, *, r_min: float | None = None, mdb_limit_sigma: float | None = None) -> list[int]:
+    """Indices of the ``observations`` rows that are poorly controlled: redundancy below ``r_min`` or
+    MDB above ``mdb_limit_sigma`` σ (the distance path's rule and defaults,
+    :data:`multilat.network.reliability.R_MIN`, ``MDB_LIMIT_SIGMA``); an uncontrolled row (r = 0,
+    no MDB) is one. A blunder there would not show in its test."""
+    from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
+
+    r_min = R_MIN if r_min is None else r_min
+    limit = MDB_LIMIT_SIGMA if mdb_limit_sigma is None else mdb_limit_sigma
+    return [k for k, o in enumerate(rows)
+            if o["redundancy"] < r_min or o["mdb_sigma"] is None or o["mdb_sigma"] > limit]
+
+
+def zero_redundancy_points(rows, points: dict) -> list[str]:
+    """The free points kept without any control: every ``observations`` row that references them has
+    redundancy 0 (:data:`multilat.network.statistics.R_ZERO`; e.g. a point placed by one polar
+    reading: distance, azimuth, elevation for its three coordinates). Their coordinates follow the
+    observations exactly; a blunder there cannot show. ``points``: the JSON's ``points`` map."""
+    from multilat.network.statistics import R_ZERO
+
+    seen: dict = {}
+    for o in rows:
+        for p in row_ends(o):
+            seen[p] = seen.get(p, True) and o["redundancy"] <= R_ZERO
+    return [p for p, zero in seen.items() if zero and points.get(p, {}).get("status") != "fixed"]

@@ -27,7 +27,7 @@ from multilat.network.general.approximate import approximate, reasons
 from multilat.network.general.observations import Network, without_points
 from multilat.network.general.points import FREE
 
-__all__ = ["NetworkAdjustment", "adjust_network", "MAX_ROUNDS"]
+__all__ = ["NetworkAdjustment", "adjust_network", "leave_out", "undetermined_reason", "MAX_ROUNDS"]
 
 #: rounds of leaving out undetermined points before giving up (each round removes at least one point)
 MAX_ROUNDS = 10
@@ -47,7 +47,9 @@ class NetworkAdjustment:
     excluded: tuple
 
 
-def _reason(coords: str) -> str:
+def undetermined_reason(coords: str) -> str:
+    """The reason recorded for a point whose coordinates ``coords`` (e.g. ``"z"``, ``"xyz"``) the
+    observations do not determine."""
     if coords == "xyz":
         return "its coordinates are not determined by the observations"
     what = f"its {', '.join(coords)} {'is' if len(coords) == 1 else 'are'}"
@@ -62,14 +64,14 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
     for rnd in range(1, max_rounds + 1):
         missing = reasons(net)                      # {id: what would reach it}
         if missing and not strict:
-            net = _leave_out(net, missing, rnd, excluded)
+            net = leave_out(net, missing, rnd, excluded)
         try:
             ready = approximate(net)
             res = adjust(ready, options=options)
         except UndeterminedError as e:
             if strict or not e.points:              # a defect no point carries: refused
                 raise
-            net = _leave_out(net, {p: _reason(c) for p, c in e.points.items()}, rnd, excluded, error=e)
+            net = leave_out(net, {p: undetermined_reason(c) for p, c in e.points.items()}, rnd, excluded, error=e)
             continue
         return NetworkAdjustment(ready, System(ready), res, given, tuple(excluded))
     raise MultilatError(f"still undetermined points after {max_rounds} rounds of leaving them out "
@@ -77,7 +79,10 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
                         f"{', ...' if len(excluded) > 5 else ''}); use --strict to see the first")
 
 
-def _leave_out(net: Network, reasons: dict, rnd: int, excluded: list, error: MultilatError | None = None) -> Network:
+def leave_out(net: Network, reasons: dict, rnd: int, excluded: list, error: MultilatError | None = None) -> Network:
+    """``net`` without the points of ``reasons`` ({id: why}) and every observation referencing them,
+    each recorded in ``excluded`` ({id, kind, reason, n_obs, round ``rnd``}); refused in one line
+    (``error`` if given) when no free point would be left, or no observation."""
     pts = net.points
     free_left = [i for i, p in enumerate(pts.ids) if p not in reasons and np.any(pts.status[i] == FREE)]
     if not free_left:

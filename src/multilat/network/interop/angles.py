@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from multilat.errors import MultilatError
 from multilat.network.data import Observations
 from multilat.network.interop.common import Network
 
-__all__ = ["angle_sigmas", "join_angles", "dms", "parse_dms"]
+__all__ = ["angle_sigmas", "join_angles", "dms", "parse_dms", "refuse_tilted_result"]
 
 
 def angle_sigmas(obs: Observations, fmt: str, tool: str) -> tuple[np.ndarray, np.ndarray]:
@@ -35,8 +36,55 @@ def angle_sigmas(obs: Observations, fmt: str, tool: str) -> tuple[np.ndarray, np
         if sid not in obs.levelled:
             raise MultilatError(f"{fmt}: station {sid!r} reads angles (observation {obs.label(int(k))}) but is "
                                 f"not levelled: {tool}'s directions and zenith angles need a levelled "
-                                f"instrument (declare it with --levelled {sid}, or drop its angle columns)")
+                                f"instrument, and its tilt (ω, φ) has no counterpart in {tool} (declare it "
+                                f"with --levelled {sid} only if it was levelled when it measured, or drop "
+                                "its angle columns)")
     return sa, se
+
+
+def _general_setups(par: dict) -> dict:
+    """The set-ups' orientation in a general result's ``parameters`` (``omega:U``, ``phi:U``,
+    ``kappa:U``) in the distance path's shape: ``{U: {parameters, orientation_rad,
+    orientation_std_rad}}``."""
+    out: dict = {}
+    for key, v in par.items():
+        name, _, setup = key.partition(":")
+        if name in ("omega", "phi", "kappa"):
+            st = out.setdefault(setup, {"parameters": [], "orientation_rad": [], "orientation_std_rad": []})
+            st["parameters"].append(name)
+            st["orientation_rad"].append(float(v["value"]))
+            st["orientation_std_rad"].append(float(v["std"]))
+    return out
+
+
+def refuse_tilted_result(obs: Observations, directory, fmt: str) -> None:
+    """Refuse (one line) a station exported as levelled whose adjustment in ``directory`` (the
+    ``--out`` of ``multilat adjust``) estimated its tilt ω, φ: the format would hold it level, a
+    different model from the one adjusted (nothing written)."""
+    import json
+
+    from multilat.io import decode_text, read_input_bytes
+
+    path = Path(directory) / "result.json"
+    if not obs.levelled or not path.is_file():
+        return
+    try:
+        doc = json.loads(decode_text(read_input_bytes(path), path))
+        stations = doc.get("stations") or _general_setups(doc.get("parameters") or {})
+        tilted = {}
+        for sid in obs.levelled:
+            st = stations.get(sid) or {}
+            par, ang, std = (list(st.get(k) or ()) for k in ("parameters", "orientation_rad", "orientation_std_rad"))
+            free = [i for i, n in enumerate(par) if n in ("omega", "phi") and i < len(std) and std[i] > 0]
+            if free:
+                tilted[sid] = ", ".join(f"{par[i]} = {ang[i] * 1e6:.1f} ± {std[i] * 1e6:.1f} µrad" for i in free)
+    except (ValueError, AttributeError, TypeError, IndexError) as exc:
+        raise MultilatError(f"{path}: not the result of `multilat adjust` ({exc})") from None
+    if tilted:                          # ω, φ with a standard deviation: unknowns of that adjustment
+        sid, tilt = next(iter(tilted.items()))
+        raise MultilatError(f"{fmt}: station {sid!r} is exported levelled (--levelled) but its adjustment in "
+                            f"{path} estimated its tilt ({tilt}): {fmt} would hold it level, another model; "
+                            f"adjust with --levelled {sid} first, or export it unlevelled")
 
 
 def join_angles(path, network: Network, arows) -> Network:

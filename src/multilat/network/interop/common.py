@@ -43,12 +43,15 @@ class Network:
     points : Points      the points that have three coordinates in the file (may be empty)
     fixed : tuple of str the points the file holds fixed (control), in file order
     notes : tuple of str what the reader applied or ignored, one line each
+    restored : bool      the file's multilat lines (heads, offsets, scales) were applied: ``obs``
+                         is multilat's model again, not the file's corrected distances
     """
 
     obs: Observations
     points: Points
     fixed: tuple = ()
     notes: tuple = field(default=())
+    restored: bool = False
 
 
 def read_text(path) -> str:
@@ -246,13 +249,14 @@ def restore_model(path, rows, tags: ModelTags, notes: list) -> tuple[list, dict 
                 raise MultilatError(f"{tags.where['offsets']}: head {h!r} has two offsets ({other} "
                                     f"{offsets.get(other, 0.0)!r}, {s} {offsets.get(s, 0.0)!r}): one head has one offset")
         notes.append("per-station offsets restored from the file: "
-                     + ", ".join(f"{k} {v * 1e6:.4f} um" for k, v in offsets.items()))
+                     + ", ".join(f"{k} {v * 1e6:.4f} µm" for k, v in offsets.items()))
     if scales:
         notes.append("fixed scales restored from the file (the source divided them out): "
                      + ", ".join(f"{h} {k:.10g}" for h, k in scales.items())
                      + "; adjust with --scales to estimate them again")
     if heads is not None:
-        notes.append(f"{len(set(heads.values()))} heads over {len(stations)} stations restored from the file: "
+        n_h = len(set(heads.values()))
+        notes.append(f"{n_h} head{'s' if n_h > 1 else ''} over {len(stations)} stations restored from the file: "
                      + ", ".join(f"{h} ({' '.join(s for s in stations if heads[s] == h)})"
                                  for h in dict.fromkeys(heads[s] for s in stations)))
     o = offsets or {}
@@ -408,6 +412,8 @@ def read_result_dir(directory) -> tuple[Points, dict[str, float], dict[str, floa
     if not d.is_dir():
         raise MultilatError(f"--result {directory}: not a directory (give the --out directory of "
                             "`multilat adjust`)")
+    if not (d / "stations.csv").exists() and (d / "points.csv").is_file():
+        return _read_general_result(d)
     st = read_csv_table(d / "stations.csv", required=("station", "x_m", "y_m", "z_m", "offset_m"),
                         warn_unknown=False)
     tg = read_csv_table(d / "targets.csv", required=("target", "x_m", "y_m", "z_m"), warn_unknown=False)
@@ -422,3 +428,23 @@ def read_result_dir(directory) -> tuple[Points, dict[str, float], dict[str, floa
         except (ValueError, AttributeError, TypeError) as exc:
             raise MultilatError(f"{d / 'result.json'}: not the result of `multilat adjust` ({exc})") from None
     return Points(tuple(ids), xyz), offsets, scales
+
+
+def _read_general_result(d: Path) -> tuple[Points, dict[str, float], dict[str, float]]:
+    """:func:`read_result_dir` of the ``--out`` of the general model (``adjust ... --model general``
+    or ``adjust DIR``): ``points.csv`` (point, x_m, y_m, z_m) and, from ``result.json``'s
+    ``parameters``, each instrument's estimated additive constant ``offset:H`` and scale ``scale:H``
+    (keyed by head; a head without one was not estimated there and must be given)."""
+    import json
+
+    from multilat.io import read_csv_table
+
+    pt = read_csv_table(d / "points.csv", required=("point", "x_m", "y_m", "z_m"), warn_unknown=False)
+    xyz = np.column_stack([pt.floats(c) for c in ("x_m", "y_m", "z_m")])
+    try:
+        par = json.loads(decode_text(read_input_bytes(d / "result.json"), d / "result.json"))["parameters"] or {}
+        offsets = {k.split(":", 1)[1]: float(v["value"]) for k, v in par.items() if k.startswith("offset:")}
+        scales = {k.split(":", 1)[1]: float(v["value"]) for k, v in par.items() if k.startswith("scale:")}
+    except (ValueError, KeyError, AttributeError, TypeError) as exc:
+        raise MultilatError(f"{d / 'result.json'}: not the result of `multilat adjust` ({exc})") from None
+    return Points(tuple(pt.ids("point")), xyz), offsets, {h: k for h, k in scales.items() if k != 0.0}

@@ -39,6 +39,7 @@ The adjusted output (``gama-local --xml``) is read by :mod:`.gama_adjusted`.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -253,7 +254,8 @@ def read_gama_local(path) -> Network:
                      "them on directions")
     rows, heads = restore_model(path, rows, tags, notes)
     network = build_network(path, rows, declared, coords, fixed, notes, "Gama", heads)
-    return join_angles(path, network, arows) if arows else network
+    network = join_angles(path, network, arows) if arows else network
+    return replace(network, restored=any(v is not None for v in (tags.offsets, tags.heads, tags.scales)))
 
 
 def _network(path, root):
