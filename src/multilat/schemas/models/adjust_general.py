@@ -224,4 +224,5 @@ class AdjustGeneralDocument(Document):
     observations: list[Observation]
     iterations: list[Iteration]
     notes: list[str]
+    warnings: list[str] = Field(description="the warnings printed (e.g. σ defaulted), one line each")
     azimuth_sense: AzimuthSense | None = None
