@@ -342,6 +342,25 @@ def test_out_files_carry_the_schema(tmp_path, capsys):
     assert len(list(tmp_path.rglob("*.csv"))) >= 6 and bad == []
 
 
+def _design_out(tmp_path, capsys):
+    if "design-out" not in _DOCS:
+        assert main(["design", str(_EX / "design" / "cube.toml"), "--out", str(tmp_path / "d")]) == 0
+        capsys.readouterr()
+        _DOCS["design-out"] = json.loads((tmp_path / "d" / "design.json").read_text())
+    return _DOCS["design-out"]
+
+
+def test_design_out_file_follows_the_model(tmp_path, capsys):
+    doc = _design_out(tmp_path, capsys)
+    model("design").model_validate(dict({"schema": stamped_id("design")}, **doc))
+
+
+@pytest.mark.xfail(strict=True, reason="design --out writes design.json without its schema key (cli/design_cmd.py "
+                                        "writes the document before emit_json stamps it)")
+def test_design_out_file_carries_the_schema(tmp_path, capsys):
+    assert _design_out(tmp_path, capsys).get("schema") == stamped_id("design")
+
+
 def test_the_conventions_page_lists_every_replaced_name():
     text = (ROOT / "docs" / "conventions.md").read_text()
     rows = dict(re.findall(r"^\| `([a-z0-9_]+)` \| `([a-z0-9_]+)` \|$", text, flags=re.M))
