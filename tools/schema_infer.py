@@ -1,7 +1,11 @@
-"""Write the shipped JSON Schemas from the documents of sample runs (developer tool, outside the package:
-it runs the CLI and reads the repository's examples and test data).
+"""Write ``adjust.json``, the one shipped JSON Schema without a typed model yet, from the documents of
+sample runs (developer tool, outside the package: it runs the CLI and reads the repository's examples).
 
-    python tools/schema_infer.py            # rewrites src/multilat/schemas/<command>.json
+    python tools/schema_infer.py            # rewrites src/multilat/schemas/adjust.json
+
+Every other command's schema is generated from its model (:mod:`multilat.schemas.models`,
+``python tools/write_schemas.py``); this tool goes once ``adjust`` has its model (with schema adjust/2).
+It can still serve as a cross-check of a model: ``infer(command, docs)`` of any command's documents.
 
 Each command is run on the shipped examples with the options in :data:`SAMPLES` (several runs per
 command, so that keys that appear only with some options are declared); the schema of a command is
@@ -24,7 +28,7 @@ import io
 import json
 from pathlib import Path
 
-from multilat.vocabulary import ID_MAPS, SCHEMA_VERSION
+from multilat.vocabulary import ID_MAPS, schema_id
 
 __all__ = ["SAMPLES", "run_sample", "infer", "merge"]
 
@@ -32,9 +36,9 @@ _ROOT = Path(__file__).resolve().parents[1]
 _EX = _ROOT / "examples"
 _N = _EX / "network"
 _TESTDATA = _ROOT / "tests" / "data"
-_INTEROP = _TESTDATA / "interop"
 
-#: command -> list of argument lists (paths relative to the repository's ``examples/``)
+#: command -> list of argument lists (the commands without a model; tests/test_output_schema.py holds every
+#: command's samples)
 SAMPLES = {
     "adjust": [["adjust", f"{_N}/small_volume_obs.csv", "--references", f"{_N}/small_volume_refs.csv"],
                ["adjust", f"{_N}/sequential/obs.csv", "--variance-components", "head"],
@@ -42,27 +46,6 @@ SAMPLES = {
                ["adjust", str(_TESTDATA / "angles" / "mixed_azimuth_blunder.csv")],
                ["adjust", f"{_EX}/campaign/raw.csv", "-e", f"{_EX}/campaign/environment.csv", "--heights",
                 f"{_EX}/campaign/heights.csv", "--average-repeats"]],
-    "propagate": [["propagate", "small-volume", "--trials", "2000"],
-                  ["propagate", f"{_N}/sequential/obs.csv", "--trials", "1000", "--noise", "gaussian"],
-                  ["propagate", f"{_EX}/campaign/raw.csv", "-e", f"{_EX}/campaign/environment.csv",
-                   "--heights", f"{_EX}/campaign/heights.csv", "--trials", "1000",
-                   "--average-repeats", "--instrument", "seed2020"],
-                  ["propagate", "small-volume", "--trials", "1000", "--instrument", "seed2020"]],
-    "simulate": [["simulate", "small-volume", "--trials", "5"]],
-    "design": [["design", f"{_EX}/design/cube.toml"], ["design", f"{_EX}/design/cube.toml", "--simulate", "500"]],
-    "budget": [["budget", "--trials", "2000"], ["budget", "--trials", "2000", "--air", "--seed", "3"]],
-    "air": [["air"]],
-    "correct": [["correct", f"{_EX}/campaign/raw.csv", "-e", f"{_EX}/campaign/environment.csv", "--heights",
-                 f"{_EX}/campaign/heights.csv"]],
-    "two-face": [["two-face", f"{_EX}/campaign/two_face.csv"]],
-    "lbb-trilaterate": [["lbb", "trilaterate", f"{_EX}/lbb/edges.csv"]],
-    "lbb-simulate": [["lbb", "simulate", "--trials", "200"]],
-    "lbb-compare": [["lbb", "compare", f"{_EX}/lbb/m60_edges.csv", f"{_EX}/lbb/m60_reference.csv"]],
-    "export": [["export", "jag3d", f"{_N}/small_volume_obs.csv", "--points", f"{_N}/small_volume_points.csv",
-                "-o", "{tmp}/x.txt"]],
-    "import": [["import", "gama-adjusted", str(_INTEROP / "small_volume_gama_out.xml"), "-o", "{tmp}/imp"],
-               ["import", "gama-adjusted", str(_INTEROP / "levelled_mixed_gama_out.xml"), "-o", "{tmp}/imp2"],
-               ["import", "starnet", str(_INTEROP / "small_volume.dat"), "-o", "{tmp}/imp3"]],
 }
 
 
@@ -147,7 +130,7 @@ def infer(command: str, docs: list) -> dict:
     for d in docs:
         shape = _shape(d) if shape is None else merge(shape, _shape(d))
     shape = _id_maps(shape)
-    sid = f"multilat.{command}/{SCHEMA_VERSION}"
+    sid = schema_id(command)
     shape["properties"]["schema"] = {"const": sid}
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": sid,
             "title": f"multilat {command.replace('-', ' ')} --json", **shape}
@@ -156,9 +139,13 @@ def infer(command: str, docs: list) -> dict:
 def main() -> None:  # pragma: no cover - developer tool
     import tempfile
 
+    from multilat.schemas.models import MODELS
+
     here = _ROOT / "src" / "multilat" / "schemas"
     with tempfile.TemporaryDirectory() as t:
         for cmd, runs in SAMPLES.items():
+            if cmd in MODELS:            # written from its model (tools/write_schemas.py)
+                continue
             docs = []
             for i, args in enumerate(runs):
                 tmp = Path(t) / f"{cmd}-{i}"

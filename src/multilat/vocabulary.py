@@ -14,8 +14,9 @@ command's JSON to it:
 * Counts are ``n_<things>``; the seed of a run is ``seed`` (the root entropy, an integer).
 * A JSON object keyed by ids (stations, targets, heads, pairs) is an *id map*: its keys are ids, not
   names (:data:`ID_MAPS` lists the keys that hold one).
-* Every JSON document starts with ``"schema": "multilat.<command>/<version>"`` (:func:`stamp`); the
-  JSON Schema of each command is shipped in ``multilat/schemas/<command>.json``.
+* Every JSON document starts with ``"schema": "multilat.<command>/<version>"`` (:func:`stamp`,
+  :func:`schema_id`); the JSON Schema of each command is shipped in ``multilat/schemas/<command>.json``,
+  generated from its typed model (:mod:`multilat.schemas.models`).
 
 :data:`RENAMED` lists the names this convention replaced (removed, not aliased); :func:`key_problems`
 refuses them and anything else outside the convention.
@@ -25,11 +26,14 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["SCHEMA_VERSION", "STATISTICS", "QUALIFIERS", "UNITS", "RENAMED", "ID_MAPS", "stamp",
+__all__ = ["SCHEMA_VERSION", "SCHEMA_VERSIONS", "schema_id", "STATISTICS", "QUALIFIERS", "UNITS", "RENAMED", "ID_MAPS", "stamp",
            "key_problems", "document_problems"]
 
 #: Version of the output schemas (bumped when a key changes meaning or name).
 SCHEMA_VERSION = 1
+#: A command's schema version where it is not :data:`SCHEMA_VERSION`: bumped, with the ``schema`` literal of
+#: its model (:mod:`multilat.schemas.models`), when the shape of its document changes.
+SCHEMA_VERSIONS: dict[str, int] = {}
 
 STATISTICS = ("std", "var", "cov", "mean", "rms", "u95", "se", "min", "max", "median", "95")
 QUALIFIERS = ("lin", "mc")
@@ -70,9 +74,14 @@ _LEADING = frozenset(STATISTICS) | frozenset(QUALIFIERS) | {"sim"}
 _UNIT_TOKENS = frozenset(t for u in UNITS for t in u.split("_"))
 
 
+def schema_id(command: str) -> str:
+    """``"multilat.<command>/<version>"``: the ``schema`` of ``command``'s documents."""
+    return f"multilat.{command}/{SCHEMA_VERSIONS.get(command, SCHEMA_VERSION)}"
+
+
 def stamp(doc: dict, command: str) -> dict:
     """``doc`` with ``"schema": "multilat.<command>/<version>"`` first (a new dict)."""
-    return {"schema": f"multilat.{command}/{SCHEMA_VERSION}", **{k: v for k, v in doc.items() if k != "schema"}}
+    return {"schema": schema_id(command), **{k: v for k, v in doc.items() if k != "schema"}}
 
 
 def key_problems(key: str) -> list[str]:
