@@ -1,0 +1,86 @@
+"""Issue 29, "small jobs do not pay for large ones": a network the dense path solves (the small volume,
+4 heads x 14 targets) is adjusted by the whole ``multilat adjust --json`` command without importing
+numba, scipy.sparse, Dask or matplotlib (their import alone costs ~0.1-0.5 s of a ~0.8 s command).
+Not a timed test: it checks which modules the command loaded. The station-target graph's components,
+which the structure checks used scipy.sparse.csgraph for, are checked against it."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from multilat.network.solvability import graph_components
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL = ROOT / "examples" / "network" / "small_volume_obs.csv"
+#: the heavy packages a small dense job must not load (issue 29, "Decisions")
+HEAVY = ("numba", "scipy.sparse", "dask", "distributed", "matplotlib")
+
+_PROBE = """
+import contextlib, io, json, sys
+sys.argv = ["multilat", "adjust", sys.argv[1], "--json"]
+from multilat.cli import run
+out = io.StringIO()
+code = 0
+with contextlib.redirect_stdout(out):
+    try:
+        run()
+    except SystemExit as e:
+        code = e.code or 0
+doc = json.loads(out.getvalue())
+print(json.dumps({"code": code, "schema": doc.get("schema"), "modules": sorted(sys.modules)}))
+"""
+
+
+def test_small_adjust_imports_no_heavy_package():
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    p = subprocess.run([sys.executable, "-c", _PROBE, str(SMALL)], capture_output=True, text=True, env=env,
+                       timeout=300)
+    assert p.returncode == 0, p.stderr[-2000:]
+    rep = json.loads(p.stdout.strip().splitlines()[-1])
+    assert rep["code"] == 0 and str(rep["schema"]).startswith("multilat.adjust/")   # the command did its work
+    mods = rep["modules"]
+    assert "multilat.network.adjust" in mods                                       # the probe sees imports
+    loaded = sorted({h for h in HEAVY for m in mods if m == h or m.startswith(h + ".")})
+    assert loaded == [], f"a small adjust imported {loaded}"
+
+
+def _scipy_components(n, a, b):
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    g = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
+    return connected_components(g, directed=False)
+
+
+@pytest.mark.parametrize("case", ["random", "chain", "isolated", "no_edges", "bipartite"])
+def test_graph_components_match_scipy(case):
+    """Same count and the same labels (numbered by each component's lowest node) as scipy's csgraph."""
+    rng = np.random.default_rng(29)
+    if case == "random":                  # sparse random graph: many components of all sizes
+        n = 400
+        a, b = rng.integers(0, n, 300), rng.integers(0, n, 300)
+    elif case == "chain":                 # long path in shuffled order: the worst case for hooking rounds
+        n = 2000
+        perm = rng.permutation(n)
+        a, b = perm[:-1], perm[1:]
+    elif case == "isolated":              # edges among the first half only, a self-loop, repeated edges
+        n = 50
+        a = np.r_[rng.integers(0, 25, 40), 7, 3, 3]
+        b = np.r_[rng.integers(0, 25, 40), 7, 4, 4]
+    elif case == "no_edges":
+        n = 5
+        a = b = np.zeros(0, int)
+    else:                                 # station-target graph of two separate networks, interleaved ids
+        s, t = 6, 40
+        st = np.r_[rng.integers(0, 3, 60), rng.integers(3, 6, 60)]
+        tg = np.r_[rng.integers(0, 20, 60), rng.integers(20, 40, 60)]
+        n, a, b = s + t, st, s + tg
+    n_ref, lab_ref = _scipy_components(n, a, b)
+    n_got, lab_got = graph_components(n, a, b)
+    assert n_got == n_ref
+    np.testing.assert_array_equal(lab_got, lab_ref)
