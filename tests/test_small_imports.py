@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from multilat.network import solvability
 from multilat.network.solvability import graph_components
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,9 +58,12 @@ def _scipy_components(n, a, b):
     return connected_components(g, directed=False)
 
 
+@pytest.mark.parametrize("numpy_path", [True, False])
 @pytest.mark.parametrize("case", ["random", "chain", "isolated", "no_edges", "bipartite"])
-def test_graph_components_match_scipy(case):
-    """Same count and the same labels (numbered by each component's lowest node) as scipy's csgraph."""
+def test_graph_components_match_scipy(case, numpy_path, monkeypatch):
+    """Same count and the same labels (numbered by each component's lowest node) as scipy's csgraph,
+    on both paths (numpy below ``GRAPH_NUMPY_MAX_EDGES`` edges, csgraph above)."""
+    monkeypatch.setattr(solvability, "GRAPH_NUMPY_MAX_EDGES", 10**9 if numpy_path else -1)
     rng = np.random.default_rng(29)
     if case == "random":                  # sparse random graph: many components of all sizes
         n = 400
