@@ -88,3 +88,30 @@ def test_graph_components_match_scipy(case, numpy_path, monkeypatch):
     n_got, lab_got = graph_components(n, a, b)
     assert n_got == n_ref
     np.testing.assert_array_equal(lab_got, lab_ref)
+
+
+def test_the_test_run_sets_blas_threads_once():
+    """tests/conftest.py sets one BLAS thread per test process before numpy loads (issue 29), for at
+    least the variables the CLI sets, and OpenBLAS took it (asked through its C API; skipped when
+    numpy's BLAS is not OpenBLAS or the user set another value)."""
+    from multilat.cli import BLAS_THREAD_VARIABLES as cli_vars
+
+    here = Path(__file__).with_name("conftest.py")
+    conf = next(m for m in list(sys.modules.values()) if getattr(m, "__file__", None) and Path(m.__file__) == here)
+    assert set(cli_vars) <= set(conf.BLAS_THREAD_VARIABLES) and "OMP_NUM_THREADS" in conf.BLAS_THREAD_VARIABLES
+    assert all(os.environ.get(v) for v in conf.BLAS_THREAD_VARIABLES)
+    if os.environ["OPENBLAS_NUM_THREADS"] != "1":
+        pytest.skip("OPENBLAS_NUM_THREADS set by the user")
+    import ctypes
+
+    if not Path("/proc/self/maps").exists():
+        pytest.skip("no /proc/self/maps to find the loaded BLAS")
+    libs = sorted({ln.split()[-1] for ln in open("/proc/self/maps") if "openblas" in ln and ln.strip().endswith(".so")})
+    get = None
+    for lib in libs:
+        for name in ("scipy_openblas_get_num_threads64_", "scipy_openblas_get_num_threads",
+                     "openblas_get_num_threads"):
+            get = get or getattr(ctypes.CDLL(lib), name, None)
+    if get is None:
+        pytest.skip("numpy's BLAS is not OpenBLAS")
+    assert get() == 1
