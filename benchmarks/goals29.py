@@ -175,7 +175,13 @@ def _propagate_diff(noise_args) -> tuple[float, float, list]:
         small.append(_wall(cmd(20_000)))
         big.append(_wall(cmd(220_000)))
     dt = statistics.median(big) - statistics.median(small)
-    return 200_000 / dt, load, small + big
+    return 200_000 / dt, load, (small, big)
+
+
+def _walls(walls) -> str:
+    small, big = walls
+    return (f"walls at 20 000 trials {', '.join(f'{w:.2f}' for w in small)} s, at 220 000 "
+            f"{', '.join(f'{w:.2f}' for w in big)} s")
 
 
 def propagate_model(tmp: Path) -> dict:
@@ -193,14 +199,13 @@ def propagate_model(tmp: Path) -> dict:
     _scipy_lm_per_trial(net, d)
     lm_rate = 100 / (time.perf_counter() - t0)
     return dict(measured=rate, baseline_measured=lm_rate, load=load,
-                note=f"walls 20k/220k: {walls[0]:.2f}, {walls[2]:.2f} / {walls[1]:.2f}, {walls[3]:.2f} s; "
-                     f"scipy lm {lm_rate:.0f} trials/s over 100 trials")
+                note=f"{_walls(walls)}; scipy lm {lm_rate:.0f} trials/s over 100 trials")
 
 
 def propagate_gaussian(tmp: Path) -> dict:
     rate, load, walls = _propagate_diff(("--noise", "gaussian"))
     return dict(measured=rate, baseline_measured=None, load=load,
-                note=f"walls 20k/220k: {walls[0]:.2f}, {walls[2]:.2f} / {walls[1]:.2f}, {walls[3]:.2f} s")
+                note=_walls(walls))
 
 
 def dask_scaling(tmp: Path) -> dict:
