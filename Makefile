@@ -21,7 +21,8 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/multilat demo --out demo-report
 
-# two pytest workers (pytest-xdist, the test extra): ~5.5 min here instead of ~8 (2 cores, quiet)
+# two pytest workers (pytest-xdist, the test extra): ~5.5 min here instead of ~8 (2 cores, quiet);
+# one BLAS thread per worker, set once in tests/conftest.py (not 2 workers x 2 BLAS threads on 2 cores)
 test: $(STAMP)
 	$(BIN)/python -m pytest -n 2
 

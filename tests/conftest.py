@@ -1,12 +1,22 @@
 """Test-session settings: the distance budget's on-disk cache (``multilat.budget``) goes to a
-directory of this session, so the tests neither read a user's cache nor write to it; under CI
-(``CI=true``) a browser test that would skip for want of Chromium or playwright fails."""
+directory of this session, so the tests neither read a user's cache nor write to it; BLAS runs one
+thread per process; under CI (``CI=true``) a browser test that would skip for want of Chromium or
+playwright fails."""
 
 import os
 import tempfile
 
 _CACHE = tempfile.mkdtemp(prefix="multilat-test-cache-")
 os.environ.setdefault("MULTILAT_CACHE_DIR", _CACHE)
+
+#: BLAS threads, set once for the whole test run (issue 29, "pytest-xdist, BLAS threads set once"):
+#: ``make test`` runs two xdist workers on a 2-core machine, and a BLAS starting a thread per core in
+#: each would run 4 threads on 2 cores. Set here, before numpy is imported (no plugin imports it
+#: first), so the controller, both workers and every CLI subprocess they start inherit it; the CLI's
+#: own ``multilat.cli.BLAS_THREAD_VARIABLES`` plus OpenMP's. A value set by the user wins.
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS", "OMP_NUM_THREADS")
+for _name in BLAS_THREAD_VARIABLES:
+    os.environ.setdefault(_name, "1")
 
 import pytest  # noqa: E402
 

@@ -11,7 +11,6 @@ from rich.table import Table
 
 from multilat.cli import report_opt
 from multilat.cli.app import app, console, emit_json
-from multilat.network.design.search import PENALTY_M
 
 
 def design_document(run) -> dict:
@@ -44,6 +43,8 @@ def design_document(run) -> dict:
                                    "path": [{"count": n, "u95_m": v, "removed": r} for n, v, r in sel.path],
                                    "evaluations": sel.evaluations}
     if run.search is not None:
+        from multilat.network.design.search import PENALTY_M
+
         s = run.search
         doc["search"] = {"method": s.method, "evaluations": s.evaluations,
                          "starts": [{"start_criterion_m": r.start_criterion_m,

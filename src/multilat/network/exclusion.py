@@ -66,13 +66,11 @@ def _distinct_counts(obs: Observations, keep: np.ndarray) -> tuple[np.ndarray, n
 
 def _largest_component(obs: Observations, keep: np.ndarray) -> np.ndarray:
     """Mask (m,) of the kept observations that belong to the component with the most observations."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+    from multilat.network.solvability import graph_components
 
     s, t = obs.n_stations, obs.n_targets
     k = np.flatnonzero(keep)
-    g = coo_matrix((np.ones(k.size), (obs.station_index[k], s + obs.target_index[k])), shape=(s + t, s + t))
-    n, lab = connected_components(g, directed=False)
+    n, lab = graph_components(s + t, obs.station_index[k], s + obs.target_index[k])
     if n <= 1:
         return keep
     comp = lab[obs.station_index]

@@ -9,8 +9,7 @@ import itertools
 import time
 
 import numpy as np
-import scipy.sparse
-import scipy.sparse.linalg
+import scipy  # scipy.sparse loads on first use: only large networks need it (issue 29)
 
 from multilat.network.model import line_of_sight, range_m
 from multilat.network.solve.convergence import Convergence
@@ -153,7 +152,7 @@ SPARSE_FROM = 150
 
 
 def row_scale(J, w):
-    if scipy.sparse.issparse(J):
+    if not isinstance(J, np.ndarray):           # sparse
         return scipy.sparse.diags(w) @ J
     return w[:, None] * J
 
@@ -174,7 +173,7 @@ def levenberg_marquardt(fun, jac, x, *, max_iter=200, tol=1e-10, deadline=None):
         if deadline is not None and time.monotonic() >= deadline:
             return x, Convergence(False, it - 1, float("nan"), "wall-time bound")
         J = jac(x)
-        sp = scipy.sparse.issparse(J)
+        sp = not isinstance(J, np.ndarray)
         A = (J.T @ J).tocsc() if sp else J.T @ J
         g = J.T @ r
         dg = np.maximum(A.diagonal(), 1e-30)

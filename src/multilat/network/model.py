@@ -43,12 +43,12 @@ __all__ = ["Q", "COSTS", "segment_sum", "range_m", "line_of_sight", "geometric_d
 def segment_sum(index, values, n):
     """``out[i] = sum of values[k] over k with index[k] == i``; values (m, ...) -> (n, ...).
 
-    (A fast ``np.add.at``: bincount per column for few columns, a sparse product otherwise.)
+    (A fast ``np.add.at``: bincount per column for few columns or rows, a sparse product otherwise.)
     """
     values = np.asarray(values, dtype=float)
     m = values.shape[0]
     flat = values.reshape(m, -1)
-    if flat.shape[1] <= 8:
+    if flat.shape[1] <= 8 or m <= 4096:    # small: bincount is faster and scipy.sparse stays unloaded
         out = np.stack([np.bincount(index, weights=flat[:, c], minlength=n) for c in range(flat.shape[1])],
                        axis=1)
     else:
