@@ -256,7 +256,8 @@ class _Gate:
 def _what(o: dict) -> str:
     """A row in words: its label (the file's line) or its kind and ends."""
     kind = o["kind"].replace("_", " ") + (f" ({o['component']})" if o.get("component") else "")
-    return f"{kind} {'->'.join(row_ends(o))}" + (f" ({o['label']})" if o.get("label") else "")
+    ends, label = "->".join(row_ends(o)), o.get("label") or ""
+    return label if ends in label else f"{kind} {ends}" + (f" ({label})" if label else "")
 
 
 def _listed(rows, limit: int = 6) -> str:
