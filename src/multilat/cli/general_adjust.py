@@ -404,22 +404,52 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
             raise MultilatError(f"--fixed-scale: unknown {what} id {fixed_scale!r} ({what}s: "
                                 f"{', '.join(obs.head_ids)})")
         scales = [h for h in obs.head_ids if h != fixed_scale]
-    net, options = network_from_tables(obs, points=pts, datum=params.get("datum", "free"), offsets=offsets,
-                                       scales=scales, scale_bars=refs, rng=seed, source=str(path))
+    def build(o):
+        return network_from_tables(o, points=pts, datum=params.get("datum", "free"), offsets=offsets, scales=scales,
+                                   scale_bars=refs, rng=seed, source=str(path))
+
+    net, options = build(obs)
     src_doc = {"kind": str(src.get("kind", "file column")), "file": str(path),
                "description": describe(src) if src else "the file's sigma_m column"}
-    doc, adj, stats = _finish(net, options, str(path), alpha=alpha, variance_factor=variance_factor,
-                              strict=strict, alpha_global=alpha_global, fmt="multilat-csv", sigma_source=src_doc,
-                              method=method, alpha_family=alpha_family, snooping=snooping,
-                              variance_components=variance_components)
-    if note := default_warning(src, path):           # the distance path's words and key (JSON "warnings")
-        doc["warnings"] = [note, *doc["warnings"]]
     from multilat.network import azimuth_sense as _az
 
-    az_rec = _az.record(obs, *_az.resolve(params.get("azimuth_sense"), params.get("instrument")))
+    sense = _az.resolve(params.get("azimuth_sense"), params.get("instrument"))
+    tests = dict(alpha=alpha, variance_factor=variance_factor, alpha_global=alpha_global, method=method,
+                 alpha_family=alpha_family)
+    try:
+        doc, adj, stats = _finish(net, options, str(path), strict=strict, fmt="multilat-csv", sigma_source=src_doc,
+                                  snooping=snooping, variance_components=variance_components, **tests)
+    except MultilatError as e:                       # refused, or snooping refused: azimuths of the other sense?
+        if hint := _sense_hint(obs, sense, build, getattr(e, "sigma0", None), strict, tests):
+            raise MultilatError(f"{e}; {hint}") from None
+        raise
+    if note := default_warning(src, path):           # the distance path's words and key (JSON "warnings")
+        doc["warnings"] = [note, *doc["warnings"]]
+    if doc["global_test"]["passed"] is False and (hint := _sense_hint(obs, sense, build, doc["sigma0"], strict, tests)):
+        doc["warnings"] = [*doc["warnings"], hint]
+    az_rec = _az.record(obs, *sense)
     if az_rec is not None:
         doc["azimuth_sense"] = az_rec
     return doc, adj, stats
+
+
+def _sense_hint(obs, sense, build, sigma0, strict, tests) -> str | None:
+    """On a network with azimuth observations whose sense nobody declared (``sense``: the resolved
+    sense and its source), after an implausible adjustment (refused: ``sigma0`` None; snooping refused
+    or the global test failed: its σ0), the hint naming ``--azimuth-sense cw`` when the azimuths
+    negated fit clearly better (:func:`multilat.network.general.run.sense_hint`; one adjustment)."""
+    from multilat.network import azimuth_sense as _az
+    from multilat.network.general.run import sense_hint
+
+    if sense[1] != _az.UNDECLARED or obs.sigma_azimuth_rad is None or not np.isfinite(obs.sigma_azimuth_rad).any():
+        return None
+    try:
+        with warnings.catch_warnings():              # the file's warnings were said on the first reading
+            warnings.simplefilter("ignore")
+            net, options = build(_az.apply(obs, "cw"))
+    except MultilatError:
+        return None
+    return sense_hint(net, sigma0, options=options, strict=strict, **tests)
 
 
 def write_out(out, inputs, doc) -> None:
@@ -438,7 +468,7 @@ def print_summary(doc, adj, stats, out) -> None:
     from rich.table import Table
 
     from multilat.cli.app import console
-    from multilat.network.general.report import zero_redundancy_points
+    from multilat.network.general.report import constant_words, zero_redundancy_points
 
     say = lambda s: console.print(s, markup=False)  # noqa: E731
     kinds = {}
@@ -471,9 +501,7 @@ def print_summary(doc, adj, stats, out) -> None:
     say(f"  redundancy {max(red.min(), 0.0):.3f}..{red.max():.3f}; {int((red <= 1e-9).sum())} uncontrolled row(s) "
         f"(r = 0); {t['n_failed']} test(s) above the critical value"
         + ("" if doc["snooping"] else " (listed in the JSON; data snooping not requested: --no-snooping)"))
-    inst = [f"{n.split(':', 1)[1]} {v['value'] * 1e3:+.4f} mm (u {v['std'] * 1e3:.4f})"
-            for n, v in doc["parameters"].items() if n.startswith("offset:")]
-    if inst:
+    if inst := constant_words({n: v for n, v in doc["parameters"].items() if n.startswith("offset:")}):
         say("  additive constants: " + "; ".join(inst))
     zero = zero_redundancy_points(doc["observations"], doc["points"])
     if zero:

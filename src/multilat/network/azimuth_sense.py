@@ -18,7 +18,8 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["SENSES", "DEFAULT", "HELP", "to_ccw_rad", "resolve", "apply", "record", "as_json"]
+__all__ = ["SENSES", "DEFAULT", "HELP", "to_ccw_rad", "resolve", "apply", "record", "as_json", "mirror_hint",
+           "hint_text"]
 
 SENSES = ("ccw", "cw")
 DEFAULT = "ccw"
@@ -104,9 +105,16 @@ def mirror_hint(obs, sigma0: float | None, options, data: dict) -> str | None:
         flipped = adjust(apply(obs, "cw"), options, **{**data, "snooping": False})
     except MultilatError:
         return None
-    if not flipped.global_test.passed or (sigma0 is not None and flipped.sigma0 * MIRROR_SIGMA0_RATIO > sigma0):
+    return hint_text(sigma0, flipped.sigma0, flipped.global_test.passed)
+
+
+def hint_text(sigma0: float | None, flipped_sigma0: float, passed: bool) -> str | None:
+    """The rule of :func:`mirror_hint` on the two fits (the azimuths as read: ``sigma0``, None when
+    refused; negated: ``flipped_sigma0`` and whether its global test ``passed``), shared by the
+    general path (:mod:`multilat.cli.general_adjust`): the text naming ``--azimuth-sense cw``, or None."""
+    if not passed or (sigma0 is not None and np.isfinite(sigma0) and flipped_sigma0 * MIRROR_SIGMA0_RATIO > sigma0):
         return None
-    was = "do not fit" if sigma0 is None else f"give σ0 = {sigma0:.3g}"
+    was = "do not fit" if sigma0 is None or not np.isfinite(sigma0) else f"give σ0 = {sigma0:.3g}"
     return (f"the azimuths read counter-clockwise (the default) {was}; negated (clockwise) they fit "
-            f"(σ0 = {flipped.sigma0:.3g}, global test passed): clockwise azimuths? give --azimuth-sense cw "
+            f"(σ0 = {flipped_sigma0:.3g}, global test passed): clockwise azimuths? give --azimuth-sense cw "
             "(or azimuth_sense = \"cw\" in the instrument file)")

@@ -11,7 +11,7 @@ from multilat.network.general.points import FIXED, FREE, WEIGHTED
 from multilat.network.frame_words import INVARIANT
 
 __all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "row_record", "external_reliability",
-           "SETUP_KINDS", "poorly_controlled", "zero_redundancy_points", "row_ends"]
+           "SETUP_KINDS", "poorly_controlled", "zero_redundancy_points", "row_ends", "constant_words"]
 
 #: kinds whose ``from`` point carries an instrument set-up (the others: levelling, vectors)
 SETUP_KINDS = ("slope_distance", "direction", "zenith_angle", "horizontal_distance", "horizontal_angle",
@@ -271,3 +271,15 @@ def zero_redundancy_points(rows, points: dict) -> list[str]:
         for p in row_ends(o):
             seen[p] = seen.get(p, True) and o["redundancy"] <= R_ZERO
     return [p for p, zero in seen.items() if zero and points.get(p, {}).get("status") != "fixed"]
+
+
+def constant_words(parameters: dict) -> list[str]:
+    """Each head's additive constant and scale (the JSON's ``parameters``, in m and 1) in the words of
+    the summary, in µm and µm/m as every small quantity of the report: ``"T1 +124.1 µm (u 9.2 µm)"``."""
+    out = []
+    for name, v in parameters.items():
+        kind, owner = name.split(":", 1)
+        if kind in ("offset", "scale"):
+            unit = "µm" if kind == "offset" else "µm/m"
+            out.append(f"{owner} {v['value'] * 1e6:+.1f} {unit} (u {v['std'] * 1e6:.1f} {unit})")
+    return out

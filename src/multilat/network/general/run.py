@@ -27,7 +27,7 @@ from multilat.network.general.approximate import approximate, reasons
 from multilat.network.general.observations import Network, without_points
 from multilat.network.general.points import FREE
 
-__all__ = ["NetworkAdjustment", "adjust_network", "leave_out", "undetermined_reason", "MAX_ROUNDS"]
+__all__ = ["NetworkAdjustment", "adjust_network", "leave_out", "undetermined_reason", "MAX_ROUNDS", "sense_hint"]
 
 #: rounds of leaving out undetermined points before giving up (each round removes at least one point)
 MAX_ROUNDS = 10
@@ -96,3 +96,23 @@ def leave_out(net: Network, reasons: dict, rnd: int, excluded: list, error: Mult
         raise MultilatError("no observation is left once the undetermined points are left out: "
                             + ", ".join(list(reasons)[:5]))
     return out
+
+
+def sense_hint(flipped: Network, sigma0: float | None, *, options: AdjustOptions | None = None,
+               strict: bool = False, **tests) -> str | None:
+    """When an adjustment with azimuths is implausible (refused: ``sigma0`` None; its data snooping
+    refused, or its global test failed: ``sigma0`` that adjustment's), whether the same network with
+    its azimuths negated (``flipped``, built by the caller from the file) fits clearly better: one
+    adjustment without data snooping, the rule and words of
+    :func:`multilat.network.azimuth_sense.hint_text` (σ0 ten times smaller, global test passed).
+    ``tests``: the test options of :func:`.quality.statistics`. The text naming ``--azimuth-sense cw``,
+    or None."""
+    from multilat.network.azimuth_sense import hint_text
+    from multilat.network.general.quality import statistics
+
+    try:
+        adj = adjust_network(flipped, options=options, strict=strict)
+    except MultilatError:
+        return None
+    stats = statistics(adj.system, adj.result, external=False, **tests)
+    return hint_text(sigma0, float(adj.result.sigma0), bool(stats.global_test.passed))

@@ -26,6 +26,23 @@ point undetermined (its 3 × 3 vector was all that fixed it): the point is then 
 with ``strict`` snooping stops instead and says why. A failing weighted coordinate of a control point
 (an ``observed_coordinates`` row of the point set) is rejected by making that coordinate free.
 
+**Gross errors are refused, not snooped.** Data snooping looks for a few blunders in a network whose
+model fits the rest; it is not a way to make a wrong model fit. Before each rejection the rows
+rejected so far and the one identified are checked, and snooping stops with
+:class:`SnoopingRefused` (one line naming the rows it would remove; nothing is rejected) when
+
+- the identified row's residual is more than :data:`GROSS_SIGMA` (1000) times its a-priori σ (a
+  tracker of 10 µm off by 10 mm: a wrong target, unit or sign, not a blunder among the readings);
+- the rejections would take more than half of one point's observation rows, in two rejections or
+  more (a point, or a set-up, whose observations disagree with the network as a whole: a control
+  point in the wrong frame, a station mirrored, a wrong point number; one blunder per point is what
+  snooping is for);
+- more than :data:`MAX_SHARE` (5 %) of the network's rows would be rejected, and more than
+  :data:`MIN_REFUSED` - 1 rejections (a network where that many observations fail is a wrong model).
+
+``gross=False`` keeps Baarda's procedure alone (what it rejected is still listed). The command line
+adds what the refusal may mean: azimuths of the opposite sense (:mod:`multilat.cli.general_adjust`).
+
 Bounded: at most ``max_rejections`` rejections (default: every row) and :data:`SNOOP_SECONDS` of wall
 time (:class:`multilat.network.bounds.Bound`, a note when it stops the rounds); each round reports
 its progress line (:func:`multilat.network.bounds.report`).
@@ -45,16 +62,33 @@ from multilat.network.general.adjust import System, UndeterminedError
 from multilat.network.general.observations import Network, point_keys, without_rows
 from multilat.network.general.points import FREE, PointSet
 from multilat.network.general.quality import POWER, GeneralStatistics, statistics
-from multilat.network.general.report import row_record
+from multilat.network.general.report import row_ends, row_record
 from multilat.network.general.run import NetworkAdjustment, adjust_network
 from multilat.network.snooping import detection_step
 
-__all__ = ["Snooping", "snoop", "SNOOP_SECONDS", "correlated_rows"]
+__all__ = ["Snooping", "SnoopingRefused", "snoop", "SNOOP_SECONDS", "correlated_rows", "GROSS_SIGMA", "MAX_SHARE",
+           "MIN_REFUSED"]
 
 #: wall-time bound of the snooping rounds (each a full adjustment), seconds
 SNOOP_SECONDS = 600.0
 #: |ρ| above 1 - this: two w-tests the data cannot tell apart (the distance path's tolerance)
 TWIN_TOL = 1e-6
+
+#: a residual above this many times the row's a-priori σ is a gross error: snooping refuses (module docstring)
+GROSS_SIGMA = 1000.0
+#: share of the network's rows beyond which the rejections are refused (with at least MIN_REFUSED of them)
+MAX_SHARE = 0.05
+#: the fewest rejections the share rule refuses (one or two blunders are snooped in any network)
+MIN_REFUSED = 3
+
+
+class SnoopingRefused(MultilatError):
+    """Data snooping would remove gross errors (module docstring): ``rows`` the records of the rows it
+    rejected before and would reject now, ``sigma0`` that of the adjustment before snooping."""
+
+    def __init__(self, message: str, *, rows: tuple = (), sigma0: float = float("nan")):
+        super().__init__(message)
+        self.rows, self.sigma0 = tuple(rows), float(sigma0)
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,10 +118,12 @@ def snoop(network: Network, *, options=None, strict: bool = False, alpha: float 
           variance_factor: str = "known", method: str | None = None, alpha_global: float | None = None,
           alpha_family: float = st.ALPHA_FAMILY, power: float = POWER, snooping: bool = True,
           max_rejections: int | None = None, max_seconds: float = SNOOP_SECONDS,
-          adjustment: NetworkAdjustment | None = None) -> Snooping:
+          adjustment: NetworkAdjustment | None = None, gross: bool = True) -> Snooping:
     """Adjust ``network`` (:func:`.run.adjust_network`, or take ``adjustment``), then data snooping
-    (module docstring) unless ``snooping`` is False; the statistics of the final adjustment."""
+    (module docstring) unless ``snooping`` is False; the statistics of the final adjustment.
+    :class:`SnoopingRefused` when it would remove gross errors (unless ``gross`` is False)."""
     adj = adjustment or adjust_network(network, options=options, strict=strict)
+    gate = _Gate(adj) if gross else None
     given, excluded = adj.given, list(adj.excluded)
     tests = dict(alpha=alpha, variance_factor=variance_factor, method=method, alpha_global=alpha_global,
                  alpha_family=alpha_family, power=power)
@@ -121,6 +157,8 @@ def snoop(network: Network, *, options=None, strict: bool = False, alpha: float 
         if why:
             unlocated, reason = (row_record(system, stats, k),), why
             break
+        if gate is not None:
+            gate.check(system, stats, unit, [r for r, _, _ in rejected])
         record = dict(row_record(system, stats, k), round=len(steps), order=len(rejected) + 1,
                       test=step["test_k"], statistic=step["statistic_k"], critical=step["critical_k"],
                       residual_rejected=float(stats.residual[k]), n_rows=int(unit.size),
@@ -167,6 +205,64 @@ def _finish(adj, stats, rejected, params_then, steps, unlocated, reason, snoopin
                 f"data snooping stopped at its wall-time bound ({max_seconds:g} s) after {len(out)} rejection(s)")
     return Snooping(adj, stats, tuple(out), unlocated, reason if unlocated else "", tuple(steps), bool(snooping),
                     note)
+
+
+# ---------------------------------------------------------------- gross errors
+class _Gate:
+    """The refusal rules of the module docstring, on the network as adjusted before snooping (its rows
+    per point and in all) and the rows rejected so far."""
+
+    def __init__(self, adj: NetworkAdjustment):
+        ref, _ = _point_rows(adj.system)
+        ids = adj.system.network.points.ids
+        self.n_rows = adj.system.n_rows
+        self.per_point = {ids[p]: int(np.any(ref == p, axis=1).sum()) for p in np.unique(ref[ref >= 0])}
+        self.sigma0 = float(adj.result.sigma0)
+
+    def check(self, system: System, stats: GeneralStatistics, unit, before: list) -> None:
+        """Raise :class:`SnoopingRefused` if rejecting the rows ``unit`` of ``system`` after the
+        rejections ``before`` (their records) breaks a rule."""
+        now = [row_record(system, stats, int(q)) for q in unit]
+        ratio = np.abs(stats.residual[unit]) / stats.sigma[unit]
+        j = int(np.argmax(ratio))
+        if ratio[j] > GROSS_SIGMA:
+            o = now[j]
+            self._refuse(f"{_what(o)} has a residual of {o['residual']:+.4g} {o['unit']} = {ratio[j]:.3g} σ (more "
+                         f"than {GROSS_SIGMA:g} σ: a gross error, not a blunder among the readings)", before + now)
+        items = [(set(row_ends(r)), int(r["n_rows"]), [r]) for r in before]
+        items.append((set().union(*(row_ends(o) for o in now)), len(now), now))
+        per: dict = {}
+        for ends, n, recs in items:
+            for p in ends:
+                c = per.setdefault(p, [0, 0, []])
+                c[0], c[1] = c[0] + 1, c[1] + n
+                c[2] += recs
+        for p, (n_rej, n_rows, recs) in per.items():
+            if n_rej >= 2 and 2 * n_rows > self.per_point.get(p, 0):
+                self._refuse(f"it would reject {n_rows} of the {self.per_point.get(p, 0)} observation rows of point "
+                             f"{p!r} ({_listed(recs)})", recs)
+        n_rows = sum(n for _, n, _ in items)
+        if len(items) >= MIN_REFUSED and n_rows > MAX_SHARE * self.n_rows:
+            recs = [o for _, _, r in items for o in r]
+            self._refuse(f"it would reject {n_rows} of the network's {self.n_rows} observation rows (more than "
+                         f"{MAX_SHARE:.0%}: {_listed(recs)})", recs)
+
+    def _refuse(self, why: str, rows) -> None:
+        raise SnoopingRefused(f"data snooping refused: {why}; the observations disagree with the network as a "
+                              "whole (a wrong point number, unit, frame or sign of an angle?): check them, or adjust "
+                              "with --no-snooping to see every residual", rows=tuple(rows), sigma0=self.sigma0)
+
+
+def _what(o: dict) -> str:
+    """A row in words: its label (the file's line) or its kind and ends."""
+    kind = o["kind"].replace("_", " ") + (f" ({o['component']})" if o.get("component") else "")
+    ends, label = "->".join(row_ends(o)), o.get("label") or ""
+    return label if ends in label else f"{kind} {ends}" + (f" ({label})" if label else "")
+
+
+def _listed(rows, limit: int = 6) -> str:
+    words = [_what(o) for o in rows]
+    return ", ".join(words[:limit]) + (f" and {len(words) - limit} more" if len(words) > limit else "")
 
 
 # ---------------------------------------------------------------- rows
