@@ -188,7 +188,7 @@ def test_mc_covariance_equals_cofactor_tracker_network(tracker):
     assert kinds == {"slope_distance", "tracker_angles", "observed_coordinates"}
     n = 6000
     res = propagate(tracker.system, tracker.result, trials=n, rng=12)
-    assert res.n_failed == 0 and res.n_full_gauss_newton == 0
+    assert res.n_failed == 0 and res.n_retried == 0
     assert {"offset:H1", "offset:H2", "kappa:A", "omega:D"} <= set(res.labels)
     _check_against_q(res, n)
 
@@ -246,13 +246,22 @@ def test_equals_todays_propagate_on_a_network_both_take():
         assert abs(new.mc_std[i] - s_old) <= NSIG * np.hypot(new.mc_std_se[i], se_old), (name, new.mc_std[i], s_old)
         compared += 1
     assert compared >= 0.9 * new.n_params
+    # one result record for both paths: the same class, the shared quantities under the same JSON keys
+    from multilat.network.propagate_result import PropagationResult
+
+    assert type(new) is type(old) is PropagationResult
+    shared = {"trials", "n_failed", "n_retried", "noise", "seed", "sigma0_mean", "sigma0_rms", "elapsed_s",
+              "parameters", "distances", "points", "summary"}
+    d_new, d_old = new.to_dict(), old.to_dict()
+    assert shared <= set(d_new) and shared <= set(d_old)
+    assert {"n_quantities", "n_agree", "ratio_min", "ratio_max"} <= set(d_new["summary"]) & set(d_old["summary"])
 
 
 def test_json_document(tracker):
     res = propagate(tracker.system, tracker.result, trials=1000, rng=1)
     doc = json.loads(json.dumps(res.to_dict()))
     assert doc["schema"] == SCHEMA and doc["model"] == "general" and doc["trials"] == 1000
-    assert {"parameters", "distances", "points", "summary", "n_full_gauss_newton", "n_failed"} <= set(doc)
+    assert {"parameters", "distances", "points", "summary", "n_retried", "n_failed"} <= set(doc)
     p = doc["parameters"][0]
     assert {"label", "unit", "nominal", "std_mc", "std_mc_se", "std_lin", "interval_symmetric"} <= set(p)
     assert set(doc["points"]) == set(tracker.result.ids)

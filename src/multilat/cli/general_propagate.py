@@ -126,7 +126,7 @@ def _write(out: Path, inputs, doc) -> None:
 def _print(console, doc, out) -> None:
     s = doc["summary"]
     console.print(f"Monte Carlo through the general adjustment ({doc['input']}, {doc['format']}): {doc['trials']} "
-                  f"trials kept, {doc['n_failed']} failed to converge, {doc['n_full_gauss_newton']} re-solved by "
+                  f"trials kept, {doc['n_failed']} failed to converge, {doc['n_retried']} re-solved by "
                   f"full Gauss-Newton; {doc['chord_steps_mean']:.2f} chord steps per trial; {doc['elapsed_s']:.1f} s",
                   markup=False)
     console.print(f"observations drawn gaussian from their a-priori covariance; sigma0 of the trials: rms "

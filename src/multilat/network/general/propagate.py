@@ -23,7 +23,7 @@ constraints) is propagated by the same :class:`~.adjust.System`:
 * **far trials.** A trial whose step does not shrink by half from one iteration to the next, or that
   has not converged after ``max_iter`` chord steps, is solved again from ``x̂`` by full Gauss-Newton
   (the Jacobian and the bordered system at every iterate, same datum): counted in
-  ``n_full_gauss_newton``. One that still does not converge is dropped and counted (``n_failed``).
+  ``n_retried``. One that still does not converge is dropped and counted (``n_failed``).
 * **seeding.** Trials are drawn and solved in fixed blocks of :data:`BLOCK`; block ``b`` draws its
   ``(n, R)`` standard normals, rows in the system's row order, from the Monte Carlo engine's
   ``block_generator(entropy, spawn_key, b)``; a chunk (the unit of work handed to ``map``) is a run of
@@ -365,7 +365,7 @@ def _solve_block(spec: _Spec, entropy, spawn_key: tuple, b: int, n: int) -> dict
     sol = solve(spec.frozen, obs, tol=spec.tol, max_iter=spec.max_iter, engine=spec.engine)
     ok = sol.converged
     return {"dev": _outputs(spec.frozen, spec.pairs, sol.x[ok]).astype(np.float32), "n": n,
-            "n_failed": int((~ok).sum()), "n_full_gauss_newton": int(sol.full_gauss_newton.sum()),
+            "n_failed": int((~ok).sum()), "n_retried": int(sol.full_gauss_newton.sum()),
             "iterations": int(sol.iterations.sum()), "vtpv": sol.vtpv[ok]}
 
 
