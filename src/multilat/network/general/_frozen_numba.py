@@ -249,16 +249,42 @@ def _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, co
     return v
 
 
+@njit(cache=True, inline="always")
+def _product(m, w, out):  # pragma: no cover - jit
+    """``out[a] = Σ_i m[i, a] w[i]``, the sum over i in order. Four rows of ``m`` per pass over ``out``:
+    ``out[a]`` stays in a register between them instead of a store and a load per row (the same
+    additions in the same order: the same bits as one row per pass); independent sums over a: vectorised."""
+    n, k = m.shape
+    for a in range(k):
+        out[a] = 0.0
+    i = 0
+    while i + 4 <= n:
+        w0, w1, w2, w3 = w[i], w[i + 1], w[i + 2], w[i + 3]
+        for a in range(k):
+            d = out[a]
+            d += m[i, a] * w0
+            d += m[i + 1, a] * w1
+            d += m[i + 2, a] * w2
+            d += m[i + 3, a] * w3
+            out[a] = d
+        i += 4
+    while i < n:
+        wi = w[i]
+        for a in range(k):
+            out[a] += m[i, a] * wi
+        i += 1
+
+
 #: Trials per unit of the parallel loop (work arrays allocated once per unit; each trial's arithmetic
 #: is its own, so the numbers never depend on it).
 UNIT = 32
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def _chord(obs, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames, angular, wdiag, p_ptr, p_idx,
-           p_val, free, q, computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
-    """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place, from ``x̂``), the rule of
-    :func:`.propagate.solve`: the first ``K (l - f(x̂))`` (``kt`` = K^T (R, n_free), ``computed`` =
+def _chord(obs, x_hat, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames, angular, wdiag, p_ptr,
+           p_idx, p_val, free, q, computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
+    """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (``x`` (T, n): from ``x_hat``, written
+    here), the rule of :func:`.propagate.solve`: the first ``K (l - f(x̂))`` (``kt`` = K^T (R, n_free), ``computed`` =
     f(x̂)); converged when the largest step, or its bound on the error left ``step c / (1 - c)``
     (c = this step / the one before), is below ``tol``; ``far`` when a step is larger than
     ``contraction`` times the one before, or after ``max_iter`` steps."""
@@ -275,11 +301,10 @@ def _chord(obs, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, fr
         rot = np.empty((max(len(frames), 1), 4, 3, 3))
         for t in range(unit * UNIT, min(t_n, unit * UNIT + UNIT)):
             xt = x[t]
-            dx[:] = 0.0
+            xt[:] = x_hat
             for i in range(r_n):              # the first step, linear in the noise: K (l - f(x̂))
-                e = _residual(obs[t, i] - computed[i], angular[i])
-                for a in range(nf):
-                    dx[a] += kt[i, a] * e
+                r[i] = _residual(obs[t, i] - computed[i], angular[i])
+            _product(kt, r, dx)
             prev = 0.0
             for a in range(nf):
                 xt[free[a]] += dx[a]
@@ -290,11 +315,7 @@ def _chord(obs, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, fr
             for it in range(1, max_iter):
                 v = _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames,
                                     angular, wdiag, p_ptr, p_idx, p_val, val, valf, r, pr, rot, f2, g)
-                dx[:] = 0.0
-                for b in range(nf):           # dx = Q g, by rows of the symmetric Q (independent sums: vectorised)
-                    gb = g[b]
-                    for a in range(nf):
-                        dx[a] += q[b, a] * gb
+                _product(q, g, dx)            # dx = Q g, by rows of the symmetric Q
                 step = 0.0
                 for a in range(nf):
                     v -= g[a] * dx[a]         # vTPv after the step, to second order: v - g^T Q g
