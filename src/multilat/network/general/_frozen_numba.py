@@ -6,8 +6,8 @@ Rows are a small program: a kind code per row, its full-layout columns (at most 
 Jacobian columns, in the kind's order), per-row numbers (the height difference along z, the tracker
 component, the set-up of a tracker row: its frame is computed once per set-up and trial; ``pair``:
 the elevation row computed with an azimuth row, :func:`_tracker_pair`; ``ref``: cos, sin and value
-of each row at x̂), and the Jacobian slots on free parameters column by column (CSC: ``c_ptr``, the
-row ``c_row`` and flat place ``c_j`` of each), so ``J^T P r`` is one running sum per free column.
+of each row at x̂), and each Jacobian slot's free column (``rcols``, -1 for none), so ``J^T P r`` is
+added row by row into the free columns.
 The columns are static, so only the values change per trial. ``P`` is the diagonal ``wdiag`` for
 rows of uncorrelated blocks, a CSR matrix (the blocks' ``C^-1``) for the others. Codes: :data:`CODES`.
 
@@ -213,13 +213,14 @@ def _residual(e, angular):  # pragma: no cover - jit
 
 
 @njit(cache=True, inline="always")
-def _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames, angular, wdiag,
-                    p_ptr, p_idx, p_val, val, valf, r, pr, rot, f2, g):  # pragma: no cover - jit
+def _trial_gradient(obs, t, xt, code, cols, pair, ref, rcols, hz, comp, setup, frames, angular, wdiag,
+                    p_ptr, p_idx, p_val, val, r, pr, rot, f2, g):  # pragma: no cover - jit
     """``g = J(x_t)^T P r`` with ``r = obs[t] - f(x_t)`` (angles wrapped); returns ``r^T P r``. A row
     with a diagonal weight (``wdiag[i] > 0``) takes ``(P r)_i = wdiag[i] r_i``, others their CSR row
-    of ``P``; tracker rows paired by ``pair`` (:func:`_tracker_pair`). ``g`` is gathered column by
-    column (CSC of the Jacobian slots: ``c_ptr``, each slot's row ``c_row`` and flat place ``c_j`` in
-    ``valf``, ``val`` flattened): one running sum per column, no scattered stores."""
+    of ``P``; tracker rows paired by ``pair`` (:func:`_tracker_pair`). ``g`` is summed row by row, each
+    slot added to its free column (``rcols``, -1 for none): per column the rows in order, the same
+    sums as column by column; no index to follow to the slot's value (gathered column by column
+    through a CSC index, the same sums cost 0.7-1.0 µs more a trial on the tracker network)."""
     _rotations(frames, xt, rot)
     for i in range(len(code)):
         k = pair[i]
@@ -242,37 +243,14 @@ def _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, co
         pr[i] = s
         v += s * r[i]
     for a in range(len(g)):
-        s = 0.0
-        for k in range(c_ptr[a], c_ptr[a + 1]):
-            s += valf[c_j[k]] * pr[c_row[k]]
-        g[a] = s
+        g[a] = 0.0
+    for i in range(len(code)):
+        s = pr[i]
+        for j in range(9):
+            a = rcols[i, j]
+            if a >= 0:
+                g[a] += val[i, j] * s
     return v
-
-
-@njit(cache=True, inline="always")
-def _product(m, w, out):  # pragma: no cover - jit
-    """``out[a] = Σ_i m[i, a] w[i]``, the sum over i in order. Four rows of ``m`` per pass over ``out``:
-    ``out[a]`` stays in a register between them instead of a store and a load per row (the same
-    additions in the same order: the same bits as one row per pass); independent sums over a: vectorised."""
-    n, k = m.shape
-    for a in range(k):
-        out[a] = 0.0
-    i = 0
-    while i + 4 <= n:
-        w0, w1, w2, w3 = w[i], w[i + 1], w[i + 2], w[i + 3]
-        for a in range(k):
-            d = out[a]
-            d += m[i, a] * w0
-            d += m[i + 1, a] * w1
-            d += m[i + 2, a] * w2
-            d += m[i + 3, a] * w3
-            out[a] = d
-        i += 4
-    while i < n:
-        wi = w[i]
-        for a in range(k):
-            out[a] += m[i, a] * wi
-        i += 1
 
 
 #: Trials per unit of the parallel loop (work arrays allocated once per unit; each trial's arithmetic
@@ -281,10 +259,10 @@ UNIT = 32
 
 
 @njit(cache=True, parallel=True, nogil=True)
-def _chord(obs, x_hat, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames, angular, wdiag, p_ptr,
-           p_idx, p_val, free, q, computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
-    """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (``x`` (T, n): from ``x_hat``, written
-    here), the rule of :func:`.propagate.solve`: the first ``K (l - f(x̂))`` (``kt`` = K^T (R, n_free), ``computed`` =
+def _chord(obs, x, code, cols, pair, ref, rcols, hz, comp, setup, frames, angular, wdiag, p_ptr, p_idx, p_val, free, q,
+           computed, kt, tol, max_iter, contraction, converged, iters, far, vtpv):  # pragma: no cover - jit
+    """Chord steps ``x_t += Q J(x_t)^T P r`` of every trial ``t`` (in place, from ``x̂``), the rule of
+    :func:`.propagate.solve`: the first ``K (l - f(x̂))`` (``kt`` = K^T (R, n_free), ``computed`` =
     f(x̂)); converged when the largest step, or its bound on the error left ``step c / (1 - c)``
     (c = this step / the one before), is below ``tol``; ``far`` when a step is larger than
     ``contraction`` times the one before, or after ``max_iter`` steps."""
@@ -292,7 +270,6 @@ def _chord(obs, x_hat, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, se
     nf = len(free)
     for unit in prange((t_n + UNIT - 1) // UNIT):
         val = np.zeros((r_n, 9))
-        valf = val.reshape(r_n * 9)
         r = np.empty(r_n)
         pr = np.empty(r_n)
         g = np.empty(nf)
@@ -301,10 +278,11 @@ def _chord(obs, x_hat, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, se
         rot = np.empty((max(len(frames), 1), 4, 3, 3))
         for t in range(unit * UNIT, min(t_n, unit * UNIT + UNIT)):
             xt = x[t]
-            xt[:] = x_hat
+            dx[:] = 0.0
             for i in range(r_n):              # the first step, linear in the noise: K (l - f(x̂))
-                r[i] = _residual(obs[t, i] - computed[i], angular[i])
-            _product(kt, r, dx)
+                e = _residual(obs[t, i] - computed[i], angular[i])
+                for a in range(nf):
+                    dx[a] += kt[i, a] * e
             prev = 0.0
             for a in range(nf):
                 xt[free[a]] += dx[a]
@@ -313,9 +291,13 @@ def _chord(obs, x_hat, x, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, se
                     prev = s if s == s else np.inf
             iters[t] = 1
             for it in range(1, max_iter):
-                v = _trial_gradient(obs, t, xt, code, cols, pair, ref, c_ptr, c_row, c_j, hz, comp, setup, frames,
-                                    angular, wdiag, p_ptr, p_idx, p_val, val, valf, r, pr, rot, f2, g)
-                _product(q, g, dx)            # dx = Q g, by rows of the symmetric Q
+                v = _trial_gradient(obs, t, xt, code, cols, pair, ref, rcols, hz, comp, setup, frames, angular, wdiag,
+                                    p_ptr, p_idx, p_val, val, r, pr, rot, f2, g)
+                dx[:] = 0.0
+                for b in range(nf):           # dx = Q g, by rows of the symmetric Q (independent sums: vectorised)
+                    gb = g[b]
+                    for a in range(nf):
+                        dx[a] += q[b, a] * gb
                 step = 0.0
                 for a in range(nf):
                     v -= g[a] * dx[a]         # vTPv after the step, to second order: v - g^T Q g

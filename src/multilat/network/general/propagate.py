@@ -153,7 +153,7 @@ def freeze(system: System, result: GeneralResult) -> Frozen:
 
 def _program(system: System, x: np.ndarray, weight) -> dict:
     """The rows as the compiled kernel's program (:mod:`._frozen_numba`): codes, full and free columns
-    (R, 9), the vertical height offsets, the tracker components, ``P`` as CSR."""
+    (R, 9: ``cols``, ``rcols``), the vertical height offsets, the tracker components, ``P`` as CSR."""
     from multilat.network.general._frozen_numba import CODES
     from multilat.network.general.kinds.geometry import _heights
 
@@ -174,19 +174,14 @@ def _program(system: System, x: np.ndarray, weight) -> dict:
     red = system.layout.reduced
     p = scipy.sparse.block_diag([scipy.sparse.diags(w) if w.ndim == 1 else scipy.sparse.csr_matrix(w)
                                  for w in weight], format="csr")
-    rcols = np.where(cols >= 0, red[cols], -1)
-    have = rcols >= 0
+    rcols = np.where(cols >= 0, red[cols], -1).astype(np.int64)     # each slot's free column, -1 for none
     n_in_row = np.diff(p.indptr)
     wdiag = np.zeros(R)
     one = np.flatnonzero(n_in_row == 1)
     one = one[p.indices[p.indptr[one]] == one]
     wdiag[one] = p.data[p.indptr[one]]
-    row, j = np.nonzero(have)                   # the Jacobian slots on free columns, column by column
-    order = np.argsort(rcols[have], kind="stable")
     return {"code": code, "cols": cols, "pair": _tracker_pairs(code, cols, hz, comp), "wdiag": wdiag,
-            "c_ptr": np.searchsorted(rcols[have][order], np.arange(system.n_free + 1)).astype(np.int64),
-            "c_row": row[order].astype(np.int64), "c_j": (9 * row + j)[order].astype(np.int64), "hz": hz, "comp": comp,
-            "setup": setup, "frames": np.array(list(frames), np.int64).reshape(-1, 3),
+            "rcols": rcols, "hz": hz, "comp": comp, "setup": setup, "frames": np.array(list(frames), np.int64).reshape(-1, 3),
             "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
 
 
@@ -234,8 +229,7 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
     obs = np.atleast_2d(np.asarray(obs, float))
     t = len(obs)
     compiled = engine == "numba" or (engine == "auto" and HAVE_NUMBA)
-    # the compiled kernel writes x̂ into its trials' rows itself (a (T, n) copy here cost ~3 % of a run)
-    x = np.empty((t, frozen.x_hat.size)) if compiled else np.repeat(frozen.x_hat[None], t, 0)
+    x = np.repeat(frozen.x_hat[None], t, 0)
     iters = np.zeros(t, np.int64)
     vtpv = np.full(t, np.nan)
     done = np.zeros(t, bool)
@@ -244,10 +238,9 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
         from multilat.network.general._frozen_numba import chord
 
         p = frozen.program
-        chord(obs, frozen.x_hat, x, p["code"], p["cols"], p["pair"], p["ref"], p["c_ptr"], p["c_row"], p["c_j"],
-              p["hz"], p["comp"], p["setup"], p["frames"], frozen.angular, p["wdiag"], p["p_ptr"], p["p_idx"], p["p_val"],
-              frozen.free.astype(np.int64), frozen.q,
-              frozen.computed, p["kt"], float(tol), int(max_iter), CONTRACTION, done, iters, far, vtpv)
+        chord(obs, x, p["code"], p["cols"], p["pair"], p["ref"], p["rcols"], p["hz"], p["comp"], p["setup"],
+              p["frames"], frozen.angular, p["wdiag"], p["p_ptr"], p["p_idx"], p["p_val"], frozen.free.astype(np.int64),
+              frozen.q, frozen.computed, p["kt"], float(tol), int(max_iter), CONTRACTION, done, iters, far, vtpv)
         return _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback)
     # the first step is linear in the noise (at x̂ the model and Jacobian are the adjustment's): one
     # matrix product for all trials, dx = K (l - f(x̂)), K = Q J(x̂)^T P
