@@ -37,13 +37,14 @@ def default_pairs(system) -> np.ndarray:
     return np.array([(a, b) for a, b in _default_pairs(free)], int).reshape(-1, 2)
 
 
-def _linear(frozen, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Linear std of the outputs and the full-layout cofactor of the points (P, 3, 3)."""
+def _linear(frozen, pairs: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Linear std of the outputs and the full-layout covariance of the points (P, 3, 3), from the free
+    parameters' covariance ``q`` (``Q``, or its sandwich for the model's inputs)."""
     n = frozen.system.layout.n
     qf = np.zeros((n, n))
-    qf[np.ix_(frozen.free, frozen.free)] = frozen.q
+    qf[np.ix_(frozen.free, frozen.free)] = q
     pc = frozen.system.layout.point_cols
-    std = [np.sqrt(np.clip(np.diag(frozen.q), 0, None))]
+    std = [np.sqrt(np.clip(np.diag(q), 0, None))]
     if len(pairs):
         a, b = pc[pairs[:, 0]], pc[pairs[:, 1]]
         u = frozen.x_hat[b] - frozen.x_hat[a]
@@ -55,8 +56,9 @@ def _linear(frozen, pairs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(std), qf[pc[:, :, None], pc[:, None, :]]
 
 
-def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaussian") -> PropagationResult:
-    """The result of a run from its blocks (:func:`.propagate._solve_block`), in block order."""
+def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaussian", q=None) -> PropagationResult:
+    """The result of a run from its blocks (:func:`.propagate._solve_block`), in block order; ``q`` the
+    linear covariance of the free parameters for the drawn inputs (default the cofactor ``Q``)."""
     from multilat.network.propagate_summary import _kurtosis
 
     dev = np.concatenate([b["dev"] for b in blocks])
@@ -74,7 +76,7 @@ def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaus
     mean = np.asarray(mc.estimate, float)
     std = np.asarray(mc.std, float)
     se = std * np.sqrt(np.clip(_kurtosis(y, mean) - 1.0, 0, None) / (4 * len(y)))
-    lin, qp = _linear(frozen, pairs)
+    lin, qp = _linear(frozen, pairs, frozen.q if q is None else q)
     red = lay.reduced
     pts = [i for i in range(len(pc)) if (red[pc[i]] >= 0).any()]
     cov_mc = np.zeros((len(pts), 3, 3))
