@@ -8,9 +8,10 @@ the same rule as ``adjust``). The network is read and adjusted as ``multilat adj
 every observation drawn gaussian from its a-priori covariance, or with ``--noise model`` the slope
 distances from the distance model of the instrument named by ``--instrument`` (refused without it).
 Options that apply: ``--trials``, ``--seed``, ``--chunk-size``, ``--workers``, ``--scheduler``,
-``--json``, ``--out``, ``--noise``, ``--instrument`` with ``--noise model``; on a CSV network also ``--points``, ``--datum``, ``--sigma-um``, ``--instrument``,
-``--scales``, ``--references`` with ``--scale-bars`` and ``--levelled``, as ``adjust --model
-general`` reads them. Every other option is refused in one line that names it.
+``--json``, ``--out``, ``--noise``, ``--instrument`` with ``--noise model``; on a CSV network also
+``--points``, ``--datum``, ``--sigma-um``, ``--instrument``, ``--scales``, ``--references`` with
+``--scale-bars`` and ``--levelled``, as ``adjust --model general`` reads them. Every other option
+is refused in one line that names it.
 """
 
 from __future__ import annotations

@@ -243,8 +243,8 @@ class PropagationResult:
         """The general layer's document: points as an id map, the chord steps and dof of its solver."""
         rows = self.rows()
         n_par = self.n_parameters
-        return {"schema": GENERAL_SCHEMA, "model": "general", "trials": int(self.trials), "n_failed": int(self.n_failed),
-                "n_retried": int(self.n_retried), "chord_steps_mean": float(self.chord_steps_mean),
+        return {"schema": GENERAL_SCHEMA, "model": "general", "trials": int(self.trials),
+                "n_failed": int(self.n_failed), "n_retried": int(self.n_retried), "chord_steps_mean": float(self.chord_steps_mean),
                 "noise": self.noise, "sigma0_mean": float(self.sigma0_mean), "sigma0_rms": float(self.sigma0_rms),
                 "dof": int(self.dof), "seed": int(self.seed_entropy), "elapsed_s": float(self.elapsed_s),
                 "parameters": rows[:n_par], "distances": rows[n_par:],

@@ -181,7 +181,8 @@ def _program(system: System, x: np.ndarray, weight) -> dict:
     one = one[p.indices[p.indptr[one]] == one]
     wdiag[one] = p.data[p.indptr[one]]
     return {"code": code, "cols": cols, "pair": _tracker_pairs(code, cols, hz, comp), "wdiag": wdiag,
-            "rcols": rcols, "hz": hz, "comp": comp, "setup": setup, "frames": np.array(list(frames), np.int64).reshape(-1, 3),
+            "rcols": rcols, "hz": hz, "comp": comp, "setup": setup,
+            "frames": np.array(list(frames), np.int64).reshape(-1, 3),
             "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
 
 
@@ -228,13 +229,12 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
         raise MultilatError(f"engine must be auto, numpy or numba, got {engine!r}")
     obs = np.atleast_2d(np.asarray(obs, float))
     t = len(obs)
-    compiled = engine == "numba" or (engine == "auto" and HAVE_NUMBA)
     x = np.repeat(frozen.x_hat[None], t, 0)
     iters = np.zeros(t, np.int64)
     vtpv = np.full(t, np.nan)
     done = np.zeros(t, bool)
     far = np.zeros(t, bool)
-    if compiled:
+    if engine == "numba" or (engine == "auto" and HAVE_NUMBA):
         from multilat.network.general._frozen_numba import chord
 
         p = frozen.program
@@ -347,6 +347,7 @@ class DistanceNoise:
     rows : (m,) system rows;  error_model : :class:`multilat.distance_errors.ErrorModel` (a row per head)
     head_row : (m,) its row per distance;  distance_m : (m,) ``f(x̂)`` of those rows
     std_m : (m,) the model's standard deviation of each (:func:`multilat.budget.distance_std_m`)
+    prior_std_m : (m,) their a-priori σ (the adjustment's weights, which the model's draws replace)
     """
 
     rows: np.ndarray
@@ -354,6 +355,7 @@ class DistanceNoise:
     head_row: np.ndarray
     distance_m: np.ndarray
     std_m: np.ndarray
+    prior_std_m: np.ndarray
 
 
 def distance_noise(frozen: Frozen, instrument) -> DistanceNoise:
@@ -365,7 +367,7 @@ def distance_noise(frozen: Frozen, instrument) -> DistanceNoise:
     from multilat.distance_errors import error_model
 
     inst = _instrument.load_instrument(instrument) if isinstance(instrument, str) else instrument
-    rows, heads = [], []
+    rows, heads, prior = [], [], []
     for b, sl in zip(frozen.system.blocks, frozen.system.rows):
         if b.kind != "slope_distance" or b.index.get("instrument") is None:
             continue
@@ -375,6 +377,7 @@ def distance_noise(frozen: Frozen, instrument) -> DistanceNoise:
             raise MultilatError("noise model draws each slope distance alone; a block of them with a covariance "
                                 "(correlated distances) cannot be drawn from the distance model: use noise gaussian")
         rows.append(sl.start + keep)
+        prior.append(np.broadcast_to(np.asarray(b.sigma, float), (b.n_rows,))[keep])
         heads.extend(b.names["instrument"][i] for i in idx[keep])
     if not heads:
         raise MultilatError("noise model draws the slope distances of an instrument's heads; this network has "
@@ -391,7 +394,7 @@ def distance_noise(frozen: Frozen, instrument) -> DistanceNoise:
     for k, hd in enumerate(names):
         sel = head_row == k
         std[sel] = budget.distance_std_m(inst, d[sel], head=hd)
-    return DistanceNoise(rows, error_model(inst, names), head_row, d, std)
+    return DistanceNoise(rows, error_model(inst, names), head_row, d, std, np.concatenate(prior))
 
 
 def _noise_cofactor(frozen: Frozen, model: DistanceNoise | None) -> np.ndarray:
@@ -400,9 +403,8 @@ def _noise_cofactor(frozen: Frozen, model: DistanceNoise | None) -> np.ndarray:
     ``C_m``) are drawn with the model's σ² ``S²`` instead (``K = Q J^T P``: ``K C K^T = Q``)."""
     if model is None:
         return frozen.q
-    sigma = np.concatenate([np.broadcast_to(np.asarray(b.sigma, float), (b.n_rows,)) for b in frozen.system.blocks])
     km = frozen.gain[:, model.rows]
-    return frozen.q + (km * (model.std_m ** 2 - sigma[model.rows] ** 2)) @ km.T
+    return frozen.q + (km * (model.std_m ** 2 - model.prior_std_m ** 2)) @ km.T
 
 
 @dataclass(frozen=True, eq=False)

@@ -59,11 +59,10 @@ def _linear(frozen, pairs: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.nd
 def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaussian", q=None) -> PropagationResult:
     """The result of a run from its blocks (:func:`.propagate._solve_block`), in block order; ``q`` the
     linear covariance of the free parameters for the drawn inputs (default the cofactor ``Q``)."""
-    from multilat.network.propagate_summary import _kurtosis
-
     dev = np.concatenate([b["dev"] for b in blocks])
-    if dev.shape[0] < 2:
-        raise MultilatError(f"only {dev.shape[0]} trials converged: the network is too weak for a Monte Carlo "
+    n = dev.shape[0]
+    if n < 2:
+        raise MultilatError(f"only {n} trials converged: the network is too weak for a Monte Carlo "
                             "from its adjusted solution")
     lay = frozen.system.layout
     names = tuple(np.array(lay.names)[frozen.free]) + tuple(
@@ -71,32 +70,52 @@ def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaus
     pc = lay.point_cols
     nominal = np.concatenate([frozen.x_hat[frozen.free],
                               np.linalg.norm(frozen.x_hat[pc[pairs[:, 1]]] - frozen.x_hat[pc[pairs[:, 0]]], axis=1)])
-    y = dev.astype(float)
-    mc = summarize(y)
-    mean = np.asarray(mc.estimate, float)
-    std = np.asarray(mc.std, float)
-    se = std * np.sqrt(np.clip(_kurtosis(y, mean) - 1.0, 0, None) / (4 * len(y)))
+    mean, std, iv_sym, iv_short, kurt, cov_mc, pts = _statistics(dev, pc, lay.reduced)
+    se = std * np.sqrt(np.clip(kurt - 1.0, 0, None) / (4 * n))
     lin, qp = _linear(frozen, pairs, frozen.q if q is None else q)
-    red = lay.reduced
-    pts = [i for i in range(len(pc)) if (red[pc[i]] >= 0).any()]
-    cov_mc = np.zeros((len(pts), 3, 3))
-    for k, i in enumerate(pts):
-        c = red[pc[i]]
-        have = c >= 0
-        sub = y[:, c[have]]
-        cov_mc[k][np.ix_(have, have)] = np.atleast_2d(np.cov(sub, rowvar=False))
     vtpv = np.concatenate([b["vtpv"] for b in blocks])
     s0 = np.sqrt(vtpv / frozen.dof) if frozen.dof > 0 else np.full(len(vtpv), np.nan)
     n_all = sum(b["n"] for b in blocks)
     return PropagationResult(
-        labels=names, units=tuple(_unit(n) if ":" in n else "m" for n in names), nominal=nominal,
+        labels=names, units=tuple(_unit(nm) if ":" in nm else "m" for nm in names), nominal=nominal,
         mc_mean=nominal + mean, mc_std=std, mc_std_se=se, lin_std=lin,
-        interval_symmetric=nominal[:, None] + np.asarray(mc.interval_symmetric),
-        interval_shortest=nominal[:, None] + np.asarray(mc.interval_shortest),
+        interval_symmetric=nominal[:, None] + iv_sym, interval_shortest=nominal[:, None] + iv_short,
         point_ids=tuple(frozen.system.network.points.ids[i] for i in pts), point_cov_mc=cov_mc,
-        point_cov_lin=qp[pts], trials=len(y), n_failed=sum(b["n_failed"] for b in blocks),
+        point_cov_lin=qp[pts], trials=n, n_failed=sum(b["n_failed"] for b in blocks),
         n_retried=sum(b["n_retried"] for b in blocks), noise=noise,
         chord_steps_mean=sum(b["iterations"] for b in blocks) / max(n_all, 1),
         sigma0_mean=float(np.mean(s0)), sigma0_rms=float(np.sqrt(np.mean(s0 ** 2))), dof=frozen.dof,
         seed_entropy=int(seed_entropy), elapsed_s=time.perf_counter() - t0, n_params=len(frozen.free),
         samples=dev if keep_samples else None)
+
+
+def _statistics(dev: np.ndarray, pc: np.ndarray, red: np.ndarray):
+    """The engine's :func:`summarize` and the kurtosis of every column of the float32 deviations ``dev``
+    (N, k), eight columns at a time in float64, and the MC 3 x 3 covariance of every point with a free
+    coordinate (``pc`` its full columns, ``red`` full -> free column): independent tasks in two threads
+    from 50 000 trials (:func:`multilat.network.propagate_summary._in_two_threads`, as the distance
+    path summarises), so no (N, k) float64 copy is made. Returns mean, std, the two intervals (k, 2)
+    (deviations), kurtosis, the covariances (P, 3, 3) and the point indices P."""
+    from multilat.network.propagate_summary import _in_two_threads, _kurtosis
+
+    k = dev.shape[1]
+    mean, std, kurt = np.empty(k), np.empty(k), np.empty(k)
+    iv_sym, iv_short = np.empty((k, 2)), np.empty((k, 2))
+    pts = [i for i in range(len(pc)) if (red[pc[i]] >= 0).any()]
+    cov_mc = np.zeros((len(pts), 3, 3))
+
+    def put(cols):
+        y = dev[:, cols].astype(np.float64)
+        r = summarize(y)
+        mean[cols], std[cols] = r.estimate, r.std
+        iv_sym[cols], iv_short[cols] = r.interval_symmetric, r.interval_shortest
+        kurt[cols] = _kurtosis(y, mean[cols])
+
+    def point(j, i):
+        c = red[pc[i]]
+        have = c >= 0
+        cov_mc[j][np.ix_(have, have)] = np.atleast_2d(np.cov(dev[:, c[have]].astype(np.float64), rowvar=False))
+
+    _in_two_threads([lambda c0=c0: put(np.arange(c0, min(c0 + 8, k))) for c0 in range(0, k, 8)]
+                    + [lambda j=j, i=i: point(j, i) for j, i in enumerate(pts)], len(dev))
+    return mean, std, iv_sym, iv_short, kurt, cov_mc, pts
