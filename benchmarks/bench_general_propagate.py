@@ -22,7 +22,8 @@ Rows (trials/s; ``ratio`` = general trials/s / distance-only trials/s; the goal 
   summaries; gaussian noise; default map: threads), same trials.
 
 Each row records the 1-minute load average before it ran (the machine is shared: compare ratios).
-Quick mode: 10 000 trials, 3 interleaved repeats; full: 100 000 trials, 5.
+Quick mode: 10 000 trials, 7 interleaved repeats (3 left the median of a 0.1 s run at the mercy of one
+burst of load on the shared machine: 0.67-0.89 in five runs); full: 100 000 trials, 5.
 """
 
 from __future__ import annotations
@@ -77,7 +78,7 @@ def run(quick: bool = False) -> list[dict]:
     from multilat.network.propagate import propagate as old_propagate
 
     trials = 10_000 if quick else 100_000
-    reps = 3 if quick else 5
+    reps = 7 if quick else 5
     rows = []
     adj = adjust_network(tracker_network()[0])
     fr = freeze(adj.system, adj.result)

@@ -5,11 +5,13 @@ Reached from the ``propagate`` command (:mod:`multilat.cli.propagate_cmd`) when 
 gama-local file or ``--model general`` is given (:func:`multilat.cli.general_adjust.wants_general`,
 the same rule as ``adjust``). The network is read and adjusted as ``multilat adjust`` does it
 (undetermined points left out and named), then propagated through the adjustment's frozen system:
-every observation drawn gaussian from its a-priori covariance. Options that apply: ``--trials``,
-``--seed``, ``--chunk-size``, ``--workers``, ``--scheduler``, ``--json``, ``--out``, ``--noise
-gaussian``; on a CSV network also ``--points``, ``--datum``, ``--sigma-um``, ``--instrument``,
-``--scales``, ``--references`` with ``--scale-bars`` and ``--levelled``, as ``adjust --model
-general`` reads them. Every other option is refused in one line that names it.
+every observation drawn gaussian from its a-priori covariance, or with ``--noise model`` the slope
+distances from the distance model of the instrument named by ``--instrument`` (refused without it).
+Options that apply: ``--trials``, ``--seed``, ``--chunk-size``, ``--workers``, ``--scheduler``,
+``--json``, ``--out``, ``--noise``, ``--instrument`` with ``--noise model``; on a CSV network also
+``--points``, ``--datum``, ``--sigma-um``, ``--instrument``, ``--scales``, ``--references`` with
+``--scale-bars`` and ``--levelled``, as ``adjust --model general`` reads them. Every other option
+is refused in one line that names it.
 """
 
 from __future__ import annotations
@@ -32,7 +34,8 @@ WHY_NOT = {
     "cloud_points": "the clouds figure is drawn from the distance path's result",
     "datum": "the datum of a gama-local file is its fix=/adj= attributes",
     "points": "the file's <point> elements carry the coordinates",
-    "sigma_um": "the σ are the file's stdev=", "instrument": "the σ are the file's stdev=",
+    "sigma_um": "the σ are the file's stdev=",
+    "instrument": "the σ are the file's stdev= (--instrument names the distance model of --noise model)",
 }
 for _raw in ("environment", "heights", "formula", "extrapolate", "max_gap_s", "average_repeats"):
     WHY_NOT[_raw] = "raw readings are corrected and propagated on the distance path only"
@@ -49,18 +52,20 @@ def run(**params) -> None:
 
     params.pop("general_propagate", None)             # the hook's own imports, passed with locals()
     params.pop("general_adjust", None)
+    from multilat.network.propagate import noise_choice
+
     path, out = Path(params["source"]), params.get("out")
     xml = is_general_input(path)
-    applies = APPLIES if xml else APPLIES_CSV
+    given = _given_options(params)
+    noise = params.get("noise") if "noise" in given else "gaussian"      # the distance model only when asked
+    applies = (APPLIES + (("instrument",) if noise == "model" else ())) if xml else APPLIES_CSV
     what = "a gama-local input" if xml else "--model general"
-    for name in _given_options(params):
+    for name in given:
         if name not in applies:
             why = WHY_NOT.get(name, "it belongs to the distance-only Monte Carlo")
             raise MultilatError(f"{_OPTION.get(name, '--' + name.replace('_', '-'))} does not apply to {what} "
                                 f"({path}): {why}")
-    if params.get("noise") != "gaussian" and "noise" in _given_options(params):
-        raise MultilatError(f"--noise {params['noise']} does not apply to {what} ({path}): the general Monte Carlo "
-                            "draws every observation gaussian from its a-priori covariance (--noise gaussian)")
+    noise, instrument = noise_choice(noise, params.get("instrument") if noise == "model" else None, cli=True)
     checks.seed(params["seed"])
     checks.trials(params["trials"], lo=2)
     checks.count(params["chunk_size"], "--chunk-size", hi=10**8)
@@ -80,10 +85,12 @@ def run(**params) -> None:
             progress() as bar:
         task = bar.add_task("Monte Carlo (general)", total=params["trials"])
         res = propagate(adj.system, adj.result, trials=params["trials"], rng=params["seed"],
-                        chunk_size=params["chunk_size"], map=m, progress=lambda n: bar.update(task, completed=n))
-    doc = {**res.to_dict(), "input": str(path), "format": fmt, "noise": "gaussian",
-           "noise_source": "the a-priori covariance of every observation (the adjustment's weights)",
-           "excluded": list(adj.excluded)}
+                        chunk_size=params["chunk_size"], map=m, progress=lambda n: bar.update(task, completed=n),
+                        noise=noise, instrument=instrument)
+    source = ("the a-priori covariance of every observation (the adjustment's weights)" if noise == "gaussian" else
+              f"the slope distances from the distance model of {instrument}, the other observations from their "
+              "a-priori covariance")
+    doc = {**res.to_dict(), "input": str(path), "format": fmt, "noise_source": source, "excluded": list(adj.excluded)}
     if out is not None:
         _write(out, inputs, doc)
     if params["as_json"]:
@@ -126,11 +133,11 @@ def _write(out: Path, inputs, doc) -> None:
 def _print(console, doc, out) -> None:
     s = doc["summary"]
     console.print(f"Monte Carlo through the general adjustment ({doc['input']}, {doc['format']}): {doc['trials']} "
-                  f"trials kept, {doc['n_failed']} failed to converge, {doc['n_full_gauss_newton']} re-solved by "
+                  f"trials kept, {doc['n_failed']} failed to converge, {doc['n_retried']} re-solved by "
                   f"full Gauss-Newton; {doc['chord_steps_mean']:.2f} chord steps per trial; {doc['elapsed_s']:.1f} s",
                   markup=False)
-    console.print(f"observations drawn gaussian from their a-priori covariance; sigma0 of the trials: rms "
-                  f"{doc['sigma0_rms']:.3f} (dof {doc['dof']}; 1 expected)", markup=False)
+    console.print(f"observations drawn from {doc['noise_source']}; sigma0 of the trials: rms "
+                  f"{doc['sigma0_rms']:.3f} (dof {doc['dof']}; 1 expected for gaussian inputs)", markup=False)
     from rich.table import Table
 
     t = Table(title="Points: standard deviations (um), Monte Carlo vs linear (the adjustment's Q)")

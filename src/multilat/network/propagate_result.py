@@ -1,5 +1,7 @@
-"""The result of :func:`multilat.network.propagate.propagate`: Monte Carlo distributions of the
-adjusted parameters beside the linear covariance, with its JSON and summary forms."""
+"""The result of a Monte Carlo propagation, one record for both paths (the distance path's
+:func:`multilat.network.propagate.propagate` and the general layer's
+:func:`multilat.network.general.propagate.propagate`): Monte Carlo distributions of the adjusted
+parameters beside the linear covariance, with its JSON and summary forms."""
 
 from __future__ import annotations
 
@@ -13,74 +15,94 @@ from multilat.network.statistics import CHI2_3_95
 if TYPE_CHECKING:
     from multilat.network.propagate import Problem
 
-__all__ = ["PropagationResult", "chi2_3_95"]
+__all__ = ["GENERAL_SCHEMA", "PropagationResult", "chi2_3_95"]
+
+#: JSON schema stamp of the general layer's document (:meth:`PropagationResult.to_dict`).
+GENERAL_SCHEMA = "multilat.propagate-general/1"
 
 #: chi-square quantile with 3 degrees of freedom at 0.95 (JCGM 102 ellipsoid scale): statistics.CHI2_3_95
 chi2_3_95 = CHI2_3_95
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False, kw_only=True)
 class PropagationResult:
-    """Result of :func:`propagate`. Deviations are relative to the nominal values; metres.
+    """Result of a Monte Carlo propagation, the distance path's (:func:`multilat.network.propagate.propagate`,
+    ``problem`` set) or the general layer's (:func:`multilat.network.general.propagate.propagate`,
+    ``problem`` None, ``units`` set). Deviations are relative to the nominal values; SI units.
 
-    Attributes
-    ----------
-    problem : Problem
+    Attributes (both paths)
+    -----------------------
     labels : tuple of str
-        Parameter labels in the :func:`batched.flatten` layout (``"A.x"``, ``"A.offset"``, ``"T1.z"``),
-        then the interpoint distances ``"T1-T2"``.
+        Parameter labels, then the interpoint distances ``"T1-T2"``: the distance path's
+        :func:`batched.flatten` layout (``"A.x"``, ``"A.offset"``, ``"T1.z"``), the general layer's
+        free parameters (``"x:P"``, ``"offset:I"``, ``"omega:U"``).
     nominal : ndarray (k,)
-        Nominal values of those quantities.
+        Nominal values of those quantities (the general layer: the adjusted ones).
     mc_mean, mc_std : ndarray (k,)
         Monte Carlo estimate and standard uncertainty.
     mc_std_se : ndarray (k,)
         Monte Carlo standard error of ``mc_std``: ``mc_std * sqrt((kurtosis - 1) / (4 n))``
         (``sqrt(1 / (2(n-1)))`` relative for a gaussian output).
     lin_std : ndarray (k,)
-        First-order standard uncertainty from the adjustment's covariance (sandwich with the actual
-        standard deviation of the input errors).
+        First-order standard uncertainty from the adjustment's covariance (the distance path: sandwich
+        with the actual standard deviation of the input errors; the general layer: its ``Q``, σ0 a priori 1).
     interval_symmetric, interval_shortest : ndarray (k, 2)
-        95 % (``coverage``) coverage intervals.
+        95 % coverage intervals (values, not deviations).
     point_ids : tuple of str
     point_cov_mc, point_cov_lin : ndarray (P, 3, 3)
-        Monte Carlo and linear covariances of each point (datum-dependent).
+        Monte Carlo and linear covariances of each point (datum-dependent; m²).
+    trials : int
+        Trials kept (converged).
+    n_failed : int
+        Trials dropped because the solver did not converge.
+    n_retried : int
+        Trials the frozen-matrix iteration did not converge (or, general layer, whose chord step did
+        not contract) and full Gauss-Newton re-solved.
+    sigma0_mean, sigma0_rms : float
+        Mean and root mean square of the trials' a-posteriori sigma0.
+    noise : str
+        How the inputs were drawn (``gaussian``, ``model``).
+    seed_entropy : int
+    elapsed_s : float
+    samples : ndarray (trials, k) float32 or None
+        Deviations from nominal (kept for figures).
+
+    Distance path (None on the general layer)
+    -----------------------------------------
+    problem : Problem
     ellipsoid_coverage_mc : ndarray (P,)
         Fraction of trials inside the 95 % ellipsoid built from the MC covariance (JCGM 102); for a
         point with datum-fixed coordinates, the ellipsoid in the free coordinates (chi2 with their
         number of degrees of freedom); NaN for a fixed point.
     ellipsoid_coverage_lin : ndarray (P,)
         Fraction of trials inside the 95 % ellipsoid of the linear covariance.
-    trials : int
-        Trials kept (converged).
-    n_failed : int
-        Trials dropped because the solver did not converge.
-    sigma0_mean : float
-        Mean a-posteriori sigma0 over the trials.
-    sigma0_rms : float
-        Root mean square of the trials' sigma0. The trials' distances are the nominal ones plus the
-        drawn errors, and the residuals are linear in the distances, so each trial's residuals are
-        the nominal residuals plus those of the errors: ``E[sigma0^2] = sigma0_nominal^2 + s_e^2``
-        with ``s_e^2`` the errors' own contribution (1 for gaussian errors with the weights' sigma).
-        For measured observations the trials' sigma0 is therefore larger than the nominal one.
-    noise : str
-    seed_entropy : int
     adaptive : dict or None
         Adaptive runs: ``{"converged": bool, "batches": int, "batch_trials": int, "tolerance_m_min": float,
         "n_fixed_by_datum": int}`` (:class:`multilat.montecarlo.AdaptiveRule`).
-    elapsed_s : float
     input_std_m : ndarray (m,)
         Standard deviation of each distance's input error used by the linear propagation: the
         gaussian ``sigma_m``, or for ``noise="model"`` the empirical std of all errors drawn.
     input_std_ratio : float
         Mean of (empirical input std / the distance model's :func:`budget.distance_std_m`) — how well
         the distance model's stated standard uncertainty matches its own samples (1 for gaussian).
-    n_retried : int
-        Trials the frozen-matrix iteration did not converge and full Gauss-Newton re-solved.
-    samples : ndarray (trials, k) float32 or None
-        Deviations from nominal (kept for figures).
+    The trials' sigma0: their distances are the nominal ones plus the drawn errors, and the residuals
+    are linear in the distances, so each trial's residuals are the nominal residuals plus those of the
+    errors: ``E[sigma0^2] = sigma0_nominal^2 + s_e^2`` with ``s_e^2`` the errors' own contribution (1
+    for gaussian errors with the weights' sigma). For measured observations the trials' sigma0 is
+    therefore larger than the nominal one.
+
+    General layer (None on the distance path)
+    -----------------------------------------
+    units : tuple of str
+        ``"m"``, ``"rad"`` or ``"1"`` per label.
+    n_params : int
+        How many of the labels are parameters (the rest are distances).
+    dof : int
+        Degrees of freedom of the adjustment (of the trials' sigma0).
+    chord_steps_mean : float
+        Mean chord steps per trial.
     """
 
-    problem: Problem
     labels: tuple
     nominal: np.ndarray
     mc_mean: np.ndarray
@@ -92,25 +114,33 @@ class PropagationResult:
     point_ids: tuple
     point_cov_mc: np.ndarray
     point_cov_lin: np.ndarray
-    ellipsoid_coverage_mc: np.ndarray
-    ellipsoid_coverage_lin: np.ndarray
     trials: int
     n_failed: int
     sigma0_mean: float
-    noise: str
     seed_entropy: int
-    adaptive: dict | None
     elapsed_s: float
-    input_std_m: np.ndarray = field(default=None, repr=False)
-    input_std_ratio: float = 1.0
     n_retried: int = 0
-    samples: np.ndarray | None = field(default=None, repr=False)
     sigma0_rms: float = float("nan")
+    noise: str = "gaussian"
+    samples: np.ndarray | None = field(default=None, repr=False)
+    # the distance path
+    problem: Problem | None = None
+    ellipsoid_coverage_mc: np.ndarray | None = None
+    ellipsoid_coverage_lin: np.ndarray | None = None
+    adaptive: dict | None = None
+    input_std_m: np.ndarray | None = field(default=None, repr=False)
+    input_std_ratio: float = 1.0
+    # the general layer
+    units: tuple | None = None
+    n_params: int | None = None
+    dof: int | None = None
+    chord_steps_mean: float | None = None
 
     @property
     def sigma0_nominal(self) -> float:
-        """sigma0 of the nominal solution (``problem.sigma0_nominal``)."""
-        return float(self.problem.sigma0_nominal)
+        """sigma0 of the nominal solution (``problem.sigma0_nominal``; NaN on the general layer, whose
+        trials are drawn about the adjusted observations)."""
+        return float(self.problem.sigma0_nominal) if self.problem is not None else float("nan")
 
     @property
     def sigma0_noise_only(self) -> float:
@@ -118,6 +148,11 @@ class PropagationResult:
         (about 1 for gaussian errors drawn with the weights' sigma; NaN if negative)."""
         v = self.sigma0_rms**2 - self.sigma0_nominal**2
         return float(np.sqrt(v)) if v >= 0 else float("nan")
+
+    @property
+    def n_parameters(self) -> int:
+        """How many of :attr:`labels` are parameters (the rest are interpoint distances)."""
+        return int(self.n_params if self.problem is None else self.problem.network.n_params)
 
     @property
     def fixed(self) -> np.ndarray:
@@ -137,31 +172,41 @@ class PropagationResult:
         return tiny | (np.abs(self.mc_std - self.lin_std) <= 3.0 * self.mc_std_se)
 
     def rows(self, kind: str | None = None):
-        """Validation rows: dicts with label, nominal, mean/std/intervals (MC), lin std, ratio, agrees."""
+        """Validation rows (``kind``: ``parameter``, ``distance`` or both): dicts with label, nominal,
+        mean/std/intervals (MC), lin std, ratio, agrees. The distance path's keys carry their unit
+        (``std_mc_m``: all its quantities are metres); the general layer's rows name it in ``unit``
+        (``m``, ``rad`` or ``1``) and their keys carry none."""
+        n_par = self.n_parameters
+        sfx = "_m" if self.units is None else ""
         out = []
         for k, lab in enumerate(self.labels):
-            if kind == "distance" and "-" not in lab or kind == "parameter" and "-" in lab:
+            if kind == "distance" and k < n_par or kind == "parameter" and k >= n_par:
                 continue
+            unit = {} if self.units is None else {"unit": self.units[k]}
             out.append({
-                "label": lab,
-                "nominal_m": float(self.nominal[k]),
-                "mean_mc_m": float(self.mc_mean[k]),
-                "std_mc_m": float(self.mc_std[k]),
-                "std_mc_se_m": float(self.mc_std_se[k]),
-                "std_lin_m": float(self.lin_std[k]),
+                "label": lab, **unit,
+                "nominal" + sfx: float(self.nominal[k]),
+                "mean_mc" + sfx: float(self.mc_mean[k]),
+                "std_mc" + sfx: float(self.mc_std[k]),
+                "std_mc_se" + sfx: float(self.mc_std_se[k]),
+                "std_lin" + sfx: float(self.lin_std[k]),
                 "ratio": None if self.fixed[k] else float(self.std_ratio[k]),
                 "agrees": bool(self.agrees[k]),
-                "interval_symmetric_m": [float(v) for v in self.interval_symmetric[k]],
-                "interval_shortest_m": [float(v) for v in self.interval_shortest[k]],
+                "interval_symmetric" + sfx: [float(v) for v in self.interval_symmetric[k]],
+                "interval_shortest" + sfx: [float(v) for v in self.interval_shortest[k]],
             })
         return out
 
     def to_dict(self) -> dict:
-        """Plain-JSON summary (no samples)."""
-        n_par = self.problem.network.n_params
+        """Plain-JSON summary (no samples): the distance path's ``propagate`` document, or the general
+        layer's (``schema`` :data:`GENERAL_SCHEMA`, keys in ``docs/general-network.md``)."""
+        if self.problem is None:
+            return self._general_dict()
+        n_par = self.n_parameters
+        rows = self.rows()
         dist_rows = []
         for k, (a, b) in enumerate(self.problem.pairs):
-            r = self.rows()[n_par + k]
+            r = rows[n_par + k]
             ref = self.problem.reference_m[k]
             r.update(a=a, b=b, reference_m=None if np.isnan(ref) else float(ref))
             dist_rows.append(r)
@@ -188,21 +233,39 @@ class PropagationResult:
             "input_std_ratio": self.input_std_ratio,
             "elapsed_s": self.elapsed_s,
             "adaptive": self.adaptive,
-            "parameters": self.rows()[:n_par],
+            "parameters": rows[:n_par],
             "distances": dist_rows,
             "points": pts,
             "summary": self.summary(),
         }
 
+    def _general_dict(self) -> dict:
+        """The general layer's document: points as an id map, the chord steps and dof of its solver."""
+        rows = self.rows()
+        n_par = self.n_parameters
+        return {"schema": GENERAL_SCHEMA, "model": "general", "trials": int(self.trials),
+                "n_failed": int(self.n_failed), "n_retried": int(self.n_retried), "chord_steps_mean": float(self.chord_steps_mean),
+                "noise": self.noise, "sigma0_mean": float(self.sigma0_mean), "sigma0_rms": float(self.sigma0_rms),
+                "dof": int(self.dof), "seed": int(self.seed_entropy), "elapsed_s": float(self.elapsed_s),
+                "parameters": rows[:n_par], "distances": rows[n_par:],
+                "points": {p: {"cov_mc_m2": self.point_cov_mc[i].tolist(), "cov_lin_m2": self.point_cov_lin[i].tolist(),
+                               "std_mc_m": np.sqrt(np.diag(self.point_cov_mc[i])).tolist(),
+                               "std_lin_m": np.sqrt(np.diag(self.point_cov_lin[i])).tolist()}
+                           for i, p in enumerate(self.point_ids)},
+                "summary": self.summary()}
+
     def summary(self) -> dict:
-        """Headline numbers: worst std ratio, how many quantities agree with the linear covariance."""
+        """Headline numbers: worst std ratio, how many quantities agree with the linear covariance
+        (the distance path adds the datum-held count and the ellipsoid coverages)."""
         r = self.std_ratio[~self.fixed]
+        out = {"n_quantities": len(self.labels), "n_agree": int(self.agrees.sum()),
+               "ratio_min": float(r.min()) if r.size else None,
+               "ratio_max": float(r.max()) if r.size else None}
+        if self.problem is None:
+            return out
         cm = self.ellipsoid_coverage_mc[np.isfinite(self.ellipsoid_coverage_mc)]
         cl = self.ellipsoid_coverage_lin[np.isfinite(self.ellipsoid_coverage_lin)]
-        return {"n_quantities": len(self.labels), "n_fixed_by_datum": int(self.fixed.sum()),
-                "n_agree": int(self.agrees.sum()),
-                "ratio_min": float(r.min()) if r.size else None,
-                "ratio_max": float(r.max()) if r.size else None,
+        return {"n_quantities": out["n_quantities"], "n_fixed_by_datum": int(self.fixed.sum()), **out,
                 "ellipsoid_coverage_mc_min": float(cm.min()) if cm.size else None,
                 "ellipsoid_coverage_mc_max": float(cm.max()) if cm.size else None,
                 "ellipsoid_coverage_lin_min": float(cl.min()) if cl.size else None,

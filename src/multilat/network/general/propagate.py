@@ -23,7 +23,7 @@ constraints) is propagated by the same :class:`~.adjust.System`:
 * **far trials.** A trial whose step does not shrink by half from one iteration to the next, or that
   has not converged after ``max_iter`` chord steps, is solved again from ``x̂`` by full Gauss-Newton
   (the Jacobian and the bordered system at every iterate, same datum): counted in
-  ``n_full_gauss_newton``. One that still does not converge is dropped and counted (``n_failed``).
+  ``n_retried``. One that still does not converge is dropped and counted (``n_failed``).
 * **seeding.** Trials are drawn and solved in fixed blocks of :data:`BLOCK`; block ``b`` draws its
   ``(n, R)`` standard normals, rows in the system's row order, from the Monte Carlo engine's
   ``block_generator(entropy, spawn_key, b)``; a chunk (the unit of work handed to ``map``) is a run of
@@ -52,8 +52,8 @@ from multilat.network.general import kinds as kinds_registry
 from multilat.network.general.adjust import GeneralResult, System, _step
 from multilat.network.general.propagate_result import SCHEMA, GeneralPropagation, default_pairs, summarise
 
-__all__ = ["BLOCK", "Frozen", "GeneralPropagation", "Solution", "default_pairs", "draw", "freeze", "gauss_newton",
-           "propagate", "solve", "SCHEMA"]
+__all__ = ["BLOCK", "DistanceNoise", "Frozen", "GeneralPropagation", "Solution", "default_pairs", "distance_noise",
+           "draw", "freeze", "gauss_newton", "propagate", "solve", "SCHEMA"]
 
 #: Trials per seeded block (the unit of reproducibility; :data:`multilat.network.propagate.BLOCK`).
 BLOCK = 1000
@@ -153,7 +153,7 @@ def freeze(system: System, result: GeneralResult) -> Frozen:
 
 def _program(system: System, x: np.ndarray, weight) -> dict:
     """The rows as the compiled kernel's program (:mod:`._frozen_numba`): codes, full and free columns
-    (R, 9), the vertical height offsets, the tracker components, ``P`` as CSR."""
+    (R, 9: ``cols``, ``rcols``), the vertical height offsets, the tracker components, ``P`` as CSR."""
     from multilat.network.general._frozen_numba import CODES
     from multilat.network.general.kinds.geometry import _heights
 
@@ -174,19 +174,15 @@ def _program(system: System, x: np.ndarray, weight) -> dict:
     red = system.layout.reduced
     p = scipy.sparse.block_diag([scipy.sparse.diags(w) if w.ndim == 1 else scipy.sparse.csr_matrix(w)
                                  for w in weight], format="csr")
-    rcols = np.where(cols >= 0, red[cols], -1)
-    have = rcols >= 0
+    rcols = np.where(cols >= 0, red[cols], -1).astype(np.int64)     # each slot's free column, -1 for none
     n_in_row = np.diff(p.indptr)
     wdiag = np.zeros(R)
     one = np.flatnonzero(n_in_row == 1)
     one = one[p.indices[p.indptr[one]] == one]
     wdiag[one] = p.data[p.indptr[one]]
-    row, j = np.nonzero(have)                   # the Jacobian slots on free columns, column by column
-    order = np.argsort(rcols[have], kind="stable")
     return {"code": code, "cols": cols, "pair": _tracker_pairs(code, cols, hz, comp), "wdiag": wdiag,
-            "c_ptr": np.searchsorted(rcols[have][order], np.arange(system.n_free + 1)).astype(np.int64),
-            "c_row": row[order].astype(np.int64), "c_j": (9 * row + j)[order].astype(np.int64), "hz": hz, "comp": comp,
-            "setup": setup, "frames": np.array(list(frames), np.int64).reshape(-1, 3),
+            "rcols": rcols, "hz": hz, "comp": comp, "setup": setup,
+            "frames": np.array(list(frames), np.int64).reshape(-1, 3),
             "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
 
 
@@ -242,10 +238,9 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
         from multilat.network.general._frozen_numba import chord
 
         p = frozen.program
-        chord(obs, x, p["code"], p["cols"], p["pair"], p["ref"], p["c_ptr"], p["c_row"], p["c_j"], p["hz"], p["comp"],
-              p["setup"], p["frames"], frozen.angular, p["wdiag"], p["p_ptr"], p["p_idx"], p["p_val"],
-              frozen.free.astype(np.int64), frozen.q,
-              frozen.computed, p["kt"], float(tol), int(max_iter), CONTRACTION, done, iters, far, vtpv)
+        chord(obs, x, p["code"], p["cols"], p["pair"], p["ref"], p["rcols"], p["hz"], p["comp"], p["setup"],
+              p["frames"], frozen.angular, p["wdiag"], p["p_ptr"], p["p_idx"], p["p_val"], frozen.free.astype(np.int64),
+              frozen.q, frozen.computed, p["kt"], float(tol), int(max_iter), CONTRACTION, done, iters, far, vtpv)
         return _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback)
     # the first step is linear in the noise (at x̂ the model and Jacobian are the adjustment's): one
     # matrix product for all trials, dx = K (l - f(x̂)), K = Q J(x̂)^T P
@@ -326,8 +321,10 @@ def gauss_newton(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_ite
 
 
 # ---------------------------------------------------------------------------------------------- blocks of trials
-def draw(frozen: Frozen, n: int, rng: np.random.Generator) -> np.ndarray:
-    """Observations of ``n`` trials (n, R): ``f(x̂) + L e``, ``e`` standard normal (n, R) in row order."""
+def draw(frozen: Frozen, n: int, rng: np.random.Generator, model: DistanceNoise | None = None) -> np.ndarray:
+    """Observations of ``n`` trials (n, R): ``f(x̂) + L e``, ``e`` standard normal (n, R) in row order;
+    with ``model`` its slope distances' errors then drawn from the instrument's distance model instead
+    (:func:`multilat.distance_errors.draw_errors`, one seed taken from ``rng`` after the normals)."""
     e = rng.standard_normal((n, frozen.n_rows))
     s = frozen.system
     for L, b, sl in zip(s.chol, s.blocks, s.rows):
@@ -335,8 +332,79 @@ def draw(frozen: Frozen, n: int, rng: np.random.Generator) -> np.ndarray:
             e[:, sl] *= b.sigma
         else:
             e[:, sl] = e[:, sl] @ L.T
+    if model is not None:
+        from multilat.distance_errors import draw_errors
+
+        e[:, model.rows] = draw_errors(model.error_model, model.head_row, model.distance_m, n, rng)
     e += frozen.computed          # in place: a fresh (n, R) array costs its page faults (~3 ms per 1000 x 130)
     return e
+
+
+@dataclass(frozen=True, eq=False)
+class DistanceNoise:
+    """The slope distances drawn from an instrument's distance model (``noise="model"``).
+
+    rows : (m,) system rows;  error_model : :class:`multilat.distance_errors.ErrorModel` (a row per head)
+    head_row : (m,) its row per distance;  distance_m : (m,) ``f(x̂)`` of those rows
+    std_m : (m,) the model's standard deviation of each (:func:`multilat.budget.distance_std_m`)
+    prior_std_m : (m,) their a-priori σ (the adjustment's weights, which the model's draws replace)
+    """
+
+    rows: np.ndarray
+    error_model: object
+    head_row: np.ndarray
+    distance_m: np.ndarray
+    std_m: np.ndarray
+    prior_std_m: np.ndarray
+
+
+def distance_noise(frozen: Frozen, instrument) -> DistanceNoise:
+    """The noise model of the network's slope distances with an instrument (``noise="model"``): every
+    slope distance with an instrument (its head) is drawn from that head's model; refused in one line
+    when there is none, or when a head is a laser tracker (no such model: gaussian from its MPE)."""
+    from multilat import budget
+    from multilat import instrument as _instrument
+    from multilat.distance_errors import error_model
+
+    inst = _instrument.load_instrument(instrument) if isinstance(instrument, str) else instrument
+    rows, heads, prior = [], [], []
+    for b, sl in zip(frozen.system.blocks, frozen.system.rows):
+        if b.kind != "slope_distance" or b.index.get("instrument") is None:
+            continue
+        idx = np.asarray(b.index["instrument"], int)
+        keep = np.flatnonzero(idx >= 0)
+        if keep.size and b.cov is not None:
+            raise MultilatError("noise model draws each slope distance alone; a block of them with a covariance "
+                                "(correlated distances) cannot be drawn from the distance model: use noise gaussian")
+        rows.append(sl.start + keep)
+        prior.append(np.broadcast_to(np.asarray(b.sigma, float), (b.n_rows,))[keep])
+        heads.extend(b.names["instrument"][i] for i in idx[keep])
+    if not heads:
+        raise MultilatError("noise model draws the slope distances of an instrument's heads; this network has "
+                            "none (no slope distance names its instrument): use noise gaussian")
+    names = tuple(dict.fromkeys(heads))
+    for hd in names:
+        if getattr(inst, "is_tracker", lambda _: False)(hd):
+            raise MultilatError(f"noise model: head {hd!r} is a laser tracker, which has no distance model to "
+                                "draw from here; use noise gaussian (its σ from the MPE)")
+    rows = np.concatenate(rows)
+    head_row = np.array([names.index(h) for h in heads], np.int64)
+    d = frozen.computed[rows]
+    std = np.empty(len(rows))
+    for k, hd in enumerate(names):
+        sel = head_row == k
+        std[sel] = budget.distance_std_m(inst, d[sel], head=hd)
+    return DistanceNoise(rows, error_model(inst, names), head_row, d, std, np.concatenate(prior))
+
+
+def _noise_cofactor(frozen: Frozen, model: DistanceNoise | None) -> np.ndarray:
+    """The linear covariance of the free parameters for the drawn inputs (σ0 a priori 1): ``Q`` for the
+    a-priori covariance, ``Q + K_m (S² - C_m) K_m^T`` when the model's rows ``m`` (uncorrelated, σ²
+    ``C_m``) are drawn with the model's σ² ``S²`` instead (``K = Q J^T P``: ``K C K^T = Q``)."""
+    if model is None:
+        return frozen.q
+    km = frozen.gain[:, model.rows]
+    return frozen.q + (km * (model.std_m ** 2 - model.prior_std_m ** 2)) @ km.T
 
 
 @dataclass(frozen=True, eq=False)
@@ -346,6 +414,7 @@ class _Spec:
     tol: float
     max_iter: int
     engine: str = "auto"
+    model: DistanceNoise | None = None
 
 
 def _outputs(frozen: Frozen, pairs: np.ndarray, x: np.ndarray) -> np.ndarray:
@@ -361,11 +430,11 @@ def _outputs(frozen: Frozen, pairs: np.ndarray, x: np.ndarray) -> np.ndarray:
 
 
 def _solve_block(spec: _Spec, entropy, spawn_key: tuple, b: int, n: int) -> dict:
-    obs = draw(spec.frozen, n, block_generator(entropy, spawn_key, b))
+    obs = draw(spec.frozen, n, block_generator(entropy, spawn_key, b), spec.model)
     sol = solve(spec.frozen, obs, tol=spec.tol, max_iter=spec.max_iter, engine=spec.engine)
     ok = sol.converged
     return {"dev": _outputs(spec.frozen, spec.pairs, sol.x[ok]).astype(np.float32), "n": n,
-            "n_failed": int((~ok).sum()), "n_full_gauss_newton": int(sol.full_gauss_newton.sum()),
+            "n_failed": int((~ok).sum()), "n_retried": int(sol.full_gauss_newton.sum()),
             "iterations": int(sol.iterations.sum()), "vtpv": sol.vtpv[ok]}
 
 
@@ -378,7 +447,7 @@ def _run_chunk(args) -> list:
 def propagate(system: System, result: GeneralResult, *, trials: int = 100_000, rng=None, pairs=None,
               chunk_size: int = 10_000, map=None, progress: Callable[[int], None] | None = None,
               keep_samples: bool = False, tol: float = 1e-10, max_iter: int = 10,
-              engine: str = "auto") -> GeneralPropagation:
+              engine: str = "auto", noise: str | None = None, instrument=None) -> GeneralPropagation:
     """Monte Carlo of an adjusted general network (``system``, ``result`` of one adjustment, e.g.
     :func:`.run.adjust_network`'s) through its frozen system (module docstring).
 
@@ -388,12 +457,19 @@ def propagate(system: System, result: GeneralResult, *, trials: int = 100_000, r
     map : ordered map (:func:`multilat.parallel.map_from_options`); default in-process threads
     tol : convergence on the largest step (m, rad);  max_iter : chord steps before full Gauss-Newton
     engine : ``auto`` | ``numba`` | ``numpy`` (:func:`solve`; the same solutions to the step tolerance)
+    noise, instrument : ``gaussian`` (every observation from its a-priori covariance) or ``model`` (the
+        slope distances from ``instrument``'s distance model, :func:`distance_noise`; the rest gaussian);
+        the rule of :func:`multilat.network.propagate.noise_choice` (model needs the instrument named)
     """
     t0 = time.perf_counter()
     for name, v, lo in (("trials", trials, 2), ("chunk_size", chunk_size, 1), ("max_iter", max_iter, 1)):
         if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < lo:
             raise MultilatError(f"{name} must be an integer >= {lo}, got {v!r}")
+    from multilat.network.propagate import noise_choice
+
+    noise, instrument = noise_choice(noise, instrument)
     frozen = freeze(system, result)
+    model = distance_noise(frozen, instrument) if noise == "model" else None
     ids = system.network.points.ids
     if pairs is None:
         pidx = default_pairs(system)
@@ -403,7 +479,7 @@ def propagate(system: System, result: GeneralResult, *, trials: int = 100_000, r
         if bad:
             raise MultilatError(f"pair point {bad[0]!r} is not a point of the adjusted network")
         pidx = np.array([(idx[a], idx[b]) for a, b in pairs], int).reshape(-1, 2)
-    spec = _Spec(frozen, pidx, float(tol), int(max_iter), engine)
+    spec = _Spec(frozen, pidx, float(tol), int(max_iter), engine, model)
     ss = resolve_seed(rng)
     entropy, key = ss.entropy, tuple(ss.spawn_key)
     if map is None:
@@ -419,4 +495,4 @@ def propagate(system: System, result: GeneralResult, *, trials: int = 100_000, r
         done += sum(r["n"] for r in res)
         if progress:
             progress(done)
-    return summarise(frozen, pidx, blocks, entropy, t0, keep_samples)
+    return summarise(frozen, pidx, blocks, entropy, t0, keep_samples, noise, _noise_cofactor(frozen, model))
