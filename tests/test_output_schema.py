@@ -208,7 +208,7 @@ FAULTS = [
     ("propagate-general", ["parameters", 0], "std_mc", "1e-6"),           # a string for a number
     ("propagate-general", ["parameters", 0], "interval_shortest", [0.0]),  # an interval of one number
     ("propagate-general", [], "trials", _DROP),                           # a required key missing
-    ("propagate-general", [], "schema", "multilat.propagate-general/2"),  # another version
+    ("propagate-general", [], "schema", "multilat.propagate-general/1"),  # another version
     ("propagate", ["distances", 0], "lin_std_m", 1e-6),                   # undeclared key, nested
     ("propagate", ["points", 0], "cov_mc_m2", [[0.0] * 3] * 2),           # a 2 x 3 covariance
     ("adjust-general", ["observations", 0], "label", None),               # null for a text

@@ -33,7 +33,7 @@ __all__ = ["SCHEMA_VERSION", "SCHEMA_VERSIONS", "schema_id", "STATISTICS", "QUAL
 SCHEMA_VERSION = 1
 #: A command's schema version where it is not :data:`SCHEMA_VERSION`: bumped, with the ``schema`` literal of
 #: its model (:mod:`multilat.schemas.models`), when the shape of its document changes.
-SCHEMA_VERSIONS: dict[str, int] = {}
+SCHEMA_VERSIONS: dict[str, int] = {"propagate-general": 2}     # /2: n_full_gauss_newton -> n_retried
 
 STATISTICS = ("std", "var", "cov", "mean", "rms", "u95", "se", "min", "max", "median", "95")
 QUALIFIERS = ("lin", "mc")

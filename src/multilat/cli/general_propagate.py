@@ -23,7 +23,7 @@ from multilat.errors import MultilatError
 
 __all__ = ["run", "APPLIES", "APPLIES_CSV", "SCHEMA"]
 
-#: ``"schema": "multilat.propagate-general/1"``
+#: ``"schema": "multilat.propagate-general/2"``
 SCHEMA = "propagate-general"
 APPLIES = ("source", "trials", "seed", "chunk_size", "workers", "scheduler", "as_json", "out", "model", "noise")
 APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "scales", "scale_bars", "references",

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from multilat.network.statistics import CHI2_3_95
+from multilat.vocabulary import schema_id
 
 if TYPE_CHECKING:
     from multilat.network.propagate import Problem
@@ -18,7 +19,7 @@ if TYPE_CHECKING:
 __all__ = ["GENERAL_SCHEMA", "PropagationResult", "chi2_3_95"]
 
 #: JSON schema stamp of the general layer's document (:meth:`PropagationResult.to_dict`).
-GENERAL_SCHEMA = "multilat.propagate-general/1"
+GENERAL_SCHEMA = schema_id("propagate-general")
 
 #: chi-square quantile with 3 degrees of freedom at 0.95 (JCGM 102 ellipsoid scale): statistics.CHI2_3_95
 chi2_3_95 = CHI2_3_95

@@ -1,6 +1,6 @@
 """The result of :func:`.propagate.propagate` from its blocks of trials: per free parameter and
 interpoint distance the Monte Carlo summaries beside the adjustment's linear ones, per point the
-covariances. The record and its JSON document (``schema`` ``multilat.propagate-general/1``, keys in
+covariances. The record and its JSON document (``schema`` ``multilat.propagate-general/2``, keys in
 ``docs/general-network.md``) are the Monte Carlo's one :class:`~multilat.network.propagate_result.PropagationResult`,
 its general fields (``units``, ``n_params``, ``dof``, ``chord_steps_mean``) set."""
 

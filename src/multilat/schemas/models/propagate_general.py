@@ -48,11 +48,11 @@ class Summary(Strict):
 class PropagateGeneralDocument(Document):
     """``multilat propagate`` on a general network (``--json``, ``--out DIR/result.json``)."""
 
-    schema_: Literal["multilat.propagate-general/1"] = Field(alias="schema")
+    schema_: Literal["multilat.propagate-general/2"] = Field(alias="schema")
     model: Literal["general"]
     trials: int
     n_failed: int
-    n_full_gauss_newton: int
+    n_retried: int
     chord_steps_mean: Num
     sigma0_mean: Num
     sigma0_rms: Num
