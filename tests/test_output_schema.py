@@ -24,7 +24,7 @@ from multilat.cli import main  # noqa: E402
 from multilat.schemas import COMMANDS, load  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tools"))
 from schema_infer import SAMPLES, infer, run_sample  # noqa: E402
-from multilat.vocabulary import RENAMED, SCHEMA_VERSION, document_problems, key_problems  # noqa: E402
+from multilat.vocabulary import RENAMED, document_problems, key_problems, schema_version  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 _DOCS: dict = {}
@@ -48,7 +48,7 @@ CASES = [(c, i) for c in SAMPLES for i in range(len(SAMPLES[c]))]
 @pytest.mark.parametrize("cmd,i", CASES, ids=[f"{c}-{i}" for c, i in CASES])
 def test_every_command_json_follows_its_schema_and_the_vocabulary(cmd, i, tmp_path):
     doc = _doc(cmd, i, tmp_path)
-    assert doc["schema"] == f"multilat.{cmd}/{SCHEMA_VERSION}"
+    assert doc["schema"] == f"multilat.{cmd}/{schema_version(cmd)}"
     assert list(doc)[0] == "schema"
     errors = sorted(_validator(cmd).iter_errors(doc), key=lambda e: list(e.path))
     assert not errors, "; ".join(f"{list(e.path)}: {e.message[:120]}" for e in errors[:5])
@@ -59,7 +59,7 @@ def test_every_command_has_a_schema_and_a_sample():
     assert set(SAMPLES) == set(COMMANDS)
     for c in COMMANDS:
         s = load(c)
-        assert s["$id"] == f"multilat.{c}/{SCHEMA_VERSION}"
+        assert s["$id"] == f"multilat.{c}/{schema_version(c)}"
         jsonschema.Draft202012Validator.check_schema(s)
 
 
@@ -124,13 +124,13 @@ def test_no_output_writes_a_replaced_name():
 
 def test_out_files_carry_the_schema(tmp_path, capsys):
     ex = ROOT / "examples" / "network"
-    assert main(["adjust", str(ex / "small_volume_obs.csv"), "--out", str(tmp_path / "a")]) == 0
+    assert main(["adjust", str(ex / "small_volume_obs.csv"), "--out", str(tmp_path / "a"), "--tables", "csv"]) == 0
     doc = json.loads((tmp_path / "a" / "result.json").read_text())
-    assert doc["schema"] == f"multilat.adjust/{SCHEMA_VERSION}"
+    assert doc["schema"] == "multilat.adjust/2"
     assert _validator("adjust").is_valid(doc)
     assert main(["propagate", "small-volume", "--trials", "1000", "--out", str(tmp_path / "p")]) == 0
     doc = json.loads((tmp_path / "p" / "summary.json").read_text())
-    assert doc["schema"] == f"multilat.propagate/{SCHEMA_VERSION}"
+    assert doc["schema"] == f"multilat.propagate/{schema_version('propagate')}"
     assert _validator("propagate").is_valid(doc)
     assert main(["lbb", "simulate", "--trials", "200", "--out", str(tmp_path / "l")]) == 0
     doc = json.loads((tmp_path / "l" / "summary.json").read_text())

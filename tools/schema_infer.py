@@ -24,7 +24,7 @@ import io
 import json
 from pathlib import Path
 
-from multilat.vocabulary import ID_MAPS, SCHEMA_VERSION
+from multilat.vocabulary import ID_MAPS, schema_version
 
 __all__ = ["SAMPLES", "run_sample", "infer", "merge"]
 
@@ -37,6 +37,8 @@ _INTEROP = _TESTDATA / "interop"
 #: command -> list of argument lists (paths relative to the repository's ``examples/``)
 SAMPLES = {
     "adjust": [["adjust", f"{_N}/small_volume_obs.csv", "--references", f"{_N}/small_volume_refs.csv"],
+               ["adjust", f"{_N}/small_volume_obs.csv", "--observations", "-o", "{tmp}/adj"],
+               ["adjust", str(_TESTDATA / "network" / "weak_target.csv")],
                ["adjust", f"{_N}/sequential/obs.csv", "--variance-components", "head"],
                ["adjust", f"{_N}/mixed/obs.csv", "--variance-components", "kind"],
                ["adjust", str(_TESTDATA / "angles" / "mixed_azimuth_blunder.csv")],
@@ -147,7 +149,7 @@ def infer(command: str, docs: list) -> dict:
     for d in docs:
         shape = _shape(d) if shape is None else merge(shape, _shape(d))
     shape = _id_maps(shape)
-    sid = f"multilat.{command}/{SCHEMA_VERSION}"
+    sid = f"multilat.{command}/{schema_version(command)}"
     shape["properties"]["schema"] = {"const": sid}
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": sid,
             "title": f"multilat {command.replace('-', ' ')} --json", **shape}

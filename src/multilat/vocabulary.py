@@ -25,11 +25,18 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["SCHEMA_VERSION", "STATISTICS", "QUALIFIERS", "UNITS", "RENAMED", "ID_MAPS", "stamp",
+__all__ = ["SCHEMA_VERSION", "schema_version", "STATISTICS", "QUALIFIERS", "UNITS", "RENAMED", "ID_MAPS", "stamp",
            "key_problems", "document_problems"]
 
 #: Version of the output schemas (bumped when a key changes meaning or name).
 SCHEMA_VERSION = 1
+#: Commands whose schema moved past :data:`SCHEMA_VERSION` (adjust/2: JSON for summaries, tables for rows).
+COMMAND_VERSIONS = {"adjust": 2}
+
+
+def schema_version(command: str) -> int:
+    """The schema version of ``command``'s document."""
+    return COMMAND_VERSIONS.get(command, SCHEMA_VERSION)
 
 STATISTICS = ("std", "var", "cov", "mean", "rms", "u95", "se", "min", "max", "median", "95")
 QUALIFIERS = ("lin", "mc")
@@ -72,7 +79,7 @@ _UNIT_TOKENS = frozenset(t for u in UNITS for t in u.split("_"))
 
 def stamp(doc: dict, command: str) -> dict:
     """``doc`` with ``"schema": "multilat.<command>/<version>"`` first (a new dict)."""
-    return {"schema": f"multilat.{command}/{SCHEMA_VERSION}", **{k: v for k, v in doc.items() if k != "schema"}}
+    return {"schema": f"multilat.{command}/{schema_version(command)}", **{k: v for k, v in doc.items() if k != "schema"}}
 
 
 def key_problems(key: str) -> list[str]:
