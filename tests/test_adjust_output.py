@@ -200,3 +200,13 @@ def test_listing_is_checked():
     with pytest.raises(MultilatError, match="observations listing must be 'flagged' or 'all'"):
         result_to_json(res, observations="some")
     assert len(result_to_json(res, observations="all")["observations"]) == res.obs.n_obs
+
+
+def test_the_general_path_meets_observations_by_listing_every_row():
+    """--model general lists every observation already (adjust-general/1): --observations is met, not
+    refused (nor passed on under another name)."""
+    net = Path(__file__).resolve().parents[1] / "examples" / "network" / "mixed" / "obs.csv"
+    a = _doc(["adjust", str(net), "--model", "general", "--json"])
+    b = _doc(["adjust", str(net), "--model", "general", "--json", "--observations"])
+    assert a["schema"] == b["schema"] == "multilat.adjust-general/1"
+    assert a["observations"] == b["observations"] and len(b["observations"]) == b["n_obs"]

@@ -226,15 +226,15 @@ def adjust_command(
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
     ellipsoids and reference-length comparisons."""
-    from multilat.cli import general_adjust
+    from multilat.cli import adjust_output, general_adjust
+    listing = adjust_output.check_listing(all_observations, as_json, out)
+    # the general path lists every observation anyway: --observations is met there, not passed on
+    given = {k: v for k, v in locals().items() if k not in ("all_observations", "listing", "adjust_output")}
     if general_adjust.wants_general(observations, model):  # --model general, or a gama-local XML input
-        return general_adjust.run(**locals())
-    given = dict(locals())                                 # for --model auto's fall-back
-    from multilat.cli import adjust_output
+        return general_adjust.run(**given)
     from multilat.network.files import read_points, read_reference_lengths
 
     checks.table_format(tables, out)
-    listing = adjust_output.check_listing(all_observations, as_json, out)
     checks.sigma_um(sigma_um)
     checks.seed(seed)
     report_opt.check_report_path(report, [observations, references, points, environment, heights])
