@@ -222,6 +222,11 @@ def print_summary(res, doc, out):
         console.print(t)
     if out is not None:
         console.print(f"results and figures written to {out}")
+        rec = next(t for t in doc["tables"] if t["name"] == "observations")
+        c = doc["observation_counts"]
+        listed = ("all of them (--observations)" if c["listing"] == "all" else
+                  f"the {c['n_flagged']:,} that matter (rejected, failing w-tests, poorly controlled)")
+        console.print(f"  {rec['n_rows']:,} observations in {rec['file']}; result.json lists {listed}", markup=False)
 
 
 def test_lines(res) -> list[str]:
