@@ -90,14 +90,14 @@ def excluded_rows(given, excluded) -> list[dict]:
     if given is None or not excluded:
         return []
     why = {(e.kind, e.id): f"{e.kind} {e.id} {e.reason}" for e in excluded}
-    sid = np.asarray(given.station_ids, dtype=object)[given.station_index]
-    tid = np.asarray(given.target_ids, dtype=object)[given.target_index]
+    left_s = np.array([("station", i) in why for i in given.station_ids], bool)
+    left_t = np.array([("target", i) in why for i in given.target_ids], bool)
     out = []
-    for k in range(given.n_obs):
-        reason = why.get(("station", sid[k])) or why.get(("target", tid[k]))
-        if reason is not None:
-            out.append({"station": str(sid[k]), "target": str(tid[k]), "distance_m": float(given.distance_m[k]),
-                        "sigma_m": float(given.sigma_m[k]), "reason": reason})
+    for k in np.flatnonzero(left_s[given.station_index] | left_t[given.target_index]).tolist():
+        sid, tid = given.station_ids[given.station_index[k]], given.target_ids[given.target_index[k]]
+        out.append({"station": str(sid), "target": str(tid), "distance_m": float(given.distance_m[k]),
+                    "sigma_m": float(given.sigma_m[k]),
+                    "reason": why.get(("station", sid)) or why[("target", tid)]})
     return out
 
 
