@@ -104,7 +104,7 @@ def test_adjust_document_same_values_with_nan_and_inf_fields(tmp_path):
                        obs.distance_m[keep], obs.sigma_m[keep])
     res = adjust(sub, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False,
                  offsets={"S1": float(net.offset_m[1])})
-    doc = result_to_json(res)
+    doc = result_to_json(res, observations="all")
     old = _old(doc)
     assert "null" in old                          # NaN / inf fields are there
     assert _same_values(dumps_json(doc), old)
@@ -373,8 +373,8 @@ def test_large_file_errors_name_the_line(tmp_path):
 
 
 def test_result_tables_written_from_columns_equal_the_row_writer(tmp_path):
-    """targets.csv and residuals.csv from the columns: byte for byte the text of the row-by-row csv
-    writer they replace (written here as it was), with an id that needs quoting and a rejected row."""
+    """targets.csv and observations.csv from the columns: byte for byte the text of the row-by-row csv
+    writer they replace (written here row by row), with an id that needs quoting and a rejected row."""
     from multilat.io import write_csv_atomic
     from multilat.network.files import write_result_tables
 
@@ -392,16 +392,21 @@ def test_result_tables_written_from_columns_equal_the_row_writer(tmp_path):
                                               "semi_axis_1_95_m", "semi_axis_2_95_m", "semi_axis_3_95_m"],
                      [[tid, *res.target_xyz_m[j], *np.sqrt(np.clip(np.diag(res.target_cov_m2[j]), 0, None)),
                        *t_ax[j][::-1]] for j, tid in enumerate(res.target_ids)])
-    o = res.obs
-    write_csv_atomic(tmp_path / "old_r.csv", ["station", "target", "distance_m", "sigma_m", "residual_m",
-                                              "redundancy", "w", "mdb_m", "used"],
-                     [[o.station_ids[o.station_index[k]], o.target_ids[o.target_index[k]], o.distance_m[k],
+    o, rel = res.obs, res.reliability
+    failed = {int(k) for g in res.w_failure_groups for k in g}
+    poor = {int(k) for k in rel.poor_obs}
+    write_csv_atomic(tmp_path / "old_r.csv", ["index", "station", "target", "distance_m", "sigma_m", "residual_m",
+                                              "redundancy", "w", "mdb_m", "rejected", "w_failed",
+                                              "poorly_controlled", "mdb_sigma", "bias_to_noise", "shift_max_m",
+                                              "shift_point"],
+                     [[k, o.station_ids[o.station_index[k]], o.target_ids[o.target_index[k]], o.distance_m[k],
                        o.sigma_m[k], res.residuals_m[k], res.redundancy[k], res.w[k], res.mdb_m[k],
-                       bool(res.used[k])] for k in range(o.n_obs)])
-    for name, old in (("targets.csv", "old_t.csv"), ("residuals.csv", "old_r.csv")):
+                       not bool(res.used[k]), k in failed, k in poor, rel.mdb_sigma[k], rel.bnr[k],
+                       rel.shift_max_m[k], rel.shift_point[k]] for k in range(o.n_obs)])
+    for name, old in (("targets.csv", "old_t.csv"), ("observations.csv", "old_r.csv")):
         assert _csv_cells(tmp_path / name) == _csv_cells(tmp_path / old), name
-    new_r = (tmp_path / "residuals.csv").read_bytes()
-    assert b'"T,""4"""' in new_r and b",False\n" in new_r
+    new_r = (tmp_path / "observations.csv").read_bytes()
+    assert b'"T,""4"""' in new_r and b",True," in new_r
 
 
 def _csv_cells(path):

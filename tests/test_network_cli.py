@@ -9,7 +9,7 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.files import read_observations, read_points, read_reference_lengths
+from multilat.network.files import read_observations, read_points, read_reference_lengths, table_format
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 OBS = EX / "small_volume_obs.csv"
@@ -57,10 +57,12 @@ def test_summary_and_out_files(capsys, tmp_path):
     assert rc == 0, err
     assert "σ0 =" in out and "global χ² test" in out and "offset" in out
     names = sorted(p.name for p in out_dir.iterdir())
-    assert names == ["reference_lengths.csv", "residuals.csv", "residuals.png", "result.json",
-                     "stations.csv", "targets.csv", "top_view.png", "view_3d.png"]
+    fmt = table_format("observations", "auto")          # parquet where pyarrow is installed
+    assert names == sorted(["reference_lengths.csv", f"observations.{fmt}", "residuals.png", "result.json",
+                            "stations.csv", "targets.csv", "top_view.png", "view_3d.png"])
     assert not any(p.name.endswith(".part") for p in tmp_path.iterdir())
-    assert (out_dir / "residuals.csv").read_text().count("\n") == 57
+    rec = {t["name"]: t for t in json.loads((out_dir / "result.json").read_text())["tables"]}["observations"]
+    assert rec["file"] == f"observations.{fmt}" and rec["n_rows"] == 56     # 56 distances in the file
 
 
 def test_blunder_with_four_heads_is_detected_but_not_located(capsys, tmp_path):
@@ -386,8 +388,9 @@ def test_sparse_solver_reads_any_column_order(capsys, tmp_path):
 
 
 def test_large_documents_are_written_compact(capsys, tmp_path, monkeypatch):
-    """Above ``io.INDENT_MAX_ROWS`` observations the adjust document (stdout and --out's result.json) is
-    one line: the same JSON value as the indented document of a small network, whitespace aside."""
+    """Above ``io.INDENT_MAX_ROWS`` rows listed (or targets) the adjust document (stdout and --out's
+    result.json) is one line: the same JSON value as the indented document of a small network,
+    whitespace and the --out directory's table records aside."""
     import multilat.io as mio
 
     rc, indented, err = _run(capsys, ["adjust", str(OBS), "--json"])
@@ -402,6 +405,7 @@ def test_large_documents_are_written_compact(capsys, tmp_path, monkeypatch):
     a, b, c = json.loads(indented), json.loads(compact), json.loads(filed)
     for d in (a, b, c):
         d.pop("elapsed_s", None)
+    assert "tables" not in a and b.pop("tables") == c.pop("tables")
     assert a == b == c
     monkeypatch.setattr(mio, "INDENT_MAX_ROWS", 56)           # the limit itself is still indented
     rc, out, err = _run(capsys, ["adjust", str(OBS), "--json"])

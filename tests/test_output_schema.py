@@ -315,9 +315,9 @@ def test_no_output_writes_a_replaced_name():
 
 def test_out_files_carry_the_schema(tmp_path, capsys):
     ex = ROOT / "examples" / "network"
-    assert main(["adjust", str(ex / "small_volume_obs.csv"), "--out", str(tmp_path / "a")]) == 0
+    assert main(["adjust", str(ex / "small_volume_obs.csv"), "--out", str(tmp_path / "a"), "--tables", "csv"]) == 0
     doc = json.loads((tmp_path / "a" / "result.json").read_text())
-    assert doc["schema"] == stamped_id("adjust")
+    assert doc["schema"] == stamped_id("adjust") == "multilat.adjust/2"
     assert _validator("adjust").is_valid(doc)
     assert main(["propagate", "small-volume", "--trials", "1000", "--out", str(tmp_path / "p")]) == 0
     doc = json.loads((tmp_path / "p" / "summary.json").read_text())

@@ -74,7 +74,8 @@ def pages(tmp_path_factory):
             "propagate": ["propagate", str(SEQ), "--trials", "100", "--seed", "5"]}
     docs = {}
     for name, args in runs.items():
-        rc, out, err = _run([*args, "--json", "--report", str(tmp / f"{name}.html")])
+        every = ["--observations"] if args[0] == "adjust" else []     # adjust/2: every row in the JSON
+        rc, out, err = _run([*args, "--json", *every, "--report", str(tmp / f"{name}.html")])
         assert rc == 0, (name, err)
         docs[name] = json.loads(out)
     sync_playwright = _browser()

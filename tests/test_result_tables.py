@@ -65,7 +65,7 @@ def test_parquet_tables_hold_the_csv_cells(tmp_path, result):
     from dataclasses import replace
 
     used = res.used.copy()
-    used[7] = False                                               # a rejected row: a False cell
+    used[7] = False                                               # a rejected row: a True cell
     res = replace(res, used=used)
     c_dir, p_dir = tmp_path / "c", tmp_path / "p"
     c_dir.mkdir()
@@ -100,12 +100,12 @@ def test_cli_tables_option(capsys, tmp_path):
                "--out", str(out), "--tables", "parquet"])
     assert rc == 0, capsys.readouterr().err
     names = {p.name for p in out.iterdir()}
-    assert {"stations.parquet", "targets.parquet", "residuals.parquet", "reference_lengths.parquet",
+    assert {"stations.parquet", "targets.parquet", "observations.parquet", "reference_lengths.parquet",
             "result.json", "residuals.png"} <= names and not any(n.endswith(".csv") for n in names)
     # the same directory again (an earlier output) is accepted
     assert main(["adjust", str(OBS), "--out", str(out), "--tables", "parquet"]) == 0
     capsys.readouterr()
-    for args, msg in ((["--tables", "xlsx", "--out", str(tmp_path / "x")], "--tables must be one of csv, parquet"),
+    for args, msg in ((["--tables", "xlsx", "--out", str(tmp_path / "x")], "--tables must be one of auto, csv, parquet"),
                       (["--tables", "parquet"], "--tables applies to the files of --out")):
         rc = main(["adjust", str(OBS), *args])
         err = capsys.readouterr().err

@@ -41,6 +41,8 @@ _TESTDATA = _ROOT / "tests" / "data"
 #: command's samples)
 SAMPLES = {
     "adjust": [["adjust", f"{_N}/small_volume_obs.csv", "--references", f"{_N}/small_volume_refs.csv"],
+               ["adjust", f"{_N}/small_volume_obs.csv", "--observations", "-o", "{tmp}/adj"],
+               ["adjust", str(_TESTDATA / "network" / "weak_target.csv")],
                ["adjust", f"{_N}/sequential/obs.csv", "--variance-components", "head"],
                ["adjust", f"{_N}/mixed/obs.csv", "--variance-components", "kind"],
                ["adjust", str(_TESTDATA / "angles" / "mixed_azimuth_blunder.csv")],

@@ -90,6 +90,7 @@ OUTPUT_NAMES = frozenset({
     "stations.csv", "targets.csv", "residuals.csv", "reference_lengths.csv", "result.json",
     "residuals.png", "top_view.png", "view_3d.png",                                  # adjust
     "stations.parquet", "targets.parquet", "residuals.parquet", "reference_lengths.parquet",
+    "observations.csv", "observations.parquet",                                      # adjust/2
     "summary.json", "parameters.csv", "distances.csv", "points.csv", "clouds.png",   # propagate
     "sides.csv", "fig8_mean_error.png", "fig8_std.png", "fig9_cdf.png",              # lbb simulate
     "comparison.csv", "fig7_comparison.png", "report.html",                          # lbb compare, demo

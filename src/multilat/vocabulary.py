@@ -26,14 +26,22 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["SCHEMA_VERSION", "SCHEMA_VERSIONS", "schema_id", "STATISTICS", "QUALIFIERS", "UNITS", "RENAMED", "ID_MAPS", "stamp",
+__all__ = ["SCHEMA_VERSION", "SCHEMA_VERSIONS", "schema_id", "schema_version", "STATISTICS", "QUALIFIERS", "UNITS", "RENAMED", "ID_MAPS", "stamp",
            "key_problems", "document_problems"]
 
 #: Version of the output schemas (bumped when a key changes meaning or name).
 SCHEMA_VERSION = 1
 #: A command's schema version where it is not :data:`SCHEMA_VERSION`: bumped, with the ``schema`` literal of
 #: its model (:mod:`multilat.schemas.models`), when the shape of its document changes.
-SCHEMA_VERSIONS: dict[str, int] = {"propagate-general": 2}     # /2: n_full_gauss_newton -> n_retried
+SCHEMA_VERSIONS: dict[str, int] = {
+    "adjust": 2,                # /2: JSON for summaries, tables for rows (issue 29)
+    "propagate-general": 2,     # /2: n_full_gauss_newton -> n_retried (one Monte Carlo record)
+}
+
+
+def schema_version(command: str) -> int:
+    """The schema version of ``command``'s document."""
+    return SCHEMA_VERSIONS.get(command, SCHEMA_VERSION)
 
 STATISTICS = ("std", "var", "cov", "mean", "rms", "u95", "se", "min", "max", "median", "95")
 QUALIFIERS = ("lin", "mc")
@@ -76,7 +84,7 @@ _UNIT_TOKENS = frozenset(t for u in UNITS for t in u.split("_"))
 
 def schema_id(command: str) -> str:
     """``"multilat.<command>/<version>"``: the ``schema`` of ``command``'s documents."""
-    return f"multilat.{command}/{SCHEMA_VERSIONS.get(command, SCHEMA_VERSION)}"
+    return f"multilat.{command}/{schema_version(command)}"
 
 
 def stamp(doc: dict, command: str) -> dict:

@@ -70,9 +70,11 @@ def test_adjust_twice_same_results(ws):
     for _ in range(2):
         rc, _, err = ws.run(["adjust", "{d}/obs.csv", "--out", "{d}/res"])
         assert rc == 0, err
-    assert sorted(p.name for p in (ws / "res").iterdir()) == [
-        "residuals.csv", "residuals.png", "result.json", "stations.csv", "targets.csv", "top_view.png",
-        "view_3d.png"]
+    from multilat.network.files import table_format
+
+    assert sorted(p.name for p in (ws / "res").iterdir()) == sorted([
+        f"observations.{table_format('observations', 'auto')}", "residuals.png", "result.json", "stations.csv",
+        "targets.csv", "top_view.png", "view_3d.png"])
 
 
 def test_hash_station_id_does_not_vanish(ws):

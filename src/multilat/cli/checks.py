@@ -65,12 +65,13 @@ def quantity(value: float | None, option: str, *, lo: float, hi: float, unit: st
 
 
 def table_format(fmt: str, out) -> str:
-    """``--tables``: csv or parquet, only with ``--out``; parquet only where pyarrow is installed."""
+    """``--tables``: auto (the default), csv or parquet, csv and parquet only with ``--out``; parquet
+    only where pyarrow is installed."""
     from multilat.io import TABLE_FORMATS
 
-    if fmt not in TABLE_FORMATS:
-        raise MultilatError(f"--tables must be one of {', '.join(TABLE_FORMATS)}, got {fmt!r}")
-    if fmt != "csv" and out is None:
+    if fmt not in ("auto", *TABLE_FORMATS):
+        raise MultilatError(f"--tables must be one of auto, {', '.join(TABLE_FORMATS)}, got {fmt!r}")
+    if fmt not in ("auto", "csv") and out is None:
         raise MultilatError("--tables applies to the files of --out: give --out DIR")
     if fmt == "parquet":
         from importlib.util import find_spec

@@ -5,14 +5,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Optional
 
-import numpy as np
 import typer
-from rich.table import Table
 
-from multilat.cli.app import app, console, emit_json, progress
+from multilat.cli.app import app, progress
 from multilat.errors import MultilatError
 from multilat.cli import checks, report_opt
-from multilat.io import check_output_dir, staging_dir
+from multilat.io import check_output_dir
 from multilat.network.azimuth_sense import HELP as AZIMUTH_SENSE_HELP
 
 
@@ -165,10 +163,17 @@ def adjust_command(
     as_json: bool = typer.Option(False, "--json", help="Print JSON instead of a summary."),
     out: Optional[Path] = typer.Option(None, "--out", "-o",
                                        help="Directory for result CSVs and figures (written atomically)."),
-    tables: str = typer.Option("csv", "--tables",
-                               help="With --out: the per-point tables (stations, targets, residuals, "
-                                    "reference lengths) as csv or parquet (needs pyarrow: pip install "
-                                    "'multilat[parquet]'; compact and fast for 10^5-10^6 rows)."),
+    tables: str = typer.Option("auto", "--tables",
+                               help="With --out: the tables (stations, targets, observations, reference "
+                                    "lengths) as csv or parquet (needs pyarrow: pip install "
+                                    "'multilat[parquet]'; compact and fast for 10^5-10^6 rows); auto (the "
+                                    "default): the observations as parquet when pyarrow is installed, "
+                                    "else csv, the others as csv."),
+    all_observations: bool = typer.Option(False, "--observations",
+                                          help="List every observation's row in the JSON (--json, "
+                                               "result.json), not only those that matter (rejected, "
+                                               "failing w-tests, poorly controlled, left out): for small "
+                                               "networks; the --out table holds them all."),
     environment: Optional[Path] = typer.Option(None, "--environment", "-e",
                                                help="Raw readings only: environment log CSV "
                                                     "(as `multilat correct --environment`)."),
@@ -223,11 +228,13 @@ def adjust_command(
     """Adjust a self-calibrating multilateration network: station and target coordinates and the
     stations' offsets from distances alone, with σ0, the global test, data snooping, 95 %
     ellipsoids and reference-length comparisons."""
-    from multilat.cli import general_adjust
+    from multilat.cli import adjust_output, general_adjust
+    listing = adjust_output.check_listing(all_observations, as_json, out)
+    # the general path lists every observation anyway: --observations is met there, not passed on
+    given = {k: v for k, v in locals().items() if k not in ("all_observations", "listing", "adjust_output")}
     if general_adjust.wants_general(observations, model):  # --model general, or a gama-local XML input
-        return general_adjust.run(**locals())
-    given = dict(locals())                                 # for --model auto's fall-back
-    from multilat.network.files import read_points, read_reference_lengths, write_result_tables
+        return general_adjust.run(**given)
+    from multilat.network.files import read_points, read_reference_lengths
 
     checks.table_format(tables, out)
     checks.sigma_um(sigma_um)
@@ -287,65 +294,10 @@ def adjust_command(
         import warnings
 
         warnings.warn(hint, UserWarning, stacklevel=1)
-    doc = _adjust_document(res, refs, obs, opts, instrument, sigma_note, vc, corrected, averaged)
-    from multilat.io import INDENT_MAX_ROWS, write_json_atomic
-
-    indent = res.obs.n_obs <= INDENT_MAX_ROWS          # 10^5-10^6 observations: compact
-    if out is not None:
-        from multilat.report.network_figures import save_figures
-
-        with staging_dir(out, inputs=[observations, references, points, environment, heights]) as tmp:
-            write_result_tables(res, tmp, references=refs, fmt=tables)
-            save_figures(res, tmp)
-            write_json_atomic(tmp / "result.json", doc, indent=indent)
-    report_opt.write_report(report, "adjust", doc, result=res)
-    if as_json:
-        emit_json(doc, "adjust", indent=indent)
-        return
-    _print_summary(res, doc, out)
-    _print_extras(doc, vc)
-
-
-def _adjust_document(res, refs, obs, opts, instrument, sigma_note, vc, corrected, averaged) -> dict:
-    """The ``adjust --json`` document: the result's, with the azimuth sense, the default-σ warning,
-    variance components, the sensors' correlations and the repeats' scatter where they apply."""
-    from multilat.network import azimuth_sense as _az
-    from multilat.network.result import result_to_json
-    from multilat.vocabulary import stamp
-
-    doc = stamp(result_to_json(res, refs), "adjust")
-    if (az_rec := _az.record(obs, *_az.resolve(opts.azimuth_sense, instrument))) is not None:
-        doc["azimuth_sense"] = az_rec
-    if sigma_note:
-        doc["warnings"] = [sigma_note, *doc["warnings"]]
-    if vc is not None:
-        doc["variance_components"] = vc.to_json()
-    if corrected is not None:
-        from multilat.campaign.correlated import correlated_json
-
-        c = corrected.covariance_m2 if averaged is None else averaged.matrix @ corrected.covariance_m2 @ averaged.matrix.T
-        doc["with_correlations"] = correlated_json(res, c, refs)
-    if averaged is not None:
-        doc["repeats"] = averaged.scatter_json()
-    return doc
-
-
-def _print_extras(doc: dict, vc) -> None:
-    """The summary's last lines: the azimuth sense, variance components, the sensors' correlations."""
-    if "azimuth_sense" in doc:
-        console.print(f"azimuths read {doc['azimuth_sense']['sense']} ({doc['azimuth_sense']['source']})",
-                      markup=False)
-    if vc is not None:
-        console.print(f"variance components by {vc.grouping} (Förstner, {vc.iterations} iterations): "
-                      + "; ".join(f"{c.group} σ × {c.sigma_scale:.3f} (factor {c.variance_factor:.3f} ± "
-                                  f"{c.variance_factor_std:.3f}, r = {c.redundancy:.1f})" for c in vc.components),
-                      markup=False)
-    if "with_correlations" in doc:
-        wc = doc["with_correlations"]
-        offs = ", ".join(f"{sid} {v['offset_std_m'] * 1e6:.1f}" for sid, v in wc["stations"].items())
-        console.print(f"with the sensors' correlations (G C Gᵀ): u(offset) µm: {offs}; largest target "
-                      f"std {wc['target_std_max_m'] * 1e6:.1f} µm (diagonal weights only: "
-                      f"{wc['target_std_diagonal_max_m'] * 1e6:.1f} µm)", markup=False)
+    doc = adjust_output.adjust_document(res, refs, obs, opts, instrument, sigma_note, vc, corrected, averaged,
+                                        listing=listing)
+    adjust_output.finish(res, doc, refs, out=out, tables=tables, report=report, as_json=as_json, vc=vc,
+                         inputs=[observations, references, points, environment, heights])
 
 
 def _mirror_hint(obs, sigma0, opts, data, instrument):
@@ -398,177 +350,6 @@ def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_si
     NetworkOptions.from_cli(alpha=alpha, alpha_global=alpha_global, test_method=test_method,
                             variance_factor=variance_factor, mdb_limit_sigma=mdb_limit_sigma,
                             alpha_family=alpha_family)
-
-
-def _left_out_lines(res) -> list[str]:
-    """The summary's lines for what was left out before solving and for mirror-ambiguous points."""
-    lines = []
-    if res.excluded:
-        lines.append("  left out before solving: " + "; ".join(f"{e.kind} {e.id} ({e.reason})"
-                                                             for e in res.excluded))
-    if res.ambiguous:
-        lines.append(f"  warning: ambiguous geometry, {len(res.ambiguous)} point(s) placed only up to a mirror "
-                     f"that fits equally: {', '.join(a.id for a in res.ambiguous[:8])}"
-                     f"{' ...' if len(res.ambiguous) > 8 else ''} (JSON 'ambiguous')")
-    return lines
-
-
-def _print_summary(res, doc, out):
-    console.print(f"adjusted {res.obs.n_stations} stations, {res.obs.n_targets} targets from "
-                  f"{int(res.used.sum())}/{res.obs.n_obs} distances ({res.cost} cost; {res.datum.describe()})",
-                  markup=False)
-    cv = res.convergence
-    console.print(f"  {res.solver} solver: {cv.iterations} iterations, {cv.reason}; initial values: "
-                  f"{res.initial.get('method', '?')}", markup=False)
-    console.print(f"  frame: {doc['frame']['axes']}", markup=False)      # the JSON's words (frame_words.py)
-    console.print(f"  scale: {doc['frame']['scale']}", markup=False)
-    for line in _left_out_lines(res):
-        console.print(line, markup=False)
-    if res.cost == "squared":
-        console.print(f"  σ0 = {res.sigma0:.4g} m² (unweighted squared-distance residuals, eq. 6), "
-                      f"dof = {res.dof}; no global test for this cost")
-        console.print("  data snooping not done for this cost")
-    else:
-        for line in test_lines(res):
-            console.print(line, markup=False)
-    if res.sigma_source:
-        from multilat.network.sigma_source import describe
-
-        console.print("  " + describe(res.sigma_source), markup=False)
-    if res.angles:
-        ws = np.array([a["w"] for a in res.angles])
-        vt = sum((a["residual_rad"] / a["sigma_rad"]) ** 2 for a in res.angles)
-        console.print(f"  angles: {len(res.angles)} observations, vᵀPv {vt:.1f} of "
-                      f"{res.sigma0 ** 2 * res.dof:.1f}, largest |w| {np.max(np.abs(ws)):.2f} "
-                      f"({sum(not a['w_test_passed'] for a in res.angles)} failing; "
-                      f"{len(res.angle_outliers)} rejected by data snooping)", markup=False)
-        for sid, o in res.orientations.items():
-            v, u = o["orientation_rad"], o["orientation_std_rad"]
-            console.print(f"  orientation of {sid}: " + ", ".join(
-                f"{n} {a:+.6f} rad (u {b * 1e6:.1f} µrad)" for n, a, b in zip("ωφκ", v, u)), markup=False)
-    if res.reliability is not None:
-        for line in reliability_lines(res):
-            console.print(line, markup=False)
-    if (res.w_failure_groups and res.global_test.passed and not res.outliers
-            and res.tests.get("detection") != "max |w|"):       # under Šidák the largest |w| detects
-        n = sum(len(g) for g in res.w_failure_groups)
-        console.print(f"  the global test passes: {n} w-test(s) above the critical value are not acted on "
-                      f"(about α = {res.tests.get('alpha0', res.alpha):g} of all tests fail by chance); "
-                      "listed in w_failures", markup=False)
-    if res.unlocated:
-        ids = ", ".join(f"{o.station}->{o.target}" for o in res.unlocated)
-        if len(res.unlocated) > 1:
-            console.print(f"  w-test failure that cannot be located (perfectly correlated "
-                          f"tests, |w| = {abs(res.unlocated[0].w):.1f}): one of {ids}; none rejected")
-        else:
-            console.print(f"  w-test failure not rejected: {ids} (|w| = "
-                          f"{abs(res.unlocated[0].w):.1f}): {res.unlocated_reason}")
-    t = Table(title="stations", title_justify="left")
-    for c in ("station", "x (m)", "y (m)", "z (m)", "offset (µm)", "u(offset) (µm)", "95 % max (µm)"):
-        t.add_column(c, justify="right")
-    (sa, _), (ta, _) = res.ellipsoids()
-    for i, sid in enumerate(res.station_ids):
-        x = res.station_xyz_m[i]
-        fixed = "" if res.offset_estimated[i] else " (fixed)"
-        t.add_row(sid, f"{x[0]:.6f}", f"{x[1]:.6f}", f"{x[2]:.6f}", f"{res.offset_m[i] * 1e6:+.1f}{fixed}",
-                  f"{res.offset_std_m[i] * 1e6:.1f}", f"{sa[i, 2] * 1e6:.1f}")
-    console.print(t)
-    order = np.argsort(-ta[:, 2])[:5]
-    t = Table(title="worst targets (largest 95 % semi-axis)", title_justify="left")
-    for c in ("target", "x (m)", "y (m)", "z (m)", "95 % max (µm)"):
-        t.add_column(c, justify="right")
-    for j in order:
-        x = res.target_xyz_m[j]
-        t.add_row(res.target_ids[j], f"{x[0]:.6f}", f"{x[1]:.6f}", f"{x[2]:.6f}", f"{ta[j, 2] * 1e6:.1f}")
-    console.print(t)
-    if doc["reference_lengths"]:
-        t = Table(title="interpoint distances vs reference lengths", title_justify="left")
-        for c in ("points", "adjusted (m)", "u (µm)", "reference (m)", "difference (µm)"):
-            t.add_column(c, justify="right")
-        for c in doc["reference_lengths"]:
-            t.add_row(f"{c['target_a']}-{c['target_b']}", f"{c['length_m']:.6f}", f"{c['length_std_m'] * 1e6:.1f}",
-                      f"{c['reference_m']:.6f}", f"{c['difference_m'] * 1e6:+.1f}")
-        console.print(t)
-    if out is not None:
-        console.print(f"results and figures written to {out}")
-
-
-def test_lines(res) -> list[str]:
-    """The summary's lines on the test procedure (detection, identification, adaptation)."""
-    gt, t = res.global_test, res.tests
-    out = []
-    if gt.statistic is None:
-        return [f"  σ0 = {res.sigma0:.4g}, dof = {res.dof} (no global test without redundancy)"]
-    how = {"b-method": "B-method: α_global for equal power to the w-test",
-           "sidak": "Šidák: the variance factor's test; the largest |w| detects"}.get(t.get("method"), "fixed α_global")
-    pw = "" if gt.power is None else f", power {gt.power:.2f} at λ0 = {gt.lambda0:.2f}"
-    if res.variance_factor == "unknown":
-        out.append(f"  σ0 = {res.sigma0:.3f} (estimated: variance factor unknown; covariances and MDBs "
-                   f"scaled by σ0²), dof = {res.dof}")
-        out.append(f"  global χ² test (information only, not a decision here): {gt.statistic:.2f} vs "
-                   f"{gt.critical:.2f} (α = {gt.alpha:.3g})")
-        out.append(f"  Pope's τ-test: α0 = {t['alpha0']:g} per observation, critical |τ| "
-                   f"{t['tau_critical']:.3f} (dof {res.dof})")
-    else:
-        out.append(f"  σ0 = {res.sigma0:.3f} (ratio to the a-priori uncertainties), dof = {res.dof}; "
-                   f"global χ² test: {gt.statistic:.2f} {'in' if gt.passed else 'not in'} "
-                   f"[{gt.critical_low:.2f}, {gt.critical:.2f}] "
-                   f"(α = {gt.alpha:.3g}, lower tail {gt.alpha_low:g}; {how}{pw}): "
-                   f"{'passed' if gt.passed else f'FAILED ({gt.side} tail)'}")
-        out.append(f"  w-test: α0 = {t['alpha0']:.3g}, critical |w| {t['w_critical']:.2f}, power "
-                   f"{t['power']:.2f}, λ0 = {t.get('lambda0_w', t['lambda0']):.2f} (MDBs at α0 = "
-                   f"{t.get('alpha0_given', t['alpha0']):g}, λ0 = {t['lambda0']:.2f})")
-    if t.get("rule"):
-        out.append(f"  test procedure: {t['rule']}")
-    chk = res.sigma0_check or {}
-    if chk.get("verdict") in ("too low", "too high"):
-        out.append(f"  σ0 {chk['verdict']}: " + ("accepted (--variance-factor unknown)" if chk.get("accepted")
-                                                 else "IMPLAUSIBLE (see the warning)"))
-    if not res.snooping:
-        out.append("  data snooping not requested (--no-snooping)")
-        return out
-    steps = t.get("steps", [])
-    if steps and steps[0]["detection_passed"] and not res.outliers and not res.angle_outliers:
-        out.append("  detection passed: no data snooping")
-    if res.outliers:
-        out.append("  rejected distances, in order:")
-        for n, o in enumerate(res.outliers, 1):
-            stat = f"{o.test} = {o.statistic:+.2f} > {o.critical:.2f}" if o.statistic is not None else f"w = {o.w:+.2f}"
-            out.append(f"    {n}. {o.station}->{o.target}: {stat}, residual {o.residual_m * 1e6:+.1f} µm")
-    if res.angle_outliers:
-        out.append("  rejected angles, in order:")
-        for a in res.angle_outliers:
-            out.append(f"    {a['order']}. {a['station']}->{a['target']} {a['kind']}: {a['test']} = "
-                       f"{a['statistic']:+.2f} > {a['critical']:.2f}, residual {a['residual_rad'] * 1e6:+.1f} µrad "
-                       f"(snooping round {a['step']})")
-    if not (res.outliers or res.angle_outliers) and not (steps and steps[0]["detection_passed"]):
-        out.append("  no observation rejected")
-    return out
-
-
-def reliability_lines(res, limit: int = 8) -> list[str]:
-    """The summary's lines on internal and external reliability: the poorly controlled targets."""
-    rel = res.reliability
-    u = res.used
-    red = rel.redundancy[u]
-    out = [f"  reliability: redundancy {red.min():.3f}..{red.max():.3f}; MDB "
-           f"{np.nanmin(rel.mdb_m[u]) * 1e6:.1f}..{np.nanmax(rel.mdb_m[u]) * 1e6:.1f} µm "
-           f"({np.nanmin(rel.mdb_sigma[u]):.1f}..{np.nanmax(rel.mdb_sigma[u]):.1f} σ)"
-           + (f"; largest coordinate shift an undetected MDB would cause "
-              f"{np.nanmax(rel.shift_max_m[u]) * 1e6:.1f} µm" if rel.shifts_computed else "")]
-    if rel.poor_targets:
-        out.append(f"  poorly controlled (redundancy < {rel.r_min:g} or MDB > {rel.mdb_limit_sigma:g} σ): "
-                   f"{len(rel.poor_obs)} observation(s) at {len(rel.poor_targets)} target(s):")
-        for t in rel.poor_targets[:limit]:
-            sh = "" if t["shift_max_m"] is None else f", shift up to {t['shift_max_m'] * 1e6:.1f} µm"
-            out.append(f"    {t['id']}: {t['n_obs']} obs, redundancy min {t['redundancy_min']:.3f}, MDB up to "
-                       f"{t['mdb_max_m'] * 1e6:.1f} µm ({t['mdb_max_sigma']:.1f} σ){sh}")
-        if len(rel.poor_targets) > limit:
-            out.append(f"    ... {len(rel.poor_targets) - limit} more in the JSON (reliability.poor_targets)")
-    else:
-        out.append(f"  every observation controlled (redundancy >= {rel.r_min:g}, MDB <= "
-                   f"{rel.mdb_limit_sigma:g} σ)")
-    return out
 
 
 def _check_instrument_used(instrument, path, obs, src, corrected) -> None:

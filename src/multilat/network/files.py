@@ -293,8 +293,9 @@ def read_points(path: str | os.PathLike) -> Points:
 
 
 def result_tables(result, *, references=None) -> dict[str, dict]:
-    """The per-point tables of an adjustment, each a dict of columns (arrays, ``(labels, index)``, or
-    lists for the small ones): ``stations``, ``targets``, ``residuals`` and, with ``references``,
+    """The tables of an adjustment, each a dict of columns (arrays, ``(labels, index)``, or lists for
+    the small ones): ``stations``, ``targets``, ``observations`` (every observation's row:
+    :func:`multilat.network.result_rows.observation_columns`) and, with ``references``,
     ``reference_lengths`` (an empty reference σ is None). One definition for every table format."""
     (s_ax, _), (t_ax, _) = result.ellipsoids()
     su = np.sqrt(np.clip(np.diagonal(result.station_cov_m2, axis1=1, axis2=2), 0, None))
@@ -313,11 +314,9 @@ def result_tables(result, *, references=None) -> dict[str, dict]:
                          "x_m": tx[:, 0], "y_m": tx[:, 1], "z_m": tx[:, 2], "x_std_m": tu[:, 0],
                          "y_std_m": tu[:, 1], "z_std_m": tu[:, 2], "semi_axis_1_95_m": t_ax[:, 2],
                          "semi_axis_2_95_m": t_ax[:, 1], "semi_axis_3_95_m": t_ax[:, 0]}
-    o = result.obs
-    tables["residuals"] = {"station": (o.station_ids, o.station_index), "target": (o.target_ids, o.target_index),
-                           "distance_m": o.distance_m, "sigma_m": o.sigma_m, "residual_m": result.residuals_m,
-                           "redundancy": result.redundancy, "w": result.w, "mdb_m": result.mdb_m,
-                           "used": np.asarray(result.used, bool)}
+    from multilat.network.result_rows import observation_columns
+
+    tables["observations"] = observation_columns(result)
     if references is not None:
         cmp = result.compare_references(references)
         tables["reference_lengths"] = {
@@ -331,10 +330,22 @@ def result_tables(result, *, references=None) -> dict[str, dict]:
 
 def write_result_tables(result, out_dir: str | os.PathLike, *, references=None, fmt: str = "csv") -> list[Path]:
     """Write the tables of :func:`result_tables` into ``out_dir`` as ``stations.csv``, ``targets.csv``,
-    ``residuals.csv`` (and ``reference_lengths.csv``), or ``.parquet`` with ``fmt="parquet"``, each
-    file atomically. Returns the paths written."""
+    ``observations.csv`` (and ``reference_lengths.csv``), or ``.parquet`` with ``fmt="parquet"``,
+    each file atomically; ``fmt="auto"``: the observations table as Parquet when pyarrow is
+    installed (CSV otherwise), the others as CSV. Returns the paths written."""
     out = Path(out_dir)
-    return [write_table_atomic(out / name, cols, fmt) for name, cols in result_tables(result, references=references).items()]
+    return [write_table_atomic(out / name, cols, table_format(name, fmt))
+            for name, cols in result_tables(result, references=references).items()]
+
+
+def table_format(name: str, fmt: str) -> str:
+    """The file format of table ``name`` under ``--tables fmt``: ``fmt`` itself, or for "auto" the
+    observations table as parquet when pyarrow is installed (else csv) and the other tables as csv."""
+    if fmt != "auto":
+        return fmt
+    import importlib.util
+
+    return "parquet" if name == "observations" and importlib.util.find_spec("pyarrow") is not None else "csv"
 
 
 def write_observations(path: str | os.PathLike, obs: Observations) -> None:

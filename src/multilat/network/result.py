@@ -396,26 +396,31 @@ def _stations_json(res) -> dict:
     return stations
 
 
-def _observation_rows(res) -> JsonRows:
-    """One row per observation (written from the columns, no Python object per row): the
-    observation, its residual, redundancy, w, MDB, rejection and, with reliability, its shifts."""
-    o = res.obs
-    si, ti = o.station_index, o.target_index
-    # one row per observation, written from the columns (no Python object per row)
-    cols = {"station": (o.station_ids, si), "target": (o.target_ids, ti),
-            "distance_m": o.distance_m, "sigma_m": o.sigma_m,
-            "residual_m": res.residuals_m, "redundancy": res.redundancy,
-            "w": res.w, "mdb_m": res.mdb_m, "rejected": ~np.asarray(res.used, bool)}
-    rel = res.reliability
-    if rel is not None:
-        labels, index = np.unique(np.asarray(rel.shift_point, dtype=str), return_inverse=True)
-        cols.update(mdb_sigma=rel.mdb_sigma, bias_to_noise=rel.bnr, shift_max_m=rel.shift_max_m,
-                    shift_point=(tuple(str(x) for x in labels), index))
-    return JsonRows(cols)
+def _observations_json(res, listing: str, given) -> dict:
+    """The document's observation keys (schema ``multilat.adjust/2``): ``observations`` (the rows that
+    matter, or every row with ``listing="all"``), ``observation_counts``, ``excluded_observations``,
+    ``observation_extremes`` and ``largest_w`` (:mod:`multilat.network.result_rows`)."""
+    from multilat.network import result_rows as rr
+
+    if listing not in ("flagged", "all"):
+        raise MultilatError(f"observations listing must be 'flagged' or 'all', got {listing!r}")
+    cols = rr.observation_columns(res)
+    rows = np.arange(res.obs.n_obs) if listing == "all" else rr.flagged(cols)
+    excl = rr.excluded_rows(given, res.excluded)
+    n_excl = len(excl) if given is not None else sum(e.n_obs for e in res.excluded)
+    return {"observation_counts": rr.observation_counts(cols, len(rows), listing, n_excl),
+            "observations": JsonRows(rr.take(cols, rows)),
+            "excluded_observations": excl,
+            "observation_extremes": rr.observation_extremes(cols) if res.cost == "distance" else {},
+            "largest_w": rr.largest_w(cols) if res.cost == "distance" else []}
 
 
-def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) -> dict:
-    """The ``--json`` document of an adjustment, the same keys whichever back end ran."""
+def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None, *,
+                   observations: str = "flagged", given: Observations | None = None) -> dict:
+    """The ``--json`` document of an adjustment (schema ``multilat.adjust/2``), the same keys whichever
+    back end ran. ``observations``: "flagged" lists only the rows that matter (rejected, failing
+    w-tests, poorly controlled; every row is in the ``--out`` table), "all" every row. ``given``: the
+    observations passed to the adjustment, to list those of points left out before solving."""
     from multilat.network.frame_words import result_frame_words
 
     stations = _stations_json(res)
@@ -425,7 +430,7 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
                                              "redundancy": np.asarray(res.target_redundancy(), float)})
     gt = res.global_test
     o, rel = res.obs, res.reliability
-    observations = _observation_rows(res)
+    obs_keys = _observations_json(res, observations, given)
     doc = {
         "datum": res.datum.describe(),
         "frame": result_frame_words(res),
@@ -465,7 +470,7 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None) 
         "unlocated_reason": res.unlocated_reason,
         "w_failures": [{"observations": [_obs_label(o, k) for k in g], "w": float(res.w[g[0]]),
                         "located": len(g) == 1} for g in res.w_failure_groups],
-        "observations": observations,
+        **obs_keys,
         "initial": dict(res.initial),
         "reliability": None if rel is None else {
             "r_min": rel.r_min, "mdb_limit_sigma": rel.mdb_limit_sigma, "shifts_computed": rel.shifts_computed,

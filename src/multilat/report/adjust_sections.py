@@ -17,9 +17,6 @@ import numpy as np
 from multilat.report.html import Num, Section, Verdict
 from multilat.report.job_sections import K, MAX_ROWS, _m, _plain, _um, ptr
 
-#: rows of the "largest |w|" table of the reliability section
-LARGEST_W_ROWS = 10
-
 
 def sections(doc: dict, result=None, options=None, *, warnings=()) -> list[Section]:
     """The adjust report's results sections (before the warnings and what was run); ``warnings``:
@@ -241,20 +238,19 @@ def reliability_section(doc: dict) -> Section:
                     _plain(doc, "tests", "power", digits=2),
                     _plain(doc, "tests", "lambda0_w" if t.get("lambda0_w") is not None else "lambda0", digits=2),
                     t.get("n_tests", "-"))], caption="w-tests", name="w-tests")
-    obs = doc.get("observations") or []
-    if obs and obs[0].get("redundancy") is not None:
+    ext = doc.get("observation_extremes") or {}        # adjust/2: over every observation kept
+    if ext:
         rows = []
         for label, key, scale, digits in (("redundancy number", "redundancy", 1.0, 3),
                                           ("MDB (µm)", "mdb_m", 1e6, 1), ("MDB / σ", "mdb_sigma", 1.0, 1),
                                           ("largest shift (µm)", "shift_max_m", 1e6, 1)):
-            vals = np.array([np.nan if o.get(key) is None or o.get("rejected") else o[key] for o in obs], float)
-            if not np.isfinite(vals).any():
+            if key not in ext:
                 continue
-            lo, hi = int(np.nanargmin(vals)), int(np.nanargmax(vals))
-            rows.append((label, Num(vals[lo], ptr("observations", lo, key), scale, digits),
-                         f"{obs[lo]['station']}-{obs[lo]['target']}",
-                         Num(vals[hi], ptr("observations", hi, key), scale, digits),
-                         f"{obs[hi]['station']}-{obs[hi]['target']}"))
+            lo, hi = ext[key]["smallest"], ext[key]["largest"]
+            rows.append((label, Num(lo["value"], ptr("observation_extremes", key, "smallest", "value"), scale, digits),
+                         f"{lo['station']}-{lo['target']}",
+                         Num(hi["value"], ptr("observation_extremes", key, "largest", "value"), scale, digits),
+                         f"{hi['station']}-{hi['target']}"))
         sec.table(("quantity", "smallest", "at", "largest", "at"), rows,
                   caption="Internal and external reliability of the distances kept (the rejected ones left "
                           "out)", name="reliability-ranges")
@@ -285,21 +281,19 @@ def reliability_section(doc: dict) -> Section:
 
 
 def _largest_w_table(sec: Section, doc: dict) -> None:
-    obs = doc.get("observations") or []
-    if not obs or obs[0].get("w") is None:
+    top = doc.get("largest_w") or []                   # adjust/2: the rows with the largest |w|, largest first
+    if not top or top[0].get("w") is None:
         return
-    ws = np.array([abs(o["w"]) if o.get("w") is not None else np.nan for o in obs], float)
-    order = [int(k) for k in np.argsort(-np.nan_to_num(ws, nan=-1.0))[:LARGEST_W_ROWS]]
     _, crit = w_critical(doc)
     sec.table(("station", "target", "σ (µm)", "residual (µm)", "redundancy", "w", "MDB (µm)", "rejected",
                "verdict"),
-              [(obs[k]["station"], obs[k]["target"], _um(doc, "observations", k, "sigma_m", digits=2),
-                _um(doc, "observations", k, "residual_m", digits=2, sign=True),
-                _plain(doc, "observations", k, "redundancy"), _plain(doc, "observations", k, "w"),
-                _um(doc, "observations", k, "mdb_m", digits=1), "yes" if obs[k].get("rejected") else "no",
-                w_verdict(obs[k]["w"], crit) if crit is not None else Verdict("-"))
-               for k in order],
-              caption=f"The {len(order)} distances with the largest |w| (residual: measured − adjusted)",
+              [(o["station"], o["target"], _um(doc, "largest_w", k, "sigma_m", digits=2),
+                _um(doc, "largest_w", k, "residual_m", digits=2, sign=True),
+                _plain(doc, "largest_w", k, "redundancy"), _plain(doc, "largest_w", k, "w"),
+                _um(doc, "largest_w", k, "mdb_m", digits=1), "yes" if o.get("rejected") else "no",
+                w_verdict(o["w"], crit) if crit is not None else Verdict("-"))
+               for k, o in enumerate(top)],
+              caption=f"The {len(top)} distances with the largest |w| (residual: measured − adjusted)",
               name="largest-w")
 
 
