@@ -166,17 +166,8 @@ def print_summary(res, doc, out):
         from multilat.network.sigma_source import describe
 
         console.print("  " + describe(res.sigma_source), markup=False)
-    if res.angles:
-        ws = np.array([a["w"] for a in res.angles])
-        vt = sum((a["residual_rad"] / a["sigma_rad"]) ** 2 for a in res.angles)
-        console.print(f"  angles: {len(res.angles)} observations, vᵀPv {vt:.1f} of "
-                      f"{res.sigma0 ** 2 * res.dof:.1f}, largest |w| {np.max(np.abs(ws)):.2f} "
-                      f"({sum(not a['w_test_passed'] for a in res.angles)} failing; "
-                      f"{len(res.angle_outliers)} rejected by data snooping)", markup=False)
-        for sid, o in res.orientations.items():
-            v, u = o["orientation_rad"], o["orientation_std_rad"]
-            console.print(f"  orientation of {sid}: " + ", ".join(
-                f"{n} {a:+.6f} rad (u {b * 1e6:.1f} µrad)" for n, a, b in zip("ωφκ", v, u)), markup=False)
+    for line in angle_lines(res):
+        console.print(line, markup=False)
     if res.reliability is not None:
         for line in reliability_lines(res):
             console.print(line, markup=False)
@@ -227,6 +218,24 @@ def print_summary(res, doc, out):
         listed = ("all of them (--observations)" if c["listing"] == "all" else
                   f"the {c['n_flagged']:,} that matter (rejected, failing w-tests, poorly controlled)")
         console.print(f"  {rec['n_rows']:,} observations in {rec['file']}; result.json lists {listed}", markup=False)
+
+
+def angle_lines(res) -> list[str]:
+    """The summary's lines on angle observations and the orientations of the set-ups."""
+    lines: list[str] = []
+    if not res.angles:
+        return lines
+    ws = np.array([a["w"] for a in res.angles])
+    vt = sum((a["residual_rad"] / a["sigma_rad"]) ** 2 for a in res.angles)
+    lines.append(f"  angles: {len(res.angles)} observations, vᵀPv {vt:.1f} of "
+                 f"{res.sigma0 ** 2 * res.dof:.1f}, largest |w| {np.max(np.abs(ws)):.2f} "
+                 f"({sum(not a['w_test_passed'] for a in res.angles)} failing; "
+                 f"{len(res.angle_outliers)} rejected by data snooping)")
+    for sid, o in res.orientations.items():
+        v, u = o["orientation_rad"], o["orientation_std_rad"]
+        lines.append(f"  orientation of {sid}: " + ", ".join(
+            f"{n} {a:+.6f} rad (u {b * 1e6:.1f} µrad)" for n, a, b in zip("ωφκ", v, u)))
+    return lines
 
 
 def test_lines(res) -> list[str]:
