@@ -34,8 +34,8 @@ from multilat.network.general.determinability import Determinability, analyse
 from multilat.network.general.layout import Layout
 from multilat.network.general.observations import Block, Network
 
-__all__ = ["AdjustOptions", "GeneralResult", "System", "UndeterminedError", "adjust", "check_size",
-           "MAX_DENSE_UNKNOWNS"]
+__all__ = ["AdjustOptions", "GeneralResult", "System", "UndeterminedError", "adjust", "backend_for", "check_size",
+           "MAX_DENSE_UNKNOWNS", "SPARSE_ABOVE", "EXTERNAL_MAX_WORK"]
 
 
 class UndeterminedError(MultilatError):
@@ -263,6 +263,9 @@ MAX_DENSE_UNKNOWNS = 2000
 #: ``backend="auto"`` takes the sparse back end above this many free parameters (measured:
 #: benchmarks/bench_general_sparse.py, docs/general-network.md "Back ends")
 SPARSE_ABOVE = 300
+#: the sparse back end leaves the external reliability out (NaN, ``not_computed``) above this many
+#: rows x unknowns: it needs ``Q J_wᵀ`` for every row (about 10 s at 1e9 here)
+EXTERNAL_MAX_WORK = 1e9
 
 
 def backend_for(system: "System", options: AdjustOptions | None = None) -> str:
@@ -328,17 +331,21 @@ def _sparse_result(system: System, x, mask, record) -> GeneralResult:
 
     lin = _sparse_linearise(system, x, mask)
     det = lin.det
+    blocks = sparse_backend.cofactor(system, lin)
+    n = system.n_free                        # the dense Q its consumers read, only where it is small
+    q = blocks.times(np.eye(n)) if n <= MAX_DENSE_UNKNOWNS else None
+    heavy = system.n_rows * n > EXTERNAL_MAX_WORK
     dof = system.n_rows - system.n_free + det.defect
     vtpv = float(lin.rw @ lin.rw)
     lay = system.layout
     names = np.array(lay.names)
     return GeneralResult(
         ids=system.network.points.ids, xyz_m=x[lay.point_cols].copy(), parameters=x.copy(),
-        names=tuple(lay.names), free_names=tuple(names[lay.free]), cofactor=None,
+        names=tuple(lay.names), free_names=tuple(names[lay.free]), cofactor=None if q is None else 0.5 * (q + q.T),
         sigma0=float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan"), dof=int(dof), defect=det.defect,
         residuals=lin.r, redundancy=sparse_backend.redundancy(lin), block_rows=system.rows, iterations=record,
-        determinability=det, backend="sparse", blocks=sparse_backend.cofactor(system, lin),
-        not_computed=("external reliability",))
+        determinability=det, backend="sparse", blocks=blocks,
+        not_computed=("external reliability",) if heavy else ())
 
 
 def _result(system: System, x, mask, record) -> GeneralResult:

@@ -79,7 +79,8 @@ def classify(g: np.ndarray, s: np.ndarray, datum_mask: np.ndarray) -> Determinab
         left = g
         b = None
     else:
-        _, sv, vt = np.linalg.svd(gs, full_matrices=False)      # gs is (n, d), n >= d: vt is (d, d)
+        # gs is (n, d), n >= d: its right singular vectors are those of R in gs = QR (d x d: cheap for large n)
+        _, sv, vt = np.linalg.svd(np.linalg.qr(gs, mode="r"), full_matrices=False)
         sv_full = np.zeros(d)
         sv_full[:len(sv)] = sv
         ok = sv_full > 1e-6 * max(sv_full.max(), 1e-300)
@@ -109,7 +110,7 @@ def schur_null_space(S: np.ndarray, col_norms: np.ndarray, rtol: float = RTOL_SC
     norms, as the dense back end scales), and the square roots of its eigenvalues, descending."""
     scale = np.where(col_norms > 0, 1.0 / np.where(col_norms > 0, col_norms, 1.0), 1.0)
     ss = S * scale[:, None] * scale[None, :]
-    w, v = np.linalg.eigh(0.5 * (ss + ss.T)) if S.size else (np.zeros(0), np.zeros((0, 0)))
+    w, v = scipy.linalg.eigh(0.5 * (ss + ss.T)) if S.size else (np.zeros(0), np.zeros((0, 0)))
     wmax = w.max(initial=0.0)
     null = w <= rtol * wmax if wmax > 0 else np.ones_like(w, bool)
     return v[:, null], scale, np.sqrt(np.clip(w, 0, None))[::-1]

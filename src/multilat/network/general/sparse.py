@@ -214,7 +214,7 @@ def _g_inverse(S, col_norms, slots, ck, binv, x, n, points) -> Reduced:
         keep[perm[:d]] = False
     if keep.any():
         ss = S[np.ix_(keep, keep)] * scale[keep][:, None] * scale[keep][None, :]
-        qi = scipy.linalg.inv(0.5 * (ss + ss.T))
+        qi = np.linalg.inv(0.5 * (ss + ss.T))
         qk[np.ix_(keep, keep)] = qi * scale[keep][:, None] * scale[keep][None, :]
     g = np.zeros((n, d))
     if d:
