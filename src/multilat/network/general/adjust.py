@@ -264,8 +264,9 @@ MAX_DENSE_UNKNOWNS = 2000
 #: benchmarks/bench_general_sparse.py, docs/general-network.md "Back ends")
 SPARSE_ABOVE = 300
 #: the sparse back end leaves the external reliability out (NaN, ``not_computed``) above this many
-#: rows x unknowns: it needs ``Q J_wᵀ`` for every row (about 10 s at 1e9 here)
-EXTERNAL_MAX_WORK = 1e9
+#: rows x unknowns: it needs ``Q J_wᵀ`` for every row, O(R n) (about 0.3 s at 2e7 here; issue 29:
+#: no statistic above O(n log n) on a large network)
+EXTERNAL_MAX_WORK = 2e7
 
 
 def backend_for(system: "System", options: AdjustOptions | None = None) -> str:
