@@ -10,18 +10,23 @@ Timed (one process, numba warm, medians of ``--repeats``):
 * **distance**: ``multilat.network.adjust.adjust`` (Schur on targets, its statistics), ``snooping=False``,
   from the same approximate coordinates.
 
-Printed per size: both times, their ratio, the growth over the previous size, the load average.
+Printed per size: both CPU times (and wall), their ratio, the growth over the previous size, the
+load average.
 The dense crossover (``SPARSE_ABOVE``) is measured with ``--crossover``: both back ends on 8 stations x
 t targets for small t. ``python benchmarks/bench_general_sparse.py [--quick] [--crossover]``.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
+for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")      # one BLAS thread: CPU time is then the work, whatever the load
+
+import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import load_avg  # noqa: E402
@@ -59,12 +64,16 @@ def _distance(syn, obs):
 
 
 def _median(fn, repeats):
-    runs = []
+    """Median CPU seconds of the process over ``repeats`` calls (and the median wall seconds): on
+    this shared 2-core machine (load 8-14 during this session) wall times moved 20x between runs of
+    the same call; with one BLAS thread the CPU time is the work."""
+    cpu, wall = [], []
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         fn()
-        runs.append(time.perf_counter() - t0)
-    return float(np.median(runs))
+        cpu.append(time.process_time() - c0)
+        wall.append(time.perf_counter() - t0)
+    return float(np.median(cpu)), float(np.median(wall))
 
 
 def run(quick: bool = False, repeats: int = 3) -> list[dict]:
@@ -75,23 +84,23 @@ def run(quick: bool = False, repeats: int = 3) -> list[dict]:
     for t in sizes:
         syn, obs, pts = _networks(t)
         load = load_avg()
-        g = _median(lambda: _general(obs, pts), repeats)
-        d = _median(lambda: _distance(syn, obs), repeats)
+        g, gw = _median(lambda: _general(obs, pts), repeats)
+        d, dw = _median(lambda: _distance(syn, obs), repeats)
         rows.append({"name": f"general_sparse_s8_t{t}", "median_s": g, "baseline": "distance-only adjust",
                      "baseline_median_s": d, "ratio": g / d,
-                     "extra": {"rows": int(obs.distance_m.size), "load_avg": load,
+                     "extra": {"rows": int(obs.distance_m.size), "load_avg": load, "wall_s": [round(gw, 3), round(dw, 3)],
                                "growth_vs_previous": None if prev is None else round(g / prev, 2)}})
         prev = g
     return rows
 
 
-def crossover(sizes=(25, 50, 100, 200, 400), repeats: int = 3) -> list[tuple]:
+def crossover(sizes=(25, 50, 100, 200), repeats: int = 3) -> list[tuple]:
     """Dense and sparse back ends on the same networks (whole general adjustment)."""
     out = []
     for t in sizes:
         _, obs, pts = _networks(t)
-        dn = _median(lambda: _general(obs, pts, "dense"), repeats)
-        sp = _median(lambda: _general(obs, pts, "sparse"), repeats)
+        dn = _median(lambda: _general(obs, pts, "dense"), repeats)[0]
+        sp = _median(lambda: _general(obs, pts, "sparse"), repeats)[0]
         out.append((t, 3 * (t + 8) + 8, dn, sp, load_avg()))
     return out
 
@@ -99,10 +108,11 @@ def crossover(sizes=(25, 50, 100, 200, 400), repeats: int = 3) -> list[tuple]:
 if __name__ == "__main__":
     if "--crossover" in sys.argv:
         for t, n, dn, sp, load in crossover():
-            print(f"8 x {t:5d} targets ({n:5d} unknowns): dense {dn:7.3f} s, sparse {sp:7.3f} s, "
+            print(f"8 x {t:5d} targets ({n:5d} unknowns): dense {dn:7.3f} s CPU, sparse {sp:7.3f} s CPU, "
                   f"dense/sparse {dn / sp:5.2f}  (load {load})")
         sys.exit(0)
     for r in run(quick="--quick" in sys.argv):
         e = r["extra"]
-        print(f"{r['name']}: general {r['median_s']:.2f} s, distance path {r['baseline_median_s']:.2f} s, "
-              f"ratio {r['ratio']:.2f}, growth {e['growth_vs_previous']}, rows {e['rows']}, load {e['load_avg']}")
+        print(f"{r['name']}: general {r['median_s']:.2f} s CPU, distance path {r['baseline_median_s']:.2f} s CPU, "
+              f"ratio {r['ratio']:.2f}, growth {e['growth_vs_previous']}, rows {e['rows']}, wall {e['wall_s']}, "
+              f"load {e['load_avg']}")

@@ -260,9 +260,10 @@ def _step(jw, rw, det: Determinability):
 #: the dense back end's largest problem: its SVD of the (R, n) whitened Jacobian costs O(R n²) per
 #: iteration (measured under load here: n = 1000, R = 3000: 4.3 s; n = 2000, R = 6000: 39 s)
 MAX_DENSE_UNKNOWNS = 2000
-#: ``backend="auto"`` takes the sparse back end above this many free parameters (measured:
-#: benchmarks/bench_general_sparse.py, docs/general-network.md "Back ends")
-SPARSE_ABOVE = 300
+#: ``backend="auto"`` takes the sparse back end above this many free parameters (measured in CPU
+#: time, benchmarks/bench_general_sparse.py --crossover: sparse 1.35x faster at 107 unknowns, 3.7x at
+#: 182, 39x at 632; below, the dense one spares small networks the import of scipy.sparse)
+SPARSE_ABOVE = 200
 #: the sparse back end leaves the external reliability out (NaN, ``not_computed``) above this many
 #: rows x unknowns: it needs ``Q J_wᵀ`` for every row, O(R n) (about 0.3 s at 2e7 here; issue 29:
 #: no statistic above O(n log n) on a large network)

@@ -84,7 +84,7 @@ def assemble(system, x: np.ndarray):
             dense = np.zeros((b.n_rows, uc.size))
             np.add.at(dense, (lr, inv), lv)
             dense = scipy.linalg.solve_triangular(L, dense, lower=True)
-            lr, ci = np.nonzero(dense)
+            lr, ci = (a.ravel() for a in np.indices(dense.shape))     # structural: every entry kept
             lc, lv = uc[ci], dense[lr, ci]
         rows_all.append(lr + sl.start)
         cols_all.append(lc)
@@ -114,34 +114,48 @@ def _point_blocks(N, slots: np.ndarray) -> np.ndarray:
     return out
 
 
+def _graph(system, jw, slots: np.ndarray):
+    """The points' adjacency (CSR, points x points: two points share an observation row) and each
+    point's degree; structural (the kinds' columns do not change between iterations): built once
+    per system."""
+    cache = system.__dict__.setdefault("_sparse_graph", {})
+    if "adj" not in cache:
+        n_pts = slots.shape[0]
+        pt_of_col = np.full(system.n_free, -1)
+        has = slots >= 0
+        pt_of_col[slots[has]] = np.nonzero(has)[0]
+        coo = jw.tocoo()
+        p = pt_of_col[coo.col]
+        k = p >= 0
+        inc = sp.csr_matrix((np.ones(int(k.sum())), (coo.row[k], p[k])), shape=(jw.shape[0], n_pts))
+        adj = (inc.T @ inc).tocsr()
+        cache.update(adj=adj, deg=np.diff(adj.indptr))
+    return cache
+
+
 def partition(system, jw, N, slots: np.ndarray) -> np.ndarray:
-    """Indices of the points eliminated (module docstring): well conditioned, no shared row."""
-    n_pts = slots.shape[0]
-    pt_of_col = np.full(system.n_free, -1)
-    has = slots >= 0
-    pt_of_col[slots[has]] = np.nonzero(has)[0]
-    coo = jw.tocoo()
-    p = pt_of_col[coo.col]
-    k = p >= 0
-    inc = sp.csr_matrix((np.ones(int(k.sum())), (coo.row[k], p[k])), shape=(jw.shape[0], n_pts))
-    adj = (inc.T @ inc).tocsr()
-    deg = np.diff(adj.indptr)
+    """Indices of the points eliminated (module docstring): well conditioned, no shared row. The
+    greedy pass is redone only when the set of well-conditioned points changes between iterations."""
+    graph = _graph(system, jw, slots)
     blk = _point_blocks(N, slots)
     diag = np.einsum("pii->pi", blk)
-    pos = np.all(diag > 0, axis=1) & has.any(1)
+    pos = np.all(diag > 0, axis=1) & (slots >= 0).any(1)
     scale = 1.0 / np.sqrt(np.where(diag > 0, diag, 1.0))
     w = np.linalg.eigvalsh(blk * scale[:, :, None] * scale[:, None, :])
     good = pos & (w[:, 0] >= RCOND_BLOCK * w[:, -1])
+    if "good" in graph and np.array_equal(graph["good"], good):
+        return graph["taken"]
     cand = np.flatnonzero(good)
-    order = cand[np.argsort(deg[cand], kind="stable")]
-    taken = np.zeros(n_pts, bool)
-    blocked = np.zeros(n_pts, bool)
-    ind, ptr = adj.indices, adj.indptr
+    order = cand[np.argsort(graph["deg"][cand], kind="stable")]
+    taken = np.zeros(slots.shape[0], bool)
+    blocked = np.zeros(slots.shape[0], bool)
+    ind, ptr = graph["adj"].indices, graph["adj"].indptr
     for q in order:
         if not blocked[q]:
             taken[q] = True
             blocked[ind[ptr[q]:ptr[q + 1]]] = True
-    return np.flatnonzero(taken)
+    graph.update(good=good, taken=np.flatnonzero(taken))
+    return graph["taken"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -335,7 +349,7 @@ def cofactor(system, lin: Linearised) -> SparseCofactor:
     for lo in range(0, me, step):
         hi = min(lo + step, me)
         xs = red.x[3 * lo:3 * hi].toarray()
-        q = red.binv[lo:hi] + np.einsum("pak,kl,pbl->pab", xs.reshape(hi - lo, 3, -1), red.qk,
+        q = red.binv[lo:hi] + np.einsum("pak,pbk->pab", (xs @ red.qk).reshape(hi - lo, 3, -1),
                                         xs.reshape(hi - lo, 3, -1))
         if lin.h is not None:
             f = np.where(valid[3 * lo:3 * hi], flat[3 * lo:3 * hi], 0)
