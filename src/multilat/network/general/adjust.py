@@ -1,4 +1,6 @@
-"""Least-squares adjustment of a general network: Gauss-Newton on the whitened system, dense back end.
+"""Least-squares adjustment of a general network: Gauss-Newton on the whitened system; the dense back
+end here, the sparse one (points eliminated by Schur complement) in :mod:`.sparse`, chosen by
+``AdjustOptions.backend`` (``auto``: dense up to :data:`SPARSE_ABOVE` free parameters).
 
 Every block of observations is whitened by the Cholesky factor of its covariance (``C = L L^T``:
 ``r_w = L^-1 r``, ``J_w = L^-1 J``), so correlated blocks (vectors, levelling lines, observed
