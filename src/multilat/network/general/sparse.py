@@ -89,10 +89,13 @@ def assemble(system, x: np.ndarray):
         rows_all.append(lr + sl.start)
         cols_all.append(lc)
         vals_all.append(lv)
-    cat = (lambda a, t: np.concatenate(a) if a else np.zeros(0, t))
-    jw = sp.csr_matrix((cat(vals_all, float), (cat(rows_all, int), cat(cols_all, int))),
+    jw = sp.csr_matrix((_cat(vals_all, float), (_cat(rows_all, int), _cat(cols_all, int))),
                        shape=(system.n_rows, system.n_free))
     return r, system.whiten(r), jw
+
+
+def _cat(parts: list, dtype) -> np.ndarray:
+    return np.concatenate(parts) if parts else np.zeros(0, dtype)
 
 
 def _point_slots(system) -> np.ndarray:
