@@ -96,7 +96,7 @@ def document(pred, source: str, fmt: str) -> dict:
         points[p] = {"xyz_m": res.xyz_m[i], "status": status_words(pts.status[i]),
                      "xyz_std_m": np.sqrt(np.clip(np.diag(cov), 0, None)), "cov_m2": cov,
                      "semi_axes_95_m": st.semi_axes_95_m[i]}
-    std = np.sqrt(np.clip(np.diag(res.cofactor), 0, None))
+    std = np.sqrt(np.clip(res.cofactor_diagonal(), 0, None))
     params = {n: {"std": float(s), "unit": "rad" if n.split(":")[0] in ("orientation", "omega", "phi", "kappa")
                   else ("1" if n.startswith("scale:") else "m")}
               for n, s in zip(res.free_names, std) if n[:2] not in ("x:", "y:", "z:")}

@@ -1,4 +1,6 @@
-"""Least-squares adjustment of a general network: Gauss-Newton on the whitened system, dense back end.
+"""Least-squares adjustment of a general network: Gauss-Newton on the whitened system; the dense back
+end here, the sparse one (points eliminated by Schur complement) in :mod:`.sparse`, chosen by
+``AdjustOptions.backend`` (``auto``: dense up to :data:`SPARSE_ABOVE` free parameters).
 
 Every block of observations is whitened by the Cholesky factor of its covariance (``C = L L^T``:
 ``r_w = L^-1 r``, ``J_w = L^-1 J``), so correlated blocks (vectors, levelling lines, observed
@@ -34,8 +36,8 @@ from multilat.network.general.determinability import Determinability, analyse
 from multilat.network.general.layout import Layout
 from multilat.network.general.observations import Block, Network
 
-__all__ = ["AdjustOptions", "GeneralResult", "System", "UndeterminedError", "adjust", "check_size",
-           "MAX_DENSE_UNKNOWNS"]
+__all__ = ["AdjustOptions", "GeneralResult", "System", "UndeterminedError", "adjust", "backend_for", "check_size",
+           "MAX_DENSE_UNKNOWNS", "SPARSE_ABOVE", "EXTERNAL_MAX_WORK"]
 
 
 class UndeterminedError(MultilatError):
@@ -56,15 +58,20 @@ class AdjustOptions:
     datum : "auto" | "free" | "fixed"  ``auto``: inner constraints on the points flagged
         ``constrained`` if any, else the fixed points alone; ``free``: on every point's free
         coordinates; ``fixed``: no inner constraints (a defect is an error)
+    backend : "auto" | "dense" | "sparse"  ``auto``: dense up to :data:`SPARSE_ABOVE` free
+        parameters, sparse above (:mod:`.sparse`); the others force one (tests, comparisons)
     """
 
     max_iterations: int = 50
     step_tolerance: float = 1e-10
     datum: str = "auto"
+    backend: str = "auto"
 
     def __post_init__(self):
         if self.datum not in ("auto", "free", "fixed"):
             raise MultilatError(f"datum={self.datum!r} must be 'auto', 'free' or 'fixed'")
+        if self.backend not in ("auto", "dense", "sparse"):
+            raise MultilatError(f"backend={self.backend!r} must be 'auto', 'dense' or 'sparse'")
         if self.max_iterations < 1 or not self.step_tolerance > 0:
             raise MultilatError("max_iterations must be >= 1 and step_tolerance > 0")
 
@@ -74,11 +81,16 @@ class GeneralResult:
     """ids : point ids; xyz_m : (n, 3) adjusted coordinates (held ones as given)
     parameters : (n_full,) adjusted full parameter vector; names : its parameter names
     free_names : names of the free parameters, the order of ``cofactor``
-    cofactor : (n_free, n_free) Q (covariance with σ0 a priori = 1)
+    cofactor : (n_free, n_free) Q (covariance with σ0 a priori = 1); None from the sparse back end,
+        which keeps Q in blocks (``blocks``): use :meth:`point_cofactor`, :meth:`cofactor_diagonal`,
+        :meth:`cofactor_times`, :meth:`cofactor_block`, which serve both back ends
     sigma0 : a-posteriori standard deviation of unit weight; dof : degrees of freedom; defect : datum defect
     residuals : (R,) observed - adjusted per row, in network order of the blocks; redundancy : (R,)
     block_rows : per block the slice of its rows; iterations : tuple of (max |step|, vᵀPv) per iteration
     determinability : the analysis at the solution
+    backend : "dense" or "sparse";  blocks : the sparse back end's :class:`.sparse.SparseCofactor` (None if dense)
+    not_computed : names of the statistics this result cannot serve (the sparse back end: the
+        external reliability, which needs ``Q`` times every row)
     """
 
     ids: tuple
@@ -95,9 +107,35 @@ class GeneralResult:
     block_rows: tuple
     iterations: tuple
     determinability: Determinability
+    backend: str = "dense"
+    blocks: object = None
+    not_computed: tuple = ()
+
+    def cofactor_diagonal(self) -> np.ndarray:
+        """(n_free,) the cofactors of the free parameters (variances with σ0 a priori = 1)."""
+        return np.diag(self.cofactor).copy() if self.blocks is None else self.blocks.diagonal()
+
+    def cofactor_times(self, m: np.ndarray) -> np.ndarray:
+        """``Q m`` for m (n_free,) or (n_free, c) (the sparse back end: one solve, no Q formed)."""
+        return self.cofactor @ m if self.blocks is None else self.blocks.times(np.asarray(m, float))
+
+    def cofactor_block(self, cols) -> np.ndarray:
+        """(c, c) cofactor of a few free columns ``cols``."""
+        cols = np.asarray(cols, int)
+        if self.blocks is None:
+            return self.cofactor[np.ix_(cols, cols)]
+        e = np.zeros((len(self.free_names), cols.size))
+        e[cols, np.arange(cols.size)] = 1.0
+        return self.blocks.times(e)[cols]
 
     def point_cofactor(self, pid: str) -> np.ndarray:
         """(3, 3) cofactor of a point's coordinates (zero rows/columns for held coordinates)."""
+        if self.blocks is not None:
+            ix = self.__dict__.get("_ix")
+            if ix is None:
+                ix = {p: k for k, p in enumerate(self.ids)}
+                object.__setattr__(self, "_ix", ix)
+            return self.blocks.point[ix[pid]].copy()
         idx = {n: k for k, n in enumerate(self.free_names)}
         cols = [idx.get(f"{c}:{pid}", -1) for c in "xyz"]
         q = np.zeros((3, 3))
@@ -117,7 +155,8 @@ class System:
         blocks = list(network.blocks) + _weighted_block(network.points)
         self.blocks = tuple(blocks)
         self.cols = [kinds_registry.kind(b.kind).register(b, self.layout) for b in blocks]
-        self.chol = [b.whitener() for b in blocks]
+        # the Cholesky factor of a correlated block; None for independent rows (no (R, R) diagonal)
+        self.chol = [b.whitener() if b.cov is not None else None for b in blocks]
         bounds = np.cumsum([0] + [b.n_rows for b in blocks])
         self.rows = tuple(slice(int(a), int(c)) for a, c in zip(bounds[:-1], bounds[1:]))
         self.n_rows = int(bounds[-1])
@@ -223,16 +262,31 @@ def _step(jw, rw, det: Determinability):
 #: the dense back end's largest problem: its SVD of the (R, n) whitened Jacobian costs O(R n²) per
 #: iteration (measured under load here: n = 1000, R = 3000: 4.3 s; n = 2000, R = 6000: 39 s)
 MAX_DENSE_UNKNOWNS = 2000
+#: ``backend="auto"`` takes the sparse back end above this many free parameters (measured in CPU
+#: time, benchmarks/bench_general_sparse.py --crossover: sparse 1.35x faster at 107 unknowns, 3.7x at
+#: 182, 39x at 632; below, the dense one spares small networks the import of scipy.sparse)
+SPARSE_ABOVE = 200
+#: the sparse back end leaves the external reliability out (NaN, ``not_computed``) above this many
+#: rows x unknowns: it needs ``Q J_wᵀ`` for every row, O(R n) (about 0.3 s at 2e7 here; issue 29:
+#: no statistic above O(n log n) on a large network)
+EXTERNAL_MAX_WORK = 2e7
 
 
-def check_size(system: "System") -> None:
-    """Refuse, in one line, a network larger than the dense back end takes (never a silent hour)."""
-    if system.n_free > MAX_DENSE_UNKNOWNS:
+def backend_for(system: "System", options: AdjustOptions | None = None) -> str:
+    """"dense" or "sparse": the option, or by size for ``auto``."""
+    b = (options or AdjustOptions()).backend
+    return b if b != "auto" else ("sparse" if system.n_free > SPARSE_ABOVE else "dense")
+
+
+def check_size(system: "System", options: AdjustOptions | None = None) -> None:
+    """Refuse, in one line, a network larger than the dense back end takes when it is the one chosen
+    (never a silent hour); the sparse back end bounds its reduced system itself (:mod:`.sparse`)."""
+    if backend_for(system, options) == "dense" and system.n_free > MAX_DENSE_UNKNOWNS:
         n_pts = len(system.network.points.ids)
         raise MultilatError(
             f"the general model's dense back end takes at most {MAX_DENSE_UNKNOWNS} unknowns; this network has "
-            f"{system.n_free} ({n_pts} points, {system.n_rows} observation rows): a distance-only network of "
-            "any size is adjusted by --model multilateration (sparse); no sparse general back end yet")
+            f"{system.n_free} ({n_pts} points, {system.n_rows} observation rows): use the sparse back end "
+            "(backend='sparse' or 'auto')")
 
 
 def adjust(network: Network, *, options: AdjustOptions | None = None) -> GeneralResult:
@@ -240,7 +294,8 @@ def adjust(network: Network, *, options: AdjustOptions | None = None) -> General
     :func:`multilat.network.general.approximate.approximate`)."""
     opt = options or AdjustOptions()
     system = System(network)
-    check_size(system)
+    check_size(system, opt)
+    sparse = backend_for(system, opt) == "sparse"
     pts = network.points
     if np.any(~np.isfinite(pts.xyz_m)):
         i = int(np.argwhere(~np.isfinite(pts.xyz_m))[0][0])
@@ -251,7 +306,11 @@ def adjust(network: Network, *, options: AdjustOptions | None = None) -> General
     free = system.layout.free
     record = []
     for _ in range(opt.max_iterations):
-        _, rw, _, _, dx, _ = system.linearise(x, mask)
+        if sparse:
+            lin = _sparse_linearise(system, x, mask)
+            rw, dx = lin.rw, lin.dx
+        else:
+            _, rw, _, _, dx, _ = system.linearise(x, mask)
         x[free] += dx
         record.append((float(np.abs(dx).max(initial=0.0)), float(rw @ rw)))
         if record[-1][0] < opt.step_tolerance:
@@ -259,7 +318,38 @@ def adjust(network: Network, *, options: AdjustOptions | None = None) -> General
     else:
         raise MultilatError(f"the adjustment did not converge in {opt.max_iterations} iterations (last step "
                             f"{record[-1][0]:.3g}, vTPv {record[-1][1]:.6g})")
-    return _result(system, x, mask, tuple(record))
+    return _sparse_result(system, x, mask, tuple(record)) if sparse else _result(system, x, mask, tuple(record))
+
+
+def _sparse_linearise(system: System, x, mask):
+    from multilat.network.general import sparse as sparse_backend      # scipy.sparse only when used
+
+    def undetermined(det):
+        raise UndeterminedError(_undetermined_line(system, det), *_undetermined(system, det))
+
+    return sparse_backend.linearise(system, x, mask, undetermined)
+
+
+def _sparse_result(system: System, x, mask, record) -> GeneralResult:
+    from multilat.network.general import sparse as sparse_backend
+
+    lin = _sparse_linearise(system, x, mask)
+    det = lin.det
+    blocks = sparse_backend.cofactor(system, lin)
+    n = system.n_free                        # the dense Q its consumers read, only where it is small
+    q = blocks.times(np.eye(n)) if n <= MAX_DENSE_UNKNOWNS else None
+    heavy = system.n_rows * n > EXTERNAL_MAX_WORK
+    dof = system.n_rows - system.n_free + det.defect
+    vtpv = float(lin.rw @ lin.rw)
+    lay = system.layout
+    names = np.array(lay.names)
+    return GeneralResult(
+        ids=system.network.points.ids, xyz_m=x[lay.point_cols].copy(), parameters=x.copy(),
+        names=tuple(lay.names), free_names=tuple(names[lay.free]), cofactor=None if q is None else 0.5 * (q + q.T),
+        sigma0=float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan"), dof=int(dof), defect=det.defect,
+        residuals=lin.r, redundancy=sparse_backend.redundancy(lin), block_rows=system.rows, iterations=record,
+        determinability=det, backend="sparse", blocks=blocks,
+        not_computed=("external reliability",) if heavy else ())
 
 
 def _result(system: System, x, mask, record) -> GeneralResult:

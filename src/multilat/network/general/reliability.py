@@ -8,6 +8,8 @@ network, so the response is the one the inner constraints give). In the whitened
 the row is ``b_k = sqrt(λ0 / r_k)`` whitened units (× σ̂0 with the variance factor unknown), which for an
 independent row is ``MDB_k / σ_k`` (as :func:`multilat.network.reliability.external_shifts` on the
 distance path). A correlated block's rows are the decorrelated ones (the convention of the w-tests).
+The sparse back end on a large network (:data:`.adjust.EXTERNAL_MAX_WORK`) does not compute it (NaN,
+listed in the result's ``not_computed``): it costs ``rows x unknowns``.
 
 Reported per row: the largest point shift ``max_p |∇x_k,p|`` (metres, over the three coordinates of
 every point; a held coordinate does not move) and which point, by
@@ -23,16 +25,26 @@ import numpy as np
 from multilat.network import statistics as st
 from multilat.network.reliability import largest_point_shift
 
-__all__ = ["whitened_jacobian", "point_columns", "external_shifts", "mdb_whitened", "BATCH"]
+__all__ = ["whitened_jacobian", "dense_rows", "point_columns", "external_shifts", "mdb_whitened", "BATCH"]
 
 #: rows per batch of the product ``Q J_wᵀ`` (memory: n_free × BATCH floats)
 BATCH = 2048
 
 
-def whitened_jacobian(system, result) -> np.ndarray:
-    """``J_w`` (R, n_free) at the adjusted parameters of ``result``."""
+def whitened_jacobian(system, result):
+    """``J_w`` (R, n_free) at the adjusted parameters of ``result``: dense, or CSR when the sparse
+    back end kept no dense cofactor matrix (a large network)."""
+    if result.cofactor is None:
+        from multilat.network.general.sparse import assemble
+        return assemble(system, result.parameters)[2]
     _, jac = system.evaluate(result.parameters)
     return system.whiten(jac)
+
+
+def dense_rows(jw, idx) -> np.ndarray:
+    """Rows ``idx`` of a dense or sparse ``J_w`` as a dense array."""
+    sub = jw[idx]
+    return sub.toarray() if hasattr(sub, "toarray") else np.asarray(sub)
 
 
 def point_columns(result) -> np.ndarray:
@@ -53,13 +65,15 @@ def external_shifts(result, jw: np.ndarray, bias_w: np.ndarray, *, batch: int = 
     shift, point = np.full(R, np.inf), [""] * R
     if R == 0 or cols.size == 0:
         return np.zeros(R), tuple(point)
+    if "external reliability" in result.not_computed:      # the sparse back end on a large network
+        return np.full(R, np.nan), tuple(point)
     b = np.asarray(bias_w, float)
     ok = np.isfinite(b)
-    Q = result.cofactor
+    nf = len(result.free_names)
     for lo in range(0, R, batch):
         hi = min(lo + batch, R)
-        D = np.zeros((Q.shape[0] + 1, hi - lo))
-        D[:-1] = Q @ jw[lo:hi].T                       # the response to one whitened unit in each row
+        D = np.zeros((nf + 1, hi - lo))
+        D[:-1] = result.cofactor_times(dense_rows(jw, slice(lo, hi)).T)   # response to one whitened unit per row
         D[:-1] *= np.where(ok[lo:hi], b[lo:hi], 0.0)
         norm, where = largest_point_shift(D[cols])     # (points, 3, k)
         shift[lo:hi] = np.where(ok[lo:hi], norm, np.inf)

@@ -175,11 +175,12 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
     gt = stats.global_test
     scale = res.sigma0 ** 2 if stats.variance_factor == "unknown" and np.isfinite(res.sigma0) else 1.0
     others = {}
+    qdiag = res.cofactor_diagonal()
     for k, name in enumerate(res.free_names):
         if name[:2] not in ("x:", "y:", "z:"):
             kind = name.split(":", 1)[0]
             others[name] = {"value": float(res.parameters[res.names.index(name)]),
-                            "std": float(np.sqrt(max(res.cofactor[k, k], 0.0) * scale)),
+                            "std": float(np.sqrt(max(qdiag[k], 0.0) * scale)),
                             "unit": {"offset": "m", "scale": "1"}.get(kind, "rad")}
     failing = [k for k in range(len(stats.passed)) if not stats.passed[k]]
     return {

@@ -148,12 +148,12 @@ def snoop(network: Network, *, options=None, strict: bool = False, alpha: float 
         jw = rel.whitened_jacobian(system, res)
         unit = correlated_rows(system, k)
         step["row"] = _label(system, k)
-        twins = _twins(jw, res.cofactor, stats.redundancy, k, unit)
+        twins = _twins(jw, res.cofactor_times, stats.redundancy, k, unit)
         if twins.size:
             unlocated = tuple(row_record(system, stats, int(q)) for q in np.concatenate([[k], twins]))
             reason = "perfectly correlated w-tests: the data cannot tell which observation is wrong"
             break
-        why = _guard(system, jw, res.cofactor, stats.redundancy, unit)
+        why = _guard(system, jw, res.cofactor_times, stats.redundancy, unit)
         if why:
             unlocated, reason = (row_record(system, stats, k),), why
             break
@@ -296,7 +296,7 @@ def _label(system: System, k: int) -> str:
 
 def _twins(jw, Q, red, k: int, unit) -> np.ndarray:
     """Rows outside ``unit`` whose w-test is perfectly correlated with row ``k``'s."""
-    c = jw @ (Q @ jw[k])                                   # row k of the hat matrix
+    c = jw @ Q(rel.dense_rows(jw, k).ravel())              # row k of the hat matrix (Q: Q times)
     out = st.correlated_with(c, np.clip(red, 0.0, None), k, TWIN_TOL)
     return out[~np.isin(out, unit)]
 
@@ -304,7 +304,7 @@ def _twins(jw, Q, red, k: int, unit) -> np.ndarray:
 def _guard(system: System, jw, Q, red, unit) -> str:
     """Why the rows ``unit`` must not be rejected ("" when they may). Removing rows that leave the
     design rank-deficient (a point undetermined) is for :func:`.run.adjust_network` to name."""
-    C = jw @ (Q @ jw[unit].T)                              # (R, u): the hat matrix's columns
+    C = jw @ Q(rel.dense_rows(jw, unit).T)                 # (R, u): the hat matrix's columns
     Rkk = np.eye(unit.size) - C[unit]
     if np.linalg.eigvalsh(Rkk).min() <= st.R_ZERO:
         return ""

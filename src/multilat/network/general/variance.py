@@ -114,7 +114,7 @@ def estimate(network: Network, *, grouping: str = "kind", options=None, max_iter
     S = None
     if system.n_rows <= vc.RIGOROUS_MAX_OBS:
         jw = rel.whitened_jacobian(system, res)
-        S = vc.helmert_sums(np.eye(system.n_rows) - jw @ res.cofactor @ jw.T, gi, ng)
+        S = vc.helmert_sums(np.eye(system.n_rows) - jw @ res.cofactor_times(rel.dense_rows(jw, slice(None)).T), gi, ng)
     var, method = vc.factor_variances(S, red)
     n = np.bincount(gi[gi >= 0], minlength=ng)
     from scipy.special import ndtr
