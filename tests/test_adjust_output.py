@@ -210,3 +210,14 @@ def test_the_general_path_meets_observations_by_listing_every_row():
     b = _doc(["adjust", str(net), "--model", "general", "--json", "--observations"])
     assert a["schema"] == b["schema"] == "multilat.adjust-general/1"
     assert a["observations"] == b["observations"] and len(b["observations"]) == b["n_obs"]
+
+
+def test_help_names_the_parquet_extra():
+    """Rich markup would eat ``[parquet]`` (it reads it as a style tag): the help must show the extra to install."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "COLUMNS": "400", "NO_COLOR": "1"}
+    r = subprocess.run([sys.executable, "-m", "multilat", "adjust", "--help"], capture_output=True, text=True, env=env)
+    assert r.returncode == 0 and "pip install 'multilat[parquet]'" in " ".join(r.stdout.split())

@@ -166,7 +166,7 @@ def adjust_command(
     tables: str = typer.Option("auto", "--tables",
                                help="With --out: the tables (stations, targets, observations, reference "
                                     "lengths) as csv or parquet (needs pyarrow: pip install "
-                                    "'multilat[parquet]'; compact and fast for 10^5-10^6 rows); auto (the "
+                                    "'multilat\\[parquet]'; compact and fast for 10^5-10^6 rows); auto (the "
                                     "default): the observations as parquet when pyarrow is installed, "
                                     "else csv, the others as csv."),
     all_observations: bool = typer.Option(False, "--observations",
