@@ -6,8 +6,8 @@ Monte Carlo, in Python: :func:`test_an_adaptive_propagation_follows_the_model`) 
 (b) validate with its typed model (:mod:`multilat.schemas.models`, strict: undeclared keys and wrong
 types refused) and against the shipped JSON Schema (jsonschema, draft 2020-12), and (c) use only names of
 the convention (:func:`multilat.vocabulary.document_problems`). The shipped schema files are what the
-models generate (regenerate with ``python tools/write_schemas.py``); ``adjust`` (no model yet) keeps
-its inferred file. The mutation tests show that each check fails on the faults it is there for.
+models generate (regenerate with ``python tools/write_schemas.py``); a run with ``--out DIR`` has its
+``DIR/result.json`` checked too. The mutation tests show that each check fails on the faults it is there for.
 """
 
 from __future__ import annotations
@@ -42,7 +42,18 @@ SAMPLES = {
                ["adjust", f"{_N}/mixed/obs.csv", "--variance-components", "kind"],
                ["adjust", str(ROOT / "tests" / "data" / "angles" / "mixed_azimuth_blunder.csv")],
                ["adjust", f"{_EX}/campaign/raw.csv", "-e", f"{_EX}/campaign/environment.csv", "--heights",
-                f"{_EX}/campaign/heights.csv", "--average-repeats"]],
+                f"{_EX}/campaign/heights.csv", "--average-repeats"],
+               ["adjust", f"{_N}/small_volume_obs.csv", "--observations", "--out", "{tmp}/adj", "--tables", "csv"],
+               ["adjust", str(ROOT / "tests" / "data" / "network" / "weak_target.csv")],
+               ["adjust", "{blunder.csv}"],
+               ["adjust", "{unlocated.csv}", "--points", f"{_N}/small_volume_points.csv"],
+               ["adjust", f"{_N}/sequential/obs.csv", "--references", "{bars.csv}", "--scale-bars", "--points",
+                "{ctrl.csv}", "--datum", "control", "--out", "{tmp}/bars"],
+               ["adjust", f"{_N}/small_volume_obs.csv", "--references", f"{_N}/small_volume_refs.csv",
+                "--scale-bars", "--scales", "--variance-factor", "unknown"],
+               ["adjust", f"{_N}/small_volume_obs.csv", "--datum", "321:A,B,C", "--no-snooping", "--cost",
+                "squared"],
+               ["adjust", "{coplanar.csv}"]],
     "adjust-general": [["adjust", f"{_G}/direction_sets.xml"], ["adjust", f"{_G}/vectors.xml"],
                        ["adjust", f"{_G}/partly_fixed.xml", "--variance-factor", "unknown"],
                        ["adjust", f"{_G}/two_trackers.xml"],
@@ -93,11 +104,31 @@ def _prepare(name: str, tmp: Path) -> Path:
     """An input made from a shipped one: ``blunder.xml`` (a slope distance of direction_sets.xml + 25 mm,
     20 σ: rejected by data snooping), ``unlocated.xml`` (a height difference of height_differences.xml
     + 20 mm: its w-test equals its neighbour's, not located), ``select.toml`` (cube.toml with the fewest
-    targets for a wanted U95)."""
+    targets for a wanted U95); for ``adjust``: ``blunder.csv`` (a distance of sequential/obs.csv + 100 µm,
+    20 σ: rejected), ``unlocated.csv`` (C->9 of the small volume + 94 µm, 20 σ: its target's 4 w-tests
+    are perfectly correlated, not located), ``bars.csv`` (two reference lengths of the sequential
+    network, true to 1 µm, σ 3 µm), ``ctrl.csv`` (four of its points, true, σ 30 µm per axis) and
+    ``coplanar.csv`` (6 stations, 20 targets in one plane: every station mirror-ambiguous)."""
+    if name == "coplanar.csv":                  # every target in one plane: the stations mirror-ambiguous
+        from test_ambiguous_geometry import _network
+
+        from multilat.network.files import write_observations
+
+        write_observations(tmp / name, _network()[0])
+        return tmp / name
+    if name in ("bars.csv", "ctrl.csv"):
+        rows = {r.split(",")[0]: r for r in (_N / "sequential" / "truth.csv").read_text().splitlines()[1:]}
+        text = ("target_a,target_b,length_m,u_m\nP1,P7,0.449172,3e-6\nP3,P12,0.933467,3e-6\n" if name == "bars.csv"
+                else "point,x_m,y_m,z_m,sx_m,sy_m,sz_m\n" + "".join(rows[p] + ",3e-5,3e-5,3e-5\n"
+                                                                    for p in ("S1", "S4", "S6", "P5")))
+        (tmp / name).write_text(text, "utf-8")
+        return tmp / name
     edits = {"blunder.xml": (_G / "direction_sets.xml", 'val="225.758826"', 'val="225.783826"'),
              "unlocated.xml": (_G / "height_differences.xml", 'val="1.300213"', 'val="1.320213"'),
              "select.toml": (_EX / "design" / "cube.toml", 'name = "max_u95"',
-                             'name = "max_u95"\ntarget_u95_m = 1.0e-4')}
+                             'name = "max_u95"\ntarget_u95_m = 1.0e-4'),
+             "blunder.csv": (_N / "sequential" / "obs.csv", "S1,P2,T1,2.687464099,", "S1,P2,T1,2.687564099,"),
+             "unlocated.csv": (_N / "small_volume_obs.csv", "C,9,0.5948152,", "C,9,0.5949092,")}
     src, old, new = edits[name]
     text = src.read_text("utf-8")
     assert text.count(old) == 1, (src, old)
@@ -124,10 +155,16 @@ _DOCS: dict = {}
 
 
 def _doc(cmd, i, tmp_path):
+    """The ``--json`` document of sample ``i`` of ``cmd``; a run with ``--out DIR`` also leaves
+    ``DIR/result.json`` (``_DOCS[(cmd, i, "out")]``)."""
     if (cmd, i) not in _DOCS:
         d = tmp_path / f"{cmd}-{i}"
         d.mkdir()
-        _DOCS[(cmd, i)] = run_sample(SAMPLES[cmd][i], d)
+        args = SAMPLES[cmd][i]
+        _DOCS[(cmd, i)] = run_sample(args, d)
+        if "--out" in args and cmd == "adjust":
+            out = Path(args[args.index("--out") + 1].replace("{tmp}", str(d)))
+            _DOCS[(cmd, i, "out")] = json.loads((out / "result.json").read_text("utf-8"))
     return _DOCS[(cmd, i)]
 
 
@@ -141,14 +178,16 @@ CASES = [(c, i) for c in SAMPLES for i in range(len(SAMPLES[c]))]
 
 @pytest.mark.parametrize("cmd,i", CASES, ids=[f"{c}-{i}" for c, i in CASES])
 def test_every_command_json_follows_its_model_schema_and_the_vocabulary(cmd, i, tmp_path):
-    doc = _doc(cmd, i, tmp_path)
-    assert doc["schema"] == stamped_id(cmd)
-    assert list(doc)[0] == "schema"
-    if cmd in MODELS:
+    docs = [_doc(cmd, i, tmp_path)] + ([_DOCS[(cmd, i, "out")]] if (cmd, i, "out") in _DOCS else [])
+    for doc in docs:                                # stdout's and, with --out, DIR/result.json
+        assert doc["schema"] == stamped_id(cmd)
+        assert list(doc)[0] == "schema"
         model(cmd).model_validate(doc)              # strict: raises on an undeclared key or a wrong type
-    errors = sorted(_validator(cmd).iter_errors(doc), key=lambda e: list(e.path))
-    assert not errors, "; ".join(f"{list(e.path)}: {e.message[:120]}" for e in errors[:5])
-    assert document_problems(doc) == []
+        errors = sorted(_validator(cmd).iter_errors(doc), key=lambda e: list(e.path))
+        assert not errors, "; ".join(f"{list(e.path)}: {e.message[:120]}" for e in errors[:5])
+        assert document_problems(doc) == []
+    if len(docs) == 2:                              # the file is the printed document (both list the tables)
+        assert docs[1]["tables"] and docs[1] == docs[0]
 
 
 def test_the_samples_reach_the_optional_parts(tmp_path):
@@ -158,6 +197,14 @@ def test_the_samples_reach_the_optional_parts(tmp_path):
     assert "azimuth_sense" in ag[1]
     assert "target_selection" in _doc("design", 2, tmp_path) and "simulation" in _doc("design", 1, tmp_path)
     assert "readings" in _doc("propagate", 2, tmp_path)
+    ad = [_doc("adjust", i, tmp_path) for i in range(len(SAMPLES["adjust"]))]
+    assert ad[0]["reference_lengths"] and ad[1]["variance_components"] and ad[2]["angles"]
+    assert ad[3]["angle_outliers"] and ad[3]["azimuth_sense"] and ad[4]["with_correlations"] and ad[4]["repeats"]
+    assert ad[5]["observation_counts"]["listing"] == "all" and ad[6]["excluded"] and ad[6]["excluded_observations"]
+    assert ad[7]["outliers"] and ad[8]["unlocated"] and ad[8]["w_failures"]
+    assert ad[9]["scale_bars"] and ad[9]["weighted_control"] and _DOCS[("adjust", 9, "out")]["tables"]
+    assert ad[10]["tests"]["tau_critical"] is not None and "scale" in next(iter(ad[10]["stations"].values()))
+    assert ad[11]["reliability"] is None and ad[11]["global_test"]["statistic"] is None and ad[12]["ambiguous"]
     assert {_doc("import", i, tmp_path)["format"] for i in (0, 2, 3)} == {"gama-adjusted", "starnet", "gama"}
 
 
@@ -182,7 +229,7 @@ def test_an_adaptive_propagation_follows_the_model(tmp_path):
 def test_every_command_has_a_schema_a_model_and_a_sample():
     jsonschema = pytest.importorskip("jsonschema")
     assert set(SAMPLES) == set(COMMANDS)
-    assert set(MODELS) == set(COMMANDS) - {"adjust"}          # adjust: its model comes with schema adjust/2
+    assert set(MODELS) == set(COMMANDS)
     for c in COMMANDS:
         s = load(c)
         assert s["$id"] == stamped_id(c)
@@ -221,6 +268,19 @@ FAULTS = [
     ("air", ["inputs"], "co2_ppm", "450"),
     ("import", [], "format", "other"),
     ("import", [], "dof", 3),                                             # gama-adjusted's key on starnet
+    ("adjust", [], "schema", "multilat.adjust/1"),                        # the document before the rows' split
+    ("adjust", [], "observations", _DROP),
+    ("adjust", ["targets", "*"], "n_obs", 4.5),
+    ("adjust", ["targets", "*"], "n_obs", 4.0),
+    ("adjust", ["global_test"], "dof", True),
+    ("adjust", ["stations", "*"], "xyz_m", [0.0, 0.0]),
+    ("adjust", ["stations", "*"], "cov_m2", [[0.0] * 3] * 2),
+    ("adjust", ["targets", "*"], "cov_m2", [[None] * 3] * 3),
+    ("adjust", ["targets", "*"], "sigma_0", 1.0),
+    ("adjust", ["largest_w", 0], "u_m", 1e-6),                           # a replaced name in a row
+    ("adjust", ["reference_lengths", 0], "length_std_m", "4e-6"),
+    ("adjust", ["observation_counts"], "listing", "some"),
+    ("adjust", ["initial"], "method", None),
 ]
 
 
@@ -258,8 +318,13 @@ def test_validate_names_the_key_that_breaks_the_contract(tmp_path):
         validate(doc)
     with pytest.raises(MultilatError, match="not a multilat document"):
         validate({"schema": "other/1"})
-    with pytest.raises(MultilatError, match="no document model for 'adjust'"):
-        validate({"schema": "multilat.adjust/1"})
+    with pytest.raises(MultilatError, match="no document model for 'nothing'"):
+        validate({"schema": "multilat.nothing/1"})
+    doc = copy.deepcopy(_doc("adjust", 0, tmp_path))
+    validate(doc)
+    doc["observation_counts"]["n_listed"] = 1.5
+    with pytest.raises(MultilatError, match=r"^adjust document, key observation_counts\.n_listed: "):
+        validate(doc)
 
 
 def test_a_renamed_or_undeclared_key_fails(tmp_path):
@@ -319,6 +384,7 @@ def test_out_files_carry_the_schema(tmp_path, capsys):
     doc = json.loads((tmp_path / "a" / "result.json").read_text())
     assert doc["schema"] == stamped_id("adjust") == "multilat.adjust/2"
     assert _validator("adjust").is_valid(doc)
+    model("adjust").model_validate(doc)
     assert main(["propagate", "small-volume", "--trials", "1000", "--out", str(tmp_path / "p")]) == 0
     doc = json.loads((tmp_path / "p" / "summary.json").read_text())
     assert doc["schema"] == stamped_id("propagate")

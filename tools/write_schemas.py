@@ -2,9 +2,9 @@
 
     python tools/write_schemas.py            # rewrites src/multilat/schemas/<command>.json
 
-Every command with a model (:data:`multilat.schemas.models.MODELS`) gets the schema of
-:func:`multilat.schemas.generate`; ``adjust.json`` (no model yet) is left as it is. The tests fail while
-a shipped file differs from its model (tests/test_output_schema.py); read the diff before committing.
+Every command has a model (:data:`multilat.schemas.models.MODELS`) and gets the schema of
+:func:`multilat.schemas.generate`. The tests fail while a shipped file differs from its model
+(tests/test_output_schema.py); read the diff before committing.
 """
 
 from __future__ import annotations

@@ -12,8 +12,7 @@ model's schema, and validates every command's documents on the shipped examples 
 (strict: undeclared keys and wrong types refused) and with the shipped file. From Python,
 :func:`validate` checks a document against its model. A command's version (its
 model's ``schema`` literal and :data:`multilat.vocabulary.SCHEMA_VERSIONS`) is bumped when the shape
-of its document changes. ``adjust`` (the distance path's document) has no model yet: its file is the
-one inferred from sample runs.
+of its document changes.
 """
 
 from __future__ import annotations

@@ -3,9 +3,7 @@ Schemas are generated from (:func:`multilat.schemas.generate`).
 
 One module per command; :mod:`.base` holds the pieces they share (the strict base, numbers that may be
 null, fixed-length vectors, the id maps, the schema key). :data:`MODELS` maps a command to its
-document model. ``adjust`` (the distance path's document) has no model yet: its shipped schema is the
-inferred ``adjust.json`` until its model is written (a module ``adjust.py`` here and one line in
-:data:`MODELS`).
+document model (``adjust``: the distance path's document; ``adjust-general``: the general path's).
 
     >>> from multilat.schemas.models import model
     >>> model("propagate").model_validate(doc)          # raises pydantic.ValidationError when off contract
@@ -19,6 +17,7 @@ __all__ = ["MODELS", "model"]
 
 #: command -> "module:DocumentModel" (imported on first use)
 MODELS = {
+    "adjust": "adjust:AdjustDocument",
     "propagate": "propagate:PropagateDocument",
     "propagate-general": "propagate_general:PropagateGeneralDocument",
     "adjust-general": "adjust_general:AdjustGeneralDocument",
