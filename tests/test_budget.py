@@ -244,7 +244,7 @@ def test_demo_section_quick():
     sec = section(seed=1, quick=True)
     html = render("t", [sec])
     assert "Table I" in html and "Table II" in html and "61.24 mm" in html and "<img" in html
-    assert html.count("<table>") == 4
+    assert html.count("<table>") == 6           # Tables I-II, 2 group tables, the per-input budget and its sums
 
 
 def test_streamed_mode_matches_stratified(inst, res, monkeypatch):

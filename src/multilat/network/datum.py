@@ -36,7 +36,7 @@ from multilat.errors import MultilatError
 from multilat.network.model import Q
 
 __all__ = ["Datum", "parse_datum", "helmert_basis", "rigid_fit", "frame_321", "frame_axes", "apply_rigid",
-           "datum_matrices", "s_coefficients", "s_transform", "RIGID_FIT_ITERATIONS", "ABOUT_Z_COLUMNS"]
+           "datum_matrices", "s_coefficients", "s_factor", "s_transform", "RIGID_FIT_ITERATIONS", "ABOUT_Z_COLUMNS"]
 
 #: the columns of :func:`helmert_basis` left when the vertical is observed (levelled stations): the
 #: three translations and the rotation about z
@@ -216,6 +216,12 @@ def s_coefficients(G, E) -> np.ndarray:
     """``H = (Eᵀ G)⁻¹ Eᵀ`` (d, n) of the S-transformation ``S = I - G H`` (:func:`s_transform`), for
     products with ``S`` that never form it (the adjustment's covariance operator)."""
     return np.linalg.solve(E.T @ G, E.T)
+
+
+def s_factor(G, E) -> np.ndarray:
+    """``G (Eᵀ G)⁻¹`` (n, d): the S-transformation's other factor, ``S = I - s_factor(G, E) Eᵀ``
+    (:func:`s_transform`), for back ends that apply ``S`` through products (the general layer's sparse one)."""
+    return np.linalg.solve((E.T @ G).T, G.T).T
 
 
 def s_transform(G, E) -> np.ndarray:

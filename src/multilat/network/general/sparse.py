@@ -51,6 +51,7 @@ import scipy.linalg
 import scipy.sparse as sp
 
 from multilat.errors import MultilatError
+from multilat.network.datum import s_factor
 from multilat.network.general import kinds as kinds_registry
 from multilat.network.general.determinability import Determinability, classify, schur_null_space
 
@@ -281,7 +282,7 @@ def linearise(system, x_full: np.ndarray, mask: np.ndarray, undetermined) -> Lin
         B = det.constraints
         if B is None or B.shape[1] != det.defect:
             raise MultilatError("the datum points do not remove the datum defect of the observations")
-        h = red.null @ np.linalg.inv(B.T @ red.null)
+        h = s_factor(red.null, B)
         w = red.ginv(B)
         m = B.T @ w
         x0 = x0 - h @ (B.T @ x0)
