@@ -50,7 +50,7 @@ def runs(tmp_path_factory):
             "blunder": [str(_blunder(tmp)), "--levelled", "T1,T2", "--model", "general"]}
     out = {}
     for name, a in args.items():
-        rc, stdout, err = _run(["adjust", *a, "--json", "--report", str(tmp / f"{name}.html")])
+        rc, stdout, err = _run(["adjust", *a, "--json", "--observations", "--report", str(tmp / f"{name}.html")])
         assert rc == 0, (name, err)
         out[name] = ((tmp / f"{name}.html").read_text("utf-8"), json.loads(stdout), err, tmp / f"{name}.html")
     return out
