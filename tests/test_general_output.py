@@ -226,3 +226,18 @@ def test_python_listing_refuses_an_unknown_listing():
 
     with pytest.raises(MultilatError, match="observations listing must be 'flagged' or 'all'"):
         list_observations({"observations": [], "outliers": [], "excluded": []}, "some")
+
+
+def test_observations_does_not_keep_auto_off_the_general_path(capsys, tmp_path):
+    """--model auto with --observations: polar points the distance path would leave out still take the
+    general path (--observations applies there), every row listed."""
+    from test_general_csv import heads_tracker_polar
+
+    case = heads_tracker_polar(np.random.default_rng(11)).simulate(np.random.default_rng(12))
+    args = case.write(tmp_path)
+    rc, out, err = _main(capsys, *args, "--json", "--observations")
+    assert rc == 0 and "adjusted by the general model" in err, err
+    doc = json.loads(out)
+    assert doc["model"] == "general" and doc["notes"][0].startswith("--model auto")
+    c = doc["observation_counts"]
+    assert c["listing"] == "all" and len(doc["observations"]) == c["n_listed"] == c["n_obs"] == doc["n_obs"]

@@ -107,14 +107,15 @@ def test_sections_in_the_auditors_order(pages, name):
     assert [s["key"] for s in dom] == ORDER
     opts = next(t for t in section(dom, "run")["tables"] if t["caption"] == "Options")
     listed = {r[0]["text"] for r in opts["rows"]}
-    assert {"alpha", "strict"} <= listed and not listed & {"cost", "mdb_limit_sigma", "solver", "tables"}
+    assert {"alpha", "strict", "tables", "backend"} <= listed     # adjust-general/2: --tables, --backend apply
+    assert not listed & {"cost", "mdb_limit_sigma", "solver"}
     assert ("points" in listed) == (name != "station_control")   # a gama-local file carries its points
 
 
 @pytest.mark.parametrize("name", ["polar", "station_control", "blunder"])
 def test_verdicts_follow_the_numbers(pages, name):
     dom, doc = pages[name]
-    obs, crit = doc["observations"], doc["tests"]["critical"]
+    obs, crit = [o for o in doc["observations"] if not o["rejected"]], doc["tests"]["critical"]   # rows adjusted
     seen = set()
     for r in table(section(dom, "verdicts"), "verdicts")["rows"]:
         label, value, _, high, verdict = (c["text"] for c in r)

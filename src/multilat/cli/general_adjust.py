@@ -39,7 +39,8 @@ SCHEMA = "adjust-general"
 
 #: the adjust command's parameters that the general path reads
 APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method",
-           "alpha_family", "model", "snooping", "variance_components", "report", "tables", "backend")
+           "alpha_family", "model", "snooping", "variance_components", "report", "tables", "backend",
+           "all_observations")
 #: ... and on a multilat CSV network (``--model general``)
 APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offsets_um", "scales", "fixed_scale",
                          "scale_bar", "references", "levelled", "seed", "azimuth_sense")
@@ -51,7 +52,8 @@ BACKENDS = ("auto", "dense", "sparse")
 #: for a network its counting rules refuse, said in a warning), the distance-only path alone, or the
 #: general network layer
 MODELS = ("auto", "multilateration", "general")
-_OPTION = {"as_json": "--json", "fix_offsets_um": "--fix-offsets-um", "scale_bar": "--scale-bars",
+_OPTION = {"as_json": "--json", "all_observations": "--observations", "fix_offsets_um": "--fix-offsets-um",
+           "scale_bar": "--scale-bars",
            "snooping": "--snooping/--no-snooping"}
 #: why an option of the distance-only path is refused here (the default reason for the others)
 WHY_NOT = {

@@ -151,8 +151,12 @@ def not_computed_line(doc) -> list[str]:
     """One line naming the statistics the back end left out (``not_computed``), and why."""
     if not doc.get("not_computed"):
         return []
-    return [f"  not computed: {', '.join(doc['not_computed'])} ({doc['backend']} back end: {doc['n_obs']} rows x "
-            f"the unknowns is above the bound of an O(n log n) statistic; the JSON's fields are null)"]
+    import importlib
+
+    bound = importlib.import_module("multilat.network.general.adjust").EXTERNAL_MAX_WORK
+    return [f"  not computed: {', '.join(doc['not_computed'])} (the {doc['backend']} back end leaves it out above "
+            f"{bound:.0e} rows x unknowns, {doc['n_obs']} rows here: it needs Q Jᵀ for every row; its JSON fields "
+            "are null)"]
 
 
 def variance_lines(doc) -> list[str]:
