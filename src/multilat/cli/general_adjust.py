@@ -4,9 +4,10 @@ layer (:mod:`multilat.network.general`) from the command line: parse, call, prin
 Reached from the ``adjust`` command (:mod:`multilat.cli.network_cmd`) when its input is a gama-local
 file (suffix ``.xml`` / ``.gkf``, or a ``<gama-local>`` root element), or with ``--model general``
 on multilat's own observation CSV (:mod:`multilat.network.general.from_tables`). For a gama-local
-file the options that apply are ``--json``, ``--out DIR``, ``--report FILE.html``
+file the options that apply are ``--json``, ``--out DIR`` with ``--tables``, ``--observations``
+(:mod:`multilat.cli.general_output`), ``--report FILE.html``
 (:mod:`multilat.report.general_sections`), ``--alpha``, ``--variance-factor``, ``--test-method``,
-``--alpha-global`` and ``--strict``: the file itself carries the datum
+``--alpha-global``, ``--backend`` and ``--strict``: the file itself carries the datum
 (``fix=``/``adj=``), the σ (``stdev=`` and ``<points-observations>``) and the approximate
 coordinates. A CSV network also takes ``--points``, ``--datum free|control``, ``--sigma-um``,
 ``--instrument``, ``--fix-offsets-um``, ``--scales``, ``--fixed-scale``, ``--references`` with
