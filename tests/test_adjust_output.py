@@ -202,14 +202,16 @@ def test_listing_is_checked():
     assert len(result_to_json(res, observations="all")["observations"]) == res.obs.n_obs
 
 
-def test_the_general_path_meets_observations_by_listing_every_row():
-    """--model general lists every observation already (adjust-general/1): --observations is met, not
-    refused (nor passed on under another name)."""
+def test_the_general_path_lists_by_the_same_rule():
+    """--model general (adjust-general/2) lists the rows that matter, every row with --observations
+    (the rule itself: tests/test_general_output.py)."""
     net = Path(__file__).resolve().parents[1] / "examples" / "network" / "mixed" / "obs.csv"
     a = _doc(["adjust", str(net), "--model", "general", "--json"])
     b = _doc(["adjust", str(net), "--model", "general", "--json", "--observations"])
-    assert a["schema"] == b["schema"] == "multilat.adjust-general/1"
-    assert a["observations"] == b["observations"] and len(b["observations"]) == b["n_obs"]
+    assert a["schema"] == b["schema"] == "multilat.adjust-general/2"
+    assert a["observations"] == [o for o in b["observations"] if o["rejected"] or o["w_failed"]
+                                 or o["poorly_controlled"]]
+    assert len(b["observations"]) == b["observation_counts"]["n_obs"] == a["observation_counts"]["n_obs"]
 
 
 def test_help_names_the_parquet_extra():

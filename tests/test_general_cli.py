@@ -59,10 +59,10 @@ def _against_gama(doc_points, sigma0, dof, name):
 
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_example_cli_json_against_gama(name):
-    r = _cli(EX / f"{name}.xml", "--json")
+    r = _cli(EX / f"{name}.xml", "--json", "--observations")        # every row (adjust-general/2)
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
-    assert doc["schema"] == "multilat.adjust-general/1" and doc["format"] == "gama-local"
+    assert doc["schema"] == "multilat.adjust-general/2" and doc["format"] == "gama-local"
     coords = _against_gama({p: v["xyz_m"] for p, v in doc["points"].items()}, doc["sigma0"], doc["dof"], name)
     assert set(coords) <= set(doc["points"])
     for p, v in doc["points"].items():
@@ -229,7 +229,10 @@ def test_out_written_whole_and_equal_to_json(capsys, tmp_path):
     rc, out, err = _main(capsys, EX / "station_control.xml", "--out", out_dir, "--json",
                          "--alpha", "0.01", "--variance-factor", "unknown", "--test-method", "b-method")
     assert rc == 0, err
-    assert sorted(p.name for p in out_dir.iterdir()) == ["points.csv", "result.json"]
+    from multilat.network.files import table_format
+
+    table = f"observations.{table_format('observations', 'auto')}"       # adjust-general/2: every row
+    assert sorted(p.name for p in out_dir.iterdir()) == sorted([table, "points.csv", "result.json"])
     doc = json.loads(out)
     assert json.loads((out_dir / "result.json").read_text()) == doc
     assert doc["tests"]["test"] == "tau" and doc["tests"]["alpha0"] == 0.01
@@ -267,7 +270,7 @@ def test_default_test_procedure_is_the_distance_paths(capsys):
     """One rule for both paths (statistics.test_levels, --test-method auto): 90 rows tested, so the
     B-method's family-wise α (1 - 0.999^90 = 0.086) exceeds α_family 0.01 and Šidák's α0 =
     1 - 0.99^(1/90) runs; the global test is the variance factor's at 0.01, both tails."""
-    rc, out, err = _main(capsys, EX / "two_trackers.xml", "--json")
+    rc, out, err = _main(capsys, EX / "two_trackers.xml", "--json", "--observations")
     doc = json.loads(out)
     gt, t = doc["global_test"], doc["tests"]
     n = int(sum(1 for o in doc["observations"] if o["redundancy"] > 1e-9))

@@ -50,7 +50,7 @@ def runs(tmp_path_factory):
             "blunder": [str(_blunder(tmp)), "--levelled", "T1,T2", "--model", "general"]}
     out = {}
     for name, a in args.items():
-        rc, stdout, err = _run(["adjust", *a, "--json", "--report", str(tmp / f"{name}.html")])
+        rc, stdout, err = _run(["adjust", *a, "--json", "--observations", "--report", str(tmp / f"{name}.html")])
         assert rc == 0, (name, err)
         out[name] = ((tmp / f"{name}.html").read_text("utf-8"), json.loads(stdout), err, tmp / f"{name}.html")
     return out
@@ -107,14 +107,15 @@ def test_sections_in_the_auditors_order(pages, name):
     assert [s["key"] for s in dom] == ORDER
     opts = next(t for t in section(dom, "run")["tables"] if t["caption"] == "Options")
     listed = {r[0]["text"] for r in opts["rows"]}
-    assert {"alpha", "strict"} <= listed and not listed & {"cost", "mdb_limit_sigma", "solver", "tables"}
+    assert {"alpha", "strict", "tables", "backend"} <= listed     # adjust-general/2: --tables, --backend apply
+    assert not listed & {"cost", "mdb_limit_sigma", "solver"}
     assert ("points" in listed) == (name != "station_control")   # a gama-local file carries its points
 
 
 @pytest.mark.parametrize("name", ["polar", "station_control", "blunder"])
 def test_verdicts_follow_the_numbers(pages, name):
     dom, doc = pages[name]
-    obs, crit = doc["observations"], doc["tests"]["critical"]
+    obs, crit = [o for o in doc["observations"] if not o["rejected"]], doc["tests"]["critical"]   # rows adjusted
     seen = set()
     for r in table(section(dom, "verdicts"), "verdicts")["rows"]:
         label, value, _, high, verdict = (c["text"] for c in r)

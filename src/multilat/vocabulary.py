@@ -35,6 +35,7 @@ SCHEMA_VERSION = 1
 #: its model (:mod:`multilat.schemas.models`), when the shape of its document changes.
 SCHEMA_VERSIONS: dict[str, int] = {
     "adjust": 2,                # /2: JSON for summaries, tables for rows (issue 29)
+    "adjust-general": 2,        # /2: the same rule for the general path (observation_counts, tables)
     "propagate-general": 2,     # /2: n_full_gauss_newton -> n_retried (one Monte Carlo record)
 }
 

@@ -4,9 +4,10 @@ layer (:mod:`multilat.network.general`) from the command line: parse, call, prin
 Reached from the ``adjust`` command (:mod:`multilat.cli.network_cmd`) when its input is a gama-local
 file (suffix ``.xml`` / ``.gkf``, or a ``<gama-local>`` root element), or with ``--model general``
 on multilat's own observation CSV (:mod:`multilat.network.general.from_tables`). For a gama-local
-file the options that apply are ``--json``, ``--out DIR``, ``--report FILE.html``
+file the options that apply are ``--json``, ``--out DIR`` with ``--tables``, ``--observations``
+(:mod:`multilat.cli.general_output`), ``--report FILE.html``
 (:mod:`multilat.report.general_sections`), ``--alpha``, ``--variance-factor``, ``--test-method``,
-``--alpha-global`` and ``--strict``: the file itself carries the datum
+``--alpha-global``, ``--backend`` and ``--strict``: the file itself carries the datum
 (``fix=``/``adj=``), the σ (``stdev=`` and ``<points-observations>``) and the approximate
 coordinates. A CSV network also takes ``--points``, ``--datum free|control``, ``--sigma-um``,
 ``--instrument``, ``--fix-offsets-um``, ``--scales``, ``--fixed-scale``, ``--references`` with
@@ -31,25 +32,29 @@ from multilat.errors import MultilatError
 
 __all__ = ["is_general_input", "wants_general", "refusal_hint", "run", "given_options", "option_name", "fall_back",
            "CountRuleRefusal", "polar_left_out", "APPLIES", "APPLIES_CSV", "WHY_NOT",
-           "WHY_NOT_CSV", "SCHEMA", "MODELS"]
+           "WHY_NOT_CSV", "SCHEMA", "MODELS", "BACKENDS"]
 
-#: the document's schema name: ``"schema": "multilat.adjust-general/1"`` (not the distance path's
+#: the document's schema name: ``"schema": "multilat.adjust-general/2"`` (not the distance path's
 #: ``multilat.adjust``: the keys differ, so a reader can tell them apart)
 SCHEMA = "adjust-general"
 
 #: the adjust command's parameters that the general path reads
 APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict", "alpha_global", "test_method",
-           "alpha_family", "model", "snooping", "variance_components", "report")
+           "alpha_family", "model", "snooping", "variance_components", "report", "tables", "backend",
+           "all_observations")
 #: ... and on a multilat CSV network (``--model general``)
 APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offsets_um", "scales", "fixed_scale",
                          "scale_bar", "references", "levelled", "seed", "azimuth_sense")
 #: the test procedures' names in the summary (statistics.test_levels)
 _METHOD_NAMES = {"b-method": "B-method", "sidak": "Šidák", "fixed": "fixed α"}
+#: ``--backend``: the general layer's back end (:attr:`multilat.network.general.adjust.AdjustOptions.backend`)
+BACKENDS = ("auto", "dense", "sparse")
 #: ``--model``: ``auto`` (the default: the distance-only self-calibrating path, and the general layer
 #: for a network its counting rules refuse, said in a warning), the distance-only path alone, or the
 #: general network layer
 MODELS = ("auto", "multilateration", "general")
-_OPTION = {"as_json": "--json", "fix_offsets_um": "--fix-offsets-um", "scale_bar": "--scale-bars",
+_OPTION = {"as_json": "--json", "all_observations": "--observations", "fix_offsets_um": "--fix-offsets-um",
+           "scale_bar": "--scale-bars",
            "snooping": "--snooping/--no-snooping"}
 #: why an option of the distance-only path is refused here (the default reason for the others)
 WHY_NOT = {
@@ -60,11 +65,10 @@ WHY_NOT = {
 #: why an option is refused with ``--model general`` on a CSV network (the default reason for the others)
 WHY_NOT_CSV = {
     "cost": "the general path minimises the weighted distance residuals only",
-    "solver": "the general path has one dense back end",
+    "solver": "the general path's back end is --backend auto|dense|sparse",
     "average_repeats": "repeated readings are kept as separate observations on the general path",
-    "mdb_limit_sigma": "the general path lists every row's MDB in the JSON and names no poor targets yet",
+    "mdb_limit_sigma": "the general path lists every row's MDB in its table and names no poor targets yet",
     "distance_only": "the general path takes the angles that have a sigma as observations, whatever the station",
-    "tables": "the general path writes result.json and points.csv",
 }
 #: why an option is refused for a directory of multilat's files (``multilat adjust DIR``)
 WHY_NOT_DIR = {"datum": "the datum is points.csv's fixed, sx_m.. and datum columns",
@@ -161,15 +165,27 @@ def polar_left_out(obs, messages) -> list[str]:
     return [t for t in counted if t in read]
 
 
-def _general_takes(obs) -> bool:
+def _general_takes(obs, backend: str | None = None) -> bool:
     """Whether the general layer's back end takes a network of ``obs``'s size: its free unknowns at
-    most (3 per point, one constant per head, three angles per station with angles) within
-    :data:`multilat.network.general.adjust.MAX_DENSE_UNKNOWNS`."""
-    from multilat.network.general.adjust import MAX_DENSE_UNKNOWNS
+    most (3 per point, one constant per head, three angles per station with angles) within the limit of
+    the back end chosen (``backend``; None: the command's ``--backend``): the dense one's
+    :data:`~multilat.network.general.adjust.MAX_DENSE_UNKNOWNS` when it is forced or ``auto`` picks it,
+    else the sparse one's reduced system (:data:`~multilat.network.general.sparse.MAX_REDUCED`): the
+    unknowns less the targets', which it eliminates (no row joins two targets of a tracker network)."""
+    from multilat.network.general.adjust import MAX_DENSE_UNKNOWNS, SPARSE_ABOVE
 
+    if backend is None:
+        from multilat.cli.report_opt import current_context
+
+        ctx = current_context()
+        backend = (ctx.params.get("backend") if ctx is not None else None) or "auto"
     n_angle = len(np.unique(obs.station_index[np.isfinite(obs.sigma_azimuth_rad)]))
     n = 3 * (obs.n_stations + obs.n_targets) + len(obs.head_ids) + 3 * n_angle
-    return n <= MAX_DENSE_UNKNOWNS
+    if backend == "dense" or (backend == "auto" and n <= SPARSE_ABOVE):
+        return n <= MAX_DENSE_UNKNOWNS
+    from multilat.network.general.sparse import MAX_REDUCED
+
+    return n - 3 * obs.n_targets <= MAX_REDUCED
 
 
 @contextlib.contextmanager
@@ -253,6 +269,7 @@ def run(**params) -> None:
     """The general path of ``multilat adjust`` (``params``: the adjust command's parameters)."""
     params.pop("general_adjust", None)                 # the hook's own import, passed with locals()
     fallback = params.pop("fallback", None)            # --model auto: the distance path's refusal
+    listing = params.pop("listing", "flagged")         # --observations: "all"
     path, out = Path(params["observations"]), params["out"]
     xml = is_general_input(path)
     applies, why_not = (APPLIES, WHY_NOT) if xml else (APPLIES_CSV, WHY_NOT_CSV)
@@ -271,8 +288,12 @@ def run(**params) -> None:
     _check_tests(alpha, a_glob, method, vf, 10.0)        # the distance path's checks of the test options
     if method == "fixed" and a_glob is None:
         a_glob = 0.05                                      # as the distance path: fixed α_global default 0.05
+    from multilat.cli import checks
     from multilat.io import check_output_dir
 
+    checks.table_format(params.get("tables", "auto"), out)
+    if params.get("backend", "auto") not in BACKENDS:
+        raise MultilatError(f"--backend must be one of {', '.join(BACKENDS)}, got {params['backend']!r}")
     inputs = [path] + [params.get(k) for k in ("points", "references") if params.get(k) is not None]
     if out is not None:
         check_output_dir(out, inputs=inputs)
@@ -281,7 +302,7 @@ def run(**params) -> None:
     report_opt.check_report_path(params.get("report"), inputs)
     tests = dict(alpha=alpha, variance_factor=vf, alpha_global=a_glob, strict=params["strict"], method=method,
                  alpha_family=params.get("alpha_family", 0.01), snooping=params.get("snooping", True),
-                 variance_components=params.get("variance_components"))
+                 variance_components=params.get("variance_components"), backend=params.get("backend", "auto"))
     from multilat.cli.app import progress
     from multilat.network.bounds import reporting
 
@@ -301,25 +322,29 @@ def run(**params) -> None:
     for e in adj.excluded:
         warnings.warn(f"point {e['id']!r} left out: {e['reason']} ({e['n_obs']} observation row(s) removed)",
                       stacklevel=2)
+    from multilat.cli.general_output import print_summary, write_out
+    from multilat.network.general.report import list_observations
+
+    full, doc = doc, list_observations(doc, listing)
     if out is not None:
-        write_out(out, inputs, doc)
+        write_out(out, inputs, doc, full, params.get("tables", "auto"))
     import functools
 
     from multilat.report.general_sections import build_report
 
-    report_opt.write_report(params.get("report"), "adjust", doc, result=adj,
+    report_opt.write_report(params.get("report"), "adjust", full, result=adj,
                             build=functools.partial(build_report, applies=applies))
     from multilat.cli.app import emit_json
 
     if params["as_json"]:
         emit_json(doc, SCHEMA)
         return
-    print_summary(doc, adj, stats, out)
+    print_summary(full | {k: doc[k] for k in ("observation_counts", "tables") if k in doc}, adj, stats, out)
 
 
 def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_global: float | None = None,
             method: str | None = None, alpha_family: float = 0.01, snooping: bool = True,
-            variance_components: str | None = None):
+            variance_components: str | None = None, backend: str = "auto"):
     """Read, adjust (undetermined points left out unless ``strict``), variance components if asked,
     data snooping (the default, as the distance path), statistics: (doc, adjustment, stats)."""
     from multilat.network.general import read_gama_input
@@ -331,19 +356,26 @@ def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_glo
         return _finish(read_network_dir(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
                        strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family,
                        fmt="multilat-files", sigma_source=src, snooping=snooping,
-                       variance_components=variance_components)
+                       variance_components=variance_components, backend=backend)
     return _finish(read_gama_input(path), None, str(path), alpha=alpha, variance_factor=variance_factor,
                    strict=strict, alpha_global=alpha_global, method=method, alpha_family=alpha_family,
-                   snooping=snooping, variance_components=variance_components)
+                   snooping=snooping, variance_components=variance_components, backend=backend)
 
 
 def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_global, fmt="gama-local",
-            sigma_source=None, method=None, alpha_family=0.01, snooping=True, variance_components=None):
+            sigma_source=None, method=None, alpha_family=0.01, snooping=True, variance_components=None,
+            backend="auto"):
     from multilat.network.general import adjust_network, to_json
     from multilat.network.general.snooping import snoop
     from multilat.network.general.variance import estimate
     from multilat.vocabulary import stamp
 
+    if backend != "auto":                    # --backend dense|sparse (AdjustOptions.backend)
+        import dataclasses
+
+        from multilat.network.general.adjust import AdjustOptions
+
+        options = AdjustOptions(backend=backend) if options is None else dataclasses.replace(options, backend=backend)
     adj = adjust_network(net, options=options, strict=strict)
     vcomp = None
     if variance_components is not None:      # snooping off during the estimation, as the distance path
@@ -362,7 +394,7 @@ def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_globa
 
 def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: bool,
                    alpha_global: float | None = None, method: str | None = None, alpha_family: float = 0.01,
-                   snooping: bool = True, variance_components: str | None = None):
+                   snooping: bool = True, variance_components: str | None = None, backend: str = "auto"):
     """A multilat observation CSV (with ``--points``, ``--references`` ...) adjusted by the general
     layer: (doc, adjustment, stats). ``params``: the adjust command's parameters."""
     from multilat.campaign.propagation import read_campaign
@@ -418,7 +450,8 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
                  alpha_family=alpha_family)
     try:
         doc, adj, stats = _finish(net, options, str(path), strict=strict, fmt="multilat-csv", sigma_source=src_doc,
-                                  snooping=snooping, variance_components=variance_components, **tests)
+                                  snooping=snooping, variance_components=variance_components, backend=backend,
+                                  **tests)
     except MultilatError as e:                       # refused, or snooping refused: azimuths of the other sense?
         if hint := _sense_hint(obs, sense, build, getattr(e, "sigma0", None), strict, tests):
             raise MultilatError(f"{e}; {hint}") from None
@@ -450,140 +483,3 @@ def _sense_hint(obs, sense, build, sigma0, strict, tests) -> str | None:
     except MultilatError:
         return None
     return sense_hint(net, sigma0, options=options, strict=strict, **tests)
-
-
-def write_out(out, inputs, doc) -> None:
-    """``result.json`` and ``points.csv`` into ``out``, all or nothing (:func:`multilat.io.staging_dir`)."""
-    from multilat.io import staging_dir, write_csv_atomic, write_json_atomic
-
-    with staging_dir(out, inputs=list(inputs) if isinstance(inputs, (list, tuple)) else [inputs]) as tmp:
-        write_json_atomic(tmp / "result.json", doc)
-        rows = [[p, *v["xyz_m"], *v["xyz_std_m"], v["semi_axes_95_m"][2], v["status"], " ".join(v["roles"])]
-                for p, v in doc["points"].items()]
-        write_csv_atomic(tmp / "points.csv", ["point", "x_m", "y_m", "z_m", "x_std_m", "y_std_m", "z_std_m",
-                                              "semi_axis_max_95_m", "status", "roles"], rows)
-
-
-def print_summary(doc, adj, stats, out) -> None:
-    from rich.table import Table
-
-    from multilat.cli.app import console
-    from multilat.network.general.report import constant_words, zero_redundancy_points
-
-    say = lambda s: console.print(s, markup=False)  # noqa: E731
-    kinds = {}
-    for o in doc["observations"]:
-        kinds[o["kind"]] = kinds.get(o["kind"], 0) + 1
-    say(f"adjusted {doc['n_points']} points from {doc['n_obs']} observation rows ("
-        + ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in kinds.items())
-        + f") of {doc['input']} ({doc['format']}; general model)")
-    say(f"  datum: {doc['datum']}")
-    say(f"  frame: {doc['frame']['axes']}")              # the JSON's words (general/report.py)
-    say(f"  scale: {doc['frame']['scale']}")
-    if "azimuth_sense" in doc:
-        say(f"  azimuths read {doc['azimuth_sense']['sense']} ({doc['azimuth_sense']['source']})")
-    gt, t = doc["global_test"], doc["tests"]
-    if gt["statistic"] is None:
-        say(f"  σ0 = {doc['sigma0']:.4g}, dof = {doc['dof']} (no global test without redundancy)")
-    elif doc["variance_factor"] == "unknown":
-        say(f"  σ0 = {doc['sigma0']:.4f} (estimated: variance factor unknown; covariances and MDBs scaled by σ0²), "
-            f"dof = {doc['dof']}")
-        say(f"  global χ² test (information only): {gt['statistic']:.2f} vs {gt['critical']:.2f} "
-            f"(α = {gt['alpha']:.3g})")
-        say(f"  Pope's τ-test: α0 = {t['alpha0']:g}, critical |τ| {t['critical']:.3f}")
-    else:
-        say(f"  σ0 = {doc['sigma0']:.4f} (ratio to the a-priori σ), dof = {doc['dof']}; global χ² test: "
-            f"{gt['statistic']:.2f} {'<=' if gt['passed'] else '>'} {gt['critical']:.2f} (α = {gt['alpha']:.3g}, "
-            f"{_METHOD_NAMES.get(gt['method'], gt['method'])}): {'passed' if gt['passed'] else 'FAILED'}")
-        say(f"  w-test: α0 = {t['alpha0']:.3g}, critical |w| {t['critical']:.2f}, λ0 = {t['lambda0']:.2f}")
-    say(f"  test procedure: {t['rule']}")
-    red = stats.redundancy
-    say(f"  redundancy {max(red.min(), 0.0):.3f}..{red.max():.3f}; {int((red <= 1e-9).sum())} uncontrolled row(s) "
-        f"(r = 0); {t['n_failed']} test(s) above the critical value"
-        + ("" if doc["snooping"] else " (listed in the JSON; data snooping not requested: --no-snooping)"))
-    if inst := constant_words({n: v for n, v in doc["parameters"].items() if n.startswith("offset:")}):
-        say("  additive constants: " + "; ".join(inst))
-    zero = zero_redundancy_points(doc["observations"], doc["points"])
-    if zero:
-        say(f"  kept without control (every row r = 0, e.g. one polar reading; a blunder cannot show): "
-            f"{_names(zero, 8)}")
-    for e in doc["excluded"]:
-        say(f"  left out: point {e['id']} ({e['reason']}; {e['n_obs']} observation rows)")
-    for note in doc["notes"]:
-        say(f"  note: {note}")
-    for line in snooping_lines(doc) + reliability_lines(doc) + variance_lines(doc):
-        say(line)
-    _worst(say, doc, stats)
-    tb = Table(title="points", title_justify="left")
-    for c in ("point", "status", "roles", "x (m)", "y (m)", "z (m)", "95 % max (mm)"):
-        tb.add_column(c, justify="right")
-    for p, v in doc["points"].items():
-        x = v["xyz_m"]
-        tb.add_row(p, v["status"], ",".join(v["roles"]), f"{x[0]:.5f}", f"{x[1]:.5f}", f"{x[2]:.5f}",
-                   f"{v['semi_axes_95_m'][2] * 1e3:.2f}")
-    console.print(tb)
-    if out is not None:
-        say(f"results written to {out}")
-
-
-def _ends(o: dict) -> str:
-    return "->".join(o[e] for e in ("from", "to", "point", "bs", "fs") if e in o)
-
-
-def snooping_lines(doc) -> list[str]:
-    """The data snooping part of the summary: the rejected rows in order, or why none was."""
-    if not doc["snooping"]:
-        return []
-    out, steps = [], doc["tests"]["steps"]
-    if doc["outliers"]:
-        out.append("  rejected by data snooping, in order:")
-        for o in doc["outliers"]:
-            res = o["residual"] if isinstance(o["residual"], (int, float)) else None
-            what = f", residual {res:+.4g} {o['unit']}" if res is not None else ""
-            block = f" with its correlated block ({o['n_rows']} rows)" if o["n_rows"] > 1 else ""
-            left = f"; point(s) left out with it: {', '.join(o['points_left_out'])}" if o["points_left_out"] else ""
-            out.append(f"    {o['order']}. {o['label'] or '(no label)'} {o['kind'].replace('_', ' ')} {_ends(o)}{block}: "
-                       f"{o['test']} = {o['statistic']:+.2f} > {o['critical']:.2f}{what}{left}")
-    elif steps and steps[0]["detection_passed"]:
-        out.append("  detection passed: no data snooping")
-    if doc["unlocated"]:
-        names = "; ".join(f"{u['label'] or u['kind']} {_ends(u)} (w = {u['w']:+.2f})" for u in doc["unlocated"])
-        out.append(f"  not rejected: {names}: {doc['unlocated_reason']}")
-    if doc["tests"]["snooping_note"]:
-        out.append(f"  {doc['tests']['snooping_note']}")
-    return out
-
-
-def reliability_lines(doc, n: int = 3) -> list[str]:
-    """External reliability: the rows whose MDB moves a point most."""
-    er = doc["external_reliability"]
-    if not er["largest"]:
-        return []
-    parts = [f"{o['label']} {o['kind'].replace('_', ' ')} {_ends(o)} moves {o['shift_point']} by {o['shift_max_m'] * 1e3:.3f} mm"
-             for o in er["largest"][:n]]
-    return [f"  external reliability (shift by an undetected MDB; {er['n_uncontrolled']} uncontrolled row(s) "
-            "without one): " + "; ".join(parts)]
-
-
-def variance_lines(doc) -> list[str]:
-    v = doc.get("variance_components")
-    if not v:
-        return []
-    parts = [f"{c['group']} factor {c['variance_factor']:.3f} ± {c['variance_factor_std']:.3f} (σ × "
-             f"{c['sigma_scale']:.3f}, r = {c['redundancy']:.1f}{', differs from 1' if c['differs_from_1'] else ''})"
-             for c in v["components"]]
-    return [f"  variance components by {v['grouping']} (Förstner, {v['iterations']} iterations; test against 1 "
-            f"at α = {v['alpha']:g}): " + "; ".join(parts)]
-
-
-def _worst(say, doc, stats, n: int = 3) -> None:
-    """The rows with the largest |test statistic|."""
-    order = np.argsort(-np.abs(stats.statistic))[:n]
-    obs = doc["observations"]
-    parts = []
-    for k in order:
-        o = obs[int(k)]
-        ends = "->".join(o[e] for e in ("from", "to", "point", "bs", "fs") if e in o)
-        parts.append(f"{o['kind'].replace('_', ' ')} {ends} {doc['tests']['test']} = {o['statistic']:+.2f}")
-    if parts:
-        say("  largest tests: " + "; ".join(parts))

@@ -217,6 +217,9 @@ def adjust_command(
                                                            "always a group of their own), Förstner's iterated "
                                                            "estimator, and adjust with the re-weighted σ."),
     report: Optional[Path] = typer.Option(None, "--report", help=report_opt.HELP),
+    backend: str = typer.Option("auto", "--backend",
+                                help="General model only: its back end, dense, sparse (Schur complement, large "
+                                     "networks) or auto (sparse above 200 unknowns)."),
     model: str = typer.Option("auto", "--model",
                               help="auto (the default): multilateration, and general for a network its counting "
                                    "rules refuse or whose polar points (distance, azimuth, elevation from one "
@@ -230,12 +233,14 @@ def adjust_command(
     ellipsoids and reference-length comparisons."""
     from multilat.cli import adjust_output, general_adjust
     listing = adjust_output.check_listing(all_observations, as_json, out)
-    # the general path lists every observation anyway: --observations is met there, not passed on
-    given = {k: v for k, v in locals().items() if k not in ("all_observations", "listing", "adjust_output")}
+    given = {k: v for k, v in locals().items() if k not in ("all_observations", "adjust_output")}
     if general_adjust.wants_general(observations, model):  # --model general, or a gama-local XML input
         return general_adjust.run(**given)
     from multilat.network.files import read_points, read_reference_lengths
 
+    if backend != "auto":
+        raise MultilatError("--backend applies to the general model (--model general); the distance path's "
+                            "back end is --solver")
     checks.table_format(tables, out)
     checks.sigma_um(sigma_um)
     checks.seed(seed)

@@ -11,7 +11,8 @@ from multilat.network.general.points import FIXED, FREE, WEIGHTED
 from multilat.network.frame_words import INVARIANT
 
 __all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "row_record", "external_reliability",
-           "SETUP_KINDS", "poorly_controlled", "zero_redundancy_points", "row_ends", "constant_words"]
+           "SETUP_KINDS", "poorly_controlled", "zero_redundancy_points", "row_ends", "constant_words",
+           "TABLE_KEYS", "observation_table", "list_observations", "LISTINGS"]
 
 #: kinds whose ``from`` point carries an instrument set-up (the others: levelling, vectors)
 SETUP_KINDS = ("slope_distance", "direction", "zenith_angle", "horizontal_distance", "horizontal_angle",
@@ -210,6 +211,8 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
         "unlocated": [_plain(r) for r in snooping.unlocated] if snooping else [],
         "unlocated_reason": snooping.unlocated_reason if snooping else "",
         "external_reliability": external_reliability(adjustment.system, stats),
+        "backend": res.backend,
+        "not_computed": list(res.not_computed),
         "variance_components": variance.to_json() if variance is not None else None,
         "sigma_source": {"kind": "file", "file": source,
                          "description": "a-priori σ of the gama-local input: each observation's stdev=, else the "
@@ -284,3 +287,60 @@ def constant_words(parameters: dict) -> list[str]:
             unit = "µm" if kind == "offset" else "µm/m"
             out.append(f"{owner} {v['value'] * 1e6:+.1f} {unit} (u {v['std'] * 1e6:.1f} {unit})")
     return out
+
+
+#: the row keys of the ``observations`` table (schema ``multilat.adjust-general/2``), after ``index``
+#: and before the flags (:data:`multilat.network.result_rows.FLAGS`); absent keys are empty cells
+TABLE_KEYS = ("kind", "from", "to", "bs", "fs", "point", "axis", "component", "set", "label", "unit", "value",
+              "sigma", "residual", "redundancy", "w", "statistic", "passed", "mdb", "mdb_sigma", "bias_to_noise",
+              "shift_max_m", "shift_point")
+#: what the document lists: the rows that matter, or every row (``--observations``)
+LISTINGS = ("flagged", "all")
+
+
+def observation_table(doc: dict) -> dict:
+    """The ``observations`` table of a general adjustment's document (every row of ``doc["observations"]``
+    as :func:`to_json` writes it, then one row per rejection of data snooping, from ``doc["outliers"]``):
+    ``index``, :data:`TABLE_KEYS` (lists, None for an empty cell) and the flags of the distance path
+    (:data:`multilat.network.result_rows.FLAGS`, bool arrays) by its rule: ``rejected`` (by data
+    snooping; its residual at the final solution, None for a correlated block rejected whole, whose
+    rows' residuals are the outlier's list), ``w_failed`` (the test at the end fails) and
+    ``poorly_controlled`` (:func:`poorly_controlled`)."""
+    rows = list(doc["observations"])
+    n_adj = len(rows)
+    for o in doc["outliers"]:
+        rows.append({**o, "residual": o["residual"] if isinstance(o["residual"], (int, float)) else None})
+    cols: dict = {"index": np.arange(len(rows), dtype=np.int64)}
+    for key in TABLE_KEYS:
+        cols[key] = [o.get(key) for o in rows]
+    rejected = np.arange(len(rows)) >= n_adj
+    poor = np.zeros(len(rows), bool)
+    poor[poorly_controlled(doc["observations"])] = True
+    failed = np.array([not o["passed"] for o in doc["observations"]] + [False] * (len(rows) - n_adj), bool)
+    cols.update(rejected=rejected, w_failed=failed, poorly_controlled=poor)
+    return cols
+
+
+def list_observations(doc: dict, listing: str = "flagged") -> dict:
+    """``doc`` (:func:`to_json`'s, every row listed) as schema ``multilat.adjust-general/2`` lists it:
+    ``observations`` only the rows that matter (``listing="flagged"``: rejected, failing w-tests,
+    poorly controlled; the rule and keys of the distance path's ``multilat.adjust/2``) or every row
+    (``"all"``), each with its ``index`` in the table and its flags, and ``observation_counts``
+    (:func:`multilat.network.result_rows.observation_counts`; ``n_excluded``: the rows of the points
+    left out). A new dict; ``doc`` is not changed."""
+    from multilat.errors import MultilatError
+    from multilat.network import result_rows as rr
+
+    if listing not in LISTINGS:
+        raise MultilatError(f"observations listing must be 'flagged' or 'all', got {listing!r}")
+    cols = observation_table(doc)
+    keep = np.arange(len(cols["index"])) if listing == "all" else rr.flagged(cols)
+    rows = []
+    for k in keep.tolist():
+        row = {"index": k, **{key: cols[key][k] for key in TABLE_KEYS if cols[key][k] is not None
+                              or key in ("residual", "mdb", "mdb_sigma", "bias_to_noise", "shift_max_m")}}
+        row.update({f: bool(cols[f][k]) for f in rr.FLAGS})
+        rows.append(row)
+    n_excl = sum(int(e["n_obs"]) for e in doc["excluded"])
+    return {**doc, "observations": rows,
+            "observation_counts": rr.observation_counts(cols, len(rows), listing, n_excl)}

@@ -60,7 +60,7 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
                    max_rounds: int = MAX_ROUNDS) -> NetworkAdjustment:
     """Approximate coordinates, adjustment, undetermined points left out and named (module docstring)."""
     given, net, excluded = network, network, []
-    check_size(System(network))                     # before the approximations: refused in one line
+    check_size(System(network), options)            # the chosen back end's limit, before the approximations
     for rnd in range(1, max_rounds + 1):
         missing = reasons(net)                      # {id: what would reach it}
         if missing and not strict:

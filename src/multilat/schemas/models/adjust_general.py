@@ -9,7 +9,8 @@ from pydantic import Field
 
 from multilat.schemas.models.base import Cov3, Document, Excluded, Num, Strict, Vec3, XYZ
 
-__all__ = ["AdjustGeneralDocument", "RowRef", "RowReliability"]
+__all__ = ["AdjustGeneralDocument", "RowRef", "RowReliability", "ListedObservation", "ObservationCounts",
+           "TableRecord"]
 
 
 class RowRef(Strict):
@@ -51,6 +52,44 @@ class Observation(RowReliability):
     statistic: Num
     passed: bool
     bias_to_noise: Num
+
+
+class ListedObservation(Observation):
+    """A row of the ``observations`` listing (schema /2): its ``index`` in the ``observations`` table and
+    the flags that make it matter (the distance path's ``multilat.adjust/2`` rule). A rejected row's
+    ``residual`` is null for a correlated block rejected whole (the outlier's list)."""
+
+    index: int
+    residual: Num
+    rejected: bool
+    w_failed: bool
+    poorly_controlled: bool
+
+
+class ObservationCounts(Strict):
+    """The counts beside the listed rows (the keys of ``multilat.adjust/2``): ``n_obs`` rows adjusted and
+    rejected, ``n_used`` adjusted, each flag, any flag, the rows of points left out, the rows listed and
+    the ``listing`` (``flagged`` or ``all``: ``--observations``)."""
+
+    n_obs: int
+    n_used: int
+    n_rejected: int
+    n_w_failed: int
+    n_poorly_controlled: int
+    n_flagged: int
+    n_excluded: int
+    n_listed: int
+    listing: Literal["flagged", "all"]
+
+
+class TableRecord(Strict):
+    """A table written under ``--out`` (every observation row: ``observations``)."""
+
+    name: str
+    file: str
+    format: Literal["csv", "parquet"]
+    n_rows: int
+    sha256: str = Field(pattern="^[0-9a-f]{64}$")
 
 
 class Outlier(Observation):
@@ -196,7 +235,7 @@ class AzimuthSense(Strict):
 class AdjustGeneralDocument(Document):
     """``multilat adjust`` on a general network (``--json``, ``--out DIR/result.json``)."""
 
-    schema_: Literal["multilat.adjust-general/1"] = Field(alias="schema")
+    schema_: Literal["multilat.adjust-general/2"] = Field(alias="schema")
     model: Literal["general"]
     input: str
     format: str
@@ -219,9 +258,16 @@ class AdjustGeneralDocument(Document):
     unlocated: list[Observation]
     unlocated_reason: str
     external_reliability: ExternalReliability
+    backend: Literal["dense", "sparse"] = Field(description="the back end that ran (--backend)")
+    not_computed: list[str] = Field(description="statistics the back end left out on a large network "
+                                                "(their fields null), e.g. external reliability")
     variance_components: VarianceComponents | None
     sigma_source: GeneralSigmaSource
-    observations: list[Observation]
+    observations: list[ListedObservation] = Field(
+        description="the rows that matter (rejected, failing w-tests, poorly controlled), every row with "
+                    "--observations; all of them in the observations table under --out")
+    observation_counts: ObservationCounts
+    tables: list[TableRecord] | None = Field(None, description="the tables written (--out, result.json)")
     iterations: list[Iteration]
     notes: list[str]
     warnings: list[str] = Field(description="the warnings printed (e.g. σ defaulted), one line each")
