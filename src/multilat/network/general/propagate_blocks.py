@@ -86,8 +86,11 @@ class Schur:
     def ginv(self, g: np.ndarray) -> np.ndarray:
         """``N⁻`` applied to every row of ``g`` (T, n)."""
         t, m = len(g), len(self.binv)
-        be = np.zeros((t, 3 * m))
-        be[:, self.valid] = g[:, self.fv]
+        if self.fv.size == 3 * m:
+            be = g[:, self.fv]
+        else:
+            be = np.zeros((t, 3 * m))
+            be[:, self.valid] = g[:, self.fv]
         xt = self.x
         yk = (g[:, self.ck] - (be @ xt if isinstance(xt, np.ndarray) else (xt.T @ be.T).T)) @ self.qk
         ye = np.matmul(self.binv, be.reshape(t, m, 3).transpose(1, 2, 0)).transpose(2, 0, 1).reshape(t, 3 * m)
@@ -101,8 +104,12 @@ class Schur:
         """``Q g_t`` for every row ``g_t`` of ``g`` (T, n) (the datum ``B^T dx = 0`` applied)."""
         if self.h is None:
             return self.ginv(g)
-        y = self.ginv(g - (g @ self.h) @ self.b.T)
-        return y - (y @ self.b) @ self.h.T
+        gb = (g @ self.h) @ -self.b.T          # in place: (T, n) temporaries are the cost here
+        gb += g
+        y = self.ginv(gb)
+        yh = (y @ self.b) @ -self.h.T
+        yh += y
+        return yh
 
 
 def schur(result) -> Schur:
