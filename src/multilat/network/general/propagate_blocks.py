@@ -190,6 +190,7 @@ def solve_blocks(frozen, obs: np.ndarray, x: np.ndarray, tol: float, max_iter: i
 def sparse_gauss_newton(frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int = 50):
     """One trial by full Gauss-Newton from x̂ with the sparse back end's step (its elimination at every
     iterate) in the frozen datum ``B``: ``(x, converged, vTPv)`` (:func:`.propagate.gauss_newton`)."""
+    from multilat.network.datum import s_factor
     from multilat.network.general import sparse
 
     s = frozen.system
@@ -212,7 +213,7 @@ def sparse_gauss_newton(frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter
                 dx = red.ginv(jw.T @ rw)
                 if det.defect:
                     B = det.constraints
-                    dx = dx - red.null @ np.linalg.solve(B.T @ red.null, B.T @ dx)
+                    dx = dx - s_factor(red.null, B) @ (B.T @ dx)
             except (MultilatError, np.linalg.LinAlgError):
                 return x, False, np.nan
             x[frozen.free] += dx
