@@ -166,3 +166,18 @@ def test_limits_refused_in_one_line_before_any_trial(large, monkeypatch):
     with pytest.raises(MultilatError, match=r"keeps 1000 trials x \d+ outputs .* the limit is 0.01 GB") as e:
         propagate(large.system, large.result, trials=1000, rng=1, progress=seen.append)
     assert not seen
+
+
+def test_cli_refuses_past_the_sample_limit_in_one_line(tmp_path):
+    """From the command line: exit 2, one ``error:`` line naming the size, the limit and the trials
+    that would pass, nothing written (the deviations of 1e8 trials x 89 outputs: 35.6 GB > 4 GB)."""
+    from test_general_propagate import ROOT, _cli
+
+    p = _cli(ROOT / "examples" / "general" / "station_control.xml", "--trials", "100000000", "--out", tmp_path / "o",
+             cwd=tmp_path)
+    assert p.returncode == 2 and p.stdout == ""
+    lines = p.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: the general Monte Carlo keeps 100000000 trials x 89 "), \
+        p.stderr
+    assert "the limit is 4 GB: run at most 11235955 trials" in lines[0]
+    assert not (tmp_path / "o").exists()

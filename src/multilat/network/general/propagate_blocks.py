@@ -32,7 +32,7 @@ __all__ = ["MAX_SAMPLE_BYTES", "MAX_WORK", "Schur", "check_size", "linear", "sch
 #: the kept deviations (float32, trials x (free parameters + reported distances)) at most this many bytes
 MAX_SAMPLE_BYTES = 4e9
 #: at most this many operations, ``trials x 3 chord steps x (40 R + 2 nnz X + 2 k²)`` (measured
-#: 5e8 to 1e9 a CPU second on distance-only networks of 8 x 1 000 and 8 x 4 000 targets: ~20 to 35 CPU
+#: 5e8 to 1e9 a CPU second on distance-only networks of 8 x 4 000 and 8 x 1 000 targets: 16 to 33 CPU
 #: minutes, docs/cli.md "Size limits")
 MAX_WORK = 1e12
 
@@ -58,7 +58,7 @@ def check_size(frozen, trials: int, n_outputs: int) -> None:
             raise MultilatError(
                 f"the general Monte Carlo of this network ({len(frozen.free)} unknowns, {frozen.n_rows} observation "
                 f"rows, reduced system {frozen.cofactor.blocks.lin.red.ck.size}) takes ~{w:.1e} operations for "
-                f"{trials} trials; the limit is {MAX_WORK:.0e} (~30 CPU minutes): run at most "
+                f"{trials} trials; the limit is {MAX_WORK:.0e} (16 to 33 CPU minutes): run at most "
                 f"{int(trials * MAX_WORK / w)} trials")
 
 
