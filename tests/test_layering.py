@@ -42,7 +42,8 @@ NETWORK_TIERS = [
     ("network propagate/design", ["multilat.network.propagate", "multilat.network.propagate_result",
                                   "multilat.network.propagate_summary", "multilat.network.design",
                                   "multilat.network.general.propagate", "multilat.network.general.propagate_result",
-                                  "multilat.network.general._frozen_numba"]),
+                                  "multilat.network.general._frozen_numba",
+                                  "multilat.network.general.propagate_blocks"]),
 ]
 
 

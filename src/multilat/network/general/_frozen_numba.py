@@ -320,3 +320,24 @@ def _chord(obs, x, code, cols, pair, ref, rcols, hz, comp, setup, frames, angula
 
 
 chord = boundary(_chord)
+
+
+@njit(cache=True, parallel=True, nogil=True)
+def _gradients(obs, x, code, cols, pair, ref, rcols, hz, comp, setup, frames, angular, wdiag, p_ptr, p_idx, p_val,
+               g_out, v_out):  # pragma: no cover - jit
+    """``g_out[t] = J(x_t)^T P r_t`` and ``v_out[t] = r_t^T P r_t`` of every trial ``t`` (``obs``,
+    ``x`` (T, R), (T, n)): :func:`_trial_gradient` alone, for the block-structured solve of
+    :mod:`.propagate_blocks` (its ``Q g`` is a Schur solve for a block of trials, in numpy)."""
+    t_n, r_n = obs.shape
+    for unit in prange((t_n + UNIT - 1) // UNIT):
+        val = np.zeros((r_n, 9))
+        r = np.empty(r_n)
+        pr = np.empty(r_n)
+        f2 = np.empty(2)
+        rot = np.empty((max(len(frames), 1), 4, 3, 3))
+        for t in range(unit * UNIT, min(t_n, unit * UNIT + UNIT)):
+            v_out[t] = _trial_gradient(obs, t, x[t], code, cols, pair, ref, rcols, hz, comp, setup, frames, angular,
+                                       wdiag, p_ptr, p_idx, p_val, val, r, pr, rot, f2, g_out[t])
+
+
+gradients = boundary(_gradients)

@@ -56,9 +56,12 @@ def _linear(frozen, pairs: np.ndarray, q: np.ndarray) -> tuple[np.ndarray, np.nd
     return np.concatenate(std), qf[pc[:, :, None], pc[:, None, :]]
 
 
-def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaussian", q=None) -> PropagationResult:
+def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaussian", q=None,
+              linear=None) -> PropagationResult:
     """The result of a run from its blocks (:func:`.propagate._solve_block`), in block order; ``q`` the
-    linear covariance of the free parameters for the drawn inputs (default the cofactor ``Q``)."""
+    linear covariance of the free parameters for the drawn inputs (default the cofactor ``Q``), or
+    ``linear`` (std of the outputs, point covariances (P, 3, 3)) when ``Q`` is kept in blocks
+    (:func:`.propagate_blocks.linear`)."""
     dev = np.concatenate([b["dev"] for b in blocks])
     n = dev.shape[0]
     if n < 2:
@@ -72,7 +75,7 @@ def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaus
                               np.linalg.norm(frozen.x_hat[pc[pairs[:, 1]]] - frozen.x_hat[pc[pairs[:, 0]]], axis=1)])
     mean, std, iv_sym, iv_short, kurt, cov_mc, pts = _statistics(dev, pc, lay.reduced)
     se = std * np.sqrt(np.clip(kurt - 1.0, 0, None) / (4 * n))
-    lin, qp = _linear(frozen, pairs, frozen.q if q is None else q)
+    lin, qp = _linear(frozen, pairs, frozen.q if q is None else q) if linear is None else linear
     vtpv = np.concatenate([b["vtpv"] for b in blocks])
     s0 = np.sqrt(vtpv / frozen.dof) if frozen.dof > 0 else np.full(len(vtpv), np.nan)
     n_all = sum(b["n"] for b in blocks)
