@@ -59,7 +59,7 @@ bit; the draws do not depend on anything but the seed and the options.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
@@ -365,10 +365,7 @@ def _with_blunders(g, net, n, size_m):
     rows = np.sort(g.choice(m, n, replace=False)).astype(np.int64)
     d = net.distance_m.copy()
     d[rows] += size_m * np.where(g.random(n) < 0.5, -1.0, 1.0)
-    obs = None
-    if net._obs is not None:
-        from dataclasses import replace
-        obs = replace(net._obs, distance_m=d)
+    obs = None if net._obs is None else replace(net._obs, distance_m=d)
     return SyntheticNetwork(net.station_xyz_m, net.target_xyz_m, net.offset_m, net.station_index,
                             net.target_index, d, net.sigma_m, net.population, net.extent_m, net.station_layout,
                             net.target_layout, net.gap_fraction, net.orientation_rad, rows, float(size_m), obs)
