@@ -1,6 +1,6 @@
 """Issue 29, the growth row: whole ``multilat adjust NET.csv --json > /dev/null`` on 8 stations x
 1 000, 4 000, 16 000 (and 200 000 in full mode) targets, 7 distances per target
-(``synthetic_network(8, t, 7)``), medians of 3 (1 at 200 000), and the growth between successive
+(``synthetic_network`` "rings", 8 stations, 7 per target), medians of 3 (1 at 200 000), and the growth between successive
 sizes (goal: each 4x step <= 5x). Before issue 29 the external reliability made one covariance product
 per observation, O(m^2): 8 x 2 000 (14 000 distances) took 89 s at load 6 (37 s quiet), 2.9 s after.
 

@@ -41,10 +41,10 @@ BASE_SRC = os.environ.get("BENCH_BASELINE_SRC")
 
 
 def _write_csv(t: int, path: Path, *, stations: int = 20, per_target: int = 8) -> int:
-    """``synthetic_network(stations, t, per_target)`` as an observation CSV (σ 5 µm); its row count."""
-    from multilat.network.large import synthetic_network
+    """``synthetic_network`` "rings" (stations, t, per_target) as an observation CSV (σ 5 µm); its row count."""
+    from multilat.network.synthetic import synthetic_network
 
-    net = synthetic_network(stations, t, per_target, rng=SEED)
+    net = synthetic_network(SEED, population="rings", n_stations=stations, n_targets=t, per_target=per_target)
     s = np.char.add("S", net.station_index.astype(str))
     tg = np.char.add("T", net.target_index.astype(str))
     dd = np.char.mod("%.9f", net.distance_m)
@@ -92,11 +92,11 @@ def _solve_alone(path: Path, solver: str) -> float:
     from multilat.network import fit
     from multilat.network.adjust import Start, adjust
     from multilat.network.files import read_observations
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
 
     obs = read_observations(path)
     t = obs.n_targets
-    net = synthetic_network(20, t, 8, rng=SEED)
+    net = synthetic_network(SEED, population="rings", n_stations=20, n_targets=t, per_target=8)
     rng = np.random.default_rng(SEED + 1)
     si = [int(x[1:]) for x in obs.station_ids]
     ti = np.array([int(x[1:]) for x in obs.target_ids])

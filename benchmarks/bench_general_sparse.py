@@ -1,5 +1,5 @@
 """Issue 26/29: the general network's sparse back end on distance-only networks of 8 stations x 1 000,
-4 000, 16 000 targets (7 distances each, ``synthetic_network(8, t, 7)``), beside the distance-only
+4 000, 16 000 targets (7 distances each, ``synthetic_network`` "rings"), beside the distance-only
 path in the same run, and its growth between sizes (goal: each 4x step <= 5x).
 
 Timed (one process, numba warm, medians of ``--repeats``):
@@ -34,10 +34,10 @@ from common import load_avg  # noqa: E402
 
 def _networks(t: int, seed: int = 3):
     from multilat.network.data import Observations, Points
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
 
     s = 8
-    syn = synthetic_network(s, t, 7, rng=seed)
+    syn = synthetic_network(seed, population="rings", n_stations=s, n_targets=t, per_target=7)
     obs = Observations(tuple(f"S{i}" for i in range(s)), tuple(f"T{j}" for j in range(t)), syn.station_index,
                        syn.target_index, syn.distance_m, syn.sigma_m)
     pts = Points(obs.station_ids + obs.target_ids, np.vstack([syn.station_xyz_m, syn.target_xyz_m]))

@@ -161,9 +161,9 @@ def _sparse_problem(t, seed=SEED):
     truth + N(0, 1 mm) on every coordinate and offset)."""
     from types import SimpleNamespace
 
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
 
-    net = synthetic_network(20, t, 8, rng=seed)
+    net = synthetic_network(seed, population="rings", n_stations=20, n_targets=t, per_target=8)
     rng = np.random.default_rng(seed + 1)
     init = SimpleNamespace(station_xyz_m=net.station_xyz_m + rng.normal(0, 1e-3, net.station_xyz_m.shape),
                            offset_m=net.offset_m + rng.normal(0, 1e-3, net.offset_m.shape),
@@ -362,10 +362,10 @@ def _w_crit(alpha):
 def bench_csv(quick):
     from multilat.network.fastio import read_observations_fast
     from multilat.network.files import read_observations
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
 
     t = 25_000 if quick else 200_000
-    net = synthetic_network(20, t, 8, rng=SEED)
+    net = synthetic_network(SEED, population="rings", n_stations=20, n_targets=t, per_target=8)
     s = np.char.add("S", net.station_index.astype(str))
     tg = np.char.add("T", net.target_index.astype(str))
     dd = np.char.mod("%.9f", net.distance_m)
@@ -486,13 +486,13 @@ def bench_cli(quick):
 
     from multilat.cli.app import to_jsonable
     from multilat.network.files import read_observations
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
     from multilat.network.result import result_to_json
 
     t = 20_000
     reps = 2 if quick else 3
     _warm_up()
-    net = synthetic_network(20, t, 8, rng=SEED)
+    net = synthetic_network(SEED, population="rings", n_stations=20, n_targets=t, per_target=8)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "big.csv"

@@ -2,7 +2,7 @@
 
 * ``initial_values_random``: :func:`multilat.network.initial.initial_values` from distances alone on
   random well-conditioned networks (4-8 stations x 10-30 targets, gaps, ±5 mm offsets, 5 um noise;
-  :func:`multilat.network.simulate.random_network`). ``median_s`` per network; ``extra``: the rate of
+  :func:`multilat.network.synthetic.synthetic_network`, "well-conditioned"). ``median_s`` per network; ``extra``: the rate of
   networks whose adjustment from these values reaches the minimum reached from the truth (1e-8 m).
   Baseline: the naive method, random restarts (20) of the same Levenberg-Marquardt refinement, the
   lowest RMS kept — same networks, same run, same success criterion.
@@ -47,11 +47,12 @@ def _converged(net, iv):
 
 def _bench_initial(quick):
     from multilat.network import initial as ini
-    from multilat.network.simulate import random_network
+    from multilat.network.synthetic import synthetic_network
 
     n = 30 if quick else 200
     load = _load()
-    nets = [random_network(np.random.default_rng(c)) for c in np.random.SeedSequence(SEED).spawn(n)]
+    seeds = np.random.SeedSequence(SEED).spawn(n)
+    nets = [synthetic_network(np.random.default_rng(c), population="well-conditioned") for c in seeds]
     ours_t, ours_ok, base_t, base_ok = [], 0, [], 0
     for k, net in enumerate(nets):
         t0 = time.perf_counter()

@@ -78,14 +78,14 @@ def _numpy_solve_alone(path: Path, stations: int, per_target: int, solver: str =
     from multilat.network import fit
     from multilat.network.adjust import Start, adjust
     from multilat.network.files import read_observations
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
 
     class _Done(Exception):
         pass
 
     obs = read_observations(path)
     t = obs.n_targets
-    net = synthetic_network(stations, t, per_target, rng=SEED)
+    net = synthetic_network(SEED, population="rings", n_stations=stations, n_targets=t, per_target=per_target)
     rng = np.random.default_rng(SEED + 1)
     si = [int(x[1:]) for x in obs.station_ids]
     ti = np.array([int(x[1:]) for x in obs.target_ids])
@@ -254,8 +254,8 @@ def growth(tmp: Path) -> list[dict]:
 
 
 def gama(tmp: Path) -> dict:
-    """Our side of the gama-local row: whole ``multilat adjust --json`` on 8 x 500 (``synthetic_network
-    (8, 500, 8)``, 4 000 distances), median of 3. gama-local is not installed here and no timing of it
+    """Our side of the gama-local row: whole ``multilat adjust --json`` on 8 x 500 (``synthetic_network``
+    "rings", 8 x 500 x 8, 4 000 distances), median of 3. gama-local is not installed here and no timing of it
     is stored in the repository, so the row stays unjudged (baseline not measured)."""
     p = tmp / "net8x500.csv"
     m = _write_csv(500, p, stations=8, per_target=8)

@@ -5,14 +5,14 @@ import numpy as np
 
 from multilat.network.angles import predicted_angles
 from multilat.network.data import Observations
-from multilat.network.generator import random_network
+from multilat.network.synthetic import synthetic_network
 
 SIG_ANGLE = 20e-6
 
 
 def mixed_with_angles(seed=3, noise=True, trackers=(0, 1)):
     """(network truth, observations, true orientations (s, 3)); ``noise=False``: exact data."""
-    net = random_network(np.random.default_rng([15, seed]), n_stations=(6, 6), n_targets=(15, 15))
+    net = synthetic_network(np.random.default_rng([15, seed]), n_stations=(6, 6), n_targets=(15, 15))
     o = net.obs
     rng = np.random.default_rng(seed)
     ori = rng.uniform(-0.2, 0.2, (o.n_stations, 3))

@@ -211,3 +211,55 @@ def test_the_homes_are_what_they_say():
     E[:9] = G[:9]                                    # inner constraints over the first 3 points
     S = s_transform(G, E)
     assert np.abs(S @ S - S).max() < 1e-12 and np.abs(E.T @ S).max() < 1e-12 and np.abs(S @ G).max() < 1e-12
+
+
+# ------------------------------------------------------------------------------ one generator (issue 27 item 4)
+PACKAGE = NETWORK.parent
+
+#: the one home of generated networks: :func:`multilat.network.synthetic.synthetic_network`
+GENERATOR_HOME = "network/synthetic.py"
+
+#: functions outside the home that draw random numbers and build observations, and why each stays
+#: (noise on a given configuration, not a generated network; this list only shrinks)
+GENERATOR_KNOWN = {
+    "network/costs.py:compare_costs_mc": "noise on the given network of the cost study",
+    "network/simulate.py:simulate": "the §4.4 study: noise on a fixed configuration",
+    "report/network_demo.py:_one_dataset": "the demo's noisy distances of the paper's configuration",
+}
+
+_DRAWS = {"uniform", "normal", "random", "integers", "choice", "standard_normal", "permutation"}
+
+
+def generators(root: Path = PACKAGE) -> dict[str, int]:
+    """``{"file:function": line}`` of every function under ``root`` that draws random numbers (a
+    Generator method) and builds :class:`Observations` or a ``SyntheticNetwork``: a network generator."""
+    found = {}
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        for f in ast.walk(ast.parse(path.read_text("utf-8"), str(path))):
+            if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                called = {getattr(c.func, "attr", getattr(c.func, "id", None))
+                          for c in ast.walk(f) if isinstance(c, ast.Call)}
+                if called & _DRAWS and called & {"Observations", "from_labels", "SyntheticNetwork"}:
+                    found[f"{rel}:{f.name}"] = f.lineno
+    return found
+
+
+def test_the_package_has_one_network_generator():
+    found = generators()
+    bad = [f"{k} (line {line})" for k, line in found.items()
+           if not k.startswith(GENERATOR_HOME + ":") and k not in GENERATOR_KNOWN]
+    assert not bad, "generate networks with multilat.network.synthetic.synthetic_network:\n" + "\n".join(bad)
+    stale = [k for k in GENERATOR_KNOWN if k not in found]
+    assert not stale, "merged, remove from GENERATOR_KNOWN:\n" + "\n".join(stale)
+    public = [p.relative_to(PACKAGE).as_posix() for p in PACKAGE.rglob("*.py")
+              if any(ln.startswith(("def random_network(", "def synthetic_network(", "def sequential_network(",
+                                    "def mixed_network("))
+                     for ln in p.read_text("utf-8").splitlines())]
+    assert public == [GENERATOR_HOME]
+
+
+def test_a_new_generator_is_found(tmp_path):
+    (tmp_path / "x.py").write_text("def f(g):\n    H = g.uniform(size=(4, 3))\n    return Observations(H)\n"
+                                   "def n(g, obs):\n    return g.normal(size=3)\n")
+    assert generators(tmp_path) == {"x.py:f": 1}

@@ -23,7 +23,7 @@ from multilat.rows_text import column_tokens
 from multilat.network import covariance as C
 from multilat.network.adjust import Start, adjust
 from multilat.network.data import Observations
-from multilat.network.large import synthetic_network
+from multilat.network.synthetic import synthetic_network
 from multilat.network.result import result_to_json
 
 
@@ -89,7 +89,7 @@ def test_json_rows_as_a_python_sequence():
 
 
 def _network(t=40, s=6, rng=21):
-    net = synthetic_network(s, t, 5, size_m=6.0, rng=rng)
+    net = synthetic_network(rng, population="rings", n_stations=s, n_targets=t, per_target=5, size_m=6.0)
     obs = Observations(tuple(f"S{i}" for i in range(s)), tuple(f"T{j}" for j in range(t)),
                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
     return net, obs
@@ -188,7 +188,7 @@ def test_sparse_statistics_with_kernels_equal_numpy_and_dense(kernels_always):
     solution with the numpy statistics (1e-12: only the summation order differs), and against the
     dense back end as tests/test_solver_family.py asks of the two back ends (w to 1e-8 absolute: the
     two solutions' residuals differ by ~1e-14 m, 2e-9 sigma)."""
-    net = synthetic_network(12, 300, 8, rng=5)
+    net = synthetic_network(5, population="rings", n_stations=12, n_targets=300, per_target=8)
     obs = Observations(tuple(f"S{i}" for i in range(12)), tuple(f"T{j}" for j in range(300)),
                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
     start = Start(net.station_xyz_m, net.target_xyz_m, net.offset_m)
@@ -337,7 +337,7 @@ def test_small_adjust_does_not_load_numba(tmp_path):
 def _big_file(path, rows=40_000, bad_line=None):
     rng = np.random.default_rng(9)
     t = rows // 8
-    net = synthetic_network(20, t, 8, rng=2)
+    net = synthetic_network(2, population="rings", n_stations=20, n_targets=t, per_target=8)
     d = net.distance_m * (1 + rng.uniform(-1e-3, 1e-3, net.distance_m.size))     # 17 digits
     lines = [f"S{i},T{j},{x!r},{s!r}" for i, j, x, s in zip(net.station_index.tolist(), net.target_index.tolist(),
                                                             d.tolist(), net.sigma_m.tolist())]

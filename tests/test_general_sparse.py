@@ -13,7 +13,7 @@ tests/test_general_trackers.py (two levelled trackers, one tracker on control wi
 the small-volume tracker network of tests/general_tracker_network.py (trackers, distance-only heads,
 scale bars, weighted control), free networks (inner constraints over all points), the random mixed
 networks of tests/test_general_approximate.py (its Design generator), and 8 stations x 2 000 targets
-of :func:`multilat.network.large.synthetic_network` against :func:`multilat.network.adjust.adjust`.
+of :func:`multilat.network.synthetic.synthetic_network` ("rings") against :func:`multilat.network.adjust.adjust`.
 """
 
 from __future__ import annotations
@@ -176,10 +176,10 @@ def test_distance_only_8_stations_2000_targets_equals_the_distance_path():
     from multilat.network.adjust import adjust as distance_adjust
     from multilat.network.data import Observations, Points
     from multilat.network.general.from_tables import network_from_tables
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
 
     s, t = 8, 2000
-    syn = synthetic_network(s, t, 7, rng=3)
+    syn = synthetic_network(3, population="rings", n_stations=s, n_targets=t, per_target=7)
     obs = Observations(tuple(f"S{i}" for i in range(s)), tuple(f"T{j}" for j in range(t)), syn.station_index,
                        syn.target_index, syn.distance_m, syn.sigma_m)
     old = distance_adjust(obs, snooping=False, initial=Start(syn.station_xyz_m, syn.target_xyz_m, syn.offset_m))

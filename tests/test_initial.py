@@ -12,7 +12,7 @@ from multilat.network.adjust import adjust
 from multilat.network.configs import large_volume, small_volume
 from multilat.network.data import Observations
 from multilat.network.initial import initial_values, multilaterate, rigid_fit
-from multilat.network.simulate import random_network
+from multilat.network.synthetic import synthetic_network
 
 
 def _obs_of(cfg, rng, sigma=4.7e-6, **angles):
@@ -120,7 +120,8 @@ def test_refinement_jacobian_against_finite_differences(n_targets):
     from multilat.network import initial as ini
     from multilat.network import initial_refine as ir
 
-    net = random_network(np.random.default_rng(3), n_stations=(5, 5), n_targets=(n_targets, n_targets), drop=0.0)
+    net = synthetic_network(np.random.default_rng(3), population="well-conditioned", n_stations=(5, 5),
+                            n_targets=(n_targets, n_targets), gap_fraction=0.0)
     D, W = ini.distance_matrix(net.obs)
     captured = {}
 
@@ -242,7 +243,8 @@ def _convergence_failures(n):
     children = np.random.SeedSequence(20200808).spawn(n)
     failures = []
     for k, child in enumerate(children):
-        net = random_network(np.random.default_rng(child), n_stations=(4, 6), n_targets=(10, 20))
+        net = synthetic_network(np.random.default_rng(child), population="well-conditioned", n_stations=(4, 6),
+                                n_targets=(10, 20))
         iv = initial_values(net.obs, rng=k)
         r1 = adjust(net.obs, initial=iv, snooping=False)
         r0 = adjust(net.obs, initial=_truth(net), snooping=False)
@@ -260,14 +262,15 @@ def test_convergence_rate_on_60_random_networks():
 @pytest.mark.slow
 def test_convergence_rate_on_200_random_networks():
     """>= 99 % of 200 random well-conditioned networks (4-6 stations x 10-20 targets, gaps, offsets
-    ±5 mm, 5 um noise; definition in multilat.network.simulate.random_network) converge from
+    ±5 mm, 5 um noise; definition in multilat.network.synthetic, population "well-conditioned") converge from
     distances alone to the minimum the adjustment reaches from the truth (1e-8 m)."""
     failures = _convergence_failures(200)
     assert len(failures) <= 2, failures
 
 
 def test_adjust_calls_initial_values_by_default():
-    net = random_network(np.random.default_rng(99), n_stations=(5, 5), n_targets=(15, 15))
+    net = synthetic_network(np.random.default_rng(99), population="well-conditioned", n_stations=(5, 5),
+                            n_targets=(15, 15))
     r1 = adjust(net.obs, snooping=False, rng=0)
     r0 = adjust(net.obs, initial=_truth(net), snooping=False)
     assert _datum_free_gap(r1, r0) < 1e-8
@@ -279,7 +282,7 @@ def test_convergence_rate_large_study():
     children = np.random.SeedSequence(7).spawn(1000)
     fails = 0
     for k, child in enumerate(children):
-        net = random_network(np.random.default_rng(child))
+        net = synthetic_network(np.random.default_rng(child), population="well-conditioned")
         iv = initial_values(net.obs, rng=k)
         r1 = adjust(net.obs, initial=iv, snooping=False)
         r0 = adjust(net.obs, initial=_truth(net), snooping=False)
@@ -300,7 +303,8 @@ def test_too_few_stations_and_under_observed_target():
     obs = Observations(("A", "B", "C"), tuple(str(j) for j in range(10)), si, ti, d, np.full(d.size, 1e-6))
     with pytest.raises(MultilatError, match="at least 4 stations"):
         initial_values(obs)
-    net = random_network(np.random.default_rng(1), n_stations=(5, 5), n_targets=(12, 12))
+    net = synthetic_network(np.random.default_rng(1), population="well-conditioned", n_stations=(5, 5),
+                            n_targets=(12, 12))
     keep = ~((net.obs.target_index == 0) & (net.obs.station_index >= 3))
     with pytest.raises(MultilatError, match=r"target .T1. is seen by [0-3] station"):
         initial_values(net.obs.subset(keep))
@@ -325,7 +329,8 @@ def test_larger_gappy_networks():
     """8-12 stations x 50-200 targets with 30 % of the distances missing (the adjustment tests'
     range): the same minimum as from the truth."""
     for k in range(4):
-        net = random_network(np.random.default_rng(1000 + k), n_stations=(8, 12), n_targets=(50, 200), drop=0.3)
+        net = synthetic_network(np.random.default_rng(1000 + k), population="well-conditioned",
+                                n_stations=(8, 12), n_targets=(50, 200), gap_fraction=0.3)
         iv = initial_values(net.obs, rng=k)
         r1 = adjust(net.obs, initial=iv, snooping=False)
         r0 = adjust(net.obs, initial=_truth(net), snooping=False)

@@ -34,7 +34,7 @@ from multilat.errors import MultilatError
 from multilat.network.adjust import adjust
 from multilat.network.angles import predicted_angles
 from multilat.network.data import Observations, Points
-from multilat.network.generator import random_network
+from multilat.network.synthetic import synthetic_network
 from multilat.network.interop.gama import gama_local_text, write_gama_local
 from multilat.network.interop.gama_adjusted import read_gama_adjustment
 
@@ -43,7 +43,7 @@ SIG_ANGLE = 20e-6
 
 
 def _levelled_mixed(levelled=("S1", "S2")):
-    net = random_network(np.random.default_rng([15, 11]), n_stations=(6, 6), n_targets=(15, 15))
+    net = synthetic_network(np.random.default_rng([15, 11]), n_stations=(6, 6), n_targets=(15, 15))
     o = net.obs
     rng = np.random.default_rng(11)
     ori = np.zeros((o.n_stations, 3))

@@ -31,7 +31,7 @@ import pytest
 from multilat.network.adjust import adjust
 from multilat.network.angles import predicted_angles
 from multilat.network.data import Observations, Points
-from multilat.network.generator import random_network
+from multilat.network.synthetic import synthetic_network
 from multilat.network.interop.gama import _AXES, gama_local_text
 from multilat.network.interop.gama_adjusted import read_gama_adjustment
 
@@ -48,7 +48,7 @@ def stored(axes, angles):
 
 def small_levelled():
     """The network (distances rounded to the file's 1e-8 m) and its points (our adjustment)."""
-    net = random_network(np.random.default_rng([25, 4]), n_stations=(4, 4), n_targets=(8, 8), gap_fraction=0.0)
+    net = synthetic_network(np.random.default_rng([25, 4]), n_stations=(4, 4), n_targets=(8, 8), gap_fraction=0.0)
     o = net.obs
     rng = np.random.default_rng(254)
     ori = np.zeros((o.n_stations, 3))

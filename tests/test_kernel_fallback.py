@@ -22,11 +22,12 @@ assert not _numba.HAVE_NUMBA
 from multilat.network import _covariance_kernels as CK, _sparse_kernels as SK
 from multilat.network.adjust import Start, adjust
 from multilat.network.data import Observations
-from multilat.network.large import multilaterate_targets, synthetic_network
+from multilat.network.large import multilaterate_targets
+from multilat.network.synthetic import synthetic_network
 from multilat.network.model import residuals_and_jacobian
 
 s, t = 6, 14
-net = synthetic_network(s, t, 5, size_m=5.0, rng=3)
+net = synthetic_network(3, population="rings", n_stations=s, n_targets=t, per_target=5, size_m=5.0)
 obs = Observations(tuple(f"S{i}" for i in range(s)), tuple(f"T{j}" for j in range(t)),
                    net.station_index, net.target_index, net.distance_m, net.sigma_m)
 start = Start(net.station_xyz_m, net.target_xyz_m, net.offset_m)

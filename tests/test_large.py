@@ -14,7 +14,8 @@ from multilat.network import _sparse_kernels as K
 from multilat.network.adjust import adjust
 from multilat.network.data import Observations
 from multilat.network.initial import rigid_fit
-from multilat.network.large import multilaterate_targets, synthetic_network
+from multilat.network.large import multilaterate_targets
+from multilat.network.synthetic import synthetic_network
 from multilat.network.model import Q
 from multilat.network.result import result_to_json
 
@@ -40,7 +41,7 @@ def as_obs(net):
 @pytest.fixture(scope="module")
 def big():
     """20 stations x 2000 targets, 8 stations per target, 5 um noise; solved from the distances alone."""
-    net = synthetic_network(20, 2000, 8, rng=31)
+    net = synthetic_network(31, population="rings", n_stations=20, n_targets=2000, per_target=8)
     return net, adjust_large(as_obs(net), rng=4)
 
 
@@ -99,7 +100,7 @@ def test_large_initial_values_reach_the_dense_solution_on_a_small_network():
     same JSON keys."""
     from multilat.network.large import large_initial_values
 
-    net = synthetic_network(8, 60, 6, rng=7)
+    net = synthetic_network(7, population="rings", n_stations=8, n_targets=60, per_target=6)
     obs = as_obs(net)
     ref = adjust(obs, datum="free:" + ",".join(obs.station_ids), snooping=False, rng=1, solver="dense")
     res = adjust(obs, datum="free:" + ",".join(obs.station_ids), snooping=False, solver="sparse",
@@ -125,7 +126,7 @@ def test_row_order_does_not_matter(tmp_path):
     rigid alignment, to 1e-9 m (and the same offsets and sigma0)."""
     from multilat.network.files import read_observations
 
-    net = synthetic_network(8, 80, 6, rng=3)
+    net = synthetic_network(3, population="rings", n_stations=8, n_targets=80, per_target=6)
     obs = as_obs(net)
 
     class Truth:
@@ -181,7 +182,7 @@ def test_multilaterate_targets_exact_and_coplanar():
 def test_a_target_seen_by_three_is_kept_with_its_mirror_named():
     """From distances alone a target seen by 3 stations has two mirror positions; it is adjusted
     (zero redundancy) and named in a warning, not a reason to refuse the network."""
-    net = synthetic_network(8, 40, 5, rng=2)
+    net = synthetic_network(2, population="rings", n_stations=8, n_targets=40, per_target=5)
     obs = as_obs(net)
     keep = ~((net.target_index == 7) & (np.arange(len(net.target_index)) % 5 < 2))   # T7 keeps 3 stations
     o3 = Observations(obs.station_ids, obs.target_ids, net.station_index[keep], net.target_index[keep],

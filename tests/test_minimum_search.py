@@ -1,4 +1,4 @@
-"""The minimum search (issue 10, item 4): random networks from multilat.network.generator adjusted
+"""The minimum search (issue 10, item 4): random networks from multilat.network.synthetic adjusted
 from distances alone reach the minimum of the solver started from the truth, or are warned."""
 
 import numpy as np
@@ -6,12 +6,12 @@ import pytest
 
 from multilat.errors import MultilatError
 from multilat.network.adjust import adjust
-from multilat.network.generator import STATION_LAYOUTS, TARGET_LAYOUTS, random_network
+from multilat.network.synthetic import STATION_LAYOUTS, TARGET_LAYOUTS, synthetic_network
 from multilat.network.search import find_minimum, needs_search
 
 
 def _net(k):
-    return random_network(np.random.default_rng([2024, k]))
+    return synthetic_network(np.random.default_rng([2024, k]))
 
 
 def _datum_free_gap(a, b):
@@ -87,11 +87,11 @@ def test_generator_is_seeded_and_within_its_ranges():
 
 
 def test_generator_flat_ring_has_heads_near_one_height():
-    net = random_network(5, station_layout="ring", n_stations=8, extent_m=10.0)
+    net = synthetic_network(5, station_layout="ring", n_stations=8, extent_m=10.0)
     z = net.station_xyz_m[:, 2]
     assert np.ptp(z) <= 0.6 and abs(z.mean() - 1.5) < 0.3
     with pytest.raises(MultilatError, match="station_layout"):
-        random_network(5, station_layout="dome")
+        synthetic_network(5, station_layout="dome")
 
 
 # ------------------------------------------------------------------------------- the search

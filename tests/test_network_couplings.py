@@ -20,7 +20,7 @@ from multilat.errors import MultilatError
 from multilat.network.adjust import adjust
 from multilat.network.data import Points, ReferenceLengths
 from multilat.network.files import read_points, read_reference_lengths
-from multilat.network.generator import random_network, sequential_network
+from multilat.network.synthetic import synthetic_network
 
 
 def _independent(obs, start, *, bars=(), control=(), hard=(), scale_heads=(), fix_321=True):
@@ -134,7 +134,7 @@ def _bars(pairs, net, u, rng):
 def test_scales_per_head_with_scale_bars_as_the_scale_datum():
     """Two heads over 8 stations, both heads' scales estimated (the 7th defect), three scale bars
     (2 µm) as observations: equal to the independent full-vector solution."""
-    net = sequential_network(np.random.default_rng([16, 2]))
+    net = synthetic_network(np.random.default_rng([16, 2]), population="sequential")
     rng = np.random.default_rng(7)
     pairs = [("P1", "P2"), ("P3", "P7"), ("P5", "P11")]
     bars = _bars(pairs, net, 2e-6, rng)
@@ -165,7 +165,7 @@ def test_scales_per_head_with_scale_bars_as_the_scale_datum():
 
 def test_scale_bars_without_scales_are_extra_observations():
     """Bars also add to a network whose scale is known (no scales): dof + 2, vtpv as the independent."""
-    net = random_network(np.random.default_rng([2024, 5]))
+    net = synthetic_network(np.random.default_rng([2024, 5]))
     t = net.obs.target_ids
     pairs = [(t[0], t[1]), (t[2], t[3])]
     bars = _bars(pairs, net, 3e-6, np.random.default_rng(1))
@@ -183,7 +183,7 @@ def test_scale_bars_without_scales_are_extra_observations():
 def test_weighted_and_hard_control_match_the_independent_solution():
     """Control datum: 2 hard control targets and 3 weighted ones (sx, sy, sz = 20, 30, 10 µm): the
     coordinates themselves (the control fixes the frame) and their covariance."""
-    net = random_network(np.random.default_rng([2024, 8]))
+    net = synthetic_network(np.random.default_rng([2024, 8]))
     tid = net.obs.target_ids
     tj = lambda p: net.target_xyz_m[tid.index(p)]  # noqa: E731
     rng = np.random.default_rng(11)
@@ -209,7 +209,7 @@ def test_weighted_and_hard_control_match_the_independent_solution():
 
 
 def test_only_weighted_control_gives_the_datum():
-    net = random_network(np.random.default_rng([2024, 9]))
+    net = synthetic_network(np.random.default_rng([2024, 9]))
     tid = net.obs.target_ids
     sd = np.full(3, 50e-6)
     rng = np.random.default_rng(2)
@@ -266,7 +266,7 @@ def test_cli_scale_bars_with_scales_on_the_sequential_example(tmp_path, capsys):
 def test_weighted_control_on_stations_with_shared_heads():
     """Weighted control on three stations (each 30 µm) of a sequential network whose heads occupy
     several stations: the stations' coordinates, the head offsets and vᵀPv as the independent."""
-    net = sequential_network(np.random.default_rng([16, 4]))
+    net = synthetic_network(np.random.default_rng([16, 4]), population="sequential")
     sid = net.obs.station_ids
     sd = np.full(3, 30e-6)
     rng = np.random.default_rng(4)

@@ -51,11 +51,11 @@ def test_large_networks_draw_densities_and_subsamples(monkeypatch):
     import matplotlib.pyplot as plt
 
     from multilat.network.data import Observations
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
     from multilat.network.result import Start
     from multilat.report import network_figures as NF
 
-    net = synthetic_network(8, 300, 6, rng=3)
+    net = synthetic_network(3, population="rings", n_stations=8, n_targets=300, per_target=6)
     d = net.distance_m.copy()
     d[5] += 200e-6                                                  # one blunder: rejected
     obs = Observations(tuple(f"S{i}" for i in range(8)), tuple(f"T{j}" for j in range(300)),
@@ -86,11 +86,11 @@ def test_density_of_equal_residuals(monkeypatch):
     from dataclasses import replace
 
     from multilat.network.data import Observations
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
     from multilat.network.result import Start
     from multilat.report import network_figures as NF
 
-    net = synthetic_network(6, 60, 5, rng=9)
+    net = synthetic_network(9, population="rings", n_stations=6, n_targets=60, per_target=5)
     obs = Observations(tuple(f"S{i}" for i in range(6)), tuple(f"T{j}" for j in range(60)),
                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
     res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False)

@@ -25,7 +25,7 @@ from multilat.network.adjust import adjust
 from multilat.network.data import Observations
 from multilat.network.datum import rigid_fit, apply_rigid
 from multilat.network.files import read_observations, read_points
-from multilat.network.generator import random_network, sequential_network
+from multilat.network.synthetic import synthetic_network
 from multilat.network.result import result_to_json
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -110,7 +110,7 @@ def _rho(r):
 
 @pytest.fixture(scope="module")
 def seq():
-    return sequential_network(np.random.default_rng([16, 1]))
+    return synthetic_network(np.random.default_rng([16, 1]), population="sequential")
 
 
 def test_shared_offsets_match_an_independent_solution(seq):
@@ -158,7 +158,7 @@ def test_dense_and_sparse_agree_with_shared_heads(seq):
 
 
 def test_one_station_per_head_gives_the_old_result_bit_for_bit():
-    net = random_network(np.random.default_rng([2024, 3]))
+    net = synthetic_network(np.random.default_rng([2024, 3]))
     o = net.obs
     named = Observations(o.station_ids, o.target_ids, o.station_index, o.target_index, o.distance_m, o.sigma_m,
                          station_heads=tuple(f"H{i}" for i in range(o.n_stations)))
@@ -185,7 +185,7 @@ def test_heads_in_the_json(seq):
 
 # ------------------------------------------------------------------ the shipped example
 def test_shipped_example_is_the_generator_output():
-    net = sequential_network(np.random.default_rng(2026))
+    net = synthetic_network(np.random.default_rng(2026), population="sequential")
     obs = read_observations(EX / "obs.csv")
     assert obs.station_heads == net.obs.station_heads
     assert np.max(np.abs(obs.distance_m - net.obs.distance_m)) < 1e-9      # printed with 9 decimals
@@ -330,7 +330,7 @@ def test_from_distances_alone_reaches_the_truth_start_minimum():
     networks `adjust` from distances alone reaches the minimum of a solve started from the truth
     (vᵀPv to 1e-6 relative, offsets to 1e-9 m)."""
     for k in range(12):
-        net = sequential_network(np.random.default_rng([16, 100 + k]))
+        net = synthetic_network(np.random.default_rng([16, 100 + k]), population="sequential")
         a = adjust(net.obs, rng=k, snooping=False)
         b = adjust(net.obs, initial=net, snooping=False)
         assert a.sigma0 == pytest.approx(b.sigma0, rel=1e-6), k
@@ -383,7 +383,8 @@ def test_correlated_gain_names_offsets_by_head():
     1e-5 relative (the solver's rounding-floor stop, ~1e-4 σ, over a 2e-6 m difference)."""
     from multilat.campaign.correlated import adjustment_gain
 
-    net = sequential_network(np.random.default_rng([16, 9]), n_stations=6, n_targets=10, gap=0.0)
+    net = synthetic_network(np.random.default_rng([16, 9]), population="sequential", n_stations=6, n_targets=10,
+                            gap_fraction=0.0)
     o = net.obs
     exact = np.linalg.norm(net.station_xyz_m[o.station_index] - net.target_xyz_m[o.target_index], axis=1)
     obs = o.with_distances(exact + net.offset_m[o.station_index])

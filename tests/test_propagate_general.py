@@ -33,7 +33,7 @@ from multilat.network.adjust import adjust
 from multilat.network.batched_coupled import CoupledBatchedNetwork
 from multilat.network.data import Points, ReferenceLengths
 from multilat.network.files import read_observations
-from multilat.network.generator import random_network, sequential_network
+from multilat.network.synthetic import synthetic_network
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "network" / "sequential"
 TRIALS = 4000
@@ -79,7 +79,7 @@ def test_heads_over_several_stations_sequential_example():
 
 def test_scale_bars_as_scale_datum_with_per_head_scales():
     """Scales of both heads estimated, three 2 µm scale bars as the scale datum; bars drawn per trial."""
-    net = sequential_network(np.random.default_rng([16, 2]))
+    net = synthetic_network(np.random.default_rng([16, 2]), population="sequential")
     rng = np.random.default_rng(7)
     ids = list(net.obs.target_ids)
     pairs = [("P1", "P2"), ("P3", "P7"), ("P5", "P11")]
@@ -100,7 +100,7 @@ def test_scale_bars_as_scale_datum_with_per_head_scales():
 
 def test_weighted_and_hard_control():
     """Control datum: 2 hard targets, 3 weighted (20, 30, 10 µm), drawn in every trial."""
-    net = random_network(np.random.default_rng([2024, 8]))
+    net = synthetic_network(np.random.default_rng([2024, 8]))
     tid = net.obs.target_ids
     tj = lambda p: net.target_xyz_m[tid.index(p)]  # noqa: E731
     rng = np.random.default_rng(11)
@@ -120,7 +120,7 @@ def test_weighted_and_hard_control():
 def test_couplings_not_drawn_would_be_caught():
     """The mutation the tests guard against: weighted control held at its coordinates in every trial
     gives a Monte Carlo spread far below the linear one (the control σ dominates here)."""
-    net = random_network(np.random.default_rng([2024, 9]))
+    net = synthetic_network(np.random.default_rng([2024, 9]))
     tid = net.obs.target_ids
     sd = np.full(3, 50e-6)
     rng = np.random.default_rng(2)
@@ -253,9 +253,9 @@ def test_angles_are_drawn_and_match_the_adjustments_covariance():
     adjust's (with the angles and orientations, a second implementation) to 1e-8, and the Monte Carlo
     (distances, angles drawn) agrees with it within 5 MC standard errors; without drawing the angles the
     targets' spread falls below it."""
-    from multilat.network.generator import mixed_network
+    from multilat.network.synthetic import synthetic_network
 
-    net, _ = mixed_network(np.random.default_rng([18, 1]))
+    net = synthetic_network(np.random.default_rng([18, 1]), population="mixed")
     res = adjust(net.obs, initial=net, snooping=False)
     prob = pr.problem_from_observations(net.obs, adjustment=res)
     nw = prob.network
@@ -277,9 +277,9 @@ def test_levelled_trackers_propagate_about_z_and_match_the_adjustment():
     equals adjust's 4-defect covariance to 1e-8; the Monte Carlo agrees with it within 5 MC SE.
     Mutation: the same trials moved by the full 6-parameter rigid fit (a tilt the data forbid) put a
     target's spread 6.7 MC standard errors off."""
-    from multilat.network.generator import mixed_network
+    from multilat.network.synthetic import synthetic_network
 
-    net, _ = mixed_network(np.random.default_rng([18, 1]), levelled=True)
+    net = synthetic_network(np.random.default_rng([18, 1]), population="mixed", levelled=True)
     assert net.obs.levelled == ("AT1", "AT2")
     res = adjust(net.obs, initial=net, snooping=False)
     prob = pr.problem_from_observations(net.obs, adjustment=res)
@@ -306,9 +306,9 @@ def test_levelled_trackers_propagate_about_z_and_match_the_adjustment():
 
 def test_cli_propagate_levelled(tmp_path, capsys):
     from multilat.network.files import write_observations
-    from multilat.network.generator import mixed_network
+    from multilat.network.synthetic import synthetic_network
 
-    net, _ = mixed_network(np.random.default_rng([18, 1]), levelled=True)
+    net = synthetic_network(np.random.default_rng([18, 1]), population="mixed", levelled=True)
     p = tmp_path / "mixed.csv"
     write_observations(p, net.obs)                       # levelled is not a column: --levelled says it
     assert main(["propagate", str(p), "--trials", "300", "--noise", "gaussian", "--levelled", "AT1,AT2",

@@ -10,7 +10,7 @@ from multilat.cli import main
 from multilat.network import statistics as st
 from multilat.network.adjust import adjust
 from multilat.network.data import Observations
-from multilat.network.large import synthetic_network
+from multilat.network.synthetic import synthetic_network
 from multilat.network.result import Start
 
 
@@ -57,7 +57,7 @@ def test_tau_test_with_a_wrong_a_priori_sigma_rejects_nothing():
     """The issue's case: 5 µm data weighted as 2 µm. Variance factor known: the global test fails and
     snooping rejects good distances. Unknown: σ0 ≈ 2.5 is estimated, Pope's τ-test rejects nothing and
     the covariances are scaled by σ0²."""
-    net = synthetic_network(6, 60, 5, size_m=5.0, sigma_m=5e-6, rng=3)
+    net = synthetic_network(3, population="rings", n_stations=6, n_targets=60, per_target=5, size_m=5.0, sigma_m=5e-6)
     obs = _obs(net, sigma_m=2e-6)
     known = adjust(obs, initial=_start(net))
     assert known.global_test.passed is False
@@ -78,7 +78,7 @@ def test_external_shift_equals_a_readjustment_with_the_mdb_added():
     """Δx_k = C Aᵀ P e_k MDB_k, checked by re-adjusting with MDB_k added to distance k (same start,
     same free datum): the largest point shift agrees to 1 % (the response is linear to ~MDB/L ~ 1e-5;
     1 % allows the iteration's stopping tolerance of 1e-9 σ on shifts of tens of µm)."""
-    net = synthetic_network(6, 40, 5, size_m=5.0, rng=8)
+    net = synthetic_network(8, population="rings", n_stations=6, n_targets=40, per_target=5, size_m=5.0)
     obs = _obs(net)
     base = adjust(obs, initial=_start(net), snooping=False)
     rel = base.reliability
@@ -101,7 +101,7 @@ def test_external_shift_equals_a_readjustment_with_the_mdb_added():
 def test_a_poorly_controlled_target_is_named_where_a_blunder_goes_undetected(capsys, tmp_path):
     """The issue's case: a target seen by 4 heads has MDBs of tens of σ; a 12σ blunder there is not
     detected. The reliability summary names that target (MDB above --mdb-limit-sigma σ)."""
-    net = synthetic_network(4, 30, 4, size_m=5.0, rng=5)
+    net = synthetic_network(5, population="rings", n_stations=4, n_targets=30, per_target=4, size_m=5.0)
     obs = _obs(net)
     base = adjust(obs, initial=_start(net), snooping=False)
     rel = base.reliability
@@ -130,7 +130,7 @@ def _rates(n_networks, seed0):
     and the larger |w| may be the other one's."""
     rejected = tested = caught = planted = 0
     for i in range(n_networks):
-        net = synthetic_network(6, 40, 5, size_m=5.0, rng=seed0 + i)
+        net = synthetic_network(seed0 + i, population="rings", n_stations=6, n_targets=40, per_target=5, size_m=5.0)
         obs = _obs(net)
         res = adjust(obs, initial=_start(net), test_method="b-method")     # forced: the B-method's rates
         rejected += len(res.outliers)
@@ -179,7 +179,7 @@ def test_false_alarm_rate_and_detection_b_method_200_networks():
 
 
 def test_cli_options_and_one_line_errors(capsys, tmp_path):
-    net = synthetic_network(5, 20, 4, size_m=4.0, rng=2)
+    net = synthetic_network(2, population="rings", n_stations=5, n_targets=20, per_target=4, size_m=4.0)
     obs = _obs(net)
     p = tmp_path / "obs.csv"
     with open(p, "w") as f:
@@ -218,7 +218,7 @@ def test_confidence_ellipsoid_closed_form_and_unlocated_points():
 
 
 def test_result_ellipsoids_computed_once_per_level():
-    net = synthetic_network(4, 12, 4, size_m=5.0, rng=5)
+    net = synthetic_network(5, population="rings", n_stations=4, n_targets=12, per_target=4, size_m=5.0)
     res = adjust(_obs(net), initial=_start(net))
     assert res.ellipsoids() is res.ellipsoids()
     (sa, _), (ta, _) = res.ellipsoids(level=0.99)
@@ -231,7 +231,8 @@ def test_final_residuals_in_slices_are_the_whole_array_formula(monkeypatch):
     # bits as the formula over the whole arrays, whatever the slice
     from multilat.network import result as R
 
-    net = synthetic_network(5, 40, 4, size_m=5.0, rng=10)     # (rng=9 has a target whose sight lines are
+    net = synthetic_network(10, population="rings", n_stations=5, n_targets=40, per_target=4,
+                            size_m=5.0)  # (rng=9 has a target whose sight lines are
     obs = _obs(net)                                             # coplanar: it is left out, test_weak_targets)
     monkeypatch.setattr(R, "RESIDUAL_SLICE", 7)
     res = adjust(obs, initial=_start(net), snooping=False)

@@ -11,7 +11,7 @@ from multilat.network import covariance as cv
 from multilat.network import reliability as rl
 from multilat.network.adjust import adjust
 from multilat.network.data import Observations, ReferenceLengths
-from multilat.network.large import synthetic_network
+from multilat.network.synthetic import synthetic_network
 from multilat.network.model import Q
 from multilat.network.result import Start
 
@@ -92,7 +92,7 @@ def test_block_shifts_equal_the_per_observation_product(monkeypatch, solver, ker
     if kernels:
         monkeypatch.setattr(cv, "KERNELS_ABOVE_OBS", 50)
     calls = _spy(monkeypatch)
-    net = synthetic_network(6, 60, 5, size_m=5.0, rng=11)
+    net = synthetic_network(11, population="rings", n_stations=6, n_targets=60, per_target=5, size_m=5.0)
     obs = _obs(net)
     d = obs.distance_m.copy()
     d[7] += 2e-3
@@ -109,7 +109,7 @@ def test_repeated_readings_and_estimated_variance(monkeypatch, kernels):
     if kernels:
         monkeypatch.setattr(cv, "KERNELS_ABOVE_OBS", 50)
     calls = _spy(monkeypatch)
-    net = synthetic_network(6, 40, 5, size_m=4.0, rng=5)
+    net = synthetic_network(5, population="rings", n_stations=6, n_targets=40, per_target=5, size_m=4.0)
     obs = _obs(net, repeat=200, rng=2)
     res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m),
                  variance_factor="unknown", snooping=False)
@@ -120,7 +120,7 @@ def test_repeated_readings_and_estimated_variance(monkeypatch, kernels):
 def test_scale_bars_take_the_coupled_path(monkeypatch):
     """Scale bars couple targets (CoupledCovariance): the dense product in batches, same numbers."""
     calls = _spy(monkeypatch)
-    net = synthetic_network(6, 30, 5, size_m=4.0, rng=3)
+    net = synthetic_network(3, population="rings", n_stations=6, n_targets=30, per_target=5, size_m=4.0)
     obs = _obs(net)
     x = net.target_xyz_m
     pairs = [(0, 1), (2, 9), (5, 17)]

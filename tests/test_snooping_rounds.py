@@ -17,7 +17,7 @@ import pytest
 from multilat.network import snooping
 from multilat.network.adjust import adjust
 from multilat.network.data import Observations
-from multilat.network.large import synthetic_network
+from multilat.network.synthetic import synthetic_network
 
 
 def _blundered(n_targets=150, n_blunders=6, seed=5, size_sigma=(25, 60)):
@@ -25,7 +25,7 @@ def _blundered(n_targets=150, n_blunders=6, seed=5, size_sigma=(25, 60)):
     (in the observations' station order)."""
     from types import SimpleNamespace
 
-    net = synthetic_network(12, n_targets, 8, rng=seed)
+    net = synthetic_network(seed, population="rings", n_stations=12, n_targets=n_targets, per_target=8)
     si, ti, d = net.station_index, net.target_index, net.distance_m.copy()
     g = np.random.default_rng(seed)
     k = g.choice(d.size, n_blunders, replace=False)
@@ -139,7 +139,7 @@ def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch
             pytest.skip("numba not installed")
         monkeypatch.setattr(C, "KERNELS_ABOVE_OBS", 0)
 
-    net = synthetic_network(10, 200, [4, 5, 6][seed % 3], rng=seed)
+    net = synthetic_network(seed, population="rings", n_stations=10, n_targets=200, per_target=[4, 5, 6][seed % 3])
     d = net.distance_m.copy()
     g = np.random.default_rng(seed)
     k = g.choice(d.size, 5, replace=False)

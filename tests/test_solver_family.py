@@ -15,7 +15,7 @@ from multilat.errors import MultilatError
 from multilat.network.adjust import Start, adjust
 from multilat.network.data import Observations
 from multilat.network.files import read_observations
-from multilat.network.large import synthetic_network
+from multilat.network.synthetic import synthetic_network
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 OBS = EX / "small_volume_obs.csv"
@@ -29,7 +29,7 @@ def _run(capsys, args):
 
 def _blundered(tmp_path) -> Path:
     """A 8-station, 60-target network (6 stations per target) with a 40-sigma blunder on one distance."""
-    net = synthetic_network(8, 60, 6, size_m=8.0, rng=3)
+    net = synthetic_network(3, population="rings", n_stations=8, n_targets=60, per_target=6, size_m=8.0)
     d = net.distance_m.copy()
     d[100] += 40 * net.sigma_m[100]
     p = tmp_path / "blunder.csv"
@@ -105,7 +105,7 @@ def test_auto_switches_and_sparse_refuses_what_it_cannot_do(capsys, monkeypatch)
 def test_sparse_equals_dense_on_a_large_network():
     """1 000 targets x 8 of 12 stations, from initial values 1 mm off: the same minimum (1e-9 m) and
     the same statistics from both back ends."""
-    net = synthetic_network(12, 1000, 8, rng=5)
+    net = synthetic_network(5, population="rings", n_stations=12, n_targets=1000, per_target=8)
     obs = Observations(tuple(f"S{i}" for i in range(12)), tuple(f"T{j}" for j in range(1000)),
                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
     rng = np.random.default_rng(6)
@@ -129,7 +129,7 @@ def test_sparse_equals_dense_on_a_large_network():
 def test_convergence_reaches_the_minimum_of_a_solver_started_from_the_truth(solver):
     """Started 5 mm off or at the truth, the solver ends at the same point to the float64 floor
     (a few 1e-15 m at a few metres), and the record says converged."""
-    net = synthetic_network(8, 300, 6, size_m=6.0, rng=9)
+    net = synthetic_network(9, population="rings", n_stations=8, n_targets=300, per_target=6, size_m=6.0)
     obs = Observations(tuple(f"S{i}" for i in range(8)), tuple(f"T{j}" for j in range(300)),
                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
     truth = Start(net.station_xyz_m, net.target_xyz_m, net.offset_m)
@@ -174,7 +174,7 @@ def test_statistics_equal_an_independent_dense_implementation(solver):
 
     from multilat.network.model import dense_jacobian, residuals_and_jacobian
 
-    net = synthetic_network(6, 40, 5, size_m=6.0, rng=21)
+    net = synthetic_network(21, population="rings", n_stations=6, n_targets=40, per_target=5, size_m=6.0)
     obs = Observations(tuple(f"S{i}" for i in range(6)), tuple(f"T{j}" for j in range(40)),
                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
     res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), solver=solver,
@@ -209,7 +209,7 @@ def test_no_snooping_while_the_global_test_passes():
     each is listed in w_failures. A 30σ blunder added to the same data fails the global test and is the
     one rejected. (The default B-method would set α_global = 0.75 at these 5 944 dof: see
     test_reliability.py.)"""
-    net = synthetic_network(12, 2000, 6, size_m=10.0, rng=17)
+    net = synthetic_network(17, population="rings", n_stations=12, n_targets=2000, per_target=6, size_m=10.0)
     obs = Observations(tuple(f"S{i}" for i in range(12)), tuple(f"T{j}" for j in range(2000)),
                        net.station_index, net.target_index, net.distance_m, net.sigma_m)
     start = Start(net.station_xyz_m, net.target_xyz_m, net.offset_m)

@@ -10,7 +10,7 @@ from multilat.errors import MultilatError
 from multilat.network import _sparse_kernels as K
 from multilat.network.adjust import Start, adjust
 from multilat.network.data import Observations
-from multilat.network.large import synthetic_network
+from multilat.network.synthetic import synthetic_network
 from multilat.network.model import Q
 from multilat.network.problem import Params, Problem
 from multilat.network.solve.dense import DenseBackend
@@ -35,7 +35,7 @@ def as_obs(net, order=None):
 def test_sparse_and_dense_assemble_the_same_reduced_system(damping):
     """N, b, the target blocks and the back-substituted target steps of both back ends agree to
     1e-9 relative at a point 1 mm off the solution, damped or not, observations in any order."""
-    net = synthetic_network(7, 50, 5, rng=4)
+    net = synthetic_network(4, population="rings", n_stations=7, n_targets=50, per_target=5)
     h, o, tg = start(net, 5)
     p = Params(h, tg, o, np.zeros(7))
     perm = np.random.default_rng(1).permutation(len(net.distance_m))
@@ -56,7 +56,7 @@ def test_sparse_and_dense_assemble_the_same_reduced_system(damping):
 
 
 def test_sparse_refuses_what_it_does_not_model():
-    net = synthetic_network(6, 20, 4, rng=1)
+    net = synthetic_network(1, population="rings", n_stations=6, n_targets=20, per_target=4)
     obs = as_obs(net)
     free = np.ones((6, Q), bool)
     with pytest.raises(ValueError, match="scales"):
@@ -70,7 +70,7 @@ def test_python_and_numba_kernels_agree():
     """The kernels run as plain Python without numba: same numbers on a tiny network."""
     if not K.HAVE_NUMBA:
         pytest.skip("numba not installed: only the Python path exists")
-    net = synthetic_network(5, 12, 4, rng=3)
+    net = synthetic_network(3, population="rings", n_stations=5, n_targets=12, per_target=4)
     h, o, tg = start(net, 4)
     t = len(tg)
     tptr = np.zeros(t + 1, np.int64)

@@ -2,7 +2,7 @@
 snooping (item 6) and the σ0 plausibility check both ways.
 
 Independent values: Šidák's formula written out, the false-alarm and planted-blunder rates counted on
-networks of the package's generator (:func:`multilat.network.large.synthetic_network`) with their truth,
+networks of the package's generator (:func:`multilat.network.synthetic.synthetic_network`) with their truth,
 and the exact hat row of a zero-redundancy observation (``e_l``)."""
 
 import warnings
@@ -13,7 +13,7 @@ import pytest
 from multilat.network import statistics as st
 from multilat.network.adjust import adjust
 from multilat.network.data import Observations
-from multilat.network.large import synthetic_network
+from multilat.network.synthetic import synthetic_network
 from multilat.network.result import Start
 
 
@@ -63,7 +63,8 @@ def study(n_networks, seed0, *, n_min=1000, n_max=100_000, blunder_sigma=20.0, p
 def _one(seed, n_min, n_max, blunder_sigma, planted):
     g = np.random.default_rng(seed)
     m = float(np.exp(g.uniform(np.log(n_min), np.log(n_max))))
-    net = synthetic_network(8, max(int(m / 6), 20), 6, size_m=10.0, rng=g)
+    net = synthetic_network(g, population="rings", n_stations=8, n_targets=max(int(m / 6), 20), per_target=6,
+                            size_m=10.0)
     obs = _obs(net)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -108,7 +109,7 @@ def test_auto_keeps_the_b_method_while_its_family_wise_alpha_is_controlled():
 
 
 def test_json_states_the_rule():
-    net = synthetic_network(8, 250, 6, size_m=10.0, rng=4)
+    net = synthetic_network(4, population="rings", n_stations=8, n_targets=250, per_target=6, size_m=10.0)
     res = adjust(_obs(net), initial=_start(net))
     t = res.tests
     assert t["method"] == "sidak" and t["requested"] == "auto" and t["n_tests"] == 1500
@@ -139,7 +140,8 @@ def test_study_small_clean_networks_keep_their_observations_and_blunders_are_fou
         for i in range(10):
             g = np.random.default_rng(7000 + i)
             m = float(np.exp(g.uniform(np.log(1000), np.log(4000))))
-            net = synthetic_network(8, max(int(m / 6), 20), 6, size_m=10.0, rng=g)
+            net = synthetic_network(g, population="rings", n_stations=8, n_targets=max(int(m / 6), 20),
+                                    per_target=6, size_m=10.0)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 lost_b += len(adjust(_obs(net), initial=_start(net), test_method="b-method").outliers) > 0
@@ -162,10 +164,10 @@ def test_study_200_networks_1e3_to_1e5_distances():
 def _case6():
     """8 stations, 40 targets, 15 % of pairs unobserved, targets seen by 3 stations allowed (one here:
     its 3 distances have zero redundancy); a 12σ blunder on the distance with the largest redundancy."""
-    from multilat.network.generator import random_network
+    from multilat.network.synthetic import synthetic_network
 
-    net = random_network(10, n_stations=8, n_targets=(40, 40), gap_fraction=0.15, min_stations_per_target=3,
-                         station_layout="two-level", target_layout="volume")
+    net = synthetic_network(10, n_stations=8, n_targets=(40, 40), gap_fraction=0.15, min_stations_per_target=3,
+                            station_layout="two-level", target_layout="volume")
     obs = net.obs
     assert (np.bincount(obs.target_index) == 3).sum() == 1
     with warnings.catch_warnings():
@@ -220,7 +222,7 @@ def test_hat_row_of_a_zero_redundancy_observation_is_rounding_noise():
 
 # ------------------------------------------------------------------------- σ0 plausibility, both ways
 def _sigma_net():
-    net = synthetic_network(6, 40, 5, size_m=5.0, rng=3)
+    net = synthetic_network(3, population="rings", n_stations=6, n_targets=40, per_target=5, size_m=5.0)
     return net, _obs(net)
 
 

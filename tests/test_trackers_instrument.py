@@ -16,7 +16,7 @@ from multilat.cli import main
 from multilat.errors import MultilatError
 from multilat.instrument import load_instrument
 from multilat.network.files import read_observations
-from multilat.network.generator import random_network
+from multilat.network.synthetic import synthetic_network
 
 INST = Path(__file__).resolve().parents[1] / "examples" / "instruments" / "heads_and_trackers.toml"
 
@@ -24,7 +24,7 @@ INST = Path(__file__).resolve().parents[1] / "examples" / "instruments" / "heads
 def _mixed_file(tmp_path):
     """A random network whose stations S1, S2 are called AT1, AT2 (trackers), the others heads H3..;
     no sigma_m column: σ from the instrument."""
-    net = random_network(np.random.default_rng([15, 40]), n_stations=(6, 6), n_targets=(14, 14))
+    net = synthetic_network(np.random.default_rng([15, 40]), n_stations=(6, 6), n_targets=(14, 14))
     o = net.obs
     names = ["AT1", "AT2"] + [f"H{i + 1}" for i in range(2, o.n_stations)]
     p = tmp_path / "mixed.csv"

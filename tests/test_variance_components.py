@@ -21,13 +21,13 @@ from scipy.stats import chi2
 from multilat.cli import main
 from multilat.errors import MultilatError
 from multilat.network.adjust import adjust
-from multilat.network.generator import random_network
+from multilat.network.synthetic import synthetic_network
 from multilat.network.variance_components import estimate_variance_components
 
 
 def _misset(k, factor=3.0):
     """A random network whose stations S1, S2 measure with `factor` times the σ their file states."""
-    net = random_network(np.random.default_rng([15, k]), n_stations=(6, 8), n_targets=(15, 25))
+    net = synthetic_network(np.random.default_rng([15, k]), n_stations=(6, 8), n_targets=(15, 25))
     o = net.obs
     g = (o.station_index <= 1).astype(int)
     extra = np.sqrt(factor ** 2 - 1.0) * o.sigma_m
@@ -144,9 +144,9 @@ def test_cli_variance_components_by_head(tmp_path, capsys):
 def _mixed_misset(k, factor=3.0):
     """A mixed campaign (4 heads, 2 trackers) whose angles scatter `factor` times their stated σ."""
     from multilat.network.data import Observations
-    from multilat.network.generator import mixed_network
+    from multilat.network.synthetic import synthetic_network
 
-    net, _ = mixed_network(np.random.default_rng([16, k]), n_targets=20)
+    net = synthetic_network(np.random.default_rng([16, k]), population="mixed", n_targets=20)
     o = net.obs
     rng = np.random.default_rng([17, k])
     extra = np.sqrt(factor ** 2 - 1.0) * o.sigma_azimuth_rad

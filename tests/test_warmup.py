@@ -18,9 +18,9 @@ pytest.importorskip("numba")
 
 @pytest.mark.slow
 def test_first_adjust_after_the_warm_up_compiles_nothing(tmp_path):
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
 
-    net = synthetic_network(20, 6000, 8, rng=4)
+    net = synthetic_network(4, population="rings", n_stations=20, n_targets=6000, per_target=8)
     rows = [f"S{i},T{j},{d:.9f},5e-06" for i, j, d in zip(net.station_index, net.target_index, net.distance_m)]
     obs = tmp_path / "obs.csv"
     obs.write_text("station,target,distance_m,sigma_m\n" + "\n".join(rows) + "\n")
@@ -52,9 +52,11 @@ loop.KERNEL_MIN_TARGETS = 0
 from multilat.cli import main
 from multilat.network.adjust import adjust
 from multilat.network.data import Observations
-from multilat.network.large import multilaterate_targets, synthetic_network
+from multilat.network.large import multilaterate_targets
+from multilat.network.synthetic import synthetic_network
 
-net = synthetic_network(6, 30, 5, rng=3)           # arrays made in memory: writeable
+net = synthetic_network(3, population="rings", n_stations=6, n_targets=30,
+                        per_target=5)  # arrays made in memory: writeable
 obs = Observations(tuple(f"S{i}" for i in range(6)), tuple(f"T{j}" for j in range(30)),
                    net.station_index, net.target_index, net.distance_m, net.sigma_m)
 res = adjust(obs, solver="sparse", rng=0)

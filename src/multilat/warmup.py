@@ -32,12 +32,12 @@ def _steps():
         from multilat.network.adjust import adjust
         from multilat.network.covariance import KERNELS_ABOVE_OBS
         from multilat.network.files import read_observations
-        from multilat.network.large import synthetic_network
+        from multilat.network.synthetic import synthetic_network
 
         from multilat.network.solve.loop import KERNEL_MIN_TARGETS
 
         t = max(KERNELS_ABOVE_OBS // 8, KERNEL_MIN_TARGETS) + 50     # every size-gated kernel runs
-        net = synthetic_network(20, t, 8, rng=1)
+        net = synthetic_network(1, population="rings", n_stations=20, n_targets=t, per_target=8)
         with tempfile.TemporaryDirectory(prefix="multilat-warmup-") as tmp:
             path = Path(tmp) / "obs.csv"
             path.write_text("station,target,distance_m,sigma_m\n" + "".join(

@@ -19,7 +19,7 @@ import pytest
 from multilat.network import covariance as C
 from multilat.network.adjust import Start, adjust
 from multilat.network.data import Observations
-from multilat.network.large import synthetic_network
+from multilat.network.synthetic import synthetic_network
 
 from conftest import CLI, EX, cli_env
 
@@ -31,7 +31,7 @@ if not K.HAVE_NUMBA:                                      # pragma: no cover
 def _repeated_network(repeats=300, s=6, t=40, rng=21):
     """A small network plus ``repeats`` readings of the pair (S0, T0) (noise 5 µm) and target T1 seen
     ``repeats // 10`` more times by every station: targets far above :data:`K.FEW_PER_TARGET`."""
-    net = synthetic_network(s, t, 5, size_m=6.0, rng=rng)
+    net = synthetic_network(rng, population="rings", n_stations=s, n_targets=t, per_target=5, size_m=6.0)
     g = np.random.default_rng(rng)
     si, ti, d = [net.station_index], [net.target_index], [net.distance_m]
     first = int(np.flatnonzero((net.station_index == 0) & (net.target_index == 0))[0])

@@ -1,4 +1,5 @@
-"""Regenerate this example's files from multilat.network.generator.mixed_network (seed 2028).
+"""Regenerate this example's files from multilat.network.synthetic.synthetic_network
+(population "mixed", seed 2028).
 
     PYTHONPATH=src python examples/network/mixed/generate.py
 
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from multilat.io import write_csv_atomic
-from multilat.network.generator import mixed_network
+from multilat.network.synthetic import synthetic_network
 
 SEED = 2028
 
@@ -26,7 +27,8 @@ def _f(v):
 
 
 def main(out: Path = Path(__file__).resolve().parent) -> None:
-    net, ori = mixed_network(np.random.default_rng(SEED))
+    net = synthetic_network(np.random.default_rng(SEED), population="mixed")
+    ori = net.orientation_rad
     o = net.obs
     write_csv_atomic(out / "obs.csv", ["station", "target", "distance_m", "sigma_m", "azimuth_rad", "elevation_rad",
                                        "sigma_azimuth_rad", "sigma_elevation_rad"],

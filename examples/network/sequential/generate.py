@@ -1,4 +1,5 @@
-"""Regenerate this example's files from multilat.network.generator.sequential_network (seed 2026).
+"""Regenerate this example's files from multilat.network.synthetic.synthetic_network
+(population "sequential", seed 2026).
 
     PYTHONPATH=src python examples/network/sequential/generate.py
 
@@ -12,13 +13,13 @@ from pathlib import Path
 import numpy as np
 
 from multilat.io import write_csv_atomic
-from multilat.network.generator import sequential_network
+from multilat.network.synthetic import synthetic_network
 
 SEED = 2026
 
 
 def main(out: Path = Path(__file__).resolve().parent) -> None:
-    net = sequential_network(np.random.default_rng(SEED))
+    net = synthetic_network(np.random.default_rng(SEED), population="sequential")
     o = net.obs
     heads = o.head_of_station
     write_csv_atomic(out / "obs.csv", ["station", "target", "head", "distance_m", "sigma_m"],

@@ -28,8 +28,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["LargeStart", "large_initial_values", "multilaterate_targets", "select_seed_targets",
-           "SyntheticNetwork", "synthetic_network"]
+__all__ = ["LargeStart", "large_initial_values", "multilaterate_targets", "select_seed_targets"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -358,58 +357,3 @@ def large_initial_values(obs, *, rng=None, seed_size: int = 48) -> LargeStart:
     return LargeStart(iv.station_xyz_m, tg, iv.offset_m, tuple(tids[j] for j in seed),
                       f"seed network ({iv.method}) + multilateration", iv.rms_residual_m, ml_rms,
                       {"seed": t1 - t0, "multilaterate": time.perf_counter() - t1})
-
-
-# --------------------------------------------------------------------------- a test network
-@dataclass(frozen=True, eq=False)
-class SyntheticNetwork:
-    """A generated network with its truth (see :func:`synthetic_network`)."""
-
-    station_index: np.ndarray
-    target_index: np.ndarray
-    distance_m: np.ndarray
-    sigma_m: np.ndarray
-    station_xyz_m: np.ndarray
-    offset_m: np.ndarray
-    target_xyz_m: np.ndarray
-
-
-def synthetic_network(n_stations: int = 20, n_targets: int = 200_000, per_target: int = 8, *,
-                      sigma_m: float = 5e-6, size_m: float = 20.0, rng=None) -> SyntheticNetwork:
-    """A large-volume test network with a known truth.
-
-    Stations on a ring of radius ``0.6 size_m`` at alternating heights (0 and ``0.3 size_m``),
-    offsets uniform in +-5 mm; targets uniform in a ``size_m x size_m x 0.25 size_m`` box; each target
-    observed by ``per_target`` distinct stations chosen at random, half on each ring (a target seen only
-    by the low ring at floor height would have coplanar lines of sight); gaussian noise ``sigma_m``.
-    Observations are listed target by target.
-    """
-    rng = np.random.default_rng(rng)
-    if per_target < 3 or per_target > n_stations:
-        raise MultilatError(f"per_target must be in 3..n_stations, got {per_target}")
-    ang = 2 * np.pi * np.arange(n_stations) / n_stations
-    rad = 0.6 * size_m
-    hz = np.where(np.arange(n_stations) % 2 == 0, 0.0, 0.3 * size_m)
-    h = np.column_stack([rad * np.cos(ang), rad * np.sin(ang), hz])
-    off = rng.uniform(-5e-3, 5e-3, n_stations)
-    tg = rng.uniform([-size_m / 2, -size_m / 2, 0.0], [size_m / 2, size_m / 2, 0.25 * size_m],
-                     (n_targets, 3))
-    # per_target distinct stations per target, half from the low ring and half from the high one
-    # (all-low stations would leave a target at floor height with coplanar lines of sight)
-    low = np.arange(0, n_stations, 2)
-    high = np.arange(1, n_stations, 2)
-    n_low = min(len(low), per_target // 2)
-    n_high = per_target - n_low
-    if n_high > len(high):
-        n_high = len(high)
-        n_low = per_target - n_high
-    pick_l = np.argpartition(rng.random((n_targets, len(low))), n_low - 1, axis=1)[:, :n_low]
-    pick_h = np.argpartition(rng.random((n_targets, len(high))), n_high - 1, axis=1)[:, :n_high]
-    st = np.concatenate([low[pick_l], high[pick_h]], axis=1)
-    st.sort(axis=1)
-    si = st.ravel().astype(np.int64)
-    ti = np.repeat(np.arange(n_targets, dtype=np.int64), per_target)
-    diff = h[si] - tg[ti]
-    dist = np.sqrt(np.einsum("mi,mi->m", diff, diff)) + off[si]
-    dist = dist + rng.normal(0.0, sigma_m, len(si))
-    return SyntheticNetwork(si, ti, dist, np.full(len(si), sigma_m), h, off, tg)

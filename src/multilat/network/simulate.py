@@ -35,8 +35,7 @@ from multilat.network.data import Observations, ReferenceLengths
 from multilat.network.sigma_source import DEFAULT_SIGMA_M
 
 __all__ = ["PaperStudy", "PAPER_STUDY", "SimulationResult", "simulate", "interpoint_error_std",
-           "linear_prediction", "load_config", "load_config_file", "NOISES", "RandomNetwork",
-           "random_network", "WELL_CONDITIONED", "perturbed_config"]
+           "linear_prediction", "load_config", "load_config_file", "NOISES", "perturbed_config"]
 
 NOISES = ("gaussian", "model")
 
@@ -466,80 +465,6 @@ def _load_csv(p: Path) -> NetworkConfig:
         else:
             raise tab.error(k, f"kind must be 'station' or 'target', got {kind!r}")
     return _build(p.stem, sid, sx, tid, tx, so, None)
-
-
-# ------------------------------------------------------------------------------------ random networks
-
-#: thresholds of a "well-conditioned" random network (see :func:`random_network`)
-WELL_CONDITIONED = {"station_flatness": 0.25, "target_flatness": 0.25, "min_stations_per_target": 4,
-                    "min_targets_per_station": 5, "min_redundancy": 4, "min_clearance": 0.1}
-
-
-@dataclass(frozen=True, eq=False)
-class RandomNetwork:
-    """A random network with its truth and one set of simulated observations.
-
-    Attributes
-    ----------
-    station_xyz_m (s, 3), target_xyz_m (t, 3), offset_m (s,) : the truth, metres
-    obs : Observations  ``|H - T| + offset + noise`` with gaps
-    """
-
-    station_xyz_m: np.ndarray
-    target_xyz_m: np.ndarray
-    offset_m: np.ndarray
-    obs: Observations
-
-
-def _flatness(x):
-    sv = np.linalg.svd(x - x.mean(0), compute_uv=False)
-    return float(sv[2] / sv[0])
-
-
-def random_network(rng=None, *, n_stations=(4, 8), n_targets=(10, 30), size_m: float = 1.0,
-                   drop: float = 0.15, offset_max_m: float = 5e-3, sigma_m: float = 5e-6) -> RandomNetwork:
-    """Draw a *well-conditioned* random network (the population of the convergence tests).
-
-    Stations uniform in a cube of half-side ``size_m``, targets in one of half-side ``1.5 size_m``;
-    offsets uniform in ``±offset_max_m``; gaussian noise ``sigma_m``; with more than 4 stations each
-    observation is missing with probability ``drop``. Draws are repeated until the network is
-    well-conditioned (:data:`WELL_CONDITIONED`):
-
-    * stations not near-coplanar: smallest / largest singular value of the centred station
-      coordinates >= 0.25 (for targets likewise: spread in 3D);
-    * every target seen by >= 4 stations, every station sees >= 5 targets (its 4 unknowns + 1, as
-      the adjustment's solvability check requires);
-    * redundancy ``m - (4 s + 3 t - 6)`` >= 4 (the paper's 4 x 14 networks have exactly 4);
-    * no target closer than ``0.1 size_m`` to a station.
-
-    Parameters
-    ----------
-    rng : numpy Generator, int or None
-    n_stations, n_targets : (low, high) inclusive ranges
-    """
-    g = np.random.default_rng(rng)
-    c = WELL_CONDITIONED
-    for _ in range(10_000):
-        s = int(g.integers(n_stations[0], n_stations[1] + 1))
-        t = int(g.integers(n_targets[0], n_targets[1] + 1))
-        H = g.uniform(-size_m, size_m, (s, 3))
-        T = g.uniform(-1.5 * size_m, 1.5 * size_m, (t, 3))
-        if _flatness(H) < c["station_flatness"] or _flatness(T) < c["target_flatness"]:
-            continue
-        if np.linalg.norm(H[:, None] - T[None], axis=2).min() < c["min_clearance"] * size_m:
-            continue
-        seen = np.ones((s, t), bool) if s == 4 else g.random((s, t)) >= drop
-        if seen.sum(0).min() < c["min_stations_per_target"] or seen.sum(1).min() < c["min_targets_per_station"]:
-            continue
-        si, ti = np.nonzero(seen)
-        if si.size - (4 * s + 3 * t - 6) < c["min_redundancy"]:
-            continue
-        o = g.uniform(-offset_max_m, offset_max_m, s)
-        d = np.linalg.norm(H[si] - T[ti], axis=1) + o[si] + g.normal(0.0, sigma_m, si.size)
-        obs = Observations(tuple(f"S{i + 1}" for i in range(s)), tuple(f"T{j + 1}" for j in range(t)),
-                           si, ti, d, np.full(si.size, sigma_m))
-        return RandomNetwork(H, T, o, obs)
-    raise MultilatError("random_network: no well-conditioned network drawn (loosen the ranges)")
 
 
 # ------------------------------------------------------------------------------------ layout sensitivity

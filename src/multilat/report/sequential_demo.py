@@ -41,11 +41,11 @@ def section(*, seed: int, quick: bool) -> Section:
     from scipy import stats
 
     from multilat.network.adjust import adjust
-    from multilat.network.generator import sequential_network
+    from multilat.network.synthetic import synthetic_network
 
     plt = _plt()
     sec = Section("Sequential multilateration: heads that occupy several stations")
-    net = sequential_network(np.random.default_rng(EXAMPLE_SEED))
+    net = synthetic_network(np.random.default_rng(EXAMPLE_SEED), population="sequential")
     o = net.obs
     res = adjust(o, rng=seed)
     sec.paragraph(
@@ -85,7 +85,7 @@ def section(*, seed: int, quick: bool) -> Section:
     zz = []
     failed = 0
     for k in range(n):
-        g = sequential_network(np.random.default_rng([seed, 16, k]))
+        g = synthetic_network(np.random.default_rng([seed, 16, k]), population="sequential")
         try:
             r = adjust(g.obs, initial=g, snooping=False)
         except Exception:           # noqa: BLE001 - counted and reported
