@@ -132,10 +132,10 @@ def test_far_trial_by_the_sparse_gauss_newton(monkeypatch):
 def large():
     from multilat.network.data import Observations, Points
     from multilat.network.general.from_tables import network_from_tables
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network
 
     s, t = 8, 1000
-    syn = synthetic_network(s, t, 7, rng=3)
+    syn = synthetic_network(3, population="rings", n_stations=s, n_targets=t, per_target=7)
     obs = Observations(tuple(f"S{i}" for i in range(s)), tuple(f"T{j}" for j in range(t)), syn.station_index,
                        syn.target_index, syn.distance_m, syn.sigma_m)
     pts = Points(obs.station_ids + obs.target_ids, np.vstack([syn.station_xyz_m, syn.target_xyz_m]))
