@@ -353,7 +353,9 @@ def write_parquet_columns_atomic(path: str | os.PathLike, columns: dict) -> None
         n = len(col[1]) if isinstance(col, tuple) else len(col)
         break
     first = arrays(0, min(n, PARQUET_ROW_GROUP))
-    with atomic_path(path) as tmp, pq.ParquetWriter(str(tmp), first.schema) as w:
+    # dictionary pages for the label columns only: for unique floats pyarrow fills a dictionary page
+    # and then falls back to plain, half the write time at 1.6 M rows (same values read back)
+    with atomic_path(path) as tmp, pq.ParquetWriter(str(tmp), first.schema, use_dictionary=list(labels)) as w:
         w.write_table(first)
         for lo in range(PARQUET_ROW_GROUP, n, PARQUET_ROW_GROUP):    # row groups: bounded memory
             w.write_table(arrays(lo, min(n, lo + PARQUET_ROW_GROUP)))

@@ -108,9 +108,16 @@ def flat_network(station_xyz_m, target_xyz_m, station_cov_m2, target_cov_m2) -> 
             "order, so it is undetermined; stations and targets must span a volume")
 
 
+def _pair_codes(si, ti, t: int):
+    """The distinct (station, target) pairs as sorted codes ``station * t + target``: a sort, not
+    ``np.unique`` (numpy 2.4's hash-based unique took 4.5 s on 1.6 M rows, the sort 0.3 s)."""
+    code = np.sort(si.astype(np.int64) * t + ti)
+    return code[np.r_[True, code[1:] != code[:-1]]] if code.size else code
+
+
 def _targets_of_stations(si, ti, s: int, t: int) -> list:
     """The distinct targets each station observes (s arrays)."""
-    code = np.unique(si.astype(np.int64) * t + ti)
+    code = _pair_codes(si, ti, t)
     return np.split(code % t, np.cumsum(np.bincount(code // t, minlength=s))[:-1])
 
 
@@ -235,7 +242,7 @@ def _target_mirrors(res, si, ti, *, lambda0: float, unit: float, skip: set) -> l
     obs = res.obs
     t = obs.n_targets
     sx, tx, scov, tcov = res.station_xyz_m, res.target_xyz_m, res.station_cov_m2, res.target_cov_m2
-    code = np.unique(si.astype(np.int64) * t + ti)
+    code = _pair_codes(si, ti, t)
     cand, c, n, h = _target_screen(sx, scov, code, t, tx)
     k = float(np.sqrt(lambda0))
     sig_n = np.sqrt(np.clip(np.einsum("pi,pij,pj->p", n, tcov, n), 0, None))

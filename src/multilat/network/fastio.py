@@ -96,16 +96,17 @@ def _cast(fields):
         raise _NotPlain from None
 
 
-def _floats(buf, starts, ends, width):
+def _floats(buf, starts, ends, width, compiled: bool = True):
     """The positive finite numbers in ``buf[starts:ends]``: the compiled decimal reader
     (:func:`multilat._text_kernels.parse_decimals`, correctly rounded, ~20x numpy's cast) where it
-    applies, numpy's cast for the rest (and for all without numba)."""
+    applies, numpy's cast for the rest (and for all without numba or with ``compiled=False``: the
+    probe's few rows, which should not pay for loading the kernels, 1-2 s on a loaded machine)."""
     ln = ends - starts
     if ln.size and (ln.max() > width or ln.min() <= 0):
         raise _NotPlain
     from multilat.rows_text import text_kernels
 
-    K = text_kernels()
+    K = text_kernels() if compiled else None
     if K is None:
         v = _cast(_fields(buf, starts, ends, width))
     else:
@@ -292,9 +293,9 @@ def _plain(data: bytes, end: int, ncol: int, sigma_m, id_width: int, number_widt
     sf = _fields(body, starts, c[:, 0], id_width)
     tf = _fields(body, c[:, 0] + 1, c[:, 1], id_width)
     dend = c[:, 2] if ncol == 4 else nl
-    d = _floats(body, c[:, 1] + 1, dend, number_width)
+    d = _floats(body, c[:, 1] + 1, dend, number_width, compiled=screen)
     if ncol == 4:
-        sig = _floats(body, c[:, 2] + 1, nl, number_width)
+        sig = _floats(body, c[:, 2] + 1, nl, number_width, compiled=screen)
     else:
         sig = np.full(n, float(sigma_m))
     sids, si = _ids(sf)

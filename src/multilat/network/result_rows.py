@@ -138,6 +138,10 @@ def observation_extremes(cols: dict) -> dict:
 
 def largest_w(cols: dict, n: int = LARGEST_W_ROWS) -> list[dict]:
     """The ``n`` rows with the largest |w| (whole rows, largest first; ties in table order)."""
-    w = np.abs(np.nan_to_num(np.asarray(cols["w"], float), nan=-1.0))
-    order = np.argsort(-w, kind="stable")[:n]
+    key = -np.abs(np.nan_to_num(np.asarray(cols["w"], float), nan=-1.0))
+    if 0 < n < key.size:                   # the rows up to the n-th value, ties included: no full sort
+        rows = np.flatnonzero(key <= np.partition(key, n - 1)[n - 1])
+    else:
+        rows = np.arange(key.size)
+    order = rows[np.argsort(key[rows], kind="stable")[:n]]
     return [_row(cols, int(k)) for k in order]

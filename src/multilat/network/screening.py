@@ -91,9 +91,9 @@ def suspect_rows(obs) -> list[tuple[int, str]]:
 
 def _group_medians(values, groups, n_groups):
     """Median of ``values`` per group id in ``[0, n_groups)`` (NaN for empty groups), vectorised."""
-    # the order of np.lexsort((values, groups)) (by group, then value, ties by position) from two
-    # sorts: numpy's lexsort is ~2x slower on millions of rows
-    order = np.argsort(values, kind="stable")
+    # by group, then value, from two sorts (numpy's lexsort is ~2x slower on millions of rows); the
+    # first need not be stable: equal values are interchangeable in a median (1.5-2x faster)
+    order = np.argsort(values)
     order = order[np.argsort(groups[order], kind="stable")]
     v, g = values[order], groups[order]
     counts = np.bincount(g, minlength=n_groups)
