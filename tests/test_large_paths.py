@@ -83,3 +83,23 @@ def test_parquet_floats_plain_labels_dictionary(tmp_path):
     enc = {meta.column(i).path_in_schema: meta.column(i).encodings for i in range(meta.num_columns)}
     assert any("DICTIONARY" in e for e in enc["station"])
     assert not any("DICTIONARY" in e for e in enc["x_m"] + enc["index"])     # no wasted dictionary page
+
+
+def test_reading_an_input_reserves_its_size_not_the_limit(tmp_path):
+    """read(n) reserves n bytes up front: reading a 50 kB file must not reserve the 2 GB input limit
+    (fatal on a machine without memory overcommit); a file read whole is returned whole."""
+    import tracemalloc
+
+    from multilat.inputs import read_input_bytes
+
+    f = tmp_path / "obs.csv"
+    body = b"station,target,distance_m\n" + b"".join(b"S%d,T%d,1.5\n" % (i % 4, i) for i in range(4000))
+    f.write_bytes(body)
+    tracemalloc.start()
+    try:
+        data = read_input_bytes(f)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert data == body
+    assert peak < 20 * len(body), f"reading {len(body)} bytes reserved {peak} bytes"

@@ -227,7 +227,11 @@ def read_input_bytes(path: str | os.PathLike, kind: str = "observations", *, tex
         raise _too_large(p, kind, _size(st.st_size))
     try:
         with open(p, "rb") as fh:
-            data = fh.read(_limit(kind) + 1)
+            # the file's size (+1 to see growth), not the limit: read(n) reserves n bytes up front
+            # (about 2 GB of address space for every file otherwise, fatal without overcommit)
+            data = fh.read(st.st_size + 1)
+            if len(data) > st.st_size:                  # grew since stat: the rest, up to the limit
+                data += fh.read(max(_limit(kind) + 1 - len(data), 0))
     except OSError as exc:
         raise MultilatError(f"{p}: cannot read: {exc.strerror or exc}") from None
     if len(data) > _limit(kind):                 # grew while read
