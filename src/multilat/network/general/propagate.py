@@ -288,18 +288,26 @@ def solve(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int 
             iters[active] += 1
             step = np.abs(dx).max(axis=1)
             step = np.where(np.isfinite(step), step, np.inf)
-            c = step / prev[active]
-            ok = (step < tol) | ((c <= CONTRACTION) & (step * c < tol * (1.0 - c)))
-            vtpv[active[ok]] = v[ok]
-            done[active[ok]] = True
-            slow = ~ok & (c > CONTRACTION)
-            far[active[slow]] = True
-            prev[active] = step
-            active = active[~ok & ~slow]
+            active = settle(active, step, v, prev, tol, CONTRACTION, vtpv, done, far)
             if not active.size:
                 break
     far[active] = True
     return _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback)
+
+
+def settle(active, step, v, prev, tol: float, contraction: float, vtpv, done, far) -> np.ndarray:
+    """The chord steps' rule, after a step of the ``active`` trials (``step`` its largest |dx|): converged
+    when the step is below ``tol`` or the contraction ``c = step / previous`` predicts the rest below it
+    (their vᵀPv ``v`` kept, ``done`` set); ``far`` (for full Gauss-Newton) when ``c > contraction``.
+    Updates the arrays in place; returns the trials still active."""
+    c = step / prev[active]
+    ok = (step < tol) | ((c <= contraction) & (step * c < tol * (1.0 - c)))
+    vtpv[active[ok]] = v[ok]
+    done[active[ok]] = True
+    slow = ~ok & (c > contraction)
+    far[active[slow]] = True
+    prev[active] = step
+    return active[~ok & ~slow]
 
 
 def _gradient(frozen: Frozen, obs: np.ndarray, x: np.ndarray):

@@ -151,6 +151,8 @@ def solve_blocks(frozen, obs: np.ndarray, x: np.ndarray, tol: float, max_iter: i
                  compiled: bool):
     """Chord steps of every trial from ``x`` (= x̂, in place) with ``Q g`` through the blocks; the rule of
     :func:`.propagate.solve`. Returns (converged, iterations, far, vtpv)."""
+    from multilat.network.general.propagate import settle
+
     t = len(obs)
     iters = np.zeros(t, np.int64)
     vtpv = np.full(t, np.nan)
@@ -173,14 +175,7 @@ def solve_blocks(frozen, obs: np.ndarray, x: np.ndarray, tol: float, max_iter: i
             if it == 0:                                   # the first step: linear in the noise, no test
                 prev[active] = step
                 continue
-            c = step / prev[active]
-            ok = (step < tol) | ((c <= contraction) & (step * c < tol * (1.0 - c)))
-            vtpv[active[ok]] = v[ok]
-            done[active[ok]] = True
-            slow = ~ok & (c > contraction)
-            far[active[slow]] = True
-            prev[active] = step
-            active = active[~ok & ~slow]
+            active = settle(active, step, v, prev, tol, contraction, vtpv, done, far)
             if not active.size:
                 break
     far[active] = True

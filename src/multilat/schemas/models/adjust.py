@@ -15,7 +15,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field
 
-from multilat.schemas.models.adjust_general import AzimuthSense, Frame
+from multilat.schemas.models.adjust_general import AzimuthSense, Frame, TestRound
 from multilat.schemas.models.base import Cov3, Document, Excluded, Num, Real, SigmaSource, Strict, Vec3, XYZ
 
 __all__ = ["AdjustDocument", "ObservationRow", "Station", "Target", "Tests", "Initial"]
@@ -165,23 +165,10 @@ class Sigma0Check(Strict):
     message: str
 
 
-class Step(Strict):
+class Step(TestRound):
     """One round of detection and identification; ``observation`` (the table row of a distance) or
     ``angle`` (its label and kind) names the observation identified."""
 
-    dof: int
-    test: str
-    statistic: Num
-    critical: Num
-    alpha: Num
-    power: Num = None
-    sigma0: Num
-    detection_passed: bool | None
-    identified: bool
-    statistic_k: Num
-    critical_k: Num
-    test_k: str
-    action: str
     observation: int | None = None
     angle: str | None = None
 

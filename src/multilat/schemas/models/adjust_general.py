@@ -154,7 +154,9 @@ class GlobalTest(Strict):
     method: str
 
 
-class SnoopingStep(Strict):
+class TestRound(Strict):
+    """One round of detection and identification (both paths' snooping records)."""
+
     dof: int
     test: str
     statistic: Num
@@ -168,6 +170,9 @@ class SnoopingStep(Strict):
     critical_k: Num
     test_k: str
     action: str
+
+
+class SnoopingStep(TestRound):
     row: str | None = None
 
 
