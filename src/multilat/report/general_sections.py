@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from multilat.report.adjust_sections import worst_point
 from multilat.report.html import Num, Section, Verdict
 from multilat.report.job_sections import K, MAX_ROWS, ptr, resolve
 
@@ -201,16 +202,6 @@ def _key_rows(doc: dict) -> list:
         rows.append((f"worst point: {pid}, U = {K:g} u (µm)",
                      _num(doc, "points", pid, "cov_m2", axis, axis, scale=MICRO, digits=1, op="sqrt", k=K)))
     return rows
-
-
-def worst_point(points: dict):
-    """(id, axis) of the point with the largest coordinate variance, or (None, None)."""
-    best, out = -1.0, (None, None)
-    for pid, p in points.items():
-        d = np.diag(np.asarray(p["cov_m2"], float))
-        if np.all(np.isfinite(d)) and d.max() > best:
-            best, out = float(d.max()), (pid, int(np.argmax(d)))
-    return out
 
 
 # ------------------------------------------------------------------------------------ frame, points
