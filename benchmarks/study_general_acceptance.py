@@ -26,6 +26,7 @@ run, ratio, load average). Seeds: ``SeedSequence`` entropy 2024 spawn key k via 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -125,7 +126,7 @@ def study_one(k: int) -> dict:
     ref, _ = _distance(net.obs, initial=net)
     row = {"k": k, "layout": f"{net.station_layout}/{net.target_layout}", "s": net.obs.n_stations,
            "t": net.obs.n_targets, "d_err": d_err, "g_err": g_err, "t_dist_s": t1 - t0, "t_gen_s": t2 - t1,
-           "d_out": d["out"] if d else None, "g_out": g["out"] if g else None,
+           "d_out": list(d["out"]) if d else None, "g_out": list(g["out"]) if g else None,
            "g_reasons": g["reasons"] if g else None, "d_warned": bool(d and d["warned"])}
     if g is None:
         row["outcome"] = "refused"
@@ -133,6 +134,7 @@ def study_one(k: int) -> dict:
         row["outcome"] = "dist-refused"
     else:
         row["outcome"], row["rel"], row["gap_m"] = compare(g, d)
+        row["rel"], row["gap_m"] = float(row["rel"]), float(row["gap_m"])
     for who, sol in (("g", g), ("d", d)):            # each against the truth-start minimum
         row[f"{who}_vs_truth"] = compare(sol, ref)[0] if sol is not None and ref is not None else None
     return row
@@ -179,19 +181,27 @@ def _large(t: int, seed: int = 3):
                         syn.target_index, syn.distance_m, syn.sigma_m)
 
 
-def timing(sizes=(2000, 20000)) -> str:
-    """Both paths whole from the observations (approximate values, adjustment; no snooping), CPU s."""
-    lines = ["| network | distance s | general s | ratio | σ0 rel diff | load |", "|---|---|---|---|---|---|"]
+def timing(sizes=(2000, 20000), repeats: int = 3) -> str:
+    """Both paths whole from the observations (approximate values, adjustment; no snooping): median
+    CPU and wall s of ``repeats`` runs, alternating, after one warm-up of each on 8 x 200."""
+    warm = _large(200)
+    _distance(warm, rng=0), _general(warm)
+    lines = ["| network | distance CPU / wall s | general CPU / wall s | ratio CPU / wall | σ0 rel diff | load |",
+             "|---|---|---|---|---|---|"]
     for t in sizes:
         obs = _large(t)
-        t0 = time.process_time()
-        d, de = _distance(obs, rng=0)
-        t1 = time.process_time()
-        g, ge = _general(obs)
-        t2 = time.process_time()
-        rel = "-" if d is None or g is None else f"{(g['sigma0'] - d['sigma0']) / d['sigma0']:+.1e}"
-        lines.append(f"| 8 x {t} | {t1 - t0:.2f}{' ' + de[:60] if de else ''} | {t2 - t1:.2f}"
-                     f"{' ' + ge[:60] if ge else ''} | {(t2 - t1) / (t1 - t0):.2f} | {rel} | {load_avg():.2f} |")
+        tm = {"d": [], "g": []}
+        for _ in range(repeats):
+            for who, fn in (("d", lambda: _distance(obs, rng=0)), ("g", lambda: _general(obs))):
+                c0, w0 = time.process_time(), time.perf_counter()
+                sol, err = fn()
+                tm[who].append((time.process_time() - c0, time.perf_counter() - w0, sol, err))
+        (dc, dw), (gc, gw) = ([float(np.median([x[i] for x in tm[w]])) for i in (0, 1)] for w in "dg")
+        d, g = tm["d"][0][2], tm["g"][0][2]
+        rel = (f"{(g['sigma0'] - d['sigma0']) / d['sigma0']:+.1e}" if d and g
+               else f"refused: {tm['d'][0][3] or tm['g'][0][3]}"[:80])
+        lines.append(f"| 8 x {t} | {dc:.2f} / {dw:.2f} | {gc:.2f} / {gw:.2f} | {gc / dc:.2f} / {gw / dw:.2f} "
+                     f"| {rel} | {load_avg():.2f} |")
     return "\n".join(lines)
 
 
@@ -200,13 +210,23 @@ def main(argv=None) -> int:
     ap.add_argument("--networks", type=int, default=200)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--time", action="store_true", help="also the 8 x 2000 / 8 x 20000 timing")
+    ap.add_argument("--jsonl", help="append each network's row to this file as it is done")
+    ap.add_argument("--summarise", help="only print the table of the rows in this JSON-lines file")
     a = ap.parse_args(argv)
+    if a.summarise:
+        rows = [json.loads(line) for line in Path(a.summarise).read_text().splitlines() if line.strip()]
+        print(summarise(sorted(rows, key=lambda r: r["k"])))
+        return 0
     rows = []
     for k in range(a.first, a.first + a.networks):
         rows.append(study_one(k))
         r = rows[-1]
         print(f"{k} {r['outcome']} dist {r['t_dist_s']:.1f} s general {r['t_gen_s']:.1f} s", file=sys.stderr, flush=True)
-    print(summarise(rows))
+        if a.jsonl:
+            with open(a.jsonl, "a") as f:
+                f.write(json.dumps(r) + "\n")
+    if rows:
+        print(summarise(rows))
     if a.time:
         print()
         print(timing())
