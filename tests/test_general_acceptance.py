@@ -62,3 +62,13 @@ def test_general_acceptance_50_networks():
     assert out.count("same") >= 49, [(r["k"], r["outcome"]) for r in rows if r["outcome"] != "same"]
     assert out.count("refused") == 0 and out.count("worse") == 0
     assert all(r["g_out"] == r["d_out"] for r in rows)
+
+
+def test_network_87_reaches_the_minimum_on_the_general_layer():
+    """Network 87 (7-station flat ring, 17 floor targets): the distance path's search reaches σ0
+    1.047 (the truth-start minimum, mirrored); the general layer converged at σ0 132 before its
+    distance-only search ran the distance path's minimum search and handed on the solution
+    (``approximate/search.py`` ``_minimum``). Now the same minimum."""
+    row = _study().study_one(87)
+    assert row["outcome"] == "same", row
+    assert row["g_vs_truth"] in ("same", "mirrored"), row
