@@ -95,6 +95,8 @@ def _general(obs):
             adj = adjust_network(net, options=opts)
     except MultilatError as e:
         return None, str(e)
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as e:   # not a one-line refusal: a defect
+        return None, f"crashed: {type(e).__name__}: {e}"
     r = adj.result
     return {"sigma0": float(r.sigma0), "ids": tuple(r.ids), "xyz": np.asarray(r.xyz_m),
             "out": tuple(sorted(e["id"] for e in adj.excluded)), "reasons": {e["id"]: e["reason"] for e in adj.excluded}}, ""
@@ -129,7 +131,7 @@ def study_one(k: int) -> dict:
            "d_out": list(d["out"]) if d else None, "g_out": list(g["out"]) if g else None,
            "g_reasons": g["reasons"] if g else None, "d_warned": bool(d and d["warned"])}
     if g is None:
-        row["outcome"] = "refused"
+        row["outcome"] = "crashed" if g_err.startswith("crashed:") else "refused"
     elif d is None:
         row["outcome"] = "dist-refused"
     else:
