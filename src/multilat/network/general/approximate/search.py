@@ -120,6 +120,8 @@ def _search(obs, sub, anchors, xyz, gen):
         start, how = initial_for(obs, None, None, gen)
     except MultilatError as e:
         return None, f"the distance-only search failed: {e}"
+    if not len(anchors):                  # the network's own frame: the distance path's minimum search too
+        start = _minimum(obs, start, gen)
     got = np.vstack([start.station_xyz_m, start.target_xyz_m])
     if len(anchors):
         try:
@@ -128,6 +130,35 @@ def _search(obs, sub, anchors, xyz, gen):
             return None, None
         got = apply_rigid(R, t, got)
     return got, how.get("method", "?").removeprefix("distances: ")
+
+
+def _minimum(obs, start, gen):
+    """The distance path's minimum search (:func:`multilat.network.search.find_minimum`) from
+    ``start``: the distances adjusted from it and, when that minimum fails the global test by far,
+    the search's solution (what :func:`multilat.network.adjust.adjust` does after its first fit);
+    ``start`` itself when it already leads to a minimum the noise explains, or when the distance
+    path fails or leaves points out. Without it a flat ring whose initial values put targets on the
+    wrong side converged at σ0 ~ 130 on the general layer (network 87 of
+    ``benchmarks/study_general_acceptance.py``) where the distance path reaches σ0 1.05."""
+    import warnings
+
+    from multilat.network.adjust import adjust
+    from multilat.network.search import find_minimum, needs_search
+
+    def solve(s):
+        return adjust(obs, initial=s, snooping=False)
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            first = solve(start)
+            if first.obs.n_stations != obs.n_stations or first.obs.n_targets != obs.n_targets:
+                return start
+            if not needs_search(first, obs):
+                return first
+            return find_minimum(obs, solve, first, rng=gen).solution
+    except MultilatError:
+        return start
 
 
 def _polish(network, xyz, known, placed, free: bool) -> tuple[float, int]:
