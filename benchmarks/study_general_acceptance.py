@@ -1,7 +1,7 @@
 """Issue 26: can the general layer take over distance-only networks? The distance path's acceptance
 study (``tests/test_minimum_search.py``, docs/network.md "The minimum search") run through both.
 
-Population: ``random_network(default_rng([2024, k]))`` (``multilat.network.generator``: flat rings,
+Population: ``synthetic_network(default_rng([2024, k]), population="field")`` (``multilat.network.synthetic``: flat rings,
 two-level rings, clustered and floor targets, 0-30 % unobserved pairs), the networks of the
 distance path's 1000-network study. Each network is adjusted, without data snooping, by
 
@@ -49,9 +49,9 @@ XYZ_M = 1e-6
 
 def network(k: int):
     """Network ``k`` of the study (the distance path's acceptance population)."""
-    from multilat.network.generator import random_network
+    from multilat.network.synthetic import synthetic_network
 
-    return random_network(np.random.default_rng([2024, k]))
+    return synthetic_network(np.random.default_rng([2024, k]), population="field")
 
 
 def _coords(ids, xyz, want):

@@ -1,7 +1,7 @@
 """Issue 26: the general layer on the distance path's acceptance networks
 (``benchmarks/study_general_acceptance.py``, docs/general-network.md "Acceptance on random networks").
 
-Each network ``random_network(default_rng([2024, k]))`` is adjusted from its distances alone by the
+Each network ``synthetic_network(default_rng([2024, k]), population="field")`` is adjusted from its distances alone by the
 distance path (``adjust``) and by the general layer as ``--model general`` builds it from the CSV
 (``network_from_tables`` + ``adjust_network``, no approximate coordinates); the two must reach the
 same minimum: σ0 equal to 1e-9 relative and every point within 1 µm after a rigid fit (no mirror).
@@ -72,3 +72,17 @@ def test_network_87_reaches_the_minimum_on_the_general_layer():
     row = _study().study_one(87)
     assert row["outcome"] == "same", row
     assert row["g_vs_truth"] in ("same", "mirrored"), row
+
+
+def test_network_616_diverging_is_refused_in_one_line():
+    """Network 616: the general layer's Gauss-Newton diverged from the chain's start (the distance path
+    refuses it too) and ended in scipy's "array must not contain infs or NaNs" traceback. Now one line."""
+    from multilat.errors import MultilatError
+    from multilat.network.general import adjust_network
+    from multilat.network.general.from_tables import network_from_tables
+
+    obs = _study().network(616).obs
+    net, opts = network_from_tables(obs, rng=0)
+    with pytest.raises(MultilatError, match=r"diverged at iteration \d+ .*--points") as e:
+        adjust_network(net, options=opts)
+    assert "\n" not in str(e.value)

@@ -306,13 +306,19 @@ def adjust(network: Network, *, options: AdjustOptions | None = None) -> General
     free = system.layout.free
     record = []
     for _ in range(opt.max_iterations):
-        if sparse:
-            lin = _sparse_linearise(system, x, mask)
-            rw, dx = lin.rw, lin.dx
-        else:
-            _, rw, _, _, dx, _ = system.linearise(x, mask)
-        x[free] += dx
-        record.append((float(np.abs(dx).max(initial=0.0)), float(rw @ rw)))
+        with np.errstate(over="ignore", invalid="ignore"):      # a diverging run is named below
+            if sparse:
+                lin = _sparse_linearise(system, x, mask)
+                rw, dx = lin.rw, lin.dx
+            else:
+                _, rw, _, _, dx, _ = system.linearise(x, mask)
+            x[free] += dx
+            record.append((float(np.abs(dx).max(initial=0.0)), float(rw @ rw)))
+        if not (np.isfinite(record[-1][1]) and np.all(np.isfinite(x))):
+            raise MultilatError(
+                f"the adjustment diverged at iteration {len(record)} (step {record[-1][0]:.3g}, vTPv "
+                f"{record[-1][1]:.6g}): the approximate coordinates are too far from a solution; give "
+                "approximate coordinates of the points (--points) or check the observations for gross errors")
         if record[-1][0] < opt.step_tolerance:
             break
     else:
