@@ -154,12 +154,14 @@ def design_cmd(
         import json
 
         from multilat.io import staging_dir, to_jsonable
+        from multilat.vocabulary import stamp
         from multilat.report.design_figures import save_design_figures
 
         tx = run.best.target_xyz_m
         h = cfg.heads
         with staging_dir(out) as tmp:
-            (tmp / "design.json").write_text(json.dumps(to_jsonable(doc), indent=2) + "\n", encoding="utf-8")
+            (tmp / "design.json").write_text(json.dumps(to_jsonable(stamp(doc, "design")), indent=2) + "\n",
+                                             encoding="utf-8")
             (tmp / "stations.csv").write_text(stations_csv(doc), encoding="utf-8")
             save_design_figures(run.best, tmp, box_min_m=tx.min(axis=0), box_max_m=tx.max(axis=0),
                                 min_range_m=h.min_range_m,
