@@ -15,7 +15,7 @@ from typing import Annotated, Literal
 
 from pydantic import Field
 
-from multilat.schemas.models.adjust_general import AzimuthSense, Frame, TestRound
+from multilat.schemas.models.adjust_general import AzimuthSense, Frame, ObservationCounts, TestRound
 from multilat.schemas.models.base import Cov3, Document, Excluded, Num, Real, SigmaSource, Strict, Vec3, XYZ
 
 __all__ = ["AdjustDocument", "ObservationRow", "Station", "Target", "Tests", "Initial"]
@@ -235,18 +235,6 @@ class WFailure(Strict):
     observations: list[Pair]
     w: Num
     located: bool
-
-
-class ObservationCounts(Strict):
-    n_obs: int
-    n_used: int
-    n_rejected: int
-    n_w_failed: int
-    n_poorly_controlled: int
-    n_flagged: int
-    n_excluded: int
-    n_listed: int
-    listing: Literal["flagged", "all"]
 
 
 class ObservationRow(Strict):
