@@ -12,7 +12,7 @@ $(BIN)/python:
 $(STAMP): $(BIN)/python pyproject.toml
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[dev]'
-	# compile the numba kernels now (cached on disk), not on a user's first command
+	# compile the modules' bytecode and the numba kernels now (cached on disk), not on a user's first command
 	$(BIN)/python -m multilat.warmup
 	touch $(STAMP)
 

@@ -22,6 +22,15 @@ ROOT = Path(__file__).resolve().parents[1]
 SMALL = ROOT / "examples" / "network" / "small_volume_obs.csv"
 #: the heavy packages a small dense job must not load (issue 29, "Decisions")
 HEAVY = ("numba", "scipy.sparse", "dask", "distributed", "matplotlib")
+#: multilat's own modules a small ``adjust`` of an observation file does not need (issue 29): the other
+#: commands' modules (registered on demand, ``multilat.cli.load_commands``), the demo's report, the
+#: raw-reading pipeline, the LBB, the Monte Carlo engine, the design and the general layer's solvers
+UNNEEDED = ("multilat.cli.air_cmd", "multilat.cli.budget_cmd", "multilat.cli.simulate_cmd",
+            "multilat.cli.lbb_cmd", "multilat.cli.campaign_cmd", "multilat.cli.propagate_cmd",
+            "multilat.cli.demo_cmd", "multilat.cli.design_cmd", "multilat.cli.interop_cmd",
+            "multilat.report", "multilat.campaign.correct", "multilat.campaign.environment", "multilat.air",
+            "multilat.lbb", "multilat.montecarlo", "multilat.network.design", "multilat.network.general",
+            "multilat.distance_errors", "multilat.budget")
 
 _PROBE = """
 import contextlib, io, json, sys
@@ -50,6 +59,48 @@ def test_small_adjust_imports_no_heavy_package():
     assert "multilat.network.adjust" in mods                                       # the probe sees imports
     loaded = sorted({h for h in HEAVY for m in mods if m == h or m.startswith(h + ".")})
     assert loaded == [], f"a small adjust imported {loaded}"
+    unneeded = sorted({u for u in UNNEEDED for m in mods if m == u or m.startswith(u + ".")})
+    assert unneeded == [], f"a small adjust imported modules it does not use: {unneeded}"
+
+
+def test_command_map_names_every_command():
+    """``multilat.cli.COMMANDS`` (command -> the module registering it, for loading on demand) matches
+    the registrations: each module, imported alone in a fresh process, registers exactly the commands
+    the map gives it, and all of them together are every command ``multilat --help`` lists."""
+    probe = """
+import json, sys
+import multilat.cli as cli
+app = sys.modules["multilat.cli.app"].app
+names = lambda: {c.name or c.callback.__name__.replace("_", "-") for c in app.registered_commands} | {
+    g.name for g in app.registered_groups}
+__import__("multilat.cli." + sys.argv[1])
+print(json.dumps(sorted(names())))
+"""
+    from multilat import cli
+
+    env = dict(os.environ, PYTHONPATH=str(ROOT / "src") + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    every = set()
+    for module in cli.COMMAND_MODULES:
+        p = subprocess.run([sys.executable, "-c", probe, module], capture_output=True, text=True, env=env,
+                           timeout=300)
+        assert p.returncode == 0, p.stderr[-2000:]
+        own = {c for c, m in cli.COMMANDS.items() if m == module}
+        got = set(json.loads(p.stdout.strip().splitlines()[-1]))
+        assert own <= got, (module, own, got)        # a module may import another (propagate: adjust's)
+        every |= got
+    assert every == set(cli.COMMANDS)
+
+
+def test_commands_loaded_in_help_order(capsys):
+    """Loading one command first (as ``multilat adjust`` does) leaves ``--help`` listing the commands
+    in the order of :data:`multilat.cli.COMMAND_MODULES`."""
+    from multilat import cli
+
+    cli.load_commands(["adjust"])
+    cli.load_commands(None)
+    mods = [c.callback.__module__ for c in cli.app.registered_commands]
+    rank = [cli.COMMAND_MODULES.index(m.rsplit(".", 1)[1]) for m in mods]
+    assert rank == sorted(rank) and len(set(mods)) == len(cli.COMMAND_MODULES) - 1   # lbb: a group
 
 
 def _scipy_components(n, a, b):

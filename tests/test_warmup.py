@@ -133,3 +133,41 @@ def test_the_command_line_runs_blas_on_one_thread(preset, expect):
     if preset is None and os.cpu_count() == 1:
         pytest.skip("one core: OpenBLAS's default is one thread anyway")
     assert p.stdout.strip() == expect
+
+
+def test_warm_up_writes_the_bytecode_of_every_module(tmp_path):
+    """The warm-up's first step writes every module's ``.pyc`` (an editable install writes none, so a
+    user's first command compiled each module it imported; with ``PYTHONDONTWRITEBYTECODE`` set, every
+    command did; issue 29), on a copy of the package without any ``__pycache__``, and Python then
+    reads that bytecode rather than compiling (``importlib``'s loader finds a valid cache)."""
+    import importlib.util
+    import shutil
+
+    src = Path(__file__).resolve().parents[1] / "src" / "multilat"
+    pkg = tmp_path / "multilat"
+    shutil.copytree(src, pkg, ignore=shutil.ignore_patterns("__pycache__"))
+    modules = sorted(pkg.rglob("*.py"))
+    assert len(modules) > 100 and not list(pkg.rglob("*.pyc"))
+    env = dict(os.environ, PYTHONPATH=str(tmp_path), PYTHONDONTWRITEBYTECODE="1")
+    p = subprocess.run([sys.executable, "-c", "from multilat import warmup; print(warmup.bytecode())"], env=env,
+                       capture_output=True, text=True, timeout=600)
+    assert p.returncode == 0 and p.stdout.strip() == "True", p.stderr[-500:]
+    missing = [m for m in modules if not Path(importlib.util.cache_from_source(str(m))).exists()]
+    assert missing == []
+    probe = """
+import importlib._bootstrap_external as be
+compiled = []
+orig = be.SourceLoader.source_to_code
+def source_to_code(self, data, path, *a, **k):
+    compiled.append(str(path))
+    return orig(self, data, path, *a, **k)
+be.SourceLoader.source_to_code = source_to_code
+import multilat.cli, multilat.network.adjust, multilat.network.propagate
+print(sum("multilat" in c for c in compiled))
+"""
+    p = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=300)
+    assert p.returncode == 0, p.stderr[-500:]
+    assert p.stdout.strip() == "0"              # every module's code came from its .pyc
+    shutil.rmtree(pkg / "network" / "__pycache__")   # the probe can see a compilation
+    p = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=300)
+    assert int(p.stdout.strip()) > 10

@@ -19,6 +19,7 @@ anticipated input errors) into ``error: <one line>`` on stderr with exit code 2.
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 
 #: BLAS threads of a command: one, set here before numpy is first imported (OpenBLAS reads it when it
 #: loads). The compiled kernels and the Monte Carlo already use every core (numba's threads, worker
@@ -31,18 +32,32 @@ for _name in BLAS_THREAD_VARIABLES:
     os.environ.setdefault(_name, "1")
 
 from multilat.cli.app import app, main, run_and_exit  # noqa: E402,F401
-from multilat.cli import (  # noqa: E402,F401  (registration side effects)
-    air_cmd,
-    budget_cmd,
-    network_cmd,
-    simulate_cmd,
-    lbb_cmd,
-    campaign_cmd,
-    propagate_cmd,
-    demo_cmd,
-    design_cmd,
-    interop_cmd,
-)
+
+#: The modules that register the commands, in the order ``multilat --help`` lists them. They are
+#: imported on demand (:func:`load_commands`): a command loads only its own module, so a small
+#: ``multilat adjust`` does not import the demo's report, the campaign commands' readers or the LBB
+#: (issue 29: small jobs do not pay for large ones).
+COMMAND_MODULES = ("air_cmd", "budget_cmd", "network_cmd", "simulate_cmd", "lbb_cmd", "campaign_cmd",
+                   "propagate_cmd", "demo_cmd", "design_cmd", "interop_cmd")
+#: command name -> the module that registers it (``tests/test_small_imports.py`` checks it against the
+#: registrations); a name not here (``--help``, a typo) loads every module, so help and "No such
+#: command" read as before.
+COMMANDS = {"air": "air_cmd", "budget": "budget_cmd", "adjust": "network_cmd", "simulate": "simulate_cmd",
+            "lbb": "lbb_cmd", "correct": "campaign_cmd", "two-face": "campaign_cmd",
+            "propagate": "propagate_cmd", "demo": "demo_cmd", "design": "design_cmd", "export": "interop_cmd",
+            "import": "interop_cmd"}
+
+
+def load_commands(args: Sequence[str] | None = None) -> None:
+    """Register the commands ``args`` runs (its first word names the command), or all of them
+    (``args`` None, empty, an option such as ``--help``, an unknown word), on :data:`app`, in the
+    order of :data:`COMMAND_MODULES` whatever the order of loading."""
+    word = next(iter(args), None) if args is not None else None
+    wanted = [COMMANDS[word]] if word in COMMANDS else COMMAND_MODULES
+    for name in wanted:
+        __import__(f"multilat.cli.{name}")          # (not importlib: `python -X importtime` sees it)
+    rank = {f"multilat.cli.{m}": i for i, m in enumerate(COMMAND_MODULES)}
+    app.registered_commands.sort(key=lambda c: rank.get(getattr(c.callback, "__module__", ""), len(rank)))
 
 
 def run() -> None:

@@ -177,6 +177,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     if threading.current_thread() is threading.main_thread():
         old_term = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
+        from multilat.cli import load_commands
+
+        load_commands(args)     # only the command asked for is imported (issue 29)
         rv = app(args=args, standalone_mode=False, prog_name="multilat")
         if rv == 130:             # typer turns Ctrl-C into a return value of 130 in this mode
             _error("interrupted")

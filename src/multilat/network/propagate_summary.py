@@ -100,8 +100,12 @@ def _in_two_threads(tasks, n: int) -> None:
 def summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done, obs_cov=None):
     """Statistics of all blocks' deviations (the engine's :func:`summarize`: JCGM 101 §7.6-7.7)."""
     net = problem.network
-    # float32 deviations kept once; statistics point by point / column block by column block in float64
-    dev = np.concatenate([b["dev"] for b in blocks]) if blocks else np.zeros((0, k), np.float32)
+    # float32 deviations kept once; statistics point by point / column block by column block in float64.
+    # Column-major: each point's or block's columns are gathered ~15x faster than from rows of k values
+    # (the gathered float64 copies are column-major either way: the same arrays, the same bits)
+    dev = np.empty((sum(len(b["dev"]) for b in blocks), k), np.float32, order="F")
+    if blocks:
+        np.concatenate([b["dev"] for b in blocks], out=dev)
     for b in blocks:
         b["dev"] = None
     n_failed = int(sum(b["n_failed"] for b in blocks))
