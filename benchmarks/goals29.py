@@ -10,7 +10,7 @@ its ``why_not_measured``; ``make test`` is measured only on a quiet machine (``-
 
 Rows (keys): small_adjust, adjust_20k, adjust_200k, adjust_200k_rss, adjust_200k_out, propagate_model,
 propagate_gaussian, dask_scaling, first_command, make_test, growth_1k_4k / growth_4k_16k (one
-measurement), gama (our side only: gama-local is not installed here).
+measurement), gama (gama-local from $GAMA_LOCAL or PATH; ours only without it).
 """
 
 from __future__ import annotations
@@ -276,17 +276,55 @@ def growth(tmp: Path) -> list[dict]:
     return out
 
 
+def _gama_local() -> str | None:
+    """The gama-local executable: ``$GAMA_LOCAL``, else ``gama-local`` on PATH, else None."""
+    import shutil
+
+    exe = os.environ.get("GAMA_LOCAL") or shutil.which("gama-local")
+    return exe if exe and os.access(exe, os.X_OK) else None
+
+
 def gama(tmp: Path) -> dict:
-    """Our side of the gama-local row: whole ``multilat adjust --json`` on 8 x 500 (``synthetic_network``
-    "rings", 8 x 500 x 8, 4 000 distances), median of 3. gama-local is not installed here and no timing of it
-    is stored in the repository, so the row stays unjudged (baseline not measured)."""
+    """Whole ``multilat adjust --json`` against whole ``gama-local`` on the same 4 000 distances
+    (``synthetic_network`` "rings", 8 stations x 500 targets x 8 sights): the network exported by
+    ``multilat export gama --result --fix S0,S1,S2`` (adjusted coordinates as approximate values, the
+    stations' adjusted offsets subtracted, three stations fixed: gama-local 2.24's ``gso`` stops with "No
+    unknowns have been defined" on the free network, whose every point is constrained), gama-local run with
+    ``--algorithm gso --cov-band 2`` as in the issue (XML output). Ours median of 3, gama-local once (it takes minutes), interleaved after
+    ours; both σ0 and dof are recorded (ours estimates 8 offsets more: dof differs by 8). gama-local from
+    ``$GAMA_LOCAL`` or PATH; without it the row stays unjudged."""
     p = tmp / "net8x500.csv"
     m = _write_csv(500, p, stations=8, per_target=8)
     _run(["adjust", p, "--json"], SRC)
     load = load_avg()
     runs = [_run(["adjust", p, "--json"], SRC)[0] for _ in range(3)]
-    return dict(measured=statistics.median(runs), baseline_measured=None, load=load,
-                note=f"ours only, {m} distances, median of 3; gama-local not installed")
+    exe = _gama_local()
+    if exe is None:
+        return dict(measured=statistics.median(runs), baseline_measured=None, load=load,
+                    note=f"ours only, {m} distances, median of 3; gama-local not installed")
+    res = tmp / "res8x500"
+    _run(["adjust", p, "--out", res], SRC)
+    gkf = tmp / "net8x500.gkf"
+    _run(["export", "gama", p, "--result", res, "--fix", "S0,S1,S2", "--out", gkf], SRC)
+    version = subprocess.run([exe, "--version"], capture_output=True, text=True).stdout.splitlines()[0]
+    out = tmp / "gama8x500.xml"
+    t0 = time.perf_counter()
+    g = subprocess.run([exe, str(gkf), "--algorithm", "gso", "--cov-band", "2", "--xml", str(out)],
+                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, timeout=3600)
+    wall = time.perf_counter() - t0
+    if g.returncode != 0 or not out.exists():
+        raise RuntimeError(f"gama-local failed: {g.stderr.decode()[-400:]}")
+    from multilat.network.interop.gama_adjusted import read_gama_adjustment
+
+    ga = read_gama_adjustment(out)
+    s0, dof = ga.sigma_aposteriori / ga.sigma_apriori, ga.dof
+    ours = json.loads(subprocess.run(_multilat("adjust", p, "--json"), capture_output=True, env=_env(SRC),
+                                     check=True).stdout)
+    return dict(measured=statistics.median(runs), baseline_measured=wall, load=load,
+                note=f"{m} distances; ours median of 3 ({', '.join(f'{r:.2f}' for r in runs)} s), "
+                     f"{version} once ({wall:.1f} s, --algorithm gso --cov-band 2); "
+                     f"σ0 ours {ours['sigma0']:.4f} dof {ours['dof']}, gama-local {s0:.4f} dof {dof} "
+                     f"(offsets held and S0, S1, S2 fixed there)")
 
 
 def make_test(tmp: Path) -> dict:
