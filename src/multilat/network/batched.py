@@ -159,6 +159,11 @@ class NetworkSizes:
     def n_obs(self) -> int:
         return len(self.station_index)
 
+    @property
+    def reported_layout(self) -> ParameterLayout:
+        """The reported parameter vector's columns ``[3s, s, 3t]`` (:func:`flatten`, the linear covariance)."""
+        return ParameterLayout.batched(self.n_stations, self.n_targets)
+
 
 @dataclass(frozen=True)
 class BatchedNetwork(NetworkSizes):
@@ -221,13 +226,8 @@ class BatchedNetwork(NetworkSizes):
 
     # -- sizes: NetworkSizes ------------------------------------------------------------------
     @property
-    def layout(self) -> ParameterLayout:
-        """The reported parameter vector's columns (:func:`flatten`, :meth:`linear_covariance`)."""
-        return ParameterLayout.batched(self.n_stations, self.n_targets)
-
-    @property
     def n_params(self) -> int:
-        return self.layout.n
+        return self.reported_layout.n
 
     @property
     def dof(self) -> int:
@@ -278,7 +278,7 @@ class BatchedNetwork(NetworkSizes):
     # -- linear propagation ------------------------------------------------------------------
     def jacobian(self) -> np.ndarray:
         """Jacobian of the model distances at the nominal solution, shape (m, 4s + 3t), m/m."""
-        m, lay = self.n_obs, self.layout
+        m, lay = self.n_obs, self.reported_layout
         u0 = self._pre["u0"]
         k = np.arange(m)
         j = np.zeros((m, lay.n))
@@ -301,7 +301,7 @@ class BatchedNetwork(NetworkSizes):
         w = self._pre["w"]
         n = j.T @ (w[:, None] * j)
         e = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)
-        g = self.layout.datum_rows(helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m])))
+        g = self.reported_layout.datum_rows(helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m])))
         etg = e.T @ g
         if abs(np.linalg.det(etg)) < 1e-14 * np.linalg.norm(etg) ** 6:
             raise MultilatError("the datum does not fix translation and rotation (degenerate points)")

@@ -148,14 +148,9 @@ class CoupledBatchedNetwork(NetworkSizes):
         return int(self.head_index.max()) + 1 if self.head_index.size else 0
 
     @cached_property
-    def layout(self) -> ParameterLayout:
+    def unknown_layout(self) -> ParameterLayout:
         """The unknowns' columns: ``[station xyz, head offsets, head scales, target xyz, orientations]``."""
         return ParameterLayout.coupled(self.n_stations, self.n_targets, self.head_index, int(self.oriented.sum()))
-
-    @cached_property
-    def reported_layout(self) -> ParameterLayout:
-        """The reported (batched) layout ``[3s, s, 3t]``."""
-        return ParameterLayout.batched(self.n_stations, self.n_targets)
 
     @property
     def n_params(self) -> int:
@@ -199,14 +194,14 @@ class CoupledBatchedNetwork(NetworkSizes):
 
     # -- layout ----------------------------------------------------------------------------------
     def _split(self, x):
-        L = self.layout
+        L = self.unknown_layout
         return (gather(x, L.station_block(XYZ)), gather(x, L.columns("head", "offset")),
                 gather(x, L.columns("head", "scale")), gather(x, L.target_block()))
 
     def _orientations(self, x):
         """(n, s, 3) orientations of every trial (zeros for stations without angles)."""
         O = np.zeros((x.shape[0], self.n_stations, 3))
-        O[:, self.oriented] = gather(x, self.layout.block("orientation"))
+        O[:, self.oriented] = gather(x, self.unknown_layout.block("orientation"))
         return O
 
     def _x0(self) -> np.ndarray:
@@ -216,7 +211,7 @@ class CoupledBatchedNetwork(NetworkSizes):
         if not (np.allclose(self.offset_m, o_h[hi], rtol=0, atol=1e-12)
                 and np.allclose(self.scale, k_h[hi], rtol=0, atol=1e-15)):
             raise MultilatError("stations of one head must have the same nominal offset and scale")
-        L = self.layout
+        L = self.unknown_layout
         x0 = np.empty(L.n)
         x0[L.station_block(XYZ)] = self.station_xyz_m
         x0[L.columns("head", "offset")] = o_h
@@ -228,8 +223,8 @@ class CoupledBatchedNetwork(NetworkSizes):
     def _layout_map(self) -> np.ndarray:
         """``M`` (4s + 3t, P): the reported layout from the P space (a head's offset on each station)."""
         R = self.reported_layout
-        M = np.zeros((R.n, self.layout.n))
-        M[np.arange(R.n), R.index_in(self.layout)] = 1.0
+        M = np.zeros((R.n, self.unknown_layout.n))
+        M[np.arange(R.n), R.index_in(self.unknown_layout)] = 1.0
         return M
 
     # -- model -----------------------------------------------------------------------------------
@@ -275,7 +270,7 @@ class CoupledBatchedNetwork(NetworkSizes):
 
     def _jacobian(self, x1) -> np.ndarray:
         """Jacobian of all model values (distances, then couplings) at one point x1 (P,), (m + q, P)."""
-        m, L = self.n_obs, self.layout
+        m, L = self.n_obs, self.unknown_layout
         H, o, k, T = (a[0] for a in self._split(x1[None]))
         si, ti = self.station_index, self.target_index
         hs = self.head_index[si]
@@ -310,7 +305,7 @@ class CoupledBatchedNetwork(NetworkSizes):
     def _precompute(self) -> dict:
         s, h, t, m = self.n_stations, self.n_heads, self.n_targets, self.n_obs
         x0 = self._x0()
-        L = self.layout
+        L = self.unknown_layout
         P = L.n
         from multilat.network.angle_rows import orientation_free_mask
 
@@ -373,7 +368,7 @@ class CoupledBatchedNetwork(NetworkSizes):
     def _gradient(self, x, d, c):
         """Gradient ``J^T W r`` (n, P) and ``r^T W r`` (n,) of every trial."""
         p = self._pre
-        s, t, m, L = self.n_stations, self.n_targets, self.n_obs, self.layout
+        s, t, m, L = self.n_stations, self.n_targets, self.n_obs, self.unknown_layout
         n = x.shape[0]
         H, o, k, T = self._split(x)
         si, ti = self.station_index, self.target_index
@@ -417,7 +412,7 @@ class CoupledBatchedNetwork(NetworkSizes):
         return g * p["free"], vtpv
 
     def _step_size(self, dx):
-        L = self.layout
+        L = self.unknown_layout
         a = np.abs(dx)
         a[:, L.columns("head", "scale")] *= self._pre["scale_len"]
         a[:, L.block("orientation").ravel()] *= self._pre["scale_len"]          # orientations, rad x length
