@@ -142,11 +142,6 @@ class ParameterLayout:
         tb = self.target_block() if self._find("target", "x") is not None else np.zeros((0, 3), np.int64)
         return np.concatenate([self.station_block(XYZ), tb])
 
-    def field_columns(self, field: str) -> np.ndarray:
-        """Every column holding ``field`` (any kind), ascending."""
-        return np.sort(np.concatenate([b.columns()[:, b.fields.index(field)] for b in self.blocks
-                                       if field in b.fields] or [np.zeros(0, np.int64)]))
-
     def index_in(self, other: ParameterLayout) -> np.ndarray:
         """(n,) for each of this layout's columns, the column of the same parameter in ``other``
         (-1 where ``other`` has none); a per-station field maps to ``other``'s head column (the tie)."""

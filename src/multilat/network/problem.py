@@ -163,12 +163,7 @@ class Problem:
 def param_names(station_ids, head_ids=None) -> list[str]:
     """Names of the global parameters in layout order (for messages); ``head_ids`` (s,) names the
     head of each station whose offset and scale they are (default: the station)."""
-    names = []
-    heads = station_ids if head_ids is None else head_ids
-    for sid, hid in zip(station_ids, heads):
-        of = f"head {hid}" if hid != sid else sid
-        names += [f"x of {sid}", f"y of {sid}", f"z of {sid}", f"offset of {of}", f"scale of {of}"]
-    return names
+    return ParameterLayout.adjustment(len(station_ids)).names(list(station_ids), head_ids=head_ids)
 
 
 def head_mean(values, obs: Observations) -> np.ndarray:
