@@ -263,3 +263,164 @@ def test_a_new_generator_is_found(tmp_path):
     (tmp_path / "x.py").write_text("def f(g):\n    H = g.uniform(size=(4, 3))\n    return Observations(H)\n"
                                    "def n(g, obs):\n    return g.normal(size=3)\n")
     assert generators(tmp_path) == {"x.py:f": 1}
+
+
+# ------------------------------------------------------------------------------ one parameter layout (issue 27 item 1)
+#: the one home of column arithmetic: :class:`multilat.network.parameter_layout.ParameterLayout`
+LAYOUT_HOME = "parameter_layout.py"
+
+#: a parameter's width: 3 (x, y, z), 4 (with the offset), 5 (and the scale), ``Q``
+_WIDTHS = {3, 4, 5}
+#: what a width multiplies in column arithmetic: a count or an index of stations, targets, heads, points
+_OWNERS = {"s", "t", "h", "i", "j", "q", "n_stations", "n_targets", "n_heads", "si", "ti", "hs", "il",
+           "station_index", "target_index", "head_index", "angle_station", "angle_target", "control_point",
+           "slot", "lead_of_head", "bar_a", "bar_b"}
+
+#: functions outside the distance path's five layouts (model, batched, batched_coupled, solve/,
+#: design/fast, design/blocked: none left) that still compute a column or a count of columns, and why
+#: each stays; this list only shrinks
+LAYOUT_KNOWN = {
+    "_sparse_kernels.py:assemble": "compiled: tiles station_system's 4-column blocks in place",
+    "_sparse_kernels.py:back_substitute": "compiled: reads station_system's 4-column blocks",
+    "adjust_steps.py:coupling_results": "the couplings' prior values per control point (couplings' layout)",
+    "adjust_steps.py:start_as_partial": "a count of unknowns (the redundancy of a start)",
+    "angle_rows.py:orientation_covariance": "the orientations' rows after the targets (angle_rows)",
+    "angle_rows.py:angle_results": "the orientations' rows after the targets (angle_rows)",
+    "angle_rows.py:whitened": "the angles' Jacobian in the adjustment layout (angle_rows)",
+    "costs.py:_design": "the cost study's own Jacobian (not the adjustment)",
+    "costs.py:compare_costs_linear": "the cost study's own Jacobian (not the adjustment)",
+    "couplings.py:resolve": "the couplings' columns in the adjustment layout",
+    "covariance.py:__init__": "the adjustment's covariance in blocks (issue 27: the memory helper's file)",
+    "covariance.py:_times": "the adjustment's covariance in blocks",
+    "covariance.py:_rotate_rows": "the adjustment's covariance in blocks",
+    "covariance.py:global_block": "the adjustment's covariance in blocks",
+    "covariance.py:target_blocks": "the adjustment's covariance in blocks",
+    "covariance.py:hat_row": "the adjustment's covariance in blocks",
+    "covariance.py:internal_times": "the adjustment's covariance in blocks",
+    "covariance.py:design_times": "the adjustment's covariance in blocks",
+    "covariance.py:target_coupling": "the adjustment's covariance in blocks",
+    "covariance.py:design_row": "the adjustment's covariance in blocks",
+    "covariance.py:_target_blocks_internal": "the adjustment's covariance in blocks",
+    "covariance.py:orientation_cov_internal": "the adjustment's covariance in blocks",
+    "covariance.py:hat_diagonal": "the adjustment's covariance in blocks",
+    "datum.py:datum_matrices": "the datum's G and E in the adjustment layout",
+    "design/config.py:_check_counts": "a count of unknowns (a layout's redundancy)",
+    "design/preanalysis.py:covariance": "the dense pre-analysis' own normal matrix",
+    "design/preanalysis.py:_point_blocks": "the dense pre-analysis' own normal matrix",
+    "design/preanalysis.py:_length_u": "the dense pre-analysis' own normal matrix",
+    "design/preanalysis.py:_method": "a count of unknowns (dense or blocked)",
+    "design/preanalysis.py:preanalyse": "the dense pre-analysis' own normal matrix",
+    "design/preanalysis.py:_preanalyse_blocked": "the dense pre-analysis' own normal matrix",
+    "design/preanalysis.py:probe_cov_m2": "the dense pre-analysis' own normal matrix",
+    "design/targets.py:work_volume_u95_m": "a count of unknowns (dense or blocked)",
+    "initial_refine.py:refine": "the starting values' own least squares (heads, then targets)",
+    "initial_refine.py:unpack": "the starting values' own least squares (heads, then targets)",
+    "initial_refine.py:jac": "the starting values' own least squares (heads, then targets)",
+    "interop/gama_adjusted.py:interpoint_distance_std_m": "GNU Gama's covariance rows (its layout)",
+    "reliability.py:_shifts_dense": "external reliability on the adjustment's covariance",
+    "reliability.py:shifts": "external reliability on the adjustment's covariance",
+    "reliability.py:__init__": "external reliability on the adjustment's covariance",
+    "result.py:build_result": "the result's covariance blocks (adjustment layout)",
+    "result.py:_param_rows": "the result's covariance blocks (adjustment layout)",
+    "result.py:offset_correlations": "the result's covariance blocks (adjustment layout)",
+    "search.py:_dof": "a count of unknowns",
+    "solvability.py:count_unknowns": "a count of unknowns",
+    "solvability.py:check_structure": "a count of unknowns",
+    "synthetic.py:_well_conditioned": "a count of unknowns (a drawn network's redundancy)",
+    "variance_components.py:_hat": "the variance components' hat matrix (adjustment layout)",
+}
+
+
+def _layout_lines(nodes) -> list[int]:
+    """Lines of ``width * owner`` (``5 * i``, ``Q * station_index``, ``3 * s``, ``4 * np.arange(s)``) or
+    ``reshape(..., Q)`` among one function's nodes."""
+    def owner(n):
+        while isinstance(n, ast.Subscript):
+            n = n.value
+        if isinstance(n, ast.Call) and getattr(n.func, "attr", getattr(n.func, "id", None)) == "arange":
+            return bool(n.args) and owner(n.args[0])
+        return (isinstance(n, ast.Name) and n.id in _OWNERS) or (isinstance(n, ast.Attribute) and n.attr in _OWNERS)
+
+    def width(n):
+        return ((isinstance(n, ast.Constant) and type(n.value) is int and n.value in _WIDTHS)
+                or (isinstance(n, ast.Name) and n.id == "Q") or (isinstance(n, ast.Attribute) and n.attr == "Q"))
+
+    out = set()
+    for n in nodes:
+        if isinstance(n, ast.BinOp) and isinstance(n.op, ast.Mult) and (
+                (width(n.left) and owner(n.right)) or (width(n.right) and owner(n.left))):
+            out.add(n.lineno)
+        if _called(n, {"reshape"}) and any(isinstance(a, ast.Name) and a.id == "Q" for a in n.args):
+            out.add(n.lineno)
+    return sorted(out)
+
+
+def layout_copies(root: Path = NETWORK) -> dict[str, list[int]]:
+    """``{"file:function": [lines]}`` of column arithmetic under ``root`` (the general layer has its own
+    :class:`multilat.network.general.layout.Layout`)."""
+    found = {}
+    for path in sorted(root.rglob("*.py")):
+        rel = path.relative_to(root).as_posix()
+        if rel == LAYOUT_HOME or rel.startswith("general/"):
+            continue
+        for f, own in _functions(ast.parse(path.read_text("utf-8"), str(path))):
+            lines = _layout_lines(own)
+            if lines:
+                found[f"{rel}:{f.name}"] = lines
+    return found
+
+
+def test_one_parameter_layout():
+    """No column arithmetic outside ``ParameterLayout`` and the known list (which only shrinks)."""
+    found = layout_copies()
+    bad = [f"network/{k} lines {v}" for k, v in found.items() if k not in LAYOUT_KNOWN]
+    assert not bad, ("ask multilat.network.parameter_layout.ParameterLayout for the columns:\n" + "\n".join(bad))
+    stale = [k for k in LAYOUT_KNOWN if k not in found]
+    assert not stale, "merged, remove from LAYOUT_KNOWN:\n" + "\n".join(stale)
+
+
+@pytest.mark.parametrize("text", [
+    "def f(J, si, c):\n    J[0, Q * si + c] = 1.0\n",
+    "def f(J, s, ti, c):\n    J[0, 4 * s + 3 * ti + c] = 1.0\n",
+    "def f(x, s):\n    return x[:, 3 * s:]\n",
+    "def f(dg):\n    return dg.reshape(-1, Q)\n",
+    "def f(self, x):\n    return x[4 * np.arange(self.n_stations)]\n",
+])
+def test_a_new_layout_copy_is_found(tmp_path, text):
+    (tmp_path / "x.py").write_text(text)
+    assert list(layout_copies(tmp_path)) == ["x.py:f"]
+
+
+def test_shapes_are_not_layouts(tmp_path):
+    (tmp_path / "x.py").write_text("def f(m, n, t):\n    a = np.zeros((m, 3))\n    return a.reshape(t, 3), 3 * n\n")
+    assert layout_copies(tmp_path) == {}
+
+
+def test_the_layout_against_its_definition():
+    """The columns against the layouts written out by hand (the docstrings of model, batched and
+    batched_coupled): 2 stations of one head and a third, 2 targets, one oriented station."""
+    from multilat.network.parameter_layout import XYZ, ParameterLayout
+
+    adj = ParameterLayout.adjustment(3, 2)
+    assert adj.n == 21 and adj.station_block().tolist() == [[0, 1, 2, 3, 4], [5, 6, 7, 8, 9], [10, 11, 12, 13, 14]]
+    assert adj.target_block().tolist() == [[15, 16, 17], [18, 19, 20]]
+    assert adj.names(["A", "B", "C"], ["P", "Q"])[8] == "offset of B" and adj.names(["A"] * 3, ["P", "Q"])[19] == "y of Q"
+    bat = ParameterLayout.batched(3, 2)
+    assert bat.station_block(XYZ).tolist() == [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
+    assert bat.station_columns("offset").tolist() == [9, 10, 11] and bat.target_block()[1].tolist() == [15, 16, 17]
+    cpl = ParameterLayout.coupled(3, 2, [0, 0, 1], n_oriented=1)      # [3s, h offsets, h scales, 3t, 3 orientation]
+    assert cpl.n == 9 + 2 + 2 + 6 + 3
+    assert cpl.station_columns("offset").tolist() == [9, 9, 10] and cpl.station_columns("scale").tolist() == [11, 11, 12]
+    assert cpl.block("orientation").tolist() == [[19, 20, 21]]
+    assert bat.index_in(cpl).tolist() == list(range(9)) + [9, 9, 10] + list(range(13, 19))
+    assert ParameterLayout.station_system(3).index_in(adj).tolist() == [0, 1, 2, 3, 5, 6, 7, 8, 10, 11, 12, 13]
+    sys3 = ParameterLayout.station_system(3, 2, offsets=False)
+    assert sys3.index_in(adj).tolist() == [0, 1, 2, 5, 6, 7, 10, 11, 12, 15, 16, 17, 18, 19, 20]
+    src = adj.tie_source([0, 0, 1])                                   # B's offset and scale read A's
+    assert src[8] == 3 and src[9] == 4 and src[13] == 13 and src[5] == 5
+    g = np.arange(15.0).reshape(15, 1)                                # rows of the 5 stacked points
+    rows = bat.datum_rows(g)
+    assert rows[:9, 0].tolist() == list(range(9)) and not rows[9:12].any() and rows[12:, 0].tolist() == list(range(9, 15))
+    assert (bat.point_rows(rows) == g).all()
+    free = cpl.free_mask(head={"scale": [False, True]}, target={"z": [True, False]})
+    assert np.flatnonzero(~free).tolist() == [11, 18]

@@ -4,6 +4,9 @@ Same arithmetic as ``BatchedNetwork._step(method="frozen")``: exact gradient of 
 Schur-reduced normal matrix of the nominal solution; one pass over the observations per iteration,
 trials in parallel (``prange``). The tests compare it with the numpy path.
 
+The station system's columns come in ``cols`` (s, 4): station ``i``'s ``x, y, z, offset`` rows of
+``s0inv`` and of the gradient (:meth:`multilat.network.parameter_layout.ParameterLayout.station_system`).
+
 IEEE division (``multilat._numba.njit``: ``error_model="numpy"``): a zero divisor gives inf or nan, never an
 exception out of a parallel region.
 """
@@ -15,30 +18,30 @@ from multilat._numba import boundary, njit, prange
 
 
 @njit(cache=True, inline="always")
-def _load4(v, i):  # pragma: no cover - jit
-    """Station ``i``'s four sums ``v[4 i : 4 i + 4]``."""
-    return v[4 * i], v[4 * i + 1], v[4 * i + 2], v[4 * i + 3]
+def _load4(v, c, i):  # pragma: no cover - jit
+    """Station ``i``'s four sums ``v[c[i]]``."""
+    return v[c[i, 0]], v[c[i, 1]], v[c[i, 2]], v[c[i, 3]]
 
 
 @njit(cache=True, inline="always")
-def _store4(v, i, a0, a1, a2, a3):  # pragma: no cover - jit
-    v[4 * i] = a0
-    v[4 * i + 1] = a1
-    v[4 * i + 2] = a2
-    v[4 * i + 3] = a3
+def _store4(v, c, i, a0, a1, a2, a3):  # pragma: no cover - jit
+    v[c[i, 0]] = a0
+    v[c[i, 1]] = a1
+    v[c[i, 2]] = a2
+    v[c[i, 3]] = a3
 
 
 @njit(parallel=True, cache=True, fastmath=False, nogil=True)
-def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pragma: no cover - jit
+def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, cols, tol, max_iter):  # pragma: no cover - jit
     n, m = d.shape
     s = h.shape[1]
     t = tg.shape[1]
-    p = 4 * s
+    p = s0inv.shape[0]
     iters = np.full(n, max_iter, np.int64)
     last = np.full(n, np.inf)
     vtpv = np.empty(n)
     for r in prange(n):
-        gh = np.empty(p)            # station rows [x, y, z, offset] of station i at 4 i .. 4 i + 3
+        gh = np.empty(p)            # station rows [x, y, z, offset] of station i at cols[i]
         gt = np.empty((t, 3))
         yt = np.empty((t, 3))
         dxp = np.empty(p)
@@ -48,13 +51,13 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
             # a station's sums stay in registers over its run of observations (stored when the
             # station changes): the same additions, in the same order, as adding into gh each time
             cur = si[0]
-            a0, a1, a2, a3 = _load4(gh, cur)
+            a0, a1, a2, a3 = _load4(gh, cols, cur)
             for k in range(m):
                 i = si[k]
                 if i != cur:
-                    _store4(gh, cur, a0, a1, a2, a3)
+                    _store4(gh, cols, cur, a0, a1, a2, a3)
                     cur = i
-                    a0, a1, a2, a3 = _load4(gh, i)
+                    a0, a1, a2, a3 = _load4(gh, cols, i)
                 j = ti[k]
                 dx = h[r, i, 0] - tg[r, j, 0]
                 dy = h[r, i, 1] - tg[r, j, 1]
@@ -68,25 +71,25 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
                 gt[j, 0] -= e * dx
                 gt[j, 1] -= e * dy
                 gt[j, 2] -= e * dz
-            _store4(gh, cur, a0, a1, a2, a3)
+            _store4(gh, cols, cur, a0, a1, a2, a3)
             for j in range(t):
                 for a in range(3):
                     yt[j, a] = ninv0[j, a, 0] * gt[j, 0] + ninv0[j, a, 1] * gt[j, 1] + ninv0[j, a, 2] * gt[j, 2]
             cur = si[0]
-            a0, a1, a2, a3 = _load4(gh, cur)
+            a0, a1, a2, a3 = _load4(gh, cols, cur)
             for k in range(m):
                 i = si[k]
                 if i != cur:
-                    _store4(gh, cur, a0, a1, a2, a3)
+                    _store4(gh, cols, cur, a0, a1, a2, a3)
                     cur = i
-                    a0, a1, a2, a3 = _load4(gh, i)
+                    a0, a1, a2, a3 = _load4(gh, cols, i)
                 j = ti[k]
                 sk = w[k] * (u0[k, 0] * yt[j, 0] + u0[k, 1] * yt[j, 1] + u0[k, 2] * yt[j, 2])
                 a0 += sk * u0[k, 0]
                 a1 += sk * u0[k, 1]
                 a2 += sk * u0[k, 2]
                 a3 += sk
-            _store4(gh, cur, a0, a1, a2, a3)
+            _store4(gh, cols, cur, a0, a1, a2, a3)
             # dxp = s0inv @ gh, each row summed over b in order; four rows at a time (independent
             # sums side by side instead of one long chain of dependent additions; p = 4 s rows)
             a = 0
@@ -110,17 +113,17 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, tol, max_iter):  # pr
             nan = False
             for i in range(s):
                 for a in range(3):
-                    h[r, i, a] += dxp[4 * i + a]
-                    step = max(step, abs(dxp[4 * i + a]))
-                    nan = nan or not np.isfinite(dxp[4 * i + a])
-                o[r, i] += dxp[4 * i + 3]
-                step = max(step, abs(dxp[4 * i + 3]))
-                nan = nan or not np.isfinite(dxp[4 * i + 3])
+                    h[r, i, a] += dxp[cols[i, a]]
+                    step = max(step, abs(dxp[cols[i, a]]))
+                    nan = nan or not np.isfinite(dxp[cols[i, a]])
+                o[r, i] += dxp[cols[i, 3]]
+                step = max(step, abs(dxp[cols[i, 3]]))
+                nan = nan or not np.isfinite(dxp[cols[i, 3]])
             for k in range(m):
                 i = si[k]
                 j = ti[k]
-                q = w[k] * (u0[k, 0] * dxp[4 * i] + u0[k, 1] * dxp[4 * i + 1] + u0[k, 2] * dxp[4 * i + 2]
-                            + dxp[4 * i + 3])
+                q = w[k] * (u0[k, 0] * dxp[cols[i, 0]] + u0[k, 1] * dxp[cols[i, 1]] + u0[k, 2] * dxp[cols[i, 2]]
+                            + dxp[cols[i, 3]])
                 gt[j, 0] += q * u0[k, 0]
                 gt[j, 1] += q * u0[k, 1]
                 gt[j, 2] += q * u0[k, 2]

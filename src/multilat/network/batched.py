@@ -41,7 +41,9 @@ definition on three stations for ``TrialDatum.three_two_one``. :meth:`BatchedNet
 returns the first-order covariance in exactly that datum, for the MC-vs-linear validation.
 
 Parameter vector layout (used by the covariance and by :func:`flatten`):
-``[station xyz (3s, station-major), station offsets (s), target xyz (3t, target-major)]``, metres.
+``[station xyz (3s, station-major), station offsets (s), target xyz (3t, target-major)]``, metres
+(:meth:`multilat.network.parameter_layout.ParameterLayout.batched`); the frozen station system's is
+``station_system`` (``x, y, z, offset`` per station).
 """
 
 from __future__ import annotations
@@ -54,6 +56,7 @@ from multilat.errors import MultilatError
 from multilat.network.datum import helmert_basis, s_transform
 from multilat.network.trial_datum import TrialDatum
 from multilat.network.model import inv3, line_of_sight, range_m
+from multilat.network.parameter_layout import XYZ, ParameterLayout, gather
 
 __all__ = [
     "TrialDatum",
@@ -83,9 +86,12 @@ def flatten(station_xyz_m, offset_m, target_xyz_m) -> np.ndarray:
     h = np.asarray(station_xyz_m, float)
     o = np.asarray(offset_m, float)
     tg = np.asarray(target_xyz_m, float)
-    lead = h.shape[:-2]
-    return np.concatenate([h.reshape(lead + (3 * h.shape[-2],)), o.reshape(lead + (o.shape[-1],)),
-                           tg.reshape(lead + (3 * tg.shape[-2],))], axis=-1)
+    lay = ParameterLayout.batched(h.shape[-2], tg.shape[-2])
+    out = np.empty(h.shape[:-2] + (lay.n,))
+    out[..., lay.station_block(XYZ)] = h
+    out[..., lay.station_columns("offset")] = o
+    out[..., lay.target_block()] = tg
+    return out
 
 
 # ----------------------------------------------------------------------------------------------
@@ -153,6 +159,11 @@ class NetworkSizes:
     def n_obs(self) -> int:
         return len(self.station_index)
 
+    @property
+    def reported_layout(self) -> ParameterLayout:
+        """The reported parameter vector's columns ``[3s, s, 3t]`` (:func:`flatten`, the linear covariance)."""
+        return ParameterLayout.batched(self.n_stations, self.n_targets)
+
 
 @dataclass(frozen=True)
 class BatchedNetwork(NetworkSizes):
@@ -216,7 +227,7 @@ class BatchedNetwork(NetworkSizes):
     # -- sizes: NetworkSizes ------------------------------------------------------------------
     @property
     def n_params(self) -> int:
-        return 4 * self.n_stations + 3 * self.n_targets
+        return self.reported_layout.n
 
     @property
     def dof(self) -> int:
@@ -250,11 +261,11 @@ class BatchedNetwork(NetworkSizes):
             raise MultilatError(f"target {int(bad[0])} is not determined by its observations "
                                 "(fewer than 3 stations or collinear lines of sight)")
         ninv0 = inv3(ntt)
-        g_s = helmert_basis(self.station_xyz_m)
-        e_pen = np.zeros((4 * s, 6))
-        e_pen.reshape(s, 4, 6)[:, :3] = g_s.reshape(s, 3, 6)
-        s0 = _schur(u0[None], w, si, ti, ninv0[None], s, a_s, a_t)[0]
-        pen_scale = np.trace(s0) / (4 * s) / max(np.trace(e_pen.T @ e_pen) / 6, 1e-300)
+        system = ParameterLayout.station_system(s)                       # [x, y, z, offset] per station
+        cols = system.station_block()
+        e_pen = system.datum_rows(helmert_basis(self.station_xyz_m))
+        s0 = _schur(u0[None], w, si, ti, ninv0[None], cols, a_s, a_t)[0]
+        pen_scale = np.trace(s0) / system.n / max(np.trace(e_pen.T @ e_pen) / 6, 1e-300)
         pen = pen_scale * (e_pen @ e_pen.T)
         try:
             chol = np.linalg.cholesky(s0 + pen)
@@ -262,19 +273,18 @@ class BatchedNetwork(NetworkSizes):
             raise MultilatError("the station/offset system is singular (degenerate geometry: "
                                 "coplanar/collinear stations or too few targets)") from None
         s0inv = np.linalg.inv(s0 + pen)
-        return dict(w=w, u0=u0, a_s=a_s, a_t=a_t, ninv0=ninv0, s0inv=s0inv, pen=pen, chol=chol)
+        return dict(w=w, u0=u0, a_s=a_s, a_t=a_t, ninv0=ninv0, s0inv=s0inv, pen=pen, chol=chol, cols=cols)
 
     # -- linear propagation ------------------------------------------------------------------
     def jacobian(self) -> np.ndarray:
         """Jacobian of the model distances at the nominal solution, shape (m, 4s + 3t), m/m."""
-        s, m = self.n_stations, self.n_obs
+        m, lay = self.n_obs, self.reported_layout
         u0 = self._pre["u0"]
         k = np.arange(m)
-        j = np.zeros((m, self.n_params))
-        for c in range(3):
-            j[k, 3 * self.station_index + c] = u0[:, c]
-            j[k, 4 * s + 3 * self.target_index + c] = -u0[:, c]
-        j[k, 3 * s + self.station_index] = 1.0
+        j = np.zeros((m, lay.n))
+        j[k[:, None], lay.station_block(XYZ)[self.station_index]] = u0
+        j[k[:, None], lay.target_block()[self.target_index]] = -u0
+        j[k, lay.station_columns("offset")[self.station_index]] = 1.0
         return j
 
     def linear_covariance(self, *, sigma_m: np.ndarray | None = None,
@@ -291,11 +301,7 @@ class BatchedNetwork(NetworkSizes):
         w = self._pre["w"]
         n = j.T @ (w[:, None] * j)
         e = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)
-        g = np.zeros((self.n_params, 6))
-        s = self.n_stations
-        gp = helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m]))
-        g[: 3 * s] = gp[: 3 * s]
-        g[4 * s:] = gp[3 * s:]
+        g = self.reported_layout.datum_rows(helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m])))
         etg = e.T @ g
         if abs(np.linalg.det(etg)) < 1e-14 * np.linalg.norm(etg) ** 6:
             raise MultilatError("the datum does not fix translation and rotation (degenerate points)")
@@ -382,7 +388,8 @@ class BatchedNetwork(NetworkSizes):
             from multilat.network import _batched_numba as nb
             p = self._pre
             iters, last, vtpv = nb.solve_frozen(d, h, o, tg, self.station_index, self.target_index,
-                                                p["w"], p["u0"], p["ninv0"], p["s0inv"], tol_m, max_iter)
+                                                p["w"], p["u0"], p["ninv0"], p["s0inv"], p["cols"], tol_m,
+                                                max_iter)
             return h, o, tg, iters, last, vtpv
         iters = np.full(n, max_iter, np.int64)
         last = np.full(n, np.inf)
@@ -412,7 +419,7 @@ class BatchedNetwork(NetworkSizes):
         """One step (dh (n,s,3), do (n,s), dt (n,t,3)) of the chosen method (numpy path)."""
         p = self._pre
         si, ti, w, a_s, a_t = self.station_index, self.target_index, p["w"], p["a_s"], p["a_t"]
-        n, s = h.shape[0], h.shape[1]
+        n, cols = h.shape[0], p["cols"]
         rho, u = line_of_sight(h[:, si] - tg[:, ti])                  # (n, m), (n, m, 3)
         e = w * (d - rho - o[:, si])                                  # w r, (n, m)
         eu = e[..., None] * u
@@ -426,17 +433,18 @@ class BatchedNetwork(NetworkSizes):
         else:
             ub = u
             ninv = inv3(_target_blocks(u, w, a_t))
-            sm = _schur(u, w, si, ti, ninv, s, a_s, a_t) + p["pen"]
+            sm = _schur(u, w, si, ti, ninv, cols, a_s, a_t) + p["pen"]
             sinv = None
         y_t = np.einsum("ntab,ntb->nta", np.broadcast_to(ninv, (n,) + ninv.shape[1:]), g_t)
         sk = w * np.einsum("nmc,nmc->nm", ub, y_t[:, ti])
-        gp = np.concatenate([g_h + np.einsum("nm,nmc,ms->nsc", sk, ub, a_s),
-                             (g_o + sk @ a_s)[..., None]], axis=2).reshape(n, 4 * s)
+        gp = np.empty((n, cols.size))
+        gp[:, cols[:, :3]] = g_h + np.einsum("nm,nmc,ms->nsc", sk, ub, a_s)
+        gp[:, cols[:, 3]] = g_o + sk @ a_s
         if sinv is not None:
             dxp = gp @ sinv[0].T
         else:
             dxp = np.linalg.solve(sm, gp[..., None])[..., 0]
-        dxp = dxp.reshape(n, s, 4)
+        dxp = gather(dxp, cols)                                       # (n, s, 4)
         dh, do = dxp[..., :3], dxp[..., 3]
         q = w * (np.einsum("nmc,nmc->nm", ub, dh[:, si]) + do[:, si])
         rhs = g_t + np.einsum("nm,nmc,mt->ntc", q, ub, a_t)
@@ -450,14 +458,15 @@ def _target_blocks(u, w, a_t):
     return np.einsum("nmij,mt->ntij", uu, a_t)
 
 
-def _schur(u, w, si, ti, ninv, s, a_s, a_t):
-    """Schur complement ``N_pp - N_pt N_tt^-1 N_tp`` per trial, shape (n, 4s, 4s) (no datum).
+def _schur(u, w, si, ti, ninv, cols, a_s, a_t):
+    """Schur complement ``N_pp - N_pt N_tt^-1 N_tp`` per trial, shape (n, 4s, 4s) (no datum), on the
+    station system's columns ``cols`` (s, 4).
 
     Station/offset rows of observation k: ``a_k = [u_k, 1]``; ``N_pt`` block (i, j) is
     ``-sum w a u^T``. The reduction for two observations k, l of the same target j is
     ``w_k w_l (u_k^T Ninv_j u_l) a_k a_l^T`` into station block (i_k, i_l).
     """
-    n, m = u.shape[0], u.shape[1]
+    n, m, s = u.shape[0], u.shape[1], cols.shape[0]
     a = np.concatenate([u, np.ones((n, m, 1))], axis=2)            # (n, m, 4)
     npp = np.einsum("nmi,nmj,m,ms->nsij", a, a, w, a_s)            # diagonal station blocks
     out = np.zeros((n, s, s, 4, 4))
@@ -473,4 +482,6 @@ def _schur(u, w, si, ti, ninv, s, a_s, a_t):
     inc[np.arange(len(kk)), pair_block] = 1.0
     red = np.einsum("nkij,kb->nbij", blk, inc).reshape(n, s, s, 4, 4)
     out -= red
-    return out.transpose(0, 1, 3, 2, 4).reshape(n, 4 * s, 4 * s)
+    full = np.zeros((n, cols.size, cols.size))
+    full[:, cols[:, :, None, None], cols[None, None]] = out.transpose(0, 1, 3, 2, 4)
+    return full

@@ -29,12 +29,14 @@ orientations (3 per oriented station)]``; the "extra" observations of a trial ar
 the control coordinates and the angles (``extra_value``, ``extra_sigma``: metres or radians);
 results are returned in the batched layout ``[station xyz (3s), offset per station (s), target xyz
 (3t)]`` (a head's offset repeated on each of its stations) so that :mod:`multilat.network.propagate`
-summarises both solvers the same way. Scales are estimated in every trial but not reported.
+summarises both solvers the same way. Scales are estimated in every trial but not reported. Both
+layouts are :class:`multilat.network.parameter_layout.ParameterLayout`'s (``coupled``, ``batched``).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -42,6 +44,7 @@ from multilat.errors import MultilatError
 from multilat.network.batched import BatchSolution, NetworkSizes
 from multilat.network.datum import ABOUT_Z_COLUMNS, helmert_basis, s_transform
 from multilat.network.model import line_of_sight, range_m
+from multilat.network.parameter_layout import XYZ, ParameterLayout, gather
 
 __all__ = ["CoupledBatchedNetwork"]
 
@@ -144,10 +147,15 @@ class CoupledBatchedNetwork(NetworkSizes):
     def n_heads(self) -> int:
         return int(self.head_index.max()) + 1 if self.head_index.size else 0
 
+    @cached_property
+    def unknown_layout(self) -> ParameterLayout:
+        """The unknowns' columns: ``[station xyz, head offsets, head scales, target xyz, orientations]``."""
+        return ParameterLayout.coupled(self.n_stations, self.n_targets, self.head_index, int(self.oriented.sum()))
+
     @property
     def n_params(self) -> int:
         """Parameters in the reported (batched) layout ``[3s, s, 3t]``."""
-        return 4 * self.n_stations + 3 * self.n_targets
+        return self.reported_layout.n
 
     @property
     def oriented(self) -> np.ndarray:
@@ -186,18 +194,14 @@ class CoupledBatchedNetwork(NetworkSizes):
 
     # -- layout ----------------------------------------------------------------------------------
     def _split(self, x):
-        s, h, t = self.n_stations, self.n_heads, self.n_targets
-        n = x.shape[0]
-        e = 3 * s + 2 * h + 3 * t
-        return (x[:, :3 * s].reshape(n, s, 3), x[:, 3 * s:3 * s + h], x[:, 3 * s + h:3 * s + 2 * h],
-                x[:, 3 * s + 2 * h:e].reshape(n, t, 3))
+        L = self.unknown_layout
+        return (gather(x, L.station_block(XYZ)), gather(x, L.columns("head", "offset")),
+                gather(x, L.columns("head", "scale")), gather(x, L.target_block()))
 
     def _orientations(self, x):
         """(n, s, 3) orientations of every trial (zeros for stations without angles)."""
-        n = x.shape[0]
-        e = 3 * (self.n_stations + self.n_targets) + 2 * self.n_heads
-        O = np.zeros((n, self.n_stations, 3))
-        O[:, self.oriented] = x[:, e:].reshape(n, -1, 3)
+        O = np.zeros((x.shape[0], self.n_stations, 3))
+        O[:, self.oriented] = gather(x, self.unknown_layout.block("orientation"))
         return O
 
     def _x0(self) -> np.ndarray:
@@ -207,16 +211,20 @@ class CoupledBatchedNetwork(NetworkSizes):
         if not (np.allclose(self.offset_m, o_h[hi], rtol=0, atol=1e-12)
                 and np.allclose(self.scale, k_h[hi], rtol=0, atol=1e-15)):
             raise MultilatError("stations of one head must have the same nominal offset and scale")
-        return np.concatenate([self.station_xyz_m.ravel(), o_h, k_h, self.target_xyz_m.ravel(),
-                               self.orientation_rad[self.oriented].ravel()])
+        L = self.unknown_layout
+        x0 = np.empty(L.n)
+        x0[L.station_block(XYZ)] = self.station_xyz_m
+        x0[L.columns("head", "offset")] = o_h
+        x0[L.columns("head", "scale")] = k_h
+        x0[L.target_block()] = self.target_xyz_m
+        x0[L.block("orientation")] = self.orientation_rad[self.oriented]
+        return x0
 
     def _layout_map(self) -> np.ndarray:
-        """``M`` (4s + 3t, P): the reported layout from the P space."""
-        s, h, t = self.n_stations, self.n_heads, self.n_targets
-        M = np.zeros((4 * s + 3 * t, 3 * s + 2 * h + 3 * t + self.n_orientation))
-        M[np.arange(3 * s), np.arange(3 * s)] = 1.0
-        M[3 * s + np.arange(s), 3 * s + self.head_index] = 1.0
-        M[4 * s + np.arange(3 * t), 3 * s + 2 * h + np.arange(3 * t)] = 1.0
+        """``M`` (4s + 3t, P): the reported layout from the P space (a head's offset on each station)."""
+        R = self.reported_layout
+        M = np.zeros((R.n, self.unknown_layout.n))
+        M[np.arange(R.n), R.index_in(self.unknown_layout)] = 1.0
         return M
 
     # -- model -----------------------------------------------------------------------------------
@@ -262,71 +270,63 @@ class CoupledBatchedNetwork(NetworkSizes):
 
     def _jacobian(self, x1) -> np.ndarray:
         """Jacobian of all model values (distances, then couplings) at one point x1 (P,), (m + q, P)."""
-        s, h, t, m = self.n_stations, self.n_heads, self.n_targets, self.n_obs
-        P = x1.size
+        m, L = self.n_obs, self.unknown_layout
         H, o, k, T = (a[0] for a in self._split(x1[None]))
         si, ti = self.station_index, self.target_index
         hs = self.head_index[si]
         rho, u = line_of_sight(H[si] - T[ti])
-        J = np.zeros((m + self.n_extra, P))
+        J = np.zeros((m + self.n_extra, L.n))
         r = np.arange(m)
-        for c in range(3):
-            J[r, 3 * si + c] = (1.0 + k[hs]) * u[:, c]
-            J[r, 3 * s + 2 * h + 3 * ti + c] = -(1.0 + k[hs]) * u[:, c]
-        J[r, 3 * s + hs] = 1.0
-        J[r, 3 * s + h + hs] = rho
+        sb, tb, pc = L.station_block(XYZ), L.target_block(), L.point_columns()   # pc: stacked points
+        J[r[:, None], sb[si]] = (1.0 + k[hs])[:, None] * u
+        J[r[:, None], tb[ti]] = -((1.0 + k[hs])[:, None] * u)
+        J[r, L.station_columns("offset")[si]] = 1.0
+        J[r, L.station_columns("scale")[si]] = rho
         X = np.concatenate([H, T])
-        col = np.concatenate([3 * np.arange(s), 3 * s + 2 * h + 3 * np.arange(t)])   # point -> first column
         nb = len(self.bar_a)
         if nb:
             _, ub = line_of_sight(X[self.bar_a] - X[self.bar_b])
-            rb = m + np.arange(nb)
-            for c in range(3):
-                J[rb, col[self.bar_a] + c] += ub[:, c]
-                J[rb, col[self.bar_b] + c] -= ub[:, c]
+            rb = (m + np.arange(nb))[:, None]
+            J[rb, pc[self.bar_a]] += ub
+            J[rb, pc[self.bar_b]] -= ub
         if len(self.control_point):
-            J[m + nb + np.arange(len(self.control_point)), col[self.control_point] + self.control_axis] = 1.0
+            J[m + nb + np.arange(len(self.control_point)), pc[self.control_point, self.control_axis]] = 1.0
         a = len(self.angle_station)
         if a:
             _, dT, dO = self._angle_parts(x1[None])
-            ra = m + nb + len(self.control_point) + np.arange(a)
+            ra = (m + nb + len(self.control_point) + np.arange(a))[:, None]
             slot = np.cumsum(self.oriented) - 1
-            e = 3 * s + 2 * h + 3 * t
-            for c in range(3):
-                J[ra, 3 * self.angle_station + c] = -dT[0, :, c]
-                J[ra, 3 * s + 2 * h + 3 * self.angle_target + c] = dT[0, :, c]
-                J[ra, e + 3 * slot[self.angle_station] + c] = dO[0, :, c]
+            J[ra, sb[self.angle_station]] = -dT[0]
+            J[ra, tb[self.angle_target]] = dT[0]
+            J[ra, L.block("orientation")[slot[self.angle_station]]] = dO[0]
         return J
 
     # -- precomputation --------------------------------------------------------------------------
     def _precompute(self) -> dict:
         s, h, t, m = self.n_stations, self.n_heads, self.n_targets, self.n_obs
         x0 = self._x0()
-        P = x0.size
+        L = self.unknown_layout
+        P = L.n
         from multilat.network.angle_rows import orientation_free_mask
 
-        free = np.concatenate([np.repeat(~self.station_held, 3), self.offset_free, self.scale_free,
-                               np.repeat(~self.target_held, 3),
-                               orientation_free_mask(self.orientation_levelled[self.oriented])])
+        free = L.free_mask(station={f: ~self.station_held for f in XYZ},
+                           head={"offset": self.offset_free, "scale": self.scale_free},
+                           target={f: ~self.target_held for f in XYZ})
+        free[L.block("orientation").ravel()] = orientation_free_mask(self.orientation_levelled[self.oriented])
         w_all = 1.0 / np.concatenate([self.sigma_m, self.extra_sigma]) ** 2
         J0 = self._jacobian(x0)
         N = J0.T @ (w_all[:, None] * J0)
         E = G = None
         pen = np.zeros((P, P))
         if self.datum is not None:
-            EL = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)
+            EL = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)   # reported layout
             # no orientation rows: the coordinates' block of the S-transformation needs none
-            e = 3 * s + 2 * h + 3 * t
             nd = EL.shape[1]
-            E = np.zeros((P, nd))
-            E[:3 * s] = EL[:3 * s]
-            E[3 * s + 2 * h:e] = EL[4 * s:]
+            E = L.datum_rows(self.reported_layout.point_rows(EL))
             gp = helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m]))
             if nd == 4:
                 gp = gp[:, ABOUT_Z_COLUMNS]
-            G = np.zeros((P, nd))
-            G[:3 * s] = gp[:3 * s]
-            G[3 * s + 2 * h:e] = gp[3 * s:]
+            G = L.datum_rows(gp)
             ef = E[free]
             c = np.trace(N[np.ix_(free, free)]) / free.sum() / max(np.trace(ef.T @ ef) / nd, 1e-300)
             pen = c * (E @ E.T)
@@ -355,8 +355,8 @@ class CoupledBatchedNetwork(NetworkSizes):
         ang_t[np.arange(a), s + self.angle_target] = 1.0
         ang_slot = np.zeros((a, int(self.oriented.sum())))   # angle row -> its station's orientation slot
         ang_slot[np.arange(a), (np.cumsum(self.oriented) - 1)[self.angle_station]] = 1.0
-        c_in = np.zeros((len(self.control_point), 3 * (s + t)))
-        c_in[np.arange(len(self.control_point)), 3 * self.control_point + self.control_axis] = 1.0
+        c_in = np.zeros((len(self.control_point), s + t, 3))      # control row -> its point's coordinate
+        c_in[np.arange(len(self.control_point)), self.control_point, self.control_axis] = 1.0
         return dict(x0=x0, free=free, w_all=w_all, J0=J0, N=N, pen=pen, Ninv=Ninv, E=E, G=G,
                     a_s=a_s, a_t=a_t, a_h=a_h, b_pm=b_pm, c_in=c_in, ang_s=ang_s, ang_t=ang_t, ang_slot=ang_slot,
                     scale_len=float(np.max(np.abs(self.nominal_distance_m_raw(x0)))))
@@ -368,7 +368,7 @@ class CoupledBatchedNetwork(NetworkSizes):
     def _gradient(self, x, d, c):
         """Gradient ``J^T W r`` (n, P) and ``r^T W r`` (n,) of every trial."""
         p = self._pre
-        s, t, m = self.n_stations, self.n_targets, self.n_obs
+        s, t, m, L = self.n_stations, self.n_targets, self.n_obs, self.unknown_layout
         n = x.shape[0]
         H, o, k, T = self._split(x)
         si, ti = self.station_index, self.target_index
@@ -384,7 +384,7 @@ class CoupledBatchedNetwork(NetworkSizes):
         g_o = e @ p["a_h"]
         g_k = (e * rho) @ p["a_h"]
         nb, nc, na = len(self.bar_a), len(self.control_point), len(self.angle_station)
-        g_or = np.zeros((n, self.n_orientation))
+        g_or = np.zeros((n,) + L.block("orientation").shape)
         if nb + nc:
             X = np.concatenate([H, T], axis=1)
             rc = c[:, :nb + nc] - self._coupling_model(x)
@@ -394,7 +394,7 @@ class CoupledBatchedNetwork(NetworkSizes):
                 _, ub = line_of_sight(X[:, self.bar_a] - X[:, self.bar_b])
                 gX = gX + np.einsum("nbc,bp->npc", ec[:, :nb, None] * ub, p["b_pm"])
             if nc:
-                gX = gX + (ec[:, nb:] @ p["c_in"]).reshape(n, s + t, 3)
+                gX = gX + (ec[:, nb:] @ p["c_in"].reshape(nc, -1)).reshape(n, s + t, 3)
         if na:
             pred, dT, dO = self._angle_parts(x)
             ra = c[:, nb + nc:] - pred
@@ -403,15 +403,19 @@ class CoupledBatchedNetwork(NetworkSizes):
             vtpv = vtpv + np.einsum("na,na->n", ea, ra)
             eT = ea[..., None] * dT                                                  # (n, a, 3)
             gX = gX + np.einsum("nac,ap->npc", eT, p["ang_t"]) - np.einsum("nac,ap->npc", eT, p["ang_s"])
-            g_or = (np.einsum("nac,ak->nkc", ea[..., None] * dO, p["ang_slot"])).reshape(n, -1)
-        g = np.concatenate([gX[:, :s].reshape(n, 3 * s), g_o, g_k, gX[:, s:].reshape(n, 3 * t), g_or], axis=1)
+            g_or = np.einsum("nac,ak->nkc", ea[..., None] * dO, p["ang_slot"])
+        g = np.empty((n, L.n))
+        g[:, L.point_columns()] = gX
+        g[:, L.columns("head", "offset")] = g_o
+        g[:, L.columns("head", "scale")] = g_k
+        g[:, L.block("orientation")] = g_or
         return g * p["free"], vtpv
 
     def _step_size(self, dx):
-        s, h, t = self.n_stations, self.n_heads, self.n_targets
+        L = self.unknown_layout
         a = np.abs(dx)
-        a[:, 3 * s + h:3 * s + 2 * h] *= self._pre["scale_len"]
-        a[:, 3 * s + 2 * h + 3 * t:] *= self._pre["scale_len"]                # orientations, rad x length
+        a[:, L.columns("head", "scale")] *= self._pre["scale_len"]
+        a[:, L.block("orientation").ravel()] *= self._pre["scale_len"]          # orientations, rad x length
         return a.max(axis=1)
 
     # -- solving ---------------------------------------------------------------------------------

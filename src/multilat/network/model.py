@@ -17,9 +17,10 @@ Parameter layout (used everywhere in :mod:`multilat.network`)::
 
     [station 0: x, y, z, offset, scale, station 1: ..., ..., target 0: x, y, z, target 1: ...]
 
-i.e. ``Q = 5`` global parameters per station (index ``5 i + c``) followed by ``3`` per target
-(index ``5 s + 3 j + c``). Jacobians are of the *model* ``f(x)`` (so ``r = obs - f`` for the
-distance cost, and ``r = g(obs, x) - f(x)`` generally; the solver uses ``J = d f / d x - d g / d x``).
+i.e. ``Q = 5`` global parameters per station followed by ``3`` per target: the columns of
+:meth:`multilat.network.parameter_layout.ParameterLayout.adjustment`, the one layout. Jacobians are
+of the *model* ``f(x)`` (so ``r = obs - f`` for the distance cost, and ``r = g(obs, x) - f(x)``
+generally; the solver uses ``J = d f / d x - d g / d x``).
 
 The normal equations are reduced by the Schur complement over the 3x3 target blocks, so the
 linear algebra is a dense ``5s x 5s`` system plus ``t`` 3x3 inverses: cost linear in the number of
@@ -32,7 +33,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-Q = 5  # global parameters per station: x, y, z, offset, scale
+from multilat.network.parameter_layout import STATION_FIELDS, ParameterLayout
+
+Q = len(STATION_FIELDS)  # global parameters per station: x, y, z, offset, scale
 COSTS = ("distance", "squared")
 
 __all__ = ["Q", "COSTS", "segment_sum", "range_m", "line_of_sight", "geometric_distance_m", "predicted_distance_m", "residuals",
@@ -181,12 +184,11 @@ def residuals_and_jacobian(distance_m, station_xyz_m, target_xyz_m, offset_m, sc
 def dense_jacobian(J_station, J_target, station_index, target_index, n_stations, n_targets):
     """The full (m, 5s + 3t) Jacobian from its blocks (for small problems and tests)."""
     m = J_station.shape[0]
-    J = np.zeros((m, Q * n_stations + 3 * n_targets))
-    rows = np.arange(m)
-    for c in range(Q):
-        J[rows, Q * station_index + c] = J_station[:, c]
-    for c in range(3):
-        J[rows, Q * n_stations + 3 * target_index + c] = J_target[:, c]
+    lay = ParameterLayout.adjustment(n_stations, n_targets)
+    J = np.zeros((m, lay.n))
+    rows = np.arange(m)[:, None]
+    J[rows, lay.station_block()[station_index]] = J_station
+    J[rows, lay.target_block()[target_index]] = J_target
     return J
 
 
@@ -267,6 +269,7 @@ class ReducedSystem:
     Ntt : ndarray (t, 3, 3)  target blocks of the (damped) normal matrix
     Ntt_inv : ndarray (t, 3, 3)  their inverses (zero for fixed targets)
     bt : ndarray (t, 3)    target right-hand sides
+    layout : ParameterLayout  the columns of ``N`` and ``b`` (the adjustment's station system)
     """
 
     N: np.ndarray
@@ -274,6 +277,7 @@ class ReducedSystem:
     Ntt: np.ndarray
     Ntt_inv: np.ndarray
     bt: np.ndarray
+    layout: ParameterLayout = None
 
 
 def reduced_normal_equations(r_w, Js_w, Jt_w, station_index, target_index, n_stations, n_targets, *,
@@ -334,15 +338,21 @@ def reduced_normal_equations(r_w, Js_w, Jt_w, station_index, target_index, n_sta
         MB = np.einsum("cij,csj->csi", Minv[lo:lo + chunk_targets], B)
         C = np.einsum("cai,cbi->cab", B, MB)                    # (c, s, s)
         R += np.einsum("caq,cab,cbr->aqbr", A, C, A, optimize=True)
-    N = -R.reshape(s * Q, s * Q)
+    lay = ParameterLayout.adjustment(s)
+    cols = lay.station_block()                                  # (s, Q)
+    N = np.zeros((cols.size, cols.size))
+    N[cols.reshape(-1, 1), cols.reshape(1, -1)] = -R.reshape(cols.size, cols.size)
     for i in range(s):
-        N[Q * i:Q * i + Q, Q * i:Q * i + Q] += Ngg[i]
-    return ReducedSystem(N=N, b=bg.reshape(-1), Ntt=Ntt, Ntt_inv=Minv, bt=bt)
+        N[np.ix_(cols[i], cols[i])] += Ngg[i]
+    b = np.zeros(cols.size)
+    b[cols] = bg
+    return ReducedSystem(N=N, b=b, Ntt=Ntt, Ntt_inv=Minv, bt=bt, layout=lay)
 
 
 def back_substitute(system: ReducedSystem, dg, Js_w, Jt_w, station_index, target_index):
     """Target steps ``dt_j = M_j (b_j - N_jg dg)`` from the global step ``dg`` (5s,) -> (t, 3)."""
     n_t = system.bt.shape[0]
-    s_k = np.einsum("mq,mq->m", Js_w, dg.reshape(-1, Q)[station_index])
+    cols = system.layout.station_block()
+    s_k = np.einsum("mq,mq->m", Js_w, dg[cols][station_index])
     ng = segment_sum(target_index, Jt_w * s_k[:, None], n_t)
     return np.einsum("tij,tj->ti", system.Ntt_inv, system.bt - ng)

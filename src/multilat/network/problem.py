@@ -29,6 +29,7 @@ import numpy as np
 
 from multilat.network.data import Observations
 from multilat.network.model import COSTS, Q
+from multilat.network.parameter_layout import XYZ, ParameterLayout
 
 __all__ = ["Problem", "Params", "param_names", "head_mean"]
 
@@ -53,9 +54,9 @@ class Params:
     def step(self, dg: np.ndarray, dt: np.ndarray, do: np.ndarray | None = None) -> "Params":
         """These parameters plus a global step ``dg`` (5s,), target steps ``dt`` (t, 3) and
         orientation steps ``do`` (n_o,)."""
-        d = dg.reshape(-1, Q)
-        return Params(self.station_xyz_m + d[:, :3], self.target_xyz_m + dt,
-                      self.offset_m + d[:, 3], self.scale + d[:, 4],
+        lay = ParameterLayout.adjustment(len(self.offset_m))
+        return Params(self.station_xyz_m + dg[lay.station_block(XYZ)], self.target_xyz_m + dt,
+                      self.offset_m + dg[lay.station_columns("offset")], self.scale + dg[lay.station_columns("scale")],
                       self.orientation_rad if do is None else self.orientation_rad + do)
 
     def is_finite(self) -> bool:
@@ -133,13 +134,9 @@ class Problem:
         o = self.obs
         if o.station_heads is None or not o.shares_heads:
             return None
-        s = o.n_stations
-        hi = o.head_index
-        lead_of_head = np.unique(hi, return_index=True)[1]
-        src = np.arange(Q * s).reshape(s, Q)
-        src[:, 3:] = Q * lead_of_head[hi][:, None] + np.arange(3, Q)
-        T = np.zeros((Q * s, Q * s))
-        T[np.arange(Q * s), src.ravel()] = 1.0
+        layout = ParameterLayout.adjustment(o.n_stations)
+        T = np.zeros((layout.n, layout.n))
+        T[np.arange(layout.n), layout.tie_source(o.head_index)] = 1.0
         return T
 
     @property
@@ -166,12 +163,7 @@ class Problem:
 def param_names(station_ids, head_ids=None) -> list[str]:
     """Names of the global parameters in layout order (for messages); ``head_ids`` (s,) names the
     head of each station whose offset and scale they are (default: the station)."""
-    names = []
-    heads = station_ids if head_ids is None else head_ids
-    for sid, hid in zip(station_ids, heads):
-        of = f"head {hid}" if hid != sid else sid
-        names += [f"x of {sid}", f"y of {sid}", f"z of {sid}", f"offset of {of}", f"scale of {of}"]
-    return names
+    return ParameterLayout.adjustment(len(station_ids)).names(list(station_ids), head_ids=head_ids)
 
 
 def head_mean(values, obs: Observations) -> np.ndarray:

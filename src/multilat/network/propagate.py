@@ -43,6 +43,7 @@ from multilat.errors import MultilatError
 from multilat.montecarlo import (AdaptiveRule, resolve_map, block_generator, block_trials, chunk_ranges,
                                  resolve_seed)
 from multilat.network import batched as bt
+from multilat.network.parameter_layout import XYZ
 from multilat.network.propagate_pairs import default_pairs as _default_pairs  # noqa: F401 (general layer)
 from multilat.network.propagate_pairs import pairs_and_refs, parse_pairs
 from multilat.network.propagate_result import PropagationResult, chi2_3_95
@@ -117,8 +118,8 @@ class Problem:
     def param_rows(self, ident: str) -> np.ndarray:
         """Rows of a point's xyz in the :func:`batched.flatten` layout."""
         k, i = self.point_index(ident)
-        s = len(self.station_ids)
-        return 3 * i + np.arange(3) if k == "station" else 4 * s + 3 * i + np.arange(3)
+        lay = self.network.reported_layout
+        return lay.station_block(XYZ)[i] if k == "station" else lay.target_block()[i]
 
 
 def _heads_for(head_names, instrument, head: str | None):

@@ -146,8 +146,7 @@ def summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_
     lin_std, pc_lin = linear_std(problem, noise_std, obs_cov)
     cov_mc_frac = np.empty(len(pids))
     cov_lin_frac = np.empty(len(pids))
-    s = len(problem.station_ids)
-    rest = np.concatenate([3 * s + np.arange(s), np.arange(net.n_params, k)])   # offsets, distances
+    rest = np.concatenate([net.reported_layout.station_columns("offset"), np.arange(net.n_params, k)])   # offsets, distances
 
     def point(q):
         rows = problem.param_rows(pids[q])

@@ -9,6 +9,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.datum import ABOUT_Z_COLUMNS, RIGID_FIT_ITERATIONS, frame_axes, helmert_basis, parse_datum
+from multilat.network.parameter_layout import ParameterLayout
 
 __all__ = ["TrialDatum"]
 
@@ -144,22 +145,21 @@ class TrialDatum:
         h0 = np.asarray(station_xyz_m, float)
         t0 = np.asarray(target_xyz_m, float)
         s, t = len(h0), len(t0)
-        p = 4 * s + 3 * t
-        e = np.zeros((p, 6))
+        layout = ParameterLayout.batched(s, t)
         if self.kind == "inner":
             mask = self._mask(s, t)
             g = helmert_basis(np.concatenate([h0, t0])).reshape(s + t, 3, 6) * mask[:, None, None]
-            e[: 3 * s] = g[:s].reshape(3 * s, 6)
-            e[4 * s:] = g[s:].reshape(3 * t, 6)
+            e = layout.datum_rows(g.reshape(-1, 6))
             return e[:, ABOUT_Z_COLUMNS] if self.about_z else e
+        e = np.zeros((layout.n, 6))
         a, b, c = self._stacked(s, t)
         x0 = np.concatenate([h0, t0])
         ex, ey, ez = frame_axes(x0[a], x0[b], x0[c])
-        rows = [3 * q if q < s else 4 * s + 3 * (q - s) for q in (a, b, c)]
-        e[rows[0]: rows[0] + 3, 0:3] = np.eye(3)
-        e[rows[1]: rows[1] + 3, 3] = ey
-        e[rows[1]: rows[1] + 3, 4] = ez
-        e[rows[2]: rows[2] + 3, 5] = ez
+        rows = layout.point_columns()[[a, b, c]]                     # (3, 3): each point's x, y, z
+        e[rows[0], 0:3] = np.eye(3)
+        e[rows[1], 3] = ey
+        e[rows[1], 4] = ez
+        e[rows[2], 5] = ez
         return e
 
     def apply(self, station_xyz_m, target_xyz_m, nominal_station_xyz_m, nominal_target_xyz_m, *,

@@ -28,6 +28,7 @@ from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.datum import Datum, apply_rigid, datum_matrices, frame_321, parse_datum
 from multilat.network.model import Q, line_of_sight, range_m
+from multilat.network.parameter_layout import STATION_FIELDS, XYZ, ParameterLayout
 
 __all__ = ["BlockedCovariance", "blocked_covariance", "blocked_criterion"]
 
@@ -94,12 +95,13 @@ def blocked_covariance(layout, sigma_m, *, offsets: bool = True, datum="free",
     d = range_m(sx0[si] - tx0[ti])
     sig = np.asarray(sigma_m, float)
     obs = Observations(layout.station_ids, layout.target_ids, si, ti, d, sig)
-    gfree = np.ones((s, Q), bool)
-    gfree[:, 3] = offsets
-    gfree[:, 4] = False
-    gfree[a, :3] = False
-    gfree[b, 1:3] = False
-    gfree[c, 2] = False
+    gfree = np.ones((s, Q), bool)                  # the adjustment's station block, STATION_FIELDS
+    field = STATION_FIELDS.index
+    gfree[:, field("offset")] = offsets
+    gfree[:, field("scale")] = False
+    gfree[a, [field("x"), field("y"), field("z")]] = False          # the 3-2-1 minimal constraint
+    gfree[b, [field("y"), field("z")]] = False
+    gfree[c, field("z")] = False
     pb = Problem(obs, "distance", gfree, np.ones(t, bool))
     p = Params(sx0, tx0, np.zeros(s), np.zeros(s))
     backend = make_backend(pb, choose_backend(pb, solver))
@@ -118,23 +120,22 @@ def external_reliability_m(bc: BlockedCovariance, layout, mdb_m, *, offsets: boo
                            chunk: int = 256) -> np.ndarray:
     """Largest shift of any target (m) caused by a bias of one MDB in each observation, in the inner
     datum (as the dense pre-analysis): ``N^+ a_k mdb_k / sigma_k`` with ``a_k`` the whitened row."""
-    s, t = layout.n_stations, layout.n_targets
+    lay = ParameterLayout.adjustment(layout.n_stations, layout.n_targets)
+    sb, tb = lay.station_block(XYZ), lay.target_block()
     si, ti, sig = bc.station_index, bc.target_index, bc.sigma_m
     u = line_of_sight(layout.station_xyz_m[si] - layout.target_xyz_m[ti])[1] / sig[:, None]
-    n = Q * s + 3 * t
     m = si.size
     scale = np.where(np.isfinite(mdb_m), mdb_m, 0.0) / sig
     out = np.empty(m)
     for lo in range(0, m, chunk):
         k = np.arange(lo, min(lo + chunk, m))
-        V = np.zeros((n, k.size))
-        cols = np.arange(k.size)
-        for c in range(3):
-            V[Q * si[k] + c, cols] = u[k, c]
-            V[Q * s + 3 * ti[k] + c, cols] = -u[k, c]
+        V = np.zeros((lay.n, k.size))
+        cols = np.arange(k.size)[:, None]
+        V[sb[si[k]], cols] = u[k]
+        V[tb[ti[k]], cols] = -u[k]
         if offsets:
-            V[Q * si[k] + 3, cols] = 1.0 / sig[k]
-        sh = bc.inner.times(V)[Q * s:].reshape(t, 3, -1) * scale[k]
+            V[lay.station_columns("offset")[si[k]], cols[:, 0]] = 1.0 / sig[k]
+        sh = np.ascontiguousarray(bc.inner.times(V)[tb]) * scale[k]
         out[k] = np.sqrt((sh ** 2).sum(axis=1)).max(axis=0)
     out[~np.isfinite(mdb_m)] = np.inf
     return out

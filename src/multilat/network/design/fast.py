@@ -27,31 +27,35 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network import statistics as st
 from multilat.network.datum import Datum, datum_matrices, helmert_basis, parse_datum, s_coefficients
-from multilat.network.model import Q, inv3, line_of_sight
+from multilat.network.model import inv3, line_of_sight
+from multilat.network.parameter_layout import ParameterLayout
 
 __all__ = ["fast_criterion", "fast_target_cov_m2"]
 
 
-def _datum_GH(layout, datum, s, t, p):
-    """Rigid motions ``G`` and ``H = E_d (Gᵀ E_d)⁻¹`` on the head rows (sp, 6) and per target (t, 3, 6)."""
+def _datum_GH(layout, datum, system: ParameterLayout):
+    """Rigid motions ``G`` and ``H = E_d (Gᵀ E_d)⁻¹`` on the head rows (sp, 6) and per target (t, 3, 6),
+    ``system`` the heads' and targets' columns."""
     sx, tx = layout.station_xyz_m, layout.target_xyz_m
+    rows_s, rows_t = system.station_block().ravel(), system.target_block()
     if datum.kind == "free" and datum.points is None:          # inner constraints over all points
         Gp = helmert_basis(np.vstack([sx, tx]))                  # (3(s + t), 6)
-        Hp = s_coefficients(Gp, Gp).T
-        Gs, Hs = np.zeros((s, p, 6)), np.zeros((s, p, 6))
-        Gs[:, :3], Hs[:, :3] = Gp[:3 * s].reshape(s, 3, 6), Hp[:3 * s].reshape(s, 3, 6)
-        return Gs.reshape(s * p, 6), Hs.reshape(s * p, 6), Gp[3 * s:].reshape(t, 3, 6), Hp[3 * s:].reshape(t, 3, 6)
-    G, E = datum_matrices(datum, layout.station_ids, layout.target_ids, sx, tx)
-    Hm = s_coefficients(G, E).T                                         # (n, 6)
-    rows_s = (Q * np.arange(s)[:, None] + np.arange(p)).ravel()
-    return G[rows_s], Hm[rows_s], G[Q * s:].reshape(t, 3, 6), Hm[Q * s:].reshape(t, 3, 6)
+        G, HT = system.datum_rows(Gp), system.datum_rows(s_coefficients(Gp, Gp).T).T
+    else:                                                       # the adjustment's layout, taken
+        G, E = datum_matrices(datum, layout.station_ids, layout.target_ids, sx, tx)
+        own = system.index_in(ParameterLayout.adjustment(system.n_stations, system.n_targets))
+        G, HT = G[own], s_coefficients(G, E)[:, own]                    # H^T (6, n)
+    c = np.ascontiguousarray
+    # H's target rows keep the memory order of a transposed matrix (the order matmul sums in)
+    return c(G[rows_s]), c(HT.T[rows_s]), c(G[rows_t]), c(HT[:, rows_t]).transpose(1, 2, 0)
 
 
 def _parts(layout, sig_mat, offsets, datum):
     sx, tx, vis = layout.station_xyz_m, layout.target_xyz_m, layout.visible
     s, t = vis.shape
-    p = 4 if offsets else 3
-    sp = s * p
+    system = ParameterLayout.station_system(s, t, offsets=offsets)      # head rows, then the targets'
+    cols = system.station_block()                                       # (s, p)
+    sp = cols.size
     _, u = line_of_sight((sx[:, None, :] - tx[None]).transpose(1, 0, 2))   # (t, s, 3)
     w = np.where(vis, 1.0 / np.where(vis, sig_mat, 1.0) ** 2, 0.0).T    # (t, s)
     a = np.concatenate([u, np.ones((t, s, 1))], axis=2) if offsets else u   # (t, s, p)
@@ -61,17 +65,16 @@ def _parts(layout, sig_mat, offsets, datum):
     det_rel = np.linalg.det(D) / (np.trace(D, axis1=1, axis2=2) / 3.0) ** 3
     if not np.all(det_rel > 1e-12):
         raise MultilatError("a target is not determined")
-    B = (a[..., :, None] * wu[..., None, :]).reshape(t, sp, 3)          # -(coupling) head x target
+    B = np.empty((t, sp, 3))                                            # -(coupling) head x target
+    B[:, cols] = a[..., :, None] * wu[..., None, :]
     F = B @ Dinv                                                        # (t, sp, 3)
-    Fm = F.transpose(1, 0, 2).reshape(sp, 3 * t)
-    S = -(Fm @ B.transpose(1, 0, 2).reshape(sp, 3 * t).T)               # - sum_j B_j D_j^-1 B_j^T
+    Fm = F.transpose(1, 0, 2).reshape(sp, -1)
+    S = -(Fm @ B.transpose(1, 0, 2).reshape(sp, -1).T)                  # - sum_j B_j D_j^-1 B_j^T
     A = np.einsum("ts,tsp,tsq->spq", w, a, a)                           # (s, p, p)
     for i in range(s):
-        S[i * p:(i + 1) * p, i * p:(i + 1) * p] += A[i]
+        S[np.ix_(cols[i], cols[i])] += A[i]
     # generalised inverse: the heads' rigid motions added to the head block
-    Es = np.zeros((s, p, 6))
-    Es[:, :3, :] = helmert_basis(sx).reshape(s, 3, 6)
-    Es = Es.reshape(sp, 6)
+    Es = ParameterLayout.station_system(s, offsets=offsets).datum_rows(helmert_basis(sx))
     c = np.trace(S) / sp
     try:
         L = np.linalg.cholesky(S + c * (Es @ Es.T))
@@ -85,14 +88,14 @@ def _parts(layout, sig_mat, offsets, datum):
     Z = Sinv @ F                                                        # (t, sp, 3)
     FT = np.swapaxes(F, 1, 2)
     Xtt = Dinv + FT @ Z                                                 # target blocks of X
-    Gs, Hs, Gt, Ht = _datum_GH(layout, datum, s, t, p)
-    Ys = Sinv @ (Hs + Fm @ Ht.reshape(3 * t, 6))                        # X H, head rows
+    Gs, Hs, Gt, Ht = _datum_GH(layout, datum, system)
+    Ys = Sinv @ (Hs + Fm @ Ht.reshape(-1, 6))                           # X H, head rows
     Yt = Dinv @ Ht + FT @ Ys                                            # X H, target rows (t, 3, 6)
-    HXH = Hs.T @ Ys + Ht.reshape(3 * t, 6).T @ Yt.reshape(3 * t, 6)
+    HXH = Hs.T @ Ys + Ht.reshape(-1, 6).T @ Yt.reshape(-1, 6)
     GtT, YtT = np.swapaxes(Gt, 1, 2), np.swapaxes(Yt, 1, 2)
     cov = Xtt - Gt @ YtT - Yt @ GtT + Gt @ HXH @ GtT
     return dict(cov=0.5 * (cov + np.swapaxes(cov, 1, 2)), w=w, a=a, u=u, Sinv=Sinv, Z=Z, Dinv=Dinv,
-                F=F, Xtt=Xtt, s=s, t=t, p=p)
+                F=F, Xtt=Xtt, cols=cols)
 
 
 def fast_target_cov_m2(layout, sig_mat, *, offsets=True, datum="free"):
@@ -104,12 +107,11 @@ def fast_target_cov_m2(layout, sig_mat, *, offsets=True, datum="free"):
 
 def _hat(P):
     """Whitened ``a_kᵀ X a_k`` for every (target, head) pair (t, s)."""
-    s, p, t = P["s"], P["p"], P["t"]
+    cols = P["cols"]
     a, u, w = P["a"], P["u"], P["w"]
-    S4 = P["Sinv"].reshape(s, p, s, p)
-    Sii = S4[np.arange(s), :, np.arange(s), :]                          # (s, p, p)
+    Sii = np.ascontiguousarray(P["Sinv"][cols[:, :, None], cols[:, None, :]])   # (s, p, p)
     h1 = np.einsum("tsp,spq,tsq->ts", a, Sii, a)
-    Zs = P["Z"].reshape(t, s, p, 3)                                     # X_st = +S^-1 F (F from -B)
+    Zs = np.ascontiguousarray(P["Z"][:, cols])                          # (t, s, p, 3): X_st = +S^-1 F (F from -B)
     h2 = -np.einsum("tsp,tspa,tsa->ts", a, Zs, u)                       # a^T X_st b, b = -u
     h3 = np.einsum("tsa,tab,tsb->ts", u, P["Xtt"], u)
     return w * (h1 + 2.0 * h2 + h3)

@@ -22,7 +22,8 @@ import scipy.sparse as sp
 
 from multilat.errors import MultilatError
 from multilat.network.couplings import flatten_params
-from multilat.network.model import Q, inv3
+from multilat.network.model import inv3
+from multilat.network.parameter_layout import STATION_FIELDS, XYZ, ParameterLayout
 from multilat.network.problem import Params, Problem
 from multilat.network.solve.system import Assembly, whitened
 
@@ -44,13 +45,12 @@ def distance_rows(problem: Problem, p: Params):
     """Whitened residuals (m,), the sparse whitened Jacobian (m, 5s + 3t) of the distances and the
     blocks ``Js_w``, ``Jt_w``."""
     o = problem.obs
-    s, t = o.n_stations, o.n_targets
+    lay = ParameterLayout.adjustment(o.n_stations, o.n_targets)
     r_w, Js_w, Jt_w = whitened(problem, p)
-    cols = np.concatenate([Q * o.station_index[:, None] + np.arange(Q),
-                           Q * s + 3 * o.target_index[:, None] + np.arange(3)], axis=1)
+    cols = np.concatenate([lay.station_block()[o.station_index], lay.target_block()[o.target_index]], axis=1)
     vals = np.concatenate([Js_w, Jt_w], axis=1)
-    A = sp.csr_matrix((vals.ravel(), (np.repeat(np.arange(o.n_obs), Q + 3), cols.ravel())),
-                      shape=(o.n_obs, Q * s + 3 * t))
+    A = sp.csr_matrix((vals.ravel(), (np.repeat(np.arange(o.n_obs), cols.shape[1]), cols.ravel())),
+                      shape=(o.n_obs, lay.n))
     return r_w, A, Js_w, Jt_w
 
 
@@ -59,23 +59,28 @@ def assemble_coupled(problem: Problem, p: Params, damping: float = 0.0) -> Assem
     s, t = o.n_stations, o.n_targets
     ang = problem.angles
     n_o = 0 if ang is None else ang.n_orientation
-    n = Q * s + 3 * t + n_o
+    lay = ParameterLayout.adjustment(s, t, 0 if ang is None else int(ang.oriented.sum()))
+    n = lay.n
     if n > MAX_COUPLED_PARAMS:
         raise MultilatError(f"scale bars, weighted control or angles with {s} stations and {t} targets ({n} "
                             f"parameters): the coupled solver handles up to {MAX_COUPLED_PARAMS} parameters")
     r_w, A, _, _ = distance_rows(problem, p)
+    dc = ParameterLayout.adjustment(s, t).index_in(lay)          # the distances' (and couplings') columns
     N = np.zeros((n, n))
-    N[:Q * s + 3 * t, :Q * s + 3 * t] = (A.T @ A).toarray()
+    N[np.ix_(dc, dc)] = (A.T @ A).toarray()
     b = np.zeros(n)
-    b[:Q * s + 3 * t] = A.T @ r_w
+    b[dc] = A.T @ r_w
     o_free = np.ones(0, bool) if ang is None else ang.orientation_free
-    free = np.concatenate([problem.station_free.ravel(), np.repeat(problem.target_free, 3), o_free])
+    free = lay.free_mask(station={f: problem.station_free[:, i] for i, f in enumerate(STATION_FIELDS)},
+                         target={f: problem.target_free for f in XYZ})
+    ocols = lay.block("orientation").ravel()
+    free[ocols] = o_free
     vtpv = float(r_w @ r_w)
     if problem.couplings is not None:
         e_w, E = problem.couplings.whitened(flatten_params(p))
-        E = E * free[:Q * s + 3 * t]
-        N[:Q * s + 3 * t, :Q * s + 3 * t] += E.T @ E
-        b[:Q * s + 3 * t] += E.T @ e_w
+        E = E * free[dc]
+        N[np.ix_(dc, dc)] += E.T @ E
+        b[dc] += E.T @ e_w
         vtpv += float(e_w @ e_w)
     if ang is not None:
         a_w, E = ang.whitened(p.station_xyz_m, p.target_xyz_m, p.orientation_rad, s, t)
@@ -85,9 +90,10 @@ def assemble_coupled(problem: Problem, p: Params, damping: float = 0.0) -> Assem
         vtpv += float(a_w @ a_w)
     if damping:
         N[np.arange(n), np.arange(n)] *= 1.0 + damping
-    g = np.arange(Q * s)
+    g = ParameterLayout.adjustment(s).index_in(lay)                # the reduced system's columns
     # eliminated with the targets: the free targets and the orientation unknowns
-    tr = Q * s + np.concatenate([np.flatnonzero(np.repeat(problem.target_free, 3)), 3 * t + np.flatnonzero(o_free)])
+    elim = np.concatenate([lay.target_block().ravel(), ocols])
+    tr = elim[free[elim]]
     Ntt_f = N[np.ix_(tr, tr)]
     try:
         fac = sla.cho_factor(Ntt_f)
@@ -100,26 +106,29 @@ def assemble_coupled(problem: Problem, p: Params, damping: float = 0.0) -> Assem
     Ngt = N[np.ix_(g, tr)]
     N_red = N[np.ix_(g, g)] - Ngt @ X_f
     b_red = b[g] - Ngt @ y
-    X = np.zeros((3 * t + n_o, Q * s))
-    Ninv = np.zeros((3 * t + n_o, 3 * t + n_o))
-    X[tr - Q * s] = X_f
-    Ninv[np.ix_(tr - Q * s, tr - Q * s)] = Ninv_f
-    blocks = N[Q * s:Q * s + 3 * t, Q * s:Q * s + 3 * t].reshape(t, 3, t, 3)
-    Ntt = np.ascontiguousarray(blocks[np.arange(t), :, np.arange(t), :])
+    pos = np.full(n, -1)
+    pos[elim] = np.arange(elim.size)                             # column -> row of the eliminated space
+    rows = pos[tr]
+    X = np.zeros((elim.size, g.size))
+    Ninv = np.zeros((elim.size, elim.size))
+    X[rows] = X_f
+    Ninv[np.ix_(rows, rows)] = Ninv_f
+    tb = lay.target_block()
+    Ntt = np.ascontiguousarray(N[tb[:, :, None], tb[:, None, :]])                       # (t, 3, 3)
     Ntt_inv = np.zeros_like(Ntt)
     Ntt_inv[problem.target_free] = inv3(Ntt[problem.target_free])
-    rows = tr - Q * s
+    t_rows, o_rows = pos[tb], pos[ocols]
 
     def solve_eliminated(dg):
-        out = np.zeros(3 * t + n_o)
+        out = np.zeros(elim.size)
         out[rows] = y - X_f @ dg
         return out
 
     def back(dg):
-        return solve_eliminated(dg)[:3 * t].reshape(t, 3)
+        return solve_eliminated(dg)[t_rows]
 
     def back_orientation(dg):
-        return solve_eliminated(dg)[3 * t:]
+        return solve_eliminated(dg)[o_rows]
 
     return Assembly(N=0.5 * (N_red + N_red.T), b=b_red, Ntt=Ntt, Ntt_inv=Ntt_inv, vtpv=vtpv,
                     back_substitute=back, coupled=CoupledTargets(X, Ninv),

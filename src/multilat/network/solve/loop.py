@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.parameter_layout import ParameterLayout
 from multilat.network.problem import Params, Problem, param_names
 from multilat.network.solvability import CONDITION_LIMIT, diagnose_degeneracy
 from multilat.network.solve.convergence import Convergence, step_verdict
@@ -125,11 +126,12 @@ def check_target_blocks(Ntt, problem: Problem) -> None:
                                    for j in np.flatnonzero(tf)[np.flatnonzero(bad)]})
 
 
-def _step_length_m(dg, dt, scale_len, do=None):
-    d = dg.reshape(-1, 5)
+def _step_length_m(dg, dt, scale_len, layout: ParameterLayout, do=None):
+    """The largest step in metres: coordinates and offsets, scales and orientations times the length."""
+    k = layout.columns("station", "scale")
     rot = 0.0 if do is None else float(np.max(np.abs(do), initial=0.0)) * scale_len   # rad x length
-    return max(float(np.max(np.abs(d[:, :4]))), float(np.max(np.abs(dt), initial=0.0)),
-               float(np.max(np.abs(d[:, 4]))) * scale_len, rot)
+    return max(float(np.max(np.abs(np.delete(dg, k)))), float(np.max(np.abs(dt), initial=0.0)),
+               float(np.max(np.abs(dg[k]))) * scale_len, rot)
 
 
 def gauss_newton(problem: Problem, start: Params, backend, *, max_iter: int = 100):
@@ -139,6 +141,7 @@ def gauss_newton(problem: Problem, start: Params, backend, *, max_iter: int = 10
     Raises :class:`MultilatError` only for degenerate geometry (named).
     """
     free = problem.station_free.ravel()
+    layout = ParameterLayout.adjustment(problem.obs.n_stations)
     sig = problem.sigma_ref_m
     scale_len = float(np.max(np.abs(problem.obs.distance_m)))
     p = start
@@ -159,7 +162,7 @@ def gauss_newton(problem: Problem, start: Params, backend, *, max_iter: int = 10
             do = None if a.back_orientation is None else a.back_orientation(dg)
             q = p.step(dg, dt, do)
             new_cost = weighted_cost(problem, q) if q.is_finite() else np.inf
-            step_sigma = _step_length_m(dg, dt, scale_len, do) / sig
+            step_sigma = _step_length_m(dg, dt, scale_len, layout, do) / sig
             noise = 2.0 * np.sqrt(cost * m) * delta + m * delta * delta + 1e-12 * cost
             if new_cost <= cost or (step_sigma < 1.0 and new_cost <= cost + noise):
                 break

@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat.network.model import Q, segment_sum
+from multilat.network.model import segment_sum
+from multilat.network.parameter_layout import ParameterLayout
 from multilat.network.problem import Params, Problem
 from multilat.network.solve.system import Assembly
 
@@ -70,13 +71,15 @@ class SparseBackend:
         np.cumsum(counts, out=self.tptr[1:])
         self.maxk = int(counts.max())
         s = o.n_stations
-        self.idx4 = (Q * np.arange(s)[:, None] + np.arange(4)).ravel()   # [x, y, z, o] of each station
+        self.layout = ParameterLayout.adjustment(s)                     # the loop's reduced system
+        self.system = ParameterLayout.station_system(s)                 # the kernels': [x, y, z, o]
+        self.cols = self.system.index_in(self.layout)                   # kernel column -> loop column
         self.nch = _nchunks()
         self.K = _kernels()
 
     def assemble(self, p: Params, damping: float = 0.0) -> Assembly:
         o = self.problem.obs
-        s, t, m = o.n_stations, o.n_targets, o.n_obs
+        t, m = o.n_targets, o.n_obs
         h = np.ascontiguousarray(p.station_xyz_m, dtype=float)
         off = np.ascontiguousarray(p.offset_m, dtype=float)
         tg = np.ascontiguousarray(p.target_xyz_m, dtype=float)
@@ -88,16 +91,19 @@ class SparseBackend:
                                      self.nch, self.maxk, float(damping))
         if damping:
             a2 = np.concatenate([u * u, np.ones((m, 1))], axis=1) * self.w[:, None]
-            sm[np.arange(4 * s), np.arange(4 * s)] += damping * segment_sum(self.si, a2, s).ravel()
-        N = np.zeros((Q * s, Q * s))
-        N[np.ix_(self.idx4, self.idx4)] = sm
-        b = np.zeros(Q * s)
-        b[self.idx4] = gp
-        si, w, tptr, idx4 = self.si, self.w, self.tptr, self.idx4
+            per_station = np.zeros(self.system.n)
+            per_station[self.system.station_block()] = segment_sum(self.si, a2, o.n_stations)   # (s, 4)
+            diag = np.arange(self.system.n)
+            sm[diag, diag] += damping * per_station
+        N = np.zeros((self.layout.n, self.layout.n))
+        N[np.ix_(self.cols, self.cols)] = sm
+        b = np.zeros(self.layout.n)
+        b[self.cols] = gp
+        si, w, tptr, cols = self.si, self.w, self.tptr, self.cols
 
         def back(dg):
             dt = np.empty((t, 3))
-            self.K.back_substitute(np.ascontiguousarray(dg[idx4]), gt, ninv, u, w, si, tptr, dt)
+            self.K.back_substitute(np.ascontiguousarray(dg[cols]), gt, ninv, u, w, si, tptr, dt)
             return dt
 
         return Assembly(N=N, b=b, Ntt=Ntt, Ntt_inv=ninv, vtpv=float(vtpv), back_substitute=back)

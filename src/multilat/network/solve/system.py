@@ -7,7 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multilat.network.model import residuals, residuals_and_jacobian
+from multilat.network.model import Q, residuals, residuals_and_jacobian
 from multilat.network.problem import Params, Problem
 
 __all__ = ["Assembly", "whitened", "weighted_cost"]
@@ -45,7 +45,7 @@ def whitened(problem: Problem, p: Params):
             from multilat.network import _sparse_kernels as K
 
             m = o.n_obs
-            r_w, Js_w, Jt_w = np.empty(m), np.empty((m, 5)), np.empty((m, 3))
+            r_w, Js_w, Jt_w = np.empty(m), np.empty((m, Q)), np.empty((m, 3))
             c = np.ascontiguousarray
             K.whitened_distances(c(p.station_xyz_m, float), c(p.target_xyz_m, float), c(p.offset_m, float),
                                  c(p.scale, float), o.station_index, o.target_index, c(o.distance_m, float),
