@@ -55,7 +55,8 @@ from multilat.network.datum import s_factor
 from multilat.network.general import kinds as kinds_registry
 from multilat.network.general.determinability import Determinability, classify, schur_null_space
 
-__all__ = ["RCOND_BLOCK", "MAX_REDUCED", "SparseCofactor", "assemble", "Linearised", "linearise"]
+__all__ = ["RCOND_BLOCK", "MAX_REDUCED", "SparseCofactor", "Reduced", "assemble", "eliminate", "frozen_step",
+           "Linearised", "linearise"]
 
 #: an eliminated point's block, scaled to a unit diagonal, has its smallest eigenvalue at least this
 #: fraction of its largest (condition <= 1e6: its explicit inverse is exact to ~1e-10 relative); a
@@ -221,9 +222,10 @@ def _reduce(system, N, slots_all, mask_e) -> tuple:
     return slots, ck, binv, x, S, np.sqrt(np.clip(np.diag(nkk), 0, None))
 
 
-def _g_inverse(S, col_norms, slots, ck, binv, x, n, points) -> Reduced:
-    """The rank decision on ``S``, the full null space, and ``Q⁻_KK`` under minimal constraints."""
-    v0, scale, _ = schur_null_space(S, col_norms)
+def _g_inverse(S, col_norms, slots, ck, binv, x, n, points) -> tuple[Reduced, np.ndarray]:
+    """The rank decision on ``S``, the full null space, and ``Q⁻_KK`` under minimal constraints; with
+    the singular values of the rank decision (:func:`..determinability.schur_null_space`)."""
+    v0, scale, sv = schur_null_space(S, col_norms)
     d = v0.shape[1]
     qk = np.zeros_like(S)
     keep = np.ones(ck.size, bool)
@@ -242,7 +244,34 @@ def _g_inverse(S, col_norms, slots, ck, binv, x, n, points) -> Reduced:
         flat = slots.ravel()
         g[flat[flat >= 0]] = ge[flat >= 0]
         g /= np.linalg.norm(g, axis=0, keepdims=True).clip(1e-300)
-    return Reduced(slots, ck, binv, x, 0.5 * (qk + qk.T), g, n, points)
+    return Reduced(slots, ck, binv, x, 0.5 * (qk + qk.T), g, n, points), sv
+
+
+def eliminate(system, jw: sp.csr_matrix) -> tuple[Reduced, np.ndarray]:
+    """The elimination of one linearisation (module docstring): ``N = J_wᵀ J_w``, the points
+    eliminated (:func:`partition`), the reduced system and its generalised inverse under minimal
+    constraints. Returns the :class:`Reduced` and the singular values of the rank decision on ``S``
+    (for :func:`..determinability.classify`)."""
+    N = (jw.T @ jw).tocsr()
+    slots_all = _point_slots(system)
+    e = np.zeros(slots_all.shape[0], bool)
+    e[partition(system, jw, N, slots_all)] = True
+    slots, ck, binv, x, S, norms = _reduce(system, N, slots_all, e)
+    return _g_inverse(S, norms, slots, ck, binv, x, system.n_free, np.flatnonzero(e))
+
+
+def frozen_step(red: Reduced, jw: sp.csr_matrix, rw: np.ndarray, constraints: np.ndarray | None = None):
+    """One Gauss-Newton step on a fixed linearisation (``J_w``, ``r_w``; its elimination ``red`` from
+    :func:`eliminate`) with the datum held by ``constraints`` ``B`` (n_free, d): ``dx = P N⁻ J_wᵀ r_w``,
+    ``P = I - H Bᵀ``, ``H = G (BᵀG)⁻¹`` (module docstring, "Datum"); None: no datum defect, ``dx = N⁻
+    J_wᵀ r_w``. The adjustment's step (:func:`linearise`, ``B`` from the determinability at the
+    iterate) and the Monte Carlo's full Gauss-Newton (:func:`.propagate_blocks.sparse_gauss_newton`,
+    ``B`` frozen at the adjustment's solution). Returns ``(dx, H)`` (``H`` None without ``B``)."""
+    dx = red.ginv(jw.T @ rw)
+    if constraints is None:
+        return dx, None
+    h = s_factor(red.null, constraints)
+    return dx - h @ (constraints.T @ dx), h
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,27 +294,18 @@ def linearise(system, x_full: np.ndarray, mask: np.ndarray, undetermined) -> Lin
     """At ``x_full``: the constrained Gauss-Newton step (``undetermined(det)`` raises the dense back
     end's error when the observations and the datum leave parameters undetermined)."""
     r, rw, jw = assemble(system, x_full)
-    N = (jw.T @ jw).tocsr()
-    slots_all = _point_slots(system)
-    e = np.zeros(slots_all.shape[0], bool)
-    e[partition(system, jw, N, slots_all)] = True
-    slots, ck, binv, x, S, norms = _reduce(system, N, slots_all, e)
-    red = _g_inverse(S, norms, slots, ck, binv, x, system.n_free, np.flatnonzero(e))
-    _, _, sv = schur_null_space(S, norms)
+    red, sv = eliminate(system, jw)
     det = classify(red.null, sv, mask)
     if det.undetermined.size:
         undetermined(det)
-    b = jw.T @ rw
-    x0 = red.ginv(b)
-    h = w = m = None
+    B = w = m = None
     if det.defect:
         B = det.constraints
         if B is None or B.shape[1] != det.defect:
             raise MultilatError("the datum points do not remove the datum defect of the observations")
-        h = s_factor(red.null, B)
         w = red.ginv(B)
         m = B.T @ w
-        x0 = x0 - h @ (B.T @ x0)
+    x0, h = frozen_step(red, jw, rw, B)
     return Linearised(r, rw, jw, red, det, h, w, m, x0)
 
 
