@@ -38,8 +38,12 @@ row, ``r_i = 1 - j_i Q j_iᵀ`` with (a row touches at most one point of ``E``):
 
 minus ``2 (j H)·(j W)`` plus ``(j H) BᵀW (j H)ᵀ``: rows of ``Z = J_K - J_E X`` (sparse) and ``J_w H``,
 ``J_w W`` (R x d). ``Q m`` for a few columns ``m`` costs one solve (:meth:`SparseCofactor.times`).
-Memory O(R + n k). Statistics that need ``Q`` for every row (external reliability) are not computed
-here; the result says so (:attr:`..adjust.GeneralResult.not_computed`).
+Memory O(R + n k). The external reliability, which needs ``Q jᵀ`` for every row, is computed from the
+same row split (:func:`row_parts`) by :class:`..reliability.SchurShifts`, O(R k²).
+
+**One step** (:func:`eliminate`, :func:`frozen_step`): the elimination of one linearisation and one
+Gauss-Newton step on it with the datum held by given constraints, shared by the adjustment
+(:func:`linearise`) and the Monte Carlo's full Gauss-Newton (:mod:`.propagate_blocks`).
 """
 
 from __future__ import annotations
@@ -55,8 +59,8 @@ from multilat.network.datum import s_factor
 from multilat.network.general import kinds as kinds_registry
 from multilat.network.general.determinability import Determinability, classify, schur_null_space
 
-__all__ = ["RCOND_BLOCK", "MAX_REDUCED", "SparseCofactor", "Reduced", "assemble", "eliminate", "frozen_step",
-           "Linearised", "linearise"]
+__all__ = ["RCOND_BLOCK", "MAX_REDUCED", "SparseCofactor", "Reduced", "RowParts", "assemble", "eliminate",
+           "frozen_step", "Linearised", "linearise", "row_parts"]
 
 #: an eliminated point's block, scaled to a unit diagonal, has its smallest eigenvalue at least this
 #: fraction of its largest (condition <= 1e6: its explicit inverse is exact to ~1e-10 relative); a
@@ -385,8 +389,21 @@ def cofactor(system, lin: Linearised) -> SparseCofactor:
     return SparseCofactor(point, red.ck, qkk, lin, slots_all)
 
 
-def redundancy(lin: Linearised) -> np.ndarray:
-    """Redundancy numbers ``1 - (J_w Q J_wᵀ)_ii`` per row, from the blocks (module docstring)."""
+@dataclass(frozen=True, eq=False)
+class RowParts:
+    """The whitened rows split by the elimination (a row touches at most one eliminated point):
+    ``z`` (R, k) CSR ``J_K - J_E X``, ``je3`` (R, 3) each row's entries on its eliminated point's
+    three slots, ``prow`` (R,) that point's position in ``Reduced.points`` (0 where none), ``touched``
+    (R,) whether the row has one."""
+
+    z: sp.csr_matrix
+    je3: np.ndarray
+    prow: np.ndarray
+    touched: np.ndarray
+
+
+def row_parts(lin: Linearised) -> RowParts:
+    """:class:`RowParts` of the whitened Jacobian of ``lin`` (O(nnz J_w + nnz X))."""
     red, jw = lin.red, lin.jw
     R = jw.shape[0]
     flat = red.slots.ravel()
@@ -399,12 +416,23 @@ def redundancy(lin: Linearised) -> np.ndarray:
     je = sp.csr_matrix((coo.data[e], (coo.row[e], s[e])), shape=(R, 3 * me))
     jk = jw[:, red.ck]
     z = (jk - je @ red.x).tocsr()
-    # j_E N_pp⁻¹ j_Eᵀ: each row's E entries lie in one point's 3 slots
     je3 = np.zeros((R, 3))
     prow = np.zeros(R, int)
+    touched = np.zeros(R, bool)
     je3[coo.row[e], s[e] % 3] = coo.data[e]
     prow[coo.row[e]] = s[e] // 3
-    quad = np.einsum("ia,iab,ib->i", je3, red.binv[prow], je3) if me else np.zeros(R)
+    touched[coo.row[e]] = True
+    return RowParts(z, je3, prow, touched)
+
+
+def redundancy(lin: Linearised) -> np.ndarray:
+    """Redundancy numbers ``1 - (J_w Q J_wᵀ)_ii`` per row, from the blocks (module docstring)."""
+    red, jw = lin.red, lin.jw
+    R = jw.shape[0]
+    parts = row_parts(lin)
+    z, je3, prow = parts.z, parts.je3, parts.prow
+    # j_E N_pp⁻¹ j_Eᵀ: each row's E entries lie in one point's 3 slots
+    quad = np.einsum("ia,iab,ib->i", je3, red.binv[prow], je3) if red.slots.shape[0] else np.zeros(R)
     for lo in range(0, R, BATCH):
         hi = min(lo + BATCH, R)
         zc = z[lo:hi].toarray()
