@@ -9,14 +9,22 @@ or MDB > 10 σ, points whose every row has redundancy 0, points left out).
 Networks: the polar-point network of tests/test_general_csv.py under ``--model auto`` (5 points
 kept without control), the shipped station_control.xml (gama-local: fixed points, direction sets),
 and the shipped two-tracker CSV with a 2 mm blunder in one distance (data snooping rejects it).
+
+Without ``--observations`` (the JSON lists only the rows that matter) the page is built from every row
+of the result: its numbers equal the printed JSON wherever it lists them (``data-path``), every row's
+numbers equal the ``observations`` table under ``--out`` (``data-row``, ``data-key``), and the page
+reads the same as with ``--observations`` (station_control and the blunder network, in Chromium).
 The page is read as headless Chromium renders it (skipped without /usr/bin/chromium or playwright);
 the numbers are also checked from the HTML alone (no browser).
 """
 
 from __future__ import annotations
 
+import csv
 import json
+import math
 import re
+from html.parser import HTMLParser
 from pathlib import Path
 
 import numpy as np
@@ -63,6 +71,81 @@ def test_every_number_is_the_jsons(runs, name):
     assert n > 100 and not bad, bad[:5]
 
 
+FLAGGED = ("station_control", "blunder")
+
+
+@pytest.fixture(scope="module")
+def flagged(runs, tmp_path_factory):
+    """{name: (html text, doc, observations table rows, html path)}: station_control and the blunder
+    network again, with --json --report --out (CSV tables) and without --observations."""
+    tmp = tmp_path_factory.mktemp("general_report_flagged")
+    args = {"station_control": [str(ROOT / "examples" / "general" / "station_control.xml")],
+            "blunder": [str(runs["blunder"][3].parent / "blunder.csv"), "--levelled", "T1,T2", "--model", "general"]}
+    out = {}                                          # the same input files as ``runs``: the pages name them
+    for name in FLAGGED:
+        html_path, out_dir = tmp / f"{name}.html", tmp / f"{name}_out"
+        rc, stdout, err = _run(["adjust", *args[name], "--json", "--report", str(html_path), "--out", str(out_dir),
+                                "--tables", "csv"])
+        assert rc == 0, (name, err)
+        doc = json.loads(stdout)
+        assert doc["observation_counts"]["listing"] == "flagged"
+        with open(out_dir / "observations.csv", newline="") as f:
+            table = list(csv.DictReader(f))
+        out[name] = (html_path.read_text("utf-8"), doc, table, html_path)
+    return out
+
+
+class _RowCells(HTMLParser):
+    """(attrs, text) of every <td> naming a row of the observations table (data-row)."""
+
+    def __init__(self):
+        super().__init__()
+        self.cells, self._cur = [], None
+
+    def handle_starttag(self, tag, attrs):
+        a = dict(attrs)
+        if tag == "td" and "data-row" in a:
+            self._cur = [a, ""]
+
+    def handle_data(self, data):
+        if self._cur is not None:
+            self._cur[1] += data
+
+    def handle_endtag(self, tag):
+        if tag == "td" and self._cur is not None:
+            self.cells.append(tuple(self._cur))
+            self._cur = None
+
+
+@pytest.mark.parametrize("name", FLAGGED)
+def test_without_observations_every_number_is_the_jsons_and_the_tables(flagged, name):
+    """Every cell with a JSON path equals the printed JSON (the rows that matter are listed there at
+    their own positions); every observation row's cell equals the --out table at its row and column,
+    read with the csv module, sqrt / k / scale applied here, to half a unit of the printed digit; and
+    the page does show rows the JSON does not list."""
+    text, doc, table, _ = flagged[name]
+    n, bad = check_numbers(text, doc)
+    assert n > 100 and not bad, bad[:5]
+    p = _RowCells()
+    p.feed(text)
+    unlisted = 0
+    for a, shown in p.cells:
+        assert a["data-table"] == "observations"
+        raw = table[int(a["data-row"])][a["data-key"]]
+        unlisted += "data-path" not in a
+        if raw == "":
+            assert shown.strip() == "-", (a, shown)
+            continue
+        v = float(raw)
+        v = math.sqrt(max(v, 0.0)) if a["data-op"] == "sqrt" else v
+        v *= float(a["data-k"]) * float(a["data-scale"])
+        m = re.fullmatch(r"\s*([+-]?\d+(?:\.(\d+))?)\s*", shown)
+        assert m is not None, (a, shown)
+        half = 0.5 * 10.0 ** -len(m.group(2) or "")
+        assert abs(float(m.group(1)) - v) <= half * (1 + 1e-9) + 1e-12 * abs(v), (a, shown, v)
+    assert len(p.cells) > 20 and unlisted > 0, (len(p.cells), unlisted)
+
+
 def test_auto_report_is_the_general_one(runs):
     text, doc, err, _ = runs["polar"]
     assert doc["model"] == "general" and "multilat adjust: General network adjustment" in text
@@ -95,6 +178,29 @@ def pages(runs):
         finally:
             b.close()
     return got
+
+
+@pytest.mark.parametrize("name", FLAGGED)
+def test_page_is_the_same_with_or_without_observations(runs, flagged, name):
+    """In Chromium: every results section (all but "what was run", whose options differ) reads the
+    same, table by table and cell by cell, whether the JSON lists every row or only those that matter."""
+    sync_playwright = _browser()
+    doms = []
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=CHROMIUM, headless=True,
+                               args=["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run"])
+        try:
+            for path in (runs[name][3], flagged[name][3]):
+                page = b.new_page()
+                page.goto(path.resolve().as_uri(), wait_until="load")
+                doms.append([s for s in page.evaluate(_DOM) if s["key"] != "run"])
+                page.close()
+        finally:
+            b.close()
+    every, listed = doms
+    assert [s["key"] for s in listed] == ORDER[:-1]
+    assert listed == every
+    assert len(flagged[name][1]["observations"]) < len(runs[name][1]["observations"])
 
 
 def _controlled(o):

@@ -200,10 +200,120 @@ def test_distance_only_8_stations_2000_targets_equals_the_distance_path():
     assert np.abs(res.redundancy - old.redundancy).max() < 1e-8
 
 
+def _shifts(net, backend, datum="auto"):
+    from multilat.network.general import quality
+
+    res = adjust(net, options=AdjustOptions(backend=backend, datum=datum))
+    st = quality.statistics(System(net), res)
+    return res, st.shift_max_m, st.shift_point
+
+
+def _same_shifts(net, datum="auto"):
+    """External reliability of the sparse back end (the Schur blocks, reliability.SchurShifts) against
+    the dense one (``Q J_wᵀ`` with the dense Q of the bordered inverse): every row's largest point
+    shift to 1e-9 relative (the two back ends' Q agree to ~1e-12 relative, the shift is a linear
+    function of it; measured <= 6e-11 on these networks), the same point, inf on the same rows.
+    Returns the sparse result and the points' indices."""
+    a, sa, pa = _shifts(net, "dense", datum)
+    b, sb, pb = _shifts(net, "sparse", datum)
+    assert b.blocks is not None and not b.not_computed
+    fin = np.isfinite(sa)
+    assert np.array_equal(fin, np.isfinite(sb)) and (fin.any() or a.dof == 0)   # dof 0: every row inf
+    assert np.all(np.abs(sb[fin] - sa[fin]) <= 1e-9 * np.abs(sa[fin]))
+    assert pa == pb
+    return b, [b.ids.index(p) if p else -1 for p in pb]
+
+
+def _winners(res, where) -> np.ndarray:
+    """Per row: 0 the row's own eliminated point gave the largest shift, 1 a point of the reduced
+    system K, 2 another eliminated point (the bounded search), -1 none (uncontrolled)."""
+    from multilat.network.general import sparse
+
+    parts = sparse.row_parts(res.blocks.lin)
+    pts = res.blocks.lin.red.points
+    w = np.asarray(where)
+    own = parts.touched & (w == pts[parts.prow])
+    return np.where(w < 0, -1, np.where(own, 0, np.where(np.isin(w, pts), 2, 1)))
+
+
+@pytest.mark.parametrize("name", NETWORKS)
+def test_external_reliability_equals_the_dense_back_end(name):
+    """The gama3d networks in the datum of their files and free over every point (inner constraints:
+    the datum terms W c1 + H c2 of every point's response)."""
+    net = approximate(read_gama_input(GAMA / f"{name}.xml"))
+    _same_shifts(net)
+    pts = net.points
+    free = PointSet(pts.ids, pts.xyz_m, np.where(pts.status == FIXED, FREE, pts.status), pts.sigma_m,
+                    np.ones(pts.n, bool))
+    _same_shifts(Network(free, net.blocks, net.notes), datum="free")
+
+
+def test_external_reliability_of_random_mixed_networks_every_branch():
+    """The random mixed networks that are determined (directions, zenith angles, trackers, heads,
+    control, a vector): equal to the dense back end; and each of the three ways a row's largest shift
+    is found (its own eliminated point, a point of K, another eliminated point by the bounded search)
+    wins on some rows, so each is checked against the dense product."""
+    seen = np.zeros(3, int)
+    for seed in (1, 2, 3, 9, 10, 11):
+        d = _random_design(seed)
+        res, where = _same_shifts(_with_truth(d.network(np.random.default_rng(seed)), d.truth))
+        seen += np.bincount(_winners(res, where)[np.asarray(where) >= 0], minlength=3)
+    assert np.all(seen >= 20), seen
+
+
+def test_external_reliability_large_distance_network_by_pruned_search(monkeypatch):
+    """8 stations x 1 000 targets free (inner constraints over every point, 3 032 unknowns, 7 000 rows;
+    the dense back end refuses it): every row's shift equals the one from ``Q J_wᵀ`` (``Q`` times the
+    rows through the blocks, the former O(R n) way, an independent product: 1e-12 relative, rounding)
+    and the same point; the bounded search evaluates the other points' shifts for almost no row (the
+    bound is below the row's own target's shift: O(R k) work, the growth measured in the commit), and
+    forced to evaluate every point (MARGIN inf) it gives the same answer."""
+    from multilat.network.data import Observations, Points
+    from multilat.network.general import reliability as rel
+    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.reliability import largest_point_shift
+    from multilat.network.synthetic import synthetic_network
+
+    s, t = 8, 1000
+    syn = synthetic_network(3, population="rings", n_stations=s, n_targets=t, per_target=7)
+    obs = Observations(tuple(f"S{i}" for i in range(s)), tuple(f"T{j}" for j in range(t)), syn.station_index,
+                       syn.target_index, syn.distance_m, syn.sigma_m)
+    pts = Points(obs.station_ids + obs.target_ids, np.vstack([syn.station_xyz_m, syn.target_xyz_m]))
+    net, opt = network_from_tables(obs, points=pts)
+    res = adjust(net, options=opt)
+    assert res.cofactor is None and res.defect == 6 and not res.not_computed
+    jw = rel.whitened_jacobian(System(net), res)
+    bias = rel.mdb_whitened(res.redundancy, alpha=0.001, power=0.8)
+    evaluated = []
+    real = rel.SchurShifts._others
+
+    def spy(self, y, c1, c2, zn, t, pr, limit, best, where):
+        evaluated.append(int((((self.bound[:, 0] @ zn) * (1 + self.MARGIN)) > limit).sum()))
+        return real(self, y, c1, c2, zn, t, pr, limit, best, where)
+
+    monkeypatch.setattr(rel.SchurShifts, "_others", spy)
+    shift, point = rel.external_shifts(res, jw, bias)
+    assert sum(evaluated) <= 0.002 * len(shift)           # measured: 6 rows of 7 000 search one chunk
+    cols = rel.point_columns(res)
+    nf = len(res.free_names)
+    for lo in range(0, jw.shape[0], 1000):
+        hi = min(lo + 1000, jw.shape[0])
+        D = np.zeros((nf + 1, hi - lo))
+        D[:-1] = res.cofactor_times(jw[lo:hi].toarray().T) * bias[lo:hi]
+        norm, where = largest_point_shift(D[cols])
+        assert np.all(np.abs(shift[lo:hi] - norm) <= 1e-12 * norm)
+        assert list(point[lo:hi]) == [res.ids[int(w)] for w in where]
+    monkeypatch.setattr(rel.SchurShifts, "MARGIN", np.inf)
+    monkeypatch.setattr(rel.SchurShifts, "CHUNK", 97)
+    shift2, point2 = rel.external_shifts(res, jw, bias, batch=700)
+    assert np.array_equal(shift2, shift) and point2 == point
+
+
 def test_statistics_served_without_a_dense_cofactor(monkeypatch):
     """With the dense Q not formed (a large network: here forced by the bound), the statistics come
     from the blocks, equal to the dense back end's; the external reliability is computed through
-    ``Q`` times rows, or marked not computed (NaN) above EXTERNAL_MAX_WORK, never silently wrong."""
+    the Schur blocks, or marked not computed (NaN) when the back end leaves it out (EXTERNAL_MAX_WORK,
+    no limit since issue 29: forced here), never silently wrong."""
     from multilat.network.general import quality
 
     net = tracker_network(5)[0]

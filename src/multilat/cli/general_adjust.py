@@ -322,18 +322,13 @@ def run(**params) -> None:
     for e in adj.excluded:
         warnings.warn(f"point {e['id']!r} left out: {e['reason']} ({e['n_obs']} observation row(s) removed)",
                       stacklevel=2)
-    from multilat.cli.general_output import print_summary, write_out
+    from multilat.cli.general_output import print_summary, write_out, write_report
     from multilat.network.general.report import list_observations
 
     full, doc = doc, list_observations(doc, listing)
     if out is not None:
         write_out(out, inputs, doc, full, params.get("tables", "auto"))
-    import functools
-
-    from multilat.report.general_sections import build_report
-
-    report_opt.write_report(params.get("report"), "adjust", full, result=adj,
-                            build=functools.partial(build_report, applies=applies))
+    write_report(params.get("report"), doc, full, adj, applies)
     from multilat.cli.app import emit_json
 
     if params["as_json"]:

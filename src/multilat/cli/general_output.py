@@ -16,7 +16,7 @@ import numpy as np
 
 from multilat.cli.general_adjust import _METHOD_NAMES, _names
 
-__all__ = ["write_out", "print_summary", "snooping_lines", "reliability_lines", "variance_lines",
+__all__ = ["write_out", "write_report", "print_summary", "snooping_lines", "reliability_lines", "variance_lines",
            "not_computed_line"]
 
 
@@ -39,6 +39,25 @@ def write_out(out, inputs, doc, full: dict, fmt: str = "auto") -> None:
                 for p, v in doc["points"].items()]
         write_csv_atomic(tmp / "points.csv", ["point", "x_m", "y_m", "z_m", "x_std_m", "y_std_m", "z_std_m",
                                               "semi_axis_max_95_m", "status", "roles"], rows)
+
+
+def write_report(path, doc: dict, full: dict, adj, applies) -> None:
+    """``--report FILE.html`` (nothing when ``path`` is None): the page from the document the command
+    prints (``doc``, listed) and every observation row of the result (``full``'s rows as the
+    ``observations`` table has them, :func:`multilat.network.general.report.list_observations` with
+    ``"all"``), so its numbers are the JSON's with or without ``--observations``
+    (:mod:`multilat.report.general_sections`)."""
+    if path is None:
+        return
+    import functools
+
+    from multilat.cli import report_opt
+    from multilat.network.general.report import list_observations
+    from multilat.report.general_sections import build_report
+
+    rows = list_observations(full, "all")["observations"]
+    report_opt.write_report(path, "adjust", doc, result=adj,
+                            build=functools.partial(build_report, applies=applies, rows=rows))
 
 
 def print_summary(doc, adj, stats, out) -> None:

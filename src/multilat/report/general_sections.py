@@ -8,7 +8,10 @@ residuals by kind and the w-tests (``docs/general-network.md``, "The HTML report
 
 Every number is read from the command's JSON document (``multilat.adjust-general``; a
 :class:`~multilat.report.html.Num` names its path); a verdict compares the numbers printed beside
-it. No statistic is computed here: the tests, critical values, redundancy numbers, MDBs and shifts
+it. The observation rows come from the result, every row (:class:`Rows`: the ``observations``
+table the command writes under ``--out``), whatever the JSON lists: a row the JSON lists (all with
+``--observations``; else the rows that matter) names its path there, every row names its place in
+the table (``data-row``, ``data-key``), so the page is the same with or without ``--observations``. No statistic is computed here: the tests, critical values, redundancy numbers, MDBs and shifts
 are :mod:`multilat.network.general.quality`'s and ``reliability``'s; which rows are poorly
 controlled and which points have no control is :mod:`multilat.network.general.report`'s rule. This
 module only selects (the largest |w|, the largest u) and compares.
@@ -19,10 +22,13 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.report.adjust_sections import worst_point
+import html as _html
+from dataclasses import dataclass
+
 from multilat.report.html import Num, Section, Verdict
 from multilat.report.job_sections import K, MAX_ROWS, ptr, resolve
 
-__all__ = ["sections", "build_report", "TITLE", "LARGEST_ROWS"]
+__all__ = ["sections", "build_report", "Rows", "rows_of", "TITLE", "LARGEST_ROWS"]
 
 TITLE = "General network adjustment"
 #: rows of the "largest test statistics" table
@@ -37,6 +43,52 @@ _KIND_WORDS = {"offset": "additive constant", "scale": "scale", "omega": "set-up
 def _num(doc, *path, scale=1.0, digits=3, k=1.0, op="", sign=False) -> Num:
     p = ptr(*path)
     return Num(resolve(doc, p), p, scale, digits, k, op, sign)
+
+
+@dataclass(frozen=True)
+class RowNum(Num):
+    """A number of an observation row: the JSON path when the document lists the row (else none), and
+    always the row's ``index`` in the ``observations`` table and the column (``data-row``, ``data-key``)."""
+
+    row: int = -1
+    key: str = ""
+
+    def cell(self) -> str:
+        attrs = (f' data-table="observations" data-row="{self.row}" data-key="{_html.escape(self.key)}"'
+                 f' data-scale="{self.scale!r}" data-k="{self.k!r}" data-op="{self.op}"')
+        if self.path:
+            attrs += f' data-path="{_html.escape(self.path)}"'
+        return f"<td{attrs}>{_html.escape(self.text())}</td>"
+
+
+@dataclass(frozen=True)
+class Rows:
+    """The observation rows the report shows: ``obs`` every adjusted row of the result (the table's
+    rows, those rejected by data snooping apart: they are the ``outliers``), ``table`` each one's
+    ``index`` in the ``observations`` table, ``pos`` its position in the document's ``observations``
+    (None where the document does not list it)."""
+
+    obs: list
+    table: list
+    pos: list
+
+    def num(self, k: int, key: str, *, scale=1.0, digits=3, mult=1.0, op="", sign=False) -> RowNum:
+        """Row ``k``'s ``key`` as a cell."""
+        p = self.pos[k]
+        return RowNum(self.obs[k].get(key), "" if p is None else ptr("observations", p, key), scale, digits, mult,
+                      op, sign, row=self.table[k], key=key)
+
+
+def rows_of(doc: dict, rows=None) -> Rows:
+    """:class:`Rows` of ``rows`` (every row of the ``observations`` table as dicts with their ``index``:
+    :func:`multilat.network.general.report.list_observations` with ``"all"``), or of ``doc`` itself
+    when None (a document listing every row)."""
+    listed = doc["observations"]
+    if rows is None:
+        rows = listed
+    where = {o.get("index", j): j for j, o in enumerate(listed)}
+    keep = [(o.get("index", j), o) for j, o in enumerate(rows) if not o.get("rejected", False)]
+    return Rows([o for _, o in keep], [t for t, _ in keep], [where.get(t) for t, _ in keep])
 
 
 def _ends(o: dict) -> str:
@@ -54,20 +106,23 @@ def _test_name(doc) -> str:
     return "|τ|" if doc["tests"]["test"] == "tau" else "|w|"
 
 
-def sections(doc: dict, *, warnings=()) -> list[Section]:
+def sections(doc: dict, *, warnings=(), rows=None) -> list[Section]:
     """The results sections (before the warnings and what was run); ``warnings``: every warning of
-    the job (counted among the verdicts)."""
-    out = [key_section(doc, warnings), frame_section(doc), points_section(doc), parameters_section(doc),
-           reliability_section(doc), residuals_section(doc), tests_section(doc)]
+    the job (counted among the verdicts); ``rows``: every row of the result (:func:`rows_of`)."""
+    r = rows_of(doc, rows)
+    out = [key_section(doc, r, warnings), frame_section(doc), points_section(doc, r), parameters_section(doc),
+           reliability_section(doc, r), residuals_section(doc, r), tests_section(doc, r)]
     if doc.get("variance_components"):
         out.append(variance_section(doc))
     return out
 
 
-def build_report(ctx, doc: dict, *, result=None, applies=None) -> str:
+def build_report(ctx, doc: dict, *, result=None, applies=None, rows=None) -> str:
     """The whole page: results (verdicts first), warnings, and last what was run (inputs with their
-    sha256, options, version) — the machinery of :mod:`multilat.report.job`. ``applies``: the names
-    of the options the general path reads (the others, the distance path's, are not listed)."""
+    sha256, options, version) — the machinery of :mod:`multilat.report.job`. ``doc``: the document the
+    command prints; ``rows``: every observation row of the result (:func:`rows_of`; None: ``doc``
+    lists every row). ``applies``: the names of the options the general path reads (the others, the
+    distance path's, are not listed)."""
     import dataclasses
 
     from multilat.io import to_jsonable
@@ -77,7 +132,9 @@ def build_report(ctx, doc: dict, *, result=None, applies=None) -> str:
     doc = to_jsonable(doc)
     if applies is not None:
         ctx = dataclasses.replace(ctx, options={k: v for k, v in ctx.options.items() if k in applies})
-    secs = [*sections(doc, warnings=job_warnings(ctx, doc)), warnings_section(ctx, doc), meta_section(ctx, doc)]
+    rows = None if rows is None else to_jsonable(list(rows))
+    secs = [*sections(doc, warnings=job_warnings(ctx, doc), rows=rows), warnings_section(ctx, doc),
+            meta_section(ctx, doc)]
     return render(f"multilat {ctx.command}: {TITLE}", secs, subtitle=uncertainty_note())
 
 
@@ -111,16 +168,16 @@ def _test_verdict(doc, stat: float) -> Verdict:
     return Verdict(f"{_test_name(doc)} <= critical" if ok else f"{_test_name(doc)} > critical", ok)
 
 
-def _zero_points(doc) -> list[str]:
+def _zero_points(doc, r: Rows) -> list[str]:
     from multilat.network.general.report import zero_redundancy_points
 
-    return zero_redundancy_points(doc["observations"], doc["points"])
+    return zero_redundancy_points(r.obs, doc["points"])
 
 
-def _poor(doc) -> list[int]:
+def _poor(r: Rows) -> list[int]:
     from multilat.network.general.report import poorly_controlled
 
-    return poorly_controlled(doc["observations"])
+    return poorly_controlled(r.obs)
 
 
 def _limits() -> tuple[float, float]:
@@ -130,19 +187,19 @@ def _limits() -> tuple[float, float]:
 
 
 # ---------------------------------------------------------------------------------- first section
-def key_section(doc: dict, warnings=()) -> Section:
+def key_section(doc: dict, r: Rows, warnings=()) -> Section:
     """Verdicts and key numbers: what the reader must decide first."""
     sec = Section("Verdicts and key numbers", key="verdicts")
-    sec.table(("check", "value", "lower limit", "upper limit", "verdict"), _verdict_rows(doc, len(warnings)),
+    sec.table(("check", "value", "lower limit", "upper limit", "verdict"), _verdict_rows(doc, r, len(warnings)),
               caption="Each verdict compares the value with the limits printed beside it", name="verdicts")
-    sec.table(("quantity", "value"), _key_rows(doc), caption="Key numbers", name="key-numbers")
+    sec.table(("quantity", "value"), _key_rows(doc, r), caption="Key numbers", name="key-numbers")
     for note in doc.get("notes") or []:
         if note.startswith("--model auto"):
             sec.paragraph(note, cls="warn")
     return sec
 
 
-def _verdict_rows(doc: dict, n_warnings: int) -> list:
+def _verdict_rows(doc: dict, r: Rows, n_warnings: int) -> list:
     gt, rows = doc["global_test"], []
     if gt.get("statistic") is None:
         rows.append(("global χ² test of σ0", "-", "-", "-", Verdict("not done (no redundancy)", None)))
@@ -153,13 +210,13 @@ def _verdict_rows(doc: dict, n_warnings: int) -> list:
         rows.append((f"global χ² test of σ0 (vᵀPv against χ², α = {gt['alpha']:g}, dof {gt['dof']})",
                      _num(doc, "global_test", "statistic"), "-", _num(doc, "global_test", "critical"),
                      Verdict(text, gt["passed"] if decides else None)))
-    obs = doc["observations"]
+    obs = r.obs
     for (kind, comp), idx in _groups(obs).items():
         k = _largest(obs, idx, "statistic", controlled_only=True)
         if k is None:
             continue
         rows.append((f"largest {_test_name(doc)} of the {_what(obs[k])} rows ({obs[k]['label'] or _ends(obs[k])})",
-                     _num(doc, "observations", k, "statistic", digits=2, sign=True), "-",
+                     r.num(k, "statistic", digits=2, sign=True), "-",
                      _num(doc, "tests", "critical"), _test_verdict(doc, obs[k]["statistic"])))
     n_out = len(doc["outliers"])
     rows.append(("observation rows rejected by data snooping", n_out, "-", "-",
@@ -169,10 +226,10 @@ def _verdict_rows(doc: dict, n_warnings: int) -> list:
         rows.append(("test failures not located (not rejected)", len(doc["unlocated"]), "-", 0,
                      Verdict(f"{len(doc['unlocated'])}: see Tests", False)))
     r_min, limit = _limits()
-    n = len(_poor(doc))
+    n = len(_poor(r))
     rows.append((f"poorly controlled observation rows (redundancy < {r_min:g} or MDB > {limit:g} σ)", n, "-", 0,
                  Verdict("none" if n == 0 else f"{n}: a blunder there would hardly show (see Reliability)", n == 0)))
-    zero = _zero_points(doc)
+    zero = _zero_points(doc, r)
     rows.append(("points kept without control (every row's redundancy 0)", len(zero), "-", 0,
                  Verdict("none" if not zero else f"{len(zero)}: a blunder there cannot show (see Points)",
                          not zero)))
@@ -184,9 +241,9 @@ def _verdict_rows(doc: dict, n_warnings: int) -> list:
     return rows
 
 
-def _key_rows(doc: dict) -> list:
+def _key_rows(doc: dict, r: Rows) -> list:
     kinds = {}
-    for o in doc["observations"]:
+    for o in r.obs:
         kinds[_what(o)] = kinds.get(_what(o), 0) + 1
     rows = [("σ0" + (" (estimated: variance factor unknown)" if doc["variance_factor"] == "unknown"
                      else " (ratio to the a-priori σ)"), _num(doc, "sigma0", digits=4)),
@@ -217,14 +274,14 @@ def frame_section(doc: dict) -> Section:
     return sec
 
 
-def points_section(doc: dict) -> Section:
+def points_section(doc: dict, r: Rows) -> Section:
     sec = Section("Points", key="points")
     pts = doc["points"]
     ids = list(pts)
     if len(ids) > MAX_ROWS:
         var = [max(np.diag(np.asarray(pts[p]["cov_m2"], float))) for p in ids]
         ids = [ids[i] for i in sorted(np.argsort(-np.nan_to_num(np.array(var), nan=np.inf))[:MAX_ROWS])]
-    zero = set(_zero_points(doc))
+    zero = set(_zero_points(doc, r))
     rows = [(p, pts[p]["status"], " ".join(pts[p]["roles"]),
              *(_num(doc, "points", p, "xyz_m", i, digits=6) for i in range(3)),
              *(_num(doc, "points", p, "cov_m2", i, i, scale=MICRO, digits=1, op="sqrt") for i in range(3)),
@@ -268,10 +325,10 @@ def parameters_section(doc: dict) -> Section:
 
 
 # ----------------------------------------------------------------------------------- reliability
-def reliability_section(doc: dict) -> Section:
+def reliability_section(doc: dict, r: Rows) -> Section:
     sec = Section("Reliability", key="reliability")
-    obs, r_min, limit = doc["observations"], *_limits()
-    poor = _poor(doc)
+    obs, (r_min, limit) = r.obs, _limits()
+    poor = _poor(r)
     if poor:
         rows = []
         for k in poor[:MAX_ROWS]:
@@ -280,10 +337,9 @@ def reliability_section(doc: dict) -> Section:
                                     ("r = 0: no MDB", o["mdb_sigma"] is None),
                                     (f"MDB > {limit:g} σ", o["mdb_sigma"] is not None and o["mdb_sigma"] > limit))
                    if bad]
-            rows.append((o["label"] or "-", _what(o), _ends(o), _num(doc, "observations", k, "redundancy"),
-                         _num(doc, "observations", k, "mdb", scale=MICRO, digits=1), _UNIT[o["unit"]],
-                         _num(doc, "observations", k, "mdb_sigma", digits=1),
-                         _num(doc, "observations", k, "shift_max_m", scale=MICRO, digits=1),
+            rows.append((o["label"] or "-", _what(o), _ends(o), r.num(k, "redundancy"),
+                         r.num(k, "mdb", scale=MICRO, digits=1), _UNIT[o["unit"]],
+                         r.num(k, "mdb_sigma", digits=1), r.num(k, "shift_max_m", scale=MICRO, digits=1),
                          o["shift_point"] or "-", Verdict(" and ".join(why), False)))
         sec.table(("row", "kind", "points", "redundancy", "MDB", "unit", "MDB / σ", "largest shift (µm)",
                    "at point", "poorly controlled because"), rows,
@@ -292,7 +348,7 @@ def reliability_section(doc: dict) -> Section:
     else:
         sec.paragraph(f"Every observation row is controlled (redundancy >= {r_min:g}, MDB <= {limit:g} σ).",
                       cls="ok")
-    zero = _zero_points(doc)
+    zero = _zero_points(doc, r)
     if zero:
         sec.paragraph("Points kept without control (every observation row referencing them has redundancy 0; "
                       "their coordinates follow the observations exactly): " + ", ".join(zero) + ".", cls="warn")
@@ -309,18 +365,18 @@ def reliability_section(doc: dict) -> Section:
     return sec
 
 
-def residuals_section(doc: dict) -> Section:
+def residuals_section(doc: dict, r: Rows) -> Section:
     sec = Section("Residuals by kind", key="residuals")
-    obs, rows = doc["observations"], []
+    obs, rows = r.obs, []
     for (kind, comp), idx in _groups(obs).items():
         big = _largest(obs, idx, "residual")
         low = min(idx, key=lambda k: obs[k]["redundancy"])
         w = _largest(obs, idx, "statistic", controlled_only=True)
         o = obs[big]
         rows.append((_what(o), len(idx), _UNIT[o["unit"]],
-                     _num(doc, "observations", big, "residual", scale=MICRO, digits=2, sign=True),
-                     o["label"] or _ends(o), _num(doc, "observations", low, "redundancy"),
-                     _num(doc, "observations", w, "statistic", digits=2, sign=True) if w is not None else "-",
+                     r.num(big, "residual", scale=MICRO, digits=2, sign=True),
+                     o["label"] or _ends(o), r.num(low, "redundancy"),
+                     r.num(w, "statistic", digits=2, sign=True) if w is not None else "-",
                      _num(doc, "tests", "critical", digits=2),
                      _test_verdict(doc, obs[w]["statistic"]) if w is not None else Verdict("no row controlled", None)))
     sec.table(("kind", "rows", "unit", "largest |residual|", "at", "smallest redundancy",
@@ -329,14 +385,14 @@ def residuals_section(doc: dict) -> Section:
     return sec
 
 
-def tests_section(doc: dict) -> Section:
+def tests_section(doc: dict, r: Rows) -> Section:
     sec = Section("Tests and data snooping", key="tests")
     t = doc["tests"]
     sec.paragraph("Test procedure: " + t["rule"] + ".")
     sec.table(("test", "α0 per row", "critical", "λ0", "rows above the critical value"),
               [(t["test"], _num(doc, "tests", "alpha0", digits=7), _num(doc, "tests", "critical"),
                 _num(doc, "tests", "lambda0", digits=2), t["n_failed"])], caption="Row tests", name="row-tests")
-    obs = doc["observations"]
+    obs = r.obs
     stat = np.array([abs(o["statistic"]) for o in obs], float)
     order = [int(k) for k in np.argsort(-stat, kind="stable")[:LARGEST_ROWS]]
     from multilat.network.statistics import R_ZERO
@@ -344,10 +400,9 @@ def tests_section(doc: dict) -> Section:
     sec.table(("row", "kind", "points", "σ", "residual", "unit", "redundancy", _test_name(doc).strip("|"),
                "verdict"),
               [(obs[k]["label"] or "-", _what(obs[k]), _ends(obs[k]),
-                _num(doc, "observations", k, "sigma", scale=MICRO, digits=2),
-                _num(doc, "observations", k, "residual", scale=MICRO, digits=2, sign=True), _UNIT[obs[k]["unit"]],
-                _num(doc, "observations", k, "redundancy"), _num(doc, "observations", k, "statistic", digits=2,
-                                                                   sign=True),
+                r.num(k, "sigma", scale=MICRO, digits=2),
+                r.num(k, "residual", scale=MICRO, digits=2, sign=True), _UNIT[obs[k]["unit"]],
+                r.num(k, "redundancy"), r.num(k, "statistic", digits=2, sign=True),
                 _test_verdict(doc, obs[k]["statistic"]) if obs[k]["redundancy"] > R_ZERO
                 else Verdict("r = 0: not testable", None)) for k in order],
               caption=f"The {len(order)} rows with the largest {_test_name(doc)}", name="largest-tests")

@@ -267,9 +267,9 @@ MAX_DENSE_UNKNOWNS = 2000
 #: 182, 39x at 632; below, the dense one spares small networks the import of scipy.sparse)
 SPARSE_ABOVE = 200
 #: the sparse back end leaves the external reliability out (NaN, ``not_computed``) above this many
-#: rows x unknowns: it needs ``Q J_wᵀ`` for every row, O(R n) (about 0.3 s at 2e7 here; issue 29:
-#: no statistic above O(n log n) on a large network)
-EXTERNAL_MAX_WORK = 2e7
+#: rows x unknowns; none since issue 29: it costs O(R k²) through the Schur blocks
+#: (:class:`.reliability.SchurShifts`), as the redundancy numbers do
+EXTERNAL_MAX_WORK = float("inf")
 
 
 def backend_for(system: "System", options: AdjustOptions | None = None) -> str:

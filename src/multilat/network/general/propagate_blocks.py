@@ -10,7 +10,8 @@ the kinds in numpy) and one :meth:`.sparse.SparseCofactor.times` on the (n_free,
 instead of ``n_free²`` (Q) and ``n_free R`` (the gain ``K``). The first step is a chord step like the
 others (at x̂ the gradient is ``J(x̂)^T P (l - f(x̂))``, so ``Q`` of it is ``K (l - f(x̂))``); the
 convergence rule, the far trials' full Gauss-Newton (here by the sparse back end's step in the frozen
-datum ``B``), the seeding and the outputs are :mod:`.propagate`'s.
+datum ``B``, :func:`.sparse.frozen_step`, the adjustment's own), the seeding and the outputs are
+:mod:`.propagate`'s.
 
 Limits (:func:`check_size`): the trials' deviations are kept (float32, one column per free parameter and
 reported distance) until summarised, and the work grows as ``trials x (R + nnz X + k²)``; a run past
@@ -184,15 +185,15 @@ def solve_blocks(frozen, obs: np.ndarray, x: np.ndarray, tol: float, max_iter: i
 
 def sparse_gauss_newton(frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int = 50):
     """One trial by full Gauss-Newton from x̂ with the sparse back end's step (its elimination at every
-    iterate) in the frozen datum ``B``: ``(x, converged, vTPv)`` (:func:`.propagate.gauss_newton`)."""
-    from multilat.network.datum import s_factor
+    iterate, :func:`.sparse.eliminate` and :func:`.sparse.frozen_step`) in the frozen datum ``B``:
+    ``(x, converged, vTPv)`` (:func:`.propagate.gauss_newton`)."""
     from multilat.network.general import sparse
 
     s = frozen.system
     x = frozen.x_hat.copy()
     det = frozen.determinability
+    B = det.constraints if det.defect else None
     value = np.concatenate([np.asarray(b.value, float) for b in s.blocks])
-    slots_all = sparse._point_slots(s)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         for _ in range(max_iter):
             try:
@@ -200,15 +201,7 @@ def sparse_gauss_newton(frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter
                 r = r0 + (obs - value)
                 r[frozen.angular] = wrap_angle(r[frozen.angular])
                 rw = s.whiten(r)
-                N = (jw.T @ jw).tocsr()
-                e = np.zeros(slots_all.shape[0], bool)
-                e[sparse.partition(s, jw, N, slots_all)] = True
-                slots, ck, binv, xx, S, norms = sparse._reduce(s, N, slots_all, e)
-                red = sparse._g_inverse(S, norms, slots, ck, binv, xx, s.n_free, np.flatnonzero(e))
-                dx = red.ginv(jw.T @ rw)
-                if det.defect:
-                    B = det.constraints
-                    dx = dx - s_factor(red.null, B) @ (B.T @ dx)
+                dx, _ = sparse.frozen_step(sparse.eliminate(s, jw)[0], jw, rw, B)
             except (MultilatError, np.linalg.LinAlgError):
                 return x, False, np.nan
             x[frozen.free] += dx

@@ -38,8 +38,12 @@ row, ``r_i = 1 - j_i Q j_iᵀ`` with (a row touches at most one point of ``E``):
 
 minus ``2 (j H)·(j W)`` plus ``(j H) BᵀW (j H)ᵀ``: rows of ``Z = J_K - J_E X`` (sparse) and ``J_w H``,
 ``J_w W`` (R x d). ``Q m`` for a few columns ``m`` costs one solve (:meth:`SparseCofactor.times`).
-Memory O(R + n k). Statistics that need ``Q`` for every row (external reliability) are not computed
-here; the result says so (:attr:`..adjust.GeneralResult.not_computed`).
+Memory O(R + n k). The external reliability, which needs ``Q jᵀ`` for every row, is computed from the
+same row split (:func:`row_parts`) by :class:`..reliability.SchurShifts`, O(R k²).
+
+**One step** (:func:`eliminate`, :func:`frozen_step`): the elimination of one linearisation and one
+Gauss-Newton step on it with the datum held by given constraints, shared by the adjustment
+(:func:`linearise`) and the Monte Carlo's full Gauss-Newton (:mod:`.propagate_blocks`).
 """
 
 from __future__ import annotations
@@ -55,7 +59,8 @@ from multilat.network.datum import s_factor
 from multilat.network.general import kinds as kinds_registry
 from multilat.network.general.determinability import Determinability, classify, schur_null_space
 
-__all__ = ["RCOND_BLOCK", "MAX_REDUCED", "SparseCofactor", "assemble", "Linearised", "linearise"]
+__all__ = ["RCOND_BLOCK", "MAX_REDUCED", "SparseCofactor", "Reduced", "RowParts", "assemble", "eliminate",
+           "frozen_step", "Linearised", "linearise", "row_parts"]
 
 #: an eliminated point's block, scaled to a unit diagonal, has its smallest eigenvalue at least this
 #: fraction of its largest (condition <= 1e6: its explicit inverse is exact to ~1e-10 relative); a
@@ -221,9 +226,10 @@ def _reduce(system, N, slots_all, mask_e) -> tuple:
     return slots, ck, binv, x, S, np.sqrt(np.clip(np.diag(nkk), 0, None))
 
 
-def _g_inverse(S, col_norms, slots, ck, binv, x, n, points) -> Reduced:
-    """The rank decision on ``S``, the full null space, and ``Q⁻_KK`` under minimal constraints."""
-    v0, scale, _ = schur_null_space(S, col_norms)
+def _g_inverse(S, col_norms, slots, ck, binv, x, n, points) -> tuple[Reduced, np.ndarray]:
+    """The rank decision on ``S``, the full null space, and ``Q⁻_KK`` under minimal constraints; with
+    the singular values of the rank decision (:func:`..determinability.schur_null_space`)."""
+    v0, scale, sv = schur_null_space(S, col_norms)
     d = v0.shape[1]
     qk = np.zeros_like(S)
     keep = np.ones(ck.size, bool)
@@ -242,7 +248,34 @@ def _g_inverse(S, col_norms, slots, ck, binv, x, n, points) -> Reduced:
         flat = slots.ravel()
         g[flat[flat >= 0]] = ge[flat >= 0]
         g /= np.linalg.norm(g, axis=0, keepdims=True).clip(1e-300)
-    return Reduced(slots, ck, binv, x, 0.5 * (qk + qk.T), g, n, points)
+    return Reduced(slots, ck, binv, x, 0.5 * (qk + qk.T), g, n, points), sv
+
+
+def eliminate(system, jw: sp.csr_matrix) -> tuple[Reduced, np.ndarray]:
+    """The elimination of one linearisation (module docstring): ``N = J_wᵀ J_w``, the points
+    eliminated (:func:`partition`), the reduced system and its generalised inverse under minimal
+    constraints. Returns the :class:`Reduced` and the singular values of the rank decision on ``S``
+    (for :func:`..determinability.classify`)."""
+    N = (jw.T @ jw).tocsr()
+    slots_all = _point_slots(system)
+    e = np.zeros(slots_all.shape[0], bool)
+    e[partition(system, jw, N, slots_all)] = True
+    slots, ck, binv, x, S, norms = _reduce(system, N, slots_all, e)
+    return _g_inverse(S, norms, slots, ck, binv, x, system.n_free, np.flatnonzero(e))
+
+
+def frozen_step(red: Reduced, jw: sp.csr_matrix, rw: np.ndarray, constraints: np.ndarray | None = None):
+    """One Gauss-Newton step on a fixed linearisation (``J_w``, ``r_w``; its elimination ``red`` from
+    :func:`eliminate`) with the datum held by ``constraints`` ``B`` (n_free, d): ``dx = P N⁻ J_wᵀ r_w``,
+    ``P = I - H Bᵀ``, ``H = G (BᵀG)⁻¹`` (module docstring, "Datum"); None: no datum defect, ``dx = N⁻
+    J_wᵀ r_w``. The adjustment's step (:func:`linearise`, ``B`` from the determinability at the
+    iterate) and the Monte Carlo's full Gauss-Newton (:func:`.propagate_blocks.sparse_gauss_newton`,
+    ``B`` frozen at the adjustment's solution). Returns ``(dx, H)`` (``H`` None without ``B``)."""
+    dx = red.ginv(jw.T @ rw)
+    if constraints is None:
+        return dx, None
+    h = s_factor(red.null, constraints)
+    return dx - h @ (constraints.T @ dx), h
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,27 +298,18 @@ def linearise(system, x_full: np.ndarray, mask: np.ndarray, undetermined) -> Lin
     """At ``x_full``: the constrained Gauss-Newton step (``undetermined(det)`` raises the dense back
     end's error when the observations and the datum leave parameters undetermined)."""
     r, rw, jw = assemble(system, x_full)
-    N = (jw.T @ jw).tocsr()
-    slots_all = _point_slots(system)
-    e = np.zeros(slots_all.shape[0], bool)
-    e[partition(system, jw, N, slots_all)] = True
-    slots, ck, binv, x, S, norms = _reduce(system, N, slots_all, e)
-    red = _g_inverse(S, norms, slots, ck, binv, x, system.n_free, np.flatnonzero(e))
-    _, _, sv = schur_null_space(S, norms)
+    red, sv = eliminate(system, jw)
     det = classify(red.null, sv, mask)
     if det.undetermined.size:
         undetermined(det)
-    b = jw.T @ rw
-    x0 = red.ginv(b)
-    h = w = m = None
+    B = w = m = None
     if det.defect:
         B = det.constraints
         if B is None or B.shape[1] != det.defect:
             raise MultilatError("the datum points do not remove the datum defect of the observations")
-        h = s_factor(red.null, B)
         w = red.ginv(B)
         m = B.T @ w
-        x0 = x0 - h @ (B.T @ x0)
+    x0, h = frozen_step(red, jw, rw, B)
     return Linearised(r, rw, jw, red, det, h, w, m, x0)
 
 
@@ -365,8 +389,21 @@ def cofactor(system, lin: Linearised) -> SparseCofactor:
     return SparseCofactor(point, red.ck, qkk, lin, slots_all)
 
 
-def redundancy(lin: Linearised) -> np.ndarray:
-    """Redundancy numbers ``1 - (J_w Q J_wᵀ)_ii`` per row, from the blocks (module docstring)."""
+@dataclass(frozen=True, eq=False)
+class RowParts:
+    """The whitened rows split by the elimination (a row touches at most one eliminated point):
+    ``z`` (R, k) CSR ``J_K - J_E X``, ``je3`` (R, 3) each row's entries on its eliminated point's
+    three slots, ``prow`` (R,) that point's position in ``Reduced.points`` (0 where none), ``touched``
+    (R,) whether the row has one."""
+
+    z: sp.csr_matrix
+    je3: np.ndarray
+    prow: np.ndarray
+    touched: np.ndarray
+
+
+def row_parts(lin: Linearised) -> RowParts:
+    """:class:`RowParts` of the whitened Jacobian of ``lin`` (O(nnz J_w + nnz X))."""
     red, jw = lin.red, lin.jw
     R = jw.shape[0]
     flat = red.slots.ravel()
@@ -379,12 +416,23 @@ def redundancy(lin: Linearised) -> np.ndarray:
     je = sp.csr_matrix((coo.data[e], (coo.row[e], s[e])), shape=(R, 3 * me))
     jk = jw[:, red.ck]
     z = (jk - je @ red.x).tocsr()
-    # j_E N_pp⁻¹ j_Eᵀ: each row's E entries lie in one point's 3 slots
     je3 = np.zeros((R, 3))
     prow = np.zeros(R, int)
+    touched = np.zeros(R, bool)
     je3[coo.row[e], s[e] % 3] = coo.data[e]
     prow[coo.row[e]] = s[e] // 3
-    quad = np.einsum("ia,iab,ib->i", je3, red.binv[prow], je3) if me else np.zeros(R)
+    touched[coo.row[e]] = True
+    return RowParts(z, je3, prow, touched)
+
+
+def redundancy(lin: Linearised) -> np.ndarray:
+    """Redundancy numbers ``1 - (J_w Q J_wᵀ)_ii`` per row, from the blocks (module docstring)."""
+    red, jw = lin.red, lin.jw
+    R = jw.shape[0]
+    parts = row_parts(lin)
+    z, je3, prow = parts.z, parts.je3, parts.prow
+    # j_E N_pp⁻¹ j_Eᵀ: each row's E entries lie in one point's 3 slots
+    quad = np.einsum("ia,iab,ib->i", je3, red.binv[prow], je3) if red.slots.shape[0] else np.zeros(R)
     for lo in range(0, R, BATCH):
         hi = min(lo + BATCH, R)
         zc = z[lo:hi].toarray()
