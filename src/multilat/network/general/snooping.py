@@ -216,7 +216,11 @@ class _Gate:
         ref, _ = _point_rows(adj.system)
         ids = adj.system.network.points.ids
         self.n_rows = adj.system.n_rows
-        self.per_point = {ids[p]: int(np.any(ref == p, axis=1).sum()) for p in np.unique(ref[ref >= 0])}
+        r = np.sort(ref, axis=1)                     # rows per point, each row once: O(rows), not points x rows
+        once = r >= 0
+        once[:, 1:] &= r[:, 1:] != r[:, :-1]
+        counts = np.bincount(r[once], minlength=len(ids))
+        self.per_point = {ids[p]: int(counts[p]) for p in np.flatnonzero(counts)}
         self.sigma0 = float(adj.result.sigma0)
 
     def check(self, system: System, stats: GeneralStatistics, unit, before: list) -> None:
