@@ -185,21 +185,30 @@ def test_sparse_size_refused_before_the_approximate_chain(monkeypatch):
     from multilat.network.general import adjust_network
 
     obs = read_observations(MIXED)
-    net, options = ft.network_from_tables(obs, backend="sparse")
-    k = adjust_network(net, options=options).result.blocks.ck.size
     monkeypatch.setattr(sparse, "MAX_REDUCED", 5)
 
     def chain(*_, **__):
         raise AssertionError("approximate coordinates computed before the size check")
 
-    monkeypatch.setattr(ft, "_with_approximations", chain)
+    import multilat.network.general.run as general_run
+    from multilat.network.general import read_gama_input
+    from multilat.network.general.adjust import AdjustOptions
+
+    monkeypatch.setattr(general_run, "approximate", chain)            # a gama-local input: adjust_network
+    with pytest.raises(MultilatError, match="sparse back end takes a reduced system of at most 5 parameters"):
+        general_run.adjust_network(read_gama_input(ROOT / "tests" / "data" / "gama3d" / "two_trackers.xml"),
+                                   options=AdjustOptions(backend="sparse"))
+    monkeypatch.setattr(ft, "_with_approximations", chain)            # a CSV network: network_from_tables
     with pytest.raises(MultilatError, match=r"^the general model's sparse back end takes a reduced system of at "
                                             r"most 5 parameters; this network leaves at least (\d+) after") as e:
         ft.network_from_tables(obs, backend="sparse")
     bound = int(str(e.value).split("at least ")[1].split()[0])
+    monkeypatch.undo()
+    net, options = ft.network_from_tables(obs, backend="sparse")
+    k = adjust_network(net, options=options).result.blocks.ck.size   # the reduced system formed
     assert 5 < bound <= k
     monkeypatch.setattr(sparse, "MAX_REDUCED", k)                      # at the limit: taken
-    sparse.check_reduced_size(__import__("multilat.network.general.adjust", fromlist=["System"]).System(net))
+    general_run.check_sizes(net, options)
 
 
 # ----------------------------------------------------------------------------- --model auto, polar points
@@ -226,3 +235,21 @@ def test_auto_decides_polar_points_before_adjusting(capsys, monkeypatch, tmp_pat
     code, out2, _ = _run(capsys, *args, "--json", "--model", "general")
     gen = json.loads(out2)
     assert code == 0 and doc["points"] == gen["points"] and doc["notes"][1:] == gen["notes"]
+
+
+def test_parquet_observations_are_refused_alike_by_both_paths(capsys, tmp_path):
+    """Neither path reads observations as Parquet (the distance path has no such reader to share):
+    the same one-line refusal naming the file, exit 2, on both."""
+    pq = pytest.importorskip("pyarrow.parquet")
+    import pyarrow as pa
+
+    rows = [ln.split(",") for ln in SMALL.read_text().splitlines() if ln and not ln.startswith("#")]
+    table = pa.table({c: [r[k] for r in rows[1:]] for k, c in enumerate(rows[0])})
+    path = tmp_path / "obs.parquet"
+    pq.write_table(table, path)
+    said = []
+    for model in ("auto", "general"):
+        code, _, err = _run(capsys, path, "--model", model)
+        assert code == 2 and len(err.strip().splitlines()) == 1, err
+        said.append(err.strip())
+    assert said[0] == said[1] and said[0].startswith(f"error: {path}") and "not a text file" in said[0]

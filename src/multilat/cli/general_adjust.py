@@ -9,14 +9,16 @@ file the options that apply are ``--json``, ``--out DIR`` with ``--tables``, ``-
 (:mod:`multilat.report.general_sections`), ``--alpha``, ``--variance-factor``, ``--test-method``,
 ``--alpha-global``, ``--backend`` and ``--strict``: the file itself carries the datum
 (``fix=``/``adj=``), the σ (``stdev=`` and ``<points-observations>``) and the approximate
-coordinates. A CSV network also takes ``--points``, ``--datum free|control``, ``--sigma-um``,
+coordinates. A CSV network also takes ``--points``, ``--datum free|321|control``, ``--sigma-um``,
 ``--instrument``, ``--fix-offsets-um``, ``--scales``, ``--fixed-scale``, ``--references`` with
-``--scale-bars``, ``--levelled``, ``--seed`` and ``--no-snooping``. Every other option is refused in
+``--scale-bars``, ``--levelled``, ``--seed``, ``--no-snooping`` and a raw readings file with its
+options (read by the distance path's reader). Every other option is refused in
 one line naming it (never silently ignored). The model is never switched silently: the default
 (distance) path's refusals by station counts say that ``--model general`` adjusts by what the
 observations determine (:func:`refusal_hint`). Under ``--model auto`` (the default) such a refusal,
-or polar points the distance path would leave out (:func:`polar_left_out`), takes the general path
-instead, said in one warning line and first in the JSON's notes (:func:`fall_back`).
+or polar points the distance path would leave out (decided on the tables before adjusting:
+:func:`polar_switch`), takes the general path instead, said in one warning line and first in the
+JSON's notes (:func:`fall_back`).
 """
 
 from __future__ import annotations
@@ -439,6 +441,12 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
     checks.seed(seed)
     src: dict = {}
     raw = {k: params[k] for k in ("environment", "heights", "formula", "extrapolate", "max_gap_s") if k in params}
+    if not raw:                                      # a caller without the raw options (propagate --model general)
+        from multilat.campaign.raw import is_raw_file
+
+        if is_raw_file(path):
+            raise MultilatError(f"--model general does not apply to raw readings ({path}) here: correct them "
+                                "first (multilat correct), or use the distance path")
     instrument = params.get("instrument")
     obs, corrected = read_campaign(path, sigma_m=None if sigma_um is None else sigma_um * 1e-6, instrument=instrument,
                                    sigma_source=src, azimuth_sense=params.get("azimuth_sense"), **raw)
