@@ -97,7 +97,8 @@ def network_from_tables(obs, *, points=None, datum="free", offsets=None, scales=
     opts = AdjustOptions(datum="auto" if (d.kind != "free" or d.points is not None) else "free", backend=backend)
     from multilat.network.general.run import check_sizes
 
-    check_sizes(net, opts)                          # before the approximate chain (the expensive part)
+    if np.isnan(pts.xyz_m).any():                   # the approximate chain has work: the size first
+        check_sizes(net, opts)                      # (else adjust_network checks it, as for any input)
     net = _with_approximations(net, obs, rng)
     if d.kind == "321":
         net = in_frame_321(net, d, datum)

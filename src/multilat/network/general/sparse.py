@@ -406,17 +406,35 @@ def check_reduced_size(system) -> None:
     (``w``: a point's free coordinates; a greedy maximal matching, low degree first). So the reduced
     system keeps at least ``n_free`` less that many: a lower bound, never a refusal of a network the
     elimination would take (ill-conditioned points only add to it). The points the adjustment will
-    leave out as undetermined are counted (they are not known before the approximate chain)."""
-    slots = _point_slots(system)
+    leave out as undetermined are counted (they are not known before the approximate chain).
+
+    First, without the Jacobian: a vertex cover ``C`` of that graph (every point a row references but
+    one, all the points of a correlated block) bounds the bound, ``Σ_M min(w) <= Σ_C w``; when even
+    that leaves at most :data:`MAX_REDUCED`, nothing more is done (a tracker network: ``C`` = the
+    stations, the reduced system the elimination forms)."""
+    from multilat.network.general.observations import point_keys
+
     if system.n_free <= MAX_REDUCED:
         return
-    x = system.layout.initial()
+    slots = _point_slots(system)
     n = slots.shape[0]
+    w = (slots >= 0).sum(axis=1)
+    cover = np.zeros(n, bool)
+    for b in system.blocks:
+        keys = point_keys(b)
+        if b.cov is not None:                    # whitening couples its rows: any two of its points
+            cover[np.concatenate([np.asarray(b.index[k], int).ravel() for k in keys])] = True
+        elif len(keys) > 1:
+            rest = [k for k in keys if k != "to"] if "to" in keys else keys[:-1]
+            for k in rest:
+                cover[np.asarray(b.index[k], int).ravel()] = True
+    if system.n_free - int(w.sum()) + int(w[cover].sum()) <= MAX_REDUCED:
+        return
+    x = system.layout.initial()
     x[system.layout.point_cols] = ((np.arange(3 * n) + 1) * 0.6180339887498949 % 1.0).reshape(n, 3) * 100.0
     with np.errstate(all="ignore"):
         _, _, jw = assemble(system, x)
     graph = _graph(system, jw, slots)
-    w = (slots >= 0).sum(axis=1)
     ind, ptr, deg = graph["adj"].indices, graph["adj"].indptr, graph["deg"]
     matched = np.zeros(n, bool)
     lost = 0                                     # coordinates no independent set can take
