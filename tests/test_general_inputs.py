@@ -6,7 +6,6 @@ network adjusted once)."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import sys
 from pathlib import Path

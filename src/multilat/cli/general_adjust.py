@@ -428,34 +428,16 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
                    snooping: bool = True, variance_components: str | None = None, backend: str = "auto"):
     """A multilat observation CSV (with ``--points``, ``--references`` ...) adjusted by the general
     layer: (doc, adjustment, stats). ``params``: the adjust command's parameters."""
-    from multilat.campaign.propagation import read_campaign
     from multilat.cli import checks
-    from multilat.cli.network_cmd import _check_instrument_used, parse_fixed_offsets, with_levelled
+    from multilat.cli.network_cmd import parse_fixed_offsets, with_levelled
     from multilat.network.files import read_points, read_reference_lengths
     from multilat.network.general.from_tables import network_from_tables
     from multilat.network.sigma_source import default_warning, describe
 
     path = Path(params["observations"])
-    sigma_um, seed = params.get("sigma_um"), params.get("seed", 0)
-    checks.sigma_um(sigma_um)
+    seed = params.get("seed", 0)
     checks.seed(seed)
-    src: dict = {}
-    raw = {k: params[k] for k in ("environment", "heights", "formula", "extrapolate", "max_gap_s") if k in params}
-    if not raw:                                      # a caller without the raw options (propagate --model general)
-        from multilat.campaign.raw import is_raw_file
-
-        if is_raw_file(path):
-            raise MultilatError(f"--model general does not apply to raw readings ({path}) here: correct them "
-                                "first (multilat correct), or use the distance path")
-    instrument = params.get("instrument")
-    obs, corrected = read_campaign(path, sigma_m=None if sigma_um is None else sigma_um * 1e-6, instrument=instrument,
-                                   sigma_source=src, azimuth_sense=params.get("azimuth_sense"), **raw)
-    if corrected is not None:                        # raw readings: the distance path's reader and rules
-        src["defaulted"] = instrument is None
-        if variance_components is not None:
-            raise MultilatError("--variance-components applies to an observation file: raw readings get "
-                                "their σ from the distance model and the sensors")
-    _check_instrument_used(instrument, path, obs, src, corrected)
+    obs, corrected, src = _read_observations(path, params, variance_components)
     obs = with_levelled(obs, params.get("levelled"))
     refs = read_reference_lengths(params["references"]) if params.get("references") is not None else None
     if refs is not None and not params.get("scale_bar"):
@@ -509,6 +491,37 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
     if az_rec is not None:
         doc["azimuth_sense"] = az_rec
     return doc, adj, stats
+
+
+def _read_observations(path: Path, params: dict, variance_components: str | None):
+    """The observations as the distance path reads them (:func:`multilat.campaign.propagation.
+    read_campaign`: an observation CSV, or raw readings corrected with ``--environment``, ``--heights``
+    ...), with its rules (``--instrument`` applied or refused, no variance components on raw readings):
+    (obs, corrected or None, the σ source record)."""
+    from multilat.campaign.propagation import read_campaign
+    from multilat.cli import checks
+    from multilat.cli.network_cmd import _check_instrument_used
+
+    sigma_um = params.get("sigma_um")
+    checks.sigma_um(sigma_um)
+    src: dict = {}
+    raw = {k: params[k] for k in ("environment", "heights", "formula", "extrapolate", "max_gap_s") if k in params}
+    if not raw:                                      # a caller without the raw options (propagate --model general)
+        from multilat.campaign.raw import is_raw_file
+
+        if is_raw_file(path):
+            raise MultilatError(f"--model general does not apply to raw readings ({path}) here: correct them "
+                                "first (multilat correct), or use the distance path")
+    instrument = params.get("instrument")
+    obs, corrected = read_campaign(path, sigma_m=None if sigma_um is None else sigma_um * 1e-6, instrument=instrument,
+                                   sigma_source=src, azimuth_sense=params.get("azimuth_sense"), **raw)
+    if corrected is not None:                        # raw readings: the distance path's reader and rules
+        src["defaulted"] = instrument is None
+        if variance_components is not None:
+            raise MultilatError("--variance-components applies to an observation file: raw readings get "
+                                "their σ from the distance model and the sensors")
+    _check_instrument_used(instrument, path, obs, src, corrected)
+    return obs, corrected, src
 
 
 def _sense_hint(obs, sense, build, sigma0, strict, tests) -> str | None:
