@@ -252,3 +252,16 @@ def test_parquet_observations_are_refused_alike_by_both_paths(capsys, tmp_path):
         assert code == 2 and len(err.strip().splitlines()) == 1, err
         said.append(err.strip())
     assert said[0] == said[1] and said[0].startswith(f"error: {path}") and "not a text file" in said[0]
+
+
+def test_point_sigmas_outside_control_are_said_as_on_the_distance_path():
+    """--points with sx_m, sy_m, sz_m under a datum other than control: approximate coordinates, said
+    in the distance path's words (the σ were dropped without a word before)."""
+    from multilat.network.data import Points
+    from multilat.network.files import read_observations
+    from multilat.network.general.from_tables import network_from_tables
+
+    pts = Points(("A",), np.zeros((1, 3)), np.full((1, 3), 1e-5))
+    with pytest.warns(UserWarning, match=r"make weighted control under --datum control only; here the points "
+                                         r"are approximate coordinates"):
+        network_from_tables(read_observations(SMALL), points=pts)

@@ -76,6 +76,10 @@ def network_from_tables(obs, *, points=None, datum="free", offsets=None, scales=
         if stray:
             warnings.warn(f"points: {len(stray)} id(s) not in the observations, ignored: "
                           f"{', '.join(stray[:8])}{'...' if len(stray) > 8 else ''}", UserWarning, stacklevel=2)
+        if points.std_m is not None and d.kind != "control":      # the distance path's warning, its words
+            warnings.warn("points: the standard uncertainties (sx_m, sy_m, sz_m) make weighted control under "
+                          "--datum control only; here the points are approximate coordinates", UserWarning,
+                          stacklevel=2)
     spec = coupling_spec(obs, bars=scale_bars, points=points, control=d.kind == "control")
     pts = _point_set(obs, points, d, spec, rng)
     off_free, off_val = _fixed_offsets(offsets, obs)
