@@ -265,3 +265,14 @@ def test_point_sigmas_outside_control_are_said_as_on_the_distance_path():
     with pytest.warns(UserWarning, match=r"make weighted control under --datum control only; here the points "
                                          r"are approximate coordinates"):
         network_from_tables(read_observations(SMALL), points=pts)
+
+
+def test_unused_instrument_is_refused_as_on_the_distance_path(capsys):
+    """--instrument with a file that gives sigma_m for every distance and no angles is used for
+    nothing: refused in one line on both paths (the general path ignored it before)."""
+    said = []
+    for model in ("multilateration", "general"):
+        code, _, err = _run(capsys, SMALL, "--instrument", "seed2020", "--model", model)
+        assert code == 2 and len(err.strip().splitlines()) == 1, err
+        said.append(err.strip())
+    assert said[0] == said[1] and "--instrument seed2020: not used" in said[0]

@@ -497,7 +497,8 @@ def _read_observations(path: Path, params: dict, variance_components: str | None
     """The observations as the distance path reads them (:func:`multilat.campaign.propagation.
     read_campaign`: an observation CSV, or raw readings corrected with ``--environment``, ``--heights``
     ...), with its rules (``--instrument`` applied or refused, no variance components on raw readings):
-    (obs, corrected or None, the σ source record)."""
+    (obs, corrected or None, the σ source record). ``params`` without the raw options is a caller
+    other than ``adjust`` (``propagate --model general``): raw readings refused, ``--instrument`` its own."""
     from multilat.campaign.propagation import read_campaign
     from multilat.cli import checks
     from multilat.cli.network_cmd import _check_instrument_used
@@ -520,7 +521,8 @@ def _read_observations(path: Path, params: dict, variance_components: str | None
         if variance_components is not None:
             raise MultilatError("--variance-components applies to an observation file: raw readings get "
                                 "their σ from the distance model and the sensors")
-    _check_instrument_used(instrument, path, obs, src, corrected)
+    if raw:                                          # adjust's rule (propagate's --noise model uses it)
+        _check_instrument_used(instrument, path, obs, src, corrected)
     return obs, corrected, src
 
 
