@@ -43,18 +43,21 @@ def _points(doc):
 # ----------------------------------------------------------------------------- --datum 321
 
 
-def test_datum_321_equals_the_distance_path(capsys):
+@pytest.mark.parametrize("backend", ["dense", "sparse"])
+def test_datum_321_equals_the_distance_path(capsys, backend):
     """A distance-only network: the general layer's 3-2-1 (approximate coordinates moved into the
     frame of A, B, C, 6 coordinates held) gives the distance path's coordinates and point covariances
-    (its 3-2-1 frame and S-transformed covariance). Tolerances: 1e-9 m and 1e-9 of the largest
-    covariance (measured 3e-15 m, 2e-11): two solvers of one least-squares problem."""
+    (its 3-2-1 frame and S-transformed covariance), with either back end. Tolerances: 1e-9 m and 1e-9
+    of the largest covariance (measured 3e-15 m, 2e-11): two solvers of one least-squares problem."""
     code, out, err = _run(capsys, SMALL, "--datum", "321:A,B,C", "--json", "--no-snooping")
     assert code == 0, err
     old = json.loads(out)
-    code, out, err = _run(capsys, SMALL, "--datum", "321:A,B,C", "--json", "--no-snooping", "--model", "general")
+    code, out, err = _run(capsys, SMALL, "--datum", "321:A,B,C", "--json", "--no-snooping", "--model", "general",
+                          "--backend", backend)
     assert code == 0, err
     gen = json.loads(out)
     assert gen["model"] == "general" and gen["dof"] == old["dof"] and gen["defect"] == 0
+    assert gen["backend"] == backend
     assert gen["sigma0"] == pytest.approx(old["sigma0"], rel=1e-9)
     assert gen["frame"]["kind"] == "321" and gen["datum"].startswith("3-2-1: A at origin")
     a, g = _points(old), _points(gen)
