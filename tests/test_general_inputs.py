@@ -148,22 +148,27 @@ def test_datum_321_refused_where_the_vertical_is_observed(capsys, tmp_path):
 
 def test_raw_readings_on_the_general_path_equal_the_distance_path(capsys):
     """The campaign's raw readings, corrected by the distance path's reader (read_campaign): the
-    same σ0 and dof, interpoint distances to 1e-9 m (one least-squares problem, two solvers;
-    measured σ0 5e-12 relative), the same default-instrument warning, the correction noted."""
-    args = [CAMPAIGN / "raw.csv", "-e", CAMPAIGN / "environment.csv", "--heights", CAMPAIGN / "heights.csv",
-            "--json", "--no-snooping"]
-    code, out, err = _run(capsys, *args)
-    assert code == 0, err
-    old = json.loads(out)
-    code, out, err = _run(capsys, *args, "--model", "general")
-    assert code == 0, err
+    general path's σ0, dof and interpoint distances are the distance path's (``adjust`` on the same
+    reader's observations; 1e-9 relative and 1e-9 m: one least-squares problem, two solvers;
+    measured σ0 5e-12 relative), with the distance path's default-instrument warning and the
+    correction noted."""
+    from multilat.campaign.propagation import read_campaign
+    from multilat.network.adjust import adjust
+
+    raw = dict(environment=CAMPAIGN / "environment.csv", heights=CAMPAIGN / "heights.csv")
+    obs, corrected = read_campaign(CAMPAIGN / "raw.csv", instrument=None, **raw)
+    old = adjust(obs, snooping=False)
+    code, out, err = _run(capsys, CAMPAIGN / "raw.csv", "-e", raw["environment"], "--heights", raw["heights"],
+                          "--json", "--no-snooping", "--model", "general")
+    assert code == 0 and corrected is not None, err
     gen = json.loads(out)
-    assert gen["dof"] == old["dof"] and gen["sigma0"] == pytest.approx(old["sigma0"], rel=1e-9)
-    assert gen["warnings"] == old["warnings"] and gen["sigma_source"]["kind"] == "raw readings"
+    assert gen["dof"] == old.dof and gen["sigma0"] == pytest.approx(old.sigma0, rel=1e-9)
+    assert "no --instrument: the raw readings are corrected and weighted by the distance model" in gen["warnings"][0]
+    assert gen["sigma_source"]["kind"] == "raw readings"
     assert any(n.startswith("raw readings corrected") for n in gen["notes"])
-    a, g = _points(old), _points(gen)
-    ids = sorted(a)
-    xa, xg = np.array([a[p][0] for p in ids]), np.array([g[p][0] for p in ids])
+    ids = list(old.station_ids) + list(old.target_ids)
+    xa = np.vstack([old.station_xyz_m, old.target_xyz_m])
+    xg = np.array([gen["points"][p]["xyz_m"] for p in ids])
     da = np.linalg.norm(xa[:, None] - xa[None], axis=-1)
     dg = np.linalg.norm(xg[:, None] - xg[None], axis=-1)
     assert np.abs(da - dg).max() < 1e-9
