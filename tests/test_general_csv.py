@@ -337,7 +337,7 @@ def test_refused_tracker_networks_against_independent_solution(name, tmp_path):
 
 
 @pytest.mark.parametrize("opt", [["--cost", "squared"], ["--average-repeats"], ["--solver", "dense"],
-                                 ["--datum", "321:H1,H2,H3"], ["--references", str(NET / "small_volume_refs.csv")]])
+                                 ["--references", str(NET / "small_volume_refs.csv")]])
 def test_options_the_general_layer_cannot_honour_are_refused_by_name(opt, tmp_path):
     out = tmp_path / "res"
     r = _cli(NET / "mixed" / "obs.csv", "--model", "general", *opt, "--out", out)

@@ -9,14 +9,16 @@ file the options that apply are ``--json``, ``--out DIR`` with ``--tables``, ``-
 (:mod:`multilat.report.general_sections`), ``--alpha``, ``--variance-factor``, ``--test-method``,
 ``--alpha-global``, ``--backend`` and ``--strict``: the file itself carries the datum
 (``fix=``/``adj=``), the σ (``stdev=`` and ``<points-observations>``) and the approximate
-coordinates. A CSV network also takes ``--points``, ``--datum free|control``, ``--sigma-um``,
+coordinates. A CSV network also takes ``--points``, ``--datum free|321|control``, ``--sigma-um``,
 ``--instrument``, ``--fix-offsets-um``, ``--scales``, ``--fixed-scale``, ``--references`` with
-``--scale-bars``, ``--levelled``, ``--seed`` and ``--no-snooping``. Every other option is refused in
+``--scale-bars``, ``--levelled``, ``--seed``, ``--no-snooping`` and a raw readings file with its
+options (read by the distance path's reader). Every other option is refused in
 one line naming it (never silently ignored). The model is never switched silently: the default
 (distance) path's refusals by station counts say that ``--model general`` adjusts by what the
 observations determine (:func:`refusal_hint`). Under ``--model auto`` (the default) such a refusal,
-or polar points the distance path would leave out (:func:`polar_left_out`), takes the general path
-instead, said in one warning line and first in the JSON's notes (:func:`fall_back`).
+or polar points the distance path would leave out (decided on the tables before adjusting:
+:func:`polar_switch`), takes the general path instead, said in one warning line and first in the
+JSON's notes (:func:`fall_back`).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ import numpy as np
 from multilat.errors import MultilatError
 
 __all__ = ["is_general_input", "wants_general", "refusal_hint", "run", "given_options", "option_name", "fall_back",
-           "CountRuleRefusal", "polar_left_out", "APPLIES", "APPLIES_CSV", "WHY_NOT",
+           "CountRuleRefusal", "polar_left_out", "polar_switch", "APPLIES", "APPLIES_CSV", "WHY_NOT",
            "WHY_NOT_CSV", "SCHEMA", "MODELS", "BACKENDS"]
 
 #: the document's schema name: ``"schema": "multilat.adjust-general/2"`` (not the distance path's
@@ -44,7 +46,8 @@ APPLIES = ("observations", "as_json", "out", "alpha", "variance_factor", "strict
            "all_observations")
 #: ... and on a multilat CSV network (``--model general``)
 APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offsets_um", "scales", "fixed_scale",
-                         "scale_bar", "references", "levelled", "seed", "azimuth_sense")
+                         "scale_bar", "references", "levelled", "seed", "azimuth_sense",
+                         "environment", "heights", "formula", "extrapolate", "max_gap_s")   # raw readings
 #: the test procedures' names in the summary (statistics.test_levels)
 _METHOD_NAMES = {"b-method": "B-method", "sidak": "Šidák", "fixed": "fixed α"}
 #: ``--backend``: the general layer's back end (:attr:`multilat.network.general.adjust.AdjustOptions.backend`)
@@ -75,8 +78,6 @@ WHY_NOT_DIR = {"datum": "the datum is points.csv's fixed, sx_m.. and datum colum
                "points": "the directory's points.csv carries the coordinates",
                "sigma_um": "the σ are observations.csv's sigma column", "instrument": "the σ are observations.csv's "
                "sigma column"}
-for _raw in ("environment", "heights", "formula", "extrapolate", "max_gap_s"):
-    WHY_NOT_CSV[_raw] = "raw readings are corrected and adjusted on the distance path only"
 
 #: the distance path's refusals by station or observation counts (its messages' text)
 _COUNT_RULES = (re.compile(r"needs at least 3 stations"), re.compile(r"3 are needed to place it"),
@@ -188,16 +189,52 @@ def _general_takes(obs, backend: str | None = None) -> bool:
     return n - 3 * obs.n_targets <= MAX_REDUCED
 
 
+def polar_switch(obs, opts, points=None) -> CountRuleRefusal | None:
+    """``--model auto``, decided before any adjustment (each network is adjusted once): the
+    :class:`CountRuleRefusal` for :func:`fall_back` when the distance path would leave out, by its
+    counting rule, targets that carry a polar reading (:func:`polar_left_out`), every option given
+    applies to the general layer (a ``--datum 321`` it can hold: :func:`~multilat.network.general.
+    from_tables.check_321`) and its back end takes the network's size (:func:`_general_takes`); else
+    None (the distance path adjusts it). The rule is the distance path's own first pass,
+    :func:`multilat.network.exclusion.exclude_weak_points` on the tables, with its held offsets,
+    scales and control targets (``opts``: the prepared :class:`~multilat.network.options.NetworkOptions`,
+    ``points``: the ``--points`` table). Networks the distance path refuses outright (fewer than 3
+    stations, ``--strict``) keep that route: the refusal comes before any solve."""
+    if (obs.sigma_azimuth_rad is None or obs.sigma_elevation_rad is None or obs.n_stations < 3 or opts.strict
+            or not all(n in APPLIES_CSV for n in given_options()) or not _general_takes(obs)):
+        return None
+    from multilat.network.adjust import _fixed_offsets, _scale_flags
+    from multilat.network.datum import parse_datum
+    from multilat.network.exclusion import exclude_weak_points
+    from multilat.network.fit import control_ids
+
+    datum = parse_datum(opts.datum)
+    if datum.kind == "control" and points is None:
+        return None
+    if datum.kind == "321":
+        from multilat.network.general.from_tables import check_321
+
+        try:
+            check_321(obs, str(opts.datum))
+        except MultilatError:
+            return None
+    off_free, _ = _fixed_offsets(opts.offsets_m, obs, opts.name("offsets_m"))
+    sc_free = _scale_flags(opts.scale_heads(obs), obs, opts.name("scales"))
+    ctrl = control_ids(obs, datum, points) if datum.kind == "control" else set()
+    _, excluded = exclude_weak_points(obs, offset_free=off_free, scale_free=sc_free, fixed_targets=ctrl)
+    said = {e.id: e.reason for e in excluded if e.kind == "target"}
+    polar = polar_left_out(obs, [f"{e.kind} {e.id!r} left out: {e.reason}" for e in excluded])
+    return CountRuleRefusal(said[polar[0]], left_out=polar) if polar else None
+
+
 @contextlib.contextmanager
 def refusal_hint(obs=None, *, auto: bool = False):
     """Around the distance path's adjustment: a refusal (or, on a network with angle observations, a
     left-out point) by one of its counting rules gets the hint that ``--model general``
     adjusts the network by what the observations determine. ``auto`` (``--model auto``): a
-    counting-rule refusal, or polar points left out (:func:`polar_left_out`) when every option given
-    applies to the general layer and its back end takes the network's size, raise
-    :class:`CountRuleRefusal` instead (the held-back warnings dropped) for :func:`fall_back`."""
+    counting-rule refusal raises :class:`CountRuleRefusal` instead, for :func:`fall_back` (polar
+    points are decided before the adjustment: :func:`polar_switch`)."""
     seen: list = []
-    switch = False
     try:
         with warnings.catch_warnings(record=True) as seen:      # held back, re-emitted below (outside)
             yield
@@ -208,14 +245,8 @@ def refusal_hint(obs=None, *, auto: bool = False):
                 raise CountRuleRefusal(msg) from e
             raise MultilatError(msg + _HINT) from e
         raise
-    else:
-        polar = polar_left_out(obs, [str(w.message) for w in seen]) if auto else []
-        if polar and _general_takes(obs) and all(n in APPLIES_CSV for n in given_options()):
-            switch = True
-            first = next(str(w.message) for w in seen if str(w.message).startswith(f"target '{polar[0]}'"))
-            raise CountRuleRefusal(first.split(" left out: ", 1)[1], left_out=polar)
     finally:
-        for w in [] if switch else seen:
+        for w in seen:
             msg = str(w.message)
             if (obs is not None and obs.has_angle_observations and any(r.search(msg) for r in _COUNT_RULES)
                     and "--model general" not in msg):
@@ -392,8 +423,6 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
                    snooping: bool = True, variance_components: str | None = None, backend: str = "auto"):
     """A multilat observation CSV (with ``--points``, ``--references`` ...) adjusted by the general
     layer: (doc, adjustment, stats). ``params``: the adjust command's parameters."""
-    from multilat.campaign.propagation import read_campaign
-    from multilat.campaign.raw import is_raw_file
     from multilat.cli import checks
     from multilat.cli.network_cmd import parse_fixed_offsets, with_levelled
     from multilat.network.files import read_points, read_reference_lengths
@@ -401,16 +430,9 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
     from multilat.network.sigma_source import default_warning, describe
 
     path = Path(params["observations"])
-    if is_raw_file(path):
-        raise MultilatError(f"--model general does not apply to raw readings ({path}): correct them first "
-                            "(multilat correct) or adjust them on the distance path")
-    sigma_um, seed = params.get("sigma_um"), params.get("seed", 0)
-    checks.sigma_um(sigma_um)
+    seed = params.get("seed", 0)
     checks.seed(seed)
-    src: dict = {}
-    obs, _ = read_campaign(path, sigma_m=None if sigma_um is None else sigma_um * 1e-6,
-                           instrument=params.get("instrument"), sigma_source=src,
-                           azimuth_sense=params.get("azimuth_sense"))
+    obs, corrected, src = _read_observations(path, params, variance_components)
     obs = with_levelled(obs, params.get("levelled"))
     refs = read_reference_lengths(params["references"]) if params.get("references") is not None else None
     if refs is not None and not params.get("scale_bar"):
@@ -433,7 +455,7 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
         scales = [h for h in obs.head_ids if h != fixed_scale]
     def build(o):
         return network_from_tables(o, points=pts, datum=params.get("datum", "free"), offsets=offsets, scales=scales,
-                                   scale_bars=refs, rng=seed, source=str(path))
+                                   scale_bars=refs, rng=seed, source=str(path), backend=backend)
 
     net, options = build(obs)
     src_doc = {"kind": str(src.get("kind", "file column")), "file": str(path),
@@ -453,12 +475,50 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
         raise
     if note := default_warning(src, path):           # the distance path's words and key (JSON "warnings")
         doc["warnings"] = [note, *doc["warnings"]]
+    if corrected is not None:
+        doc["notes"] = [*doc["notes"], f"raw readings corrected as by `multilat correct` ({obs.n_obs} distances); "
+                        "adjusted with each distance's σ, as the distance path; the sensors' correlations "
+                        "(with_correlations) are computed on the distance path only"]
+    _datum_321_words(doc, params.get("datum", "free"))
     if doc["global_test"]["passed"] is False and (hint := _sense_hint(obs, sense, build, doc["sigma0"], strict, tests)):
         doc["warnings"] = [*doc["warnings"], hint]
     az_rec = _az.record(obs, *sense)
     if az_rec is not None:
         doc["azimuth_sense"] = az_rec
     return doc, adj, stats
+
+
+def _read_observations(path: Path, params: dict, variance_components: str | None):
+    """The observations as the distance path reads them (:func:`multilat.campaign.propagation.
+    read_campaign`: an observation CSV, or raw readings corrected with ``--environment``, ``--heights``
+    ...), with its rules (``--instrument`` applied or refused, no variance components on raw readings):
+    (obs, corrected or None, the σ source record). ``params`` without the raw options is a caller
+    other than ``adjust`` (``propagate --model general``): raw readings refused, ``--instrument`` its own."""
+    from multilat.campaign.propagation import read_campaign
+    from multilat.cli import checks
+    from multilat.cli.network_cmd import _check_instrument_used
+
+    sigma_um = params.get("sigma_um")
+    checks.sigma_um(sigma_um)
+    src: dict = {}
+    raw = {k: params[k] for k in ("environment", "heights", "formula", "extrapolate", "max_gap_s") if k in params}
+    if not raw:                                      # a caller without the raw options (propagate --model general)
+        from multilat.campaign.raw import is_raw_file
+
+        if is_raw_file(path):
+            raise MultilatError(f"--model general does not apply to raw readings ({path}) here: correct them "
+                                "first (multilat correct), or use the distance path")
+    instrument = params.get("instrument")
+    obs, corrected = read_campaign(path, sigma_m=None if sigma_um is None else sigma_um * 1e-6, instrument=instrument,
+                                   sigma_source=src, azimuth_sense=params.get("azimuth_sense"), **raw)
+    if corrected is not None:                        # raw readings: the distance path's reader and rules
+        src["defaulted"] = instrument is None
+        if variance_components is not None:
+            raise MultilatError("--variance-components applies to an observation file: raw readings get "
+                                "their σ from the distance model and the sensors")
+    if raw:                                          # adjust's rule (propagate's --noise model uses it)
+        _check_instrument_used(instrument, path, obs, src, corrected)
+    return obs, corrected, src
 
 
 def _sense_hint(obs, sense, build, sigma0, strict, tests) -> str | None:
@@ -478,3 +538,15 @@ def _sense_hint(obs, sense, build, sigma0, strict, tests) -> str | None:
     except MultilatError:
         return None
     return sense_hint(net, sigma0, options=options, strict=strict, **tests)
+
+
+def _datum_321_words(doc: dict, datum: str) -> None:
+    """``--datum 321:A,B,C``: the JSON's ``datum`` and ``frame`` in the distance path's words (the
+    general layer holds the 6 coordinates as partly fixed points: :func:`.from_tables.in_frame_321`)."""
+    from multilat.network.datum import parse_datum
+    from multilat.network.frame_words import frame_words
+
+    d = parse_datum(datum)
+    if d.kind == "321":
+        doc["datum"] = f"{d.describe()} (minimal constraints; the other datums' cofactors S-transformed onto it)"
+        doc["frame"] = {**doc["frame"], **{k: v for k, v in frame_words(d).items() if k != "scale"}}

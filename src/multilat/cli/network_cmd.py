@@ -288,6 +288,8 @@ def adjust_command(
         # auto: the general layer can do better only with what the counting rules do not count: angles
         # or control (a distance-only network it cannot place either keeps the old refusal)
         auto = model == "auto" and (obs.has_angle_observations or pts is not None)
+        if auto and (polar := general_adjust.polar_switch(obs, opts, pts)) is not None:
+            raise polar                                   # decided on the tables: adjusted once, there
         res, vc = _adjust_with_progress(obs, opts, data, auto=auto, files=(observations, points))
     except general_adjust.CountRuleRefusal as refusal:     # --model auto: the general layer adjusts it
         return general_adjust.fall_back(given, refusal)

@@ -20,7 +20,9 @@ The mapping keeps the conventions of the distance path exactly (``docs/conventio
 * datum ``free`` is inner constraints over every point, ``free:P,..`` over those points; ``control``
   (``control:P,..``) holds the given points' coordinates (``FIXED``) or, with ``sx_m, sy_m, sz_m``,
   observes them (``WEIGHTED``); the other rows of ``--points`` are approximate coordinates.
-  ``321:A,B,C`` is refused (not available on this path).
+  ``321:A,B,C`` moves the approximate coordinates into the 3-2-1 frame of A, B, C and holds A's x,
+  y, z, B's y, z and C's z (:func:`in_frame_321`): the distance path's frame and cofactors; refused
+  where levelled stations' angles observe the vertical (:func:`check_321`).
 
 Approximate coordinates: the ``--points`` rows, then the general chain (:mod:`.approximate`: polar
 points, resection, intersection, multilateration, the distance-only search of
@@ -40,18 +42,19 @@ from multilat.network.general.adjust import AdjustOptions
 from multilat.network.general.observations import Block, Network
 from multilat.network.general.points import FIXED, FREE, WEIGHTED, PointSet
 
-__all__ = ["network_from_tables"]
+__all__ = ["network_from_tables", "check_321", "in_frame_321"]
 
 
 def network_from_tables(obs, *, points=None, datum="free", offsets=None, scales=False, scale_bars=None,
-                        rng=0, source: str = "") -> tuple[Network, AdjustOptions]:
+                        rng=0, source: str = "", backend: str = "auto") -> tuple[Network, AdjustOptions]:
     """The general network of multilat's tables and the adjustment options of its datum.
 
     obs : :class:`multilat.network.data.Observations`; points : :class:`~multilat.network.data.Points`
-    or None; datum : ``free[:P,..]``, ``control[:P,..]`` (``321`` refused); offsets, scales : as
+    or None; datum : ``free[:P,..]``, ``321:A,B,C``, ``control[:P,..]``; offsets, scales : as
     :func:`multilat.network.adjust.adjust` (keys are head ids); scale_bars : ReferenceLengths or None;
     rng : seed of the distance path's initial values (networks without angles); source : the file
-    name, for labels.
+    name, for labels; backend : :attr:`.adjust.AdjustOptions.backend`, whose size limit is checked
+    before the approximate coordinates (:func:`.run.check_sizes`).
     """
     from multilat.network.adjust import _fixed_offsets, _scale_flags
     from multilat.network.couplings import coupling_spec
@@ -59,8 +62,7 @@ def network_from_tables(obs, *, points=None, datum="free", offsets=None, scales=
 
     d = parse_datum(datum)
     if d.kind == "321":
-        raise MultilatError(f"--datum {datum}: the 3-2-1 datum is not available with --model general "
-                            "(use free[:P,..] or control[:P,..])")
+        check_321(obs, datum)
     ids = obs.station_ids + obs.target_ids
     if d.points is not None:
         for p in d.points:
@@ -74,6 +76,10 @@ def network_from_tables(obs, *, points=None, datum="free", offsets=None, scales=
         if stray:
             warnings.warn(f"points: {len(stray)} id(s) not in the observations, ignored: "
                           f"{', '.join(stray[:8])}{'...' if len(stray) > 8 else ''}", UserWarning, stacklevel=2)
+        if points.std_m is not None and d.kind != "control":      # the distance path's warning, its words
+            warnings.warn("points: the standard uncertainties (sx_m, sy_m, sz_m) make weighted control under "
+                          "--datum control only; here the points are approximate coordinates", UserWarning,
+                          stacklevel=2)
     spec = coupling_spec(obs, bars=scale_bars, points=points, control=d.kind == "control")
     pts = _point_set(obs, points, d, spec, rng)
     off_free, off_val = _fixed_offsets(offsets, obs)
@@ -92,9 +98,61 @@ def network_from_tables(obs, *, points=None, datum="free", offsets=None, scales=
     if not np.all(off_free):
         notes.append("held head offsets subtracted from their heads' distances (the constant held at 0)")
     net = Network(pts, tuple(blocks), tuple(notes))
+    opts = AdjustOptions(datum="auto" if (d.kind != "free" or d.points is not None) else "free", backend=backend)
+    from multilat.network.general.run import check_sizes
+
+    if np.isnan(pts.xyz_m).any():                   # the approximate chain has work: the size first
+        check_sizes(net, opts)                      # (else adjust_network checks it, as for any input)
     net = _with_approximations(net, obs, rng)
-    opts = AdjustOptions(datum="auto" if (d.kind == "control" or d.points is not None) else "free")
+    if d.kind == "321":
+        net = in_frame_321(net, d, datum)
     return net, opts
+
+
+def check_321(obs, datum: str) -> None:
+    """``--datum 321:A,B,C`` means on the general layer what it means on the distance path (A at the
+    origin, B on +x, C in the xy-plane: a rigid motion of the network, 6 coordinates held) only when
+    the observations leave the 6 rigid motions free: refused in one line when angles read by levelled
+    stations observe the vertical (the frame may then turn about z only: datum defect 4)."""
+    if obs.sigma_azimuth_rad is None and obs.sigma_elevation_rad is None:
+        return
+    ang = np.zeros(obs.n_obs, bool)
+    for s in (obs.sigma_azimuth_rad, obs.sigma_elevation_rad):
+        if s is not None:
+            ang |= np.isfinite(s)
+    lev = sorted({obs.station_ids[i] for i in np.unique(obs.station_index[ang]) if obs.station_ids[i] in obs.levelled})
+    if lev:
+        raise MultilatError(f"--datum {datum} does not apply to this network on the general model: the angles of "
+                            f"levelled station(s) {', '.join(lev[:5])}{', ...' if len(lev) > 5 else ''} observe the "
+                            "vertical, so the frame can turn about z only (datum defect 4, not the 6 rigid motions "
+                            "3-2-1 holds); use --datum free[:P,..] or control[:P,..]")
+
+
+def in_frame_321(net: Network, d, datum: str) -> Network:
+    """``net`` moved rigidly into the 3-2-1 frame of its approximate coordinates (``d.points`` = A, B,
+    C: :func:`multilat.network.datum.frame_321`, the distance path's), with A's x, y, z, B's y, z and
+    C's z held there (``FIXED``): minimal constraints, whose cofactor is the S-transformation of any
+    other datum's onto ``Eᵀ dx = 0`` (:func:`multilat.network.datum.s_transform`, E those 6 rows),
+    and whose solution is the distance path's 3-2-1 frame of the adjusted A, B, C. A point of the three
+    without approximate coordinates is named."""
+    from multilat.network.datum import apply_rigid, frame_321
+    from multilat.network.general.approximate import reasons
+
+    pts = net.points
+    ix = [pts.index(p) for p in d.points]
+    for p, i in zip(d.points, ix):
+        if not np.all(np.isfinite(pts.xyz_m[i])):
+            why = reasons(net).get(p, "no approximate coordinates")
+            raise MultilatError(f"--datum {datum}: point {p!r} cannot carry the datum: {why}")
+    R, t = frame_321(*pts.xyz_m[ix])
+    xyz = apply_rigid(R, t, pts.xyz_m)
+    status = pts.status.copy()
+    for i, axes in zip(ix, ((0, 1, 2), (1, 2), (2,))):
+        xyz[i, list(axes)] = 0.0                    # exactly, not 1e-16
+        status[i, list(axes)] = FIXED
+    moved = type(pts)(pts.ids, xyz, status, pts.sigma_m, pts.constrained)
+    note = f"datum {d.describe()} (minimal constraints: {d.points[0]} x, y, z, {d.points[1]} y, z, {d.points[2]} z held)"
+    return Network(moved, net.blocks, net.notes + (note,))
 
 
 def _point_set(obs, points, d, spec, rng) -> PointSet:
@@ -120,7 +178,7 @@ def _point_set(obs, points, d, spec, rng) -> PointSet:
                     status[k], sigma[k] = WEIGHTED, weighted[p]
                 else:
                     status[k] = FIXED
-    elif d.points is not None:
+    elif d.kind == "free" and d.points is not None:
         constrained[[ids.index(p) for p in d.points]] = True
     return PointSet(tuple(ids), xyz, status, sigma, constrained)
 

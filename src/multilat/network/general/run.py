@@ -22,12 +22,13 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.general.adjust import (AdjustOptions, GeneralResult, System, UndeterminedError, adjust,
-                                             check_size)
+                                             backend_for, check_size)
 from multilat.network.general.approximate import approximate, reasons
 from multilat.network.general.observations import Network, without_points
 from multilat.network.general.points import FREE
 
-__all__ = ["NetworkAdjustment", "adjust_network", "leave_out", "undetermined_reason", "MAX_ROUNDS", "sense_hint"]
+__all__ = ["NetworkAdjustment", "adjust_network", "check_sizes", "leave_out", "undetermined_reason", "MAX_ROUNDS",
+           "sense_hint"]
 
 #: rounds of leaving out undetermined points before giving up (each round removes at least one point)
 MAX_ROUNDS = 10
@@ -60,7 +61,7 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
                    max_rounds: int = MAX_ROUNDS) -> NetworkAdjustment:
     """Approximate coordinates, adjustment, undetermined points left out and named (module docstring)."""
     given, net, excluded = network, network, []
-    check_size(System(network), options)            # the chosen back end's limit, before the approximations
+    check_sizes(network, options)                   # the chosen back end's limit, before the approximations
     for rnd in range(1, max_rounds + 1):
         missing = reasons(net)                      # {id: what would reach it}
         if missing and not strict:
@@ -77,6 +78,18 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
     raise MultilatError(f"still undetermined points after {max_rounds} rounds of leaving them out "
                         f"({len(excluded)} left out: {', '.join(e['id'] for e in excluded[:5])}"
                         f"{', ...' if len(excluded) > 5 else ''}); use --strict to see the first")
+
+
+def check_sizes(network: Network, options: AdjustOptions | None = None) -> None:
+    """The chosen back end's size limit, from the design alone (before the approximate coordinates,
+    which may cost more than the refusal): the dense one's unknowns (:func:`.adjust.check_size`), the
+    sparse one's reduced system (:func:`.sparse.check_reduced_size`, a lower bound of its size)."""
+    system = System(network)
+    check_size(system, options)
+    if backend_for(system, options) == "sparse":
+        from multilat.network.general.sparse import check_reduced_size
+
+        check_reduced_size(system)
 
 
 def leave_out(net: Network, reasons: dict, rnd: int, excluded: list, error: MultilatError | None = None) -> Network:

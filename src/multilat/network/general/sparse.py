@@ -60,7 +60,7 @@ from multilat.network.general import kinds as kinds_registry
 from multilat.network.general.determinability import Determinability, classify, schur_null_space
 
 __all__ = ["RCOND_BLOCK", "MAX_REDUCED", "SparseCofactor", "Reduced", "RowParts", "assemble", "eliminate",
-           "frozen_step", "Linearised", "linearise", "row_parts"]
+           "frozen_step", "Linearised", "linearise", "row_parts", "check_reduced_size"]
 
 #: an eliminated point's block, scaled to a unit diagonal, has its smallest eigenvalue at least this
 #: fraction of its largest (condition <= 1e6: its explicit inverse is exact to ~1e-10 relative); a
@@ -441,3 +441,62 @@ def redundancy(lin: Linearised) -> np.ndarray:
         jh, jwm = jw @ lin.h, jw @ lin.w
         quad += -2.0 * np.einsum("id,id->i", jh, jwm) + np.einsum("id,de,ie->i", jh, lin.m, jh)
     return 1.0 - quad
+
+
+def check_reduced_size(system) -> None:
+    """Refuse, before any approximate coordinate, a network whose reduced system cannot stay within
+    :data:`MAX_REDUCED` (the message of the check in the elimination, with the bounds). From the
+    design alone: the Jacobian's structure (evaluated at arbitrary distinct coordinates: the kinds'
+    columns do not depend on the values) gives the graph "two points share a row"; the points
+    eliminated form an independent set of it, and a matching ``M`` bounds what any independent set
+    takes: at most the free coordinates of all points less ``min(w_u, w_v)`` for each edge of ``M``
+    (``w``: a point's free coordinates; a greedy maximal matching, low degree first). So the reduced
+    system keeps at least ``n_free`` less that many: a lower bound, never a refusal of a network the
+    elimination would take (ill-conditioned points only add to it). The points the adjustment will
+    leave out as undetermined are counted (they are not known before the approximate chain).
+
+    First, without the Jacobian: a vertex cover ``C`` of that graph (every point a row references but
+    one, all the points of a correlated block) bounds the bound, ``Σ_M min(w) <= Σ_C w``; when even
+    that leaves at most :data:`MAX_REDUCED`, nothing more is done (a tracker network: ``C`` = the
+    stations, the reduced system the elimination forms)."""
+    from multilat.network.general.observations import point_keys
+
+    if system.n_free <= MAX_REDUCED:
+        return
+    slots = _point_slots(system)
+    n = slots.shape[0]
+    w = (slots >= 0).sum(axis=1)
+    cover = np.zeros(n, bool)
+    for b in system.blocks:
+        keys = point_keys(b)
+        if b.cov is not None:                    # whitening couples its rows: any two of its points
+            cover[np.concatenate([np.asarray(b.index[k], int).ravel() for k in keys])] = True
+        elif len(keys) > 1:
+            rest = [k for k in keys if k != "to"] if "to" in keys else keys[:-1]
+            for k in rest:
+                cover[np.asarray(b.index[k], int).ravel()] = True
+    if system.n_free - int(w.sum()) + int(w[cover].sum()) <= MAX_REDUCED:
+        return
+    x = system.layout.initial()
+    x[system.layout.point_cols] = ((np.arange(3 * n) + 1) * 0.6180339887498949 % 1.0).reshape(n, 3) * 100.0
+    with np.errstate(all="ignore"):
+        _, _, jw = assemble(system, x)
+    graph = _graph(system, jw, slots)
+    ind, ptr, deg = graph["adj"].indices, graph["adj"].indptr, graph["deg"]
+    matched = np.zeros(n, bool)
+    lost = 0                                     # coordinates no independent set can take
+    for u in np.argsort(deg, kind="stable"):
+        if matched[u] or not w[u]:
+            continue
+        for v in ind[ptr[u]:ptr[u + 1]]:
+            if v != u and not matched[v] and w[v]:
+                matched[u] = matched[v] = True
+                lost += min(int(w[u]), int(w[v]))
+                break
+    k_min = system.n_free - (int(w.sum()) - lost)
+    if k_min > MAX_REDUCED:
+        m_max = int(np.count_nonzero(w)) - int(matched.sum()) // 2
+        raise MultilatError(
+            f"the general model's sparse back end takes a reduced system of at most {MAX_REDUCED} parameters; "
+            f"this network leaves at least {k_min} after eliminating at most {m_max} of {n} points "
+            f"({system.n_free} unknowns, {system.n_rows} observation rows)")
