@@ -89,7 +89,7 @@ def _put(new_dir: str, olds: str, rename: dict[str, str] | None = None) -> None:
 
 _put("model", "data.py model.py angles.py angle_rows.py couplings.py datum.py scale_datum.py problem.py "
               "covariance.py _covariance_kernels.py statistics.py _sparse_kernels.py sigma_source.py "
-              "repeats.py frame_words.py general/points.py general/observations.py general/layout.py "
+              "repeats.py frame_words.py parameter_layout.py general/points.py general/observations.py general/layout.py "
               "general/determinability.py", {"model.py": "distance.py"})
 _put("model/kinds", " ".join(f"general/kinds/{m}.py" for m in (
     "__init__ columns coordinate_difference direction geometry height_difference horizontal_angle "
