@@ -207,6 +207,56 @@ def test_bit_identical_across_chunks_and_maps(tracker):
         assert np.array_equal(a.mc_std, other.mc_std) and np.array_equal(a.interval_shortest, other.interval_shortest)
 
 
+def test_draws_are_sigma_or_cholesky_times_the_row_normals():
+    """``draw`` is ``f(x̂) + σ e`` on independent rows and ``f(x̂) + L e`` on a correlated block, ``e``
+    the generator's standard normals in row order: the same bits as scaling them block by block (a
+    network with both: partly_fixed's correlated weighted coordinates beside its independent rows)."""
+    adj = _gama("partly_fixed")
+    s = adj.system
+    assert {b.cov is None for b in s.blocks} == {True, False}
+    fr = freeze(adj.system, adj.result)
+    obs = draw(fr, 50, np.random.default_rng(3))
+    e = np.random.default_rng(3).standard_normal((50, fr.n_rows))
+    for L, b, sl in zip(s.chol, s.blocks, s.rows):
+        want = e[:, sl] * b.sigma if b.cov is None else e[:, sl] @ L.T
+        assert np.array_equal(obs[:, sl], want + fr.computed[sl])
+
+
+def test_frozen_first_step_from_the_systems_jacobian(tracker):
+    """``freeze`` evaluates each block once; its first-step gain ``K = Q J^T P`` is the one from
+    :meth:`System.evaluate`'s Jacobian (bit for bit: the same values scattered the same way)."""
+    fr = freeze(tracker.system, tracker.result)
+    _, jac = tracker.system.evaluate(fr.x_hat)
+    assert np.array_equal(fr.gain, fr.q @ fr.weighted(np.ascontiguousarray(jac.T)))
+    assert np.array_equal(fr.program["kt"], fr.gain.T)
+
+
+@pytest.mark.parametrize("name", ["tracker", "partly_fixed"])
+def test_point_covariance_is_the_engines_summary(name, tracker):
+    """Each point's MC covariance is the engine's streamed covariance (:func:`multilat.montecarlo.summarize`,
+    the distance path's estimator) of its free columns' samples, bit for bit, zero where a coordinate is
+    held; numpy's ``np.cov`` of the same samples (a second method: one BLAS product) agrees to 1e-12
+    relative (float order only). The columns' std is that summary's too."""
+    from multilat.montecarlo import summarize
+
+    adj = tracker if name == "tracker" else _gama(name)
+    res = propagate(adj.system, adj.result, trials=2500, rng=5, keep_samples=True, pairs=())
+    labels = list(res.labels)
+    partly = 0
+    for pid, cov in zip(res.point_ids, res.point_cov_mc):
+        have = np.array([f"{c}:{pid}" in labels for c in "xyz"])
+        cols = [labels.index(f"{c}:{pid}") for c in "xyz" if f"{c}:{pid}" in labels]
+        partly += not have.all()
+        y = res.samples[:, cols].astype(np.float64)
+        r = summarize(y)
+        want = np.zeros((3, 3))
+        want[np.ix_(have, have)] = r.cov
+        assert np.array_equal(cov, want)
+        assert np.array_equal(res.mc_std[cols], r.std)
+        assert np.allclose(cov[np.ix_(have, have)], np.atleast_2d(np.cov(y, rowvar=False)), rtol=1e-12, atol=0)
+    assert (partly > 0) == (name == "partly_fixed")      # a point with a held coordinate is covered
+
+
 def test_far_trial_goes_to_full_gauss_newton():
     adj = _gama("trilateration_fixed")
     fr = freeze(adj.system, adj.result)
