@@ -231,6 +231,25 @@ def test_frozen_first_step_from_the_systems_jacobian(tracker):
     assert np.array_equal(fr.program["kt"], fr.gain.T)
 
 
+@pytest.mark.parametrize("name", ["partly_fixed", "vectors", "height_differences", "two_trackers"])
+def test_kernel_weight_matrix_is_the_block_diagonal(name):
+    """The kernel's ``P`` (CSR arrays of the program) is ``scipy.sparse.block_diag`` of the blocks'
+    ``1/σ²`` and ``C⁻¹`` (a second construction), array for array; ``wdiag`` holds the rows whose
+    only entry is their diagonal (networks with correlated blocks, and one without)."""
+    import scipy.sparse
+
+    adj = _gama(name)
+    fr = freeze(adj.system, adj.result)
+    p = scipy.sparse.block_diag([scipy.sparse.diags(w) if w.ndim == 1 else scipy.sparse.csr_matrix(w)
+                                 for w in fr.weight], format="csr")
+    prog = fr.program
+    assert np.array_equal(prog["p_ptr"], p.indptr) and np.array_equal(prog["p_idx"], p.indices)
+    assert np.array_equal(prog["p_val"], p.data)
+    diag_only = np.array([p.indptr[i + 1] - p.indptr[i] == 1 and p.indices[p.indptr[i]] == i for i in range(p.shape[0])])
+    assert np.array_equal(prog["wdiag"] > 0, diag_only)
+    assert np.array_equal(prog["wdiag"][diag_only], p.diagonal()[diag_only])
+
+
 @pytest.mark.parametrize("name", ["tracker", "partly_fixed"])
 def test_point_covariance_is_the_engines_summary(name, tracker):
     """Each point's MC covariance is the engine's streamed covariance (:func:`multilat.montecarlo.summarize`,

@@ -207,18 +207,34 @@ def _program(system: System, columns_of: list, weight) -> dict:
             for k, f in enumerate(map(tuple, columns[:, 6:9])):
                 setup[sl.start + k] = frames.setdefault(f, len(frames))
     red = system.layout.reduced
-    p = scipy.sparse.block_diag([scipy.sparse.diags(w) if w.ndim == 1 else scipy.sparse.csr_matrix(w)
-                                 for w in weight], format="csr")
+    p_ptr, p_idx, p_val = _weight_csr(weight, system.rows)
     rcols = np.where(cols >= 0, red[cols], -1).astype(np.int64)     # each slot's free column, -1 for none
-    n_in_row = np.diff(p.indptr)
+    n_in_row = np.diff(p_ptr)
     wdiag = np.zeros(R)
     one = np.flatnonzero(n_in_row == 1)
-    one = one[p.indices[p.indptr[one]] == one]
-    wdiag[one] = p.data[p.indptr[one]]
+    one = one[p_idx[p_ptr[one]] == one]
+    wdiag[one] = p_val[p_ptr[one]]
     return {"code": code, "cols": cols, "pair": _tracker_pairs(code, cols, hz, comp), "wdiag": wdiag,
             "rcols": rcols, "hz": hz, "comp": comp, "setup": setup,
             "frames": np.array(list(frames), np.int64).reshape(-1, 3),
-            "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
+            "p_ptr": p_ptr, "p_idx": p_idx, "p_val": p_val}
+
+
+def _weight_csr(weight, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``P``, block diagonal (each block's ``1/σ²`` (R_b,) or ``C⁻¹`` (R_b, R_b)), as CSR arrays
+    ``(indptr, indices, data)``, zeros not stored, columns in order within a row: what
+    ``scipy.sparse.block_diag`` of the blocks gives, without its set-up (half of ``freeze``)."""
+    idx, val, count = [], [], []
+    for w, sl in zip(weight, rows):
+        nz = w != 0
+        if w.ndim == 1:
+            idx.append(sl.start + np.flatnonzero(nz))
+        else:
+            idx.append(sl.start + np.nonzero(nz)[1])
+        val.append(w[nz])
+        count.append(nz.reshape(len(nz), -1).sum(1))
+    ptr = np.concatenate([[0], np.cumsum(np.concatenate(count))]).astype(np.int64)
+    return ptr, np.concatenate(idx).astype(np.int64), np.concatenate(val).astype(float)
 
 
 def _tracker_pairs(code, cols, hz, comp) -> np.ndarray:
