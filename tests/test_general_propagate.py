@@ -18,6 +18,10 @@ its solution, against independent values.
   4 combined MC standard errors; the datum differs only at second order (the old path's Kabsch fit on
   all points against the minimum-trace inner constraints over all points: the same to first order);
 * bit-identical results across chunk sizes and maps;
+* the draws are ``σ e`` / ``L e`` of the generator's normals, the first-step gain is ``Q J^T P`` with
+  ``System.evaluate``'s ``J``, the kernel's ``P`` is ``scipy.sparse.block_diag`` of the blocks' weights
+  (bit for bit), and each point's MC covariance is the engine's ``summarize`` covariance of its
+  samples (``np.cov`` to 1e-12 relative);
 * a far trial (observations moved by 100 σ: metres, on this network of 0.1 m σ) goes to full Gauss-Newton and still equals ``adjust``.
 """
 
