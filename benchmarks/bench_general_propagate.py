@@ -114,7 +114,8 @@ def run(quick: bool = False) -> list[dict]:
     t_new, t_old, ta, tb, cpu = _interleaved(lambda: solve(fr, obs), lambda: pb_rows.network.solve(dist_rows), reps)
     rows.append(_row("general_solve_vs_distance_only_same_rows", t_new, t_old, trials,
                      "compiled distance-only BatchedNetwork.solve, 4 stations x 33 targets (same number of rows)",
-                     load_avg_1min=load, goal_ratio=0.8, runs_s=ta, baseline_runs_s=tb, cpu_ratio=cpu, rows_general=fr.n_rows,
+                     load_avg_1min=load, goal_ratio=0.8, runs_s=ta, baseline_runs_s=tb, cpu_ratio=cpu,
+                     rows_general=fr.n_rows,
                      rows_distance_only=int(pb_rows.network.n_obs), unknowns_distance_only=int(pb_rows.network.n_params),
                      distance_only_iterations_mean=float(pb_rows.network.solve(dist_rows[:2000]).iterations.mean())))
 
@@ -126,7 +127,8 @@ def run(quick: bool = False) -> list[dict]:
     t_new, t_old, ta, tb, cpu = _interleaved(lambda: solve(fp, obs_p), lambda: net.solve(dist), reps)
     rows.append(_row("general_solve_distance_only_network", t_new, t_old, trials,
                      "compiled distance-only BatchedNetwork.solve, same network", load_avg_1min=load,
-                     runs_s=ta, baseline_runs_s=tb, cpu_ratio=cpu, rows_general=fp.n_rows, unknowns_general=int(len(fp.free))))
+                     runs_s=ta, baseline_runs_s=tb, cpu_ratio=cpu, rows_general=fp.n_rows,
+                     unknowns_general=int(len(fp.free))))
 
     propagate(adj.system, adj.result, trials=1000, rng=1, pairs=())
     old_propagate(pb, trials=1000, rng=1, noise="gaussian")

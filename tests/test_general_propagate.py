@@ -249,7 +249,8 @@ def test_kernel_weight_matrix_is_the_block_diagonal(name):
     prog = fr.program
     assert np.array_equal(prog["p_ptr"], p.indptr) and np.array_equal(prog["p_idx"], p.indices)
     assert np.array_equal(prog["p_val"], p.data)
-    diag_only = np.array([p.indptr[i + 1] - p.indptr[i] == 1 and p.indices[p.indptr[i]] == i for i in range(p.shape[0])])
+    diag_only = np.array([p.indptr[i + 1] - p.indptr[i] == 1 and p.indices[p.indptr[i]] == i
+                          for i in range(p.shape[0])])
     assert np.array_equal(prog["wdiag"] > 0, diag_only)
     assert np.array_equal(prog["wdiag"][diag_only], p.diagonal()[diag_only])
 

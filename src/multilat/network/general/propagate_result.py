@@ -99,7 +99,8 @@ def _statistics(dev: np.ndarray, pc: np.ndarray, red: np.ndarray):
     (N, k) in float64, as the distance path summarises (:func:`multilat.network.propagate_summary.summarise`):
     each point with a free coordinate (``pc`` its full columns, ``red`` full -> free column) its own
     columns at once, whose summary gives its MC 3 x 3 covariance too; the other columns eight at a
-    time. Independent tasks in two threads from 50 000 trials (:func:`~multilat.network.propagate_summary._in_two_threads`),
+    time. Independent tasks in two threads from 50 000 trials
+    (:func:`~multilat.network.propagate_summary._in_two_threads`),
     no (N, k) float64 copy. Returns mean, std, the two intervals (k, 2) (deviations), kurtosis, the
     covariances (P, 3, 3) and the point indices P."""
     from multilat.network.propagate_summary import _in_two_threads, _kurtosis
