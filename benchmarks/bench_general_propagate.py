@@ -19,7 +19,11 @@ Rows (trials/s; ``ratio`` = general trials/s / distance-only trials/s; the goal 
   and 33 targets (its 14 and 19 more drawn in the same volume, seed 7): 132 distances, 115 unknowns
   ("a network of the same size" read as the same number of rows; the first row reads it as the same points).
 * ``general_propagate_vs_distance_only``: the whole in-process ``propagate`` of each (drawing, solving,
-  summaries; gaussian noise; default map: threads), same trials.
+  summaries; gaussian noise; default map: threads), same trials, as many interleaved repeats as the
+  solver rows (3 let one burst of load set the median: 0.55 in one run of 2026-11-27).
+
+Every row also records ``cpu_ratio``: the ratio of the median process CPU seconds (all threads) of
+the two, the work done; the wall ``ratio`` is the goal's measure.
 
 Each row records the 1-minute load average before it ran (the machine is shared: compare ratios).
 Quick mode: 10 000 trials, 7 interleaved repeats (3 left the median of a 0.1 s run at the mercy of one
@@ -40,13 +44,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 
 def _interleaved(fa, fb, reps):
-    ta, tb = [], []
+    """Medians of ``reps`` interleaved runs (A B A B ...): wall seconds of each, their runs, and the
+    ratio of the medians of the process CPU seconds (all threads: the work, less at the mercy of the
+    shared machine's load than the wall time)."""
+    ta, tb, ca, cb = [], [], [], []
     for _ in range(reps):
-        for f, out in ((fa, ta), (fb, tb)):
-            t0 = time.perf_counter()
+        for f, out, cpu in ((fa, ta, ca), (fb, tb, cb)):
+            c0, t0 = time.process_time(), time.perf_counter()
             f()
             out.append(time.perf_counter() - t0)
-    return float(np.median(ta)), float(np.median(tb)), ta, tb
+            cpu.append(time.process_time() - c0)
+    return float(np.median(ta)), float(np.median(tb)), ta, tb, float(np.median(cb) / np.median(ca))
 
 
 def _row(name, t_new, t_old, trials, baseline, **extra):
@@ -94,19 +102,20 @@ def run(quick: bool = False) -> list[dict]:
                 chord_steps_mean=float(sol.iterations.mean()), full_gauss_newton=int(sol.full_gauss_newton.sum()),
                 distance_only_iterations_mean=float(net.solve(dist[:2000]).iterations.mean()))
     load = load_avg()
-    t_new, t_old, ta, tb = _interleaved(lambda: solve(fr, obs), lambda: net.solve(dist), reps)
+    t_new, t_old, ta, tb, cpu = _interleaved(lambda: solve(fr, obs), lambda: net.solve(dist), reps)
     rows.append(_row("general_solve_vs_distance_only", t_new, t_old, trials,
                      "compiled distance-only BatchedNetwork.solve, small volume (same points)", load_avg_1min=load,
-                     goal_ratio=0.8, runs_s=ta, baseline_runs_s=tb, **size))
+                     goal_ratio=0.8, runs_s=ta, baseline_runs_s=tb, cpu_ratio=cpu, **size))
 
     pb_rows = problem_from_config(_same_rows(small_volume()), sigma_m=4.7e-6)
     dist_rows = pb_rows.distance_m + np.random.default_rng(4).standard_normal((trials, pb_rows.distance_m.size)) * 4.7e-6
     pb_rows.network.solve(dist_rows[:100])
     load = load_avg()
-    t_new, t_old, ta, tb = _interleaved(lambda: solve(fr, obs), lambda: pb_rows.network.solve(dist_rows), reps)
+    t_new, t_old, ta, tb, cpu = _interleaved(lambda: solve(fr, obs), lambda: pb_rows.network.solve(dist_rows), reps)
     rows.append(_row("general_solve_vs_distance_only_same_rows", t_new, t_old, trials,
                      "compiled distance-only BatchedNetwork.solve, 4 stations x 33 targets (same number of rows)",
-                     load_avg_1min=load, goal_ratio=0.8, runs_s=ta, baseline_runs_s=tb, rows_general=fr.n_rows,
+                     load_avg_1min=load, goal_ratio=0.8, runs_s=ta, baseline_runs_s=tb, cpu_ratio=cpu,
+                     rows_general=fr.n_rows,
                      rows_distance_only=int(pb_rows.network.n_obs), unknowns_distance_only=int(pb_rows.network.n_params),
                      distance_only_iterations_mean=float(pb_rows.network.solve(dist_rows[:2000]).iterations.mean())))
 
@@ -115,20 +124,21 @@ def run(quick: bool = False) -> list[dict]:
     obs_p = draw(fp, trials, np.random.default_rng(3))
     solve(fp, obs_p[:100])
     load = load_avg()
-    t_new, t_old, ta, tb = _interleaved(lambda: solve(fp, obs_p), lambda: net.solve(dist), reps)
+    t_new, t_old, ta, tb, cpu = _interleaved(lambda: solve(fp, obs_p), lambda: net.solve(dist), reps)
     rows.append(_row("general_solve_distance_only_network", t_new, t_old, trials,
                      "compiled distance-only BatchedNetwork.solve, same network", load_avg_1min=load,
-                     runs_s=ta, baseline_runs_s=tb, rows_general=fp.n_rows, unknowns_general=int(len(fp.free))))
+                     runs_s=ta, baseline_runs_s=tb, cpu_ratio=cpu, rows_general=fp.n_rows,
+                     unknowns_general=int(len(fp.free))))
 
     propagate(adj.system, adj.result, trials=1000, rng=1, pairs=())
     old_propagate(pb, trials=1000, rng=1, noise="gaussian")
     load = load_avg()
-    t_new, t_old, ta, tb = _interleaved(lambda: propagate(adj.system, adj.result, trials=trials, rng=1, pairs=()),
+    t_new, t_old, ta, tb, cpu = _interleaved(lambda: propagate(adj.system, adj.result, trials=trials, rng=1, pairs=()),
                                         lambda: old_propagate(pb, trials=trials, rng=1, noise="gaussian",
-                                                              keep_samples=False), max(1, reps // 2))
+                                                              keep_samples=False), reps)
     rows.append(_row("general_propagate_vs_distance_only", t_new, t_old, trials,
                      "multilat.network.propagate.propagate (distance-only, compiled), gaussian, small volume",
-                     load_avg_1min=load, runs_s=ta, baseline_runs_s=tb))
+                     load_avg_1min=load, runs_s=ta, baseline_runs_s=tb, cpu_ratio=cpu))
     return rows
 
 

@@ -74,6 +74,7 @@ class Frozen:
     determinability : the adjustment's at x̂ (its ``constraints`` B: the datum of the fall-back)
     dof : degrees of freedom;  program : the rows for the compiled kernel (:func:`_program`)
     gain : (n_free, R) ``K = Q J(x̂)^T P``, the first step
+    scale : (R,) each row's σ for the draws, 1 for a correlated block's rows (drawn through its ``L``)
     cofactor : the adjustment's result when the sparse back end adjusted it (its ``Q`` in blocks, dense
         only up to :data:`~.adjust.MAX_DENSE_UNKNOWNS`): ``q`` and ``gain`` are then None and every
         step's ``Q g`` is a solve through the blocks (:mod:`.propagate_blocks`: 2.6x the trials/s of
@@ -95,6 +96,13 @@ class Frozen:
     gain: np.ndarray | None = None
     cofactor: GeneralResult | None = None
     schur: object = None
+    scale: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.scale is None:    # (R,) each row's σ, 1 for the rows of correlated blocks (drawn through L)
+            object.__setattr__(self, "scale", np.concatenate(
+                [np.ones(b.n_rows) if b.cov is not None else np.broadcast_to(np.asarray(b.sigma, float), (b.n_rows,))
+                 for b in self.system.blocks]))
 
     @property
     def n_rows(self) -> int:
@@ -126,17 +134,21 @@ class Frozen:
 
 
 def freeze(system: System, result: GeneralResult) -> Frozen:
-    """The frozen system of an adjusted network (``system`` and ``result`` of one adjustment)."""
+    """The frozen system of an adjusted network (``system`` and ``result`` of one adjustment). Each
+    block's model and Jacobian at x̂ is evaluated once: ``f(x̂)``, the scatter, the kernel's program
+    and the first step's ``J(x̂)`` all come from it (the dense ``J`` as :meth:`System.evaluate` builds
+    it, the same bits: 3 evaluations of every kind were a third of a 10 000-trial run's set-up)."""
     x = np.asarray(result.parameters, float)
     lay = system.layout
     red = lay.reduced
     computed = np.empty(system.n_rows)
     angular = np.zeros(system.n_rows, bool)
-    weight, rows_i, cols_i, repeat = [], [], [], []
+    weight, rows_i, cols_i, repeat, evaluated = [], [], [], [], []
     offset = 0
     for b, cols, sl in zip(system.blocks, system.cols, system.rows):
         mod = kinds_registry.kind(b.kind)
         c, values, columns = mod.evaluate(b, lay, cols, x)
+        evaluated.append((values, columns))
         computed[sl] = c
         angular[sl] = mod.ANGULAR
         weight.append(1.0 / np.asarray(b.sigma, float) ** 2 if b.cov is None else np.linalg.inv(b.covariance))
@@ -152,12 +164,17 @@ def freeze(system: System, result: GeneralResult) -> Frozen:
     blocks = result.blocks is not None        # the sparse back end's: Q g through its Schur blocks
     fr = Frozen(system, x, computed, None if blocks else np.ascontiguousarray(result.cofactor, float),
                 np.flatnonzero(lay.free), angular, tuple(weight), scatter, np.concatenate(repeat),
-                result.determinability, int(result.dof), _program(system, x, weight),
+                result.determinability, int(result.dof), _program(system, [c for _, c in evaluated], weight),
                 cofactor=result if blocks else None, schur=_schur(result) if blocks else None)
     fr.program["ref"] = np.column_stack([np.cos(computed), np.sin(computed), computed])
     if blocks:                  # no dense Q: every step through the Schur blocks (.propagate_blocks)
         return fr
-    _, jac = system.evaluate(x)
+    jac = np.zeros((system.n_rows, system.n_free))   # System.evaluate's dense Jacobian, from the values above
+    for (values, columns), sl in zip(evaluated, system.rows):
+        rc = red[columns]
+        rows = np.broadcast_to(np.arange(sl.start, sl.stop)[:, None], rc.shape)
+        keep = rc >= 0
+        np.add.at(jac, (rows[keep], rc[keep]), values[keep])
     gain = fr.q @ fr.weighted(np.ascontiguousarray(jac.T))
     fr.program["kt"] = np.ascontiguousarray(gain.T)
     return dataclasses.replace(fr, gain=gain)
@@ -169,9 +186,10 @@ def _schur(result: GeneralResult):
     return schur(result)
 
 
-def _program(system: System, x: np.ndarray, weight) -> dict:
+def _program(system: System, columns_of: list, weight) -> dict:
     """The rows as the compiled kernel's program (:mod:`._frozen_numba`): codes, full and free columns
-    (R, 9: ``cols``, ``rcols``), the vertical height offsets, the tracker components, ``P`` as CSR."""
+    (R, 9: ``cols``, ``rcols``; ``columns_of`` each block's Jacobian columns, as its kind evaluates
+    them), the vertical height offsets, the tracker components, ``P`` as CSR."""
     from multilat.network.general._frozen_numba import CODES
     from multilat.network.general.kinds.geometry import _heights
 
@@ -179,8 +197,7 @@ def _program(system: System, x: np.ndarray, weight) -> dict:
     code, hz, comp, setup = np.empty(R, np.int64), np.zeros(R), np.zeros(R, np.int64), np.full(R, -1, np.int64)
     frames: dict = {}
     cols = np.full((R, 9), -1, np.int64)
-    for b, bc, sl in zip(system.blocks, system.cols, system.rows):
-        _, _, columns = kinds_registry.kind(b.kind).evaluate(b, system.layout, bc, x)
+    for b, columns, sl in zip(system.blocks, columns_of, system.rows):
         code[sl] = CODES[b.kind]
         cols[sl, :columns.shape[1]] = columns
         if b.kind in ("slope_distance", "zenith_angle", "tracker_angles"):
@@ -190,18 +207,34 @@ def _program(system: System, x: np.ndarray, weight) -> dict:
             for k, f in enumerate(map(tuple, columns[:, 6:9])):
                 setup[sl.start + k] = frames.setdefault(f, len(frames))
     red = system.layout.reduced
-    p = scipy.sparse.block_diag([scipy.sparse.diags(w) if w.ndim == 1 else scipy.sparse.csr_matrix(w)
-                                 for w in weight], format="csr")
+    p_ptr, p_idx, p_val = _weight_csr(weight, system.rows)
     rcols = np.where(cols >= 0, red[cols], -1).astype(np.int64)     # each slot's free column, -1 for none
-    n_in_row = np.diff(p.indptr)
+    n_in_row = np.diff(p_ptr)
     wdiag = np.zeros(R)
     one = np.flatnonzero(n_in_row == 1)
-    one = one[p.indices[p.indptr[one]] == one]
-    wdiag[one] = p.data[p.indptr[one]]
+    one = one[p_idx[p_ptr[one]] == one]
+    wdiag[one] = p_val[p_ptr[one]]
     return {"code": code, "cols": cols, "pair": _tracker_pairs(code, cols, hz, comp), "wdiag": wdiag,
             "rcols": rcols, "hz": hz, "comp": comp, "setup": setup,
             "frames": np.array(list(frames), np.int64).reshape(-1, 3),
-            "p_ptr": p.indptr.astype(np.int64), "p_idx": p.indices.astype(np.int64), "p_val": p.data}
+            "p_ptr": p_ptr, "p_idx": p_idx, "p_val": p_val}
+
+
+def _weight_csr(weight, rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``P``, block diagonal (each block's ``1/σ²`` (R_b,) or ``C⁻¹`` (R_b, R_b)), as CSR arrays
+    ``(indptr, indices, data)``, zeros not stored, columns in order within a row: what
+    ``scipy.sparse.block_diag`` of the blocks gives, without its set-up (half of ``freeze``)."""
+    idx, val, count = [], [], []
+    for w, sl in zip(weight, rows):
+        nz = w != 0
+        if w.ndim == 1:
+            idx.append(sl.start + np.flatnonzero(nz))
+        else:
+            idx.append(sl.start + np.nonzero(nz)[1])
+        val.append(w[nz])
+        count.append(nz.reshape(len(nz), -1).sum(1))
+    ptr = np.concatenate([[0], np.cumsum(np.concatenate(count))]).astype(np.int64)
+    return ptr, np.concatenate(idx).astype(np.int64), np.concatenate(val).astype(float)
 
 
 def _tracker_pairs(code, cols, hz, comp) -> np.ndarray:
@@ -364,10 +397,9 @@ def draw(frozen: Frozen, n: int, rng: np.random.Generator, model: DistanceNoise 
     e = rng.standard_normal((n, frozen.n_rows))
     s = frozen.system
     for L, b, sl in zip(s.chol, s.blocks, s.rows):
-        if b.cov is None:
-            e[:, sl] *= b.sigma
-        else:
+        if b.cov is not None:
             e[:, sl] = e[:, sl] @ L.T
+    e *= frozen.scale             # σ of the independent rows, 1 of the correlated: one pass, the same bits
     if model is not None:
         from multilat.distance_errors import draw_errors
 
@@ -454,14 +486,17 @@ class _Spec:
 
 
 def _outputs(frozen: Frozen, pairs: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """Deviations from x̂ of the free parameters, then of the pairs' distances (T, n_free + q)."""
+    """Deviations from x̂ of the free parameters, then of the pairs' distances (T, n_free + q), float32:
+    each computed in float64 and rounded once as it is written (what ``.astype(np.float32)`` of the
+    float64 deviations gives, without the (T, n_free + q) float64 array)."""
     pc = frozen.system.layout.point_cols
-    out = np.empty((len(x), len(frozen.free) + len(pairs)))
-    out[:, :len(frozen.free)] = x[:, frozen.free] - frozen.x_hat[frozen.free]
+    nf = len(frozen.free)
+    out = np.empty((len(x), nf + len(pairs)), np.float32)
+    np.subtract(x[:, frozen.free], frozen.x_hat[frozen.free], out=out[:, :nf])
     if len(pairs):
         a, b = pc[pairs[:, 0]], pc[pairs[:, 1]]
         d0 = np.linalg.norm(frozen.x_hat[b] - frozen.x_hat[a], axis=-1)
-        out[:, len(frozen.free):] = np.linalg.norm(x[:, b] - x[:, a], axis=-1) - d0
+        np.subtract(np.linalg.norm(x[:, b] - x[:, a], axis=-1), d0, out=out[:, nf:])
     return out
 
 
@@ -469,9 +504,10 @@ def _solve_block(spec: _Spec, entropy, spawn_key: tuple, b: int, n: int) -> dict
     obs = draw(spec.frozen, n, block_generator(entropy, spawn_key, b), spec.model)
     sol = solve(spec.frozen, obs, tol=spec.tol, max_iter=spec.max_iter, engine=spec.engine)
     ok = sol.converged
-    return {"dev": _outputs(spec.frozen, spec.pairs, sol.x[ok]).astype(np.float32), "n": n,
-            "n_failed": int((~ok).sum()), "n_retried": int(sol.full_gauss_newton.sum()),
-            "iterations": int(sol.iterations.sum()), "vtpv": sol.vtpv[ok]}
+    all_ok = bool(ok.all())
+    return {"dev": _outputs(spec.frozen, spec.pairs, sol.x if all_ok else sol.x[ok]), "n": n,
+            "n_failed": int(n - ok.sum()), "n_retried": int(sol.full_gauss_newton.sum()),
+            "iterations": int(sol.iterations.sum()), "vtpv": sol.vtpv if all_ok else sol.vtpv[ok]}
 
 
 def _run_chunk(args) -> list:

@@ -62,7 +62,9 @@ def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaus
     linear covariance of the free parameters for the drawn inputs (default the cofactor ``Q``), or
     ``linear`` (std of the outputs, point covariances (P, 3, 3)) when ``Q`` is kept in blocks
     (:func:`.propagate_blocks.linear`)."""
-    dev = np.concatenate([b["dev"] for b in blocks])
+    # column-major, as the distance path keeps them: each point's or block's columns gathered at once
+    dev = np.empty((sum(len(b["dev"]) for b in blocks), blocks[0]["dev"].shape[1]), np.float32, order="F")
+    np.concatenate([b["dev"] for b in blocks], out=dev)
     n = dev.shape[0]
     if n < 2:
         raise MultilatError(f"only {n} trials converged: the network is too weak for a Monte Carlo "
@@ -94,11 +96,13 @@ def summarise(frozen, pairs, blocks, seed_entropy, t0, keep_samples, noise="gaus
 
 def _statistics(dev: np.ndarray, pc: np.ndarray, red: np.ndarray):
     """The engine's :func:`summarize` and the kurtosis of every column of the float32 deviations ``dev``
-    (N, k), eight columns at a time in float64, and the MC 3 x 3 covariance of every point with a free
-    coordinate (``pc`` its full columns, ``red`` full -> free column): independent tasks in two threads
-    from 50 000 trials (:func:`multilat.network.propagate_summary._in_two_threads`, as the distance
-    path summarises), so no (N, k) float64 copy is made. Returns mean, std, the two intervals (k, 2)
-    (deviations), kurtosis, the covariances (P, 3, 3) and the point indices P."""
+    (N, k) in float64, as the distance path summarises (:func:`multilat.network.propagate_summary.summarise`):
+    each point with a free coordinate (``pc`` its full columns, ``red`` full -> free column) its own
+    columns at once, whose summary gives its MC 3 x 3 covariance too; the other columns eight at a
+    time. Independent tasks in two threads from 50 000 trials
+    (:func:`~multilat.network.propagate_summary._in_two_threads`),
+    no (N, k) float64 copy. Returns mean, std, the two intervals (k, 2) (deviations), kurtosis, the
+    covariances (P, 3, 3) and the point indices P."""
     from multilat.network.propagate_summary import _in_two_threads, _kurtosis
 
     k = dev.shape[1]
@@ -113,12 +117,19 @@ def _statistics(dev: np.ndarray, pc: np.ndarray, red: np.ndarray):
         mean[cols], std[cols] = r.estimate, r.std
         iv_sym[cols], iv_short[cols] = r.interval_symmetric, r.interval_shortest
         kurt[cols] = _kurtosis(y, mean[cols])
+        return r
 
     def point(j, i):
         c = red[pc[i]]
         have = c >= 0
-        cov_mc[j][np.ix_(have, have)] = np.atleast_2d(np.cov(dev[:, c[have]].astype(np.float64), rowvar=False))
+        r = put(c[have])
+        cov_mc[j][np.ix_(have, have)] = r.cov
 
-    _in_two_threads([lambda c0=c0: put(np.arange(c0, min(c0 + 8, k))) for c0 in range(0, k, 8)]
-                    + [lambda j=j, i=i: point(j, i) for j, i in enumerate(pts)], len(dev))
+    in_point = np.zeros(k, bool)
+    for i in pts:
+        c = red[pc[i]]
+        in_point[c[c >= 0]] = True
+    rest = np.flatnonzero(~in_point)
+    _in_two_threads([lambda j=j, i=i: point(j, i) for j, i in enumerate(pts)]
+                    + [lambda c=rest[c0:c0 + 8]: put(c) for c0 in range(0, len(rest), 8)], len(dev))
     return mean, std, iv_sym, iv_short, kurt, cov_mc, pts
