@@ -1,0 +1,80 @@
+"""Issue 29: the general layer's statistics and data snooping make no pass over all rows per point.
+
+No timing (this machine is shared): a count. Every numpy call made by :mod:`.snooping` and
+:mod:`.quality` (their module's ``np``, wrapped) during ``snoop`` on a distance-only network of
+8 stations x 40 targets and on the same network 4x larger (``synthetic_network`` "rings"; one
+distance made a 20 σ blunder, so one round of detection, identification, the gross-error gate and
+a new adjustment runs). A step with a loop over points or rows (``np.any(ref == p)`` per point: the
+gate before commit e686776, 244 of 296 s of ``multilat adjust --model general`` at 8 x 16 000)
+makes 4x the calls on the 4x network; the code without such a loop makes the same number of calls
+on both. The snooping result is checked too (the blunder is the one rejected), so the count is that
+of the real path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from multilat.network.data import Observations, Points
+from multilat.network.general import quality, snooping
+from multilat.network.general.from_tables import network_from_tables
+from multilat.network.general.observations import Network
+from multilat.network.general.run import adjust_network
+from multilat.network.synthetic import synthetic_network
+
+
+class _Counting:
+    """A stand-in for a module's ``np``: counts the calls of its functions (types and constants pass)."""
+
+    def __init__(self):
+        self.calls = 0
+
+    def __getattr__(self, name):
+        a = getattr(np, name)
+        if not callable(a) or isinstance(a, type):
+            return a
+
+        def counted(*args, **kw):
+            self.calls += 1
+            return a(*args, **kw)
+        return counted
+
+
+def _network(t: int, blunder_row: int = 11):
+    s = 8
+    syn = synthetic_network(3, population="rings", n_stations=s, n_targets=t, per_target=7)
+    d = syn.distance_m.copy()
+    d[blunder_row] += 20.0 * syn.sigma_m[blunder_row]
+    obs = Observations(tuple(f"S{i}" for i in range(s)), tuple(f"T{j}" for j in range(t)), syn.station_index,
+                       syn.target_index, d, syn.sigma_m)
+    pts = Points(obs.station_ids + obs.target_ids, np.vstack([syn.station_xyz_m, syn.target_xyz_m]))
+    net, opt = network_from_tables(obs, points=pts)
+    return net, opt
+
+
+def _calls(monkeypatch, t: int) -> tuple[int, int]:
+    net, opt = _network(t)
+    assert isinstance(net, Network)
+    adj = adjust_network(net, options=opt)
+    counters = []
+    for mod in (snooping, quality):
+        c = _Counting()
+        monkeypatch.setattr(mod, "np", c)
+        counters.append(c)
+    sn = snooping.snoop(net, options=opt, adjustment=adj)
+    monkeypatch.undo()
+    assert len(sn.rejected) == 1 and sn.rejected[0]["n_rows"] == 1
+    b = sn.adjustment.system.blocks[0]
+    assert sn.adjustment.system.n_rows == adj.system.n_rows - 1 and b.n_rows == net.blocks[0].n_rows - 1
+    return counters[0].calls, counters[1].calls
+
+
+@pytest.mark.parametrize("t", [40])
+def test_snooping_and_statistics_make_no_pass_per_point(monkeypatch, t):
+    small = _calls(monkeypatch, t)
+    large = _calls(monkeypatch, 4 * t)
+    # the same calls on the 4x network: nothing loops over points or rows (a few calls of slack for a
+    # branch taken on one network only, far below the 3 x (8 + 4 t) more calls a per-point pass adds)
+    assert large[0] <= small[0] + 8, (small, large)
+    assert large[1] <= small[1] + 8, (small, large)
