@@ -78,3 +78,21 @@ def test_snooping_and_statistics_make_no_pass_per_point(monkeypatch, t):
     # branch taken on one network only, far below the 3 x (8 + 4 t) more calls a per-point pass adds)
     assert large[0] <= small[0] + 8, (small, large)
     assert large[1] <= small[1] + 8, (small, large)
+
+
+@pytest.mark.parametrize("backend", ["dense", "sparse"])
+def test_point_cofactors_are_those_of_each_point(backend):
+    """quality.point_cofactors (all points at once) against GeneralResult.point_cofactor point by point
+    (the dense Q searched by name; the sparse blocks by index): the same numbers, bit for bit."""
+    from dataclasses import replace
+
+    from multilat.network.general.adjust import adjust
+
+    net, opt = _network(30)
+    res = adjust(net, options=replace(opt, backend=backend))
+    assert res.backend == backend
+    every = quality.point_cofactors(res)
+    assert every.shape == (len(res.ids), 3, 3)
+    one = np.stack([res.point_cofactor(p) for p in res.ids])
+    np.testing.assert_array_equal(every, one)
+    assert np.all(np.linalg.eigvalsh(every)[:, -1] > 0)
