@@ -12,14 +12,22 @@ Timed (one process, numba warm, medians of ``--repeats``):
 
 Printed per size: both CPU times (and wall), their ratio, the growth over the previous size, the
 load average.
+``--command`` (issue 29's row): the **whole command** ``multilat adjust obs.csv --model general --json``
+beside the distance path's ``multilat adjust obs.csv --json`` on the same CSV (written once per size),
+each a fresh process: CPU time of the child (user + sys, ``getrusage``) and wall, the growth of each
+over the previous size, the load average before each size (goal: each 4x step <= 5x).
 The dense crossover (``SPARSE_ABOVE``) is measured with ``--crossover``: both back ends on 8 stations x
-t targets for small t. ``python benchmarks/bench_general_sparse.py [--quick] [--crossover]``.
+t targets for small t. ``python benchmarks/bench_general_sparse.py [--quick] [--command] [--crossover]``.
+Results: ``benchmarks/bench_general_sparse.md``.
 """
 
 from __future__ import annotations
 
 import os
+import resource
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -94,6 +102,39 @@ def run(quick: bool = False, repeats: int = 3) -> list[dict]:
     return rows
 
 
+def _child(argv: list) -> tuple[float, float]:
+    """(CPU s, wall s) of one command run to its end in a child process (output discarded)."""
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    subprocess.run(argv, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime), wall
+
+
+def command(sizes=(1000, 4000, 16000), repeats: int = 1) -> list[dict]:
+    """Issue 29's row: the whole ``multilat adjust obs.csv --model general --json`` beside the distance
+    path's ``multilat adjust obs.csv --json``, same CSV, same run; medians of ``repeats``."""
+    from multilat.network.files import write_observations
+
+    cli = [sys.executable, "-c", "import sys; from multilat.cli import run; sys.exit(run())", "adjust"]
+    rows, prev = [], None
+    with tempfile.TemporaryDirectory() as tmp:
+        for t in sizes:
+            path = os.path.join(tmp, f"obs{t}.csv")
+            write_observations(path, _networks(t)[1])
+            load = load_avg()
+            g = np.median([_child(cli + [path, "--model", "general", "--json"]) for _ in range(repeats)], axis=0)
+            d = np.median([_child(cli + [path, "--json"]) for _ in range(repeats)], axis=0)
+            rows.append({"name": f"general_command_s8_t{t}", "median_s": float(g[0]), "baseline": "distance-path command",
+                         "baseline_median_s": float(d[0]), "ratio": float(g[0] / d[0]),
+                         "extra": {"load_avg": load, "wall_s": [round(float(g[1]), 2), round(float(d[1]), 2)],
+                                   "growth_vs_previous": None if prev is None else
+                                   [round(float(g[0] / prev[0]), 2), round(float(d[0] / prev[1]), 2)]}})
+            prev = (g[0], d[0])
+    return rows
+
+
 def crossover(sizes=(25, 50, 100, 200), repeats: int = 3) -> list[tuple]:
     """Dense and sparse back ends on the same networks (whole general adjustment)."""
     out = []
@@ -110,6 +151,13 @@ if __name__ == "__main__":
         for t, n, dn, sp, load in crossover():
             print(f"8 x {t:5d} targets ({n:5d} unknowns): dense {dn:7.3f} s CPU, sparse {sp:7.3f} s CPU, "
                   f"dense/sparse {dn / sp:5.2f}  (load {load})")
+        sys.exit(0)
+    if "--command" in sys.argv:
+        for r in command((1000, 4000) if "--quick" in sys.argv else (1000, 4000, 16000)):
+            e = r["extra"]
+            print(f"{r['name']}: general command {r['median_s']:.2f} s CPU, distance command "
+                  f"{r['baseline_median_s']:.2f} s CPU, ratio {r['ratio']:.2f}, growth (general, distance) "
+                  f"{e['growth_vs_previous']}, wall {e['wall_s']}, load {e['load_avg']}")
         sys.exit(0)
     for r in run(quick="--quick" in sys.argv):
         e = r["extra"]

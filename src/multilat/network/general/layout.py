@@ -32,15 +32,12 @@ class Layout:
 
     def __init__(self, points: PointSet):
         self.points = points
-        self.names: list[str] = []
-        self._values: list[float] = []
-        self._free: list[bool] = []
-        self._col: dict[str, int] = {}
-        for i, p in enumerate(points.ids):
-            for c in range(3):
-                v = points.xyz_m[i, c]
-                self.add(f"{'xyz'[c]}:{p}", 0.0 if not np.isfinite(v) else float(v),
-                         free=bool(points.status[i, c] != FIXED))
+        # the points' coordinates in one pass (what ``add`` does name by name; the ids are unique)
+        self.names: list[str] = [f"{c}:{p}" for p in points.ids for c in "xyz"]
+        xyz = np.asarray(points.xyz_m, float).reshape(-1)
+        self._values: list[float] = np.where(np.isfinite(xyz), xyz, 0.0).tolist()
+        self._free: list[bool] = (np.asarray(points.status).reshape(-1) != FIXED).tolist()
+        self._col: dict[str, int] = dict(zip(self.names, range(len(self.names))))
         self.point_cols = np.arange(3 * points.n).reshape(points.n, 3)
 
     def add(self, name: str, value: float = 0.0, *, free: bool = True) -> int:

@@ -61,7 +61,7 @@ class Block:
 
     @property
     def n_rows(self) -> int:
-        return int(np.shape(self.value)[0])
+        return len(self.value)                    # asked once per row by the reports: no np.shape
 
     @property
     def covariance(self) -> np.ndarray:
@@ -145,10 +145,10 @@ def _subset_block(b: Block, keep: np.ndarray, new_index: np.ndarray) -> Block:
              for k, v in b.index.items()}
     names = {}
     for k, nm in b.names.items():                     # compact sets / instruments / set-ups still used
-        used = sorted(set(int(i) for i in index[k] if i >= 0))
-        remap = {o: n for n, o in enumerate(used)}
-        index[k] = np.array([remap.get(int(i), -1) for i in index[k]], int)
-        names[k] = tuple(nm[o] for o in used)
+        ix = np.asarray(index[k], int)
+        used = np.unique(ix[ix >= 0])
+        index[k] = np.where(ix >= 0, np.searchsorted(used, ix), -1)
+        names[k] = tuple(nm[int(o)] for o in used)
     data = {k: np.asarray(v)[keep] for k, v in b.data.items()}
     labels = tuple(np.asarray(b.labels, object)[keep]) if len(b.labels) == b.n_rows else b.labels
     cov = None if b.cov is None else np.asarray(b.cov)[np.ix_(keep, keep)]

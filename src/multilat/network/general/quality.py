@@ -117,7 +117,7 @@ def statistics(system, result, *, alpha: float = 0.001, variance_factor: str = "
     controlled = red > st.R_ZERO
     passed = ~controlled | ~(np.abs(stat) > crit)          # an uncontrolled row cannot fail (nor pass a real test)
     mdb = st.minimal_detectable_bias_m(sigma * scale, red, alpha=alpha, power=power)
-    cov = np.stack([result.point_cofactor(p) for p in result.ids]) * scale ** 2 if result.ids else np.zeros((0, 3, 3))
+    cov = point_cofactors(result) * scale ** 2
     semi, axes = st.confidence_ellipsoid(cov, level=0.95)
     if external:
         jw = rel.whitened_jacobian(system, result)
@@ -131,3 +131,19 @@ def statistics(system, result, *, alpha: float = 0.001, variance_factor: str = "
         redundancy=red, w=w, statistic=stat, passed=passed, mdb=mdb, mdb_sigma=mdb / sigma,
         bias_to_noise=st.bias_to_noise_ratio(red, alpha=alpha, power=power), cov_m2=cov, semi_axes_95_m=semi,
         axes_95=axes, shift_max_m=shift, shift_point=tuple(where), levels=levels)
+
+
+def point_cofactors(result) -> np.ndarray:
+    """(n, 3, 3) cofactor of every point's coordinates (zero rows/columns for held coordinates), in
+    ``result.ids`` order: :meth:`~.adjust.GeneralResult.point_cofactor` for all points at once (the
+    sparse back end's blocks as kept; the dense ``Q`` gathered by :func:`.reliability.point_columns`,
+    not a search of the free names per point)."""
+    if not result.ids:
+        return np.zeros((0, 3, 3))
+    if result.blocks is not None:
+        return np.array(result.blocks.point, float)
+    cols = rel.point_columns(result)                       # n_free where held: the zero row / column
+    nf = len(result.free_names)
+    q = np.zeros((nf + 1, nf + 1))
+    q[:nf, :nf] = result.cofactor
+    return q[cols[:, :, None], cols[:, None, :]]

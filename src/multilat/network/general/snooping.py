@@ -213,7 +213,7 @@ class _Gate:
     per point and in all) and the rows rejected so far."""
 
     def __init__(self, adj: NetworkAdjustment):
-        ref, _ = _point_rows(adj.system)
+        ref = _point_rows(adj.system)
         ids = adj.system.network.points.ids
         self.n_rows = adj.system.n_rows
         r = np.sort(ref, axis=1)                     # rows per point, each row once: O(rows), not points x rows
@@ -314,12 +314,14 @@ def _guard(system: System, jw, Q, red, unit) -> str:
         return ""
     after = red - np.einsum("ij,ij->i", C, np.linalg.solve(Rkk, C.T).T)
     after[unit] = 0.0
-    rows_of = _point_rows(system)
+    ref = _point_rows(system)
     pts = system.network.points
-    for p in sorted({int(i) for q in unit for i in rows_of[1][q]}):
+    points = np.unique(ref[unit][ref[unit] >= 0])
+    near = np.flatnonzero(np.isin(ref, points).any(axis=1))   # one pass over the rows, then only theirs
+    for p in points.tolist():
         if not np.any(pts.status[p] == FREE):
             continue
-        mine = np.flatnonzero(np.any(rows_of[0] == p, axis=1))
+        mine = near[np.any(ref[near] == p, axis=1)]
         rest = mine[~np.isin(mine, unit)]
         if np.any(red[rest] > st.R_ZERO) and not np.any(after[rest] > 1e-6):
             return (f"rejecting it would leave point {pts.ids[p]!r} without redundancy (its {rest.size} other "
@@ -327,13 +329,13 @@ def _guard(system: System, jw, Q, red, unit) -> str:
     return ""
 
 
-def _point_rows(system: System):
-    """(R, 4) point indices of every row (-1 padded), and per row the list of its points."""
+def _point_rows(system: System) -> np.ndarray:
+    """(R, 4) point indices of every row (-1 padded)."""
     ref = np.full((system.n_rows, 4), -1)
     for b, sl in zip(system.blocks, system.rows):
         for c, key in enumerate(point_keys(b)[:4]):
             ref[sl, c] = np.asarray(b.index[key], int)
-    return ref, [r[r >= 0] for r in ref]
+    return ref
 
 
 def _removed_rows(system: System, unit) -> list:
