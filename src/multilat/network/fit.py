@@ -292,13 +292,18 @@ def _angle_fit(sub, ang, pb, p, cov, A_rows, R, G, E, *, levelled):
                 design_w=A_rows * free_all)
 
 
-def _jacobian_at(pb: Problem, p: Params):
+class _JacobianAt:
     """The whitened Jacobian blocks ``(Js_w, Jt_w)`` of ``pb`` at ``p``, recomputed on each call (for
-    :meth:`NetworkCovariance.release_jacobian`; the closure holds the problem and a copy of the
-    parameters only)."""
-    p = Params(*(np.array(a, copy=True) for a in (p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale,
-                                                  p.orientation_rad)))
-    return lambda: whitened(pb, p)[1:]
+    :meth:`NetworkCovariance.release_jacobian`): holds the problem and a copy of the parameters only,
+    and pickles (process pools) where a closure would not."""
+
+    def __init__(self, pb: Problem, p: Params):
+        self.pb = pb
+        self.p = Params(*(np.array(a, copy=True) for a in (p.station_xyz_m, p.target_xyz_m, p.offset_m,
+                                                           p.scale, p.orientation_rad)))
+
+    def __call__(self):
+        return whitened(self.pb, self.p)[1:]
 
 
 def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
@@ -360,7 +365,7 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
                                 sub.target_index, factor=factor, R=R, G=G, E=E)
     else:
         cov = NetworkCovariance(Qgg, fin.Ntt_inv, Js_w, Jt_w, sub.station_index, sub.target_index,
-                                factor=factor, R=R, G=G, E=E, jacobian=_jacobian_at(pb, p))
+                                factor=factor, R=R, G=G, E=E, jacobian=_JacobianAt(pb, p))
     h = cov.hat_diagonal(chunk_targets)
     del Js_w, Jt_w
     if sub.n_obs >= JACOBIAN_ON_DEMAND_OBS:      # 135 MiB at 1.6 M distances, live at the command's peak
