@@ -21,12 +21,18 @@ from multilat.network.datum import s_coefficients
 from multilat.network.model import Q, repeat_share, segment_sum, slot_gain, target_slots
 from multilat.network.statistics import correlated_with
 
-__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS"]
+__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS", "JACOBIAN_ON_DEMAND_OBS"]
 
 #: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
 #: from the compiled kernels of :mod:`multilat.network._covariance_kernels` (numba, when installed); smaller
 #: ones from the numpy code below (no compile/load cost; the tests compare the two to 1e-12).
 KERNELS_ABOVE_OBS = 10_000
+
+#: Adjustments of at least this many observations do not keep their whitened Jacobian blocks and gains
+#: (88 bytes per observation) once their own statistics are computed: each later product recomputes
+#: them from the adjusted parameters (O(m), 0.1 s at 1.6 M; :meth:`NetworkCovariance.release_jacobian`).
+#: Smaller ones keep them (a few MB, reused by every round of data snooping).
+JACOBIAN_ON_DEMAND_OBS = 1 << 18
 
 
 def compiled_for(m: int) -> bool:
@@ -64,14 +70,15 @@ class NetworkCovariance:
         rigid datum, 7 when the network's scale is a datum defect too (scales of every station)
     extra : ndarray (n, r) or None   a low-rank term ``V V^T`` added in the final datum (e.g. the
         uncertainty of the reference length that fixes the scale)
+    jacobian : callable () -> (Js_w, Jt_w), or None   recomputes the blocks (the same numbers), so
+        that :meth:`release_jacobian` can drop them (the adjustment does at
+        :data:`JACOBIAN_ON_DEMAND_OBS` observations and more)
     """
 
     def __init__(self, Qgg, Minv, Js_w, Jt_w, station_index, target_index, *, factor=1.0,
-                 R=None, G=None, E=None, extra=None):
+                 R=None, G=None, E=None, extra=None, jacobian=None):
         self.Qgg = Qgg
         self.Minv = Minv
-        self.Js_w = Js_w
-        self.Jt_w = Jt_w
         self.si = station_index
         self.ti = target_index
         self.s = Qgg.shape[0] // Q
@@ -79,14 +86,8 @@ class NetworkCovariance:
         self.n = Q * self.s + 3 * self.t
         self.factor = float(factor)
         self.R = np.eye(3) if R is None else np.asarray(R)
-        # per-observation P_k = M_j b_k  (3,)
-        K = _kernels(len(target_index))
-        if K is None:
-            self.P = np.einsum("mij,mj->mi", Minv[target_index], Jt_w)
-        else:                                              # no (m, 3, 3) gather: 115 MB at 1.6 M
-            self.P = np.empty((len(target_index), 3))
-            K.target_gains(np.ascontiguousarray(Minv, float), np.ascontiguousarray(Jt_w, float),
-                           np.asarray(target_index, np.int64), self.P)
+        self._jacobian = jacobian
+        self._held = (Js_w, Jt_w, self._gains(Jt_w))
         self._csr = None
         self.G = G
         if G is not None:
@@ -96,6 +97,52 @@ class NetworkCovariance:
             self.HCHt = H @ self.CHt
         self._point_rows = None
         self.extra = None if extra is None else np.asarray(extra, float).reshape(self.n, -1)
+
+    # ------------------------------------------------------------ the whitened Jacobian blocks
+    def _gains(self, Jt_w):
+        """``P_k = M_j b_k`` (m, 3) per observation from the target blocks (compiled above the size:
+        no (m, 3, 3) gather, 115 MB at 1.6 M)."""
+        K = _kernels(len(self.ti))
+        if K is None:
+            return np.einsum("mij,mj->mi", self.Minv[self.ti], Jt_w)
+        P = np.empty((len(self.ti), 3))
+        K.target_gains(np.ascontiguousarray(self.Minv, float), np.ascontiguousarray(Jt_w, float),
+                       np.asarray(self.ti, np.int64), P)
+        return P
+
+    def release_jacobian(self) -> bool:
+        """Stop holding the whitened Jacobian blocks and the gains ``P`` (64 + 24 bytes per
+        observation: 135 MiB at 1.6 M distances) when the covariance can recompute them (its
+        ``jacobian`` callable, e.g. from the adjusted parameters): every later product recomputes
+        them, O(m), and drops them again; the numbers are the same (the same function of the same
+        inputs). Returns whether they were released."""
+        if self._jacobian is None:
+            return False
+        self._held = None
+        return True
+
+    def _blocks(self):
+        """``(Js_w, Jt_w, P)``: the held blocks, or recomputed for one use after
+        :meth:`release_jacobian`."""
+        if self._held is not None:
+            return self._held
+        Js_w, Jt_w = self._jacobian()
+        return Js_w, Jt_w, self._gains(Jt_w)
+
+    @property
+    def Js_w(self):
+        """Whitened station Jacobian blocks (m, 5) (recomputed on each access once released)."""
+        return self._blocks()[0]
+
+    @property
+    def Jt_w(self):
+        """Whitened target Jacobian blocks (m, 3) (recomputed on each access once released)."""
+        return self._blocks()[1]
+
+    @property
+    def P(self):
+        """``P_k = M_j b_k`` (m, 3) (recomputed on each access once released)."""
+        return self._blocks()[2]
 
     # ------------------------------------------------------------ internal (solving frame)
     def _times(self, V):
@@ -117,13 +164,14 @@ class NetworkCovariance:
         Vg = V[:Qn * s].reshape(s, Qn, -1)
         VT = V[Qn * s:].reshape(self.t, 3, -1)
         # Vg - K^T VT : per obs a_k (p_k . VT_j)
-        pv = np.einsum("mi,mic->mc", self.P, VT[self.ti])
-        acc = Vg - segment_sum(self.si, self.Js_w[:, :, None] * pv[:, None, :], s)
+        Js_w, _, P = self._blocks()
+        pv = np.einsum("mi,mic->mc", P, VT[self.ti])
+        acc = Vg - segment_sum(self.si, Js_w[:, :, None] * pv[:, None, :], s)
         u = (self.Qgg @ acc.reshape(Qn * s, -1))          # (5s, c)
         # M VT - K u : per obs p_k (a_k . u_station)
-        au = np.einsum("mq,mqc->mc", self.Js_w, u.reshape(s, Qn, -1)[self.si])
+        au = np.einsum("mq,mqc->mc", Js_w, u.reshape(s, Qn, -1)[self.si])
         outT = (np.einsum("tij,tjc->tic", self.Minv, VT)
-                - segment_sum(self.ti, self.P[:, :, None] * au[:, None, :], self.t))
+                - segment_sum(self.ti, P[:, :, None] * au[:, None, :], self.t))
         return np.concatenate([u, outT.reshape(3 * self.t, -1)], axis=0) * self.factor
 
     def _rotate_rows(self, V, R):
@@ -194,8 +242,9 @@ class NetworkCovariance:
     def _kernel_args(self):
         order, tptr = self._by_target()
         c = np.ascontiguousarray
-        return (c(self.Qgg, dtype=float), c(self.Minv, dtype=float), c(self.Js_w, dtype=float),
-                c(self.Jt_w, dtype=float), c(self.P, dtype=float), c(self.si, dtype=np.int64),
+        Js_w, Jt_w, P = self._blocks()
+        return (c(self.Qgg, dtype=float), c(self.Minv, dtype=float), c(Js_w, dtype=float),
+                c(Jt_w, dtype=float), c(P, dtype=float), c(self.si, dtype=np.int64),
                 c(self.ti, dtype=np.int64), order, tptr)
 
     def _target_blocks_internal(self, chunk_targets: int = 20000, *, kernels=True):
@@ -207,8 +256,9 @@ class NetworkCovariance:
             K.target_blocks(Qgg, Minv, Js, P, si, order, tptr, out)
             return out
         s, t = self.s, self.t
+        Js_w, Jt_w, P_all = self._blocks()
         slots = target_slots(self.si, self.ti, s, t)
-        gain = slot_gain(slots, self.si, self.ti, self.Js_w, self.Jt_w)     # repeated readings
+        gain = slot_gain(slots, self.si, self.ti, Js_w, Jt_w)     # repeated readings
         Q4 = self.Qgg.reshape(s, Q, s, Q)
         out = np.empty((t, 3, 3))
         for lo in range(0, t, chunk_targets):
@@ -216,8 +266,8 @@ class NetworkCovariance:
             seen = sl >= 0
             ix = np.where(seen, sl, 0)
             sc = seen if gain is None else seen * gain[ix]
-            A = self.Js_w[ix] * sc[..., None]             # (c, s, Q)
-            P = self.P[ix] * sc[..., None]                # (c, s, 3)
+            A = Js_w[ix] * sc[..., None]                  # (c, s, Q)
+            P = P_all[ix] * sc[..., None]                 # (c, s, 3)
             S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)
             out[lo:lo + chunk_targets] = (self.Minv[lo:lo + chunk_targets]
                                           + np.einsum("cai,cab,cbj->cij", P, S, P, optimize=True))
@@ -253,8 +303,9 @@ class NetworkCovariance:
         v = self._times(self.design_row(k)[:, None])[:, 0] / self.factor
         vg = v[:Q * self.s].reshape(self.s, Q)
         vt = v[Q * self.s:].reshape(self.t, 3)
-        return (np.einsum("mq,mq->m", self.Js_w, vg[self.si])
-                + np.einsum("mi,mi->m", self.Jt_w, vt[self.ti]))
+        Js_w, Jt_w, _ = self._blocks()
+        return (np.einsum("mq,mq->m", Js_w, vg[self.si])
+                + np.einsum("mi,mi->m", Jt_w, vt[self.ti]))
 
     def internal_times(self, g) -> np.ndarray:
         """The internal covariance (solving frame, datum-free, without ``factor``) times one
@@ -283,7 +334,8 @@ class NetworkCovariance:
         xt = x[Q * self.s:].reshape(self.t, 3)
         K = _kernels(self.si.shape[0])
         if K is None:
-            return np.einsum("mq,mq->m", self.Js_w, xg[self.si]) + np.einsum("mi,mi->m", self.Jt_w, xt[self.ti])
+            Js_w, Jt_w, _ = self._blocks()
+            return np.einsum("mq,mq->m", Js_w, xg[self.si]) + np.einsum("mi,mi->m", Jt_w, xt[self.ti])
         _, _, Js, Jt, _, si, ti, _, _ = self._kernel_args()
         out = np.empty(si.shape[0])
         K.design_times(Js, Jt, si, ti, np.ascontiguousarray(xg), np.ascontiguousarray(xt), out)
@@ -296,15 +348,17 @@ class NetworkCovariance:
         vector ``g`` is ``-L_j Q_gg g`` (the off-diagonal block of :meth:`_times`)."""
         s, t = self.s, self.t
         key = np.asarray(self.ti, np.int64) * s + np.asarray(self.si, np.int64)
-        L = segment_sum(key, self.P[:, :, None] * self.Js_w[:, None, :], t * s)      # (t s, 3, Q)
+        Js_w, _, P = self._blocks()
+        L = segment_sum(key, P[:, :, None] * Js_w[:, None, :], t * s)      # (t s, 3, Q)
         return np.ascontiguousarray(L.reshape(t, s, 3, Q).transpose(0, 2, 1, 3)).reshape(t, 3, Q * s)
 
     def design_row(self, k: int) -> np.ndarray:
         """Row ``k`` of the whitened design as a parameter-space vector (n,) (station and target parts)."""
         a = np.zeros(self.n)
         i, j = int(self.si[k]), int(self.ti[k])
-        a[Q * i:Q * i + Q] = self.Js_w[k]
-        a[Q * self.s + 3 * j:Q * self.s + 3 * j + 3] = self.Jt_w[k]
+        Js_w, Jt_w, _ = self._blocks()
+        a[Q * i:Q * i + Q] = Js_w[k]
+        a[Q * self.s + 3 * j:Q * self.s + 3 * j + 3] = Jt_w[k]
         return a
 
     def perfectly_correlated(self, k: int, redundancy, tol: float = 1e-6) -> np.ndarray:
@@ -326,10 +380,11 @@ class NetworkCovariance:
             K.hat_diagonal(Qgg, Minv, Js, Jt, P, si, order, tptr, h)
             return h
         s, t = self.s, self.t
+        Js_w, Jt_w, P_all = self._blocks()
         slots = target_slots(self.si, self.ti, s, t)
         # repeated readings of a pair: the pair's hat as one observation of all their weight, shared
         # among them by weight (their rows are proportional)
-        gain = slot_gain(slots, self.si, self.ti, self.Js_w, self.Jt_w)
+        gain = slot_gain(slots, self.si, self.ti, Js_w, Jt_w)
         Q4 = self.Qgg.reshape(s, Q, s, Q)
         h = np.empty(self.si.shape[0])
         for lo in range(0, t, chunk_targets):
@@ -337,9 +392,9 @@ class NetworkCovariance:
             seen = sl >= 0
             ix = np.where(seen, sl, 0)
             sc = seen if gain is None else seen * gain[ix]
-            A = self.Js_w[ix] * sc[..., None]
-            B = self.Jt_w[ix] * sc[..., None]
-            P = self.P[ix] * sc[..., None]
+            A = Js_w[ix] * sc[..., None]
+            B = Jt_w[ix] * sc[..., None]
+            P = P_all[ix] * sc[..., None]
             S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)      # a Q a
             BP = np.einsum("cai,cbi->cab", B, P)                             # b_a . p_b
             diagS = np.einsum("cbb->cb", S)
@@ -349,7 +404,7 @@ class NetworkCovariance:
             h[sl[seen]] = hh[seen]
         if gain is not None:
             key = self.ti.astype(np.int64) * s + self.si
-            h = h[slots.ravel()[key]] * repeat_share(slots, self.si, self.ti, self.Js_w, self.Jt_w)
+            h = h[slots.ravel()[key]] * repeat_share(slots, self.si, self.ti, Js_w, Jt_w)
         return h
 
 
@@ -409,7 +464,7 @@ class CoupledCovariance(NetworkCovariance):
         QXt = (self.Qgg @ self.X[:3 * self.t].T).reshape(s, Q, self.t, 3)   # (5s, 3t) = -C_gt
         Q4 = self.Qgg.reshape(s, Q, s, Q)
         i, j = self.si, self.ti
-        a, b = self.Js_w, self.Jt_w
+        a, b, _ = self._blocks()
         hs = np.einsum("mq,mqr,mr->m", a, Q4[i, :, i, :], a)
         ht = np.einsum("mc,mcd,md->m", b, Ctt[j], b)
         hst = np.einsum("mq,mqc,mc->m", a, QXt[i, :, j, :], b)

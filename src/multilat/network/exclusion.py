@@ -191,9 +191,8 @@ def undetermined_targets(obs: Observations, station_xyz_m, target_xyz_m, skip=()
     w = np.where(ok, 1.0 / np.where(ok, sig, 1.0) ** 2, 0.0)
     t = obs.n_targets
     N = np.zeros((t, 9))
-    uu = (w[:, None, None] * u[:, :, None] * u[:, None, :]).reshape(-1, 9)
-    for k in range(9):
-        N[:, k] = np.bincount(ti, weights=uu[:, k], minlength=t)
+    for k in range(9):          # one column at a time: no (m, 9) products (110 MiB at 1.6 M distances)
+        N[:, k] = np.bincount(ti, weights=w * u[:, k // 3] * u[:, k % 3], minlength=t)
     test = np.all(np.isfinite(T), axis=1) & np.array([tid not in skip for tid in obs.target_ids], bool)
     ev, V = np.linalg.eigh(N.reshape(t, 3, 3))
     along = np.einsum("mi,mi->m", np.where(ok[:, None], d, 0.0), V[ti, :, 0])

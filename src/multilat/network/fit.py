@@ -14,7 +14,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.couplings import flatten_params
-from multilat.network.covariance import CoupledCovariance, NetworkCovariance
+from multilat.network.covariance import JACOBIAN_ON_DEMAND_OBS, CoupledCovariance, NetworkCovariance
 from multilat.network.data import Observations
 from multilat.network import statistics as st
 from multilat.network.fit_state import Fit
@@ -292,6 +292,20 @@ def _angle_fit(sub, ang, pb, p, cov, A_rows, R, G, E, *, levelled):
                 design_w=A_rows * free_all)
 
 
+class _JacobianAt:
+    """The whitened Jacobian blocks ``(Js_w, Jt_w)`` of ``pb`` at ``p``, recomputed on each call (for
+    :meth:`NetworkCovariance.release_jacobian`): holds the problem and a copy of the parameters only,
+    and pickles (process pools) where a closure would not."""
+
+    def __init__(self, pb: Problem, p: Params):
+        self.pb = pb
+        self.p = Params(*(np.array(a, copy=True) for a in (p.station_xyz_m, p.target_xyz_m, p.offset_m,
+                                                           p.scale, p.orientation_rad)))
+
+    def __call__(self):
+        return whitened(self.pb, self.p)[1:]
+
+
 def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all, off_val_all,
                  sc_free_all, max_iter, solver, chunk_targets, *, warn, partial_ok=False, couplings=None):
     """One adjustment of the observations ``sub`` (a subset of ``obs``) from ``start``;
@@ -351,8 +365,11 @@ def fit_once(sub, datum, start, ref_start, obs, used, points, cost, off_free_all
                                 sub.target_index, factor=factor, R=R, G=G, E=E)
     else:
         cov = NetworkCovariance(Qgg, fin.Ntt_inv, Js_w, Jt_w, sub.station_index, sub.target_index,
-                                factor=factor, R=R, G=G, E=E)
+                                factor=factor, R=R, G=G, E=E, jacobian=_JacobianAt(pb, p))
     h = cov.hat_diagonal(chunk_targets)
+    del Js_w, Jt_w
+    if sub.n_obs >= JACOBIAN_ON_DEMAND_OBS:      # 135 MiB at 1.6 M distances, live at the command's peak
+        cov.release_jacobian()
     red = np.clip(1.0 - h, 0.0, 1.0)
     coupled = None
     if cpl is not None:
