@@ -143,6 +143,45 @@ def test_table_rows_count_and_sha256(blunder):
         assert all(_cell_is(cells[k], v) for k, v in row.items()), row["index"]
 
 
+def test_outliers_join_the_table_by_index(blunder):
+    """adjust/3: an outlier carries ``index``, its row of the observations table (and of
+    ``observations[]``): the row there is the same distance, rejected, with the same residual."""
+    _, pair, flagged, every, out = blunder
+    with open(out / "observations.csv", newline="", encoding="utf-8") as f:
+        table = list(csv.DictReader(f))
+    assert [o["index"] for o in flagged["outliers"]] == [BLUNDER]
+    for o in flagged["outliers"]:
+        cells, row = table[o["index"]], every["observations"][o["index"]]
+        assert row["index"] == o["index"] and (row["station"], row["target"]) == (o["station"], o["target"]) == pair
+        assert row["rejected"] and cells["rejected"] == "True"
+        assert row["residual_m"] == o["residual_m"] and float(cells["residual_m"]) == o["residual_m"]
+    # the snooping step that rejected it names the same row the same way
+    steps = [s for s in flagged["tests"]["steps"] if s["action"] == "rejected"]
+    assert [(s["index"], s["kind"]) for s in steps] == [(BLUNDER, "distance")]
+
+
+def test_unlocated_join_the_table_by_index(tmp_path):
+    """A 20 σ fault on one of four perfectly correlated distances (a target seen by four stations,
+    each distance's w-test the same): ``unlocated`` lists the four, each with ``index``; the row
+    there is the same distance, failing its w-test, with the same w and residual."""
+    ex = Path(__file__).resolve().parents[1] / "examples" / "network"
+    lines = (ex / "small_volume_obs.csv").read_text().splitlines()
+    i = next(k for k, ln in enumerate(lines) if ln.startswith("C,9,"))
+    st, tg, d, sig = lines[i].split(",")
+    lines[i] = f"{st},{tg},{float(d) + 20 * 4.7e-6:.7f},{sig}"
+    p = tmp_path / "obs.csv"
+    p.write_text("\n".join(lines) + "\n")
+    doc = _doc(["adjust", str(p), "--points", str(ex / "small_volume_points.csv"), "--json", "--observations"])
+    assert doc["outliers"] == [] and len(doc["unlocated"]) == 4
+    rows = doc["observations"]
+    for u in doc["unlocated"]:
+        row = rows[u["index"]]
+        assert row["index"] == u["index"] and (row["station"], row["target"]) == (u["station"], u["target"])
+        assert row["w_failed"] and not row["rejected"]
+        assert (row["w"], row["residual_m"]) == (u["w"], u["residual_m"])
+    assert sorted(rows[u["index"]]["station"] for u in doc["unlocated"]) == ["A", "B", "C", "D"]
+
+
 def test_parquet_and_csv_tables_give_the_same_rows(blunder, tmp_path):
     pq = pytest.importorskip("pyarrow.parquet")
     path, _, _, _, c_dir = blunder

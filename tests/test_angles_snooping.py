@@ -48,7 +48,8 @@ def test_a_planted_angle_blunder_is_rejected_and_the_rest_equals_the_adjustment_
     assert a["w"] > a["critical"] and a["step"] == 1 and a["test"] == "w"
     assert abs(a["residual_rad"] - 20 * SIG_ANGLE) < 4 * SIG_ANGLE      # the blunder, seen against the rest
     assert not res.outliers                                               # its row's distance is kept
-    assert res.tests["steps"][0]["angle"] == f"{obs.label(k)} {kind}"
+    step = res.tests["steps"][0]                                         # adjust/3: the row by index and kind
+    assert (step["index"], step["kind"]) == (k, kind) and a["index"] == k
     ref = adjust(_left_out(bad, k, kind), initial=net, snooping=False)
     assert res.dof == ref.dof and res.sigma0 == pytest.approx(ref.sigma0, rel=1e-9)
     np.testing.assert_allclose(res.target_xyz_m, ref.target_xyz_m, atol=1e-9)
@@ -97,9 +98,14 @@ def test_cli_reports_rejected_angles(tmp_path, capsys):
     k = int(np.flatnonzero(np.isfinite(obs.sigma_azimuth_rad))[4])
     p = tmp_path / "bad.csv"
     write_observations(p, _blunder(obs, k, "azimuth", 20 * SIG_ANGLE))
-    assert main(["adjust", str(p), "--json"]) == 0
+    assert main(["adjust", str(p), "--json", "--observations"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert [(a["station"], a["target"], a["kind"]) for a in doc["angle_outliers"]] == [("S1", "T5", "azimuth")]
+    # adjust/3: the angle's row of the observations table, named the same way by its snooping step
+    a = doc["angle_outliers"][0]
+    row = doc["observations"][a["index"]]
+    assert a["index"] == k and (row["index"], row["station"], row["target"]) == (k, "S1", "T5")
+    assert [(s["index"], s["kind"]) for s in doc["tests"]["steps"] if s["action"] == "rejected"] == [(k, "azimuth")]
     assert main(["adjust", str(p)]) == 0
     out = capsys.readouterr().out
     assert "rejected angles, in order:" in out and "S1->T5 azimuth: w = +" in out

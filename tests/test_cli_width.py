@@ -52,9 +52,9 @@ def test_propagate_summary_fits_80_columns_with_every_u(capsys, width80):
     doc = json.loads(_run(capsys, [*args, "--json"]))
     text = _run(capsys, args)
     _fits(text)
-    for p in doc["points"]:
+    for pid, p in doc["points"].items():
         for i in range(3):
-            assert f"{math.sqrt(p['cov_mc_m2'][i][i]) * 1e6:.2f}" in text, p["id"]
+            assert f"{math.sqrt(p['cov_mc_m2'][i][i]) * 1e6:.2f}" in text, pid
 
 
 @pytest.mark.parametrize("args", [

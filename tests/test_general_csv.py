@@ -352,7 +352,7 @@ def test_model_is_checked_and_never_switched(tmp_path):
     r = _cli(NET / "mixed" / "obs.csv", "--model", "gen")
     assert r.returncode == 2 and "--model must be one of auto, multilateration, general" in r.stderr
     r = _cli(NET / "mixed" / "obs.csv", "--json", "--no-snooping")          # the default path runs
-    assert r.returncode == 0 and json.loads(r.stdout)["schema"] == "multilat.adjust/2"
+    assert r.returncode == 0 and json.loads(r.stdout)["schema"] == "multilat.adjust/3"
 
 
 def _schema():

@@ -257,7 +257,7 @@ FAULTS = [
     ("propagate-general", [], "trials", _DROP),                           # a required key missing
     ("propagate-general", [], "schema", "multilat.propagate-general/1"),  # another version
     ("propagate", ["distances", 0], "lin_std_m", 1e-6),                   # undeclared key, nested
-    ("propagate", ["points", 0], "cov_mc_m2", [[0.0] * 3] * 2),           # a 2 x 3 covariance
+    ("propagate", ["points", "*"], "cov_mc_m2", [[0.0] * 3] * 2),           # a 2 x 3 covariance
     ("adjust-general", ["observations", 0], "label", None),               # null for a text
     ("adjust-general", ["points", "*"], "xyz_m", [0.0, 0.0]),             # two coordinates
     ("adjust-general", ["points", "*"], "sigma_0", 1.0),                  # undeclared key in an id map
@@ -269,6 +269,8 @@ FAULTS = [
     ("import", [], "format", "other"),
     ("import", [], "dof", 3),                                             # gama-adjusted's key on starnet
     ("adjust", [], "schema", "multilat.adjust/1"),                        # the document before the rows' split
+    ("adjust", [], "schema", "multilat.adjust/2"),                        # the document before outliers' index
+    ("propagate", [], "schema", "multilat.propagate/1"),                  # points a list, not an id map
     ("adjust", [], "observations", _DROP),
     ("adjust", ["targets", "*"], "n_obs", 4.5),
     ("adjust", ["targets", "*"], "n_obs", 4.0),
@@ -382,7 +384,7 @@ def test_out_files_carry_the_schema(tmp_path, capsys):
     ex = ROOT / "examples" / "network"
     assert main(["adjust", str(ex / "small_volume_obs.csv"), "--out", str(tmp_path / "a"), "--tables", "csv"]) == 0
     doc = json.loads((tmp_path / "a" / "result.json").read_text())
-    assert doc["schema"] == stamped_id("adjust") == "multilat.adjust/2"
+    assert doc["schema"] == stamped_id("adjust") == "multilat.adjust/3"
     assert _validator("adjust").is_valid(doc)
     model("adjust").model_validate(doc)
     assert main(["propagate", "small-volume", "--trials", "1000", "--out", str(tmp_path / "p")]) == 0

@@ -91,7 +91,7 @@ def _same(lin, ref):
     sl, sr = lin.tests["steps"], ref.tests["steps"]
     assert len(sl) == len(sr)
     for a, b in zip(sl, sr):
-        assert a["action"] == b["action"] and a.get("observation") == b.get("observation")
+        assert a["action"] == b["action"] and a.get("index") == b.get("index")
         assert a["statistic"] == pytest.approx(b["statistic"], rel=1e-7)
         assert a["statistic_k"] == pytest.approx(b["statistic_k"], rel=1e-7)
 

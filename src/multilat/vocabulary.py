@@ -34,7 +34,8 @@ SCHEMA_VERSION = 1
 #: A command's schema version where it is not :data:`SCHEMA_VERSION`: bumped, with the ``schema`` literal of
 #: its model (:mod:`multilat.schemas.models`), when the shape of its document changes.
 SCHEMA_VERSIONS: dict[str, int] = {
-    "adjust": 2,                # /2: JSON for summaries, tables for rows (issue 29)
+    "adjust": 3,                # /2: JSON for summaries, tables for rows (issue 29); /3: outliers' index
+    "propagate": 2,             # /2: points an id map, as adjust's targets and propagate-general's
     "adjust-general": 2,        # /2: the same rule for the general path (observation_counts, tables)
     "propagate-general": 2,     # /2: n_full_gauss_newton -> n_retried (one Monte Carlo record)
 }

@@ -288,8 +288,8 @@ def write_outputs(res, doc, out: Path, *, cloud_points: str | None = None) -> No
     write_csv_atomic(out / "distances.csv", hdr, rows(doc["distances"]))
     write_csv_atomic(out / "points.csv",
                      ["id", "semi_axis_1_95_m", "semi_axis_2_95_m", "semi_axis_3_95_m", "ellipsoid_coverage_mc", "ellipsoid_coverage_lin"],
-                     ([p["id"], *p["semi_axes_95_m"], p["ellipsoid_coverage_mc"], p["ellipsoid_coverage_lin"]]
-                      for p in doc["points"]))
+                     ([pid, *p["semi_axes_95_m"], p["ellipsoid_coverage_mc"], p["ellipsoid_coverage_lin"]]
+                      for pid, p in doc["points"].items()))
     fig = clouds_figure(res, points=[s.strip() for s in cloud_points.split(",") if s.strip()]
                         if cloud_points else None)
     with atomic_path(out / "clouds.png") as tmp:

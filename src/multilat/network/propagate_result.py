@@ -211,13 +211,13 @@ class PropagationResult:
             ref = self.problem.reference_m[k]
             r.update(a=a, b=b, reference_m=None if np.isnan(ref) else float(ref))
             dist_rows.append(r)
-        pts = []
+        pts = {}                    # an id map (schema /2), as adjust's targets and the general path's points
         for q, pid in enumerate(self.point_ids):
-            pts.append({"id": pid, "cov_mc_m2": self.point_cov_mc[q].tolist(),
+            pts[pid] = {"cov_mc_m2": self.point_cov_mc[q].tolist(),
                         "cov_lin_m2": self.point_cov_lin[q].tolist(),
                         "semi_axes_95_m": _semi_axes(self.point_cov_mc[q]).tolist(),
                         "ellipsoid_coverage_mc": float(self.ellipsoid_coverage_mc[q]),
-                        "ellipsoid_coverage_lin": float(self.ellipsoid_coverage_lin[q])})
+                        "ellipsoid_coverage_lin": float(self.ellipsoid_coverage_lin[q])}
         return {
             "source": self.problem.source,
             "trials": self.trials,

@@ -54,6 +54,7 @@ class Outlier:
     statistic: float | None = None
     critical: float | None = None
     test: str = "w"
+    index: int | None = None      # its row in the observations table (``observation_columns``)
 
 
 @dataclass(frozen=True)
@@ -354,10 +355,11 @@ def build_result(obs, used, rejected, unlocated, core, datum, cost, alpha, power
         rel = None
     outliers = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
                              wk, float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"),
-                             *rest)
+                             *rest, index=int(k))
                      for k, wk, *rest in rejected)
     unloc = tuple(Outlier(obs.station_ids[obs.station_index[k]], obs.target_ids[obs.target_index[k]],
-                          float(w[k]), float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"))
+                          float(w[k]), float(r_all[k]), float(mdb[k]) if np.isfinite(mdb[k]) else float("nan"),
+                          index=int(k))
                   for k in unlocated)
     cov = core.cov
     gd = np.diag(gcov).reshape(s, Q)
@@ -462,10 +464,10 @@ def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None, 
         "tests": dict(res.tests),
         "sigma_source": dict(res.sigma_source),
         "variance_factor": res.variance_factor,
-        "outliers": [{"station": x.station, "target": x.target, "w": x.w, "residual_m": x.residual_m,
+        "outliers": [{"index": x.index, "station": x.station, "target": x.target, "w": x.w, "residual_m": x.residual_m,
                       "test": x.test, "statistic": x.statistic, "critical": x.critical, "order": n + 1}
                      for n, x in enumerate(res.outliers)],
-        "unlocated": [{"station": x.station, "target": x.target, "w": x.w, "residual_m": x.residual_m}
+        "unlocated": [{"index": x.index, "station": x.station, "target": x.target, "w": x.w, "residual_m": x.residual_m}
                       for x in res.unlocated],
         "unlocated_reason": res.unlocated_reason,
         "w_failures": [{"observations": [_obs_label(o, k) for k in g], "w": float(res.w[g[0]]),

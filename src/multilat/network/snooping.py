@@ -261,7 +261,7 @@ def snooping_round(obs, obs_w, used, core: Fit, lin, rounds: Rounds, proc: Proce
     if angle_first:
         # the largest |w| is an angle's: reject that angle (the row's distance and other angle stay)
         k, kind, w_a, why = _angle_to_reject(core, w_ang, obs_w, used)
-        step["angle"] = f"{obs.label(k)} {kind}"
+        step["index"], step["kind"] = k, kind            # the row of the observations table, its angle
         if why:
             return "stop", ((), why)
         step["action"] = "rejected"
@@ -270,7 +270,7 @@ def snooping_round(obs, obs_w, used, core: Fit, lin, rounds: Rounds, proc: Proce
                              "step": len(steps)})
         return "angle", _without_angle(obs_w, k, kind)
     k = int(to_global[k_sub])
-    step["observation"] = k
+    step["index"], step["kind"] = k, "distance"       # adjust/3: one way to name a row (was "observation")
     # is the fault locatable? another observation whose w-test is perfectly (|rho| > 1 - 1e-6)
     # correlated with this one would show the same |w|: the data cannot tell which is wrong
     if lin is None:
@@ -339,7 +339,7 @@ def angle_outliers(obs, rejected: list[dict], res) -> tuple:
                                       res.target_xyz_m[[j]], [0], [0])
             resid = float(wrap_angle(obs.azimuth_rad[k] - az[0]) if r["kind"] == "azimuth"
                           else obs.elevation_rad[k] - el[0])
-        out.append({"station": sid, "target": tid, "kind": r["kind"], "w": r["w"], "residual_rad": resid,
+        out.append({"index": k, "station": sid, "target": tid, "kind": r["kind"], "w": r["w"], "residual_rad": resid,
                     "test": r["test"], "statistic": r["statistic"], "critical": r["critical"],
                     "step": r["step"], "order": n + 1})
     return tuple(out)

@@ -118,10 +118,10 @@ def propagate(doc: dict, result=None, options=None) -> list[Section]:
          f"{doc['summary']['n_agree']} / {doc['summary']['n_quantities']}"),
     ], caption="Run")
     rows = []
-    pts = doc["points"]
-    for q in _worst(pts, lambda p: p["semi_axes_95_m"][0]):
-        p = pts[q]
-        rows.append((p["id"], *(_um(doc, "points", q, "cov_mc_m2", i, i, op="sqrt") for i in range(3)),
+    pts = doc["points"]                                 # {id: point} (propagate/2)
+    ids = list(pts)
+    for q in (ids[i] for i in _worst([pts[p] for p in ids], lambda p: p["semi_axes_95_m"][0])):
+        rows.append((q, *(_um(doc, "points", q, "cov_mc_m2", i, i, op="sqrt") for i in range(3)),
                      *(_um(doc, "points", q, "cov_lin_m2", i, i, op="sqrt") for i in range(3)),
                      *(_um(doc, "points", q, "semi_axes_95_m", i) for i in range(3)),
                      _plain(doc, "points", q, "ellipsoid_coverage_mc")))

@@ -1,6 +1,6 @@
 """``multilat adjust OBS.csv --json`` (and ``--out DIR``'s ``result.json``): the distance path's
-adjustment, schema ``multilat.adjust/2`` (:func:`multilat.network.result.result_to_json`,
-:func:`multilat.cli.adjust_output.adjust_document`; keys in docs/cli.md "adjust/2").
+adjustment, schema ``multilat.adjust/3`` (:func:`multilat.network.result.result_to_json`,
+:func:`multilat.cli.adjust_output.adjust_document`; keys in docs/cli.md "adjust/3").
 
 The keys every run writes are required; the ones written only with an option or a network are
 optional: ``azimuth_sense`` (azimuths in the file), ``variance_components`` (``--variance-components``),
@@ -120,8 +120,10 @@ class Angle(Strict):
 
 
 class AngleOutlier(Strict):
-    """An angle rejected by data snooping (in ``order``, in snooping round ``step``)."""
+    """An angle rejected by data snooping (in ``order``, in snooping round ``step``); ``index`` the row
+    of the observations table that holds it."""
 
+    index: int
     station: str
     target: str
     kind: str
@@ -166,11 +168,12 @@ class Sigma0Check(Strict):
 
 
 class Step(TestRound):
-    """One round of detection and identification; ``observation`` (the table row of a distance) or
-    ``angle`` (its label and kind) names the observation identified."""
+    """One round of detection and identification; ``index`` (the row of the observations table, the
+    key of ``observations[]`` and ``outliers[]``) and ``kind`` (``distance``, ``azimuth`` or
+    ``elevation``) name the observation identified (adjust/3; ``observation`` / ``angle`` under /2)."""
 
-    observation: int | None = None
-    angle: str | None = None
+    index: int | None = None
+    kind: Literal["distance", "azimuth", "elevation"] | None = None
 
 
 class Tests(Strict):
@@ -203,8 +206,10 @@ class AdjustSigmaSource(SigmaSource):
 
 
 class Outlier(Strict):
-    """A distance rejected by data snooping (``residual_m`` against the final solution)."""
+    """A distance rejected by data snooping (``residual_m`` against the final solution); ``index`` its
+    row in the observations table (the key of ``observations[]``)."""
 
+    index: int
     station: str
     target: str
     w: Num
@@ -216,8 +221,10 @@ class Outlier(Strict):
 
 
 class Unlocated(Strict):
-    """A w-test failure not rejected (``unlocated_reason`` says why)."""
+    """A w-test failure not rejected (``unlocated_reason`` says why); ``index`` its row in the
+    observations table."""
 
+    index: int
     station: str
     target: str
     w: Num
@@ -451,7 +458,7 @@ class TableRecord(Strict):
 class AdjustDocument(Document):
     """``multilat adjust`` on the distance path (``--json``, ``--out DIR/result.json``)."""
 
-    schema_: Literal["multilat.adjust/2"] = Field(alias="schema")
+    schema_: Literal["multilat.adjust/3"] = Field(alias="schema")
     datum: str
     frame: Frame
     cost: Literal["distance", "squared"]

@@ -35,7 +35,10 @@ class DistanceRow(Row):
 
 
 class PointRow(Strict):
-    id: str
+    """A point's covariances (Monte Carlo and linear), the MC 95 % ellipsoid and the fraction of the
+    trials inside each ellipsoid; ``points`` maps the point's id to it (schema /2; a list with ``id``
+    under /1)."""
+
     cov_mc_m2: Cov3
     cov_lin_m2: Cov3
     semi_axes_95_m: Vec3
@@ -94,7 +97,7 @@ class Readings(Strict):
 class PropagateDocument(Document):
     """``multilat propagate --json`` and ``--out DIR/summary.json``."""
 
-    schema_: Literal["multilat.propagate/1"] = Field(alias="schema")
+    schema_: Literal["multilat.propagate/2"] = Field(alias="schema")
     source: str
     trials: int
     n_failed: int
@@ -112,7 +115,7 @@ class PropagateDocument(Document):
     adaptive: Adaptive | None
     parameters: list[Row]
     distances: list[DistanceRow]
-    points: list[PointRow]
+    points: dict[str, PointRow]
     summary: Summary
     sigma_source: SigmaSource
     noise_source: NoiseSource
