@@ -176,9 +176,9 @@ def summarise(rows) -> str:
 
 def _large(t: int, seed: int = 3):
     from multilat.network.data import Observations
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network    # large.synthetic_network(8, t, 7), bit for bit
 
-    syn = synthetic_network(8, t, 7, rng=seed)
+    syn = synthetic_network(seed, population="rings", n_stations=8, n_targets=t, per_target=7)
     return Observations(tuple(f"S{i}" for i in range(8)), tuple(f"T{j}" for j in range(t)), syn.station_index,
                         syn.target_index, syn.distance_m, syn.sigma_m)
 
