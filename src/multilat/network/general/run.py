@@ -90,7 +90,7 @@ def _failing_by_far(res: GeneralResult) -> bool:
 def _adjusted(net: Network, options) -> tuple[Network, GeneralResult]:
     """Approximate coordinates and the adjustment from them. Where the distance-only search placed
     points in the network's own frame and the adjustment fails the global test by far (or does not
-    converge), the distance path's minimum search is run from the approximations
+    converge), the distance path's minimum search is run from the search's own start
     (:func:`.approximate.search.minimum_search`, once per network: its note), the chain places the
     other points again, and the lower minimum is kept: a flat ring started with targets on the
     mirrored side otherwise converges at σ0 ~ 130 (network 87 of

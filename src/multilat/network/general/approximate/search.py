@@ -21,7 +21,7 @@ first whose cost the noise explains is kept (else the lowest).
 The distance path's minimum search is not part of the chain: :func:`multilat.network.general.run.adjust_network`
 adjusts from the search's start first and, only when that adjustment fails the global test by far
 (or does not converge) and the search ran in the network's own frame (:func:`searched_free`), runs
-it from the approximations (:func:`minimum_search`). Run always, it cost a full distance-path
+it from the search's own start (:func:`minimum_search`). Run always, it cost a full distance-path
 adjustment per chain (about 1.3 s of 3.6 at 8 stations x 20 000 targets).
 """
 
@@ -151,22 +151,24 @@ def _search(obs, sub, anchors, xyz, gen):
 
 def minimum_search(network, rng=0):
     """The distance path's minimum search (:func:`_minimum`) on the distance sub-network of ``network``
-    (:func:`_tables`), started from its points' present coordinates (head constants 0): (n, 3)
-    coordinates with the sub-network's points at the solution and the others NaN (to be placed
-    again by the chain), or None when it found nothing else (or the coordinates are incomplete).
-    ``rng``: seed of the search's candidates."""
-    from multilat.network.result import Start
+    (:func:`_tables`), from the search's own start (:func:`multilat.network.starts.initial_for`,
+    seeded by ``rng`` and its generator then driving the candidates: the chain's start and, for
+    the default seed, what the search did when it ran inside the chain); (n, 3) coordinates with the
+    sub-network's points at the solution and the others NaN (to be placed again by the chain), or
+    None when it found nothing else."""
+    from multilat.network.starts import initial_for
 
     got = _tables(network)
     if got is None:
         return None
     obs, sub, _ = got
     xyz = network.points.xyz_m
-    if not np.all(np.isfinite(xyz[sub])):
+    gen = np.random.default_rng(rng)
+    try:
+        start, _ = initial_for(obs, None, None, gen)
+    except MultilatError:
         return None
-    ns = obs.n_stations
-    start = Start(xyz[sub[:ns]].copy(), xyz[sub[ns:]].copy(), np.zeros(ns))
-    sol = _minimum(obs, start, np.random.default_rng(rng))
+    sol = _minimum(obs, start, gen)
     if sol is start:
         return None
     out = np.full_like(xyz, np.nan)
