@@ -87,6 +87,7 @@ def _general(obs):
     from multilat.errors import MultilatError
     from multilat.network.general import adjust_network
     from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.general.run import false_minimum_warning
 
     try:
         with warnings.catch_warnings():
@@ -99,7 +100,8 @@ def _general(obs):
         return None, f"crashed: {type(e).__name__}: {e}"
     r = adj.result
     return {"sigma0": float(r.sigma0), "ids": tuple(r.ids), "xyz": np.asarray(r.xyz_m),
-            "out": tuple(sorted(e["id"] for e in adj.excluded)), "reasons": {e["id"]: e["reason"] for e in adj.excluded}}, ""
+            "out": tuple(sorted(e["id"] for e in adj.excluded)), "reasons": {e["id"]: e["reason"] for e in adj.excluded},
+            "warned": false_minimum_warning(adj) is not None}, ""
 
 
 def compare(g, d) -> tuple[str, float, float]:
@@ -129,7 +131,8 @@ def study_one(k: int) -> dict:
     row = {"k": k, "layout": f"{net.station_layout}/{net.target_layout}", "s": net.obs.n_stations,
            "t": net.obs.n_targets, "d_err": d_err, "g_err": g_err, "t_dist_s": t1 - t0, "t_gen_s": t2 - t1,
            "d_out": list(d["out"]) if d else None, "g_out": list(g["out"]) if g else None,
-           "g_reasons": g["reasons"] if g else None, "d_warned": bool(d and d["warned"])}
+           "g_reasons": g["reasons"] if g else None, "d_warned": bool(d and d["warned"]),
+           "g_warned": bool(g and g["warned"])}
     if g is None:
         row["outcome"] = "crashed" if g_err.startswith("crashed:") else "refused"
     elif d is None:
@@ -162,7 +165,8 @@ def summarise(rows) -> str:
             f"different sets in {len(diff_out)}"]
     for r in diff_out[:5]:
         out.append(f"  k={r['k']}: distance {r['d_out']}, general {r['g_reasons']}")
-    out.append(f"distance path warned 'possible false minimum': {sum(r['d_warned'] for r in rows)}")
+    out.append(f"warned 'possible false minimum': distance path {sum(r['d_warned'] for r in rows)}, general "
+               f"{sum(bool(r.get('g_warned')) for r in rows)} (of {sum('g_warned' in r for r in rows)} rows that record it)")
     for r in rows:
         if r["outcome"] != "same":
             extra = (f"rel {r['rel']:+.2e} gap {r['gap_m']:.2e} m" if "rel" in r
@@ -176,9 +180,9 @@ def summarise(rows) -> str:
 
 def _large(t: int, seed: int = 3):
     from multilat.network.data import Observations
-    from multilat.network.large import synthetic_network
+    from multilat.network.synthetic import synthetic_network    # large.synthetic_network(8, t, 7), bit for bit
 
-    syn = synthetic_network(8, t, 7, rng=seed)
+    syn = synthetic_network(seed, population="rings", n_stations=8, n_targets=t, per_target=7)
     return Observations(tuple(f"S{i}" for i in range(8)), tuple(f"T{j}" for j in range(t)), syn.station_index,
                         syn.target_index, syn.distance_m, syn.sigma_m)
 

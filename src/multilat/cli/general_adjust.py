@@ -344,8 +344,8 @@ def run(**params) -> None:
                 doc, adj, stats = compute(path, **tests)
             else:
                 doc, adj, stats = compute_tables(params, **tests)
-    if fallback is None and doc["warnings"]:          # under auto the distance path said it already
-        for w in doc["warnings"]:
+    for w in doc["warnings"]:                           # under auto the distance path said them already
+        if fallback is None or w.startswith("possible false minimum"):     # (not this one: the general layer's)
             warnings.warn(w, UserWarning, stacklevel=2)
     if fallback is not None:
         doc["notes"] = [f"--model auto: the self-calibrating model {fallback}; adjusted by the general model",
@@ -412,7 +412,9 @@ def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_globa
                alpha_global=alpha_global, alpha_family=alpha_family, snooping=snooping, adjustment=adj)
     adj, stats = sn.adjustment, sn.stats
     doc = to_json(adj, stats, source=source, snooping=sn, variance=vcomp)
-    doc = {"model": "general", **doc, "format": fmt, "warnings": []}
+    from multilat.network.general.run import false_minimum_warning
+
+    doc = {"model": "general", **doc, "format": fmt, "warnings": [w for w in (false_minimum_warning(adj),) if w]}
     if sigma_source is not None:
         doc["sigma_source"] = sigma_source
     return stamp(doc, SCHEMA), adj, stats

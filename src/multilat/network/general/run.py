@@ -28,7 +28,7 @@ from multilat.network.general.observations import Network, without_points
 from multilat.network.general.points import FREE
 
 __all__ = ["NetworkAdjustment", "adjust_network", "check_sizes", "leave_out", "undetermined_reason", "MAX_ROUNDS",
-           "sense_hint"]
+           "sense_hint", "false_minimum_warning"]
 
 #: rounds of leaving out undetermined points before giving up (each round removes at least one point)
 MAX_ROUNDS = 10
@@ -67,8 +67,7 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
         if missing and not strict:
             net = leave_out(net, missing, rnd, excluded)
         try:
-            ready = approximate(net)
-            res = adjust(ready, options=options)
+            ready, res = _adjusted(net, options)
         except UndeterminedError as e:
             if strict or not e.points:              # a defect no point carries: refused
                 raise
@@ -90,6 +89,75 @@ def check_sizes(network: Network, options: AdjustOptions | None = None) -> None:
         from multilat.network.general.sparse import check_reduced_size
 
         check_reduced_size(system)
+
+
+def _failing_by_far(res: GeneralResult) -> bool:
+    """The distance path's trigger of its minimum search (:func:`multilat.network.search.needs_search`):
+    the χ² tail probability of vᵀPv below ``P_MIN``."""
+    from multilat.network.search import P_MIN, p_value
+
+    return p_value(float(res.sigma0) ** 2 * res.dof, res.dof) < P_MIN
+
+
+def _adjusted(net: Network, options) -> tuple[Network, GeneralResult]:
+    """Approximate coordinates and the adjustment from them. Where the distance-only search placed
+    points in the network's own frame and the adjustment fails the global test by far (or does not
+    converge), the distance path's minimum search is run from the search's own start
+    (:func:`.approximate.search.minimum_search`, once per network: its note), the chain places the
+    other points again, and the lower minimum is kept: a flat ring started with targets on the
+    mirrored side otherwise converges at σ0 ~ 130 (network 87 of
+    ``benchmarks/study_general_acceptance.py``). Run always, it made the general layer ~4x the
+    distance path's time at 8 x 20 000."""
+    from multilat.network.general.approximate.search import MINIMUM_NOTE, minimum_search, searched_free
+
+    ready = approximate(net)
+    searched = searched_free(ready.notes) and not any(n.startswith(MINIMUM_NOTE) for n in ready.notes)
+    try:
+        res, failed = adjust(ready, options=options), None
+    except UndeterminedError:
+        raise
+    except MultilatError as e:                              # diverged from the search's start
+        if not searched:
+            raise
+        res, failed = None, e
+    if not searched or res is not None and not _failing_by_far(res):
+        return ready, res
+    xyz = minimum_search(ready)
+    try:
+        if xyz is None:
+            raise MultilatError("the minimum search found nothing lower")
+        again = approximate(Network(ready.points.with_xyz(xyz), ready.blocks, ready.notes))
+        res2 = adjust(again, options=options)
+    except UndeterminedError:
+        raise
+    except MultilatError:
+        if failed is not None:
+            raise failed from None
+        res2 = None
+    before = "not converged" if res is None else f"sigma0 {res.sigma0:.4g}"
+    if res2 is not None and (res is None or res2.sigma0 ** 2 * res2.dof < res.sigma0 ** 2 * res.dof):
+        note = f"{MINIMUM_NOTE}: {before} from the search's start, {res2.sigma0:.4g} after it"
+        return Network(again.points, again.blocks, again.notes + (note,)), res2
+    note = f"{MINIMUM_NOTE}: {before} from the search's start, nothing lower found"
+    return Network(ready.points, ready.blocks, ready.notes + (note,)), res
+
+
+def false_minimum_warning(adj: NetworkAdjustment) -> str | None:
+    """The distance path's "possible false minimum" warning (its words), for an adjustment whose
+    approximations came from the distance-only search in the network's own frame and which still
+    fails the global test by far (:func:`_failing_by_far`; the minimum search has run, see
+    :func:`_adjusted`): None otherwise. Judged on the final adjustment (after data snooping, as the
+    distance path)."""
+    from multilat.network.general.approximate.search import searched_free
+    from multilat.network.search import p_value
+
+    res = adj.result
+    if not searched_free(adj.network.notes) or not _failing_by_far(res):
+        return None
+    p = p_value(float(res.sigma0) ** 2 * res.dof, res.dof)
+    return (f"possible false minimum: the global test fails by far after the minimum search (sigma0 "
+            f"{res.sigma0:.3g}, chi-square p {p:.1e}): check for gross errors, a-priori sigma too small, "
+            "or give approximate coordinates")
 
 
 def leave_out(net: Network, reasons: dict, rnd: int, excluded: list, error: MultilatError | None = None) -> Network:
