@@ -8,11 +8,12 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.network.general.points import FIXED, FREE, WEIGHTED
+from multilat.rows_text import JsonRows
 from multilat.network.frame_words import INVARIANT
 
 __all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "row_record", "external_reliability",
            "SETUP_KINDS", "poorly_controlled", "zero_redundancy_points", "row_ends", "constant_words",
-           "TABLE_KEYS", "observation_table", "list_observations", "LISTINGS"]
+           "TABLE_KEYS", "observation_table", "list_observations", "LISTINGS", "ObservationRows"]
 
 #: kinds whose ``from`` point carries an instrument set-up (the others: levelling, vectors)
 SETUP_KINDS = ("slope_distance", "direction", "zenith_angle", "horizontal_distance", "horizontal_angle",
@@ -85,8 +86,63 @@ def datum_words(points, result) -> str:
 
 def observation_rows(system, stats) -> list[dict]:
     """One dict per row of the adjusted system (the ``observations`` table of the JSON)."""
-    ids = system.network.points.ids
-    return [_row(b, k, sl.start + k, ids, stats) for b, sl in zip(system.blocks, system.rows) for k in range(b.n_rows)]
+    return list(ObservationRows(system, stats))
+
+
+class ObservationRows(JsonRows):
+    """Every row of the adjusted system as :func:`to_json`'s ``observations``, without building them:
+    as a sequence it gives :func:`_row`'s dicts one at a time; :func:`observation_table` reads its
+    columns from ``stats`` and the blocks (arrays), so ``--json`` builds a dict only for the rows it
+    lists. Written to JSON (:func:`multilat.io.write_json`) as the list of those dicts."""
+
+    def __init__(self, system, stats):
+        self.system, self.stats, self.columns, self._labels = system, stats, {}, {}
+        self.n = int(sum(b.n_rows for b in system.blocks))
+        self._stops = np.array([sl.stop for sl in system.rows], np.int64)
+
+    def _row(self, i: int) -> dict:
+        q = int(np.searchsorted(self._stops, i, side="right"))
+        sl, b = self.system.rows[q], self.system.blocks[q]
+        return _row(b, i - sl.start, i, self.system.network.points.ids, self.stats)
+
+    def __iter__(self):
+        ids = self.system.network.points.ids
+        return (_row(b, k, sl.start + k, ids, self.stats)
+                for b, sl in zip(self.system.blocks, self.system.rows) for k in range(b.n_rows))
+
+    def write(self, orjson, write, indent: int | None, chunk: int = 0) -> None:
+        """The rows' dicts as orjson writes a list nested at column ``indent`` (None: compact)."""
+        text = orjson.dumps(self.to_python(), option=orjson.OPT_INDENT_2 if indent is not None else 0)
+        write(text.replace(b"\n", b"\n" + b" " * indent) if indent else text)
+
+    def columns_of(self) -> dict:
+        """:data:`TABLE_KEYS` as lists (None for an empty cell), the values of :func:`_row`'s dicts."""
+        st, ids = self.stats, np.asarray(self.system.network.points.ids, object)
+        cols = {key: np.full(self.n, None, object) for key in TABLE_KEYS}
+        for b, sl in zip(self.system.blocks, self.system.rows):
+            c = {"kind": b.kind, "label": (np.asarray(b.labels, str).astype(object) if len(b.labels) == b.n_rows
+                                           else "")}
+            c.update({key: ids[np.asarray(b.index[key], np.intp)] for key in ("from", "to", "bs", "fs", "point")
+                      if key in b.index})
+            if "axis" in b.index:
+                c["axis"] = np.array(list("xyz"), object)[np.asarray(b.index["axis"], np.intp)]
+            if "component" in b.index:
+                c["component"] = np.array(["azimuth", "elevation"], object)[np.asarray(b.index["component"], np.intp)]
+            if "set" in b.index:
+                c["set"] = np.asarray(b.names["set"], object)[np.asarray(b.index["set"], np.intp)]
+            c["value"] = np.asarray(b.value, float)
+            for key, v in c.items():
+                cols[key][sl] = v
+        cols["unit"] = np.where(np.asarray(st.angular, bool), "rad", "m").astype(object)
+        for key in ("sigma", "residual", "redundancy", "w", "statistic"):
+            cols[key] = np.asarray(getattr(st, key), float)
+        cols["passed"] = np.asarray(st.passed, bool)
+        for key in ("mdb", "mdb_sigma", "bias_to_noise", "shift_max_m"):
+            v = np.asarray(getattr(st, key), float)
+            cols[key] = v.astype(object)
+            cols[key][~np.isfinite(v)] = None
+        cols["shift_point"] = np.asarray(st.shift_point, str).astype(object)
+        return {key: v.tolist() for key, v in cols.items()}
 
 
 def row_record(system, stats, i: int) -> dict:
@@ -219,7 +275,7 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
                                         "<points-observations> defaults (distance-stdev, direction-stdev, "
                                         "angle-stdev, zenith-angle-stdev), <cov-mat> of vectors, coordinates "
                                         "and height-difference blocks"},
-        "observations": observation_rows(adjustment.system, stats),
+        "observations": ObservationRows(adjustment.system, stats),
         "iterations": [{"step_max": s, "vtpv": v} for s, v in res.iterations],
         "notes": list(net.notes),
     }
@@ -255,12 +311,20 @@ def poorly_controlled(rows, *, r_min: float | None = None, mdb_limit_sigma: floa
     MDB above ``mdb_limit_sigma`` σ (the distance path's rule and defaults,
     :data:`multilat.network.reliability.R_MIN`, ``MDB_LIMIT_SIGMA``); an uncontrolled row (r = 0,
     no MDB) is one. A blunder there would not show in its test."""
+    rows = list(rows)
+    red = np.array([o["redundancy"] for o in rows], float).reshape(len(rows))
+    mdb_sigma = np.array([o["mdb_sigma"] for o in rows], float).reshape(len(rows))
+    return np.flatnonzero(_poor_mask(red, mdb_sigma, r_min=r_min, mdb_limit_sigma=mdb_limit_sigma)).tolist()
+
+
+def _poor_mask(redundancy, mdb_sigma, *, r_min: float | None = None, mdb_limit_sigma: float | None = None):
+    """:func:`poorly_controlled`'s rule on arrays (``mdb_sigma`` nan where a row has no MDB)."""
     from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
 
     r_min = R_MIN if r_min is None else r_min
     limit = MDB_LIMIT_SIGMA if mdb_limit_sigma is None else mdb_limit_sigma
-    return [k for k, o in enumerate(rows)
-            if o["redundancy"] < r_min or o["mdb_sigma"] is None or o["mdb_sigma"] > limit]
+    with np.errstate(invalid="ignore"):
+        return (redundancy < r_min) | ~np.isfinite(mdb_sigma) | (mdb_sigma > limit)
 
 
 def zero_redundancy_points(rows, points: dict) -> list[str]:
@@ -306,18 +370,25 @@ def observation_table(doc: dict) -> dict:
     snooping; its residual at the final solution, None for a correlated block rejected whole, whose
     rows' residuals are the outlier's list), ``w_failed`` (the test at the end fails) and
     ``poorly_controlled`` (:func:`poorly_controlled`)."""
-    rows = list(doc["observations"])
-    n_adj = len(rows)
-    for o in doc["outliers"]:
-        rows.append({**o, "residual": o["residual"] if isinstance(o["residual"], (int, float)) else None})
-    cols: dict = {"index": np.arange(len(rows), dtype=np.int64)}
+    obs = doc["observations"]
+    if isinstance(obs, ObservationRows):          # to_json's rows: the columns from the arrays
+        adjusted = obs.columns_of()
+    else:
+        adjusted = {key: [o.get(key) for o in obs] for key in TABLE_KEYS}
+    n_adj = len(adjusted["kind"])
+    out = [{**o, "residual": o["residual"] if isinstance(o["residual"], (int, float)) else None}
+           for o in doc["outliers"]]
+    n = n_adj + len(out)
+    cols: dict = {"index": np.arange(n, dtype=np.int64)}
     for key in TABLE_KEYS:
-        cols[key] = [o.get(key) for o in rows]
-    rejected = np.arange(len(rows)) >= n_adj
-    poor = np.zeros(len(rows), bool)
-    poor[poorly_controlled(doc["observations"])] = True
-    failed = np.array([not o["passed"] for o in doc["observations"]] + [False] * (len(rows) - n_adj), bool)
-    cols.update(rejected=rejected, w_failed=failed, poorly_controlled=poor)
+        cols[key] = adjusted[key] + [o.get(key) for o in out]
+    red = np.array(adjusted["redundancy"], float).reshape(n_adj)
+    mdb_sigma = np.array(adjusted["mdb_sigma"], float).reshape(n_adj)      # None (no MDB): nan
+    poor = np.zeros(n, bool)
+    poor[:n_adj] = _poor_mask(red, mdb_sigma)
+    failed = np.zeros(n, bool)
+    failed[:n_adj] = ~np.array(adjusted["passed"], bool).reshape(n_adj)
+    cols.update(rejected=np.arange(n) >= n_adj, w_failed=failed, poorly_controlled=poor)
     return cols
 
 
