@@ -27,28 +27,22 @@ def roles(network) -> list[list[str]]:
     coordinate difference), ``observed`` (observed coordinates), ``control`` (a fixed or weighted
     coordinate), ``datum`` (a datum point of a free network)."""
     pts = network.points
-    found = [set() for _ in range(pts.n)]
+    order = ("station", "target", "levelling", "vector", "observed", "control", "datum")
+    has = np.zeros((pts.n, len(order)), bool)          # per point, per role of ``order``
     for b in network.blocks:
         if b.kind in SETUP_KINDS:
-            for i in b.index["from"]:
-                found[int(i)].add("station")
+            has[np.asarray(b.index["from"], np.intp), 0] = True
             for k in ("to", "bs", "fs"):
-                for i in b.index.get(k, ()):
-                    found[int(i)].add("target")
+                has[np.asarray(b.index.get(k, ()), np.intp), 1] = True
         elif b.kind in ("height_difference", "coordinate_difference"):
             for k in ("from", "to"):
-                for i in b.index[k]:
-                    found[int(i)].add("levelling" if b.kind == "height_difference" else "vector")
+                has[np.asarray(b.index[k], np.intp), 2 if b.kind == "height_difference" else 3] = True
         elif b.kind == "observed_coordinates":
-            for i in b.index["point"]:
-                found[int(i)].add("observed")
-    for i in range(pts.n):
-        if np.any(pts.status[i] != FREE):
-            found[i].add("control")
-        if pts.constrained[i]:
-            found[i].add("datum")
-    order = ("station", "target", "levelling", "vector", "observed", "control", "datum")
-    return [[r for r in order if r in f] for f in found]
+            has[np.asarray(b.index["point"], np.intp), 4] = True
+    has[:, 5] = np.any(np.asarray(pts.status) != FREE, axis=1)
+    has[:, 6] = np.asarray(pts.constrained, bool)
+    words: dict = {}                                   # the few distinct combinations, each once
+    return [list(words.setdefault(row, tuple(r for r, h in zip(order, row) if h))) for row in map(tuple, has.tolist())]
 
 
 def status_words(status_row) -> str:
@@ -221,14 +215,16 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
     net, res = adjustment.network, adjustment.result
     pts = net.points
     rl = roles(net)
+    cov = np.asarray(stats.cov_m2)
+    std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None)).tolist()
+    words: dict = {}                                   # per distinct status row: its words, once
+    for row in set(map(tuple, np.asarray(pts.status).tolist())):
+        words[row] = (status_words(row), [{FREE: "free", FIXED: "fixed", WEIGHTED: "weighted"}[s] for s in row])
     points = {}
-    for i, p in enumerate(pts.ids):
-        cov = stats.cov_m2[i]
-        points[p] = {"xyz_m": res.xyz_m[i].tolist(), "xyz_std_m": np.sqrt(np.clip(np.diag(cov), 0, None)).tolist(),
-                     "cov_m2": cov.tolist(), "semi_axes_95_m": stats.semi_axes_95_m[i].tolist(), "roles": rl[i],
-                     "status": status_words(pts.status[i]),
-                     "status_xyz": [{FREE: "free", FIXED: "fixed", WEIGHTED: "weighted"}[int(s)]
-                                    for s in pts.status[i]]}
+    for p, xyz, sd, c, semi, r, st in zip(pts.ids, res.xyz_m.tolist(), std, cov.tolist(),
+                                          stats.semi_axes_95_m.tolist(), rl, map(tuple, pts.status.tolist())):
+        points[p] = {"xyz_m": xyz, "xyz_std_m": sd, "cov_m2": c, "semi_axes_95_m": semi, "roles": r,
+                     "status": words[st][0], "status_xyz": list(words[st][1])}
     gt = stats.global_test
     scale = res.sigma0 ** 2 if stats.variance_factor == "unknown" and np.isfinite(res.sigma0) else 1.0
     others = {}
