@@ -8,11 +8,12 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.network.general.points import FIXED, FREE, WEIGHTED
+from multilat.rows_text import JsonRows
 from multilat.network.frame_words import INVARIANT
 
 __all__ = ["to_json", "roles", "status_words", "datum_words", "observation_rows", "row_record", "external_reliability",
            "SETUP_KINDS", "poorly_controlled", "zero_redundancy_points", "row_ends", "constant_words",
-           "TABLE_KEYS", "observation_table", "list_observations", "LISTINGS"]
+           "TABLE_KEYS", "observation_table", "list_observations", "LISTINGS", "ObservationRows"]
 
 #: kinds whose ``from`` point carries an instrument set-up (the others: levelling, vectors)
 SETUP_KINDS = ("slope_distance", "direction", "zenith_angle", "horizontal_distance", "horizontal_angle",
@@ -26,28 +27,22 @@ def roles(network) -> list[list[str]]:
     coordinate difference), ``observed`` (observed coordinates), ``control`` (a fixed or weighted
     coordinate), ``datum`` (a datum point of a free network)."""
     pts = network.points
-    found = [set() for _ in range(pts.n)]
+    order = ("station", "target", "levelling", "vector", "observed", "control", "datum")
+    has = np.zeros((pts.n, len(order)), bool)          # per point, per role of ``order``
     for b in network.blocks:
         if b.kind in SETUP_KINDS:
-            for i in b.index["from"]:
-                found[int(i)].add("station")
+            has[np.asarray(b.index["from"], np.intp), 0] = True
             for k in ("to", "bs", "fs"):
-                for i in b.index.get(k, ()):
-                    found[int(i)].add("target")
+                has[np.asarray(b.index.get(k, ()), np.intp), 1] = True
         elif b.kind in ("height_difference", "coordinate_difference"):
             for k in ("from", "to"):
-                for i in b.index[k]:
-                    found[int(i)].add("levelling" if b.kind == "height_difference" else "vector")
+                has[np.asarray(b.index[k], np.intp), 2 if b.kind == "height_difference" else 3] = True
         elif b.kind == "observed_coordinates":
-            for i in b.index["point"]:
-                found[int(i)].add("observed")
-    for i in range(pts.n):
-        if np.any(pts.status[i] != FREE):
-            found[i].add("control")
-        if pts.constrained[i]:
-            found[i].add("datum")
-    order = ("station", "target", "levelling", "vector", "observed", "control", "datum")
-    return [[r for r in order if r in f] for f in found]
+            has[np.asarray(b.index["point"], np.intp), 4] = True
+    has[:, 5] = np.any(np.asarray(pts.status) != FREE, axis=1)
+    has[:, 6] = np.asarray(pts.constrained, bool)
+    words: dict = {}                                   # the few distinct combinations, each once
+    return [list(words.setdefault(row, tuple(r for r, h in zip(order, row) if h))) for row in map(tuple, has.tolist())]
 
 
 def status_words(status_row) -> str:
@@ -85,8 +80,63 @@ def datum_words(points, result) -> str:
 
 def observation_rows(system, stats) -> list[dict]:
     """One dict per row of the adjusted system (the ``observations`` table of the JSON)."""
-    ids = system.network.points.ids
-    return [_row(b, k, sl.start + k, ids, stats) for b, sl in zip(system.blocks, system.rows) for k in range(b.n_rows)]
+    return list(ObservationRows(system, stats))
+
+
+class ObservationRows(JsonRows):
+    """Every row of the adjusted system as :func:`to_json`'s ``observations``, without building them:
+    as a sequence it gives :func:`_row`'s dicts one at a time; :func:`observation_table` reads its
+    columns from ``stats`` and the blocks (arrays), so ``--json`` builds a dict only for the rows it
+    lists. Written to JSON (:func:`multilat.io.write_json`) as the list of those dicts."""
+
+    def __init__(self, system, stats):
+        self.system, self.stats, self.columns, self._labels = system, stats, {}, {}
+        self.n = int(sum(b.n_rows for b in system.blocks))
+        self._stops = np.array([sl.stop for sl in system.rows], np.int64)
+
+    def _row(self, i: int) -> dict:
+        q = int(np.searchsorted(self._stops, i, side="right"))
+        sl, b = self.system.rows[q], self.system.blocks[q]
+        return _row(b, i - sl.start, i, self.system.network.points.ids, self.stats)
+
+    def __iter__(self):
+        ids = self.system.network.points.ids
+        return (_row(b, k, sl.start + k, ids, self.stats)
+                for b, sl in zip(self.system.blocks, self.system.rows) for k in range(b.n_rows))
+
+    def write(self, orjson, write, indent: int | None, chunk: int = 0) -> None:
+        """The rows' dicts as orjson writes a list nested at column ``indent`` (None: compact)."""
+        text = orjson.dumps(self.to_python(), option=orjson.OPT_INDENT_2 if indent is not None else 0)
+        write(text.replace(b"\n", b"\n" + b" " * indent) if indent else text)
+
+    def columns_of(self) -> dict:
+        """:data:`TABLE_KEYS` as lists (None for an empty cell), the values of :func:`_row`'s dicts."""
+        st, ids = self.stats, np.asarray(self.system.network.points.ids, object)
+        cols = {key: np.full(self.n, None, object) for key in TABLE_KEYS}
+        for b, sl in zip(self.system.blocks, self.system.rows):
+            c = {"kind": b.kind, "label": (np.asarray(b.labels, str).astype(object) if len(b.labels) == b.n_rows
+                                           else "")}
+            c.update({key: ids[np.asarray(b.index[key], np.intp)] for key in ("from", "to", "bs", "fs", "point")
+                      if key in b.index})
+            if "axis" in b.index:
+                c["axis"] = np.array(list("xyz"), object)[np.asarray(b.index["axis"], np.intp)]
+            if "component" in b.index:
+                c["component"] = np.array(["azimuth", "elevation"], object)[np.asarray(b.index["component"], np.intp)]
+            if "set" in b.index:
+                c["set"] = np.asarray(b.names["set"], object)[np.asarray(b.index["set"], np.intp)]
+            c["value"] = np.asarray(b.value, float)
+            for key, v in c.items():
+                cols[key][sl] = v
+        cols["unit"] = np.where(np.asarray(st.angular, bool), "rad", "m").astype(object)
+        for key in ("sigma", "residual", "redundancy", "w", "statistic"):
+            cols[key] = np.asarray(getattr(st, key), float)
+        cols["passed"] = np.asarray(st.passed, bool)
+        for key in ("mdb", "mdb_sigma", "bias_to_noise", "shift_max_m"):
+            v = np.asarray(getattr(st, key), float)
+            cols[key] = v.astype(object)
+            cols[key][~np.isfinite(v)] = None
+        cols["shift_point"] = np.asarray(st.shift_point, str).astype(object)
+        return {key: v.tolist() for key, v in cols.items()}
 
 
 def row_record(system, stats, i: int) -> dict:
@@ -165,14 +215,16 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
     net, res = adjustment.network, adjustment.result
     pts = net.points
     rl = roles(net)
+    cov = np.asarray(stats.cov_m2)
+    std = np.sqrt(np.clip(np.diagonal(cov, axis1=1, axis2=2), 0, None)).tolist()
+    words: dict = {}                                   # per distinct status row: its words, once
+    for row in set(map(tuple, np.asarray(pts.status).tolist())):
+        words[row] = (status_words(row), [{FREE: "free", FIXED: "fixed", WEIGHTED: "weighted"}[s] for s in row])
     points = {}
-    for i, p in enumerate(pts.ids):
-        cov = stats.cov_m2[i]
-        points[p] = {"xyz_m": res.xyz_m[i].tolist(), "xyz_std_m": np.sqrt(np.clip(np.diag(cov), 0, None)).tolist(),
-                     "cov_m2": cov.tolist(), "semi_axes_95_m": stats.semi_axes_95_m[i].tolist(), "roles": rl[i],
-                     "status": status_words(pts.status[i]),
-                     "status_xyz": [{FREE: "free", FIXED: "fixed", WEIGHTED: "weighted"}[int(s)]
-                                    for s in pts.status[i]]}
+    for p, xyz, sd, c, semi, r, st in zip(pts.ids, res.xyz_m.tolist(), std, cov.tolist(),
+                                          stats.semi_axes_95_m.tolist(), rl, map(tuple, pts.status.tolist())):
+        points[p] = {"xyz_m": xyz, "xyz_std_m": sd, "cov_m2": c, "semi_axes_95_m": semi, "roles": r,
+                     "status": words[st][0], "status_xyz": list(words[st][1])}
     gt = stats.global_test
     scale = res.sigma0 ** 2 if stats.variance_factor == "unknown" and np.isfinite(res.sigma0) else 1.0
     others = {}
@@ -219,7 +271,7 @@ def to_json(adjustment, stats, *, source: str, snooping=None, variance=None) -> 
                                         "<points-observations> defaults (distance-stdev, direction-stdev, "
                                         "angle-stdev, zenith-angle-stdev), <cov-mat> of vectors, coordinates "
                                         "and height-difference blocks"},
-        "observations": observation_rows(adjustment.system, stats),
+        "observations": ObservationRows(adjustment.system, stats),
         "iterations": [{"step_max": s, "vtpv": v} for s, v in res.iterations],
         "notes": list(net.notes),
     }
@@ -255,12 +307,20 @@ def poorly_controlled(rows, *, r_min: float | None = None, mdb_limit_sigma: floa
     MDB above ``mdb_limit_sigma`` σ (the distance path's rule and defaults,
     :data:`multilat.network.reliability.R_MIN`, ``MDB_LIMIT_SIGMA``); an uncontrolled row (r = 0,
     no MDB) is one. A blunder there would not show in its test."""
+    rows = list(rows)
+    red = np.array([o["redundancy"] for o in rows], float).reshape(len(rows))
+    mdb_sigma = np.array([o["mdb_sigma"] for o in rows], float).reshape(len(rows))
+    return np.flatnonzero(_poor_mask(red, mdb_sigma, r_min=r_min, mdb_limit_sigma=mdb_limit_sigma)).tolist()
+
+
+def _poor_mask(redundancy, mdb_sigma, *, r_min: float | None = None, mdb_limit_sigma: float | None = None):
+    """:func:`poorly_controlled`'s rule on arrays (``mdb_sigma`` nan where a row has no MDB)."""
     from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
 
     r_min = R_MIN if r_min is None else r_min
     limit = MDB_LIMIT_SIGMA if mdb_limit_sigma is None else mdb_limit_sigma
-    return [k for k, o in enumerate(rows)
-            if o["redundancy"] < r_min or o["mdb_sigma"] is None or o["mdb_sigma"] > limit]
+    with np.errstate(invalid="ignore"):
+        return (redundancy < r_min) | ~np.isfinite(mdb_sigma) | (mdb_sigma > limit)
 
 
 def zero_redundancy_points(rows, points: dict) -> list[str]:
@@ -306,18 +366,25 @@ def observation_table(doc: dict) -> dict:
     snooping; its residual at the final solution, None for a correlated block rejected whole, whose
     rows' residuals are the outlier's list), ``w_failed`` (the test at the end fails) and
     ``poorly_controlled`` (:func:`poorly_controlled`)."""
-    rows = list(doc["observations"])
-    n_adj = len(rows)
-    for o in doc["outliers"]:
-        rows.append({**o, "residual": o["residual"] if isinstance(o["residual"], (int, float)) else None})
-    cols: dict = {"index": np.arange(len(rows), dtype=np.int64)}
+    obs = doc["observations"]
+    if isinstance(obs, ObservationRows):          # to_json's rows: the columns from the arrays
+        adjusted = obs.columns_of()
+    else:
+        adjusted = {key: [o.get(key) for o in obs] for key in TABLE_KEYS}
+    n_adj = len(adjusted["kind"])
+    out = [{**o, "residual": o["residual"] if isinstance(o["residual"], (int, float)) else None}
+           for o in doc["outliers"]]
+    n = n_adj + len(out)
+    cols: dict = {"index": np.arange(n, dtype=np.int64)}
     for key in TABLE_KEYS:
-        cols[key] = [o.get(key) for o in rows]
-    rejected = np.arange(len(rows)) >= n_adj
-    poor = np.zeros(len(rows), bool)
-    poor[poorly_controlled(doc["observations"])] = True
-    failed = np.array([not o["passed"] for o in doc["observations"]] + [False] * (len(rows) - n_adj), bool)
-    cols.update(rejected=rejected, w_failed=failed, poorly_controlled=poor)
+        cols[key] = adjusted[key] + [o.get(key) for o in out]
+    red = np.array(adjusted["redundancy"], float).reshape(n_adj)
+    mdb_sigma = np.array(adjusted["mdb_sigma"], float).reshape(n_adj)      # None (no MDB): nan
+    poor = np.zeros(n, bool)
+    poor[:n_adj] = _poor_mask(red, mdb_sigma)
+    failed = np.zeros(n, bool)
+    failed[:n_adj] = ~np.array(adjusted["passed"], bool).reshape(n_adj)
+    cols.update(rejected=np.arange(n) >= n_adj, w_failed=failed, poorly_controlled=poor)
     return cols
 
 
