@@ -15,7 +15,7 @@ from multilat.network.bounds import Bound, reporting
 from multilat.network.data import Observations, Points
 from multilat.network.files import read_observations
 from multilat.network.unit_slip import SLIP_FACTOR, UnitSlipError, likely_unit
-from network_truth import random_network
+from multilat.network.synthetic import synthetic_network
 from pathlib import Path
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "network" / "small_volume_obs.csv"
@@ -92,7 +92,7 @@ def test_gross_errors_are_not_a_slip(blunders):
     factor, and their misfit smears into the other residuals (robust scale 150-300); but the robust
     scale stays below SPREAD_MIN x σ0, so no unit-slip stop: data snooping rejects them, each with
     its blunder as residual (to 50 µm: 10 σ, the blunders' own effect on the fit is below that)."""
-    net = random_network(3, n_stations=6, n_targets=20)
+    net = synthetic_network(3, population="shell", n_stations=6, n_targets=20)
     obs = net.obs
     d = obs.distance_m.copy()
     for k, b in blunders.items():
@@ -248,7 +248,7 @@ def test_instrument_metres_key_holding_micrometres(path, value, key):
 def test_starts_message_when_no_target_is_seen_by_four():
     from multilat.network.starts import initial_from_distances
 
-    net = random_network(2, n_stations=4, n_targets=12)
+    net = synthetic_network(2, population="shell", n_stations=4, n_targets=12)
     o = net.obs
     keep = o.station_index != (o.target_index % 4)            # each target loses one station
     sub = o.subset(keep)
