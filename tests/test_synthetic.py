@@ -169,6 +169,8 @@ def test_same_seed_same_network_and_the_split_does_not_matter():
     ({"blunders": 10**6}, "blunders must be in 0.."),
     ({"blunders": 2, "blunder_m": 0.0}, "blunder_m must be > 0"),
     ({"gap_fraction": (0.5, 1.0)}, "gap_fraction must be below 1"),
+    ({"population": "shell", "n_stations": 3}, "shell needs >= 4 stations"),
+    ({"population": "shell", "offset_max_m": 1e-3}, "population 'shell' takes no option 'offset_max_m'"),
 ])
 def test_bad_options_are_refused(kw, msg):
     with pytest.raises(MultilatError, match=msg.replace("(", r"\(").replace(".", r"\.")):
