@@ -22,7 +22,7 @@ import pytest
 from multilat.cli import main
 from multilat.errors import MultilatError
 from multilat.network.files import write_observations
-from network_truth import random_network
+from multilat.network.synthetic import synthetic_network
 
 DATA = Path(__file__).resolve().parent / "data" / "network"
 FLAGS = ("rejected", "w_failed", "poorly_controlled")
@@ -47,7 +47,7 @@ def blunder(tmp_path_factory):
     """8 stations x 30 targets, one distance 60 σ too long: (csv path, its pair, --json doc,
     --json --observations doc, --out csv dir)."""
     tmp = tmp_path_factory.mktemp("adjust2")
-    truth = random_network(7, n_stations=8, n_targets=30)
+    truth = synthetic_network(7, population="shell", n_stations=8, n_targets=30)
     obs = truth.obs
     d = obs.distance_m.copy()
     d[BLUNDER] += 60 * obs.sigma_m[BLUNDER]
@@ -213,7 +213,7 @@ def test_observations_of_points_left_out_are_listed(tmp_path):
 def test_json_of_a_larger_network_is_small(tmp_path):
     """Rows grow with the observations, the document with the points: 8 stations x 400 targets
     (3 200 distances, few flagged) without every row is well under half the document with them."""
-    obs = random_network(3, n_stations=8, n_targets=400).obs
+    obs = synthetic_network(3, population="shell", n_stations=8, n_targets=400).obs
     path = tmp_path / "obs.csv"
     write_observations(path, obs)
     rc, small, err = _run(["adjust", str(path), "--json"])
@@ -235,7 +235,7 @@ def test_listing_is_checked():
     from multilat.network.adjust import adjust
     from multilat.network.result import result_to_json
 
-    res = adjust(random_network(1, n_stations=5, n_targets=12).obs)
+    res = adjust(synthetic_network(1, population="shell", n_stations=5, n_targets=12).obs)
     with pytest.raises(MultilatError, match="observations listing must be 'flagged' or 'all'"):
         result_to_json(res, observations="some")
     assert len(result_to_json(res, observations="all")["observations"]) == res.obs.n_obs

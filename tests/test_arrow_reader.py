@@ -12,7 +12,7 @@ pytest.importorskip("pyarrow.csv")
 from multilat.errors import MultilatError  # noqa: E402
 from multilat.network import fastio, files  # noqa: E402
 from multilat.network.files import read_observations, write_observations  # noqa: E402
-from network_truth import random_network  # noqa: E402
+from multilat.network.synthetic import synthetic_network  # noqa: E402
 
 
 @pytest.fixture
@@ -49,7 +49,7 @@ def _same(a, b):
 
 
 def test_plain_file_same_observations(tmp_path, monkeypatch, arrow_everywhere):
-    obs = random_network(5, n_stations=6, n_targets=40).obs
+    obs = synthetic_network(5, population="shell", n_stations=6, n_targets=40).obs
     p = tmp_path / "obs.csv"
     write_observations(p, obs)
     fast = read_observations(p)
@@ -62,17 +62,17 @@ def test_plain_file_same_observations(tmp_path, monkeypatch, arrow_everywhere):
 
 
 @pytest.mark.parametrize("row,accepted", [
-    ('"S0",T1,1.5,5e-06', True),          # quoted id (and a repeated pair): the strict reader's business
-    ("S0,T1,1_5,5e-06", False),           # Python's float reads 1_5, Arrow does not: the strict reader refuses
-    ("S0,T1,nan,5e-06", False),
-    ("S0,,1.5,5e-06", False),             # an empty id
-    ("S0,T1,-1.5,5e-06", False),
-    ("S0,S1,1.5,5e-06", False),           # an id both station and target
+    ('"S1",T1,1.5,5e-06', True),          # quoted id (and a repeated pair): the strict reader's business
+    ("S1,T1,1_5,5e-06", False),           # Python's float reads 1_5, Arrow does not: the strict reader refuses
+    ("S1,T1,nan,5e-06", False),
+    ("S1,,1.5,5e-06", False),             # an empty id
+    ("S1,T1,-1.5,5e-06", False),
+    ("S1,S2,1.5,5e-06", False),           # an id both station and target
     ("", True),                            # a blank line
 ])
 def test_outside_the_plain_subset_the_strict_reader_decides(tmp_path, monkeypatch, arrow_everywhere, row,
                                                             accepted):
-    obs = random_network(2, n_stations=8, n_targets=400).obs
+    obs = synthetic_network(2, population="shell", n_stations=8, n_targets=400).obs
     p = tmp_path / "obs.csv"
     write_observations(p, obs)
     lines = p.read_text().splitlines()

@@ -4,9 +4,10 @@ image silently).
 Initial values from distances alone are a network or its mirror image (distances cannot tell);
 ``--points`` covering only some points must move them onto the points' frame with the hand that
 fits (:func:`multilat.network.starts.onto_points`). Independent values: the simulated truth
-(examples/tutorial/truth.csv, tests/network_truth.py), and the hand of a solution judged by fitting
-it to the truth with a proper rotation and with a reflection (the smaller RMS misfit wins; the two
-differ by metres where the network is mirrored, by micrometres where it is not).
+(examples/tutorial/truth.csv, networks of :func:`multilat.network.synthetic.synthetic_network`), and
+the hand of a solution judged by fitting it to the truth with a proper rotation and with a
+reflection (the smaller RMS misfit wins; the two differ by metres where the network is mirrored, by
+micrometres where it is not).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from multilat.network.data import Points
 from multilat.network.datum import apply_rigid, rigid_fit
 from multilat.network.files import read_observations, read_points
 
-from network_truth import random_network
+from multilat.network.synthetic import synthetic_network
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "tutorial"
 CONTROL = ("P01", "P02", "P05", "P09")   # two on the floor, two raised: not coplanar
@@ -119,8 +120,8 @@ def test_random_partial_points_never_mirrored_silently():
     rng = np.random.default_rng(20261127)
     n, silent_mirror, corrected, named = 40, 0, 0, 0
     for case in range(n):
-        tr = random_network(int(rng.integers(2**31)), n_stations=int(rng.integers(5, 7)),
-                            n_targets=int(rng.integers(12, 17)))
+        tr = synthetic_network(int(rng.integers(2**31)), population="shell",
+                               n_stations=int(rng.integers(5, 7)), n_targets=int(rng.integers(12, 17)))
         truth = dict(zip(tr.obs.station_ids + tr.obs.target_ids, np.vstack([tr.station_xyz_m, tr.target_xyz_m])))
         ids = sorted(rng.choice(tr.obs.target_ids, size=int(rng.integers(4, 7)), replace=False))
         pts = Points(tuple(ids), np.array([truth[i] for i in ids]))

@@ -11,8 +11,15 @@ from multilat.errors import MultilatError
 from multilat.network.adjust import Start, adjust
 from multilat.network.datum import rigid_fit
 from multilat.network.model import Q, dense_jacobian, residuals_and_jacobian
+from multilat.network.synthetic import synthetic_network
 
-from network_truth import perturbed_start, random_network
+from network_truth import noise_free, perturbed_start
+
+
+def _net(seed, s, t, gap_fraction=0.0, **options):
+    """``s`` stations around ``t`` targets (the package's generator, population "shell")."""
+    return synthetic_network(seed, population="shell", n_stations=s, n_targets=t,
+                             gap_fraction=gap_fraction, **options)
 
 
 def _rigid_errors(res, truth):
@@ -25,8 +32,8 @@ def _rigid_errors(res, truth):
 
 
 def test_noise_free_network_is_recovered_exactly():
-    tr = random_network(7, n_stations=6, n_targets=25, gap_fraction=0.2, noise=False)
-    res = adjust(tr.obs, initial=perturbed_start(tr, 8, scale_m=2e-2))
+    tr = _net(7, 6, 25, 0.2)
+    res = adjust(noise_free(tr), initial=perturbed_start(tr, 8, scale_m=2e-2))
     # nothing but rounding: coordinates of metres to 1e-10 m
     assert np.abs(_rigid_errors(res, tr)).max() < 1e-10
     np.testing.assert_allclose(res.offset_m, tr.offset_m, atol=1e-10)
@@ -43,8 +50,7 @@ def test_errors_consistent_with_covariance_chi2():
     for run in range(24):
         s = int(rng.integers(4, 13))
         t = int(rng.integers(10, 201)) if s > 4 else int(rng.integers(14, 201))
-        tr = random_network(rng, n_stations=s, n_targets=t, gap_fraction=0.15 if s > 5 else 0.0,
-                            sigma_m=float(rng.uniform(2e-6, 8e-6)), offset_scale_m=3e-3)
+        tr = _net(rng, s, t, 0.15 if s > 5 else 0.0, sigma_m=float(rng.uniform(2e-6, 8e-6)))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             res = adjust(tr.obs, initial=perturbed_start(tr, rng), snooping=False)
@@ -73,7 +79,7 @@ def test_errors_consistent_with_covariance_chi2():
 
 
 def test_covariance_is_pseudo_inverse_and_redundancies_sum_to_dof():
-    tr = random_network(3, n_stations=5, n_targets=15, gap_fraction=0.2)
+    tr = _net(3, 5, 15, 0.2)
     res = adjust(tr.obs, initial=perturbed_start(tr, 4))
     o = tr.obs
     _, Js, Jt = residuals_and_jacobian(o.distance_m, res.station_xyz_m, res.target_xyz_m, res.offset_m,
@@ -95,7 +101,7 @@ def test_covariance_is_pseudo_inverse_and_redundancies_sum_to_dof():
 @pytest.mark.parametrize("seed", [0, 1, 2, 3, 4])
 def test_single_20_sigma_blunder_is_found_and_nothing_else(seed):
     rng = np.random.default_rng(100 + seed)
-    tr = random_network(rng, n_stations=6, n_targets=30, gap_fraction=0.1, sigma_m=5e-6)
+    tr = _net(rng, 6, 30, 0.1, sigma_m=5e-6)
     # a redundant place: a target seen by >= 5 stations (with 4, its 4 w-tests are perfectly
     # correlated and the faulty one cannot be told from the others; see docs/network.md)
     per_target = np.bincount(tr.obs.target_index)
@@ -115,35 +121,36 @@ def test_single_20_sigma_blunder_is_found_and_nothing_else(seed):
 
 
 def test_squared_cost_and_fixed_offsets_and_scales():
-    tr = random_network(21, n_stations=6, n_targets=30, noise=False)
+    tr = _net(21, 6, 30)
+    exact = noise_free(tr)
     st = perturbed_start(tr, 22)
-    res = adjust(tr.obs, initial=st, cost="squared")
+    res = adjust(exact, initial=st, cost="squared")
     assert np.abs(_rigid_errors(res, tr)).max() < 1e-9
     np.testing.assert_allclose(res.offset_m, tr.offset_m, atol=1e-9)
     assert res.global_test.passed is None and res.outliers == ()
     # offsets fixed at their true values: same solution, offsets reported as fixed, 6 more dof
-    free = adjust(tr.obs, initial=st)
-    fixed = adjust(tr.obs, initial=st, offsets=dict(zip(tr.obs.station_ids, tr.offset_m)))
+    free = adjust(exact, initial=st)
+    fixed = adjust(exact, initial=st, offsets=dict(zip(exact.station_ids, tr.offset_m)))
     assert not fixed.offset_estimated.any() and fixed.dof == free.dof + 6
     assert np.all(fixed.offset_std_m == 0)
     # a true scale of 20 ppm on one station is recovered when scales are estimated
-    d = tr.obs.distance_m.copy()
-    m0 = tr.obs.station_index == 2
+    d = exact.distance_m.copy()
+    m0 = exact.station_index == 2
     d[m0] = (d[m0] - tr.offset_m[2]) * (1 + 2e-5) + tr.offset_m[2]
-    sc = adjust(tr.obs.with_distances(d), initial=st, scales=["S2"])
+    sc = adjust(exact.with_distances(d), initial=st, scales=["S3"])
     assert sc.scale[2] == pytest.approx(2e-5, abs=1e-12)
     assert sc.scale_estimated.tolist() == [False, False, True, False, False, False]
 
 
 def test_large_network_runs_linear_in_targets():
-    tr = random_network(5, n_stations=8, n_targets=2000, gap_fraction=0.2)
+    tr = _net(5, 8, 2000, 0.2)
     res = adjust(tr.obs, initial=perturbed_start(tr, 6, scale_m=1e-3), snooping=False)
     assert res.target_cov_m2.shape == (2000, 3, 3)
     assert 0.9 < res.sigma0 < 1.1     # dof ~ 6000: sd of sigma0 ~ 0.01
 
 
 def test_bad_options_raise():
-    tr = random_network(1, n_stations=4, n_targets=14)
+    tr = _net(1, 4, 14)
     st = perturbed_start(tr, 1)
     with pytest.raises(MultilatError, match="cost"):
         adjust(tr.obs, initial=st, cost="cubic")
@@ -156,10 +163,10 @@ def test_bad_options_raise():
 
 
 def test_fault_at_a_minimally_observed_station_is_reported_not_misplaced():
-    # station S0 sees exactly 5 targets (its minimum: 3 coordinates + offset + 1 for redundancy):
-    # its 5 w-tests are perfectly correlated, so a 200-sigma fault on S0->T2 is detected but cannot
+    # station S1 sees exactly 5 targets (its minimum: 3 coordinates + offset + 1 for redundancy):
+    # its 5 w-tests are perfectly correlated, so a 200-sigma fault on S1->T3 is detected but cannot
     # be located; nothing is rejected and the group is reported, and the global test fails
-    tr = random_network(31, n_stations=6, n_targets=25, noise=True)
+    tr = _net(31, 6, 25)
     keep = (tr.obs.station_index != 0) | (tr.obs.target_index < 5)
     obs = tr.obs.subset(keep)
     k = int(np.flatnonzero((obs.station_index == 0) & (obs.target_index == 2))[0])
@@ -167,8 +174,8 @@ def test_fault_at_a_minimally_observed_station_is_reported_not_misplaced():
     d[k] += 200 * obs.sigma_m[k]
     res = adjust(obs.with_distances(d), initial=perturbed_start(tr, 32))
     assert res.outliers == ()
-    assert sorted(o.target for o in res.unlocated) == ["T0", "T1", "T2", "T3", "T4"]
-    assert {o.station for o in res.unlocated} == {"S0"}
+    assert sorted(o.target for o in res.unlocated) == ["T1", "T2", "T3", "T4", "T5"]
+    assert {o.station for o in res.unlocated} == {"S1"}
     assert len({round(abs(o.w), 6) for o in res.unlocated}) == 1 and abs(res.unlocated[0].w) > 3.29
     # detected: by the largest |w| (Šidák, the default above 10 observations: the χ² test is then the
     # variance factor's, at 0.01, and passes here), by the global test under the B-method
@@ -185,7 +192,7 @@ def test_snooping_keeps_a_targets_last_redundancy():
     with 6 stations (the target's 3 coordinates absorb 3 of the 4 residual directions), so the
     fault is reported as not locatable and nothing is removed (the rule 'keep >= 4 distances per
     free target' in snooping._last_redundancy is the safety net behind this)."""
-    tr = random_network(41, n_stations=6, n_targets=20)
+    tr = _net(41, 6, 20)
     keep = (tr.obs.target_index != 0) | (tr.obs.station_index < 4)
     obs = tr.obs.subset(keep)
     k = int(np.flatnonzero((obs.station_index == 1) & (obs.target_index == 0))[0])
@@ -193,7 +200,7 @@ def test_snooping_keeps_a_targets_last_redundancy():
     d[k] += 30 * obs.sigma_m[k]
     res = adjust(obs.with_distances(d), initial=perturbed_start(tr, 42))
     assert res.outliers == () and res.used.all()
-    assert {o.target for o in res.unlocated} == {"T0"}
+    assert {o.target for o in res.unlocated} == {"T1"}
     assert len(res.unlocated) == 4 and "perfectly correlated" in res.unlocated_reason
 
 
@@ -203,8 +210,8 @@ def test_control_blunder_is_snooped_and_bad_control_is_named():
     point moved by 2 mm is refused as inconsistent, naming it."""
     from multilat.network.data import Points
 
-    tr = random_network(51, n_stations=6, n_targets=25)
-    ctrl = [f"T{j}" for j in range(6)]
+    tr = _net(51, 6, 25)
+    ctrl = [f"T{j + 1}" for j in range(6)]
     pts = Points(tuple(ctrl), tr.target_xyz_m[:6])
     st = perturbed_start(tr, 52)
     per_target = np.bincount(tr.obs.target_index)
@@ -212,10 +219,10 @@ def test_control_blunder_is_snooped_and_bad_control_is_named():
     d = tr.obs.distance_m.copy()
     d[k] += 20 * tr.obs.sigma_m[k]
     res = adjust(tr.obs.with_distances(d), initial=st, points=pts, datum="control", alpha=1e-5)
-    assert [(o.station, o.target) for o in res.outliers] == [(tr.obs.label(k).split("->")[0], "T10")]
+    assert [(o.station, o.target) for o in res.outliers] == [(tr.obs.label(k).split("->")[0], "T11")]
     moved = tr.target_xyz_m[:6].copy()
     moved[3] += [2e-3, 0.0, 0.0]
-    with pytest.raises(MultilatError, match=r"control coordinates inconsistent .*largest misfit 'T3'"):
+    with pytest.raises(MultilatError, match=r"control coordinates inconsistent .*largest misfit 'T4'"):
         adjust(tr.obs, initial=st, points=Points(tuple(ctrl), moved), datum="control")
 
 
@@ -225,14 +232,14 @@ def test_control_point_keeps_its_last_observation():
     'data snooping removed every observation of ...')."""
     from multilat.network.data import Points
 
-    tr = random_network(61, n_stations=6, n_targets=25)
+    tr = _net(61, 6, 25)
     keep = (tr.obs.target_index != 0) | (tr.obs.station_index == 2)
     obs = tr.obs.subset(keep)
     k = int(np.flatnonzero(obs.target_index == 0)[0])
     d = obs.distance_m.copy()
     d[k] += 50 * obs.sigma_m[k]
-    pts = Points(tuple(f"T{j}" for j in range(5)), tr.target_xyz_m[:5])
+    pts = Points(tuple(f"T{j + 1}" for j in range(5)), tr.target_xyz_m[:5])
     res = adjust(obs.with_distances(d), initial=perturbed_start(tr, 62), points=pts, datum="control")
     assert res.outliers == () and res.used.all()
-    assert [(o.station, o.target) for o in res.unlocated] == [("S2", "T0")]
-    assert "control point 'T0'" in res.unlocated_reason
+    assert [(o.station, o.target) for o in res.unlocated] == [("S3", "T1")]
+    assert "control point 'T1'" in res.unlocated_reason

@@ -11,12 +11,14 @@ from multilat.network.adjust import adjust
 from multilat.network.data import Points
 from multilat.network.datum import Datum, frame_321, helmert_basis, parse_datum
 
-from network_truth import perturbed_start, random_network
+from multilat.network.synthetic import synthetic_network
+
+from network_truth import perturbed_start
 
 
 @pytest.fixture(scope="module")
 def net():
-    tr = random_network(42, n_stations=5, n_targets=20, gap_fraction=0.15)
+    tr = synthetic_network(42, population="shell", n_stations=5, n_targets=20, gap_fraction=0.15)
     return tr, perturbed_start(tr, 43)
 
 
@@ -27,12 +29,12 @@ def _all_distances(res, ids):
 def test_three_datums_same_distances_offsets_sigma0(net):
     tr, st = net
     free = adjust(tr.obs, initial=st)
-    d321 = adjust(tr.obs, initial=st, datum="321:S1,S3,S0")
+    d321 = adjust(tr.obs, initial=st, datum="321:S2,S4,S1")
     # control: three stations held at the free solution's coordinates moved by an arbitrary rigid
     # motion (control consistent with the distances, so the shape is not forced)
     ang = 0.7
     R = np.array([[np.cos(ang), -np.sin(ang), 0], [np.sin(ang), np.cos(ang), 0], [0, 0, 1]])
-    ids = ["S0", "S2", "T5"]
+    ids = ["S1", "S3", "T6"]
     pts = Points(tuple(ids), np.array([free.xyz(i) for i in ids]) @ R.T + [10.0, -3.0, 1.0])
     ctrl = adjust(tr.obs, initial=st, datum="control", points=pts)
     ids_all = tr.obs.station_ids + tr.obs.target_ids
@@ -46,10 +48,10 @@ def test_three_datums_same_distances_offsets_sigma0(net):
     assert ctrl.dof == free.dof + 3
     # uncertainties of distances: identical between minimal-constraint datums (1e-9 relative is
     # far below 1 nm for micrometre uncertainties)
-    for a, b in [("T0", "T7"), ("S1", "T3"), ("S0", "S4"), ("T11", "T19")]:
+    for a, b in [("T1", "T8"), ("S2", "T4"), ("S1", "S5"), ("T12", "T20")]:
         u_f = free.interpoint_distance(a, b).u_m
         assert d321.interpoint_distance(a, b).u_m == pytest.approx(u_f, abs=1e-12)
-        assert adjust(tr.obs, initial=st, datum="free:T0,T1,T2,S4").interpoint_distance(a, b).u_m \
+        assert adjust(tr.obs, initial=st, datum="free:T1,T2,T3,S5").interpoint_distance(a, b).u_m \
             == pytest.approx(u_f, abs=1e-12)
     np.testing.assert_allclose(d321.offset_std_m, free.offset_std_m, rtol=1e-9)
     # the control points are where they were put, with zero variance
@@ -60,12 +62,12 @@ def test_three_datums_same_distances_offsets_sigma0(net):
 
 def test_321_frame_and_zero_variance(net):
     tr, st = net
-    r = adjust(tr.obs, initial=st, datum=Datum.three_two_one("S1", "S3", "S0"))
-    a, b, c = r.xyz("S1"), r.xyz("S3"), r.xyz("S0")
+    r = adjust(tr.obs, initial=st, datum=Datum.three_two_one("S2", "S4", "S1"))
+    a, b, c = r.xyz("S2"), r.xyz("S4"), r.xyz("S1")
     np.testing.assert_allclose(a, 0, atol=1e-12)
     assert abs(b[1]) < 1e-12 and abs(b[2]) < 1e-12 and b[0] > 0
     assert abs(c[2]) < 1e-12 and c[1] > 0
-    C = r.points_covariance(["S1", "S3", "S0"])
+    C = r.points_covariance(["S2", "S4", "S1"])
     fixed = [0, 1, 2, 4, 5, 8]
     assert np.abs(C[np.ix_(fixed, fixed)]).max() < 1e-24
     assert np.all(np.diag(C)[[3, 6, 7]] > 0)
@@ -73,10 +75,10 @@ def test_321_frame_and_zero_variance(net):
 
 def test_inner_constraints_minimise_the_trace(net):
     tr, st = net
-    ids = ["T0", "T1", "T2", "T3", "S4"]
+    ids = ["T1", "T2", "T3", "T4", "S5"]
     inner = adjust(tr.obs, initial=st, datum="free:" + ",".join(ids))
     tr_inner = np.trace(inner.points_covariance(ids))
-    for d in ("321:S1,S3,S0", "free", "321:T0,T1,T2"):
+    for d in ("321:S2,S4,S1", "free", "321:T1,T2,T3"):
         other = adjust(tr.obs, initial=st, datum=d)
         assert tr_inner <= np.trace(other.points_covariance(ids)) * (1 + 1e-12)
     # and its datum points fit the initial values best: their mean correction is zero
@@ -107,7 +109,7 @@ def test_parse_and_bad_datums(net):
         with pytest.raises(MultilatError, match=msg):
             parse_datum(bad)
     with pytest.raises(MultilatError, match="unknown point id 'X'"):
-        adjust(tr.obs, initial=st, datum="321:S0,S1,X")
+        adjust(tr.obs, initial=st, datum="321:S1,S2,X")
     with pytest.raises(MultilatError, match="control"):
         adjust(tr.obs, initial=st, datum="control")
     with pytest.raises(MultilatError, match="collinear"):

@@ -20,7 +20,8 @@ def _fingerprint(n):
 
 #: fingerprints of networks drawn by the three generators this module replaced (generator.random_network,
 #: simulate.random_network, large.synthetic_network, and generator.sequential_network / mixed_network),
-#: measured at f64db4c with the old functions; the integers pin the observed pairs, the sums the draws
+#: measured at f64db4c with the old functions, and by the tests' own tests/network_truth.random_network
+#: (measured at c3e65ec); the integers pin the observed pairs, the sums the draws
 OLD = [
     (dict(rng=np.random.default_rng([2024, 0])),
      (5, 45, 222, 20796, 227287, 383.85801005350095, 1.3359041101079232, 0.7349663150903702, 6.0867057309533115,
@@ -51,6 +52,13 @@ OLD = [
     (dict(rng=2028, population="mixed"),
      (6, 14, 84, 12145, 24024, 214.72390190264338, 1.8277600383282, 27.53130681318424, 57.70729976734133,
       -0.001034348376610306)),
+    # the tests' own generator it replaced (tests/network_truth.random_network, measured at c3e65ec)
+    (dict(rng=7, population="shell", n_stations=6, n_targets=25, gap_fraction=0.2),
+     (6, 25, 120, 12176, 56164, 257.8563984341612, 2.120616997897538, -1.205180614477881, -2.5972874113217266,
+      -0.0034187577796137222)),
+    (dict(rng=1, population="shell", n_stations=8, n_targets=40, gap_fraction=0.15),
+     (8, 40, 268, 42355, 259293, 558.9521085753827, 1.9988786967819445, 4.2520859333592655, 2.3149436889001502,
+      -0.003042313235883107)),
 ]
 
 
@@ -161,6 +169,8 @@ def test_same_seed_same_network_and_the_split_does_not_matter():
     ({"blunders": 10**6}, "blunders must be in 0.."),
     ({"blunders": 2, "blunder_m": 0.0}, "blunder_m must be > 0"),
     ({"gap_fraction": (0.5, 1.0)}, "gap_fraction must be below 1"),
+    ({"population": "shell", "n_stations": 3}, "shell needs >= 4 stations"),
+    ({"population": "shell", "offset_max_m": 1e-3}, "population 'shell' takes no option 'offset_max_m'"),
 ])
 def test_bad_options_are_refused(kw, msg):
     with pytest.raises(MultilatError, match=msg.replace("(", r"\(").replace(".", r"\.")):

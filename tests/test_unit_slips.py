@@ -15,7 +15,7 @@ from multilat.network.bounds import Bound, reporting
 from multilat.network.data import Observations, Points
 from multilat.network.files import read_observations
 from multilat.network.unit_slip import SLIP_FACTOR, UnitSlipError, likely_unit
-from network_truth import random_network
+from multilat.network.synthetic import synthetic_network
 from pathlib import Path
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "network" / "small_volume_obs.csv"
@@ -92,7 +92,7 @@ def test_gross_errors_are_not_a_slip(blunders):
     factor, and their misfit smears into the other residuals (robust scale 150-300); but the robust
     scale stays below SPREAD_MIN x σ0, so no unit-slip stop: data snooping rejects them, each with
     its blunder as residual (to 50 µm: 10 σ, the blunders' own effect on the fit is below that)."""
-    net = random_network(3, n_stations=6, n_targets=20)
+    net = synthetic_network(3, population="shell", n_stations=6, n_targets=20)
     obs = net.obs
     d = obs.distance_m.copy()
     for k, b in blunders.items():
@@ -179,17 +179,24 @@ def test_restarts_end_when_a_far_minimum_is_found_again(example):
 
 
 def test_minimum_search_records_its_bound(example):
-    """A work bound of 2 starts: the search stops there and says so in its record."""
+    """A work bound of 2 starts: the search stops there and says so in its record.
+
+    The first solution is the example's adjustment with σ 300 times too small: the same minimum (a
+    common factor on σ does not move it), σ0 300 x 1.199 ~ 360, so the search is triggered. The
+    solver hands that solution back for every start (no start improves on it): only the bound can
+    end the search, after exactly 2 solves. (It used to run the full adjustment, which searched
+    again inside each solve: 10 s for a test of the bound's bookkeeping.)"""
+    from types import SimpleNamespace
+
     from multilat.network.search import find_minimum
 
-    obs, _ = example
-    bad = _scaled(obs, sigma=1 / 300)            # σ0 ~ 360: the search is triggered
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        first = adjust(bad, rng=0, snooping=False, variance_factor="unknown")
-        ms = find_minimum(bad, lambda s: adjust(bad, initial=s, snooping=False, variance_factor="unknown"),
-                          first, rng=0, max_solves=2)
-    assert ms.triggered and len(ms.candidates) == 2
+    obs, ref = example
+    bad = _scaled(obs, sigma=1 / 300)
+    first = SimpleNamespace(station_xyz_m=ref.station_xyz_m, target_xyz_m=ref.target_xyz_m, offset_m=ref.offset_m,
+                            sigma0=300 * ref.sigma0, dof=ref.dof)
+    starts = []
+    ms = find_minimum(bad, lambda s: starts.append(s) or first, first, rng=0, max_solves=2)
+    assert ms.triggered and len(ms.candidates) == 2 and len(starts) == 2
     assert ms.bounded == "minimum search: stopped at its work bound (2 starts)"
     assert ms.as_dict()["bounded"] == ms.bounded
 
@@ -248,7 +255,7 @@ def test_instrument_metres_key_holding_micrometres(path, value, key):
 def test_starts_message_when_no_target_is_seen_by_four():
     from multilat.network.starts import initial_from_distances
 
-    net = random_network(2, n_stations=4, n_targets=12)
+    net = synthetic_network(2, population="shell", n_stations=4, n_targets=12)
     o = net.obs
     keep = o.station_index != (o.target_index % 4)            # each target loses one station
     sub = o.subset(keep)

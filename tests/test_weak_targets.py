@@ -11,20 +11,16 @@ converged Gauss-Newton solutions from the same start rule, equal to 1e-12 m (a f
 from __future__ import annotations
 
 import json
-import sys
 import warnings
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-from network_truth import random_network  # noqa: E402
-
-from multilat.cli import main  # noqa: E402
-from multilat.errors import MultilatError  # noqa: E402
-from multilat.network.adjust import adjust  # noqa: E402
-from multilat.network.data import Observations  # noqa: E402
+from multilat.cli import main
+from multilat.errors import MultilatError
+from multilat.network.adjust import adjust
+from multilat.network.data import Observations
+from multilat.network.synthetic import synthetic_network
 
 SIGMA = 5e-6
 ON = (1, 2, 3)      # the stations that see the weak target; it lies in their plane
@@ -33,7 +29,7 @@ ON = (1, 2, 3)      # the stations that see the weak target; it lies in their pl
 def _networks():
     """(with the weak target 'P403', without it): 6 stations, 40 targets seen by all, plus P403 at
     the centroid of stations 1, 2, 3 seen by those 3 only (its sight lines are exactly coplanar)."""
-    tr = random_network(np.random.default_rng(1), n_stations=6, n_targets=40, sigma_m=SIGMA)
+    tr = synthetic_network(1, population="shell", n_stations=6, n_targets=40, sigma_m=SIGMA)
     o, H = tr.obs, tr.station_xyz_m
     P = H[list(ON)].mean(axis=0)
     rho = (np.linalg.norm(H[list(ON)] - P, axis=1) + tr.offset_m[list(ON)]
@@ -88,7 +84,7 @@ def test_three_stations_off_their_plane_stay():
     weak, rest = _networks()
     from multilat.network.exclusion import undetermined_targets
 
-    tr = random_network(np.random.default_rng(1), n_stations=6, n_targets=40, sigma_m=SIGMA)
+    tr = synthetic_network(1, population="shell", n_stations=6, n_targets=40, sigma_m=SIGMA)
     H = tr.station_xyz_m
     T = np.vstack([tr.target_xyz_m, H[list(ON)].mean(axis=0)])
     n = np.cross(H[2] - H[1], H[3] - H[1])

@@ -39,6 +39,13 @@ are in :data:`POPULATIONS`. Distributions (``U(a, b)`` uniform, ``U{a..b}`` unif
     exactly ``per_target`` distinct stations chosen at random, half on each height (a target seen
     only by the low ring at floor height would have coplanar lines of sight; ``per_target`` 3-4 gives
     weak targets). Observations listed target by target; ``obs`` is built on first use.
+``"shell"`` — stations around the volume, targets inside (the network-adjustment tests' population)
+    station directions gaussian, the vertical folded up (``0.6 |z| + U(0, 0.2)``) and normalised; with
+    4 or more stations the first points down, at ``(0.1, 0.1, -0.9)``; each at ``U(0.8, 1.2) size_m``
+    along its direction; targets uniform in the cube of side ``size_m`` centred on the origin;
+    offsets ``N(0, offset_sd_m)``. Each pair unseen with probability ``gap_fraction`` (with more than
+    4 stations; a target left with fewer than 4 keeps 4 stations drawn at random). Observations listed
+    target by target. No screening: every draw is returned.
 ``"sequential"`` — ``len(heads)`` heads moved over ``n_stations`` stations around a part
     stations on a ring of radius ``radius_m`` (jitter ``U(-0.2, 0.2)`` of the spacing), heights
     alternating ``U(0.4, 0.8)`` and ``U(1.4, 1.9)`` m; station ``i`` occupied by ``heads[i % len(heads)]``
@@ -50,7 +57,8 @@ are in :data:`POPULATIONS`. Distributions (``U(a, b)`` uniform, ``U{a..b}`` unif
     random tilt ``U(+-0.02)`` rad (none if ``levelled``; same draws) and heading; ``orientation_rad``
     holds the true orientations. Trackers: offset 0, their specification's σ at each range.
 
-Common to all: offsets ``U(-offset_max_m, offset_max_m)`` (per station, per head for "sequential"),
+Common to all: offsets ``U(-offset_max_m, offset_max_m)`` (per station, per head for "sequential";
+gaussian for "shell"),
 gaussian noise of ``sigma_m`` (the observations' σ). ``blunders`` observations (distinct rows, drawn
 after everything else, so the rest of the network is the same as without them) get
 ``+-blunder_m``; ``blunder_index`` names them. Same seed and options -> the same network, bit for
@@ -85,6 +93,8 @@ POPULATIONS = {
     "well-conditioned": {"n_stations": (4, 8), "n_targets": (10, 30), "size_m": 1.0, "gap_fraction": 0.15,
                          **_COMMON},
     "rings": {"n_stations": 20, "n_targets": 200_000, "per_target": 8, "size_m": 20.0, **_COMMON},
+    "shell": {"n_stations": 4, "n_targets": 20, "size_m": 2.0, "gap_fraction": 0.0, "offset_sd_m": 3e-3,
+              "sigma_m": 5e-6},
     "sequential": {"heads": ("T1", "T2"), "n_stations": 8, "n_targets": 16, "part_m": (1.6, 1.0, 0.6),
                    "radius_m": 2.8, "gap_fraction": 0.15, "offset_max_m": 2e-3, "sigma_m": 5e-6},
     "mixed": {"heads": ("H1", "H2", "H3", "H4"), "trackers": None, "n_targets": 14, "room_m": (4.0, 3.0, 1.2),
@@ -288,6 +298,33 @@ def _rings(g, o):
                             "two-height ring", "box", 1.0 - k / s)
 
 
+# ------------------------------------------------------------------------------------------------ shell
+def _shell(g, o):
+    s, t, size, gap = int(o["n_stations"]), int(o["n_targets"]), float(o["size_m"]), float(o["gap_fraction"])
+    if s < 4 or t < 1 or not 0.0 <= gap < 1.0:
+        raise MultilatError("synthetic_network: shell needs >= 4 stations, >= 1 target and 0 <= gap_fraction < 1")
+    d = g.normal(size=(s, 3))
+    d[:, 2] = np.abs(d[:, 2]) * 0.6 + 0.2 * g.uniform(size=s)
+    d /= np.linalg.norm(d, axis=1)[:, None]
+    d[0] = [0.1, 0.1, -0.9]                       # one station well below the others
+    H = d * size * g.uniform(0.8, 1.2, size=(s, 1))
+    T = g.uniform(-0.5, 0.5, size=(t, 3)) * size
+    off = g.normal(0.0, o["offset_sd_m"], size=s)
+    seen = np.ones((t, s), bool)                  # target-major: rows listed target by target
+    if gap > 0 and s > 4:
+        for j in range(t):
+            drop = g.uniform(size=s) < gap
+            if s - drop.sum() < 4:
+                keep = g.choice(s, size=4, replace=False)
+                drop[:] = True
+                drop[keep] = False
+            seen[j] = ~drop
+    ti, si = np.nonzero(seen)
+    d_m = np.linalg.norm(H[si] - T[ti], axis=1) + off[si] + g.normal(0.0, o["sigma_m"], size=si.size)
+    return SyntheticNetwork(H, T, off, si, ti, d_m, np.full(si.size, float(o["sigma_m"])), "shell", 2 * size,
+                            "shell", "cube", gap)
+
+
 # ------------------------------------------------------------------------------------------- sequential
 def _sequential(g, o):
     heads = tuple(o["heads"])
@@ -351,8 +388,8 @@ def _mixed(g, o):
                             "room", 0.0, orientation_rad=ori, _obs=obs)
 
 
-_DRAW = {"field": _field, "well-conditioned": _well_conditioned, "rings": _rings, "sequential": _sequential,
-         "mixed": _mixed}
+_DRAW = {"field": _field, "well-conditioned": _well_conditioned, "rings": _rings, "shell": _shell,
+         "sequential": _sequential, "mixed": _mixed}
 
 
 def _with_blunders(g, net, n, size_m):
