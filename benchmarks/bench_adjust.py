@@ -1,4 +1,4 @@
-"""Benchmark of the network adjustment (``multilat.network.adjust``).
+"""Benchmark of the network adjustment (``multilat.network.adjust.distance.adjust``).
 
 Rows
 ----
@@ -34,7 +34,7 @@ def _median_time(fn, repeats):
 def _scipy_baseline(obs, start):
     from scipy.optimize import least_squares
 
-    from multilat.network.model import dense_jacobian, residuals_and_jacobian
+    from multilat.network.model.distance import dense_jacobian, residuals_and_jacobian
 
     s, t = obs.n_stations, obs.n_targets
     # 3-2-1 on stations 0, 1, 2 held at the start values (the same datum defect removed)
@@ -70,8 +70,8 @@ def run(quick: bool = False) -> list[dict]:
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from network_truth import perturbed_start, random_network
 
-    from multilat.network.adjust import adjust
-    from multilat.network.datum import rigid_fit
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.model.datum import rigid_fit
 
     sizes = [(6, 100)] if quick else [(6, 100), (8, 300), (8, 1000), (8, 10000), (12, 50000)]
     rows = []

@@ -42,7 +42,7 @@ BASE_SRC = os.environ.get("BENCH_BASELINE_SRC")
 
 def _write_csv(t: int, path: Path, *, stations: int = 20, per_target: int = 8) -> int:
     """``synthetic_network`` "rings" (stations, t, per_target) as an observation CSV (σ 5 µm); its row count."""
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.synthetic.generator import synthetic_network
 
     net = synthetic_network(SEED, population="rings", n_stations=stations, n_targets=t, per_target=per_target)
     s = np.char.add("S", net.station_index.astype(str))
@@ -89,10 +89,10 @@ def _solve_alone(path: Path, solver: str) -> float:
     N(0, 1 mm), in-process (the reader and statistics not counted)."""
     import warnings
 
-    from multilat.network import fit
-    from multilat.network.adjust import Start, adjust
-    from multilat.network.files import read_observations
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.adjust.distance import fit
+    from multilat.network.adjust.distance.adjust import Start, adjust
+    from multilat.network.io.files import read_observations
+    from multilat.network.synthetic.generator import synthetic_network
 
     obs = read_observations(path)
     t = obs.n_targets

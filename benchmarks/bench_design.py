@@ -2,7 +2,7 @@
 
 * ``design_eval_4x14``: one pre-analysis criterion evaluation (``max_u95``) of the paper's small
   volume (4 heads x 14 targets, 56 distances, 58 free parameters), ``median_s`` over 200 calls.
-  Baseline: :func:`multilat.network.adjust.adjust` on the same exact distances started at the truth
+  Baseline: :func:`multilat.network.adjust.distance.adjust.adjust` on the same exact distances started at the truth
   (the way to get the same covariance without the design module). Goal: <= 1 ms.
 * ``design_cli_4x100``: the whole command ``multilat design CUBE100.toml --json`` (4 heads, 100
   targets on a 5 x 5 x 4 grid in a 1 m cube, heads in a 4 m box, sigma 4.7 um, multistart, 4 starts,
@@ -34,8 +34,8 @@ SEED = 20200808
 
 
 def _bench_eval(quick):
-    from multilat.network.adjust import adjust
-    from multilat.network.configs import small_volume
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.synthetic.configs import small_volume
     from multilat.network.design import Layout, SigmaModel, criterion_value, layout_observations
 
     cfg = small_volume()

@@ -9,7 +9,7 @@ volume (the same 18 points, its 56 distances, 58 unknowns: ``problem_from_config
 Rows (trials/s; ``ratio`` = general trials/s / distance-only trials/s; the goal is >= 0.8):
 
 * ``general_solve_vs_distance_only``: the solvers alone on pre-drawn observations, in-process:
-  :func:`multilat.network.general.propagate.solve` (compiled chord steps) against
+  :func:`multilat.network.montecarlo.general.propagate.solve` (compiled chord steps) against
   :meth:`BatchedNetwork.solve` (compiled frozen Schur steps); runs interleaved (A B A B ...), medians.
 * ``general_solve_distance_only_network``: the general solver on the distance-only small volume itself
   (the same 56 distances, one head per station, free network), against the same baseline: the price
@@ -78,12 +78,12 @@ def _same_rows(cfg):
 def run(quick: bool = False) -> list[dict]:
     from general_tracker_network import tracker_network
 
-    from multilat.network.configs import small_volume
-    from multilat.network.general import adjust_network
-    from multilat.network.general.adjust import AdjustOptions
-    from multilat.network.general.propagate import draw, freeze, propagate, solve
-    from multilat.network.propagate import problem_from_config
-    from multilat.network.propagate import propagate as old_propagate
+    from multilat.network.synthetic.configs import small_volume
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.adjust.general.adjust import AdjustOptions
+    from multilat.network.montecarlo.general.propagate import draw, freeze, propagate, solve
+    from multilat.network.montecarlo.propagate import problem_from_config
+    from multilat.network.montecarlo.propagate import propagate as old_propagate
 
     trials = 10_000 if quick else 100_000
     reps = 7 if quick else 5
@@ -137,7 +137,7 @@ def run(quick: bool = False) -> list[dict]:
                                         lambda: old_propagate(pb, trials=trials, rng=1, noise="gaussian",
                                                               keep_samples=False), reps)
     rows.append(_row("general_propagate_vs_distance_only", t_new, t_old, trials,
-                     "multilat.network.propagate.propagate (distance-only, compiled), gaussian, small volume",
+                     "multilat.network.montecarlo.propagate.propagate (distance-only, compiled), gaussian, small volume",
                      load_avg_1min=load, runs_s=ta, baseline_runs_s=tb, cpu_ratio=cpu))
     return rows
 

@@ -7,7 +7,7 @@ Timed (one process, numba warm, medians of ``--repeats``):
 * **general**: the whole general adjustment from the tables: ``network_from_tables`` (approximate
   coordinates given), ``adjust`` (``backend="auto"``: sparse at these sizes) and the statistics
   (``quality.statistics``: σ0, w-tests, MDBs, point ellipsoids);
-* **distance**: ``multilat.network.adjust.adjust`` (Schur on targets, its statistics), ``snooping=False``,
+* **distance**: ``multilat.network.adjust.distance.adjust.adjust`` (Schur on targets, its statistics), ``snooping=False``,
   from the same approximate coordinates.
 
 Printed per size: both CPU times (and wall), their ratio, the growth over the previous size, the
@@ -41,8 +41,8 @@ from common import load_avg  # noqa: E402
 
 
 def _networks(t: int, seed: int = 3):
-    from multilat.network.data import Observations, Points
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.model.data import Observations, Points
+    from multilat.network.synthetic.generator import synthetic_network
 
     s = 8
     syn = synthetic_network(seed, population="rings", n_stations=s, n_targets=t, per_target=7)
@@ -55,9 +55,9 @@ def _networks(t: int, seed: int = 3):
 def _general(obs, pts, backend="auto"):
     from dataclasses import replace
 
-    from multilat.network.general import quality
-    from multilat.network.general.adjust import System, adjust
-    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.adjust.general import quality
+    from multilat.network.adjust.general.adjust import System, adjust
+    from multilat.network.adjust.general.from_tables import network_from_tables
 
     net, opt = network_from_tables(obs, points=pts)
     res = adjust(net, options=replace(opt, backend=backend))
@@ -66,7 +66,7 @@ def _general(obs, pts, backend="auto"):
 
 
 def _distance(syn, obs):
-    from multilat.network.adjust import Start, adjust
+    from multilat.network.adjust.distance.adjust import Start, adjust
 
     return adjust(obs, snooping=False, initial=Start(syn.station_xyz_m, syn.target_xyz_m, syn.offset_m))
 
@@ -115,7 +115,7 @@ def _child(argv: list) -> tuple[float, float]:
 def command(sizes=(1000, 4000, 16000), repeats: int = 1) -> list[dict]:
     """Issue 29's row: the whole ``multilat adjust obs.csv --model general --json`` beside the distance
     path's ``multilat adjust obs.csv --json``, same CSV, same run; medians of ``repeats``."""
-    from multilat.network.files import write_observations
+    from multilat.network.io.files import write_observations
 
     cli = [sys.executable, "-c", "import sys; from multilat.cli import run; sys.exit(run())", "adjust"]
     rows, prev = [], None

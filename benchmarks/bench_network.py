@@ -61,8 +61,8 @@ _median_time = median_time
 
 
 def _small_network():
-    from multilat.network.batched import BatchedNetwork
-    from multilat.network.configs import small_volume
+    from multilat.network.montecarlo.batched import BatchedNetwork
+    from multilat.network.synthetic.configs import small_volume
 
     cfg = small_volume()
     s, t = len(cfg.station_ids), len(cfg.target_ids)
@@ -74,7 +74,7 @@ def _scipy_lm_per_trial(net, d):
     """Baseline: scipy LM per trial, analytic Jacobian, 3-2-1 minimal constraints (B xyz, D yz, C y)."""
     from scipy.optimize import least_squares
 
-    from multilat.network.batched import flatten
+    from multilat.network.montecarlo.batched import flatten
 
     s, t = net.n_stations, net.n_targets
     x0 = flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m)
@@ -135,8 +135,8 @@ def bench_batched(quick):
 
 
 def bench_propagate(quick):
-    from multilat.network.configs import small_volume
-    from multilat.network.propagate import problem_from_config, propagate
+    from multilat.network.synthetic.configs import small_volume
+    from multilat.network.montecarlo.propagate import problem_from_config, propagate
 
     pb = problem_from_config(small_volume(), sigma_m=4.7e-6)
     n = 20_000 if quick else 100_000
@@ -150,7 +150,7 @@ def bench_propagate(quick):
 
 
 def _observations(net, t):
-    from multilat.network.data import Observations
+    from multilat.network.model.data import Observations
 
     return Observations(tuple(f"S{i}" for i in range(len(net.offset_m))), tuple(f"T{j}" for j in range(t)),
                         net.station_index, net.target_index, net.distance_m, net.sigma_m)
@@ -161,7 +161,7 @@ def _sparse_problem(t, seed=SEED):
     truth + N(0, 1 mm) on every coordinate and offset)."""
     from types import SimpleNamespace
 
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.synthetic.generator import synthetic_network
 
     net = synthetic_network(seed, population="rings", n_stations=20, n_targets=t, per_target=8)
     rng = np.random.default_rng(seed + 1)
@@ -176,11 +176,11 @@ def _sparse_problem(t, seed=SEED):
 # call, also those of a minimum search); ``initial`` the initial values from distances; the rest are
 # statistics: ``redundancy`` (hat-matrix diagonal), ``result`` (build_result: point covariances,
 # w-tests, MDBs), ``w_groups`` (grouping the failing w-tests by correlation).
-_PARTS = (("multilat.network.fit", "gauss_newton", "solve"),
-          ("multilat.network.adjust", "initial_for", "initial"),
-          ("multilat.network.covariance", "NetworkCovariance.hat_diagonal", "redundancy"),
-          ("multilat.network.adjust", "build_result", "result"),
-          ("multilat.network.adjust", "_w_failure_groups", "w_groups"))
+_PARTS = (("multilat.network.adjust.distance.fit", "gauss_newton", "solve"),
+          ("multilat.network.adjust.distance.adjust", "initial_for", "initial"),
+          ("multilat.network.model.covariance", "NetworkCovariance.hat_diagonal", "redundancy"),
+          ("multilat.network.adjust.distance.adjust", "build_result", "result"),
+          ("multilat.network.adjust.distance.adjust", "_w_failure_groups", "w_groups"))
 
 
 class _Split:
@@ -222,7 +222,7 @@ def _timed_adjust(obs, **kw):
     numbers, w-tests, result building, checks)."""
     import warnings
 
-    from multilat.network.adjust import adjust
+    from multilat.network.adjust.distance.adjust import adjust
 
     with _Split() as sp, warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -275,7 +275,7 @@ import json, sys, time
 sys.path.insert(0, %r)
 import numpy as np
 from bench_network import _sparse_problem
-from multilat.network.adjust import adjust
+from multilat.network.adjust.distance.adjust import adjust
 net, obs, init = _sparse_problem(%d)
 t0 = time.perf_counter()
 res = adjust(obs, solver="sparse", initial=init, snooping=False)
@@ -354,15 +354,15 @@ def bench_sparse(quick):
 
 
 def _w_crit(alpha):
-    from multilat.network.statistics import w_critical
+    from multilat.network.model.statistics import w_critical
 
     return w_critical(alpha)
 
 
 def bench_csv(quick):
-    from multilat.network.fastio import read_observations_fast
-    from multilat.network.files import read_observations
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.io.fastio import read_observations_fast
+    from multilat.network.io.files import read_observations
+    from multilat.network.synthetic.generator import synthetic_network
 
     t = 25_000 if quick else 200_000
     net = synthetic_network(SEED, population="rings", n_stations=20, n_targets=t, per_target=8)
@@ -381,7 +381,7 @@ def bench_csv(quick):
         fo = read_observations_fast(path)
         # the strict reader itself: read_observations hands files of >= 1 MiB in the plain format to
         # the vectorised reader, so the size test is stood down for the baseline
-        from multilat.network import files as F
+        from multilat.network.io import files as F
 
         big = F._large_file
         F._large_file = lambda _p: False
@@ -399,9 +399,9 @@ def bench_csv(quick):
 
 def bench_large(quick):
     """Targets from distances alone: ``adjust(obs, solver="sparse", snooping=False)`` (initial values by
-    :func:`multilat.network.large.large_initial_values` inside ``adjust``, solve, statistics) against
+    :func:`multilat.network.adjust.approximate.large.large_initial_values` inside ``adjust``, solve, statistics) against
     the same call given truth + N(0, 1 mm) as initial values, same run, interleaved."""
-    from multilat.network.datum import rigid_fit
+    from multilat.network.model.datum import rigid_fit
 
     t = 20_000 if quick else min(200_000, max(MAX_TARGETS, 20_000))
     reps = 3 if quick else 2
@@ -485,9 +485,9 @@ def bench_cli(quick):
     import warnings
 
     from multilat.cli.app import to_jsonable
-    from multilat.network.files import read_observations
-    from multilat.network.synthetic import synthetic_network
-    from multilat.network.result import result_to_json
+    from multilat.network.io.files import read_observations
+    from multilat.network.synthetic.generator import synthetic_network
+    from multilat.network.adjust.distance.result import result_to_json
 
     t = 20_000
     reps = 2 if quick else 3

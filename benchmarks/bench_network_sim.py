@@ -1,8 +1,8 @@
 """Network-simulation benchmarks (issue 3 items 4 and 7).
 
-* ``initial_values_random``: :func:`multilat.network.initial.initial_values` from distances alone on
+* ``initial_values_random``: :func:`multilat.network.adjust.approximate.initial.initial_values` from distances alone on
   random well-conditioned networks (4-8 stations x 10-30 targets, gaps, ±5 mm offsets, 5 um noise;
-  :func:`multilat.network.synthetic.synthetic_network`, "well-conditioned"). ``median_s`` per network; ``extra``: the rate of
+  :func:`multilat.network.synthetic.generator.synthetic_network`, "well-conditioned"). ``median_s`` per network; ``extra``: the rate of
   networks whose adjustment from these values reaches the minimum reached from the truth (1e-8 m).
   Baseline: the naive method, random restarts (20) of the same Levenberg-Marquardt refinement, the
   lowest RMS kept — same networks, same run, same success criterion.
@@ -29,7 +29,7 @@ SEED = 20200808
 
 
 def _converged(net, iv):
-    from multilat.network.adjust import adjust
+    from multilat.network.adjust.distance.adjust import adjust
 
     truth = SimpleNamespace(station_xyz_m=net.station_xyz_m, target_xyz_m=net.target_xyz_m,
                             offset_m=net.offset_m)
@@ -46,8 +46,8 @@ def _converged(net, iv):
 
 
 def _bench_initial(quick):
-    from multilat.network import initial as ini
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.adjust.approximate import initial as ini
+    from multilat.network.synthetic.generator import synthetic_network
 
     n = 30 if quick else 200
     load = _load()
@@ -74,8 +74,8 @@ def _bench_initial(quick):
 
 
 def _bench_simulate(quick):
-    from multilat.network.configs import small_volume
-    from multilat.network.simulate import simulate
+    from multilat.network.synthetic.configs import small_volume
+    from multilat.network.montecarlo.simulate import simulate
 
     trials = 10 if quick else 50
     cfg = small_volume()

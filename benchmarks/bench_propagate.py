@@ -11,7 +11,7 @@ Rows (each beside its baseline, same run):
   alone on the same trials (:meth:`BatchedNetwork.solve` of gaussian distances, in-process), so the
   ratio says what the rest of the command costs next to the solve. Goal: >= 1e5 trials/s.
 * ``cli_propagate_gaussian``: the same command with ``--noise gaussian``. Goal: >= 1.5e5 trials/s.
-* ``solve_general_small_volume``: the general batched solver (:mod:`multilat.network.batched_coupled`:
+* ``solve_general_small_volume``: the general batched solver (:mod:`multilat.network.montecarlo.batched_coupled`:
   heads over several stations, scale bars, control; numpy chord iterations) on the same network and
   trials as the specialised batched solver (compiled), which is the baseline (ratio = batched time /
   general time: below 1, the price of generality).
@@ -93,8 +93,8 @@ def _row(name, t, baseline, tb, trials, **extra):
 def run(quick: bool = False) -> list[dict]:
     from multilat import budget, instrument as instr
     from multilat.distance_errors import draw_errors, error_model
-    from multilat.network.configs import small_volume
-    from multilat.network.propagate import problem_from_config
+    from multilat.network.synthetic.configs import small_volume
+    from multilat.network.montecarlo.propagate import problem_from_config
 
     trials = 20_000 if quick else 200_000
     reps = 1 if quick else 3
@@ -123,7 +123,7 @@ def run(quick: bool = False) -> list[dict]:
     net.solve(dist[:100])
     t_solve = _median(lambda: net.solve(dist), reps)
 
-    from multilat.network.batched_coupled import CoupledBatchedNetwork
+    from multilat.network.montecarlo.batched_coupled import CoupledBatchedNetwork
 
     s = net.n_stations
     gen = CoupledBatchedNetwork(net.station_index, net.target_index, net.sigma_m, np.arange(s),

@@ -85,10 +85,10 @@ def _numpy_solve_alone(path: Path, stations: int, per_target: int, solver: str =
 
     import numpy as np
 
-    from multilat.network import fit
-    from multilat.network.adjust import Start, adjust
-    from multilat.network.files import read_observations
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.adjust.distance import fit
+    from multilat.network.adjust.distance.adjust import Start, adjust
+    from multilat.network.io.files import read_observations
+    from multilat.network.synthetic.generator import synthetic_network
 
     class _Done(Exception):
         pass
@@ -314,7 +314,7 @@ def gama(tmp: Path) -> dict:
     wall = time.perf_counter() - t0
     if g.returncode != 0 or not out.exists():
         raise RuntimeError(f"gama-local failed: {g.stderr.decode()[-400:]}")
-    from multilat.network.interop.gama_adjusted import read_gama_adjustment
+    from multilat.network.io.interop.gama_adjusted import read_gama_adjustment
 
     ga = read_gama_adjustment(out)
     s0, dof = ga.sigma_aposteriori / ga.sigma_apriori, ga.dof

@@ -1,11 +1,11 @@
 """Issue 26: can the general layer take over distance-only networks? The distance path's acceptance
 study (``tests/test_minimum_search.py``, docs/network.md "The minimum search") run through both.
 
-Population: ``synthetic_network(default_rng([2024, k]), population="field")`` (``multilat.network.synthetic``: flat rings,
+Population: ``synthetic_network(default_rng([2024, k]), population="field")`` (``multilat.network.synthetic.generator``: flat rings,
 two-level rings, clustered and floor targets, 0-30 % unobserved pairs), the networks of the
 distance path's 1000-network study. Each network is adjusted, without data snooping, by
 
-* **distance**: ``multilat.network.adjust.adjust(obs, snooping=False, rng=0)`` (what ``multilat
+* **distance**: ``multilat.network.adjust.distance.adjust.adjust(obs, snooping=False, rng=0)`` (what ``multilat
   adjust obs.csv`` runs: initial values, mirror sweep, the minimum search);
 * **general**: ``network_from_tables(obs, rng=0)`` then ``adjust_network`` (what ``--model general``
   runs on the same CSV: no approximate coordinates given, the general chain places every point);
@@ -49,7 +49,7 @@ XYZ_M = 1e-6
 
 def network(k: int):
     """Network ``k`` of the study (the distance path's acceptance population)."""
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.synthetic.generator import synthetic_network
 
     return synthetic_network(np.random.default_rng([2024, k]), population="field")
 
@@ -61,7 +61,7 @@ def _coords(ids, xyz, want):
 
 def _fit_gap(a, b, reflect: bool) -> float:
     """Largest point distance of ``a`` rigidly fitted onto ``b`` (m)."""
-    from multilat.network.datum import apply_rigid, rigid_fit
+    from multilat.network.model.datum import apply_rigid, rigid_fit
 
     R, t = rigid_fit(a, b, allow_reflection=reflect)
     return float(np.linalg.norm(apply_rigid(R, t, a) - b, axis=1).max())
@@ -69,7 +69,7 @@ def _fit_gap(a, b, reflect: bool) -> float:
 
 def _distance(obs, **kw):
     from multilat.errors import MultilatError
-    from multilat.network.adjust import adjust
+    from multilat.network.adjust.distance.adjust import adjust
 
     try:
         with warnings.catch_warnings():
@@ -85,9 +85,9 @@ def _distance(obs, **kw):
 
 def _general(obs):
     from multilat.errors import MultilatError
-    from multilat.network.general import adjust_network
-    from multilat.network.general.from_tables import network_from_tables
-    from multilat.network.general.run import false_minimum_warning
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.adjust.general.from_tables import network_from_tables
+    from multilat.network.adjust.general.run import false_minimum_warning
 
     try:
         with warnings.catch_warnings():
@@ -179,8 +179,8 @@ def summarise(rows) -> str:
 
 
 def _large(t: int, seed: int = 3):
-    from multilat.network.data import Observations
-    from multilat.network.synthetic import synthetic_network    # large.synthetic_network(8, t, 7), bit for bit
+    from multilat.network.model.data import Observations
+    from multilat.network.synthetic.generator import synthetic_network    # large.synthetic_network(8, t, 7), bit for bit
 
     syn = synthetic_network(seed, population="rings", n_stations=8, n_targets=t, per_target=7)
     return Observations(tuple(f"S{i}" for i in range(8)), tuple(f"T{j}" for j in range(t)), syn.station_index,

@@ -3,9 +3,9 @@ azimuths and elevations at 20 µrad from two tracker stations with random orient
 
 import numpy as np
 
-from multilat.network.angles import predicted_angles
-from multilat.network.data import Observations
-from multilat.network.synthetic import synthetic_network
+from multilat.network.model.angles import predicted_angles
+from multilat.network.model.data import Observations
+from multilat.network.synthetic.generator import synthetic_network
 
 SIG_ANGLE = 20e-6
 

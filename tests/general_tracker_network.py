@@ -6,10 +6,10 @@ Carlo's tests and benchmark (``benchmarks/bench_general_propagate.py``)."""
 
 import numpy as np
 
-from multilat.network.angles import predicted_angles
-from multilat.network.configs import small_volume
-from multilat.network.general.observations import Block, Network
-from multilat.network.general.points import FREE, WEIGHTED, PointSet
+from multilat.network.model.angles import predicted_angles
+from multilat.network.synthetic.configs import small_volume
+from multilat.network.model.observations import Block, Network
+from multilat.network.model.points import FREE, WEIGHTED, PointSet
 
 SIG_DIST_M = 4.7e-6
 SIG_ANGLE_RAD = 20e-6

@@ -1,6 +1,6 @@
 """Helpers around the package's one network generator, for the network tests (not a test module).
 
-Networks are drawn by :func:`multilat.network.synthetic.synthetic_network` (issue 27, "one
+Networks are drawn by :func:`multilat.network.synthetic.generator.synthetic_network` (issue 27, "one
 generator"); this module only adds what a test needs on top of a drawn network: its exact
 (noise-free) observations and initial values near the truth in another frame."""
 
@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from multilat.network.adjust import Start
-from multilat.network.model import predicted_distance_m
+from multilat.network.adjust.distance.adjust import Start
+from multilat.network.model.distance import predicted_distance_m
 
 
 def noise_free(net):

@@ -1,5 +1,5 @@
 """One options type for the network model and its adjustment (issue 26 item 6, issue 28):
-:class:`multilat.network.options.NetworkOptions` is what ``multilat adjust``, ``adjust()`` and
+:class:`multilat.network.adjust.distance.options.NetworkOptions` is what ``multilat adjust``, ``adjust()`` and
 ``propagate`` take. Bad values are one line naming the option (the Python field, or the CLI option);
 the options object, the keyword options and the command give the same adjustment, float for float."""
 
@@ -11,10 +11,10 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.files import read_observations, read_points, read_reference_lengths
-from multilat.network.options import NetworkOptions
-from multilat.network.result import result_to_json
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.io.files import read_observations, read_points, read_reference_lengths
+from multilat.network.adjust.distance.options import NetworkOptions
+from multilat.network.adjust.distance.result import result_to_json
 from multilat.vocabulary import stamp
 from multilat.io import dumps_json
 

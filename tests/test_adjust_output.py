@@ -21,8 +21,8 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.files import write_observations
-from multilat.network.synthetic import synthetic_network
+from multilat.network.io.files import write_observations
+from multilat.network.synthetic.generator import synthetic_network
 
 DATA = Path(__file__).resolve().parent / "data" / "network"
 FLAGS = ("rejected", "w_failed", "poorly_controlled")
@@ -232,8 +232,8 @@ def test_observations_option_needs_a_json_document(tmp_path):
 
 
 def test_listing_is_checked():
-    from multilat.network.adjust import adjust
-    from multilat.network.result import result_to_json
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.adjust.distance.result import result_to_json
 
     res = adjust(synthetic_network(1, population="shell", n_stations=5, n_targets=12).obs)
     with pytest.raises(MultilatError, match="observations listing must be 'flagged' or 'all'"):

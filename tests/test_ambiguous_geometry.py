@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.ambiguity import K_PLANE, flat_network, plane_spread
-from multilat.network.angles import predicted_angles
-from multilat.network.data import Observations, Points
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.adjust.distance.ambiguity import K_PLANE, flat_network, plane_spread
+from multilat.network.model.angles import predicted_angles
+from multilat.network.model.data import Observations, Points
 
 SIG = 5e-6
 HEIGHTS = np.array([0.5, 0.7, 0.6, 0.4, 0.8, 0.6])
@@ -54,7 +54,7 @@ def test_coplanar_targets_name_every_station_as_mirror_ambiguous():
     # the reflection was re-adjusted and fits within the tests' non-centrality λ0 = 17.07
     assert all(abs(a.delta_vtpv) < res.tests["lambda0"] for a in res.ambiguous)
     assert any("ambiguous geometry" in w for w in res.warnings)
-    from multilat.network.result import result_to_json
+    from multilat.network.adjust.distance.result import result_to_json
 
     doc = result_to_json(res)
     assert [a["id"] for a in doc["ambiguous"]] == list(obs.station_ids)

@@ -1,10 +1,10 @@
-"""The angle observation model (network/angles.py) against closed forms, symmetries and finite differences."""
+"""The angle observation model (network/model/angles.py) against closed forms, symmetries and finite differences."""
 
 import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network import angles as A
+from multilat.network.model import angles as A
 
 
 def _random_case(rng, m=40, s=4, t=15):

@@ -26,11 +26,11 @@ from scipy.optimize import least_squares
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.angles import predicted_angles
-from multilat.network.data import Observations
-from multilat.network.datum import helmert_basis
-from multilat.network.files import write_observations
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.angles import predicted_angles
+from multilat.network.model.data import Observations
+from multilat.network.model.datum import helmert_basis
+from multilat.network.io.files import write_observations
 
 from angle_networks import SIG_ANGLE, mixed_with_angles as _mixed
 
@@ -247,7 +247,7 @@ def test_shipped_mixed_example_is_the_generator_output_and_recovers_the_truth(tm
     mod.main(tmp_path)
     for f in ("obs.csv", "truth.csv", "offsets_truth.csv", "orientation_truth.csv"):
         assert (tmp_path / f).read_text() == (ex / f).read_text(), f
-    from multilat.network.files import read_observations
+    from multilat.network.io.files import read_observations
 
     obs = read_observations(ex / "obs.csv")
     res = adjust(obs)

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from multilat.cli import main
-from multilat.network.adjust import adjust
-from multilat.network.files import write_observations
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.io.files import write_observations
 
 from angle_networks import SIG_ANGLE, mixed_with_angles
 

@@ -10,9 +10,9 @@ import pytest
 pytest.importorskip("pyarrow.csv")
 
 from multilat.errors import MultilatError  # noqa: E402
-from multilat.network import fastio, files  # noqa: E402
-from multilat.network.files import read_observations, write_observations  # noqa: E402
-from multilat.network.synthetic import synthetic_network  # noqa: E402
+from multilat.network.io import fastio, files  # noqa: E402
+from multilat.network.io.files import read_observations, write_observations  # noqa: E402
+from multilat.network.synthetic.generator import synthetic_network  # noqa: E402
 
 
 @pytest.fixture

@@ -22,9 +22,9 @@ import numpy as np
 import pytest
 
 from multilat.cli import main
-from multilat.network.azimuth_sense import to_ccw_rad
-from multilat.network.data import Observations
-from multilat.network.files import write_observations
+from multilat.network.adjust.distance.azimuth_sense import to_ccw_rad
+from multilat.network.model.data import Observations
+from multilat.network.io.files import write_observations
 
 from angle_networks import mixed_with_angles
 

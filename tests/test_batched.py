@@ -7,8 +7,8 @@ import pytest
 from scipy.optimize import least_squares
 
 from multilat.errors import MultilatError
-from multilat.network.batched import BatchedNetwork, TrialDatum as Datum, flatten, numba_available
-from multilat.network.model import inv3 as inv3_sym
+from multilat.network.montecarlo.batched import BatchedNetwork, TrialDatum as Datum, flatten, numba_available
+from multilat.network.model.distance import inv3 as inv3_sym
 
 H = np.array([[504, 938, 491], [0, 0, 0], [524, -7, 909], [1050, 0, 0]]) / 1000.0   # seed 000 §4.1
 
@@ -89,8 +89,8 @@ def test_against_scipy_least_squares_per_trial():
 
 def test_against_network_adjust_solution_and_covariance():
     """Same solution (< 1 nm) and same linear covariance as the general adjustment, free datum."""
-    from multilat.network.adjust import adjust
-    from multilat.network.data import Observations
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.model.data import Observations
 
     net = small_network()
     d = noisy(net, 1)[0]

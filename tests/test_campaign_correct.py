@@ -164,7 +164,7 @@ def test_cli_correct_writes_observation_file(tmp_path, capsys):
     np.testing.assert_allclose(t.floats("distance_m"), camp.observed_true_m, atol=1e-9)
     np.testing.assert_allclose(t.floats("sigma_m"), js["sigma_m"], rtol=1e-12)
     assert not is_raw_file(out)
-    from multilat.network.files import read_observations   # the file `multilat adjust` reads
+    from multilat.network.io.files import read_observations   # the file `multilat adjust` reads
     obs = read_observations(out)
     np.testing.assert_allclose(obs.sigma_m, js["sigma_m"], rtol=1e-12)
     assert main(["correct", str(raw), "-e", str(env), "--formula", "edlen"]) == 0
@@ -270,7 +270,7 @@ def test_per_row_environment_and_unknown_head(tmp_path, capsys):
                  .replace(",0.0,", ",0.0,-0.5,"))
     out = tmp_path / "obs_az.csv"
     assert main(["correct", str(q), "--out", str(out)]) == 0
-    from multilat.network.files import read_observations
+    from multilat.network.io.files import read_observations
     obs = read_observations(out)
     np.testing.assert_allclose(obs.azimuth_rad, [1.5, -0.5])
     np.testing.assert_allclose(obs.elevation_rad, [0.1, 0.0])

@@ -13,9 +13,9 @@ import pytest
 
 from multilat.campaign.correlated import adjustment_gain, correlated_covariance
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.configs import small_volume
-from multilat.network.data import Observations
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.synthetic.configs import small_volume
+from multilat.network.model.data import Observations
 
 SIGMA = 4.7e-6
 

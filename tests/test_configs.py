@@ -5,9 +5,9 @@ import pytest
 from scipy.spatial import Delaunay
 
 from multilat.errors import MultilatError
-from multilat.network.configs import (LARGE_FLOOR_Z_M, NetworkConfig, get_config, large_volume,
+from multilat.network.synthetic.configs import (LARGE_FLOOR_Z_M, NetworkConfig, get_config, large_volume,
                                       small_volume, triplet_points)
-from multilat.network.data import ReferenceLengths
+from multilat.network.model.data import ReferenceLengths
 
 
 def test_head_coordinates_as_published():

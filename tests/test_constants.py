@@ -16,7 +16,7 @@ PKG = Path(__file__).resolve().parents[1] / "src" / "multilat"
 WATCHED = {
     "chi2_3_95": (7.814727903251178, None),
     "sqrt_chi2_3_95": (math.sqrt(7.814727903251178), None),
-    "default_sigma_m": (4.7e-6, "network/sigma_source.py"),
+    "default_sigma_m": (4.7e-6, "network/model/sigma_source.py"),
 }
 
 
@@ -36,14 +36,14 @@ def literal_copies(root: Path = PKG) -> list[str]:
 
 def test_no_literal_copy_of_a_shared_constant():
     bad = literal_copies()
-    assert not bad, "use multilat.network.statistics.CHI2_3_95 / sigma_source.DEFAULT_SIGMA_M:\n" + "\n".join(bad)
+    assert not bad, "use multilat.network.model.statistics.CHI2_3_95 / sigma_source.DEFAULT_SIGMA_M:\n" + "\n".join(bad)
 
 
 @pytest.mark.parametrize("text", ["K = 7.814727903251178\n", "k = 2.7954834829151074\n",
                                   "def f(sigma_m=4.7e-06):\n    return sigma_m\n"])
 def test_a_new_copy_is_found(tmp_path, text):
-    (tmp_path / "network").mkdir()
-    (tmp_path / "network" / "sigma_source.py").write_text("DEFAULT_SIGMA_M = 4.7e-6\n")
+    (tmp_path / "network" / "model").mkdir(parents=True)
+    (tmp_path / "network" / "model" / "sigma_source.py").write_text("DEFAULT_SIGMA_M = 4.7e-6\n")
     (tmp_path / "x.py").write_text(text)
     assert [s.split()[0] for s in literal_copies(tmp_path)] == ["x.py:1"]
 
@@ -53,9 +53,9 @@ def test_the_constants_are_the_published_values():
     quantile may round differently); the default σ is the seed paper's 4.7 µm (§3.4, §4.4)."""
     from scipy import stats
 
-    from multilat.network.propagate import chi2_3_95
-    from multilat.network.sigma_source import DEFAULT_SIGMA_M
-    from multilat.network.statistics import CHI2_3_95
+    from multilat.network.montecarlo.propagate import chi2_3_95
+    from multilat.network.model.sigma_source import DEFAULT_SIGMA_M
+    from multilat.network.model.statistics import CHI2_3_95
 
     assert CHI2_3_95 == pytest.approx(stats.chi2.ppf(0.95, 3), rel=4e-16)
     assert chi2_3_95 == CHI2_3_95

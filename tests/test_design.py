@@ -11,8 +11,8 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network import configs
-from multilat.network.adjust import adjust
+from multilat.network.synthetic import configs
+from multilat.network.adjust.distance.adjust import adjust
 from multilat.network.design import (Layout, SigmaModel, choose_candidates, criterion_value,
                                      layout_observations, optimise_heads, preanalyse)
 from multilat.network.design.config import parse_design_config, run_design
@@ -55,7 +55,7 @@ def test_preanalysis_equals_adjust_on_exact_distances(name, datum):
 
 
 def test_preanalysis_known_offsets_partial_visibility_and_321_frame():
-    from multilat.network.datum import apply_rigid, frame_321
+    from multilat.network.model.datum import apply_rigid, frame_321
 
     cfg = configs.small_volume()
     vis = np.ones((4, 14), bool)

@@ -168,7 +168,7 @@ def test_poorly_controlled_matches_adjust_notion():
     import inspect
 
     from multilat.network.design.config import poorly_controlled_targets
-    from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN, reliability
+    from multilat.network.adjust.distance.reliability import MDB_LIMIT_SIGMA, R_MIN, reliability
 
     sig = inspect.signature(reliability).parameters
     assert sig["r_min"].default == R_MIN == 0.1 and sig["mdb_limit_sigma"].default == MDB_LIMIT_SIGMA == 10.0

@@ -1,7 +1,7 @@
 """Each concept once (issue 27): the distance model's Jacobian (the unit vector ``u = (H - T)/rho``
-of a difference over its length) has one numpy copy, :func:`multilat.network.model.line_of_sight`,
+of a difference over its length) has one numpy copy, :func:`multilat.network.model.distance.line_of_sight`,
 and one inline copy per compiled kernel; the S-transformation ``S = I - G (EᵀG)⁻¹Eᵀ`` one,
-:func:`multilat.network.datum.s_transform` (with its coefficients ``s_coefficients``). A new copy
+:func:`multilat.network.model.datum.s_transform` (with its coefficients ``s_coefficients``). A new copy
 anywhere in ``network/`` fails here, named ``file:line function``; the places left as they are,
 each with its reason, are listed in ``KNOWN`` and may only shrink (docs/architecture.md, "Each
 concept once").
@@ -24,31 +24,31 @@ import pytest
 NETWORK = Path(__file__).resolve().parents[1] / "src" / "multilat" / "network"
 
 #: compiled kernels: each @njit function may keep its own inline copy of the Jacobian
-KERNEL_FILES = {"_sparse_kernels.py", "_batched_numba.py", "_covariance_kernels.py", "general/_frozen_numba.py"}
+KERNEL_FILES = {"model/_sparse_kernels.py", "montecarlo/_batched_numba.py", "model/_covariance_kernels.py", "montecarlo/general/_frozen_numba.py"}
 
 #: the homes: ``file:function`` holding the one numpy copy of each concept
 HOME = {
-    "jacobian": {"model.py:line_of_sight"},
-    "s_transform": {"datum.py:s_coefficients"},
+    "jacobian": {"model/distance.py:line_of_sight"},
+    "s_transform": {"model/datum.py:s_coefficients"},
 }
 
 #: copies found today outside the homes, and why each stays (this list only shrinks)
 KNOWN = {
     "jacobian": {
-        "datum.py:frame_axes": "the 3-2-1 frame's x axis: a frame, not a distance",
-        "angle_rows.py:initial_orientations": "an angle's starting direction (angles, not distances)",
-        "costs.py:compare_costs_linear": "a scale bar's direction in the cost study (not the adjustment)",
-        "couplings.py:whitened": "the scale bars' rows of the adjustment: a point-to-point length",
-        "large.py:refit_point": "the large-network generator's refit (multilat.synthetic, issue 27 item 4)",
-        "propagate_summary.py:linear_std": "the gradient of a reported length (a result, not the model)",
-        "simulate.py:linear_prediction": "a bar's direction in the length-error prediction",
-        "general/approximate/frames.py:orient": "the general layer (issue 26), not in this change",
-        "general/approximate/search.py:jac": "the general layer (issue 26), not in this change",
+        "model/datum.py:frame_axes": "the 3-2-1 frame's x axis: a frame, not a distance",
+        "model/angle_rows.py:initial_orientations": "an angle's starting direction (angles, not distances)",
+        "adjust/distance/costs.py:compare_costs_linear": "a scale bar's direction in the cost study (not the adjustment)",
+        "model/couplings.py:whitened": "the scale bars' rows of the adjustment: a point-to-point length",
+        "adjust/approximate/large.py:refit_point": "the large-network generator's refit (multilat.synthetic, issue 27 item 4)",
+        "montecarlo/propagate_summary.py:linear_std": "the gradient of a reported length (a result, not the model)",
+        "montecarlo/simulate.py:linear_prediction": "a bar's direction in the length-error prediction",
+        "adjust/approximate/general/frames.py:orient": "the general layer (issue 26), not in this change",
+        "adjust/approximate/general/search.py:jac": "the general layer (issue 26), not in this change",
     },
     "s_transform": {
-        "angle_rows.py:orientation_covariance": "the orientations' rows (EᵀG)⁻¹ of an S-transform that "
+        "model/angle_rows.py:orientation_covariance": "the orientations' rows (EᵀG)⁻¹ of an S-transform that "
                                                 "needs no n x n matrix",
-        "trial_datum.py:apply": "the Monte Carlo trials' rigid fit (Gᵀ G)⁻¹ (a projection, per trial)",
+        "montecarlo/trial_datum.py:apply": "the Monte Carlo trials' rigid fit (Gᵀ G)⁻¹ (a projection, per trial)",
     },
 }
 
@@ -155,8 +155,8 @@ def unexpected(found) -> list[str]:
 
 def test_no_new_copy_of_the_distance_jacobian_or_the_s_transformation():
     bad = unexpected(copies())
-    assert not bad, ("use multilat.network.model.line_of_sight / range_m and "
-                     "multilat.network.datum.s_transform / s_coefficients:\n" + "\n".join(bad))
+    assert not bad, ("use multilat.network.model.distance.line_of_sight / range_m and "
+                     "multilat.network.model.datum.s_transform / s_coefficients:\n" + "\n".join(bad))
 
 
 def test_the_known_list_only_shrinks():
@@ -196,8 +196,8 @@ def test_the_homes_are_what_they_say():
     its length (``np.hypot``, a second method), on random differences with a leading trial axis;
     ``S`` is the projector onto ``Eᵀ dx = 0`` along the rigid motions: ``S² = S``, ``Eᵀ S = 0``,
     ``S G = 0`` (to 1e-12: solved in double precision, conditioned by the 10 m network)."""
-    from multilat.network.datum import helmert_basis, s_transform
-    from multilat.network.model import line_of_sight
+    from multilat.network.model.datum import helmert_basis, s_transform
+    from multilat.network.model.distance import line_of_sight
 
     rng = np.random.default_rng(27)
     d = rng.normal(size=(4, 50, 3)) * 10.0
@@ -216,14 +216,14 @@ def test_the_homes_are_what_they_say():
 # ------------------------------------------------------------------------------ one generator (issue 27 item 4)
 PACKAGE = NETWORK.parent
 
-#: the one home of generated networks: :func:`multilat.network.synthetic.synthetic_network`
-GENERATOR_HOME = "network/synthetic.py"
+#: the one home of generated networks: :func:`multilat.network.synthetic.generator.synthetic_network`
+GENERATOR_HOME = "network/synthetic/generator.py"
 
 #: functions outside the home that draw random numbers and build observations, and why each stays
 #: (noise on a given configuration, not a generated network; this list only shrinks)
 GENERATOR_KNOWN = {
-    "network/costs.py:compare_costs_mc": "noise on the given network of the cost study",
-    "network/simulate.py:simulate": "the §4.4 study: noise on a fixed configuration",
+    "network/adjust/distance/costs.py:compare_costs_mc": "noise on the given network of the cost study",
+    "network/montecarlo/simulate.py:simulate": "the §4.4 study: noise on a fixed configuration",
     "report/network_demo.py:_one_dataset": "the demo's noisy distances of the paper's configuration",
 }
 
@@ -249,7 +249,7 @@ def test_the_package_has_one_network_generator():
     found = generators()
     bad = [f"{k} (line {line})" for k, line in found.items()
            if not k.startswith(GENERATOR_HOME + ":") and k not in GENERATOR_KNOWN]
-    assert not bad, "generate networks with multilat.network.synthetic.synthetic_network:\n" + "\n".join(bad)
+    assert not bad, "generate networks with multilat.network.synthetic.generator.synthetic_network:\n" + "\n".join(bad)
     stale = [k for k in GENERATOR_KNOWN if k not in found]
     assert not stale, "merged, remove from GENERATOR_KNOWN:\n" + "\n".join(stale)
     public = [p.relative_to(PACKAGE).as_posix() for p in PACKAGE.rglob("*.py")
@@ -266,8 +266,8 @@ def test_a_new_generator_is_found(tmp_path):
 
 
 # ------------------------------------------------------------------------------ one parameter layout (issue 27 item 1)
-#: the one home of column arithmetic: :class:`multilat.network.parameter_layout.ParameterLayout`
-LAYOUT_HOME = "parameter_layout.py"
+#: the one home of column arithmetic: :class:`multilat.network.model.parameter_layout.ParameterLayout`
+LAYOUT_HOME = "model/parameter_layout.py"
 
 #: a parameter's width: 3 (x, y, z), 4 (with the offset), 5 (and the scale), ``Q``
 _WIDTHS = {3, 4, 5}
@@ -280,30 +280,30 @@ _OWNERS = {"s", "t", "h", "i", "j", "q", "n_stations", "n_targets", "n_heads", "
 #: design/fast, design/blocked: none left) that still compute a column or a count of columns, and why
 #: each stays; this list only shrinks
 LAYOUT_KNOWN = {
-    "_sparse_kernels.py:assemble": "compiled: tiles station_system's 4-column blocks in place",
-    "_sparse_kernels.py:back_substitute": "compiled: reads station_system's 4-column blocks",
-    "adjust_steps.py:coupling_results": "the couplings' prior values per control point (couplings' layout)",
-    "adjust_steps.py:start_as_partial": "a count of unknowns (the redundancy of a start)",
-    "angle_rows.py:orientation_covariance": "the orientations' rows after the targets (angle_rows)",
-    "angle_rows.py:angle_results": "the orientations' rows after the targets (angle_rows)",
-    "angle_rows.py:whitened": "the angles' Jacobian in the adjustment layout (angle_rows)",
-    "costs.py:_design": "the cost study's own Jacobian (not the adjustment)",
-    "costs.py:compare_costs_linear": "the cost study's own Jacobian (not the adjustment)",
-    "couplings.py:resolve": "the couplings' columns in the adjustment layout",
-    "covariance.py:__init__": "the adjustment's covariance in blocks (issue 27: the memory helper's file)",
-    "covariance.py:_times": "the adjustment's covariance in blocks",
-    "covariance.py:_rotate_rows": "the adjustment's covariance in blocks",
-    "covariance.py:global_block": "the adjustment's covariance in blocks",
-    "covariance.py:target_blocks": "the adjustment's covariance in blocks",
-    "covariance.py:hat_row": "the adjustment's covariance in blocks",
-    "covariance.py:internal_times": "the adjustment's covariance in blocks",
-    "covariance.py:design_times": "the adjustment's covariance in blocks",
-    "covariance.py:target_coupling": "the adjustment's covariance in blocks",
-    "covariance.py:design_row": "the adjustment's covariance in blocks",
-    "covariance.py:_target_blocks_internal": "the adjustment's covariance in blocks",
-    "covariance.py:orientation_cov_internal": "the adjustment's covariance in blocks",
-    "covariance.py:hat_diagonal": "the adjustment's covariance in blocks",
-    "datum.py:datum_matrices": "the datum's G and E in the adjustment layout",
+    "model/_sparse_kernels.py:assemble": "compiled: tiles station_system's 4-column blocks in place",
+    "model/_sparse_kernels.py:back_substitute": "compiled: reads station_system's 4-column blocks",
+    "adjust/distance/adjust_steps.py:coupling_results": "the couplings' prior values per control point (couplings' layout)",
+    "adjust/distance/adjust_steps.py:start_as_partial": "a count of unknowns (the redundancy of a start)",
+    "model/angle_rows.py:orientation_covariance": "the orientations' rows after the targets (angle_rows)",
+    "model/angle_rows.py:angle_results": "the orientations' rows after the targets (angle_rows)",
+    "model/angle_rows.py:whitened": "the angles' Jacobian in the adjustment layout (angle_rows)",
+    "adjust/distance/costs.py:_design": "the cost study's own Jacobian (not the adjustment)",
+    "adjust/distance/costs.py:compare_costs_linear": "the cost study's own Jacobian (not the adjustment)",
+    "model/couplings.py:resolve": "the couplings' columns in the adjustment layout",
+    "model/covariance.py:__init__": "the adjustment's covariance in blocks (issue 27: the memory helper's file)",
+    "model/covariance.py:_times": "the adjustment's covariance in blocks",
+    "model/covariance.py:_rotate_rows": "the adjustment's covariance in blocks",
+    "model/covariance.py:global_block": "the adjustment's covariance in blocks",
+    "model/covariance.py:target_blocks": "the adjustment's covariance in blocks",
+    "model/covariance.py:hat_row": "the adjustment's covariance in blocks",
+    "model/covariance.py:internal_times": "the adjustment's covariance in blocks",
+    "model/covariance.py:design_times": "the adjustment's covariance in blocks",
+    "model/covariance.py:target_coupling": "the adjustment's covariance in blocks",
+    "model/covariance.py:design_row": "the adjustment's covariance in blocks",
+    "model/covariance.py:_target_blocks_internal": "the adjustment's covariance in blocks",
+    "model/covariance.py:orientation_cov_internal": "the adjustment's covariance in blocks",
+    "model/covariance.py:hat_diagonal": "the adjustment's covariance in blocks",
+    "model/datum.py:datum_matrices": "the datum's G and E in the adjustment layout",
     "design/config.py:_check_counts": "a count of unknowns (a layout's redundancy)",
     "design/preanalysis.py:covariance": "the dense pre-analysis' own normal matrix",
     "design/preanalysis.py:_point_blocks": "the dense pre-analysis' own normal matrix",
@@ -313,21 +313,21 @@ LAYOUT_KNOWN = {
     "design/preanalysis.py:_preanalyse_blocked": "the dense pre-analysis' own normal matrix",
     "design/preanalysis.py:probe_cov_m2": "the dense pre-analysis' own normal matrix",
     "design/targets.py:work_volume_u95_m": "a count of unknowns (dense or blocked)",
-    "initial_refine.py:refine": "the starting values' own least squares (heads, then targets)",
-    "initial_refine.py:unpack": "the starting values' own least squares (heads, then targets)",
-    "initial_refine.py:jac": "the starting values' own least squares (heads, then targets)",
-    "interop/gama_adjusted.py:interpoint_distance_std_m": "GNU Gama's covariance rows (its layout)",
-    "reliability.py:_shifts_dense": "external reliability on the adjustment's covariance",
-    "reliability.py:shifts": "external reliability on the adjustment's covariance",
-    "reliability.py:__init__": "external reliability on the adjustment's covariance",
-    "result.py:build_result": "the result's covariance blocks (adjustment layout)",
-    "result.py:_param_rows": "the result's covariance blocks (adjustment layout)",
-    "result.py:offset_correlations": "the result's covariance blocks (adjustment layout)",
-    "search.py:_dof": "a count of unknowns",
-    "solvability.py:count_unknowns": "a count of unknowns",
-    "solvability.py:check_structure": "a count of unknowns",
-    "synthetic.py:_well_conditioned": "a count of unknowns (a drawn network's redundancy)",
-    "variance_components.py:_hat": "the variance components' hat matrix (adjustment layout)",
+    "adjust/approximate/initial_refine.py:refine": "the starting values' own least squares (heads, then targets)",
+    "adjust/approximate/initial_refine.py:unpack": "the starting values' own least squares (heads, then targets)",
+    "adjust/approximate/initial_refine.py:jac": "the starting values' own least squares (heads, then targets)",
+    "io/interop/gama_adjusted.py:interpoint_distance_std_m": "GNU Gama's covariance rows (its layout)",
+    "adjust/distance/reliability.py:_shifts_dense": "external reliability on the adjustment's covariance",
+    "adjust/distance/reliability.py:shifts": "external reliability on the adjustment's covariance",
+    "adjust/distance/reliability.py:__init__": "external reliability on the adjustment's covariance",
+    "adjust/distance/result.py:build_result": "the result's covariance blocks (adjustment layout)",
+    "adjust/distance/result.py:_param_rows": "the result's covariance blocks (adjustment layout)",
+    "adjust/distance/result.py:offset_correlations": "the result's covariance blocks (adjustment layout)",
+    "adjust/approximate/search.py:_dof": "a count of unknowns",
+    "adjust/distance/solvability.py:count_unknowns": "a count of unknowns",
+    "adjust/distance/solvability.py:check_structure": "a count of unknowns",
+    "synthetic/generator.py:_well_conditioned": "a count of unknowns (a drawn network's redundancy)",
+    "adjust/distance/variance_components.py:_hat": "the variance components' hat matrix (adjustment layout)",
 }
 
 
@@ -357,7 +357,7 @@ def _layout_lines(nodes) -> list[int]:
 
 def layout_copies(root: Path = NETWORK) -> dict[str, list[int]]:
     """``{"file:function": [lines]}`` of column arithmetic under ``root`` (the general layer has its own
-    :class:`multilat.network.general.layout.Layout`)."""
+    :class:`multilat.network.model.layout.Layout`)."""
     found = {}
     for path in sorted(root.rglob("*.py")):
         rel = path.relative_to(root).as_posix()
@@ -374,7 +374,7 @@ def test_one_parameter_layout():
     """No column arithmetic outside ``ParameterLayout`` and the known list (which only shrinks)."""
     found = layout_copies()
     bad = [f"network/{k} lines {v}" for k, v in found.items() if k not in LAYOUT_KNOWN]
-    assert not bad, ("ask multilat.network.parameter_layout.ParameterLayout for the columns:\n" + "\n".join(bad))
+    assert not bad, ("ask multilat.network.model.parameter_layout.ParameterLayout for the columns:\n" + "\n".join(bad))
     stale = [k for k in LAYOUT_KNOWN if k not in found]
     assert not stale, "merged, remove from LAYOUT_KNOWN:\n" + "\n".join(stale)
 
@@ -399,7 +399,7 @@ def test_shapes_are_not_layouts(tmp_path):
 def test_the_layout_against_its_definition():
     """The columns against the layouts written out by hand (the docstrings of model, batched and
     batched_coupled): 2 stations of one head and a third, 2 targets, one oriented station."""
-    from multilat.network.parameter_layout import XYZ, ParameterLayout
+    from multilat.network.model.parameter_layout import XYZ, ParameterLayout
 
     adj = ParameterLayout.adjustment(3, 2)
     assert adj.n == 21 and adj.station_block().tolist() == [[0, 1, 2, 3, 4], [5, 6, 7, 8, 9], [10, 11, 12, 13, 14]]

@@ -20,11 +20,11 @@ import pytest
 from multilat import io as mio
 from multilat.io import JsonRows, dumps_json, to_jsonable
 from multilat.rows_text import column_tokens
-from multilat.network import covariance as C
-from multilat.network.adjust import Start, adjust
-from multilat.network.data import Observations
-from multilat.network.synthetic import synthetic_network
-from multilat.network.result import result_to_json
+from multilat.network.model import covariance as C
+from multilat.network.adjust.distance.adjust import Start, adjust
+from multilat.network.model.data import Observations
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.adjust.distance.result import result_to_json
 
 
 def _old(doc) -> str:
@@ -116,7 +116,7 @@ def test_adjust_document_same_values_with_nan_and_inf_fields(tmp_path):
 
 def test_cli_json_equals_the_library_document(capsys, tmp_path):
     from multilat.cli.app import main
-    from multilat.network.files import read_observations
+    from multilat.network.io.files import read_observations
 
     net, obs = _network(t=30, rng=4)
     p = tmp_path / "obs.csv"
@@ -140,7 +140,7 @@ def test_cli_json_equals_the_library_document(capsys, tmp_path):
 # ----------------------------------------------------------------------------- statistics kernels
 @pytest.fixture
 def kernels_always(monkeypatch):
-    from multilat.network import _covariance_kernels as K
+    from multilat.network.model import _covariance_kernels as K
 
     if not K.HAVE_NUMBA:
         pytest.skip("numba not installed: the numpy path is the only one")
@@ -152,7 +152,7 @@ def test_kernels_equal_numpy_and_an_independent_hat_matrix(kernels_always, datum
     """Hat diagonal, hat rows, target blocks and covariance products from the compiled kernels
     against the numpy path (1e-12 relative), and the hat matrix against the SVD of the whole
     whitened Jacobian (1e-9: its own rounding)."""
-    from multilat.network.model import dense_jacobian, residuals_and_jacobian
+    from multilat.network.model.distance import dense_jacobian, residuals_and_jacobian
 
     net, obs = _network()
     res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False,
@@ -211,7 +211,7 @@ def test_residual_kernel_equals_numpy(kernels_always):
     with scales and offsets: the same operations in the same order (bit for bit with numpy 2.4 on
     x86-64, whose einsum sums (x0² + x2²) + x1²); the bound allows a platform whose einsum sums in
     another order: 2 ulp of the distance."""
-    from multilat.network import model
+    from multilat.network.model import distance as model
 
     rng = np.random.default_rng(4)
     s, t, m = 9, 5000, 40001
@@ -228,8 +228,8 @@ def test_whitened_jacobian_and_target_gains_kernels_equal_numpy(kernels_always):
     """The fused whitened residuals/Jacobian (distance cost) and the covariance's per-observation
     gains ``P`` from the kernels against the numpy path, with held parameters (an offset, a station's
     coordinates, a control target) and scales: 2 ulp (bit for bit with numpy 2.4 on x86-64)."""
-    from multilat.network.problem import Params, Problem
-    from multilat.network.solve.system import whitened
+    from multilat.network.model.problem import Params, Problem
+    from multilat.network.adjust.solve.system import whitened
 
     net, obs = _network(t=300, s=7, rng=12)
     rng = np.random.default_rng(3)
@@ -261,7 +261,7 @@ def test_covariance_product_over_the_touched_targets_only_is_the_full_sum(kernel
     """``cov_times`` summing only over the observations of the targets a vector touches (the snooping
     rounds' design rows and generators) gives the bits of the sum over all observations; a vector
     without target part sums over none."""
-    from multilat.network import _covariance_kernels as K
+    from multilat.network.model import _covariance_kernels as K
 
     net, obs = _network(t=200, s=8, rng=6)
     res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False,
@@ -298,7 +298,7 @@ def test_hat_rows_of_combinations_equal_numpy_and_the_dense_hat_matrix(kernels_a
 def test_quantiles_without_scipy_stats_are_bit_identical():
     from scipy import stats
 
-    from multilat.network import statistics as st
+    from multilat.network.model import statistics as st
 
     for a in (0.05, 0.001, 1e-6):
         assert st.norm_ppf(1 - a / 2) == float(stats.norm.ppf(1 - a / 2))
@@ -313,7 +313,7 @@ def test_adjust_does_not_import_scipy_stats():
     import subprocess
     import sys
 
-    code = ("import sys; import multilat.cli.network_cmd, multilat.network.adjust, multilat.network.files; "
+    code = ("import sys; import multilat.cli.network_cmd, multilat.network.adjust.distance.adjust, multilat.network.io.files; "
             "print('scipy.stats' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
@@ -348,7 +348,7 @@ def _big_file(path, rows=40_000, bad_line=None):
 
 
 def test_large_files_read_vectorised_bit_identical(tmp_path, monkeypatch):
-    from multilat.network import files
+    from multilat.network.io import files
 
     p = tmp_path / "big.csv"
     d = _big_file(p)
@@ -364,7 +364,7 @@ def test_large_files_read_vectorised_bit_identical(tmp_path, monkeypatch):
 
 def test_large_file_errors_name_the_line(tmp_path):
     from multilat.errors import MultilatError
-    from multilat.network import files
+    from multilat.network.io import files
 
     p = tmp_path / "big.csv"
     _big_file(p, bad_line=30_001)
@@ -376,7 +376,7 @@ def test_result_tables_written_from_columns_equal_the_row_writer(tmp_path):
     """targets.csv and observations.csv from the columns: byte for byte the text of the row-by-row csv
     writer they replace (written here row by row), with an id that needs quoting and a rejected row."""
     from multilat.io import write_csv_atomic
-    from multilat.network.files import write_result_tables
+    from multilat.network.io.files import write_result_tables
 
     net, obs = _network(t=25, rng=8)
     tids = tuple(f'T{j}' if j != 4 else 'T,"4"' for j in range(25))

@@ -1,4 +1,4 @@
-"""The frame of each datum in words, worded once (:mod:`multilat.network.frame_words`) and the same
+"""The frame of each datum in words, worded once (:mod:`multilat.network.model.frame_words`) and the same
 string in the JSON (``frame``), the terminal summary and the HTML report; and the default σ named:
 a file without ``sigma_m`` adjusted without ``--sigma-um`` or ``--instrument`` gets one ``warning:``
 line (stderr and the JSON ``warnings``), a file with a σ source none.
@@ -24,7 +24,7 @@ OBS, REFS, TRUTH = EX / "small_volume_obs.csv", EX / "small_volume_refs.csv", EX
 
 def _control(tmp: Path) -> Path:
     """Three stations and a target as weighted control: truth + N(0, 30 µm), σ 30 µm, seed 3."""
-    from multilat.network.files import read_points
+    from multilat.network.io.files import read_points
 
     t = read_points(TRUTH)
     rng = np.random.default_rng(3)

@@ -33,7 +33,7 @@ import pytest
 from scipy.stats import chi2
 
 from multilat.errors import MultilatError
-from multilat.network.interop.gama_adjusted import read_gama_adjustment
+from multilat.network.io.interop.gama_adjusted import read_gama_adjustment
 
 DATA = Path(__file__).resolve().parent / "data" / "gama3d"
 GON = 200.0 / math.pi

@@ -80,8 +80,8 @@ def test_network_616_diverging_is_refused_in_one_line():
     """Network 616: the general layer's Gauss-Newton diverged from the chain's start (the distance path
     refuses it too) and ended in scipy's "array must not contain infs or NaNs" traceback. Now one line."""
     from multilat.errors import MultilatError
-    from multilat.network.general import adjust_network
-    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.adjust.general.from_tables import network_from_tables
 
     obs = _study().network(616).obs
     net, opts = network_from_tables(obs, rng=0)
@@ -95,10 +95,10 @@ def test_a_diverging_step_is_refused_in_one_line(monkeypatch, backend):
     """The guard behind network 616 (slow above), fast: a Gauss-Newton step that overflows is refused in one
     line naming the iteration, never carried into the next linearisation (scipy's NaN traceback)."""
     from multilat.errors import MultilatError
-    general_adjust = importlib.import_module("multilat.network.general.adjust")     # the package's `adjust` is
-    sparse_backend = importlib.import_module("multilat.network.general.sparse")     # the function
-    from multilat.network.general.approximate import approximate
-    from multilat.network.general.gama_input import read_gama_input
+    general_adjust = importlib.import_module("multilat.network.adjust.general.adjust")     # the package's `adjust` is
+    sparse_backend = importlib.import_module("multilat.network.adjust.general.sparse")     # the function
+    from multilat.network.adjust.approximate.general import approximate
+    from multilat.network.io.interop.gama_input import read_gama_input
 
     net = approximate(read_gama_input(Path(__file__).parent / "data" / "gama3d" / "two_trackers.xml"))
     if backend == "dense":
@@ -125,7 +125,7 @@ def test_a_diverging_step_is_refused_in_one_line(monkeypatch, backend):
 def _without_minimum_search(monkeypatch):
     """The general layer as it was before the distance path's minimum search joined it: the search's
     start only (network 87 then converges at σ0 132, a false minimum)."""
-    from multilat.network.general.approximate import search
+    from multilat.network.adjust.approximate.general import search
 
     monkeypatch.setattr(search, "minimum_search", lambda network, rng=0: None)
 
@@ -133,13 +133,13 @@ def _without_minimum_search(monkeypatch):
 @pytest.mark.slow
 def test_false_minimum_is_warned_and_a_true_one_is_not(monkeypatch):
     """The distance path's "possible false minimum" warning on the general layer
-    (:func:`multilat.network.general.run.false_minimum_warning`): network 87 left at the search's
+    (:func:`multilat.network.adjust.general.run.false_minimum_warning`): network 87 left at the search's
     start lands at σ0 ~132 (the distance path's search reaches 1.047 there): warned, naming σ0;
     network 0 (σ0 1.06, the distance path's minimum): no warning."""
     import warnings
 
-    from multilat.network.general import adjust_network
-    from multilat.network.general.run import false_minimum_warning
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.adjust.general.run import false_minimum_warning
 
     s = _study()
     with warnings.catch_warnings():
@@ -157,7 +157,7 @@ def test_false_minimum_is_warned_and_a_true_one_is_not(monkeypatch):
 
 
 def _general_input(s, k):
-    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.adjust.general.from_tables import network_from_tables
 
     net, opts = network_from_tables(s.network(k).obs, rng=0)
     return net, opts
@@ -170,7 +170,7 @@ def test_false_minimum_warning_in_json_and_on_stderr(tmp_path, monkeypatch, caps
     import json
 
     from multilat.cli.app import main
-    from multilat.network.files import write_observations
+    from multilat.network.io.files import write_observations
 
     path = tmp_path / "obs.csv"
     write_observations(path, _study().network(k).obs)
@@ -186,7 +186,7 @@ def test_false_minimum_warning_in_json_and_on_stderr(tmp_path, monkeypatch, caps
 def _flat_ring(seed=5, ns=5, nt=10, dz_m=0.1, z_m=(0.05, 0.3), sigma_m=5e-6):
     """A flat station ring (radius 5 m, heights within ±``dz_m``) with targets just above it, every
     pair measured (noise ``sigma_m``): the distance path's hard case (issue 10)."""
-    from multilat.network.data import Observations
+    from multilat.network.model.data import Observations
 
     rng = np.random.default_rng(seed)
     a = np.linspace(0, 2 * np.pi, ns, endpoint=False)
@@ -202,8 +202,8 @@ def _ring_adjusted():
     """The ring through ``--model general``'s builder and its adjustment (the search's note kept)."""
     import warnings
 
-    from multilat.network.general import adjust_network
-    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.adjust.general.from_tables import network_from_tables
 
     obs = _flat_ring()
     net, opts = network_from_tables(obs, rng=0)
@@ -220,8 +220,8 @@ def test_start_with_a_mirrored_target_is_rescued_by_the_minimum_search():
     answer (and with the search run always, a full distance-path adjustment on every network)."""
     import warnings
 
-    from multilat.network.general import adjust_network
-    from multilat.network.general.observations import Network
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.model.observations import Network
 
     s = _study()
     obs, net, opts, good = _ring_adjusted()
@@ -247,9 +247,9 @@ def test_sigma_too_small_is_warned(monkeypatch):
     import dataclasses
     import warnings
 
-    from multilat.network.general import adjust_network
-    from multilat.network.general.observations import Network
-    from multilat.network.general.run import false_minimum_warning
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.model.observations import Network
+    from multilat.network.adjust.general.run import false_minimum_warning
 
     obs, net, opts, good = _ring_adjusted()
     assert false_minimum_warning(good) is None

@@ -1,7 +1,7 @@
-"""Approximate coordinates of the general network (:mod:`multilat.network.general.approximate`).
+"""Approximate coordinates of the general network (:mod:`multilat.network.adjust.approximate.general`).
 
 Every method against a closed-form geometry: the observations are computed from a known truth by
-the kinds' own models (:class:`~multilat.network.general.adjust.System` evaluated at the truth, set
+the kinds' own models (:class:`~multilat.network.adjust.general.adjust.System` evaluated at the truth, set
 orientations and tracker frames included), the free points' coordinates blanked, and the chain must
 give the truth back. Noise-free, each method is exact in closed form (circular mean, Kabsch,
 least-squares lines, Gauss-Newton on the distances to its fixed point), so the tolerance is 1e-9 m
@@ -22,11 +22,11 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.general.adjust import AdjustOptions, System, adjust
-from multilat.network.general.approximate import approximate, reasons, unreachable
-from multilat.network.general.observations import Block, Network, without_points
-from multilat.network.general.points import FIXED, FREE, PointSet
-from multilat.network.general.run import adjust_network
+from multilat.network.adjust.general.adjust import AdjustOptions, System, adjust
+from multilat.network.adjust.approximate.general import approximate, reasons, unreachable
+from multilat.network.model.observations import Block, Network, without_points
+from multilat.network.model.points import FIXED, FREE, PointSet
+from multilat.network.adjust.general.run import adjust_network
 
 SD, SA = 2e-4, 1.5e-5                      # σ of distances (m) and angles (rad)
 TOL = 1e-9                                 # noise-free: closed forms (module docstring)
@@ -341,7 +341,7 @@ def test_random_networks(seed):
     fits the noise-free observations exactly (σ0 < 1e-6: an exact solution). With noise and no such
     target, adjust_network from the chain reaches the minimum the same network (its unreached points
     left out) reaches from the truth."""
-    from multilat.network.general.approximate import chain
+    from multilat.network.adjust.approximate.general import chain
 
     d = _random_design(seed)
     exact = d.network()
@@ -376,7 +376,7 @@ def test_random_networks_use_every_method():
     resort), trilateration 3; 66 of 811 points unreached)."""
     from collections import Counter
 
-    from multilat.network.general.approximate import chain
+    from multilat.network.adjust.approximate.general import chain
 
     used, missing = Counter(), 0
     for seed in range(40):
@@ -401,7 +401,7 @@ def test_gama3d_from_blanked_free_points(name):
     adjustment reaches the solution it reaches from the file's approximations (dof, σ0 to 1e-9;
     coordinates to 1e-8 m; for the two free networks, whose minimum-trace datum follows the
     approximations, the interpoint distances), hence gama-local's (tests/test_general_gama3d.py)."""
-    from multilat.network.general.gama_input import read_gama_input
+    from multilat.network.io.interop.gama_input import read_gama_input
 
     net = read_gama_input(GAMA3D / f"{name}.xml")
     p = net.points
@@ -425,9 +425,9 @@ def test_tables_angles_without_sigma_serve_the_approximations():
     observations: the blocks hold distances only) still give the chain its readings: T1 the origin,
     its polar points, T2 placed from them (multilateration comes first in the pass); noise-free, the
     shape is the truth's to 1e-9 m."""
-    from multilat.network.angles import rotation_matrix
-    from multilat.network.data import Observations
-    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.model.angles import rotation_matrix
+    from multilat.network.model.data import Observations
+    from multilat.network.adjust.general.from_tables import network_from_tables
 
     rng = np.random.default_rng(9)
     st = np.array([[0.0, 0.0, 0.0], [8.0, 1.0, 0.5]])

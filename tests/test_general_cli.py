@@ -76,7 +76,7 @@ def test_example_cli_json_against_gama(name):
 
 @pytest.mark.parametrize("name", EXAMPLES)
 def test_example_python_api_against_gama(name):
-    from multilat.network.general import adjust_network, read_gama_input, statistics, to_json
+    from multilat.network.adjust.general import adjust_network, read_gama_input, statistics, to_json
 
     adj = adjust_network(read_gama_input(EX / f"{name}.xml"))
     res = adj.result
@@ -86,7 +86,7 @@ def test_example_python_api_against_gama(name):
 
 
 def test_roles_status_and_datum_words():
-    from multilat.network.general import adjust_network, read_gama_input, statistics, to_json
+    from multilat.network.adjust.general import adjust_network, read_gama_input, statistics, to_json
 
     adj = adjust_network(read_gama_input(EX / "station_control.xml"))
     doc = to_json(adj, statistics(adj.system, adj.result), source="x")
@@ -129,7 +129,7 @@ def test_statistics_against_independent_formulas(name):
     """Both networks have independent observations only, so the whitened rows are the
     observations. Tolerances: 1e-8 on r and w (two factorisations of a condition ~1e6 system);
     1e-9 relative on the quantiles."""
-    from multilat.network.general import adjust_network, read_gama_input, statistics
+    from multilat.network.adjust.general import adjust_network, read_gama_input, statistics
 
     adj = adjust_network(read_gama_input(EX / f"{name}.xml"))
     st = statistics(adj.system, adj.result, alpha=0.001, method="b-method")
@@ -155,7 +155,7 @@ def test_statistics_against_independent_formulas(name):
 
 def test_variance_factor_unknown_tau_and_scaled_covariance():
     """τ = w / σ̂0; Pope's critical value from τ²/dof ~ Beta(1/2, (dof-1)/2); covariances × σ̂0²."""
-    from multilat.network.general import adjust_network, read_gama_input, statistics
+    from multilat.network.adjust.general import adjust_network, read_gama_input, statistics
 
     adj = adjust_network(read_gama_input(EX / "two_trackers.xml"))
     known = statistics(adj.system, adj.result, alpha=0.01, method="b-method")
@@ -229,7 +229,7 @@ def test_out_written_whole_and_equal_to_json(capsys, tmp_path):
     rc, out, err = _main(capsys, EX / "station_control.xml", "--out", out_dir, "--json",
                          "--alpha", "0.01", "--variance-factor", "unknown", "--test-method", "b-method")
     assert rc == 0, err
-    from multilat.network.files import table_format
+    from multilat.network.io.files import table_format
 
     table = f"observations.{table_format('observations', 'auto')}"       # adjust-general/2: every row
     assert sorted(p.name for p in out_dir.iterdir()) == sorted([table, "points.csv", "result.json"])
@@ -324,7 +324,7 @@ def _rows(net):
 def test_without_points_keeps_every_other_row_and_its_set():
     """Removing S2 (a station with one direction set) from direction_sets: every row not touching S2
     is kept with the same set name and value, S2's set is gone from the layout."""
-    from multilat.network.general import System, read_gama_input, without_points
+    from multilat.network.adjust.general import System, read_gama_input, without_points
 
     net = read_gama_input(GAMA3D / "direction_sets.xml")
     out, n = without_points(net, ["S2"])
@@ -336,7 +336,7 @@ def test_without_points_keeps_every_other_row_and_its_set():
 
 
 def test_without_points_keeps_the_covariance_of_the_remaining_rows():
-    from multilat.network.general import read_gama_input, without_points
+    from multilat.network.adjust.general import read_gama_input, without_points
 
     net = read_gama_input(GAMA3D / "vectors.xml")
     (vec,) = [b for b in net.blocks if b.kind == "coordinate_difference"]

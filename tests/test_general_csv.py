@@ -1,5 +1,5 @@
 """multilat's own CSV networks adjusted by the general layer (``multilat adjust obs.csv --model general``,
-:mod:`multilat.network.general.from_tables`).
+:mod:`multilat.network.adjust.general.from_tables`).
 
 (a) On networks the default (distance) path accepts — examples/network/mixed (4 heads, 2 unlevelled
     trackers, angles), small_volume (--datum free), sequential (2 heads on 8 stations) — the general
@@ -67,10 +67,10 @@ EXAMPLES = [("mixed", NET / "mixed" / "obs.csv", ()),
 
 @pytest.mark.parametrize("name,path,opts", EXAMPLES, ids=[e[0] for e in EXAMPLES])
 def test_general_equals_old_path_where_both_apply(name, path, opts):
-    from multilat.network.adjust import adjust
-    from multilat.network.files import read_observations
-    from multilat.network.general import adjust_network
-    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.io.files import read_observations
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.adjust.general.from_tables import network_from_tables
 
     obs = read_observations(path)
     old = adjust(obs, snooping=False)
@@ -102,7 +102,7 @@ def test_general_equals_old_path_where_both_apply(name, path, opts):
 
 
 def _rot(o, p, k):
-    """Rz(k) Ry(p) Rx(o), written out here (independent of multilat.network.angles)."""
+    """Rz(k) Ry(p) Rx(o), written out here (independent of multilat.network.model.angles)."""
     co, so, cp, sp, ck, sk = np.cos(o), np.sin(o), np.cos(p), np.sin(p), np.cos(k), np.sin(k)
     rx = np.array([[1, 0, 0], [0, co, -so], [0, so, co]])
     ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
@@ -261,7 +261,7 @@ def heads_tracker_polar(rng):
 
 def _fit_about_z(src, dst):
     """Rotation about z and shift mapping src (n, 3) onto dst (least squares)."""
-    from multilat.network.datum import rigid_fit
+    from multilat.network.model.datum import rigid_fit
 
     R, t = rigid_fit(src, dst, about_z=True)
     return src @ R.T + t
@@ -403,7 +403,7 @@ def test_refusal_hint_only_on_the_counting_rules():
 
     from multilat.cli.general_adjust import refusal_hint
     from multilat.errors import MultilatError
-    from multilat.network.files import read_observations
+    from multilat.network.io.files import read_observations
 
     for msg, hinted in (("a self-calibrating network needs at least 3 stations, got 2 (T1, T2)", True),
                         ("target 'X' has 2 observation(s); it needs at least 3 (4 for redundancy)", True),
@@ -482,7 +482,7 @@ def test_auto_keeps_the_distance_path_above_the_dense_bound(tmp_path, monkeypatc
 
     from multilat.cli.app import main
 
-    gadjust = importlib.import_module("multilat.network.general.adjust")
+    gadjust = importlib.import_module("multilat.network.adjust.general.adjust")
     args = _polar_case(tmp_path)
     monkeypatch.setattr(gadjust, "MAX_DENSE_UNKNOWNS", 60)     # this network: 22 points, 66+ unknowns
     assert main(["adjust", *map(str, args), "--json"]) == 0
@@ -495,7 +495,7 @@ def test_default_sigma_warning_is_in_the_general_json(tmp_path):
     """No sigma_m column, no --sigma-um, no --instrument: the default-σ warning is in the general
     JSON's ``warnings`` (the distance path's key and words) under --model general and auto, and on
     stderr once."""
-    from multilat.network.sigma_source import default_warning
+    from multilat.network.model.sigma_source import default_warning
 
     src = ROOT / "examples" / "general" / "two_trackers_csv" / "obs.csv"
     with open(src, newline="") as f:

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.general.adjust import AdjustOptions, adjust
-from multilat.network.general.observations import Block, Network
-from multilat.network.general.points import FIXED, FREE, PointSet
+from multilat.network.adjust.general.adjust import AdjustOptions, adjust
+from multilat.network.model.observations import Block, Network
+from multilat.network.model.points import FIXED, FREE, PointSet
 
 STATIONS = np.array([[0.0, 0.0, 0.0], [10.0, 0.0, 0.0], [0.0, 10.0, 0.0], [10.0, 10.0, 3.0]])
 

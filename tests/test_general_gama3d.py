@@ -1,4 +1,4 @@
-"""The general network (multilat.network.general) against gama-local 2.24 on the 11 stored reference
+"""The general network (multilat.network.adjust.general) against gama-local 2.24 on the 11 stored reference
 networks of tests/data/gama3d (README.md there): each input is read by ``read_gama_input``, given
 approximate coordinates by ``approximate`` where the file has none, adjusted by ``adjust``, and
 compared with gama-local's own output NAME_out.xml:
@@ -28,10 +28,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from multilat.network.general.adjust import System, adjust
-from multilat.network.general.approximate import approximate
-from multilat.network.general.gama_input import CC_PER_RAD, read_gama_input
-from multilat.network.general.observations import Block, Network
+from multilat.network.adjust.general.adjust import System, adjust
+from multilat.network.adjust.approximate.general import approximate
+from multilat.network.io.interop.gama_input import CC_PER_RAD, read_gama_input
+from multilat.network.model.observations import Block, Network
 
 DATA = Path(__file__).resolve().parent / "data" / "gama3d"
 NETWORKS = ["two_trackers", "station_control", "partly_fixed", "heights", "traverse", "direction_sets",

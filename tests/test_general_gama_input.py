@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.general.adjust import adjust
-from multilat.network.general.approximate import approximate
-from multilat.network.general.gama_input import CC_PER_RAD, read_gama_input
+from multilat.network.adjust.general.adjust import adjust
+from multilat.network.adjust.approximate.general import approximate
+from multilat.network.io.interop.gama_input import CC_PER_RAD, read_gama_input
 
 DATA = Path(__file__).resolve().parent / "data" / "gama3d"
 HEAD = ('<?xml version="1.0" ?>\n<gama-local xmlns="http://www.gnu.org/software/gama/gama-local">\n'

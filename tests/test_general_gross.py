@@ -1,6 +1,6 @@
 """Never silent on the general path: data snooping refuses gross errors instead of rejecting them one
 by one, and a refusal on a network with azimuths names the sense (``--azimuth-sense cw``) when the
-azimuths negated fit (multilat.network.general.snooping, .run.sense_hint, cli/general_adjust.py).
+azimuths negated fit (multilat.network.adjust.general.snooping, .run.sense_hint, cli/general_adjust.py).
 
 The case found by a user walk: the tutorial's two levelled trackers (examples/tutorial/trackers.csv)
 with every azimuth negated (clockwise, as many trackers report), adjusted on 4 control points as
@@ -29,9 +29,9 @@ import numpy as np
 import pytest
 
 from multilat.cli import main
-from multilat.network.general import read_gama_input
-from multilat.network.general.observations import Network
-from multilat.network.general.snooping import GROSS_SIGMA, SnoopingRefused, snoop
+from multilat.network.adjust.general import read_gama_input
+from multilat.network.model.observations import Network
+from multilat.network.adjust.general.snooping import GROSS_SIGMA, SnoopingRefused, snoop
 
 ROOT = Path(__file__).resolve().parents[1]
 EX = ROOT / "examples" / "tutorial"

@@ -18,13 +18,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from multilat.network.data import Observations, Points
-from multilat.network.general import quality, snooping
-from multilat.network.general.adjust import GeneralResult
-from multilat.network.general.from_tables import network_from_tables
-from multilat.network.general.observations import Network
-from multilat.network.general.run import adjust_network
-from multilat.network.synthetic import synthetic_network
+from multilat.network.model.data import Observations, Points
+from multilat.network.adjust.general import quality, snooping
+from multilat.network.adjust.general.adjust import GeneralResult
+from multilat.network.adjust.general.from_tables import network_from_tables
+from multilat.network.model.observations import Network
+from multilat.network.adjust.general.run import adjust_network
+from multilat.network.synthetic.generator import synthetic_network
 
 
 class _Counting:
@@ -97,7 +97,7 @@ def test_point_cofactors_are_those_of_each_point(backend):
     (the dense Q searched by name; the sparse blocks by index): the same numbers, bit for bit."""
     from dataclasses import replace
 
-    from multilat.network.general.adjust import adjust
+    from multilat.network.adjust.general.adjust import adjust
 
     net, opt = _network(30)
     res = adjust(net, options=replace(opt, backend=backend))

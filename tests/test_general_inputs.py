@@ -81,8 +81,8 @@ def _unlevelled_polar_case():
 
 
 def _adjusted(obs, datum):
-    from multilat.network.general import adjust_network
-    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.adjust.general.from_tables import network_from_tables
 
     net, options = network_from_tables(obs, datum=datum)
     return adjust_network(net, options=options).result
@@ -107,7 +107,7 @@ def test_datum_321_on_a_general_network_closed_form(tmp_path):
     the 6 held coordinates have zero cofactor; the cofactors of interpoint distances, invariant
     under a change of datum, equal the free network's (1e-9 relative; both from one linearisation
     of an exact solution)."""
-    from multilat.network.files import read_observations
+    from multilat.network.io.files import read_observations
 
     case = _unlevelled_polar_case()
     obs = read_observations(case.write(tmp_path)[0])
@@ -153,7 +153,7 @@ def test_raw_readings_on_the_general_path_equal_the_distance_path(capsys):
     measured σ0 5e-12 relative), with the distance path's default-instrument warning and the
     correction noted."""
     from multilat.campaign.propagation import read_campaign
-    from multilat.network.adjust import adjust
+    from multilat.network.adjust.distance.adjust import adjust
 
     raw = dict(environment=CAMPAIGN / "environment.csv", heights=CAMPAIGN / "heights.csv")
     obs, corrected = read_campaign(CAMPAIGN / "raw.csv", instrument=None, **raw)
@@ -186,10 +186,10 @@ def test_sparse_size_refused_before_the_approximate_chain(monkeypatch):
     """Over the sparse back end's limit (lowered here to 5): refused from the design alone, the
     approximate chain never run, in the elimination's words with the bound (30 here, which the
     elimination reaches: the bound is never above the reduced system it forms)."""
-    import multilat.network.general.from_tables as ft
-    import multilat.network.general.sparse as sparse
-    from multilat.network.files import read_observations
-    from multilat.network.general import adjust_network
+    import multilat.network.adjust.general.from_tables as ft
+    import multilat.network.adjust.general.sparse as sparse
+    from multilat.network.io.files import read_observations
+    from multilat.network.adjust.general import adjust_network
 
     obs = read_observations(MIXED)
     monkeypatch.setattr(sparse, "MAX_REDUCED", 5)
@@ -197,9 +197,9 @@ def test_sparse_size_refused_before_the_approximate_chain(monkeypatch):
     def chain(*_, **__):
         raise AssertionError("approximate coordinates computed before the size check")
 
-    import multilat.network.general.run as general_run
-    from multilat.network.general import read_gama_input
-    from multilat.network.general.adjust import AdjustOptions
+    import multilat.network.adjust.general.run as general_run
+    from multilat.network.adjust.general import read_gama_input
+    from multilat.network.adjust.general.adjust import AdjustOptions
 
     monkeypatch.setattr(general_run, "approximate", chain)            # a gama-local input: adjust_network
     with pytest.raises(MultilatError, match="sparse back end takes a reduced system of at most 5 parameters"):
@@ -225,7 +225,7 @@ def test_auto_decides_polar_points_before_adjusting(capsys, monkeypatch, tmp_pat
     """Polar points the distance path would leave out: the general layer adjusts the network and the
     distance path never runs (patched to fail); the document is the one --model general gives, with
     the --model auto note first."""
-    import multilat.network.adjust as distance_path
+    import multilat.network.adjust.distance.adjust as distance_path
 
     case = gcsv.heads_tracker_polar(np.random.default_rng(11)).simulate(np.random.default_rng(12))
     args = case.write(tmp_path)
@@ -265,9 +265,9 @@ def test_parquet_observations_are_refused_alike_by_both_paths(capsys, tmp_path):
 def test_point_sigmas_outside_control_are_said_as_on_the_distance_path():
     """--points with sx_m, sy_m, sz_m under a datum other than control: approximate coordinates, said
     in the distance path's words (the σ were dropped without a word before)."""
-    from multilat.network.data import Points
-    from multilat.network.files import read_observations
-    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.model.data import Points
+    from multilat.network.io.files import read_observations
+    from multilat.network.adjust.general.from_tables import network_from_tables
 
     pts = Points(("A",), np.zeros((1, 3)), np.full((1, 3), 1e-5))
     with pytest.warns(UserWarning, match=r"make weighted control under --datum control only; here the points "

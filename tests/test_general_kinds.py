@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from multilat.network.angles import rotation_matrix
-from multilat.network.general.kinds import KINDS, kind
-from multilat.network.general.layout import Layout
-from multilat.network.general.observations import Block
-from multilat.network.general.points import PointSet
+from multilat.network.model.angles import rotation_matrix
+from multilat.network.model.kinds import KINDS, kind
+from multilat.network.model.layout import Layout
+from multilat.network.model.observations import Block
+from multilat.network.model.points import PointSet
 
 
 def _network(rng, n=6):

@@ -7,7 +7,7 @@ back end before the approximate coordinates; ``--model auto`` measures a network
 the back end that would run.
 
 Independent values: the rule is re-applied here to the full listing with the distance path's
-thresholds (:data:`multilat.network.reliability.R_MIN`, ``MDB_LIMIT_SIGMA``); the table is read back
+thresholds (:data:`multilat.network.adjust.distance.reliability.R_MIN`, ``MDB_LIMIT_SIGMA``); the table is read back
 with the csv module and compared with the ``--observations`` rows, its sha256 with hashlib's; the
 sparse back end against the dense one (two factorisations: 1e-9 m).
 """
@@ -56,7 +56,7 @@ def _blunder(tmp: Path) -> Path:
 
 
 def _matters(o) -> bool:
-    from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
+    from multilat.network.adjust.distance.reliability import MDB_LIMIT_SIGMA, R_MIN
 
     return (not o["passed"] or o["redundancy"] < R_MIN or o["mdb_sigma"] is None
             or o["mdb_sigma"] > MDB_LIMIT_SIGMA)
@@ -127,7 +127,7 @@ def test_out_writes_every_row_to_the_table(capsys, tmp_path, fmt):
 
 
 def test_tables_auto_and_refusals(capsys, tmp_path):
-    from multilat.network.files import table_format
+    from multilat.network.io.files import table_format
 
     out = tmp_path / "a"
     doc = _doc(capsys, EX / "station_control.xml", "--json", "--out", out)
@@ -160,7 +160,7 @@ def test_not_computed_is_said(capsys, monkeypatch):
     """The sparse back end above its work bound leaves external reliability out: the JSON says so
     (``not_computed``, ``external_reliability.computed`` false, its shifts null) and the summary in one
     line."""
-    general_adjust = importlib.import_module("multilat.network.general.adjust")   # the package exports adjust()
+    general_adjust = importlib.import_module("multilat.network.adjust.general.adjust")   # the package exports adjust()
     monkeypatch.setattr(general_adjust, "EXTERNAL_MAX_WORK", 0.0)
     xml = EX / "two_trackers.xml"
     doc = _doc(capsys, xml, "--json", "--backend", "sparse", "--observations")
@@ -176,11 +176,11 @@ def test_not_computed_is_said(capsys, monkeypatch):
 def test_size_checked_with_the_chosen_backend_before_approximations(monkeypatch):
     """adjust_network refuses a network above the dense limit when dense is forced before computing
     any approximate coordinates (never an hour of approximations to be refused after)."""
-    from multilat.network.general import read_gama_input
+    from multilat.network.adjust.general import read_gama_input
 
-    general_adjust = importlib.import_module("multilat.network.general.adjust")
-    general_run = importlib.import_module("multilat.network.general.run")
-    from multilat.network.general.adjust import AdjustOptions
+    general_adjust = importlib.import_module("multilat.network.adjust.general.adjust")
+    general_run = importlib.import_module("multilat.network.adjust.general.run")
+    from multilat.network.adjust.general.adjust import AdjustOptions
 
     net = read_gama_input(EX / "two_trackers.xml")
     n = general_adjust.System(net).n_free
@@ -209,8 +209,8 @@ def test_auto_measures_against_the_backend_that_runs():
     (the targets eliminated): the general path takes it; with --backend dense it does not; 1100
     stations leave a reduced system above sparse.MAX_REDUCED."""
     from multilat.cli.general_adjust import _general_takes
-    from multilat.network.general.adjust import MAX_DENSE_UNKNOWNS
-    from multilat.network.general.sparse import MAX_REDUCED
+    from multilat.network.adjust.general.adjust import MAX_DENSE_UNKNOWNS
+    from multilat.network.adjust.general.sparse import MAX_REDUCED
 
     big = _tracker_obs(4, 1000)
     assert 3 * 1004 + 4 + 12 > MAX_DENSE_UNKNOWNS
@@ -222,7 +222,7 @@ def test_auto_measures_against_the_backend_that_runs():
 
 
 def test_python_listing_refuses_an_unknown_listing():
-    from multilat.network.general.report import list_observations
+    from multilat.network.adjust.general.report import list_observations
 
     with pytest.raises(MultilatError, match="observations listing must be 'flagged' or 'all'"):
         list_observations({"observations": [], "outliers": [], "excluded": []}, "some")

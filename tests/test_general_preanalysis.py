@@ -24,18 +24,18 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network import configs
-from multilat.network.adjust import adjust as distance_adjust
+from multilat.network.synthetic import configs
+from multilat.network.adjust.distance.adjust import adjust as distance_adjust
 from multilat.network.design.config import load_design_config, run_design
 from multilat.network.design.evaluate import Design, design_from_layout, evaluate_layout
 from multilat.network.design.preanalysis import Layout, layout_observations
-from multilat.network.general import adjust_network, read_gama_input
-from multilat.network.general.adjust import UndeterminedError, adjust
-from multilat.network.general.approximate import approximate
-from multilat.network.general.observations import Block, Network, without_points
-from multilat.network.general.points import FREE, PointSet
-from multilat.network.general.preanalysis import planned, predict
-from multilat.network.general.propagate import propagate
+from multilat.network.adjust.general import adjust_network, read_gama_input
+from multilat.network.adjust.general.adjust import UndeterminedError, adjust
+from multilat.network.adjust.approximate.general import approximate
+from multilat.network.model.observations import Block, Network, without_points
+from multilat.network.model.points import FREE, PointSet
+from multilat.network.design.general_preanalysis import planned, predict
+from multilat.network.montecarlo.general.propagate import propagate
 
 ROOT = Path(__file__).resolve().parents[1]
 GAMA3D = ROOT / "tests" / "data" / "gama3d"

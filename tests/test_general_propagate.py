@@ -1,4 +1,4 @@
-"""The general Monte Carlo (``multilat.network.general.propagate``): the adjustment's system frozen at
+"""The general Monte Carlo (``multilat.network.montecarlo.general.propagate``): the adjustment's system frozen at
 its solution, against independent values.
 
 * the kinds over a trial axis equal the kinds one trial at a time (bit for bit: the same arithmetic);
@@ -13,7 +13,7 @@ its solution, against independent values.
   deviation sqrt(1/(2(N-1))); every standard deviation must agree within 4 of its standard errors
   (a 4σ bound, so that among ~100 quantities none fails by chance: P(|z|>4) = 6e-5 each), and the
   point covariances' correlations within 4/sqrt(N);
-* the distance-only Monte Carlo of today (``multilat.network.propagate``, compiled) and this one give
+* the distance-only Monte Carlo of today (``multilat.network.montecarlo.propagate``, compiled) and this one give
   the same standard deviations on a network both take (examples/network/sequential, gaussian), within
   4 combined MC standard errors; the datum differs only at second order (the old path's Kabsch fit on
   all points against the minimum-trace inner constraints over all points: the same to first order);
@@ -35,11 +35,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from multilat.network.general import adjust_network, read_gama_input
-from multilat.network.general.adjust import adjust
-from multilat.network.general.kinds import KINDS
-from multilat.network.general.observations import Network
-from multilat.network.general.propagate import SCHEMA, draw, freeze, propagate, solve
+from multilat.network.adjust.general import adjust_network, read_gama_input
+from multilat.network.adjust.general.adjust import adjust
+from multilat.network.model.kinds import KINDS
+from multilat.network.model.observations import Network
+from multilat.network.montecarlo.general.propagate import SCHEMA, draw, freeze, propagate, solve
 
 sys.path.insert(0, str(Path(__file__).parent))
 from general_tracker_network import tracker_network  # noqa: E402
@@ -67,7 +67,7 @@ def _with_observations(network: Network, obs: np.ndarray, system) -> Network:
         blocks.append(dataclasses.replace(b, value=obs[sl]))
     pts = network.points
     if len(system.blocks) > n:                   # weighted coordinates: their observed values
-        from multilat.network.general.points import WEIGHTED
+        from multilat.network.model.points import WEIGHTED
 
         xyz = pts.xyz_m.copy()
         i, c = np.nonzero(pts.status == WEIGHTED)
@@ -94,7 +94,7 @@ def test_kinds_over_trial_axis_equal_one_at_a_time(name):
 @pytest.mark.parametrize("name", ["two_trackers", "station_control", "direction_sets", "angles_hdist",
                                   "heights", "height_differences", "vectors", "trilateration_free", "tracker"])
 def test_compiled_rows_equal_the_kinds(name, tracker):
-    from multilat.network.general._frozen_numba import model_rows
+    from multilat.network.montecarlo.general._frozen_numba import model_rows
 
     adj = tracker if name == "tracker" else _gama(name)
     fr = freeze(adj.system, adj.result)
@@ -132,7 +132,7 @@ def test_each_trial_is_the_least_squares_solution(name, tracker):
     fr = freeze(adj.system, adj.result)
     obs = draw(fr, 3, np.random.default_rng(5))
     sol = solve(fr, obs)
-    from multilat.network.general.adjust import AdjustOptions
+    from multilat.network.adjust.general.adjust import AdjustOptions
 
     datum = "free" if adj.result.determinability.constraints is not None else "fixed"
     for t in range(3):
@@ -153,7 +153,7 @@ def test_each_trial_is_the_least_squares_solution(name, tracker):
 
 def _started(net: Network, result) -> Network:
     """The network with its free coordinates started at the adjusted ones (held and weighted as given)."""
-    from multilat.network.general.points import FREE
+    from multilat.network.model.points import FREE
 
     pts = net.points
     xyz = np.where(pts.status == FREE, result.xyz_m, pts.xyz_m)
@@ -298,10 +298,10 @@ def test_far_trial_goes_to_full_gauss_newton():
 
 
 def test_equals_todays_propagate_on_a_network_both_take():
-    from multilat.network.files import read_observations
-    from multilat.network.general.from_tables import network_from_tables
-    from multilat.network.propagate import problem_from_observations
-    from multilat.network.propagate import propagate as old_propagate
+    from multilat.network.io.files import read_observations
+    from multilat.network.adjust.general.from_tables import network_from_tables
+    from multilat.network.montecarlo.propagate import problem_from_observations
+    from multilat.network.montecarlo.propagate import propagate as old_propagate
 
     path = ROOT / "examples" / "network" / "sequential" / "obs.csv"
     obs = read_observations(path)
@@ -312,7 +312,7 @@ def test_equals_todays_propagate_on_a_network_both_take():
     old = old_propagate(problem_from_observations(obs, datum="free"), trials=n, rng=4, noise="gaussian")
     assert _agree_with_todays(new, old) >= 0.9 * new.n_params
     # one result record for both paths: the same class, the shared quantities under the same JSON keys
-    from multilat.network.propagate_result import PropagationResult
+    from multilat.network.montecarlo.propagate_result import PropagationResult
 
     assert type(new) is type(old) is PropagationResult
     shared = {"trials", "n_failed", "n_retried", "noise", "seed", "sigma0_mean", "sigma0_rms", "elapsed_s",
@@ -392,10 +392,10 @@ def test_noise_model_equals_todays_propagate():
     model's σ) agrees with its MC std."""
     from multilat.errors import MultilatError
     from multilat.instrument import load_instrument
-    from multilat.network.configs import small_volume
-    from multilat.network.general.adjust import AdjustOptions
-    from multilat.network.propagate import problem_from_config
-    from multilat.network.propagate import propagate as old_propagate
+    from multilat.network.synthetic.configs import small_volume
+    from multilat.network.adjust.general.adjust import AdjustOptions
+    from multilat.network.montecarlo.propagate import problem_from_config
+    from multilat.network.montecarlo.propagate import propagate as old_propagate
 
     adj = adjust_network(tracker_network(noise=False, extras=False)[0], options=AdjustOptions(datum="free"))
     n = 6000

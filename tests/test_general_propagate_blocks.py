@@ -1,5 +1,5 @@
 """The general Monte Carlo on networks the sparse back end adjusts without a dense ``Q``
-(``multilat.network.general.propagate_blocks``: every chord step's ``Q g`` through the Schur blocks).
+(``multilat.network.montecarlo.general.propagate_blocks``: every chord step's ``Q g`` through the Schur blocks).
 
 Against independent values:
 
@@ -28,17 +28,17 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.general import adjust_network, read_gama_input
-from multilat.network.general.adjust import AdjustOptions, adjust
-from multilat.network.general.propagate import draw, freeze, propagate, solve
+from multilat.network.adjust.general import adjust_network, read_gama_input
+from multilat.network.adjust.general.adjust import AdjustOptions, adjust
+from multilat.network.montecarlo.general.propagate import draw, freeze, propagate, solve
 
 sys.path.insert(0, str(Path(__file__).parent))
 from general_tracker_network import tracker_network  # noqa: E402
 from test_general_propagate import _started, _with_observations  # noqa: E402
 
 GAMA = Path(__file__).resolve().parent / "data" / "gama3d"
-gadjust = importlib.import_module("multilat.network.general.adjust")
-blocks_mod = importlib.import_module("multilat.network.general.propagate_blocks")
+gadjust = importlib.import_module("multilat.network.adjust.general.adjust")
+blocks_mod = importlib.import_module("multilat.network.montecarlo.general.propagate_blocks")
 
 
 def _pair(net, monkeypatch, datum="auto"):
@@ -81,8 +81,8 @@ def test_noise_model_linear_sandwich_equals_the_dense_one(monkeypatch):
     ra = propagate(dense.system, dense.result, **kw)
     fs = freeze(sparse.system, sparse.result)
     pairs = np.array([[0, 5], [4, 17], [2, 3]])
-    from multilat.network.general.propagate import _noise_cofactor, distance_noise
-    from multilat.network.general.propagate_result import _linear
+    from multilat.network.montecarlo.general.propagate import _noise_cofactor, distance_noise
+    from multilat.network.montecarlo.general.propagate_result import _linear
 
     fd = freeze(dense.system, dense.result)
     lin_d, pts_d = _linear(fd, pairs, _noise_cofactor(fd, distance_noise(fd, "seed2020")))
@@ -130,9 +130,9 @@ def test_far_trial_by_the_sparse_gauss_newton(monkeypatch):
 
 @pytest.fixture(scope="module")
 def large():
-    from multilat.network.data import Observations, Points
-    from multilat.network.general.from_tables import network_from_tables
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.model.data import Observations, Points
+    from multilat.network.adjust.general.from_tables import network_from_tables
+    from multilat.network.synthetic.generator import synthetic_network
 
     s, t = 8, 1000
     syn = synthetic_network(3, population="rings", n_stations=s, n_targets=t, per_target=7)

@@ -36,7 +36,7 @@ from test_report_sections import _DOM, printed, section, table
 
 ROOT = Path(__file__).resolve().parents[1]
 ORDER = ["verdicts", "frame", "points", "parameters", "reliability", "residuals", "tests", "warnings", "run"]
-R_MIN, MDB_LIMIT = 0.1, 10.0          # the distance path's defaults (network/reliability.py), written out
+R_MIN, MDB_LIMIT = 0.1, 10.0          # the distance path's defaults (network/adjust/distance/reliability.py), written out
 
 
 def _blunder(tmp: Path) -> Path:

@@ -14,14 +14,14 @@ NET = ROOT / "examples" / "general" / "two_trackers.xml"       # 90 rows: tracke
 
 
 def _adjusted():
-    from multilat.network.general import adjust_network, read_gama_input, statistics
+    from multilat.network.adjust.general import adjust_network, read_gama_input, statistics
 
     adj = adjust_network(read_gama_input(NET))
     return adj, statistics(adj.system, adj.result)
 
 
 def test_no_row_dict_for_the_rows_the_json_does_not_list(monkeypatch):
-    from multilat.network.general import report
+    from multilat.network.adjust.general import report
 
     adj, stats = _adjusted()
     calls = []
@@ -36,7 +36,7 @@ def test_no_row_dict_for_the_rows_the_json_does_not_list(monkeypatch):
 
 
 def test_table_from_the_arrays_equals_the_row_dicts():
-    from multilat.network.general import report
+    from multilat.network.adjust.general import report
 
     adj, stats = _adjusted()
     doc = report.to_json(adj, stats, source="x")

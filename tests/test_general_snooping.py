@@ -1,5 +1,5 @@
 """Data snooping, external reliability and variance components on the general network
-(multilat.network.general.snooping, .reliability, .variance), each against an independent value:
+(multilat.network.adjust.general.snooping, .reliability, .variance), each against an independent value:
 
 - a 20σ blunder planted in a direction, a slope distance, a zenith angle and a height difference of the
   gama3d reference networks (tests/data/gama3d) is found and rejected, and the re-adjusted solution
@@ -29,14 +29,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from multilat.network import statistics as st
-from multilat.network.general import adjust_network, read_gama_input
-from multilat.network.general.adjust import System, adjust
-from multilat.network.general.observations import Block, Network
-from multilat.network.general.quality import statistics
-from multilat.network.general.reliability import point_columns, whitened_jacobian
-from multilat.network.general.snooping import snoop
-from multilat.network.general.variance import estimate
+from multilat.network.model import statistics as st
+from multilat.network.adjust.general import adjust_network, read_gama_input
+from multilat.network.adjust.general.adjust import System, adjust
+from multilat.network.model.observations import Block, Network
+from multilat.network.adjust.general.quality import statistics
+from multilat.network.adjust.general.reliability import point_columns, whitened_jacobian
+from multilat.network.adjust.general.snooping import snoop
+from multilat.network.adjust.general.variance import estimate
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "tests" / "data" / "gama3d"
@@ -137,7 +137,7 @@ def test_a_vector_is_rejected_as_a_block():
 def test_perfectly_correlated_rows_are_not_rejected():
     """Two distances that are all a point's one free coordinate (z) has: redundancy 1, their w-tests
     perfectly correlated; snooping names both and rejects neither (as the distance path)."""
-    from multilat.network.general.points import FIXED, FREE, PointSet
+    from multilat.network.model.points import FIXED, FREE, PointSet
 
     pts = PointSet.build(["A", "B", "P"], [[0, 0, 0], [100, 0, 0], [50, 50, 30.0]],
                          status=[[FIXED] * 3, [FIXED] * 3, [FIXED, FIXED, FREE]])
@@ -152,7 +152,7 @@ def test_perfectly_correlated_rows_are_not_rejected():
 def _vector_to_new_point(strict=False):
     """vectors.xml plus a point X placed by one correlated vector from G1 (its x, y have no check) and
     two height differences (its z has redundancy 2); the vector's dz carries a 20σ blunder."""
-    from multilat.network.general.points import FREE, PointSet
+    from multilat.network.model.points import FREE, PointSet
 
     net = read_gama_input(DATA / "vectors.xml")
     res = adjust_network(net).result
@@ -293,7 +293,7 @@ def _stations_and_targets(rng) -> tuple[Network, np.ndarray]:
     """4 fixed stations, 25 free targets; a slope distance (σ 1 mm) and a zenith angle (σ 0.3 mgon)
     from every station to every target: 200 rows, 75 unknowns, dof 125 (about 60 per kind). Returns
     the network with its values at the truth and the truth's parameter vector."""
-    from multilat.network.general.points import FIXED, FREE, PointSet
+    from multilat.network.model.points import FIXED, FREE, PointSet
 
     st_xyz = np.array([[0, 0, 1.5], [60, 0, 1.0], [60, 50, 2.0], [0, 50, 1.2]])
     tg = rng.uniform([5, 5, 0], [55, 45, 12], size=(25, 3))
@@ -350,8 +350,8 @@ def test_variance_components_by_head_on_a_csv_network():
 # ------------------------------------------------------------------------------ against the distance path
 def test_same_rejections_as_the_distance_path(tmp_path):
     from multilat.cli.general_adjust import compute_tables
-    from multilat.network.adjust import adjust as adjust_old
-    from multilat.network.files import read_observations
+    from multilat.network.adjust.distance.adjust import adjust as adjust_old
+    from multilat.network.io.files import read_observations
 
     rows = list(csv.reader((ROOT / "examples" / "network" / "mixed" / "obs.csv").read_text().splitlines()))
     rows[10][2] = f"{float(rows[10][2]) + 20 * float(rows[10][3]):.9f}"            # H1->P10 distance

@@ -1,4 +1,4 @@
-"""The sparse back end of the general network (multilat.network.general.sparse) against the dense one
+"""The sparse back end of the general network (multilat.network.adjust.general.sparse) against the dense one
 (an independent solution: SVD of the dense whitened Jacobian and the inverse of the bordered normal
 matrix), and against the distance-only path on a large distance-only network.
 
@@ -13,7 +13,7 @@ tests/test_general_trackers.py (two levelled trackers, one tracker on control wi
 the small-volume tracker network of tests/general_tracker_network.py (trackers, distance-only heads,
 scale bars, weighted control), free networks (inner constraints over all points), the random mixed
 networks of tests/test_general_approximate.py (its Design generator), and 8 stations x 2 000 targets
-of :func:`multilat.network.synthetic.synthetic_network` ("rings") against :func:`multilat.network.adjust.adjust`.
+of :func:`multilat.network.synthetic.generator.synthetic_network` ("rings") against :func:`multilat.network.adjust.distance.adjust.adjust`.
 """
 
 from __future__ import annotations
@@ -26,11 +26,11 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.general.adjust import AdjustOptions, System, UndeterminedError, adjust, backend_for
-from multilat.network.general.approximate import approximate
-from multilat.network.general.gama_input import read_gama_input
-from multilat.network.general.observations import Block, Network
-from multilat.network.general.points import FIXED, FREE, PointSet
+from multilat.network.adjust.general.adjust import AdjustOptions, System, UndeterminedError, adjust, backend_for
+from multilat.network.adjust.approximate.general import approximate
+from multilat.network.io.interop.gama_input import read_gama_input
+from multilat.network.model.observations import Block, Network
+from multilat.network.model.points import FIXED, FREE, PointSet
 
 sys.path.insert(0, str(Path(__file__).parent))
 from general_tracker_network import tracker_network  # noqa: E402
@@ -40,7 +40,7 @@ from test_general_trackers import SIG_D, _blocks, _simulate  # noqa: E402
 GAMA = Path(__file__).resolve().parent / "data" / "gama3d"
 NETWORKS = ["two_trackers", "station_control", "partly_fixed", "heights", "traverse", "direction_sets",
             "angles_hdist", "height_differences", "vectors", "trilateration_fixed", "trilateration_free"]
-gadjust = importlib.import_module("multilat.network.general.adjust")
+gadjust = importlib.import_module("multilat.network.adjust.general.adjust")
 
 
 def _both(net: Network, datum: str = "auto"):
@@ -172,11 +172,11 @@ def test_distance_only_8_stations_2000_targets_equals_the_distance_path():
     the distance-only path (Schur on targets, its own code) in σ0 and in coordinates, both in the
     free datum (inner constraints over every point, from the same approximate coordinates), and the
     heads' additive constants."""
-    from multilat.network.adjust import Start
-    from multilat.network.adjust import adjust as distance_adjust
-    from multilat.network.data import Observations, Points
-    from multilat.network.general.from_tables import network_from_tables
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.adjust.distance.adjust import Start
+    from multilat.network.adjust.distance.adjust import adjust as distance_adjust
+    from multilat.network.model.data import Observations, Points
+    from multilat.network.adjust.general.from_tables import network_from_tables
+    from multilat.network.synthetic.generator import synthetic_network
 
     s, t = 8, 2000
     syn = synthetic_network(3, population="rings", n_stations=s, n_targets=t, per_target=7)
@@ -201,7 +201,7 @@ def test_distance_only_8_stations_2000_targets_equals_the_distance_path():
 
 
 def _shifts(net, backend, datum="auto"):
-    from multilat.network.general import quality
+    from multilat.network.adjust.general import quality
 
     res = adjust(net, options=AdjustOptions(backend=backend, datum=datum))
     st = quality.statistics(System(net), res)
@@ -227,7 +227,7 @@ def _same_shifts(net, datum="auto"):
 def _winners(res, where) -> np.ndarray:
     """Per row: 0 the row's own eliminated point gave the largest shift, 1 a point of the reduced
     system K, 2 another eliminated point (the bounded search), -1 none (uncontrolled)."""
-    from multilat.network.general import sparse
+    from multilat.network.adjust.general import sparse
 
     parts = sparse.row_parts(res.blocks.lin)
     pts = res.blocks.lin.red.points
@@ -268,11 +268,11 @@ def test_external_reliability_large_distance_network_by_pruned_search(monkeypatc
     and the same point; the bounded search evaluates the other points' shifts for almost no row (the
     bound is below the row's own target's shift: O(R k) work, the growth measured in the commit), and
     forced to evaluate every point (MARGIN inf) it gives the same answer."""
-    from multilat.network.data import Observations, Points
-    from multilat.network.general import reliability as rel
-    from multilat.network.general.from_tables import network_from_tables
-    from multilat.network.reliability import largest_point_shift
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.model.data import Observations, Points
+    from multilat.network.adjust.general import reliability as rel
+    from multilat.network.adjust.general.from_tables import network_from_tables
+    from multilat.network.adjust.distance.reliability import largest_point_shift
+    from multilat.network.synthetic.generator import synthetic_network
 
     s, t = 8, 1000
     syn = synthetic_network(3, population="rings", n_stations=s, n_targets=t, per_target=7)
@@ -314,7 +314,7 @@ def test_statistics_served_without_a_dense_cofactor(monkeypatch):
     from the blocks, equal to the dense back end's; the external reliability is computed through
     the Schur blocks, or marked not computed (NaN) when the back end leaves it out (EXTERNAL_MAX_WORK,
     no limit since issue 29: forced here), never silently wrong."""
-    from multilat.network.general import quality
+    from multilat.network.adjust.general import quality
 
     net = tracker_network(5)[0]
     a = adjust(net, options=AdjustOptions(backend="dense"))
@@ -341,7 +341,7 @@ def test_dispatch_and_one_line_refusals(monkeypatch):
     monkeypatch.setattr(gadjust, "MAX_DENSE_UNKNOWNS", n - 1)
     with pytest.raises(MultilatError, match=rf"dense back end takes at most {n - 1} unknowns; this network has {n} "):
         adjust(net, options=AdjustOptions(backend="dense"))
-    monkeypatch.setattr("multilat.network.general.sparse.MAX_REDUCED", 3)
+    monkeypatch.setattr("multilat.network.adjust.general.sparse.MAX_REDUCED", 3)
     with pytest.raises(MultilatError, match=r"reduced system of at most 3 parameters; this network leaves \d+ "):
         adjust(net, options=AdjustOptions(backend="sparse"))
     with pytest.raises(MultilatError, match="backend='x' must be"):

@@ -22,9 +22,9 @@ import pytest
 from scipy.optimize import least_squares
 
 from multilat.errors import MultilatError
-from multilat.network.general.adjust import AdjustOptions, adjust
-from multilat.network.general.observations import Block, Network
-from multilat.network.general.points import FIXED, FREE, WEIGHTED, PointSet
+from multilat.network.adjust.general.adjust import AdjustOptions, adjust
+from multilat.network.model.observations import Block, Network
+from multilat.network.model.points import FIXED, FREE, WEIGHTED, PointSet
 
 SIG_D, SIG_A = 20e-6, 5e-6          # metres, radians
 

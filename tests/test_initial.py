@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.configs import large_volume, small_volume
-from multilat.network.data import Observations
-from multilat.network.initial import initial_values, multilaterate, rigid_fit
-from multilat.network.synthetic import synthetic_network
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.synthetic.configs import large_volume, small_volume
+from multilat.network.model.data import Observations
+from multilat.network.adjust.approximate.initial import initial_values, multilaterate, rigid_fit
+from multilat.network.synthetic.generator import synthetic_network
 
 
 def _obs_of(cfg, rng, sigma=4.7e-6, **angles):
@@ -75,7 +75,7 @@ def test_rigid_fit_rotation_and_reflection():
 def test_closed_form_block_is_exact_without_offsets():
     """The bipartite factorisation + linear solve for G recovers an offset-free, noise-free block
     exactly (up to a rigid motion and a mirror): the derivation checked against a known truth."""
-    from multilat.network.initial import _algebraic_block
+    from multilat.network.adjust.approximate.initial import _algebraic_block
 
     rng = np.random.default_rng(12)
     H = rng.uniform(-1, 1, (5, 3))
@@ -86,7 +86,7 @@ def test_closed_form_block_is_exact_without_offsets():
 
 
 def test_affine_fit_jacobian_against_finite_differences():
-    from multilat.network import initial as ini
+    from multilat.network.adjust.approximate import initial as ini
 
     rng = np.random.default_rng(0)
     H = rng.normal(size=(5, 3))
@@ -117,8 +117,8 @@ def test_affine_fit_jacobian_against_finite_differences():
 def test_refinement_jacobian_against_finite_differences(n_targets):
     import scipy.sparse
 
-    from multilat.network import initial as ini
-    from multilat.network import initial_refine as ir
+    from multilat.network.adjust.approximate import initial as ini
+    from multilat.network.adjust.approximate import initial_refine as ir
 
     net = synthetic_network(np.random.default_rng(3), population="well-conditioned", n_stations=(5, 5),
                             n_targets=(n_targets, n_targets), gap_fraction=0.0)
@@ -262,7 +262,7 @@ def test_convergence_rate_on_60_random_networks():
 @pytest.mark.slow
 def test_convergence_rate_on_200_random_networks():
     """>= 99 % of 200 random well-conditioned networks (4-6 stations x 10-20 targets, gaps, offsets
-    ±5 mm, 5 um noise; definition in multilat.network.synthetic, population "well-conditioned") converge from
+    ±5 mm, 5 um noise; definition in multilat.network.synthetic.generator, population "well-conditioned") converge from
     distances alone to the minimum the adjustment reaches from the truth (1e-8 m)."""
     failures = _convergence_failures(200)
     assert len(failures) <= 2, failures

@@ -20,14 +20,14 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.data import Points
-from multilat.network.files import read_observations, read_points
-from multilat.network.interop.gama_adjusted import read_gama_adjustment
-from multilat.network.interop.gama import (gama_local_text, read_gama_local,
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Points
+from multilat.network.io.files import read_observations, read_points
+from multilat.network.io.interop.gama_adjusted import read_gama_adjustment
+from multilat.network.io.interop.gama import (gama_local_text, read_gama_local,
                                            write_gama_local)
-from multilat.network.interop.jag3d import read_jag3d, write_jag3d
-from multilat.network.interop.starnet import read_starnet, starnet_text, write_starnet
+from multilat.network.io.interop.jag3d import read_jag3d, write_jag3d
+from multilat.network.io.interop.starnet import read_starnet, starnet_text, write_starnet
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 OBS = EX / "small_volume_obs.csv"

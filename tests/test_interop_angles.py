@@ -31,12 +31,12 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.angles import predicted_angles
-from multilat.network.data import Observations, Points
-from multilat.network.synthetic import synthetic_network
-from multilat.network.interop.gama import gama_local_text, write_gama_local
-from multilat.network.interop.gama_adjusted import read_gama_adjustment
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.angles import predicted_angles
+from multilat.network.model.data import Observations, Points
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.io.interop.gama import gama_local_text, write_gama_local
+from multilat.network.io.interop.gama_adjusted import read_gama_adjustment
 
 STORED = Path(__file__).resolve().parent / "data" / "interop" / "levelled_mixed_gama_out.xml"
 SIG_ANGLE = 20e-6
@@ -141,7 +141,7 @@ def test_export_refuses_angles_of_a_station_that_is_not_levelled(mixed):
 
 # ------------------------------------------------------------------------------ through the CLI
 def _csv(obs, tmp_path):
-    from multilat.network.files import write_observations
+    from multilat.network.io.files import write_observations
 
     p = tmp_path / "mixed.csv"
     write_observations(p, obs)
@@ -163,7 +163,7 @@ def test_cli_round_trip_export_import_adjust_keeps_the_angles(mixed, tmp_path, c
     assert main(["import", "gama", str(tmp_path / "net.xml"), "-o", str(tmp_path / "imp"), "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["levelled"] == ["S1", "S2"] and doc["n_angles"] > 0
-    from multilat.network.files import read_observations
+    from multilat.network.io.files import read_observations
 
     back = read_observations(tmp_path / "imp" / "distances.csv")
     k = np.isfinite(obs.sigma_azimuth_rad)
@@ -194,7 +194,7 @@ def test_left_handed_directions_read_as_the_same_azimuths(mixed, tmp_path):
     gama-local adjusts to the same σ0 — gives the same azimuths up to each station's constant."""
     import re
 
-    from multilat.network.interop.gama import read_gama_local
+    from multilat.network.io.interop.gama import read_gama_local
 
     obs, pts, _, zero = mixed
     text = gama_local_text(obs, pts, offsets=zero)
@@ -230,7 +230,7 @@ def test_left_handed_directions_read_as_the_same_azimuths(mixed, tmp_path):
     (lambda t: re.sub(r'(<direction [^>]*val=")[0-9.]+', r'\g<1>221-29-47.x', t, count=1), r"is not d-m-s"),
 ])
 def test_bad_gama_angles_are_one_line_errors(mixed, tmp_path, edit, message):
-    from multilat.network.interop.gama import read_gama_local
+    from multilat.network.io.interop.gama import read_gama_local
 
     obs, pts, _, zero = mixed
     text = edit(gama_local_text(obs, pts, offsets=zero))
@@ -241,7 +241,7 @@ def test_bad_gama_angles_are_one_line_errors(mixed, tmp_path, edit, message):
 
 
 def test_dms_directions_take_their_sigma_in_arc_seconds(mixed, tmp_path):
-    from multilat.network.interop.gama import read_gama_local
+    from multilat.network.io.interop.gama import read_gama_local
 
     obs, pts, _, zero = mixed
     text = gama_local_text(obs, pts, offsets=zero)

@@ -28,12 +28,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from multilat.network.adjust import adjust
-from multilat.network.angles import predicted_angles
-from multilat.network.data import Observations, Points
-from multilat.network.synthetic import synthetic_network
-from multilat.network.interop.gama import _AXES, gama_local_text
-from multilat.network.interop.gama_adjusted import read_gama_adjustment
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.angles import predicted_angles
+from multilat.network.model.data import Observations, Points
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.io.interop.gama import _AXES, gama_local_text
+from multilat.network.io.interop.gama_adjusted import read_gama_adjustment
 
 DATA = Path(__file__).resolve().parent / "data" / "interop"
 #: (axes-xy, angles or None for Gama's default left-handed): consistent and inconsistent pairs

@@ -24,10 +24,10 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.files import read_observations, read_points
-from multilat.network.interop.gama import ATTRIBUTES, NAMESPACE, _UNSUPPORTED, gama_local_text, read_gama_local
-from multilat.network.interop.gama_adjusted import read_gama_adjustment
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.io.files import read_observations, read_points
+from multilat.network.io.interop.gama import ATTRIBUTES, NAMESPACE, _UNSUPPORTED, gama_local_text, read_gama_local
+from multilat.network.io.interop.gama_adjusted import read_gama_adjustment
 
 DATA = Path(__file__).resolve().parent / "data" / "interop"
 XSD = json.loads((DATA / "gama-local-xsd-2.24.json").read_text())["elements"]
@@ -98,7 +98,7 @@ def test_the_checker_sees_the_removed_parameter():
 
 
 def _tiny():
-    from multilat.network.data import Observations, Points
+    from multilat.network.model.data import Observations, Points
 
     obs = Observations.from_labels(["S1", "S1"], ["T1", "T2"], np.array([1.0, 1.2]), np.array([5e-6, 5e-6]))
     pts = Points(("S1", "T1", "T2"), np.array([[0.0, 0, 0], [1, 0, 0], [0, 1.2, 0]]))

@@ -31,12 +31,12 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.data import Points
-from multilat.network.files import read_observations, read_points
-from multilat.network.interop.gama import gama_local_text, read_gama_local
-from multilat.network.interop.jag3d import head_file, read_jag3d, write_jag3d
-from multilat.network.interop.starnet import read_starnet, starnet_text
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Points
+from multilat.network.io.files import read_observations, read_points
+from multilat.network.io.interop.gama import gama_local_text, read_gama_local
+from multilat.network.io.interop.jag3d import head_file, read_jag3d, write_jag3d
+from multilat.network.io.interop.starnet import read_starnet, starnet_text
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 SEQ = EX / "sequential" / "obs.csv"
@@ -194,7 +194,7 @@ def test_heads_to_estimate_refused_naming_heads_and_format(capsys, tmp_path, fmt
 
 def test_two_offsets_for_one_head_refused(capsys, tmp_path, seq):
     obs, res = seq
-    from multilat.network.files import write_result_tables
+    from multilat.network.io.files import write_result_tables
 
     write_result_tables(res, tmp_path / "adj")
     st = tmp_path / "adj" / "stations.csv"
@@ -266,7 +266,7 @@ def test_import_refuses_an_inconsistent_file(seq, tmp_path):
 
 def test_cli_round_trip_jag3d_and_starnet_keep_heads(capsys, tmp_path, seq):
     obs, res = seq
-    from multilat.network.files import write_result_tables
+    from multilat.network.io.files import write_result_tables
 
     write_result_tables(res, tmp_path / "adj")
     rc, o, e = _run(capsys, ["export", "jag3d", SEQ, "--result", tmp_path / "adj", "-o", tmp_path / "s.txt",

@@ -10,14 +10,14 @@ import pytest
 from scipy import stats
 
 from multilat.io import to_jsonable
-from multilat.network import _sparse_kernels as K
-from multilat.network.adjust import adjust
-from multilat.network.data import Observations
-from multilat.network.initial import rigid_fit
-from multilat.network.large import multilaterate_targets
-from multilat.network.synthetic import synthetic_network
-from multilat.network.model import Q
-from multilat.network.result import result_to_json
+from multilat.network.model import _sparse_kernels as K
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Observations
+from multilat.network.adjust.approximate.initial import rigid_fit
+from multilat.network.adjust.approximate.large import multilaterate_targets
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.model.distance import Q
+from multilat.network.adjust.distance.result import result_to_json
 
 
 def adjust_large(obs, rng=0, solver="sparse"):
@@ -98,7 +98,7 @@ def test_large_initial_values_reach_the_dense_solution_on_a_small_network():
     large_initial_values' seed network + multilateration): coordinates after a rigid alignment
     < 1e-9 m, offsets < 1e-9 m, sigma0 1e-9 relative, covariances (rotated) 1e-6 relative; and the
     same JSON keys."""
-    from multilat.network.large import large_initial_values
+    from multilat.network.adjust.approximate.large import large_initial_values
 
     net = synthetic_network(7, population="rings", n_stations=8, n_targets=60, per_target=6)
     obs = as_obs(net)
@@ -124,7 +124,7 @@ def test_row_order_does_not_matter(tmp_path):
     """The network read from a file with its rows shuffled (ids renumbered in order of first
     appearance): the same least-squares solution as the sparse solve started from the truth, after a
     rigid alignment, to 1e-9 m (and the same offsets and sigma0)."""
-    from multilat.network.files import read_observations
+    from multilat.network.io.files import read_observations
 
     net = synthetic_network(3, population="rings", n_stations=8, n_targets=80, per_target=6)
     obs = as_obs(net)

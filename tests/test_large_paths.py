@@ -8,7 +8,8 @@ import statistics
 import numpy as np
 import pytest
 
-from multilat.network import ambiguity, fastio, result_rows, screening
+from multilat.network.adjust.distance import ambiguity
+from multilat.network.io import fastio, result_rows, screening
 
 
 def test_pair_codes_are_the_sorted_distinct_pairs():

@@ -31,19 +31,17 @@ LAYERS = [
     [("cli", ["multilat.cli", "multilat.warmup", "multilat.__main__"])],
 ]
 
-#: Inside ``multilat.network``, lowest first: the model (data, model, datum, solve, fit, statistics,
-#: readers, ...: every module not named below), the adjustments built on it, and the Monte Carlo and
-#: design built on the adjustment.
+#: Inside ``multilat.network``, lowest first (written by tools/retree.py; docs/architecture.md):
+#: the model, the readers and generated networks, the adjustments (the general layer above
+#: the distance path's cores it calls), the Monte Carlo on the adjustment's system, the design.
+#: A module of ``network/`` in no package listed here (a new flat module) counts as the model.
 NETWORK_TIERS = [
-    ("network model", ["multilat.network"]),
-    ("network adjust", ["multilat.network.adjust", "multilat.network.costs", "multilat.network.simulate",
-                        "multilat.network.variance_components", "multilat.network.general",
-                        "multilat.network.azimuth_sense"]),
-    ("network propagate/design", ["multilat.network.propagate", "multilat.network.propagate_result",
-                                  "multilat.network.propagate_summary", "multilat.network.design",
-                                  "multilat.network.general.propagate", "multilat.network.general.propagate_result",
-                                  "multilat.network.general._frozen_numba",
-                                  "multilat.network.general.propagate_blocks"]),
+    ("network model", ["multilat.network", "multilat.network.model"]),
+    ("network io", ["multilat.network.io", "multilat.network.synthetic"]),
+    ("network adjust", ["multilat.network.adjust"]),
+    ("network adjust general", ["multilat.network.adjust.general"]),
+    ("network montecarlo", ["multilat.network.montecarlo"]),
+    ("network design", ["multilat.network.design"]),
 ]
 
 
@@ -74,7 +72,7 @@ def module_name(path: Path) -> str:
 
 def _resolve(name: str) -> str:
     """The module a dotted name refers to: the longest prefix that is a module or package of the tree
-    (``multilat.network.batched.flatten`` -> ``multilat.network.batched``)."""
+    (``multilat.network.montecarlo.batched.flatten`` -> ``multilat.network.montecarlo.batched``)."""
     parts = name.split(".")
     for n in range(len(parts), 0, -1):
         base = SRC.joinpath(*parts[:n])
@@ -134,10 +132,12 @@ def test_every_module_is_in_a_layer():
 
 @pytest.mark.parametrize("importer,imported,layer", [
     ("multilat/lbb/files.py", "multilat.report.html", "lbb may not import report"),
-    ("multilat/montecarlo/engine.py", "multilat.network.batched", "probability may not import network"),
+    ("multilat/montecarlo/engine.py", "multilat.network.montecarlo.batched", "probability may not import network"),
     ("multilat/campaign/raw.py", "multilat.lbb", "campaign may not import lbb"),
-    ("multilat/network/datum.py", "multilat.network.adjust", "network model may not import network adjust"),
-    ("multilat/network/fit.py", "multilat.network.design.fast", "network model may not import network propagate"),
+    ("multilat/network/model/datum.py", "multilat.network.adjust.distance.adjust", "network model may not import network adjust"),
+    ("multilat/network/adjust/distance/fit.py", "multilat.network.design.fast", "network adjust may not import network design"),
+    ("multilat/network/io/files.py", "multilat.network.adjust.distance.result", "network io may not import network adjust"),
+    ("multilat/network/adjust/distance/snooping.py", "multilat.network.adjust.general.quality", "network adjust may not import network adjust general"),
 ])
 def test_a_new_upward_import_is_named(tmp_path, monkeypatch, importer, imported, layer):
     """Mutation: one upward import added to a copy of the tree is reported as ``importer -> imported``."""

@@ -1,13 +1,13 @@
-"""The minimum search (issue 10, item 4): random networks from multilat.network.synthetic adjusted
+"""The minimum search (issue 10, item 4): random networks from multilat.network.synthetic.generator adjusted
 from distances alone reach the minimum of the solver started from the truth, or are warned."""
 
 import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.synthetic import STATION_LAYOUTS, TARGET_LAYOUTS, synthetic_network
-from multilat.network.search import find_minimum, needs_search
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.synthetic.generator import STATION_LAYOUTS, TARGET_LAYOUTS, synthetic_network
+from multilat.network.adjust.approximate.search import find_minimum, needs_search
 
 
 def _net(k):

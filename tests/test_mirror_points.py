@@ -3,8 +3,8 @@ image silently).
 
 Initial values from distances alone are a network or its mirror image (distances cannot tell);
 ``--points`` covering only some points must move them onto the points' frame with the hand that
-fits (:func:`multilat.network.starts.onto_points`). Independent values: the simulated truth
-(examples/tutorial/truth.csv, networks of :func:`multilat.network.synthetic.synthetic_network`), and
+fits (:func:`multilat.network.adjust.approximate.starts.onto_points`). Independent values: the simulated truth
+(examples/tutorial/truth.csv, networks of :func:`multilat.network.synthetic.generator.synthetic_network`), and
 the hand of a solution judged by fitting it to the truth with a proper rotation and with a
 reflection (the smaller RMS misfit wins; the two differ by metres where the network is mirrored, by
 micrometres where it is not).
@@ -19,12 +19,12 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.data import Points
-from multilat.network.datum import apply_rigid, rigid_fit
-from multilat.network.files import read_observations, read_points
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Points
+from multilat.network.model.datum import apply_rigid, rigid_fit
+from multilat.network.io.files import read_observations, read_points
 
-from multilat.network.synthetic import synthetic_network
+from multilat.network.synthetic.generator import synthetic_network
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "tutorial"
 CONTROL = ("P01", "P02", "P05", "P09")   # two on the floor, two raised: not coplanar

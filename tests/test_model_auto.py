@@ -69,9 +69,9 @@ def test_dense_general_back_end_refuses_a_network_larger_than_it_takes(monkeypat
     """The bound is checked before approximate coordinates or any SVD: one line naming the sizes."""
     import importlib
 
-    gadjust = importlib.import_module("multilat.network.general.adjust")   # the module, not the function
-    from multilat.network.general import read_gama_input
-    from multilat.network.general.run import adjust_network
+    gadjust = importlib.import_module("multilat.network.adjust.general.adjust")   # the module, not the function
+    from multilat.network.adjust.general import read_gama_input
+    from multilat.network.adjust.general.run import adjust_network
 
     net = read_gama_input("tests/data/gama3d/two_trackers.xml")
     n_free = gadjust.System(net).n_free
@@ -87,7 +87,7 @@ def test_null_space_economy_svd_equals_the_full_one(n_rows):
     """The economy SVD (no (R, R) U) gives the same null space as the full one: a free distance
     network's null space (defect 6 with all 28 pairs; 24 - 10 = 14 with 10 rows, fewer rows than
     unknowns) and the projector onto it."""
-    from multilat.network.general.determinability import null_space
+    from multilat.network.model.determinability import null_space
 
     rng = np.random.default_rng(3)
     pts = rng.uniform(-5, 5, (8, 3))

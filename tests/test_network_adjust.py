@@ -8,10 +8,10 @@ import pytest
 from scipy import stats
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import Start, adjust
-from multilat.network.datum import rigid_fit
-from multilat.network.model import Q, dense_jacobian, residuals_and_jacobian
-from multilat.network.synthetic import synthetic_network
+from multilat.network.adjust.distance.adjust import Start, adjust
+from multilat.network.model.datum import rigid_fit
+from multilat.network.model.distance import Q, dense_jacobian, residuals_and_jacobian
+from multilat.network.synthetic.generator import synthetic_network
 
 from network_truth import noise_free, perturbed_start
 
@@ -208,7 +208,7 @@ def test_control_blunder_is_snooped_and_bad_control_is_named():
     """Under a control datum (true coordinates of 6 targets) a 20-sigma distance blunder is still
     found by snooping (the control test separates the two: Omega_c - Omega_f ~ chi2); a control
     point moved by 2 mm is refused as inconsistent, naming it."""
-    from multilat.network.data import Points
+    from multilat.network.model.data import Points
 
     tr = _net(51, 6, 25)
     ctrl = [f"T{j + 1}" for j in range(6)]
@@ -230,7 +230,7 @@ def test_control_point_keeps_its_last_observation():
     """A control target seen by a single station with a fault on that distance: snooping flags it
     but does not remove the control point's only observation (it used to, then failed with
     'data snooping removed every observation of ...')."""
-    from multilat.network.data import Points
+    from multilat.network.model.data import Points
 
     tr = _net(61, 6, 25)
     keep = (tr.obs.target_index != 0) | (tr.obs.station_index == 2)

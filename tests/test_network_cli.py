@@ -9,7 +9,7 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.files import read_observations, read_points, read_reference_lengths, table_format
+from multilat.network.io.files import read_observations, read_points, read_reference_lengths, table_format
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 OBS = EX / "small_volume_obs.csv"
@@ -187,7 +187,7 @@ def test_angles_read_and_figures_take_axes(tmp_path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from multilat.network.adjust import adjust
+    from multilat.network.adjust.distance.adjust import adjust
     from multilat.report.network_figures import plot_3d, plot_residuals, plot_top_view
 
     p = tmp_path / "o.csv"
@@ -228,7 +228,7 @@ def test_control_datum_from_the_command_line(capsys):
 
 
 def test_from_distances_alone_same_invariants_as_from_points():
-    from multilat.network.adjust import adjust
+    from multilat.network.adjust.distance.adjust import adjust
 
     obs = read_observations(OBS)
     a = adjust(obs, rng=1)                              # initial values from the distances alone

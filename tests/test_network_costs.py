@@ -4,8 +4,8 @@ worse; the first-order (sandwich) uncertainty of eq. (6) is checked by Monte Car
 import numpy as np
 from scipy import stats
 
-from multilat.network import configs
-from multilat.network.costs import compare_costs_linear, compare_costs_mc
+from multilat.network.synthetic import configs
+from multilat.network.adjust.distance.costs import compare_costs_linear, compare_costs_mc
 
 
 def _refs(cfg):

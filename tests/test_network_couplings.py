@@ -17,10 +17,10 @@ from scipy.optimize import least_squares
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.data import Points, ReferenceLengths
-from multilat.network.files import read_points, read_reference_lengths
-from multilat.network.synthetic import synthetic_network
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Points, ReferenceLengths
+from multilat.network.io.files import read_points, read_reference_lengths
+from multilat.network.synthetic.generator import synthetic_network
 
 
 def _independent(obs, start, *, bars=(), control=(), hard=(), scale_heads=(), fix_321=True):

@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.data import Points
-from multilat.network.datum import Datum, frame_321, helmert_basis, parse_datum
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Points
+from multilat.network.model.datum import Datum, frame_321, helmert_basis, parse_datum
 
-from multilat.network.synthetic import synthetic_network
+from multilat.network.synthetic.generator import synthetic_network
 
 from network_truth import perturbed_start
 

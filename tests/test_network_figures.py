@@ -5,8 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from multilat.network.adjust import adjust
-from multilat.network.files import read_observations, read_points
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.io.files import read_observations, read_points
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 
@@ -50,9 +50,9 @@ def test_large_networks_draw_densities_and_subsamples(monkeypatch):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from multilat.network.data import Observations
-    from multilat.network.synthetic import synthetic_network
-    from multilat.network.result import Start
+    from multilat.network.model.data import Observations
+    from multilat.network.synthetic.generator import synthetic_network
+    from multilat.network.adjust.distance.result import Start
     from multilat.report import network_figures as NF
 
     net = synthetic_network(3, population="rings", n_stations=8, n_targets=300, per_target=6)
@@ -85,9 +85,9 @@ def test_density_of_equal_residuals(monkeypatch):
     import matplotlib.pyplot as plt
     from dataclasses import replace
 
-    from multilat.network.data import Observations
-    from multilat.network.synthetic import synthetic_network
-    from multilat.network.result import Start
+    from multilat.network.model.data import Observations
+    from multilat.network.synthetic.generator import synthetic_network
+    from multilat.network.adjust.distance.result import Start
     from multilat.report import network_figures as NF
 
     net = synthetic_network(9, population="rings", n_stations=6, n_targets=60, per_target=5)

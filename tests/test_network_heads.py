@@ -21,12 +21,12 @@ import pytest
 from scipy.optimize import least_squares
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.data import Observations
-from multilat.network.datum import rigid_fit, apply_rigid
-from multilat.network.files import read_observations, read_points
-from multilat.network.synthetic import synthetic_network
-from multilat.network.result import result_to_json
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Observations
+from multilat.network.model.datum import rigid_fit, apply_rigid
+from multilat.network.io.files import read_observations, read_points
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.adjust.distance.result import result_to_json
 
 ROOT = Path(__file__).resolve().parents[1]
 EX = ROOT / "examples" / "network" / "sequential"

@@ -4,7 +4,7 @@ equations vs the dense normal equations (two independent routes to the same step
 import numpy as np
 import pytest
 
-from multilat.network.model import (Q, back_substitute, dense_jacobian, inv3, predicted_distance_m,
+from multilat.network.model.distance import (Q, back_substitute, dense_jacobian, inv3, predicted_distance_m,
                                     reduced_normal_equations, residuals_and_jacobian)
 
 
@@ -97,7 +97,7 @@ def test_schur_step_equals_dense_normal_equations():
 def test_residuals_alone_equal_those_with_the_jacobian(cost):
     """``residuals`` (the cost of a trial step, no Jacobian) gives the very numbers of
     ``residuals_and_jacobian``: bit for bit."""
-    from multilat.network.model import residuals, residuals_and_jacobian
+    from multilat.network.model.distance import residuals, residuals_and_jacobian
 
     r = np.random.default_rng(3)
     H, T = r.normal(size=(5, 3)) * 3, r.normal(size=(40, 3)) * 3

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import Start, adjust
-from multilat.network.data import Observations
-from multilat.network.model import Q, dense_jacobian, residuals_and_jacobian
+from multilat.network.adjust.distance.adjust import Start, adjust
+from multilat.network.model.data import Observations
+from multilat.network.model.distance import Q, dense_jacobian, residuals_and_jacobian
 
 H4 = np.array([[0, 0, 0], [3, 0, 0.2], [1.5, 2.5, -0.3], [1.2, 1, 2.2]], float)
 OFF4 = np.array([1e-3, -2e-3, 5e-4, 0.0])
@@ -75,7 +75,7 @@ def test_degenerate_geometries_are_named():
     with pytest.raises(MultilatError, match="targets are \\(nearly\\) collinear"):
         adjust(_obs(H4, Tl, OFF4), initial=Start(H4, Tl, np.zeros(4)))
     # coplanar targets are NOT degenerate with distances and offsets (rank says so; solve works), but
-    # each station's side of the target plane is a discrete ambiguity: named (multilat.network.ambiguity)
+    # each station's side of the target plane is a discrete ambiguity: named (multilat.network.adjust.distance.ambiguity)
     Tp = T.copy()
     Tp[:, 2] = 0.7
     assert _rank_defect(H4, Tp, OFF4)[0] == 0
@@ -137,7 +137,7 @@ def test_stations_collinear_with_a_target_on_every_back_end(monkeypatch, solver,
     ZeroDivisionError pending in numba's parallel region, and the next compiled call failed with
     "SystemError: ... returned a result with an exception set" (fixed by IEEE division,
     multilat._numba.njit)."""
-    from multilat.network.solve import loop
+    from multilat.network.adjust.solve import loop
 
     if compiled:
         monkeypatch.setattr(loop, "KERNEL_MIN_TARGETS", 0)
@@ -174,7 +174,7 @@ def test_coplanarity_tolerance_follows_the_resolution_of_the_out_of_plane_spread
     uncertainty scales as sigma L / (h sqrt(m)) with a constant of order 1 (0.1-3), i.e. a spread
     below h_min is not resolved by the distances. Below the bound the network is refused with the
     cause named, above it it is adjusted."""
-    from multilat.network.solvability import flat_geometry, resolvable_spread_m
+    from multilat.network.adjust.distance.solvability import flat_geometry, resolvable_spread_m
 
     sigma = 5e-6
     H, T, off, o = _ring_network(1.0)
@@ -196,7 +196,7 @@ def test_coplanarity_tolerance_follows_the_resolution_of_the_out_of_plane_spread
 
 
 def test_collinear_targets_named_from_their_spread():
-    from multilat.network.solvability import flat_geometry
+    from multilat.network.adjust.distance.solvability import flat_geometry
 
     rng = np.random.default_rng(3)
     u = np.array([1.0, 0.5, 0.3]) / np.linalg.norm([1.0, 0.5, 0.3])

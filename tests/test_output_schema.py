@@ -112,7 +112,7 @@ def _prepare(name: str, tmp: Path) -> Path:
     if name == "coplanar.csv":                  # every target in one plane: the stations mirror-ambiguous
         from test_ambiguous_geometry import _network
 
-        from multilat.network.files import write_observations
+        from multilat.network.io.files import write_observations
 
         write_observations(tmp / name, _network()[0])
         return tmp / name
@@ -212,8 +212,8 @@ def test_an_adaptive_propagation_follows_the_model(tmp_path):
     """``propagate --adaptive`` on the small volume takes ~40 s at ndigits 2: the same engine at ndigits 1
     (3 batches), its document written as the CLI writes it (the CLI's keys around it)."""
     from multilat.io import dumps_json
-    from multilat.network.configs import small_volume
-    from multilat.network.propagate import problem_from_config, propagate
+    from multilat.network.synthetic.configs import small_volume
+    from multilat.network.montecarlo.propagate import problem_from_config, propagate
 
     res = propagate(problem_from_config(small_volume(), sigma_m=4.7e-6, source="small-volume"), adaptive=True,
                     ndigits=1, rng=3, noise="gaussian", keep_samples=False)
@@ -367,7 +367,7 @@ def test_names_outside_the_convention_fail(key):
 def test_no_output_writes_a_replaced_name():
     """The replaced names are gone from the package's code (quoted as keys or CSV columns); the one
     exception is ``u_m``, the reference-length *input* column (its outputs are ``length_std_m``)."""
-    allowed = {("u_m", "network/files.py"), ("u_m", "network/data.py")}
+    allowed = {("u_m", "network/io/files.py"), ("u_m", "network/model/data.py")}
     hits = []
     for p in (ROOT / "src" / "multilat").rglob("*.py"):
         rel = p.relative_to(ROOT / "src" / "multilat").as_posix()

@@ -11,9 +11,9 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network import batched as bt
-from multilat.network.configs import small_volume
-from multilat.network.propagate import chi2_3_95, problem_from_config, problem_from_truth, propagate
+from multilat.network.montecarlo import batched as bt
+from multilat.network.synthetic.configs import small_volume
+from multilat.network.montecarlo.propagate import chi2_3_95, problem_from_config, problem_from_truth, propagate
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +85,7 @@ def test_identical_for_any_chunk_size(small_problem):
     """Fixed blocks of BLOCK trials are the unit of seeding and solving; chunk_size only groups whole
     blocks: 1000, 3000 and 1700 (rounded up to 2 blocks; divides neither 3500 nor 2000) give the same
     bits, with a partial last block (3500 trials) and distance-model noise."""
-    from multilat.network.propagate import BLOCK
+    from multilat.network.montecarlo.propagate import BLOCK
 
     assert BLOCK == 1000
     runs = [propagate(small_problem, trials=3500, rng=9, noise="model", instrument="seed2020", chunk_size=c) for c in (1000, 3000, 1700)]
@@ -329,9 +329,9 @@ def test_measured_observations_sigma0_carries_the_nominal_residuals():
     to the column space), so E[sigma0^2] = sigma0_nominal^2 + 1 for gaussian errors with the weights'
     sigma. sigma0^2 dof ~ noncentral chi2(dof, dof sigma0_nominal^2): the mean of n trials has standard
     error sqrt(2 dof + 4 dof sigma0_nom^2) / dof / sqrt(n); 4 of them."""
-    from multilat.network.adjust import adjust
-    from multilat.network.files import read_observations
-    from multilat.network.propagate import problem_from_observations
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.io.files import read_observations
+    from multilat.network.montecarlo.propagate import problem_from_observations
 
     obs = read_observations(_example_obs())
     adj = adjust(obs, snooping=False)
@@ -393,8 +393,8 @@ def test_ellipsoid_fraction_is_the_row_sum_formula():
     """``_ellipsoid_fraction`` adds the columns of z^2 / ev left to right instead of np.sum(axis=1) over
     rows of 3 (slow in numpy): the same bits (numpy sums a row shorter than its pairwise block in
     order), for full and rank-deficient covariances and both memory layouts of the samples."""
-    from multilat.network.propagate_summary import _ellipsoid_fraction
-    from multilat.network.statistics import chi2_ppf
+    from multilat.network.montecarlo.propagate_summary import _ellipsoid_fraction
+    from multilat.network.model.statistics import chi2_ppf
 
     def by_row_sums(dev3, center, cov):
         ev, vec = np.linalg.eigh(cov)
@@ -444,7 +444,7 @@ def test_block_deviations_are_the_flattened_differences(small_problem, monkeypat
 
 def test_summaries_in_two_threads_are_those_computed_in_order(small_problem, monkeypatch):
     """From 50 000 trials the column statistics run in two threads: the same numbers as in order."""
-    from multilat.network import propagate_summary as ps
+    from multilat.network.montecarlo import propagate_summary as ps
 
     in_threads = ps._in_two_threads
     seen = []

@@ -49,7 +49,7 @@ def _z_scores(samples, ref):
 def _campaign(instrument="seed2020"):
     from multilat.campaign.correlated import correlated_covariance
     from multilat.campaign.propagation import campaign_problem
-    from multilat.network.adjust import adjust
+    from multilat.network.adjust.distance.adjust import adjust
 
     prob, corr = campaign_problem(RAW, instrument=instrument, **KW)
     res = adjust(corr.to_observations(), snooping=False)        # what `adjust RAW` does
@@ -80,7 +80,7 @@ def test_linear_sensor_sensitivity_matches_the_full_correction(shipped):
 def test_mc_covariance_of_the_shipped_campaign_agrees_with_adjust_raw(shipped):
     """Must-show: `propagate` on examples/campaign (raw readings + environment log) — the Monte Carlo
     covariance of all 52 parameters agrees with adjust RAW's G C Gᵀ within 4.5 MC standard errors."""
-    from multilat.network.propagate import propagate
+    from multilat.network.montecarlo.propagate import propagate
 
     prob, corr, res, cc = shipped
     assert prob.readings.n_sensor_errors == 16
@@ -102,7 +102,7 @@ def test_sensor_correlations_are_what_the_monte_carlo_sees():
     model for every quantity that differs by more than 20 % — so the comparison above can fail."""
     from multilat import instrument as _inst
     from multilat.campaign.correlated import correlated_covariance
-    from multilat.network.propagate import propagate
+    from multilat.network.montecarlo.propagate import propagate
 
     base = _inst.load_instrument("seed2020")
     inst = base.model_copy(update={"environment": base.environment.model_copy(
@@ -124,7 +124,7 @@ def test_model_noise_with_sensors(shipped):
     """Non-gaussian per-reading errors (distance model) plus gaussian sensor errors: each variance
     agrees with G C Gᵀ within 4.5 standard errors of a variance for that output's kurtosis
     (sqrt((k - 1) / n) relative)."""
-    from multilat.network.propagate import propagate
+    from multilat.network.montecarlo.propagate import propagate
 
     prob, corr, res, cc = shipped
     r = propagate(prob, trials=N, rng=9, noise="model")
@@ -140,7 +140,7 @@ def test_model_noise_with_sensors(shipped):
 def test_identical_whatever_the_chunks_or_map(shipped):
     """Fixed-block seeding: the campaign draws (readings, sensors) are bit-identical for any chunk
     size and any map."""
-    from multilat.network.propagate import propagate
+    from multilat.network.montecarlo.propagate import propagate
 
     prob = shipped[0]
     a = propagate(prob, trials=2500, rng=4, noise="model", chunk_size=1000)
@@ -181,9 +181,9 @@ def test_nine_readings_kept_or_averaged_give_the_same_result(raw9):
     Monte Carlo with the same seed draws the same readings and gives the same trials (to 1e-9 m,
     float32 storage) and standard deviations; both solvers agree on the repeats."""
     from multilat.campaign.propagation import campaign_problem
-    from multilat.network.adjust import adjust
-    from multilat.network.propagate import propagate
-    from multilat.network.repeats import average_repeats
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.montecarlo.propagate import propagate
+    from multilat.network.model.repeats import average_repeats
 
     kw = dict(KW, datum="321:A,B,C")
     sep, corr = campaign_problem(raw9, **kw)
@@ -300,7 +300,7 @@ def test_repeated_reading_with_a_slipped_digit_is_one_line_error(tmp_path, capsy
 
 
 def test_readings_validation():
-    from multilat.network.readings import Readings
+    from multilat.network.montecarlo.readings import Readings
 
     with pytest.raises(MultilatError, match="one value per reading"):
         Readings(np.zeros(3, int), np.ones(3), np.ones(2))
@@ -318,7 +318,7 @@ def test_adjust_average_repeats_cli(raw9, capsys):
     assert len(avg["repeats"]) == 56 and avg["repeats"][0]["n"] == 9 and avg["dof"] == 4
     assert "with_correlations" in avg
     from multilat.campaign.correct import correct_file
-    from multilat.network.adjust import adjust
+    from multilat.network.adjust.distance.adjust import adjust
 
     sep = adjust(correct_file(raw9, **KW).to_observations(), snooping=False)
     off = {k: v["offset_m"] for k, v in avg["stations"].items()}
@@ -330,9 +330,9 @@ def test_redundancy_of_repeated_readings_against_a_dense_hat_matrix(tmp_path):
     """The pair table scaled for repeats (model.slot_gain, covariance.hat_diagonal) against the plain
     hat matrix ``A (AᵀA)⁺ Aᵀ`` of the whole whitened Jacobian (an independent computation), with
     2-4 readings per pair of unequal sigma: redundancy numbers equal to 1e-8."""
-    from multilat.network.adjust import adjust
-    from multilat.network.data import Observations
-    from multilat.network.model import dense_jacobian, residuals_and_jacobian
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.model.data import Observations
+    from multilat.network.model.distance import dense_jacobian, residuals_and_jacobian
 
     p = _write_repeats(tmp_path / "r.csv", k=1)
     from multilat.campaign.correct import correct_file

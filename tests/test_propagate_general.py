@@ -1,6 +1,6 @@
 """``propagate`` of what ``adjust`` accepts beyond one offset per station (issue 16 item 6): heads that
 occupy several stations, scale bars (with per-head scales), weighted and hard control — the general
-batched solver (:mod:`multilat.network.batched_coupled`).
+batched solver (:mod:`multilat.network.montecarlo.batched_coupled`).
 
 Independent values:
 
@@ -28,12 +28,12 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network import propagate as pr
-from multilat.network.adjust import adjust
-from multilat.network.batched_coupled import CoupledBatchedNetwork
-from multilat.network.data import Points, ReferenceLengths
-from multilat.network.files import read_observations
-from multilat.network.synthetic import synthetic_network
+from multilat.network.montecarlo import propagate as pr
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.montecarlo.batched_coupled import CoupledBatchedNetwork
+from multilat.network.model.data import Points, ReferenceLengths
+from multilat.network.io.files import read_observations
+from multilat.network.synthetic.generator import synthetic_network
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "network" / "sequential"
 TRIALS = 4000
@@ -208,7 +208,7 @@ def test_refusals_left():
 
 def _small_volume_both():
     """The small volume's problem, its batched network and the same network for the general solver."""
-    from multilat.network.configs import small_volume
+    from multilat.network.synthetic.configs import small_volume
 
     pb = pr.problem_from_config(small_volume(), sigma_m=4.7e-6)
     net = pb.network
@@ -253,7 +253,7 @@ def test_angles_are_drawn_and_match_the_adjustments_covariance():
     adjust's (with the angles and orientations, a second implementation) to 1e-8, and the Monte Carlo
     (distances, angles drawn) agrees with it within 5 MC standard errors; without drawing the angles the
     targets' spread falls below it."""
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.synthetic.generator import synthetic_network
 
     net = synthetic_network(np.random.default_rng([18, 1]), population="mixed")
     res = adjust(net.obs, initial=net, snooping=False)
@@ -277,7 +277,7 @@ def test_levelled_trackers_propagate_about_z_and_match_the_adjustment():
     equals adjust's 4-defect covariance to 1e-8; the Monte Carlo agrees with it within 5 MC SE.
     Mutation: the same trials moved by the full 6-parameter rigid fit (a tilt the data forbid) put a
     target's spread 6.7 MC standard errors off."""
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.synthetic.generator import synthetic_network
 
     net = synthetic_network(np.random.default_rng([18, 1]), population="mixed", levelled=True)
     assert net.obs.levelled == ("AT1", "AT2")
@@ -287,7 +287,7 @@ def test_levelled_trackers_propagate_about_z_and_match_the_adjustment():
     assert nw.datum.about_z and nw.datum.n_defect == 4
     assert nw.dof == res.dof
     _check(res, prob)
-    from multilat.network.trial_datum import TrialDatum
+    from multilat.network.montecarlo.trial_datum import TrialDatum
 
     g = np.random.default_rng(9)
     n = 2000
@@ -305,8 +305,8 @@ def test_levelled_trackers_propagate_about_z_and_match_the_adjustment():
 
 
 def test_cli_propagate_levelled(tmp_path, capsys):
-    from multilat.network.files import write_observations
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.io.files import write_observations
+    from multilat.network.synthetic.generator import synthetic_network
 
     net = synthetic_network(np.random.default_rng([18, 1]), population="mixed", levelled=True)
     p = tmp_path / "mixed.csv"

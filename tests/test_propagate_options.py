@@ -20,10 +20,10 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network import propagate as pr
-from multilat.network.adjust import adjust
-from multilat.network.files import read_observations
-from multilat.network.options import NetworkOptions
+from multilat.network.montecarlo import propagate as pr
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.io.files import read_observations
+from multilat.network.adjust.distance.options import NetworkOptions
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 OBS = EX / "small_volume_obs.csv"

@@ -7,11 +7,11 @@ import pytest
 from scipy import stats
 
 from multilat.cli import main
-from multilat.network import statistics as st
-from multilat.network.adjust import adjust
-from multilat.network.data import Observations
-from multilat.network.synthetic import synthetic_network
-from multilat.network.result import Start
+from multilat.network.model import statistics as st
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Observations
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.adjust.distance.result import Start
 
 
 def _obs(net, sigma_m=None):
@@ -229,7 +229,7 @@ def test_result_ellipsoids_computed_once_per_level():
 def test_final_residuals_in_slices_are_the_whole_array_formula(monkeypatch):
     # build_result computes the residuals slice by slice (bounded memory at 10^6 distances): the same
     # bits as the formula over the whole arrays, whatever the slice
-    from multilat.network import result as R
+    from multilat.network.adjust.distance import result as R
 
     net = synthetic_network(10, population="rings", n_stations=5, n_targets=40, per_target=4,
                             size_m=5.0)  # (rng=9 has a target whose sight lines are

@@ -7,13 +7,13 @@ product of the whole covariance per design row. The largest point shift must agr
 import numpy as np
 import pytest
 
-from multilat.network import covariance as cv
-from multilat.network import reliability as rl
-from multilat.network.adjust import adjust
-from multilat.network.data import Observations, ReferenceLengths
-from multilat.network.synthetic import synthetic_network
-from multilat.network.model import Q
-from multilat.network.result import Start
+from multilat.network.model import covariance as cv
+from multilat.network.adjust.distance import reliability as rl
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Observations, ReferenceLengths
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.model.distance import Q
+from multilat.network.adjust.distance.result import Start
 
 
 def _reference_shifts(cov, sx_ids, tx_ids, bias_m, batch=64):

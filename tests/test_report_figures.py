@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from multilat.network.adjust import adjust
-from multilat.network.files import read_observations
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.io.files import read_observations
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 
@@ -71,7 +71,7 @@ def test_top_view_prints_both_scales(res):
 
 @pytest.fixture(scope="module")
 def prop():
-    from multilat.network.propagate import problem_from_observations, propagate
+    from multilat.network.montecarlo.propagate import problem_from_observations, propagate
 
     obs = read_observations(EX / "small_volume_obs.csv")
     return propagate(problem_from_observations(obs), trials=60, rng=4, noise="gaussian", keep_samples=True)

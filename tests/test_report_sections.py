@@ -41,7 +41,7 @@ _DOM = """() => Array.from(document.querySelectorAll("section")).map(s => ({
 def _write_bars_and_control(tmp: Path) -> tuple[Path, Path]:
     """Three bars between targets (true length + N(0, 3 µm)) and four weighted control points (three
     stations and a target, true coordinates + N(0, 30 µm)) from the example's truth, seed 7."""
-    from multilat.network.files import read_points
+    from multilat.network.io.files import read_points
 
     t = read_points(EX / "sequential" / "truth.csv")
     rng = np.random.default_rng(7)
@@ -378,8 +378,8 @@ def test_residual_plot_and_views_name_stations_not_heads():
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from multilat.network.adjust import adjust
-    from multilat.network.files import read_observations
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.io.files import read_observations
     from multilat.report.network_figures import plot_residuals, plot_top_view
 
     legends = {}

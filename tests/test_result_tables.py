@@ -16,8 +16,8 @@ import pytest
 
 from multilat.cli import main
 from multilat.io import write_csv_atomic
-from multilat.network.adjust import adjust
-from multilat.network.files import read_observations, read_points, read_reference_lengths, write_result_tables
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.io.files import read_observations, read_points, read_reference_lengths, write_result_tables
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 OBS, REF, PTS = EX / "small_volume_obs.csv", EX / "small_volume_refs.csv", EX / "small_volume_points.csv"

@@ -12,9 +12,9 @@ from scipy.optimize import least_squares
 
 from multilat.cli.app import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.data import ReferenceLengths
-from multilat.network.files import read_observations, read_reference_lengths
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import ReferenceLengths
+from multilat.network.io.files import read_observations, read_reference_lengths
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 OBS, REF = EX / "small_volume_obs.csv", EX / "small_volume_refs.csv"

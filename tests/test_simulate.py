@@ -8,8 +8,8 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.configs import large_volume, small_volume
-from multilat.network.simulate import (PAPER_STUDY, interpoint_error_std, linear_prediction,
+from multilat.network.synthetic.configs import large_volume, small_volume
+from multilat.network.montecarlo.simulate import (PAPER_STUDY, interpoint_error_std, linear_prediction,
                                        load_config_file, simulate)
 
 # seed 000 Tables V and VI: multilateration minus reference, um
@@ -202,7 +202,7 @@ def test_cli_model_noise_json(capsys):
 
 
 def test_perturbed_config_keeps_groups_rigid():
-    from multilat.network.simulate import perturbed_config
+    from multilat.network.montecarlo.simulate import perturbed_config
 
     cfg = large_volume()
     p = perturbed_config(cfg, 0.5, rng=0, fixed=("3",))
@@ -218,7 +218,7 @@ def test_perturbed_config_keeps_groups_rigid():
 def test_large_volume_layout_sensitivity():
     """docs/network-simulation.md: 100 re-placements (±0.5 m, pillars held) of the large volume give
     first-order rms values whose 5th percentile is above what the paper's 5.4 um mean implies."""
-    from multilat.network.simulate import perturbed_config
+    from multilat.network.montecarlo.simulate import perturbed_config
 
     vals = [linear_prediction(perturbed_config(large_volume(), 0.5, rng=k, fixed=("3",)), 4.7e-6)
             for k in range(100)]

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from multilat.network import solvability
-from multilat.network.solvability import graph_components
+from multilat.network.adjust.distance import solvability
+from multilat.network.adjust.distance.solvability import graph_components
 
 ROOT = Path(__file__).resolve().parents[1]
 SMALL = ROOT / "examples" / "network" / "small_volume_obs.csv"
@@ -29,7 +29,7 @@ UNNEEDED = ("multilat.cli.air_cmd", "multilat.cli.budget_cmd", "multilat.cli.sim
             "multilat.cli.lbb_cmd", "multilat.cli.campaign_cmd", "multilat.cli.propagate_cmd",
             "multilat.cli.demo_cmd", "multilat.cli.design_cmd", "multilat.cli.interop_cmd",
             "multilat.report", "multilat.campaign.correct", "multilat.campaign.environment", "multilat.air",
-            "multilat.lbb", "multilat.montecarlo", "multilat.network.design", "multilat.network.general",
+            "multilat.lbb", "multilat.montecarlo", "multilat.network.design", "multilat.network.adjust.general",
             "multilat.distance_errors", "multilat.budget")
 
 _PROBE = """
@@ -56,7 +56,7 @@ def test_small_adjust_imports_no_heavy_package():
     rep = json.loads(p.stdout.strip().splitlines()[-1])
     assert rep["code"] == 0 and str(rep["schema"]).startswith("multilat.adjust/")   # the command did its work
     mods = rep["modules"]
-    assert "multilat.network.adjust" in mods                                       # the probe sees imports
+    assert "multilat.network.adjust.distance.adjust" in mods                                       # the probe sees imports
     loaded = sorted({h for h in HEAVY for m in mods if m == h or m.startswith(h + ".")})
     assert loaded == [], f"a small adjust imported {loaded}"
     unneeded = sorted({u for u in UNNEEDED for m in mods if m == u or m.startswith(u + ".")})

@@ -1,5 +1,5 @@
 """Data snooping on large networks: the rounds between two adjustments as rank-one downdates
-(:mod:`multilat.network.snooping`) against the exact path, a full adjustment after every rejection.
+(:mod:`multilat.network.adjust.distance.snooping`) against the exact path, a full adjustment after every rejection.
 
 Independent value: the exact path itself (a second method: every round a full Gauss-Newton
 adjustment and its own covariance). Forcing the downdated rounds on smaller networks (the threshold
@@ -14,10 +14,10 @@ without that rule the planted 125-300 µm blunders put the later rounds' vᵀPv 
 import numpy as np
 import pytest
 
-from multilat.network import snooping
-from multilat.network.adjust import adjust
-from multilat.network.data import Observations
-from multilat.network.synthetic import synthetic_network
+from multilat.network.adjust.distance import snooping
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Observations
+from multilat.network.synthetic.generator import synthetic_network
 
 
 def _blundered(n_targets=150, n_blunders=6, seed=5, size_sigma=(25, 60)):
@@ -53,7 +53,7 @@ class _NoSearch:
 
 @pytest.fixture(autouse=True)
 def _no_search(monkeypatch):
-    import multilat.network.adjust as adjust_module
+    import multilat.network.adjust.distance.adjust as adjust_module
 
     monkeypatch.setattr(adjust_module, "_search_minimum", _NoSearch())
 
@@ -132,8 +132,8 @@ def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch
     from types import SimpleNamespace
 
     if kernels:
-        from multilat.network import _covariance_kernels as K
-        from multilat.network import covariance as C
+        from multilat.network.model import _covariance_kernels as K
+        from multilat.network.model import covariance as C
 
         if not K.HAVE_NUMBA:
             pytest.skip("numba not installed")
@@ -165,8 +165,8 @@ def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch
 def test_downdated_rounds_through_the_compiled_kernels(monkeypatch, downdates):
     """The same agreement with the hat rows, covariance products and residuals from the compiled
     kernels (what networks above 10 000 distances run), several downdates between adjustments."""
-    from multilat.network import _covariance_kernels as K
-    from multilat.network import covariance as C
+    from multilat.network.model import _covariance_kernels as K
+    from multilat.network.model import covariance as C
 
     if not K.HAVE_NUMBA:
         pytest.skip("numba not installed")

@@ -12,10 +12,10 @@ import pytest
 
 from multilat.cli.app import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import Start, adjust
-from multilat.network.data import Observations
-from multilat.network.files import read_observations
-from multilat.network.synthetic import synthetic_network
+from multilat.network.adjust.distance.adjust import Start, adjust
+from multilat.network.model.data import Observations
+from multilat.network.io.files import read_observations
+from multilat.network.synthetic.generator import synthetic_network
 
 EX = Path(__file__).resolve().parents[1] / "examples" / "network"
 OBS = EX / "small_volume_obs.csv"
@@ -91,7 +91,7 @@ def test_dense_and_sparse_identical_with_a_blunder(capsys, tmp_path):
 
 
 def test_auto_switches_and_sparse_refuses_what_it_cannot_do(capsys, monkeypatch):
-    from multilat.network.solve import loop
+    from multilat.network.adjust.solve import loop
 
     monkeypatch.setattr(loop, "SPARSE_ABOVE_OBS", 10)
     rc, out, err = _run(capsys, ["adjust", str(OBS), "--json"])
@@ -172,7 +172,7 @@ def test_statistics_equal_an_independent_dense_implementation(solver):
     to 4e-15 m)."""
     from scipy import stats
 
-    from multilat.network.model import dense_jacobian, residuals_and_jacobian
+    from multilat.network.model.distance import dense_jacobian, residuals_and_jacobian
 
     net = synthetic_network(21, population="rings", n_stations=6, n_targets=40, per_target=5, size_m=6.0)
     obs = Observations(tuple(f"S{i}" for i in range(6)), tuple(f"T{j}" for j in range(40)),
@@ -242,7 +242,7 @@ def test_weak_target_left_out_from_the_cli_and_strict_refuses(capsys, tmp_path):
 
 def test_initial_values_carry_their_refinement_record():
     """The initial values' own least squares does not end silently: its record is in the result."""
-    from multilat.network.initial import initial_values
+    from multilat.network.adjust.approximate.initial import initial_values
 
     obs = read_observations(OBS)
     iv = initial_values(obs, rng=0)

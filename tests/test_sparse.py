@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network import _sparse_kernels as K
-from multilat.network.adjust import Start, adjust
-from multilat.network.data import Observations
-from multilat.network.synthetic import synthetic_network
-from multilat.network.model import Q
-from multilat.network.problem import Params, Problem
-from multilat.network.solve.dense import DenseBackend
-from multilat.network.solve.sparse import SparseBackend
+from multilat.network.model import _sparse_kernels as K
+from multilat.network.adjust.distance.adjust import Start, adjust
+from multilat.network.model.data import Observations
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.model.distance import Q
+from multilat.network.model.problem import Params, Problem
+from multilat.network.adjust.solve.dense import DenseBackend
+from multilat.network.adjust.solve.sparse import SparseBackend
 
 
 def start(net, rng, scale=1e-3):
@@ -100,8 +100,8 @@ def test_python_and_numba_kernels_agree():
 
 
 def test_fast_reader_matches_the_strict_reader(tmp_path):
-    from multilat.network.fastio import read_observations_fast
-    from multilat.network.files import read_observations
+    from multilat.network.io.fastio import read_observations_fast
+    from multilat.network.io.files import read_observations
 
     p = tmp_path / "obs.csv"
     p.write_text("# comment\nstation,target,distance_m,sigma_m\nA,P10,1.25,5e-6\nB,P10,2.5,4e-6\n"
@@ -129,7 +129,7 @@ def test_compiled_block_test_equals_eigvalsh():
     """The compiled closed-form test of the targets' 3x3 blocks (used from 2 000 free targets) against
     LAPACK's eigenvalues: the same verdict on random, nearly singular (1e-13 and 1e-8 relative) and
     non-finite blocks."""
-    from multilat.network._sparse_kernels import degenerate_blocks
+    from multilat.network.model._sparse_kernels import degenerate_blocks
 
     r = np.random.default_rng(0)
     A = r.normal(size=(3000, 3, 3))
@@ -148,7 +148,7 @@ def test_compiled_block_test_equals_eigvalsh():
 
 
 def test_distinct_pair_codes_equal_numpy_unique():
-    from multilat.network.data import distinct_pair_codes
+    from multilat.network.model.data import distinct_pair_codes
 
     r = np.random.default_rng(1)
     for n in (0, 1, 2, 50, 10_000):

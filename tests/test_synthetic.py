@@ -1,4 +1,4 @@
-"""The package's one generator of networks, :func:`multilat.network.synthetic.synthetic_network`
+"""The package's one generator of networks, :func:`multilat.network.synthetic.generator.synthetic_network`
 (issue 27 item 4): the draws of the three generators it replaces kept bit for bit, and its options
 checked against what they promise (sizes, coverage, gap rate, blunders, seeding)."""
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.synthetic import POPULATIONS, synthetic_network
+from multilat.network.synthetic.generator import POPULATIONS, synthetic_network
 
 
 def _fingerprint(n):

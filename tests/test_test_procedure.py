@@ -2,7 +2,7 @@
 snooping (item 6) and the σ0 plausibility check both ways.
 
 Independent values: Šidák's formula written out, the false-alarm and planted-blunder rates counted on
-networks of the package's generator (:func:`multilat.network.synthetic.synthetic_network`) with their truth,
+networks of the package's generator (:func:`multilat.network.synthetic.generator.synthetic_network`) with their truth,
 and the exact hat row of a zero-redundancy observation (``e_l``)."""
 
 import warnings
@@ -10,11 +10,11 @@ import warnings
 import numpy as np
 import pytest
 
-from multilat.network import statistics as st
-from multilat.network.adjust import adjust
-from multilat.network.data import Observations
-from multilat.network.synthetic import synthetic_network
-from multilat.network.result import Start
+from multilat.network.model import statistics as st
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Observations
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.adjust.distance.result import Start
 
 
 def _obs(net):
@@ -51,7 +51,7 @@ def study(n_networks, seed0, *, n_min=1000, n_max=100_000, blunder_sigma=20.0, p
     identifiable distance (found: it is among the rejections). Returns one dict per network.
     The external reliability (point shifts, O(m^2) below 20 000 distances, not part of the tests) is
     not computed."""
-    from multilat.network import reliability
+    from multilat.network.adjust.distance import reliability
 
     keep, reliability.MAX_EXTERNAL_OBS = reliability.MAX_EXTERNAL_OBS, 0
     try:
@@ -132,7 +132,7 @@ def test_study_small_clean_networks_keep_their_observations_and_blunders_are_fou
     keep, found, planted = _summary(rows)
     assert keep >= 0.9 and planted >= 9 and found == 1.0, rows
     assert all(r["method"] == "sidak" for r in rows)
-    from multilat.network import reliability
+    from multilat.network.adjust.distance import reliability
 
     lost_b = 0
     old, reliability.MAX_EXTERNAL_OBS = reliability.MAX_EXTERNAL_OBS, 0
@@ -164,7 +164,7 @@ def test_study_200_networks_1e3_to_1e5_distances():
 def _case6():
     """8 stations, 40 targets, 15 % of pairs unobserved, targets seen by 3 stations allowed (one here:
     its 3 distances have zero redundancy); a 12σ blunder on the distance with the largest redundancy."""
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.synthetic.generator import synthetic_network
 
     net = synthetic_network(10, n_stations=8, n_targets=(40, 40), gap_fraction=0.15, min_stations_per_target=3,
                             station_layout="two-level", target_layout="volume")
@@ -229,10 +229,10 @@ def _sigma_net():
 def test_sigma_in_micrometres_is_named_both_in_warning_and_json(capsys, tmp_path):
     """Issue 25 item 2's statistical side: σ too large by a factor (the issue's µm case gave σ0 = 0.000 and
     'global test passed'). A unit's factor (≥ 100: mm or µm read as m) is stopped before any result by
-    :mod:`multilat.network.unit_slip` (tests/test_unit_slips.py); below it, here 30×, the lower tail fails and
+    :mod:`multilat.network.adjust.distance.unit_slip` (tests/test_unit_slips.py); below it, here 30×, the lower tail fails and
     σ0 is named implausible with its source."""
-    from multilat.network.result import result_to_json
-    from multilat.network.sigma_source import file_column
+    from multilat.network.adjust.distance.result import result_to_json
+    from multilat.network.model.sigma_source import file_column
 
     net, obs = _sigma_net()
     slip = Observations(obs.station_ids, obs.target_ids, obs.station_index, obs.target_index, obs.distance_m,
@@ -283,7 +283,7 @@ def test_a_plausible_sigma0_gives_no_warning():
 def test_noise_free_data_are_not_judged():
     """Error-free (simulated) distances give σ0 ~ 1e-11: neither the unit-slip stop nor the σ0 check may
     call that implausible (simulate and the design's pre-analysis adjust such data); one unit slip rule,
-    :func:`multilat.network.unit_slip.noise_free`, decides for both."""
+    :func:`multilat.network.adjust.distance.unit_slip.noise_free`, decides for both."""
     net, obs = _sigma_net()
     rho = np.linalg.norm(net.station_xyz_m[net.station_index] - net.target_xyz_m[net.target_index], axis=1)
     exact = obs.with_distances(rho + net.offset_m[net.station_index])

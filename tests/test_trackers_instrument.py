@@ -15,8 +15,8 @@ from multilat import budget
 from multilat.cli import main
 from multilat.errors import MultilatError
 from multilat.instrument import load_instrument
-from multilat.network.files import read_observations
-from multilat.network.synthetic import synthetic_network
+from multilat.network.io.files import read_observations
+from multilat.network.synthetic.generator import synthetic_network
 
 INST = Path(__file__).resolve().parents[1] / "examples" / "instruments" / "heads_and_trackers.toml"
 

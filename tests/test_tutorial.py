@@ -104,7 +104,7 @@ def test_page_has_the_commands_of_every_step():
 def test_every_command_runs_and_the_outputs_exist(ran):
     work, outputs = ran
     assert set(commands(PAGE.read_text(encoding="utf-8"))) == set(outputs)
-    from multilat.network.files import table_format
+    from multilat.network.io.files import table_format
 
     for rel in ("free/result.json", f"free/observations.{table_format('observations', 'auto')}", "hall/result.json", "trackers/result.json",
                 "mc/summary.json", "design-now/design.json", "design-next/stations.csv", "net.txt",

@@ -1,5 +1,5 @@
 """Unit slips and bounded searches (issue 25, items 1, 2 and 8): the rule of
-:mod:`multilat.network.unit_slip`, the bounds of :mod:`multilat.network.bounds`, the control-scale
+:mod:`multilat.network.adjust.distance.unit_slip`, the bounds of :mod:`multilat.network.adjust.approximate.bounds`, the control-scale
 check, the instrument's metres keys, and the messages of the starts and the scale datum."""
 
 from __future__ import annotations
@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.bounds import Bound, reporting
-from multilat.network.data import Observations, Points
-from multilat.network.files import read_observations
-from multilat.network.unit_slip import SLIP_FACTOR, UnitSlipError, likely_unit
-from multilat.network.synthetic import synthetic_network
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.adjust.approximate.bounds import Bound, reporting
+from multilat.network.model.data import Observations, Points
+from multilat.network.io.files import read_observations
+from multilat.network.adjust.distance.unit_slip import SLIP_FACTOR, UnitSlipError, likely_unit
+from multilat.network.synthetic.generator import synthetic_network
 from pathlib import Path
 
 EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "network" / "small_volume_obs.csv"
@@ -152,7 +152,7 @@ def test_levenberg_marquardt_stops_at_a_passed_deadline():
     """A deadline already passed: no iteration, the start returned as it was."""
     import time
 
-    from multilat.network.initial_refine import levenberg_marquardt
+    from multilat.network.adjust.approximate.initial_refine import levenberg_marquardt
 
     x0 = np.array([3.0, -1.0])
     x, conv = levenberg_marquardt(lambda x: x - 1.0, lambda x: np.eye(2), x0,
@@ -166,7 +166,7 @@ def test_restarts_end_when_a_far_minimum_is_found_again(example):
     """Distances in mm: the blocks' minimum is ~320 RMS σ; the first random restart reaches it
     again (same RMS to 1e-6) and the restarts stop (before: all 20 ran). The minimum is the valid
     network's scaled by 1000 (RMS residual 1000 x)."""
-    from multilat.network.initial import initial_values
+    from multilat.network.adjust.approximate.initial import initial_values
 
     obs, _ = example
     good = initial_values(obs, rng=0)
@@ -188,7 +188,7 @@ def test_minimum_search_records_its_bound(example):
     again inside each solve: 10 s for a test of the bound's bookkeeping.)"""
     from types import SimpleNamespace
 
-    from multilat.network.search import find_minimum
+    from multilat.network.adjust.approximate.search import find_minimum
 
     obs, ref = example
     bad = _scaled(obs, sigma=1 / 300)
@@ -218,7 +218,7 @@ def test_control_in_mm_names_the_points(example):
 def test_control_scale_from_spacings_when_no_pair_is_given(example):
     """Control on targets only: the scale is compared with the targets' spacings from the
     distances; a control file in metres passes, in mm it is refused."""
-    from multilat.network.fit import check_control_scale
+    from multilat.network.adjust.distance.fit import check_control_scale
 
     obs, ref = example
     ids = ("1", "2", "3", "4")
@@ -253,7 +253,7 @@ def test_instrument_metres_key_holding_micrometres(path, value, key):
 
 
 def test_starts_message_when_no_target_is_seen_by_four():
-    from multilat.network.starts import initial_from_distances
+    from multilat.network.adjust.approximate.starts import initial_from_distances
 
     net = synthetic_network(2, population="shell", n_stations=4, n_targets=12)
     o = net.obs

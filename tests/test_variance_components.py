@@ -20,9 +20,9 @@ from scipy.stats import chi2
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.synthetic import synthetic_network
-from multilat.network.variance_components import estimate_variance_components
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.synthetic.generator import synthetic_network
+from multilat.network.adjust.distance.variance_components import estimate_variance_components
 
 
 def _misset(k, factor=3.0):
@@ -143,8 +143,8 @@ def test_cli_variance_components_by_head(tmp_path, capsys):
 
 def _mixed_misset(k, factor=3.0):
     """A mixed campaign (4 heads, 2 trackers) whose angles scatter `factor` times their stated σ."""
-    from multilat.network.data import Observations
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.model.data import Observations
+    from multilat.network.synthetic.generator import synthetic_network
 
     net = synthetic_network(np.random.default_rng([16, k]), population="mixed", n_targets=20)
     o = net.obs
@@ -176,8 +176,8 @@ def test_angle_sigma_misset_by_three_is_recovered():
 def test_helmert_matrix_with_angles_equals_a_dense_finite_difference_solution():
     """``S`` from multilat's hat matrix of distances and angles against ``R = I − J (JᵀJ)⁺ Jᵀ`` with
     ``J`` by central differences of the model written here (free network, orientations included)."""
-    from multilat.network.angles import predicted_angles, wrap_angle
-    from multilat.network.variance_components import helmert_matrix, observation_groups
+    from multilat.network.model.angles import predicted_angles, wrap_angle
+    from multilat.network.adjust.distance.variance_components import helmert_matrix, observation_groups
 
     net, obs = _mixed_misset(0, factor=1.0)
     res = adjust(obs, initial=net, snooping=False)

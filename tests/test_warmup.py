@@ -18,7 +18,7 @@ pytest.importorskip("numba")
 
 @pytest.mark.slow
 def test_first_adjust_after_the_warm_up_compiles_nothing(tmp_path):
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.synthetic.generator import synthetic_network
 
     net = synthetic_network(4, population="rings", n_stations=20, n_targets=6000, per_target=8)
     rows = [f"S{i},T{j},{d:.9f},5e-06" for i, j, d in zip(net.station_index, net.target_index, net.distance_m)]
@@ -44,16 +44,16 @@ import numpy as np
 from numba.core import types
 from numba.core.registry import CPUDispatcher
 
-from multilat.network import covariance as C
-from multilat.network.solve import loop
+from multilat.network.model import covariance as C
+from multilat.network.adjust.solve import loop
 
 C.KERNELS_ABOVE_OBS = 0                      # every size gate open: the kernels on a small network
 loop.KERNEL_MIN_TARGETS = 0
 from multilat.cli import main
-from multilat.network.adjust import adjust
-from multilat.network.data import Observations
-from multilat.network.large import multilaterate_targets
-from multilat.network.synthetic import synthetic_network
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Observations
+from multilat.network.adjust.approximate.large import multilaterate_targets
+from multilat.network.synthetic.generator import synthetic_network
 
 net = synthetic_network(3, population="rings", n_stations=6, n_targets=30,
                         per_target=5)  # arrays made in memory: writeable
@@ -95,9 +95,9 @@ def test_one_compiled_variant_per_kernel_for_files_and_memory(tmp_path):
     assert p.returncode == 0, p.stderr[-3000:]
     rows = [ln.split(" ", 2) for ln in p.stderr.splitlines() if ln.startswith("multilat.")]
     names = {r[0] for r in rows}
-    for must in ("multilat.network._sparse_kernels.assemble", "multilat.network._sparse_kernels.multilaterate",
-                 "multilat.network._covariance_kernels._hat_diagonal",
-                 "multilat.network._sparse_kernels.whitened_distances"):
+    for must in ("multilat.network.model._sparse_kernels.assemble", "multilat.network.model._sparse_kernels.multilaterate",
+                 "multilat.network.model._covariance_kernels._hat_diagonal",
+                 "multilat.network.model._sparse_kernels.whitened_distances"):
         assert must in names, sorted(names)
     bad = [r for r in rows if r[1] != "1" or r[2] != "[]"]
     assert not bad, bad
@@ -162,7 +162,7 @@ def source_to_code(self, data, path, *a, **k):
     compiled.append(str(path))
     return orig(self, data, path, *a, **k)
 be.SourceLoader.source_to_code = source_to_code
-import multilat.cli, multilat.network.adjust, multilat.network.propagate
+import multilat.cli, multilat.network.adjust.distance.adjust, multilat.network.montecarlo.propagate
 print(sum("multilat" in c for c in compiled))
 """
     p = subprocess.run([sys.executable, "-c", probe], env=env, capture_output=True, text=True, timeout=300)

@@ -18,9 +18,9 @@ import pytest
 
 from multilat.cli import main
 from multilat.errors import MultilatError
-from multilat.network.adjust import adjust
-from multilat.network.data import Observations
-from multilat.network.synthetic import synthetic_network
+from multilat.network.adjust.distance.adjust import adjust
+from multilat.network.model.data import Observations
+from multilat.network.synthetic.generator import synthetic_network
 
 SIGMA = 5e-6
 ON = (1, 2, 3)      # the stations that see the weak target; it lies in their plane
@@ -82,7 +82,7 @@ def test_cli_json_lists_it_as_excluded(tmp_path, capsys):
 def test_three_stations_off_their_plane_stay():
     """A target seen by 3 stations well off their plane is determined (mirror-ambiguous only): kept."""
     weak, rest = _networks()
-    from multilat.network.exclusion import undetermined_targets
+    from multilat.network.adjust.distance.exclusion import undetermined_targets
 
     tr = synthetic_network(1, population="shell", n_stations=6, n_targets=40, sigma_m=SIGMA)
     H = tr.station_xyz_m

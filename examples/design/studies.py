@@ -7,7 +7,7 @@ import sys
 import numpy as np
 
 from multilat.instrument import load_instrument
-from multilat.network import configs
+from multilat.network.synthetic import configs
 from multilat.network.design import Layout, SigmaModel, optimise_heads, preanalyse
 
 sigma = SigmaModel(instrument=load_instrument("seed2020"))

@@ -1,6 +1,6 @@
 """Compiled text kernels (numba; ``HAVE_NUMBA`` False without it and the callers take their numpy or
 Python paths): :func:`assemble_rows` lays out rows of text for :func:`multilat.rows_text.assemble`,
-:func:`parse_decimals` reads decimal numbers for the large-file reader :mod:`multilat.network.fastio`.
+:func:`parse_decimals` reads decimal numbers for the large-file reader :mod:`multilat.network.io.fastio`.
 
 IEEE division (``multilat._numba.njit``: ``error_model="numpy"``): a zero divisor gives inf or nan, never an
 exception out of a parallel region.

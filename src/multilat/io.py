@@ -1,6 +1,6 @@
 """Shared file primitives: atomic writes (reading: :mod:`multilat.inputs`, re-exported here).
 
-Domain formats live beside their science (``network/files.py``, ``lbb/files.py``,
+Domain formats live beside their science (``network/io/files.py``, ``lbb/files.py``,
 ``campaign/files.py``); they build on these helpers so that every reader reports errors the same
 way (``FILE:ROW: message``) and every writer writes a file whole or not at all.
 """

@@ -45,12 +45,12 @@ def _steps():
         from pathlib import Path
 
         from multilat.io import dumps_json
-        from multilat.network.adjust import adjust
-        from multilat.network.covariance import KERNELS_ABOVE_OBS
-        from multilat.network.files import read_observations
-        from multilat.network.synthetic import synthetic_network
+        from multilat.network.adjust.distance.adjust import adjust
+        from multilat.network.model.covariance import KERNELS_ABOVE_OBS
+        from multilat.network.io.files import read_observations
+        from multilat.network.synthetic.generator import synthetic_network
 
-        from multilat.network.solve.loop import KERNEL_MIN_TARGETS
+        from multilat.network.adjust.solve.loop import KERNEL_MIN_TARGETS
 
         t = max(KERNELS_ABOVE_OBS // 8, KERNEL_MIN_TARGETS) + 50     # every size-gated kernel runs
         net = synthetic_network(1, population="rings", n_stations=20, n_targets=t, per_target=8)
@@ -64,15 +64,15 @@ def _steps():
         cov = res.covariance
         cov.hat_row(0)
         cov.design_times(cov.internal_times(cov.design_row(0)))      # the downdated snooping rounds
-        from multilat.network.result import result_to_json
+        from multilat.network.adjust.distance.result import result_to_json
 
         dumps_json(result_to_json(res))
 
     def propagate_small():
         """The batched Monte Carlo solver and the distance-model draws."""
-        from multilat.network.configs import small_volume
-        from multilat.network.propagate import problem_from_config, propagate
-        from multilat.network.sigma_source import DEFAULT_SIGMA_M
+        from multilat.network.synthetic.configs import small_volume
+        from multilat.network.montecarlo.propagate import problem_from_config, propagate
+        from multilat.network.model.sigma_source import DEFAULT_SIGMA_M
 
         propagate(problem_from_config(small_volume(), sigma_m=DEFAULT_SIGMA_M), trials=2000, rng=1,
                   noise="model", instrument="seed2020")      # the draws' kernels: named (never a default)
@@ -80,10 +80,10 @@ def _steps():
     def propagate_general():
         """The general layer's compiled chord steps (``general/_frozen_numba``), on the distance-only
         network of the package generator adjusted by the general layer (the kernels are the same for every kind)."""
-        from multilat.network.general import adjust_network
-        from multilat.network.general.from_tables import network_from_tables
-        from multilat.network.general.propagate import propagate as propagate_general
-        from multilat.network.synthetic import synthetic_network
+        from multilat.network.adjust.general import adjust_network
+        from multilat.network.adjust.general.from_tables import network_from_tables
+        from multilat.network.montecarlo.general.propagate import propagate as propagate_general
+        from multilat.network.synthetic.generator import synthetic_network
 
         net, options = network_from_tables(synthetic_network(1, population="well-conditioned").obs, rng=0)
         adj = adjust_network(net, options=options)

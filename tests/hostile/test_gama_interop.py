@@ -59,8 +59,8 @@ def test_gama_set_wide_instrument_height_is_applied_or_refused(ws, tmp_path):
     from multilat.cli.app import main
     from multilat.errors import MultilatError
     from multilat.inputs import read_csv_table
-    from multilat.network.files import read_observations, read_points
-    from multilat.network.interop.gama import gama_local_text, read_gama_local
+    from multilat.network.io.files import read_observations, read_points
+    from multilat.network.io.interop.gama import gama_local_text, read_gama_local
 
     text = gama_local_text(read_observations(ws / "obs.csv"), read_points(ws / "points.csv"), offsets=0.0)
     bad = text.replace('<obs from="A">', '<obs from="A" from_dh="1.500">')

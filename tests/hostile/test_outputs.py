@@ -227,7 +227,7 @@ def test_concurrent_writers_of_one_out(ws):
         if rc == 2:
             assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
     names = sorted(p.name for p in out.iterdir())
-    from multilat.network.files import table_format
+    from multilat.network.io.files import table_format
 
     base = sorted([f"observations.{table_format('observations', 'auto')}", "residuals.png", "result.json",
                    "stations.csv", "targets.csv", "top_view.png", "view_3d.png"])

@@ -8,8 +8,8 @@ import string
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from multilat.errors import MultilatError
-from multilat.network.fastio import read_observations_fast
-from multilat.network.files import read_observations
+from multilat.network.io.fastio import read_observations_fast
+from multilat.network.io.files import read_observations
 
 from conftest import assert_one_line_error
 

@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.fastio import read_observations_fast
-from multilat.network.files import read_observations
+from multilat.network.io.fastio import read_observations_fast
+from multilat.network.io.files import read_observations
 
 HEADER = "station,target,distance_m,sigma_m\n"
 ROWS = "".join(f"{s},T{t},{1.0 + 0.1 * t + 0.01 * k:.4f},5e-6\n" for k, s in enumerate("ABCD")

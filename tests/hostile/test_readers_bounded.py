@@ -154,8 +154,8 @@ def test_fast_reader_keeps_large_plain_files_and_refuses_a_bad_early_line(tmp_pa
     import numpy as np
 
     from multilat.errors import MultilatError
-    from multilat.network import fastio
-    from multilat.network.files import FAST_READ_ABOVE_BYTES, read_observations
+    from multilat.network.io import fastio
+    from multilat.network.io.files import FAST_READ_ABOVE_BYTES, read_observations
 
     rng = np.random.default_rng(7)
     n = 60_000

@@ -1,4 +1,4 @@
-"""network/screening.py: gross errors named as suspect rows before the adjustment."""
+"""network/io/screening.py: gross errors named as suspect rows before the adjustment."""
 
 from __future__ import annotations
 
@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.data import Observations
-from multilat.network.files import read_observations
-from multilat.network.screening import screen_observations, suspect_rows
+from multilat.network.model.data import Observations
+from multilat.network.io.files import read_observations
+from multilat.network.io.screening import screen_observations, suspect_rows
 
 from conftest import BASE
 
@@ -94,7 +94,7 @@ def test_cli_names_the_row_not_the_geometry(ws):
 
 
 def test_group_medians_match_numpy():
-    from multilat.network.screening import _group_medians
+    from multilat.network.io.screening import _group_medians
 
     rng = np.random.default_rng(3)
     g = rng.integers(0, 7, 200)

@@ -29,7 +29,7 @@ def _scaled(src, dst, column: int, factor: float, fmt: str = "{:.10g}"):
 
 def _big_network_csv(path, factor: float):
     """8 stations, 40 targets (15 % of the pairs unobserved), σ 5 µm, distances times ``factor``."""
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.synthetic.generator import synthetic_network
 
     o = synthetic_network(1, population="shell", n_stations=8, n_targets=40, gap_fraction=0.15).obs
     rows = [f"{o.station_ids[i]},{o.target_ids[j]},{d * factor:.10g},{s:g}"

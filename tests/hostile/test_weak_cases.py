@@ -70,7 +70,7 @@ def test_adjust_twice_same_results(ws):
     for _ in range(2):
         rc, _, err = ws.run(["adjust", "{d}/obs.csv", "--out", "{d}/res"])
         assert rc == 0, err
-    from multilat.network.files import table_format
+    from multilat.network.io.files import table_format
 
     assert sorted(p.name for p in (ws / "res").iterdir()) == sorted([
         f"observations.{table_format('observations', 'auto')}", "residuals.png", "result.json", "stations.csv",

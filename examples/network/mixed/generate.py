@@ -1,4 +1,4 @@
-"""Regenerate this example's files from multilat.network.synthetic.synthetic_network
+"""Regenerate this example's files from multilat.network.synthetic.generator.synthetic_network
 (population "mixed", seed 2028).
 
     PYTHONPATH=src python examples/network/mixed/generate.py
@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from multilat.io import write_csv_atomic
-from multilat.network.synthetic import synthetic_network
+from multilat.network.synthetic.generator import synthetic_network
 
 SEED = 2028
 

@@ -1,4 +1,4 @@
-"""Regenerate this example's files from multilat.network.synthetic.synthetic_network
+"""Regenerate this example's files from multilat.network.synthetic.generator.synthetic_network
 (population "sequential", seed 2026).
 
     PYTHONPATH=src python examples/network/sequential/generate.py
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from multilat.io import write_csv_atomic
-from multilat.network.synthetic import synthetic_network
+from multilat.network.synthetic.generator import synthetic_network
 
 SEED = 2026
 

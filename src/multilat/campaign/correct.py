@@ -119,8 +119,8 @@ class CorrectedObservations:
         return self.covariance_m2 / np.outer(s, s)
 
     def to_observations(self):
-        """The corrected distances as :class:`multilat.network.data.Observations` (for ``adjust``)."""
-        from multilat.network.data import Observations
+        """The corrected distances as :class:`multilat.network.model.data.Observations` (for ``adjust``)."""
+        from multilat.network.model.data import Observations
 
         return _make_observations(Observations, self)
 
@@ -409,7 +409,7 @@ def correct_file(path: str | os.PathLike, *, environment: str | os.PathLike | En
 def observations_from_raw(path: str | os.PathLike, *, environment=None, instrument="seed2020",
                           formula: str = "ciddor", heights=None, extrapolate: bool = False,
                           max_gap_s: float | None = None):
-    """Raw file -> :class:`multilat.network.data.Observations` with corrected distances and sigma_m.
+    """Raw file -> :class:`multilat.network.model.data.Observations` with corrected distances and sigma_m.
 
     The entry point for ``multilat adjust RAW.csv --environment ENV.csv`` (see :func:`is_raw_file`).
     """

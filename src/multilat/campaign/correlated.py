@@ -81,7 +81,7 @@ def adjustment_gain(result, *, step_m: float = 1e-6) -> np.ndarray:
 
     Parameters
     ----------
-    result : multilat.network.adjust.AdjustmentResult
+    result : multilat.network.adjust.distance.adjust.AdjustmentResult
     step_m : float
         Distance step (m); the adjustment is linear to ~step/distance, and its convergence
         tolerance (1e-10 m) is negligible beside ``step_m``.
@@ -90,7 +90,7 @@ def adjustment_gain(result, *, step_m: float = 1e-6) -> np.ndarray:
     -------
     ndarray (n, m); columns of rejected observations are zero.
     """
-    from multilat.network.adjust import adjust
+    from multilat.network.adjust.distance.adjust import adjust
 
     if not (np.isfinite(step_m) and step_m > 0):
         raise MultilatError(f"step_m must be finite and > 0, got {step_m!r}")
@@ -101,7 +101,7 @@ def adjustment_gain(result, *, step_m: float = 1e-6) -> np.ndarray:
     scales = [hid for hid, h in heads.items() if h["scale_estimated"]]
     bars = None
     if result.scale_bars:              # scale bars were observations: they are in every re-adjustment
-        from multilat.network.data import ReferenceLengths
+        from multilat.network.model.data import ReferenceLengths
 
         sb = result.scale_bars
         bars = ReferenceLengths(tuple(b["target_a"] for b in sb), tuple(b["target_b"] for b in sb),
@@ -124,7 +124,7 @@ def adjustment_gain(result, *, step_m: float = 1e-6) -> np.ndarray:
 
 
 def _subset(obs, mask):
-    from multilat.network.data import Observations
+    from multilat.network.model.data import Observations
 
     def pick(a):
         return None if a is None else np.asarray(a)[mask]
@@ -142,7 +142,7 @@ def correlated_covariance(result, obs_covariance_m2, *, step_m: float = 1e-6,
 
     Parameters
     ----------
-    result : multilat.network.adjust.AdjustmentResult
+    result : multilat.network.adjust.distance.adjust.AdjustmentResult
         An adjustment of the distances (diagonal weights).
     obs_covariance_m2 : ndarray (m, m)
         Full covariance of ``result.obs.distance_m``, m² (e.g. ``CorrectedObservations.covariance_m2``).

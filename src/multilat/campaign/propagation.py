@@ -3,14 +3,14 @@
 :func:`campaign_problem` reads an observations file or a raw-readings file exactly as ``adjust``
 does (raw readings are corrected by :func:`multilat.campaign.correct.correct_file` with the
 environment log, heights and formula), adjusts it for the nominal network, and attaches the readings
-behind the observations (:class:`multilat.network.readings.Readings`):
+behind the observations (:class:`multilat.network.montecarlo.readings.Readings`):
 
 * raw readings: the sensitivity ``J = ∂d/∂e`` of every corrected distance to every environment
   sensor's calibration error and those errors' standard uncertainties (the covariance
   ``J Σ_e Jᵀ + diag(u_model²)`` that ``adjust RAW`` propagates as ``G C Gᵀ``), so each Monte Carlo
   trial draws each sensor's error once and applies it to every reading it serves;
 * repeated readings of a pair: kept as separate observations, or averaged (``average=True``,
-  :func:`multilat.network.repeats.average_repeats`: weighted means, the scatter per pair reported)
+  :func:`multilat.network.model.repeats.average_repeats`: weighted means, the scatter per pair reported)
   with every trial averaging its drawn readings the same way.
 
 :func:`shifted_sensor_distances` redoes the whole correction with shifted sensor logs: the check of
@@ -37,11 +37,11 @@ def read_campaign(path, *, sigma_m=None, instrument="seed2020", environment=None
 
     One-line errors: raw options on an observation file, ``sigma_m`` on raw readings, a raw file
     without environment (from :func:`correct_raw`). ``sigma_source`` (a dict) is filled with where
-    the distances' σ came from (:mod:`multilat.network.sigma_source`). ``azimuth_sense`` (``ccw``,
+    the distances' σ came from (:mod:`multilat.network.model.sigma_source`). ``azimuth_sense`` (``ccw``,
     ``cw`` or None: the instrument file's, else ``ccw``): the azimuths converted to counter-clockwise
-    here, once, for every reader (:mod:`multilat.network.azimuth_sense`).
+    here, once, for every reader (:mod:`multilat.network.adjust.distance.azimuth_sense`).
     """
-    from multilat.network import azimuth_sense as _az
+    from multilat.network.adjust.distance import azimuth_sense as _az
 
     sense, _ = _az.resolve(azimuth_sense, instrument)
     obs, corrected = _read_campaign(path, sigma_m=sigma_m, instrument=instrument, environment=environment,
@@ -74,7 +74,7 @@ def _read_campaign(path, *, sigma_m, instrument, environment, heights, formula, 
         raise MultilatError(f"{path}: --environment/--heights/--extrapolate/--max-gap-s apply to raw "
                             "readings (optical_path_m or phase_rad), but this is an observation file "
                             "with distance_m")
-    from multilat.network.files import read_observations
+    from multilat.network.io.files import read_observations
 
     return read_observations(path, sigma_m=sigma_m, instrument=instrument, sigma_source=sigma_source), None
 
@@ -89,7 +89,7 @@ def campaign_problem(path, options=None, *, references=None, instrument="seed202
                      extrapolate: bool = False, max_gap_s=None, average: bool = False, pairs=None,
                      sigma_source: dict | None = None, points=None, pairs_option: str = "interpoint distance",
                      **option_fields):
-    """The :class:`multilat.network.propagate.Problem` of a campaign file (module docstring).
+    """The :class:`multilat.network.montecarlo.propagate.Problem` of a campaign file (module docstring).
 
     Parameters
     ----------
@@ -97,7 +97,7 @@ def campaign_problem(path, options=None, *, references=None, instrument="seed202
     options : NetworkOptions, optional
         The network model, as ``adjust`` takes it (datum, offsets, scales, levelled, scale bars, ...);
         its fields may also come as keywords (``datum=``, ``scales=``, ``levelled=``, ``scale_bars=``).
-    references, pairs, pairs_option : as :func:`multilat.network.propagate.problem_from_observations`
+    references, pairs, pairs_option : as :func:`multilat.network.montecarlo.propagate.problem_from_observations`
     instrument : preset name, TOML path or Instrument
     sigma_m : float, optional
         Every distance's sigma (observation files without a sigma_m column).
@@ -116,11 +116,11 @@ def campaign_problem(path, options=None, *, references=None, instrument="seed202
     (Problem, corrected) — ``corrected`` the corrected raw readings (or None).
     """
     from multilat import instrument as _inst
-    from multilat.network import propagate as pr
-    from multilat.network.readings import Readings
-    from multilat.network.repeats import average_repeats
+    from multilat.network.montecarlo import propagate as pr
+    from multilat.network.montecarlo.readings import Readings
+    from multilat.network.model.repeats import average_repeats
 
-    from multilat.network.options import NetworkOptions
+    from multilat.network.adjust.distance.options import NetworkOptions
 
     inst = _inst.load_instrument(instrument) if isinstance(instrument, (str, os.PathLike)) else instrument
     opts = NetworkOptions.of(options, **option_fields)

@@ -168,7 +168,7 @@ def large_volume_geometry():
     floor_offset_m)``; heights above the floor are ``z + floor_offset_m`` (the network helpers'
     assumption: head A 1.10 m above the floor).
     """
-    from multilat.network import configs
+    from multilat.network.synthetic import configs
 
     cfg = configs.large_volume()
     return (tuple(cfg.station_ids), np.asarray(cfg.station_xyz_m, float), tuple(cfg.target_ids),
@@ -450,7 +450,7 @@ def gradient_study(station_ids, station_xyz_m, target_ids, target_xyz_m, *, offs
     """Simulate a campaign (path-integrated truth) and correct it with each of :data:`STUDY_METHODS`.
 
     With ``adjust=True`` each set of corrected distances goes through the self-calibrating network
-    adjustment (:func:`multilat.network.adjust.adjust`, free datum, truth as initial values, no data
+    adjustment (:func:`multilat.network.adjust.distance.adjust.adjust`, free datum, truth as initial values, no data
     snooping) and the coordinates are compared with the truth.
     """
     from multilat import air
@@ -486,7 +486,7 @@ def gradient_study(station_ids, station_xyz_m, target_ids, target_xyz_m, *, offs
             rms[name], ipe[name], offe[name] = float("nan"), np.full(true_ip.shape, np.nan), \
                 np.full(true_off.shape, np.nan)
             continue
-        from multilat.network.adjust import adjust as _adjust
+        from multilat.network.adjust.distance.adjust import adjust as _adjust
 
         obs = res.to_observations()
         init = _Initial(camp.station_xyz_m, camp.target_xyz_m, true_off)

@@ -4,7 +4,7 @@ sha256) and the printed summary.
 
 JSON for summaries, tables for rows: the document carries the summaries, every point, head and
 orientation, and only the observations that matter (rejected, failing w-tests, poorly controlled;
-those of points left out before solving), with their counts (:mod:`multilat.network.result_rows`);
+those of points left out before solving), with their counts (:mod:`multilat.network.io.result_rows`);
 every observation's row is in the ``observations`` table under ``--out`` (Parquet when pyarrow is
 installed, else CSV), and in the document with ``--observations``.
 """
@@ -54,10 +54,10 @@ def table_records(paths, tables: dict) -> list[dict]:
 
 def write_out(out: Path, res, doc: dict, refs, fmt: str, inputs, *, indent: bool) -> None:
     """The ``--out`` directory, whole or not at all (:func:`multilat.io.staging_dir`): the tables
-    (:func:`multilat.network.files.result_tables`), the figures and ``result.json``, which lists each
+    (:func:`multilat.network.io.files.result_tables`), the figures and ``result.json``, which lists each
     table's name, file, format, row count and sha256 under ``tables`` (added to ``doc`` too)."""
     from multilat.io import staging_dir, write_json_atomic, write_table_atomic
-    from multilat.network.files import result_tables, table_format
+    from multilat.network.io.files import result_tables, table_format
     from multilat.report.network_figures import save_figures
 
     tables = result_tables(res, references=refs)
@@ -90,8 +90,8 @@ def adjust_document(res, refs, obs, opts, instrument, sigma_note, vc, corrected,
     default-σ warning, variance components, the sensors' correlations and the repeats' scatter where
     they apply. ``listing``: "flagged" (the observations that matter) or "all" (``--observations``);
     ``obs``: the observations adjusted (those of points left out before solving are listed)."""
-    from multilat.network import azimuth_sense as _az
-    from multilat.network.result import result_to_json
+    from multilat.network.adjust.distance import azimuth_sense as _az
+    from multilat.network.adjust.distance.result import result_to_json
     from multilat.vocabulary import stamp
 
     doc = stamp(result_to_json(res, refs, observations=listing, given=obs), "adjust")
@@ -163,7 +163,7 @@ def print_summary(res, doc, out):
         for line in test_lines(res):
             console.print(line, markup=False)
     if res.sigma_source:
-        from multilat.network.sigma_source import describe
+        from multilat.network.model.sigma_source import describe
 
         console.print("  " + describe(res.sigma_source), markup=False)
     for line in angle_lines(res):

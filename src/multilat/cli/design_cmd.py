@@ -60,7 +60,7 @@ def design_document(run) -> dict:
 def poorly_controlled_document(run) -> dict:
     """The ``poorly_controlled`` block: the thresholds and the targets owning a poorly controlled
     distance (:func:`~multilat.network.design.config.poorly_controlled_targets`)."""
-    from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
+    from multilat.network.adjust.distance.reliability import MDB_LIMIT_SIGMA, R_MIN
 
     return {"r_min": R_MIN, "mdb_limit_sigma": MDB_LIMIT_SIGMA, "n_targets": len(run.poorly_controlled),
             "targets": list(run.poorly_controlled)}
@@ -128,7 +128,7 @@ def design_cmd(
         checks.memory(need, f"{config}: targets.grid x heads.count")
     heads = None
     if evaluate is not None:
-        from multilat.network.files import read_points
+        from multilat.network.io.files import read_points
 
         heads = read_points(evaluate)
     if noise is not None and noise not in ("gaussian", "model"):

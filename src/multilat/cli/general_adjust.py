@@ -1,9 +1,9 @@
 """``multilat adjust NET.xml`` and ``multilat adjust obs.csv --model general``: the general network
-layer (:mod:`multilat.network.general`) from the command line: parse, call, print.
+layer (:mod:`multilat.network.adjust.general`) from the command line: parse, call, print.
 
 Reached from the ``adjust`` command (:mod:`multilat.cli.network_cmd`) when its input is a gama-local
 file (suffix ``.xml`` / ``.gkf``, or a ``<gama-local>`` root element), or with ``--model general``
-on multilat's own observation CSV (:mod:`multilat.network.general.from_tables`). For a gama-local
+on multilat's own observation CSV (:mod:`multilat.network.adjust.general.from_tables`). For a gama-local
 file the options that apply are ``--json``, ``--out DIR`` with ``--tables``, ``--observations``
 (:mod:`multilat.cli.general_output`), ``--report FILE.html``
 (:mod:`multilat.report.general_sections`), ``--alpha``, ``--variance-factor``, ``--test-method``,
@@ -50,7 +50,7 @@ APPLIES_CSV = APPLIES + ("points", "datum", "sigma_um", "instrument", "fix_offse
                          "environment", "heights", "formula", "extrapolate", "max_gap_s")   # raw readings
 #: the test procedures' names in the summary (statistics.test_levels)
 _METHOD_NAMES = {"b-method": "B-method", "sidak": "Šidák", "fixed": "fixed α"}
-#: ``--backend``: the general layer's back end (:attr:`multilat.network.general.adjust.AdjustOptions.backend`)
+#: ``--backend``: the general layer's back end (:attr:`multilat.network.adjust.general.adjust.AdjustOptions.backend`)
 BACKENDS = ("auto", "dense", "sparse")
 #: ``--model``: ``auto`` (the default: the distance-only self-calibrating path, and the general layer
 #: for a network its counting rules refuse, said in a warning), the distance-only path alone, or the
@@ -138,7 +138,7 @@ def _names(ids, limit: int = 5) -> str:
     return ", ".join(ids[:limit]) + (f" and {len(ids) - limit} more" if len(ids) > limit else "")
 
 
-#: the distance path's warnings of a point left out (:func:`multilat.network.adjust.adjust`)
+#: the distance path's warnings of a point left out (:func:`multilat.network.adjust.distance.adjust.adjust`)
 _LEFT_OUT = re.compile(r"^(target|station) '(.+?)' left out: ")
 
 
@@ -170,10 +170,10 @@ def _general_takes(obs, backend: str | None = None) -> bool:
     """Whether the general layer's back end takes a network of ``obs``'s size: its free unknowns at
     most (3 per point, one constant per head, three angles per station with angles) within the limit of
     the back end chosen (``backend``; None: the command's ``--backend``): the dense one's
-    :data:`~multilat.network.general.adjust.MAX_DENSE_UNKNOWNS` when it is forced or ``auto`` picks it,
-    else the sparse one's reduced system (:data:`~multilat.network.general.sparse.MAX_REDUCED`): the
+    :data:`~multilat.network.adjust.general.adjust.MAX_DENSE_UNKNOWNS` when it is forced or ``auto`` picks it,
+    else the sparse one's reduced system (:data:`~multilat.network.adjust.general.sparse.MAX_REDUCED`): the
     unknowns less the targets', which it eliminates (no row joins two targets of a tracker network)."""
-    from multilat.network.general.adjust import MAX_DENSE_UNKNOWNS, SPARSE_ABOVE
+    from multilat.network.adjust.general.adjust import MAX_DENSE_UNKNOWNS, SPARSE_ABOVE
 
     if backend is None:
         from multilat.cli.report_opt import current_context
@@ -184,7 +184,7 @@ def _general_takes(obs, backend: str | None = None) -> bool:
     n = 3 * (obs.n_stations + obs.n_targets) + len(obs.head_ids) + 3 * n_angle
     if backend == "dense" or (backend == "auto" and n <= SPARSE_ABOVE):
         return n <= MAX_DENSE_UNKNOWNS
-    from multilat.network.general.sparse import MAX_REDUCED
+    from multilat.network.adjust.general.sparse import MAX_REDUCED
 
     return n - 3 * obs.n_targets <= MAX_REDUCED
 
@@ -193,26 +193,26 @@ def polar_switch(obs, opts, points=None) -> CountRuleRefusal | None:
     """``--model auto``, decided before any adjustment (each network is adjusted once): the
     :class:`CountRuleRefusal` for :func:`fall_back` when the distance path would leave out, by its
     counting rule, targets that carry a polar reading (:func:`polar_left_out`), every option given
-    applies to the general layer (a ``--datum 321`` it can hold: :func:`~multilat.network.general.
+    applies to the general layer (a ``--datum 321`` it can hold: :func:`~multilat.network.adjust.general.
     from_tables.check_321`) and its back end takes the network's size (:func:`_general_takes`); else
     None (the distance path adjusts it). The rule is the distance path's own first pass,
-    :func:`multilat.network.exclusion.exclude_weak_points` on the tables, with its held offsets,
-    scales and control targets (``opts``: the prepared :class:`~multilat.network.options.NetworkOptions`,
+    :func:`multilat.network.adjust.distance.exclusion.exclude_weak_points` on the tables, with its held offsets,
+    scales and control targets (``opts``: the prepared :class:`~multilat.network.adjust.distance.options.NetworkOptions`,
     ``points``: the ``--points`` table). Networks the distance path refuses outright (fewer than 3
     stations, ``--strict``) keep that route: the refusal comes before any solve."""
     if (obs.sigma_azimuth_rad is None or obs.sigma_elevation_rad is None or obs.n_stations < 3 or opts.strict
             or not all(n in APPLIES_CSV for n in given_options()) or not _general_takes(obs)):
         return None
-    from multilat.network.adjust import _fixed_offsets, _scale_flags
-    from multilat.network.datum import parse_datum
-    from multilat.network.exclusion import exclude_weak_points
-    from multilat.network.fit import control_ids
+    from multilat.network.adjust.distance.adjust import _fixed_offsets, _scale_flags
+    from multilat.network.model.datum import parse_datum
+    from multilat.network.adjust.distance.exclusion import exclude_weak_points
+    from multilat.network.adjust.distance.fit import control_ids
 
     datum = parse_datum(opts.datum)
     if datum.kind == "control" and points is None:
         return None
     if datum.kind == "321":
-        from multilat.network.general.from_tables import check_321
+        from multilat.network.adjust.general.from_tables import check_321
 
         try:
             check_321(obs, str(opts.datum))
@@ -335,7 +335,7 @@ def run(**params) -> None:
                  alpha_family=params.get("alpha_family", 0.01), snooping=params.get("snooping", True),
                  variance_components=params.get("variance_components"), backend=params.get("backend", "auto"))
     from multilat.cli.app import progress
-    from multilat.network.bounds import reporting
+    from multilat.network.adjust.approximate.bounds import reporting
 
     with progress() as p:
         task = p.add_task(f"adjusting {path.name}", total=None)
@@ -354,7 +354,7 @@ def run(**params) -> None:
         warnings.warn(f"point {e['id']!r} left out: {e['reason']} ({e['n_obs']} observation row(s) removed)",
                       stacklevel=2)
     from multilat.cli.general_output import print_summary, write_out, write_report
-    from multilat.network.general.report import list_observations
+    from multilat.network.adjust.general.report import list_observations
 
     full, doc = doc, list_observations(doc, listing)
     if out is not None:
@@ -373,8 +373,8 @@ def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_glo
             variance_components: str | None = None, backend: str = "auto"):
     """Read, adjust (undetermined points left out unless ``strict``), variance components if asked,
     data snooping (the default, as the distance path), statistics: (doc, adjustment, stats)."""
-    from multilat.network.general import read_gama_input
-    from multilat.network.general.files import is_network_dir, read_network_dir
+    from multilat.network.adjust.general import read_gama_input
+    from multilat.network.io.general_files import is_network_dir, read_network_dir
 
     if is_network_dir(path):                           # `multilat adjust DIR` (multilat's files)
         src = {"kind": "file", "file": str(path), "description": "observations.csv's sigma column and the "
@@ -391,15 +391,15 @@ def compute(path, *, alpha: float, variance_factor: str, strict: bool, alpha_glo
 def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_global, fmt="gama-local",
             sigma_source=None, method=None, alpha_family=0.01, snooping=True, variance_components=None,
             backend="auto"):
-    from multilat.network.general import adjust_network, to_json
-    from multilat.network.general.snooping import snoop
-    from multilat.network.general.variance import estimate
+    from multilat.network.adjust.general import adjust_network, to_json
+    from multilat.network.adjust.general.snooping import snoop
+    from multilat.network.adjust.general.variance import estimate
     from multilat.vocabulary import stamp
 
     if backend != "auto":                    # --backend dense|sparse (AdjustOptions.backend)
         import dataclasses
 
-        from multilat.network.general.adjust import AdjustOptions
+        from multilat.network.adjust.general.adjust import AdjustOptions
 
         options = AdjustOptions(backend=backend) if options is None else dataclasses.replace(options, backend=backend)
     adj = adjust_network(net, options=options, strict=strict)
@@ -412,7 +412,7 @@ def _finish(net, options, source, *, alpha, variance_factor, strict, alpha_globa
                alpha_global=alpha_global, alpha_family=alpha_family, snooping=snooping, adjustment=adj)
     adj, stats = sn.adjustment, sn.stats
     doc = to_json(adj, stats, source=source, snooping=sn, variance=vcomp)
-    from multilat.network.general.run import false_minimum_warning
+    from multilat.network.adjust.general.run import false_minimum_warning
 
     doc = {"model": "general", **doc, "format": fmt, "warnings": [w for w in (false_minimum_warning(adj),) if w]}
     if sigma_source is not None:
@@ -427,9 +427,9 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
     layer: (doc, adjustment, stats). ``params``: the adjust command's parameters."""
     from multilat.cli import checks
     from multilat.cli.network_cmd import parse_fixed_offsets, with_levelled
-    from multilat.network.files import read_points, read_reference_lengths
-    from multilat.network.general.from_tables import network_from_tables
-    from multilat.network.sigma_source import default_warning, describe
+    from multilat.network.io.files import read_points, read_reference_lengths
+    from multilat.network.adjust.general.from_tables import network_from_tables
+    from multilat.network.model.sigma_source import default_warning, describe
 
     path = Path(params["observations"])
     seed = params.get("seed", 0)
@@ -462,7 +462,7 @@ def compute_tables(params: dict, *, alpha: float, variance_factor: str, strict: 
     net, options = build(obs)
     src_doc = {"kind": str(src.get("kind", "file column")), "file": str(path),
                "description": describe(src) if src else "the file's sigma_m column"}
-    from multilat.network import azimuth_sense as _az
+    from multilat.network.adjust.distance import azimuth_sense as _az
 
     sense = _az.resolve(params.get("azimuth_sense"), params.get("instrument"))
     tests = dict(alpha=alpha, variance_factor=variance_factor, alpha_global=alpha_global, method=method,
@@ -527,9 +527,9 @@ def _sense_hint(obs, sense, build, sigma0, strict, tests) -> str | None:
     """On a network with azimuth observations whose sense nobody declared (``sense``: the resolved
     sense and its source), after an implausible adjustment (refused: ``sigma0`` None; snooping refused
     or the global test failed: its σ0), the hint naming ``--azimuth-sense cw`` when the azimuths
-    negated fit clearly better (:func:`multilat.network.general.run.sense_hint`; one adjustment)."""
-    from multilat.network import azimuth_sense as _az
-    from multilat.network.general.run import sense_hint
+    negated fit clearly better (:func:`multilat.network.adjust.general.run.sense_hint`; one adjustment)."""
+    from multilat.network.adjust.distance import azimuth_sense as _az
+    from multilat.network.adjust.general.run import sense_hint
 
     if sense[1] != _az.UNDECLARED or obs.sigma_azimuth_rad is None or not np.isfinite(obs.sigma_azimuth_rad).any():
         return None
@@ -545,8 +545,8 @@ def _sense_hint(obs, sense, build, sigma0, strict, tests) -> str | None:
 def _datum_321_words(doc: dict, datum: str) -> None:
     """``--datum 321:A,B,C``: the JSON's ``datum`` and ``frame`` in the distance path's words (the
     general layer holds the 6 coordinates as partly fixed points: :func:`.from_tables.in_frame_321`)."""
-    from multilat.network.datum import parse_datum
-    from multilat.network.frame_words import frame_words
+    from multilat.network.model.datum import parse_datum
+    from multilat.network.model.frame_words import frame_words
 
     d = parse_datum(datum)
     if d.kind == "321":

@@ -1,5 +1,5 @@
 """``multilat design --evaluate NET.xml`` (or ``multilat design NET.xml``): the pre-analysis of a planned
-general network (:mod:`multilat.network.general.preanalysis`) from the command line: parse, call, print.
+general network (:mod:`multilat.network.design.general_preanalysis`) from the command line: parse, call, print.
 
 The input is a gama-local file or a directory of multilat's network files (``docs/general-files.md``)
 whose points carry the *planned* coordinates of every point and whose observations carry their σ; the
@@ -72,9 +72,9 @@ def run(**params) -> None:
 
 def compute(path: Path):
     """Read the planned network and predict it: (document, GeneralPrediction)."""
-    from multilat.network.general import read_gama_input
-    from multilat.network.general.files import is_network_dir, read_network_dir
-    from multilat.network.general.preanalysis import predict
+    from multilat.network.adjust.general import read_gama_input
+    from multilat.network.io.general_files import is_network_dir, read_network_dir
+    from multilat.network.design.general_preanalysis import predict
 
     net = read_network_dir(path) if is_network_dir(path) else read_gama_input(path)
     try:
@@ -85,8 +85,8 @@ def compute(path: Path):
 
 
 def document(pred, source: str, fmt: str) -> dict:
-    """The ``multilat.design-general/1`` document of a :class:`~multilat.network.general.preanalysis.GeneralPrediction`."""
-    from multilat.network.general.report import datum_words, observation_rows, status_words
+    """The ``multilat.design-general/1`` document of a :class:`~multilat.network.design.general_preanalysis.GeneralPrediction`."""
+    from multilat.network.adjust.general.report import datum_words, observation_rows, status_words
 
     res, st, sysm = pred.result, pred.stats, pred.system
     pts = sysm.network.points

@@ -4,7 +4,7 @@
 The rule of the distance path's ``multilat.adjust/2`` (:mod:`multilat.cli.adjust_output`): the document
 carries the summaries, every point and parameter, and only the observations that matter (rejected,
 failing w-tests, poorly controlled), with ``observation_counts``
-(:func:`multilat.network.general.report.list_observations`); every row is in the ``observations``
+(:func:`multilat.network.adjust.general.report.list_observations`); every row is in the ``observations``
 table under ``--out`` (Parquet when pyarrow is installed, else CSV; ``--tables``), named with its row
 count and sha256 in ``result.json``'s ``tables``, and in the document with ``--observations``.
 The summary reads the adjustment's full document (every row).
@@ -22,13 +22,13 @@ __all__ = ["write_out", "write_report", "print_summary", "snooping_lines", "reli
 
 def write_out(out, inputs, doc, full: dict, fmt: str = "auto") -> None:
     """``result.json``, ``points.csv`` and the ``observations`` table (every row of ``full``, the
-    adjustment's document before listing: :func:`multilat.network.general.report.observation_table`;
+    adjustment's document before listing: :func:`multilat.network.adjust.general.report.observation_table`;
     ``fmt``: ``--tables``) into ``out``, all or nothing (:func:`multilat.io.staging_dir`); the table's
     name, file, format, row count and sha256 go to ``doc["tables"]`` (in ``result.json`` too)."""
     from multilat.cli.adjust_output import table_records
     from multilat.io import staging_dir, write_csv_atomic, write_json_atomic, write_table_atomic
-    from multilat.network.files import table_format
-    from multilat.network.general.report import observation_table
+    from multilat.network.io.files import table_format
+    from multilat.network.adjust.general.report import observation_table
 
     tables = {"observations": observation_table(full)}
     with staging_dir(out, inputs=list(inputs) if isinstance(inputs, (list, tuple)) else [inputs]) as tmp:
@@ -44,7 +44,7 @@ def write_out(out, inputs, doc, full: dict, fmt: str = "auto") -> None:
 def write_report(path, doc: dict, full: dict, adj, applies) -> None:
     """``--report FILE.html`` (nothing when ``path`` is None): the page from the document the command
     prints (``doc``, listed) and every observation row of the result (``full``'s rows as the
-    ``observations`` table has them, :func:`multilat.network.general.report.list_observations` with
+    ``observations`` table has them, :func:`multilat.network.adjust.general.report.list_observations` with
     ``"all"``), so its numbers are the JSON's with or without ``--observations``
     (:mod:`multilat.report.general_sections`)."""
     if path is None:
@@ -52,7 +52,7 @@ def write_report(path, doc: dict, full: dict, adj, applies) -> None:
     import functools
 
     from multilat.cli import report_opt
-    from multilat.network.general.report import list_observations
+    from multilat.network.adjust.general.report import list_observations
     from multilat.report.general_sections import build_report
 
     rows = list_observations(full, "all")["observations"]
@@ -64,7 +64,7 @@ def print_summary(doc, adj, stats, out) -> None:
     from rich.table import Table
 
     from multilat.cli.app import console
-    from multilat.network.general.report import constant_words, zero_redundancy_points
+    from multilat.network.adjust.general.report import constant_words, zero_redundancy_points
 
     say = lambda s: console.print(s, markup=False)  # noqa: E731
     kinds = {}
@@ -172,7 +172,7 @@ def not_computed_line(doc) -> list[str]:
         return []
     import importlib
 
-    bound = importlib.import_module("multilat.network.general.adjust").EXTERNAL_MAX_WORK
+    bound = importlib.import_module("multilat.network.adjust.general.adjust").EXTERNAL_MAX_WORK
     return [f"  not computed: {', '.join(doc['not_computed'])} (the {doc['backend']} back end leaves it out above "
             f"{bound:.0e} rows x unknowns, {doc['n_obs']} rows here: it needs Q Jᵀ for every row; its JSON fields "
             "are null)"]

@@ -1,5 +1,5 @@
 """``multilat propagate NET.xml`` and ``multilat propagate obs.csv --model general``: the Monte Carlo
-of the general network layer (:mod:`multilat.network.general.propagate`) from the command line.
+of the general network layer (:mod:`multilat.network.montecarlo.general.propagate`) from the command line.
 
 Reached from the ``propagate`` command (:mod:`multilat.cli.propagate_cmd`) when its input is a
 gama-local file or ``--model general`` is given (:func:`multilat.cli.general_adjust.wants_general`,
@@ -47,12 +47,12 @@ def run(**params) -> None:
     from multilat.cli import checks
     from multilat.cli.app import console, emit_json, progress
     from multilat.cli.general_adjust import _given_options, is_general_input
-    from multilat.network.general.propagate import propagate
+    from multilat.network.montecarlo.general.propagate import propagate
     from multilat.parallel import map_from_options
 
     params.pop("general_propagate", None)             # the hook's own imports, passed with locals()
     params.pop("general_adjust", None)
-    from multilat.network.propagate import noise_choice
+    from multilat.network.montecarlo.propagate import noise_choice
 
     path, out = Path(params["source"]), params.get("out")
     xml = is_general_input(path)
@@ -100,8 +100,8 @@ def run(**params) -> None:
 
 
 def _adjusted(path: Path, xml: bool, params: dict):
-    """The adjusted network (:class:`~multilat.network.general.run.NetworkAdjustment`) and its format."""
-    from multilat.network.general import adjust_network, read_gama_input
+    """The adjusted network (:class:`~multilat.network.adjust.general.run.NetworkAdjustment`) and its format."""
+    from multilat.network.adjust.general import adjust_network, read_gama_input
 
     if xml:
         return adjust_network(read_gama_input(path)), "gama-local"

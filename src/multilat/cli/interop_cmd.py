@@ -55,8 +55,8 @@ def export_command(
     """Write the network for GNU Gama, JAG3D or Star*Net. What a format cannot carry (a per-station
     additive offset in Gama and Star*Net) is applied as a fixed correction or refused."""
     from multilat.cli.network_cmd import parse_fixed_offsets, with_levelled
-    from multilat.network.files import read_observations, read_points
-    from multilat.network.interop.common import read_result_dir
+    from multilat.network.io.files import read_observations, read_points
+    from multilat.network.io.interop.common import read_result_dir
 
     if fmt not in EXPORT_FORMATS:
         raise MultilatError(f"export FORMAT must be one of {', '.join(EXPORT_FORMATS)}, got {fmt!r}")
@@ -68,7 +68,7 @@ def export_command(
     offsets, scales = None, None
     pts = read_points(points) if points is not None else None
     if result is not None:
-        from multilat.network.interop.angles import refuse_tilted_result
+        from multilat.network.io.interop.angles import refuse_tilted_result
 
         pts, offsets, scales = read_result_dir(result)
         refuse_tilted_result(obs, result, fmt)
@@ -85,25 +85,25 @@ def export_command(
                                        if result else [])
     written = [out]
     if fmt == "gama":
-        from multilat.network.interop.gama import write_gama_local
+        from multilat.network.io.interop.gama import write_gama_local
 
         check_not_input(out, inputs)
         write_gama_local(out, obs, pts if pts is not None else _no_points(), offsets=offsets,
                          fixed=fixed, description=f"multilat export of {observations.name}", scales=scales)
     elif fmt == "jag3d":
-        from multilat.network.interop.jag3d import write_jag3d
+        from multilat.network.io.interop.jag3d import write_jag3d
 
         if fixed:
             raise MultilatError("--fix: JAG3D's point type (reference/datum/new) is chosen on its "
                                 "import, not in the file")
-        from multilat.network.interop.jag3d import jag3d_files
+        from multilat.network.io.interop.jag3d import jag3d_files
 
         p_out = out.with_name(out.stem + "-points" + (out.suffix or ".txt"))
         for w in [*jag3d_files(out, obs), p_out]:
             check_not_input(w, inputs)
         written = write_jag3d(p_out, out, obs, pts, offsets=offsets, scales=scales) + [p_out]
     else:
-        from multilat.network.interop.starnet import write_starnet
+        from multilat.network.io.interop.starnet import write_starnet
 
         check_not_input(out, inputs)
         write_starnet(out, obs, pts, offsets=offsets, fixed=fixed, scales=scales)
@@ -127,7 +127,7 @@ def _n_angles(obs) -> int:
 def _no_points():
     import numpy as np
 
-    from multilat.network.data import Points
+    from multilat.network.model.data import Points
 
     return Points((), np.zeros((0, 3)))
 
@@ -152,7 +152,7 @@ def import_command(
     """Read a network (or gama-local's adjusted result) from GNU Gama, JAG3D or Star*Net files into
     multilat's CSVs (`multilat adjust OUT/distances.csv --points OUT/points.csv`)."""
     from multilat.io import staging_dir, write_csv_atomic, write_json_atomic
-    from multilat.network.files import write_observations
+    from multilat.network.io.files import write_observations
 
     if fmt not in IMPORT_FORMATS:
         raise MultilatError(f"import FORMAT must be one of {', '.join(IMPORT_FORMATS)}, got {fmt!r}")
@@ -164,7 +164,7 @@ def import_command(
     if (points_file is not None) != (fmt == "jag3d"):
         raise MultilatError("--points-file goes with jag3d (and jag3d needs it)")
     if fmt == "gama-adjusted":
-        from multilat.network.interop.gama_adjusted import read_gama_adjustment
+        from multilat.network.io.interop.gama_adjusted import read_gama_adjustment
 
         g = read_gama_adjustment(source)
         doc = {"format": fmt, "dof": g.dof, "defect": g.defect, "sigma0": g.sigma_aposteriori,
@@ -203,11 +203,11 @@ def import_command(
     if fmt == "gama":
         return _import_gama(source, out, as_json)       # the general network's files (docs/interop.md)
     if fmt == "jag3d":
-        from multilat.network.interop.jag3d import read_jag3d
+        from multilat.network.io.interop.jag3d import read_jag3d
 
         net = read_jag3d(points_file, sources, sigma_m=sig)
     else:
-        from multilat.network.interop.starnet import read_starnet
+        from multilat.network.io.interop.starnet import read_starnet
 
         net = read_starnet(source, sigma_m=sig)
     o = net.obs
@@ -233,9 +233,9 @@ def import_command(
 def _restored_general(old, source: Path):
     """The general network of a multilat export read back with its model restored (``old``: the
     interop reader's network): one instrument per head with its offset estimated, levelled stations'
-    angles, the file's fixed points held (:func:`~multilat.network.general.from_tables.network_from_tables`,
+    angles, the file's fixed points held (:func:`~multilat.network.adjust.general.from_tables.network_from_tables`,
     the mapping ``adjust obs.csv --model general`` uses)."""
-    from multilat.network.general.from_tables import network_from_tables
+    from multilat.network.adjust.general.from_tables import network_from_tables
 
     import dataclasses
 
@@ -257,11 +257,11 @@ def _import_gama(source: Path, out: Path, as_json: bool) -> None:
     import numpy as np
 
     from multilat.io import staging_dir
-    from multilat.network.files import write_observations
-    from multilat.network.general import FIXED, read_gama_input
-    from multilat.network.general.files import write_network_files
-    from multilat.network.general.kinds import KINDS
-    from multilat.network.interop.gama import read_gama_local
+    from multilat.network.io.files import write_observations
+    from multilat.network.adjust.general import FIXED, read_gama_input
+    from multilat.network.io.general_files import write_network_files
+    from multilat.network.model.kinds import KINDS
+    from multilat.network.io.interop.gama import read_gama_local
 
     net = read_gama_input(source)
     try:

@@ -11,7 +11,7 @@ from multilat.cli.app import app, progress
 from multilat.errors import MultilatError
 from multilat.cli import checks, report_opt
 from multilat.io import check_output_dir
-from multilat.network.azimuth_sense import HELP as AZIMUTH_SENSE_HELP
+from multilat.network.adjust.distance.azimuth_sense import HELP as AZIMUTH_SENSE_HELP
 
 
 #: The CLI parameters of ``adjust`` (and ``propagate``) that are fields of :class:`NetworkOptions`
@@ -24,11 +24,11 @@ _MODEL_FIELDS = ("datum", "cost", "scales", "fixed_scale", "levelled", "distance
 
 
 def model_options(params: dict):
-    """The :class:`~multilat.network.options.NetworkOptions` of a command's parameters (``locals()``
+    """The :class:`~multilat.network.adjust.distance.options.NetworkOptions` of a command's parameters (``locals()``
     of ``adjust`` or ``propagate``; the ones a command lacks keep their defaults), validated before any
     file is read: a bad value is one line naming the option. ``--fix-offsets-um`` names heads of the
     file: added by :func:`with_fixed_offsets` once it is read."""
-    from multilat.network.options import NetworkOptions
+    from multilat.network.adjust.distance.options import NetworkOptions
 
     fields = {_CLI_FIELDS.get(k, k): params[k] for k in _MODEL_FIELDS if params.get(k) is not None}
     if params.get("sigma_um") is not None:
@@ -50,7 +50,7 @@ def with_levelled(obs, levelled: str | None):
     """``obs`` with the stations of ``--levelled ID,ID,...`` levelled too (one-line error for an unknown id)."""
     if not levelled:
         return obs
-    from multilat.network.options import NetworkOptions
+    from multilat.network.adjust.distance.options import NetworkOptions
 
     return NetworkOptions.from_cli(levelled=levelled).prepare(obs)
 
@@ -236,7 +236,7 @@ def adjust_command(
     given = {k: v for k, v in locals().items() if k not in ("all_observations", "adjust_output")}
     if general_adjust.wants_general(observations, model):  # --model general, or a gama-local XML input
         return general_adjust.run(**given)
-    from multilat.network.files import read_points, read_reference_lengths
+    from multilat.network.io.files import read_points, read_reference_lengths
 
     if backend != "auto":
         raise MultilatError("--backend applies to the general model (--model general); the distance path's "
@@ -260,14 +260,14 @@ def adjust_command(
     _check_instrument_used(instrument, observations, obs, src, corrected)
     import warnings
 
-    from multilat.network.sigma_source import default_warning
+    from multilat.network.model.sigma_source import default_warning
 
     sigma_note = default_warning(src, observations)      # the default σ is said, once
     if sigma_note:
         warnings.warn(sigma_note, UserWarning, stacklevel=1)
     averaged = None
     if average_repeats:
-        from multilat.network.repeats import average_repeats as _average
+        from multilat.network.model.repeats import average_repeats as _average
 
         averaged = _average(obs)
         obs = averaged.obs
@@ -308,8 +308,8 @@ def adjust_command(
 
 
 def _mirror_hint(obs, sigma0, opts, data, instrument):
-    """:func:`multilat.network.azimuth_sense.mirror_hint` when the sense was not declared (else None)."""
-    from multilat.network import azimuth_sense as _az
+    """:func:`multilat.network.adjust.distance.azimuth_sense.mirror_hint` when the sense was not declared (else None)."""
+    from multilat.network.adjust.distance import azimuth_sense as _az
 
     if opts.azimuth_sense is not None or _az.resolve(None, instrument)[1] != _az.UNDECLARED:
         return None
@@ -323,9 +323,9 @@ def _adjust_with_progress(obs, opts, data, *, auto: bool, files):
 
     from multilat.cli import general_adjust
     from multilat.errors import printable
-    from multilat.network.adjust import adjust
-    from multilat.network.bounds import reporting
-    from multilat.network.unit_slip import UnitSlipError
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.adjust.approximate.bounds import reporting
+    from multilat.network.adjust.distance.unit_slip import UnitSlipError
 
     vc = None
     with progress() as p, general_adjust.refusal_hint(obs, auto=auto):  # count-rule refusals: --model general
@@ -340,7 +340,7 @@ def _adjust_with_progress(obs, opts, data, *, auto: bool, files):
                 if opts.variance_components is None:
                     res = adjust(obs, opts, **data)
                 else:
-                    from multilat.network.variance_components import estimate_variance_components
+                    from multilat.network.adjust.distance.variance_components import estimate_variance_components
 
                     vc = estimate_variance_components(obs, grouping=opts.variance_components, options=opts,
                                                       snooping=opts.snooping, **data)
@@ -352,7 +352,7 @@ def _adjust_with_progress(obs, opts, data, *, auto: bool, files):
 
 def _check_tests(alpha, alpha_global, test_method, variance_factor, mdb_limit_sigma, alpha_family=0.01):
     """The test options, before any work (the checks of :class:`NetworkOptions`)."""
-    from multilat.network.options import NetworkOptions
+    from multilat.network.adjust.distance.options import NetworkOptions
 
     NetworkOptions.from_cli(alpha=alpha, alpha_global=alpha_global, test_method=test_method,
                             variance_factor=variance_factor, mdb_limit_sigma=mdb_limit_sigma,

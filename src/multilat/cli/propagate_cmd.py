@@ -12,7 +12,7 @@ from rich.table import Table
 from multilat.cli import checks, report_opt
 from multilat.cli.app import app, console, emit_json, progress
 from multilat.errors import MultilatError
-from multilat.network.azimuth_sense import HELP as AZIMUTH_SENSE_HELP
+from multilat.network.adjust.distance.azimuth_sense import HELP as AZIMUTH_SENSE_HELP
 
 BUILTIN = ("small-volume", "large-volume")
 
@@ -25,14 +25,14 @@ def load_problem(source: str, opts, *, noise: str | None, instrument: str | None
     """``(problem, noise)``: the propagation problem for ``source`` — a built-in configuration name, or
     what ``adjust`` reads (an observations CSV, or raw readings with their environment log; repeated
     readings kept or averaged), :func:`multilat.campaign.propagation.campaign_problem` — with the network
-    model ``opts`` (:class:`~multilat.network.options.NetworkOptions`, as ``adjust`` takes it), and the
-    noise drawn (:func:`multilat.network.propagate.noise_choice`: the distance model only with an
+    model ``opts`` (:class:`~multilat.network.adjust.distance.options.NetworkOptions`, as ``adjust`` takes it), and the
+    noise drawn (:func:`multilat.network.montecarlo.propagate.noise_choice`: the distance model only with an
     instrument named; otherwise gaussian with the σ the file gives). A file whose σ would come from an
     instrument nobody named (no ``sigma_m`` column, no ``--sigma-um``; raw readings) is refused in one
     line naming the options. ``sigma_source`` (a dict) is filled with where the weights' σ came from."""
     from multilat import instrument as _inst
-    from multilat.network import propagate as pr
-    from multilat.network import sigma_source as ss
+    from multilat.network.montecarlo import propagate as pr
+    from multilat.network.model import sigma_source as ss
 
     src = {} if sigma_source is None else sigma_source
     noise, _ = pr.noise_choice(noise, instrument, cli=True)
@@ -47,9 +47,9 @@ def load_problem(source: str, opts, *, noise: str | None, instrument: str | None
             raise MultilatError(f"{used[0]}: the model and file options apply to a campaign file, not to the "
                                 f"built-in {source!r}")
         try:
-            from multilat.network import configs
+            from multilat.network.synthetic import configs
         except ImportError:
-            raise MultilatError("built-in configurations are not available (multilat.network.configs)") from None
+            raise MultilatError("built-in configurations are not available (multilat.network.synthetic.configs)") from None
         cfg = configs.small_volume() if source == "small-volume" else configs.large_volume()
         sigma = None if noise == "model" else (sigma_um * 1e-6 if sigma_um else ss.DEFAULT_SIGMA_M)
         src.update(ss.distance_model(cfg.station_ids, inst) if sigma is None else
@@ -59,7 +59,7 @@ def load_problem(source: str, opts, *, noise: str | None, instrument: str | None
     from multilat.campaign.propagation import campaign_problem
     from multilat.campaign.raw import is_raw_file
     from multilat.cli.network_cmd import with_fixed_offsets
-    from multilat.network.files import read_points, read_reference_lengths
+    from multilat.network.io.files import read_points, read_reference_lengths
 
     if not Path(source).exists():
         raise MultilatError(f"{source}: no such file (and not a built-in: {', '.join(BUILTIN)})")
@@ -209,7 +209,7 @@ def propagate_cmd(
     from multilat.cli import general_adjust, general_propagate
     if general_adjust.wants_general(source, model):     # --model general, or a gama-local XML input
         return general_propagate.run(**locals())
-    from multilat.network.propagate import propagate
+    from multilat.network.montecarlo.propagate import propagate
     from multilat.parallel import map_from_options
 
     checks.sigma_um(sigma_um)
@@ -249,7 +249,7 @@ def propagate_cmd(
         doc["readings"] = problem.readings.to_json()
     doc["sigma_source"] = src
     if source not in BUILTIN and "azimuth_rad" in (_header(source) or ()):
-        from multilat.network.azimuth_sense import as_json, resolve
+        from multilat.network.adjust.distance.azimuth_sense import as_json, resolve
 
         doc["azimuth_sense"] = as_json(*resolve(opts.azimuth_sense, instrument))
     doc["noise_source"] = ({"kind": "distance model", "instrument": str(instrument)} if noise == "model"
@@ -316,7 +316,7 @@ def _print(res, doc, out) -> None:
                   f"Gauss-Newton), noise={doc['noise']}, {doc['elapsed_s']:.1f} s")
     console.print(f"sigma0: nominal {doc['sigma0_nominal']:.3f}, trials' mean {doc['sigma0_mean']:.3f} "
                   f"(rms {doc['sigma0_rms']:.3f}; drawn errors alone {doc['sigma0_noise_only']:.3f})")
-    from multilat.network.sigma_source import describe
+    from multilat.network.model.sigma_source import describe
 
     ns = doc["noise_source"]
     console.print("  " + describe(doc["sigma_source"]) + (f"; errors drawn from the distance model of "

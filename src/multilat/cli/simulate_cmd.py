@@ -34,12 +34,12 @@ def simulate_cmd(
 ) -> None:
     """Simulate distances of a configuration (truth + offsets + noise), adjust them, and report the
     standard deviation of the interpoint-distance errors per simulation: min/mean/max beside the paper."""
-    from multilat.network.simulate import NOISES, load_config, simulate
+    from multilat.network.montecarlo.simulate import NOISES, load_config, simulate
 
     if noise not in NOISES:
         raise MultilatError(f"--noise must be one of {', '.join(NOISES)}, got {noise!r}")
     checks.sigma_um(sigma_um)
-    from multilat.network import sigma_source as ss
+    from multilat.network.model import sigma_source as ss
 
     given_sigma = sigma_um is not None
     sigma_um = ss.DEFAULT_SIGMA_M * 1e6 if sigma_um is None else sigma_um

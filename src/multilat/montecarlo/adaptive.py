@@ -33,7 +33,7 @@ def numerical_tolerance(u: float, ndigits: int = 2) -> float:
 class AdaptiveRule:
     """The adaptive procedure of JCGM 101 §7.9: batch size, check cadence and stopping decision.
 
-    One implementation, driven by :func:`run_mc` and by :func:`multilat.network.propagate.propagate`.
+    One implementation, driven by :func:`run_mc` and by :func:`multilat.network.montecarlo.propagate.propagate`.
     A batch is ``max(100 / (1 - p), 10^4)`` trials rounded up to whole blocks of ``block`` trials
     (batch ``h`` is blocks ``h * batch_blocks .. (h + 1) * batch_blocks - 1``, so an adaptive run
     draws exactly the trials of a fixed run of the same length). The driver hands every batch's

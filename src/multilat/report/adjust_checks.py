@@ -1,7 +1,7 @@
 """The adjust report's sections on angles and orientations, on scale bars and control (observations
 of the adjustment, with their residuals and w) against the independent reference lengths (checks
 not in the adjustment), and on the coordinate frame and datum in words (the JSON's ``frame``, worded
-once in :mod:`multilat.network.frame_words`).
+once in :mod:`multilat.network.model.frame_words`).
 
 As in :mod:`multilat.report.adjust_sections`: numbers from the JSON document, verdicts from the
 numbers printed beside them, no statistic computed here.
@@ -142,12 +142,12 @@ def _reference_table(sec: Section, doc: dict) -> None:
 
 # ------------------------------------------------------------------------------- frame and datum
 def frame_section(doc: dict, options: dict) -> Section:
-    """The frame and the scale in the JSON's words (``frame``, :mod:`multilat.network.frame_words`)."""
+    """The frame and the scale in the JSON's words (``frame``, :mod:`multilat.network.model.frame_words`)."""
     sec = Section("Frame and datum", key="frame")
     fr = doc.get("frame") or {"axes": "not recorded (a result written before the key frame)",
                               "scale": "not recorded"}
     init = (doc.get("initial") or {}).get("method", "not recorded")
-    from multilat.network.sigma_source import describe
+    from multilat.network.model.sigma_source import describe
 
     items = [f"datum: {doc['datum']}", f"frame: {fr['axes']}", f"scale: {fr['scale']}",
              f"initial values: {init}",

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat.network.sigma_source import DEFAULT_SIGMA_M
+from multilat.network.model.sigma_source import DEFAULT_SIGMA_M
 from multilat.report.html import Section
 
 __all__ = ["section", "encoder_angle_study", "ENCODER_SIGMA_RAD"]
@@ -20,9 +20,9 @@ DIST_SIGMA_M = DEFAULT_SIGMA_M          # the seed's §4.4 distance σ
 def _small_volume_obs(sigma_angle_rad):
     """Exact distances of the small volume and, when ``sigma_angle_rad``, exact encoder angles of every
     head (each head with an arbitrary heading about its vertical axis, world y)."""
-    from multilat.network.angles import predicted_angles
-    from multilat.network.configs import small_volume
-    from multilat.network.data import Observations
+    from multilat.network.model.angles import predicted_angles
+    from multilat.network.synthetic.configs import small_volume
+    from multilat.network.model.data import Observations
 
     cfg = small_volume()
     s, t = len(cfg.station_ids), len(cfg.target_ids)
@@ -46,8 +46,8 @@ def encoder_angle_study(*, trials: int, seed: int, sigma_angle_rad: float = ENCO
     targets' coordinates of their standard uncertainty and the RMS over the §4.4 reference pairs of their
     interpoint standard uncertainty, first order (``lin``) and by Monte Carlo (``mc``, gaussian inputs,
     ``trials``), with the Monte Carlo's relative standard error of a standard deviation."""
-    from multilat.network.adjust import adjust
-    from multilat.network.propagate import problem_from_observations, propagate
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.montecarlo.propagate import problem_from_observations, propagate
 
     out = {}
     for case, sig in (("distances", 0.0), ("distances_and_angles", sigma_angle_rad)):
@@ -73,8 +73,8 @@ def encoder_angle_study(*, trials: int, seed: int, sigma_angle_rad: float = ENCO
 
 def section(*, seed: int, quick: bool) -> Section:
     """The angles section of ``multilat demo`` (``quick``: 1 000 trials per case, else 20 000)."""
-    from multilat.network.adjust import adjust
-    from multilat.network.files import read_observations
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.io.files import read_observations
 
     sec = Section("Angles as observations: encoder angles and laser trackers")
     st = encoder_angle_study(trials=1000 if quick else 20000, seed=seed)

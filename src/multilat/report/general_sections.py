@@ -12,8 +12,8 @@ it. The observation rows come from the result, every row (:class:`Rows`: the ``o
 table the command writes under ``--out``), whatever the JSON lists: a row the JSON lists (all with
 ``--observations``; else the rows that matter) names its path there, every row names its place in
 the table (``data-row``, ``data-key``), so the page is the same with or without ``--observations``. No statistic is computed here: the tests, critical values, redundancy numbers, MDBs and shifts
-are :mod:`multilat.network.general.quality`'s and ``reliability``'s; which rows are poorly
-controlled and which points have no control is :mod:`multilat.network.general.report`'s rule. This
+are :mod:`multilat.network.adjust.general.quality`'s and ``reliability``'s; which rows are poorly
+controlled and which points have no control is :mod:`multilat.network.adjust.general.report`'s rule. This
 module only selects (the largest |w|, the largest u) and compares.
 """
 
@@ -81,7 +81,7 @@ class Rows:
 
 def rows_of(doc: dict, rows=None) -> Rows:
     """:class:`Rows` of ``rows`` (every row of the ``observations`` table as dicts with their ``index``:
-    :func:`multilat.network.general.report.list_observations` with ``"all"``), or of ``doc`` itself
+    :func:`multilat.network.adjust.general.report.list_observations` with ``"all"``), or of ``doc`` itself
     when None (a document listing every row)."""
     listed = doc["observations"]
     if rows is None:
@@ -92,7 +92,7 @@ def rows_of(doc: dict, rows=None) -> Rows:
 
 
 def _ends(o: dict) -> str:
-    from multilat.network.general.report import row_ends
+    from multilat.network.adjust.general.report import row_ends
 
     return "->".join(row_ends(o))
 
@@ -150,7 +150,7 @@ def _groups(rows) -> dict:
 def _largest(rows, idx, key, *, controlled_only=False):
     """The index among ``idx`` with the largest finite |row[key]| (rows without redundancy left out
     when ``controlled_only``: their test statistic is 0 by construction), or None."""
-    from multilat.network.statistics import R_ZERO
+    from multilat.network.model.statistics import R_ZERO
 
     best, at = -1.0, None
     for k in idx:
@@ -169,19 +169,19 @@ def _test_verdict(doc, stat: float) -> Verdict:
 
 
 def _zero_points(doc, r: Rows) -> list[str]:
-    from multilat.network.general.report import zero_redundancy_points
+    from multilat.network.adjust.general.report import zero_redundancy_points
 
     return zero_redundancy_points(r.obs, doc["points"])
 
 
 def _poor(r: Rows) -> list[int]:
-    from multilat.network.general.report import poorly_controlled
+    from multilat.network.adjust.general.report import poorly_controlled
 
     return poorly_controlled(r.obs)
 
 
 def _limits() -> tuple[float, float]:
-    from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
+    from multilat.network.adjust.distance.reliability import MDB_LIMIT_SIGMA, R_MIN
 
     return R_MIN, MDB_LIMIT_SIGMA
 
@@ -395,7 +395,7 @@ def tests_section(doc: dict, r: Rows) -> Section:
     obs = r.obs
     stat = np.array([abs(o["statistic"]) for o in obs], float)
     order = [int(k) for k in np.argsort(-stat, kind="stable")[:LARGEST_ROWS]]
-    from multilat.network.statistics import R_ZERO
+    from multilat.network.model.statistics import R_ZERO
 
     sec.table(("row", "kind", "points", "σ", "residual", "unit", "redundancy", _test_name(doc).strip("|"),
                "verdict"),

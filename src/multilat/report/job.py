@@ -116,7 +116,7 @@ def _sigma_source(ctx: JobContext, doc: dict) -> list[str]:
                                                        if os.path.isfile(str(inst)) else " (preset)"))
     recorded = doc.get("sigma_source") if isinstance(doc, dict) else None
     if recorded:        # the command's own record (adjust, propagate, simulate)
-        from multilat.network.sigma_source import describe
+        from multilat.network.model.sigma_source import describe
 
         out.append(describe(recorded) + " (k = 1)")
     elif o.get("sigma_um") is not None and ctx.command not in ("simulate",):
@@ -203,7 +203,7 @@ def warnings_section(ctx: JobContext, doc: dict) -> Section:
 
 
 def uncertainty_note() -> str:
-    from multilat.network.statistics import CHI2_3_95   # here: scipy loads only for a report
+    from multilat.network.model.statistics import CHI2_3_95   # here: scipy loads only for a report
 
     return (f"Standard uncertainties u are k = 1. Expanded uncertainties U = k u with k = {K_EXPANDED:g} "
             "(coverage probability about 95 % for a normal distribution). 95 % ellipsoids: semi-axes "

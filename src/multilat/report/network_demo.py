@@ -52,7 +52,7 @@ def plot_config(cfg, ax=None):
 
 
 def _constraints(small, large):
-    from multilat.network.configs import LARGE_FLOOR_Z_M
+    from multilat.network.synthetic.configs import LARGE_FLOOR_Z_M
 
     H = small.station_xyz_m
     e = [np.linalg.norm(H[i] - H[j]) for i in range(4) for j in range(i + 1, 4)]
@@ -82,10 +82,10 @@ def _um(v, nd=1):
 
 def _one_dataset(sec, cfg, seed):
     """A simulated 56-distance data set adjusted from distances alone; offsets and Tables V-VI."""
-    from multilat.network.adjust import adjust
-    from multilat.network.data import Observations
-    from multilat.network.initial import initial_values
-    from multilat.network.sigma_source import DEFAULT_SIGMA_M
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.model.data import Observations
+    from multilat.network.adjust.approximate.initial import initial_values
+    from multilat.network.model.sigma_source import DEFAULT_SIGMA_M
 
     rng = np.random.default_rng(seed)
     s, t = cfg.n_stations, cfg.n_targets
@@ -126,8 +126,8 @@ def section(*, seed: int, quick: bool) -> Section:
     otherwise 200 gaussian simulations (initial values from the distances alone, as a user would)
     plus 50 with distance-model noise per configuration (~30 s).
     """
-    from multilat.network.configs import large_volume, small_volume
-    from multilat.network.simulate import interpoint_error_std, simulate
+    from multilat.network.synthetic.configs import large_volume, small_volume
+    from multilat.network.montecarlo.simulate import interpoint_error_std, simulate
 
     plt = _plt()
     cfgs = (small_volume(), large_volume())

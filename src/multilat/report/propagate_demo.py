@@ -18,9 +18,9 @@ def _per_trial_std(res) -> np.ndarray:
 
 
 def section(*, seed: int, quick: bool) -> Section:
-    from multilat.network.configs import small_volume
-    from multilat.network.propagate import problem_from_config, propagate
-    from multilat.network.sigma_source import DEFAULT_SIGMA_M
+    from multilat.network.synthetic.configs import small_volume
+    from multilat.network.montecarlo.propagate import problem_from_config, propagate
+    from multilat.network.model.sigma_source import DEFAULT_SIGMA_M
     from multilat.report.propagate_figures import clouds_figure
 
     trials = 2000 if quick else 40_000

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat.network.propagate import chi2_3_95
+from multilat.network.montecarlo.propagate import chi2_3_95
 
 
 def ellipse_xy(cov3, *, plane=(0, 1), n=181) -> np.ndarray:

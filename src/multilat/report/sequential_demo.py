@@ -40,8 +40,8 @@ def section(*, seed: int, quick: bool) -> Section:
     the same design (``quick``: 30 networks, else 200; adjustments started from the truth)."""
     from scipy import stats
 
-    from multilat.network.adjust import adjust
-    from multilat.network.synthetic import synthetic_network
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.synthetic.generator import synthetic_network
 
     plt = _plt()
     sec = Section("Sequential multilateration: heads that occupy several stations")

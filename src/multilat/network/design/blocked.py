@@ -2,16 +2,16 @@
 
 The dense pre-analysis (:func:`multilat.network.design.preanalysis.covariance`) inverts the whole
 ``(4s + 3t)`` normal matrix: ``O(t^3)``, ~27 ms for 4 heads x 100 targets, hopeless for 1000 targets.
-This module computes the same numbers the way :func:`multilat.network.adjust.adjust` does at its
-solution (:func:`multilat.network.fit.fit_once`), with no new algebra:
+This module computes the same numbers the way :func:`multilat.network.adjust.distance.adjust.adjust` does at its
+solution (:func:`multilat.network.adjust.distance.fit.fit_once`), with no new algebra:
 
 1. the exact observations of the layout in the 3-2-1 frame of its three widest heads, the internal
-   minimal constraint holding 6 of their coordinates (:func:`multilat.network.fit.pick_321_stations`);
+   minimal constraint holding 6 of their coordinates (:func:`multilat.network.adjust.distance.fit.pick_321_stations`);
 2. the back end's Schur-reduced normal equations ``S = N_gg - sum_j N_gj N_jj^-1 N_jg`` over the
-   per-target 3 x 3 blocks (:mod:`multilat.network.solve`: ``dense`` numpy or ``sparse`` compiled
-   kernels), inverted by :func:`multilat.network.solve.loop.solve_reduced` (with its conditioning
+   per-target 3 x 3 blocks (:mod:`multilat.network.adjust.solve`: ``dense`` numpy or ``sparse`` compiled
+   kernels), inverted by :func:`multilat.network.adjust.solve.loop.solve_reduced` (with its conditioning
    check: a degenerate layout raises);
-3. :class:`multilat.network.covariance.NetworkCovariance` rotates back to the layout's frame and
+3. :class:`multilat.network.model.covariance.NetworkCovariance` rotates back to the layout's frame and
    S-transforms to the datum (``free`` over all points by default): target 3 x 3 blocks, the
    station block and the hat diagonal (redundancy numbers) without the full matrix.
 
@@ -25,10 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network import statistics as st
-from multilat.network.datum import Datum, apply_rigid, datum_matrices, frame_321, parse_datum
-from multilat.network.model import Q, line_of_sight, range_m
-from multilat.network.parameter_layout import STATION_FIELDS, XYZ, ParameterLayout
+from multilat.network.model import statistics as st
+from multilat.network.model.datum import Datum, apply_rigid, datum_matrices, frame_321, parse_datum
+from multilat.network.model.distance import Q, line_of_sight, range_m
+from multilat.network.model.parameter_layout import STATION_FIELDS, XYZ, ParameterLayout
 
 __all__ = ["BlockedCovariance", "blocked_covariance", "blocked_criterion"]
 
@@ -70,13 +70,13 @@ def blocked_covariance(layout, sigma_m, *, offsets: bool = True, datum="free",
     ------
     MultilatError  a degenerate layout (a target not determined, a singular reduced system)
     """
-    from multilat.network.covariance import NetworkCovariance
-    from multilat.network.data import Observations
-    from multilat.network.fit import pick_321_stations
-    from multilat.network.problem import Params, Problem
-    from multilat.network.solve.loop import (check_target_blocks, choose_backend, make_backend,
+    from multilat.network.model.covariance import NetworkCovariance
+    from multilat.network.model.data import Observations
+    from multilat.network.adjust.distance.fit import pick_321_stations
+    from multilat.network.model.problem import Params, Problem
+    from multilat.network.adjust.solve.loop import (check_target_blocks, choose_backend, make_backend,
                                              solve_reduced)
-    from multilat.network.solve.system import whitened
+    from multilat.network.adjust.solve.system import whitened
 
     dat = datum if isinstance(datum, Datum) else parse_datum(datum)
     if dat.kind not in ("free", "321"):

@@ -305,7 +305,7 @@ def load_design_config(path: str | Path) -> DesignConfig:
 
 # ---------------------------------------------------------------------------------------------
 def _read_points(base: Path, name: str):
-    from multilat.network.files import read_points
+    from multilat.network.io.files import read_points
 
     return read_points(base / name)
 
@@ -373,7 +373,7 @@ def _check_sizes(n_targets: int, n_fixed: int | None, source: str) -> None:
 
 def _check_datum(datum: str, known: set, source: str) -> None:
     """``network.datum`` parsed, each point it names a target or head of the design."""
-    from multilat.network.datum import parse_datum
+    from multilat.network.model.datum import parse_datum
 
     try:
         d = parse_datum(datum)
@@ -417,7 +417,7 @@ class DesignRun:
 def run_design(cfg: DesignConfig, *, base_dir: str | Path = ".", evaluate=None, rng=None,
                source: str = "config") -> DesignRun:
     """Run a validated config: optimise (box or candidates) or, with fixed heads or ``evaluate``
-    (a :class:`~multilat.network.data.Points` of heads), score the given layout only."""
+    (a :class:`~multilat.network.model.data.Points` of heads), score the given layout only."""
     import dataclasses
 
     run = _run_design(cfg, base_dir=base_dir, evaluate=evaluate, rng=rng, source=source)
@@ -558,11 +558,11 @@ def _run(criterion, search, best, start, sigma, selection) -> DesignRun:
 def poorly_controlled_targets(pa: PreAnalysis, *, r_min: float | None = None,
                               mdb_limit_sigma: float | None = None) -> tuple:
     """The targets owning a poorly controlled distance (redundancy number below ``r_min`` or MDB
-    above ``mdb_limit_sigma`` σ; the adjustment's defaults :data:`~multilat.network.reliability.R_MIN`
-    and :data:`~multilat.network.reliability.MDB_LIMIT_SIGMA`): a blunder in such a distance would
+    above ``mdb_limit_sigma`` σ; the adjustment's defaults :data:`~multilat.network.adjust.distance.reliability.R_MIN`
+    and :data:`~multilat.network.adjust.distance.reliability.MDB_LIMIT_SIGMA`): a blunder in such a distance would
     not show in the residuals. One dict per target (``id``, ``n_obs`` poorly controlled, smallest
     ``redundancy``, largest ``mdb_m`` and ``mdb_sigma``), smallest redundancy first."""
-    from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
+    from multilat.network.adjust.distance.reliability import MDB_LIMIT_SIGMA, R_MIN
 
     r_min = R_MIN if r_min is None else r_min
     lim = MDB_LIMIT_SIGMA if mdb_limit_sigma is None else mdb_limit_sigma

@@ -1,8 +1,8 @@
-"""Monte Carlo confirmation of a design: the layout handed to :func:`multilat.network.propagate.propagate`.
+"""Monte Carlo confirmation of a design: the layout handed to :func:`multilat.network.montecarlo.propagate.propagate`.
 
 The design's pre-analysis is linear (first order, any distance-error distribution with the given
 standard deviations). :func:`simulate_design` builds the propagate problem of the layout's exact
-distances (:func:`~multilat.network.propagate.problem_from_truth`, same observations, weights and
+distances (:func:`~multilat.network.montecarlo.propagate.problem_from_truth`, same observations, weights and
 datum), draws the distance errors (``gaussian`` with the design's sigmas, or ``model``: the
 instrument's non-gaussian distance model of :mod:`multilat.budget`), re-adjusts every trial and
 compares the Monte Carlo standard uncertainty of every target coordinate with the predicted one, in
@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network import statistics as st
+from multilat.network.model import statistics as st
 
 __all__ = ["DesignSimulation", "simulate_design"]
 
@@ -76,8 +76,8 @@ def simulate_design(pa, *, trials: int = 4000, rng=None, noise: str = "gaussian"
         design's sigmas should come from the same instrument for the comparison to mean anything)
     instrument : Instrument or preset, for ``noise="model"``
     """
-    from multilat.network.datum import frame_321
-    from multilat.network.propagate import problem_from_truth, propagate
+    from multilat.network.model.datum import frame_321
+    from multilat.network.montecarlo.propagate import problem_from_truth, propagate
 
     if not pa.offsets:
         raise MultilatError("simulate: the Monte Carlo estimates the offsets; design with offsets = true")
@@ -92,7 +92,7 @@ def simulate_design(pa, *, trials: int = 4000, rng=None, noise: str = "gaussian"
                     chunk_size=chunk_size, keep_samples=True, map=map)
     C = pa.target_cov_m2
     if pa.datum.kind == "321":         # propagate (as adjust) reports in the frame of the three points
-        from multilat.network.datum import apply_rigid
+        from multilat.network.model.datum import apply_rigid
         from multilat.network.design.preanalysis import Layout, preanalyse
 
         xyz = dict(zip(lay.station_ids + lay.target_ids, np.vstack([lay.station_xyz_m, lay.target_xyz_m])))

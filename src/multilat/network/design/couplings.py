@@ -4,7 +4,7 @@ Scale bars (a reference length between two targets with its standard uncertainty
 observed with standard uncertainties couple targets, which the fast and blocked evaluators (per-target
 3 x 3 blocks) do not model. Here the pre-analysis is what the issue defines it to be: ``adjust`` run on
 the layout's error-free distances, with the bars as observations of their exact lengths and the control
-points at their exact coordinates (:mod:`multilat.network.couplings`, the dense coupled path), data
+points at their exact coordinates (:mod:`multilat.network.model.couplings`, the dense coupled path), data
 snooping off. Its covariance, redundancy numbers, MDBs and external reliability are the prediction.
 
 The optimisation (``multilat design`` without fixed heads) does not use bars or control yet: a config
@@ -35,11 +35,11 @@ def preanalyse_coupled(layout, sigma, *, scale_bars=(), control=None, offsets: b
     offsets, lengths, alpha, power : as :func:`~multilat.network.design.preanalysis.preanalyse`
     datum : str, optional  default ``control`` with control points, else ``free``
     """
-    from multilat.network.adjust import adjust
-    from multilat.network.data import Points, ReferenceLengths
+    from multilat.network.adjust.distance.adjust import adjust
+    from multilat.network.model.data import Points, ReferenceLengths
     from multilat.network.design.preanalysis import PreAnalysis, SigmaModel, _u95_max, layout_observations
-    from multilat.network.datum import parse_datum
-    from multilat.network.result import Start
+    from multilat.network.model.datum import parse_datum
+    from multilat.network.adjust.distance.result import Start
 
     si, ti = layout.pairs()
     d = np.linalg.norm(layout.station_xyz_m[si] - layout.target_xyz_m[ti], axis=1)

@@ -2,7 +2,7 @@
 design's evaluators as back ends behind it (as Gama's adjustment algorithms sit behind ``AdjBase``).
 
 * ``general`` (the default): the general network layer's pre-analysis
-  (:func:`multilat.network.general.preanalysis.predict`): any kinds (distances, angles, tracker
+  (:func:`multilat.network.design.general_preanalysis.predict`): any kinds (distances, angles, tracker
   angles, vectors, levelling, control), the adjustment's own system, datum and statistics.
 * ``distance``: the distance-only pre-analysis :func:`.preanalysis.preanalyse` (dense or blocked), an
   adapter: the whole distance-only layout, stations and targets, redundancy and MDBs.
@@ -23,13 +23,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network import statistics as st
-from multilat.network.datum import parse_datum
+from multilat.network.model import statistics as st
+from multilat.network.model.datum import parse_datum
 from multilat.network.design.preanalysis import Layout, SigmaModel, preanalyse
-from multilat.network.general.observations import Block, Network
-from multilat.network.general.points import FREE, PointSet
-from multilat.network.model import range_m
-from multilat.network.reliability import MDB_LIMIT_SIGMA, R_MIN
+from multilat.network.model.observations import Block, Network
+from multilat.network.model.points import FREE, PointSet
+from multilat.network.model.distance import range_m
+from multilat.network.adjust.distance.reliability import MDB_LIMIT_SIGMA, R_MIN
 
 __all__ = ["Design", "Prediction", "design_from_layout", "evaluate_layout", "BACKENDS"]
 
@@ -60,7 +60,7 @@ class Prediction:
     semi_axes_95_m : (n, 3) ascending, axes_95 : (n, 3, 3) the 95 % ellipsoids
     redundancy, mdb, weak : (R,) per observation row (None when the back end does not give them)
     undetermined : the points left out and why (dicts {id, reason, n_obs, ...})
-    detail : the back end's own result (:class:`~multilat.network.general.preanalysis.GeneralPrediction`,
+    detail : the back end's own result (:class:`~multilat.network.design.general_preanalysis.GeneralPrediction`,
         :class:`~.preanalysis.PreAnalysis`, or None)
     """
 
@@ -115,7 +115,7 @@ def _ellipsoids(backend, ids, cov, **rows) -> Prediction:
 
 
 def _general(design: Design) -> Prediction:
-    from multilat.network.general.preanalysis import predict
+    from multilat.network.design.general_preanalysis import predict
 
     g = predict(design.network, datum=design.datum, alpha=design.alpha, power=design.power)
     s = g.stats

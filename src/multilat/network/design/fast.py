@@ -13,7 +13,7 @@ does not see weighted zero:
 * a generalised inverse ``X = (N + c E Eᵀ)⁻¹`` with ``E`` the rigid motions of the heads only (it
   touches the head block only, so ``X``'s blocks follow from ``(S + c E Eᵀ)⁻¹``);
 * the datum by the S-transform ``C = (I - G Hᵀ) X (I - G Hᵀ)ᵀ``, ``H = E_d (Gᵀ E_d)⁻¹``
-  (:func:`multilat.network.datum.datum_matrices`): every target's 3 x 3 block from ``X``'s blocks and
+  (:func:`multilat.network.model.datum.datum_matrices`): every target's 3 x 3 block from ``X``'s blocks and
   ``X H`` (6 columns), never the full matrix;
 * redundancy numbers ``1 - a_kᵀ X a_k`` (datum-free: ``a_k`` lies in the range of ``N``).
 
@@ -25,10 +25,10 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network import statistics as st
-from multilat.network.datum import Datum, datum_matrices, helmert_basis, parse_datum, s_coefficients
-from multilat.network.model import inv3, line_of_sight
-from multilat.network.parameter_layout import ParameterLayout
+from multilat.network.model import statistics as st
+from multilat.network.model.datum import Datum, datum_matrices, helmert_basis, parse_datum, s_coefficients
+from multilat.network.model.distance import inv3, line_of_sight
+from multilat.network.model.parameter_layout import ParameterLayout
 
 __all__ = ["fast_criterion", "fast_target_cov_m2"]
 

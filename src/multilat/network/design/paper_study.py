@@ -35,10 +35,10 @@ def paper_volume_study(name: str, *, evaluations: int = 6000, starts: int = 6, m
     ``criteria``: one optimised layout per criterion (``length_u`` over the configuration's
     reference pairs, the §4.4 pairs)."""
     from multilat.instrument import load_instrument
-    from multilat.network import configs
+    from multilat.network.synthetic import configs
     from multilat.network.design import SigmaModel, optimise_heads, preanalyse
     from multilat.network.design.confirm import simulate_design
-    from multilat.network.simulate import simulate
+    from multilat.network.montecarlo.simulate import simulate
 
     cfg = configs.get_config(name)
     inst = load_instrument("seed2020")

@@ -1,16 +1,16 @@
 """Pre-analysis of a multilateration layout: the covariance, redundancy numbers and minimal
-detectable biases that :func:`multilat.network.adjust.adjust` would report for error-free distances,
+detectable biases that :func:`multilat.network.adjust.distance.adjust.adjust` would report for error-free distances,
 computed from the geometry alone (no measurements).
 
 For exact distances the residuals are zero, so the adjustment's covariance is the (datum-transformed)
 inverse of the normal matrix at the true geometry. Here the normal matrix is built densely from the
-model's Jacobian (:func:`multilat.network.model.residuals_and_jacobian`, parameter layout of
-:mod:`multilat.network.model`: ``[x, y, z, offset, scale]`` per station then ``x, y, z`` per target;
+model's Jacobian (:func:`multilat.network.model.distance.residuals_and_jacobian`, parameter layout of
+:mod:`multilat.network.model.distance`: ``[x, y, z, offset, scale]`` per station then ``x, y, z`` per target;
 scales are never estimated, offsets optionally) and inverted in the inner-constraint datum by
 
     N^+ = (N + c U U^T)^-1 - U U^T / c,
 
-``U`` an orthonormal basis of the 6 rigid motions (:func:`multilat.network.datum.helmert_basis`),
+``U`` an orthonormal basis of the 6 rigid motions (:func:`multilat.network.model.datum.helmert_basis`),
 ``c = trace(N) / n`` for conditioning. Other datums follow by the S-transform
 ``S N^+ S^T``, ``S = I - G (E^T G)^-1 E^T``. Dense algebra: fast for a few hundred targets (a 4 x 14
 layout is a 58 x 58 matrix); see docs/design.md for the sizes.
@@ -25,10 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network import statistics as st
-from multilat.network.data import Observations
-from multilat.network.datum import Datum, helmert_basis, parse_datum, s_transform
-from multilat.network.model import Q, line_of_sight, range_m, residuals_and_jacobian
+from multilat.network.model import statistics as st
+from multilat.network.model.data import Observations
+from multilat.network.model.datum import Datum, helmert_basis, parse_datum, s_transform
+from multilat.network.model.distance import Q, line_of_sight, range_m, residuals_and_jacobian
 
 __all__ = ["Layout", "SigmaModel", "design_head_names", "PreAnalysis", "preanalyse", "covariance", "CRITERIA",
            "criterion_value", "target_criterion", "layout_observations", "probe_cov_m2", "DENSE_MAX_PARAMS"]
@@ -213,7 +213,7 @@ def covariance(layout: Layout, sigma_m, *, offsets: bool = True, datum="free"):
     Returns
     -------
     cov : ndarray (5s + 3t, 5s + 3t)
-        In the model layout (:mod:`multilat.network.model`), m² (rows of fixed parameters zero).
+        In the model layout (:mod:`multilat.network.model.distance`), m² (rows of fixed parameters zero).
     A_w : ndarray (m, n_free)  whitened Jacobian of the free parameters
     free : ndarray of bool (5s + 3t,)
     Qplus : ndarray (n_free, n_free)  inner-constraint (pseudo-inverse) covariance of the free ones

@@ -22,8 +22,8 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.design.preanalysis import (DENSE_MAX_PARAMS, Layout, covariance,
                                                  probe_cov_m2)
-from multilat.network import statistics as st
-from multilat.network.model import Q
+from multilat.network.model import statistics as st
+from multilat.network.model.distance import Q
 
 __all__ = ["TargetSelection", "select_targets", "work_volume_u95_m"]
 
@@ -90,7 +90,7 @@ def select_targets(layout: Layout, sigma, wanted_u95_m: float, *, offsets: bool 
     """
     if not (np.isfinite(wanted_u95_m) and wanted_u95_m > 0):
         raise MultilatError(f"target_u95_m must be > 0, got {wanted_u95_m!r}")
-    from multilat.network.datum import parse_datum
+    from multilat.network.model.datum import parse_datum
 
     dat = parse_datum(datum)
     keep_always = set(dat.points or ())

@@ -1,5 +1,5 @@
 """``multilat adjust OBS.csv --json`` (and ``--out DIR``'s ``result.json``): the distance path's
-adjustment, schema ``multilat.adjust/3`` (:func:`multilat.network.result.result_to_json`,
+adjustment, schema ``multilat.adjust/3`` (:func:`multilat.network.adjust.distance.result.result_to_json`,
 :func:`multilat.cli.adjust_output.adjust_document`; keys in docs/cli.md "adjust/3").
 
 The keys every run writes are required; the ones written only with an option or a network are
@@ -22,7 +22,7 @@ __all__ = ["AdjustDocument", "ObservationRow", "Station", "Target", "Tests", "In
 
 
 class Convergence(Strict):
-    """How a solver ended (:class:`multilat.network.solve.convergence.Convergence`)."""
+    """How a solver ended (:class:`multilat.network.adjust.solve.convergence.Convergence`)."""
 
     converged: bool
     iterations: int
@@ -31,7 +31,7 @@ class Convergence(Strict):
 
 
 class Ambiguous(Strict):
-    """A point the distances place only up to a mirror image (:mod:`multilat.network.ambiguity`)."""
+    """A point the distances place only up to a mirror image (:mod:`multilat.network.adjust.distance.ambiguity`)."""
 
     id: str
     kind: str
@@ -154,7 +154,7 @@ class GlobalTest(Strict):
 
 
 class Sigma0Check(Strict):
-    """Is σ0 plausible (:func:`multilat.network.statistics.sigma0_check`)."""
+    """Is σ0 plausible (:func:`multilat.network.model.statistics.sigma0_check`)."""
 
     sigma0: Num
     dof: int
@@ -245,7 +245,7 @@ class WFailure(Strict):
 
 
 class ObservationRow(Strict):
-    """A row of the observations table (:func:`multilat.network.result_rows.observation_columns`);
+    """A row of the observations table (:func:`multilat.network.io.result_rows.observation_columns`);
     the reliability columns are there with the distance cost."""
 
     index: int
@@ -307,7 +307,7 @@ class Tried(Strict):
 
 
 class Search(Strict):
-    """The search for a false minimum (:meth:`multilat.network.search.Search.as_dict`)."""
+    """The search for a false minimum (:meth:`multilat.network.adjust.approximate.search.Search.as_dict`)."""
 
     search_triggered: bool
     bounded: str | None = None
@@ -320,7 +320,7 @@ class Search(Strict):
 
 
 class Handedness(Strict):
-    """Which hand of the distances' solution the given points chose (:func:`multilat.network.starts.onto_points`)."""
+    """Which hand of the distances' solution the given points chose (:func:`multilat.network.adjust.approximate.starts.onto_points`)."""
 
     decided: bool
     mirrored: bool
@@ -340,7 +340,7 @@ class ScaleDatum(Strict):
 
 
 class Initial(Strict):
-    """How the initial values were found (:mod:`multilat.network.starts`) and the minimum search."""
+    """How the initial values were found (:mod:`multilat.network.adjust.approximate.starts`) and the minimum search."""
 
     method: str
     residual_rms_m: Num = None

@@ -1,5 +1,5 @@
 """``multilat adjust NET.xml --json`` (and ``DIR``, ``obs.csv --model general``): the general network's
-adjustment (:mod:`multilat.network.general.report`, keys in docs/general-network.md)."""
+adjustment (:mod:`multilat.network.adjust.general.report`, keys in docs/general-network.md)."""
 
 from __future__ import annotations
 

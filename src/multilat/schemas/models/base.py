@@ -76,7 +76,7 @@ class TrackerSigma(Strict):
 
 
 class SigmaSource(Strict):
-    """Where the distances' a-priori σ came from (:mod:`multilat.network.sigma_source`): ``kind`` is
+    """Where the distances' a-priori σ came from (:mod:`multilat.network.model.sigma_source`): ``kind`` is
     ``file column`` (``file``, ``column``), ``--sigma-um`` or another option (``sigma_m``), or
     ``distance model`` (``instrument``, ``defaulted``, ``heads`` per station, ``trackers``)."""
 

@@ -1,4 +1,4 @@
-"""``multilat export FORMAT ... --json``: what was written for another program (:mod:`multilat.network.interop`)."""
+"""``multilat export FORMAT ... --json``: what was written for another program (:mod:`multilat.network.io.interop`)."""
 
 from __future__ import annotations
 

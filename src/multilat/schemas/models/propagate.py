@@ -1,4 +1,4 @@
-"""``multilat propagate --json`` (the distance path's Monte Carlo; :mod:`multilat.network.propagate_result`)."""
+"""``multilat propagate --json`` (the distance path's Monte Carlo; :mod:`multilat.network.montecarlo.propagate_result`)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """``multilat propagate NET.xml --json`` (and ``obs.csv --model general``): the general network's Monte
-Carlo (:mod:`multilat.network.general.propagate_result`, keys in docs/general-network.md)."""
+Carlo (:mod:`multilat.network.montecarlo.general.propagate_result`, keys in docs/general-network.md)."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """``multilat simulate CONFIG --json``: repeated adjustments of a simulated network
-(:mod:`multilat.network.simulate`); the maps are keyed by pair (``A-B``) or station id."""
+(:mod:`multilat.network.montecarlo.simulate`); the maps are keyed by pair (``A-B``) or station id."""
 
 from __future__ import annotations
 

@@ -1,0 +1,477 @@
+"""Covariance of a network adjustment without forming the full matrix.
+
+The inverse of the normal matrix is kept in its Schur form (the station/offset/scale block
+``Q_gg``, the target blocks ``M_j = N_jj^-1`` and the per-observation coupling), so products
+``C V``, per-point 3x3 blocks and any small joint block cost O(m) each. The covariance is then
+expressed in the chosen datum: rotated into the final frame (``R``) and S-transformed::
+
+    C_datum = S C S^T,   S = I - G (E^T G)^-1 E^T
+
+with ``G`` the infinitesimal rigid motions (6 columns) and ``E`` the datum's constraint matrix
+(``G`` on the datum points for inner constraints; unit vectors on the 6 fixed coordinates for 3-2-1).
+
+Parameter layout: :mod:`multilat.network.model.distance` (5 per station, then 3 per target).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from multilat.network.model.datum import s_coefficients
+from multilat.network.model.distance import Q, repeat_share, segment_sum, slot_gain, target_slots
+from multilat.network.model.statistics import correlated_with
+
+__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS", "JACOBIAN_ON_DEMAND_OBS"]
+
+#: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
+#: from the compiled kernels of :mod:`multilat.network.model._covariance_kernels` (numba, when installed); smaller
+#: ones from the numpy code below (no compile/load cost; the tests compare the two to 1e-12).
+KERNELS_ABOVE_OBS = 10_000
+
+#: Adjustments of at least this many observations do not keep their whitened Jacobian blocks and gains
+#: (88 bytes per observation) once their own statistics are computed: each later product recomputes
+#: them from the adjusted parameters (O(m), 0.1 s at 1.6 M; :meth:`NetworkCovariance.release_jacobian`).
+#: Smaller ones keep them (a few MB, reused by every round of data snooping).
+JACOBIAN_ON_DEMAND_OBS = 1 << 18
+
+
+def compiled_for(m: int) -> bool:
+    """Whether a network of ``m`` observations runs the compiled kernels (its statistics here, its
+    residuals and Jacobian in :mod:`multilat.network.model.distance` and the solve's system): at least
+    :data:`KERNELS_ABOVE_OBS` observations and numba installed (not imported below the size)."""
+    if m < KERNELS_ABOVE_OBS:
+        return False
+    from multilat._numba import HAVE_NUMBA
+
+    return HAVE_NUMBA
+
+
+def _kernels(m: int):
+    """The compiled statistics kernels for a network of ``m`` observations, or None (numpy path)."""
+    if not compiled_for(m):
+        return None
+    from multilat.network.model import _covariance_kernels as K
+
+    return K
+
+
+class NetworkCovariance:
+    """Labelled covariance of all parameters (m², m·1, 1 for scales) in the final datum.
+
+    Parameters
+    ----------
+    Qgg : ndarray (5s, 5s)   inverse of the reduced normal matrix (zeros for fixed parameters)
+    Minv : ndarray (t, 3, 3) inverses of the target blocks (zeros for fixed targets)
+    Js_w, Jt_w : ndarray (m, 5), (m, 3) whitened Jacobian blocks at the solution (fixed columns zero)
+    station_index, target_index : ndarray of int (m,)
+    factor : float   multiplies everything (sigma0**2 for an unweighted cost, else 1)
+    R : ndarray (3, 3)   rotation from the solving frame to the final frame
+    G, E : ndarray (n, d) or None   S-transformation (None: no datum transformation); d = 6 for the
+        rigid datum, 7 when the network's scale is a datum defect too (scales of every station)
+    extra : ndarray (n, r) or None   a low-rank term ``V V^T`` added in the final datum (e.g. the
+        uncertainty of the reference length that fixes the scale)
+    jacobian : callable () -> (Js_w, Jt_w), or None   recomputes the blocks (the same numbers), so
+        that :meth:`release_jacobian` can drop them (the adjustment does at
+        :data:`JACOBIAN_ON_DEMAND_OBS` observations and more)
+    """
+
+    def __init__(self, Qgg, Minv, Js_w, Jt_w, station_index, target_index, *, factor=1.0,
+                 R=None, G=None, E=None, extra=None, jacobian=None):
+        self.Qgg = Qgg
+        self.Minv = Minv
+        self.si = station_index
+        self.ti = target_index
+        self.s = Qgg.shape[0] // Q
+        self.t = Minv.shape[0]
+        self.n = Q * self.s + 3 * self.t
+        self.factor = float(factor)
+        self.R = np.eye(3) if R is None else np.asarray(R)
+        self._jacobian = jacobian
+        self._held = (Js_w, Jt_w, self._gains(Jt_w))
+        self._csr = None
+        self.G = G
+        if G is not None:
+            H = s_coefficients(G, E)                     # (6, n)
+            self.H = H
+            self.CHt = self._rot_times(H.T)               # (n, 6)  C_rot H^T
+            self.HCHt = H @ self.CHt
+        self._point_rows = None
+        self.extra = None if extra is None else np.asarray(extra, float).reshape(self.n, -1)
+
+    # ------------------------------------------------------------ the whitened Jacobian blocks
+    def _gains(self, Jt_w):
+        """``P_k = M_j b_k`` (m, 3) per observation from the target blocks (compiled above the size:
+        no (m, 3, 3) gather, 115 MB at 1.6 M)."""
+        K = _kernels(len(self.ti))
+        if K is None:
+            return np.einsum("mij,mj->mi", self.Minv[self.ti], Jt_w)
+        P = np.empty((len(self.ti), 3))
+        K.target_gains(np.ascontiguousarray(self.Minv, float), np.ascontiguousarray(Jt_w, float),
+                       np.asarray(self.ti, np.int64), P)
+        return P
+
+    def release_jacobian(self) -> bool:
+        """Stop holding the whitened Jacobian blocks and the gains ``P`` (64 + 24 bytes per
+        observation: 135 MiB at 1.6 M distances) when the covariance can recompute them (its
+        ``jacobian`` callable, e.g. from the adjusted parameters): every later product recomputes
+        them, O(m), and drops them again; the numbers are the same (the same function of the same
+        inputs). Returns whether they were released."""
+        if self._jacobian is None:
+            return False
+        self._held = None
+        return True
+
+    def _blocks(self):
+        """``(Js_w, Jt_w, P)``: the held blocks, or recomputed for one use after
+        :meth:`release_jacobian`."""
+        if self._held is not None:
+            return self._held
+        Js_w, Jt_w = self._jacobian()
+        return Js_w, Jt_w, self._gains(Jt_w)
+
+    @property
+    def Js_w(self):
+        """Whitened station Jacobian blocks (m, 5) (recomputed on each access once released)."""
+        return self._blocks()[0]
+
+    @property
+    def Jt_w(self):
+        """Whitened target Jacobian blocks (m, 3) (recomputed on each access once released)."""
+        return self._blocks()[1]
+
+    @property
+    def P(self):
+        """``P_k = M_j b_k`` (m, 3) (recomputed on each access once released)."""
+        return self._blocks()[2]
+
+    # ------------------------------------------------------------ internal (solving frame)
+    def _times(self, V):
+        """Internal covariance times V (n, c) -> (n, c)."""
+        s, Qn = self.s, Q
+        V = np.asarray(V, float)
+        K = _kernels(self.si.shape[0])
+        if K is not None:       # one column at a time: no (m, 5, c) temporaries
+            Qgg, Minv, Js, _, P, si, ti, order, tptr = self._kernel_args()
+            out = np.empty((self.n, V.shape[1]))
+            og, ot = np.empty(Qn * s), np.empty((self.t, 3))
+            for c in range(V.shape[1]):
+                col = np.ascontiguousarray(V[:, c])
+                K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, col[:Qn * s].copy(),
+                            col[Qn * s:].reshape(self.t, 3).copy(), og, ot, False, np.zeros(0, np.int64))
+                out[:Qn * s, c] = og
+                out[Qn * s:, c] = ot.ravel()
+            return out * self.factor
+        Vg = V[:Qn * s].reshape(s, Qn, -1)
+        VT = V[Qn * s:].reshape(self.t, 3, -1)
+        # Vg - K^T VT : per obs a_k (p_k . VT_j)
+        Js_w, _, P = self._blocks()
+        pv = np.einsum("mi,mic->mc", P, VT[self.ti])
+        acc = Vg - segment_sum(self.si, Js_w[:, :, None] * pv[:, None, :], s)
+        u = (self.Qgg @ acc.reshape(Qn * s, -1))          # (5s, c)
+        # M VT - K u : per obs p_k (a_k . u_station)
+        au = np.einsum("mq,mqc->mc", Js_w, u.reshape(s, Qn, -1)[self.si])
+        outT = (np.einsum("tij,tjc->tic", self.Minv, VT)
+                - segment_sum(self.ti, P[:, :, None] * au[:, None, :], self.t))
+        return np.concatenate([u, outT.reshape(3 * self.t, -1)], axis=0) * self.factor
+
+    def _rotate_rows(self, V, R):
+        """Apply the 3x3 ``R`` to every coordinate triple of V's rows (n, c)."""
+        s = self.s
+        out = V.copy()
+        g = out[:Q * s].reshape(s, Q, -1)
+        g[:, :3] = np.einsum("ij,sjc->sic", R, g[:, :3])
+        T = out[Q * s:].reshape(self.t, 3, -1)
+        out[Q * s:] = np.einsum("ij,tjc->tic", R, T).reshape(3 * self.t, -1)
+        return out
+
+    def _rot_times(self, V):
+        """Rotated covariance (final frame, before S) times V."""
+        return self._rotate_rows(self._times(self._rotate_rows(np.asarray(V, float), self.R.T)), self.R)
+
+    # ------------------------------------------------------------ public
+    def times(self, V):
+        """Final-datum covariance times V (n, c)."""
+        V = np.asarray(V, float)
+        if self.G is None:
+            return self._rot_times(V)
+        # S C S^T V with S = I - G H
+        W = V - self.H.T @ (self.G.T @ V)
+        Y = self._rot_times(W)
+        out = Y - self.G @ (self.H @ Y)
+        if self.extra is not None:
+            out = out + self.extra @ (self.extra.T @ V)
+        return out
+
+    def block(self, idx):
+        """Dense covariance of the parameters ``idx`` (k,) -> (k, k)."""
+        idx = np.asarray(idx, dtype=np.intp)
+        E = np.zeros((self.n, idx.size))
+        E[idx, np.arange(idx.size)] = 1.0
+        return self.times(E)[idx]
+
+    def full(self):
+        """The whole (n, n) matrix (small networks only)."""
+        return self.times(np.eye(self.n))
+
+    def global_block(self):
+        """Covariance of the station parameters (5s, 5s): x, y, z, offset, scale per station."""
+        s = self.s
+        Rb = np.eye(Q * s)
+        for i in range(s):
+            Rb[Q * i:Q * i + 3, Q * i:Q * i + 3] = self.R
+        out = Rb @ (self.Qgg * self.factor) @ Rb.T
+        if self.G is not None:
+            g = slice(0, Q * s)
+            Gg, Cg = self.G[g], self.CHt[g]
+            out = out - Gg @ Cg.T - Cg @ Gg.T + Gg @ self.HCHt @ Gg.T
+        if self.extra is not None:
+            Xg = self.extra[:Q * s]
+            out = out + Xg @ Xg.T
+        return 0.5 * (out + out.T)
+
+    def _by_target(self):
+        """Observations grouped by target: ``(order, tptr)`` (CSR, for the kernels)."""
+        if self._csr is None:
+            ti = np.asarray(self.ti)
+            order = np.argsort(ti, kind="stable").astype(np.int64)
+            tptr = np.zeros(self.t + 1, np.int64)
+            np.cumsum(np.bincount(ti, minlength=self.t), out=tptr[1:])
+            self._csr = (order, tptr)
+        return self._csr
+
+    def _kernel_args(self):
+        order, tptr = self._by_target()
+        c = np.ascontiguousarray
+        Js_w, Jt_w, P = self._blocks()
+        return (c(self.Qgg, dtype=float), c(self.Minv, dtype=float), c(Js_w, dtype=float),
+                c(Jt_w, dtype=float), c(P, dtype=float), c(self.si, dtype=np.int64),
+                c(self.ti, dtype=np.int64), order, tptr)
+
+    def _target_blocks_internal(self, chunk_targets: int = 20000, *, kernels=True):
+        """Per-target 3x3 blocks of the internal covariance (solving frame, without ``factor``)."""
+        K = _kernels(self.si.shape[0]) if kernels else None
+        if K is not None:
+            Qgg, Minv, Js, _, P, si, _, order, tptr = self._kernel_args()
+            out = np.empty((self.t, 3, 3))
+            K.target_blocks(Qgg, Minv, Js, P, si, order, tptr, out)
+            return out
+        s, t = self.s, self.t
+        Js_w, Jt_w, P_all = self._blocks()
+        slots = target_slots(self.si, self.ti, s, t)
+        gain = slot_gain(slots, self.si, self.ti, Js_w, Jt_w)     # repeated readings
+        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        out = np.empty((t, 3, 3))
+        for lo in range(0, t, chunk_targets):
+            sl = slots[lo:lo + chunk_targets]
+            seen = sl >= 0
+            ix = np.where(seen, sl, 0)
+            sc = seen if gain is None else seen * gain[ix]
+            A = Js_w[ix] * sc[..., None]                  # (c, s, Q)
+            P = P_all[ix] * sc[..., None]                 # (c, s, 3)
+            S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)
+            out[lo:lo + chunk_targets] = (self.Minv[lo:lo + chunk_targets]
+                                          + np.einsum("cai,cab,cbj->cij", P, S, P, optimize=True))
+        return out
+
+    def target_blocks(self, chunk_targets: int = 20000, *, kernels=True):
+        """3x3 covariance of every target (t, 3, 3) in the final datum, O(t s^2)."""
+        s, t = self.s, self.t
+        out = self._target_blocks_internal(chunk_targets, kernels=kernels)
+        out *= self.factor
+        out = np.einsum("ij,tjk,lk->til", self.R, out, self.R)
+        if self.G is not None:
+            rows = Q * s + np.arange(3 * t)
+            dcol = self.G.shape[1]
+            Gp = self.G[rows].reshape(t, 3, dcol)
+            Cp = self.CHt[rows].reshape(t, 3, dcol)
+            out = (out - np.einsum("tia,tja->tij", Gp, Cp) - np.einsum("tia,tja->tij", Cp, Gp)
+                   + np.einsum("tia,ab,tjb->tij", Gp, self.HCHt, Gp))
+        if self.extra is not None:
+            Xp = self.extra[Q * s:].reshape(t, 3, -1)
+            out = out + np.einsum("tia,tja->tij", Xp, Xp)
+        return 0.5 * (out + np.swapaxes(out, 1, 2))
+
+    def hat_row(self, k: int, *, kernels=True):
+        """Row ``k`` of the whitened hat matrix ``A C A^T`` (m,) (datum-free; for the correlation
+        of w-tests: ``rho_kl = -hat_kl / sqrt(r_k r_l)``)."""
+        K = _kernels(self.si.shape[0]) if kernels else None
+        if K is not None:
+            Qgg, Minv, Js, Jt, P, si, ti, order, tptr = self._kernel_args()
+            out = np.empty(si.shape[0])
+            K.hat_row(int(k), Qgg, Minv, Js, Jt, P, si, ti, order, tptr, out)
+            return out
+        v = self._times(self.design_row(k)[:, None])[:, 0] / self.factor
+        vg = v[:Q * self.s].reshape(self.s, Q)
+        vt = v[Q * self.s:].reshape(self.t, 3)
+        Js_w, Jt_w, _ = self._blocks()
+        return (np.einsum("mq,mq->m", Js_w, vg[self.si])
+                + np.einsum("mi,mi->m", Jt_w, vt[self.ti]))
+
+    def internal_times(self, g) -> np.ndarray:
+        """The internal covariance (solving frame, datum-free, without ``factor``) times one
+        parameter-space vector ``g`` (n,) -> (n,): ``C a_k`` for the design row ``a_k`` of
+        observation ``k`` is the solution's response to it."""
+        g = np.asarray(g, float)
+        K = _kernels(self.si.shape[0])
+        if K is None:
+            return self._times(g[:, None])[:, 0] / self.factor
+        Qgg, Minv, Js, _, P, si, ti, order, tptr = self._kernel_args()
+        og, ot = np.empty(Q * self.s), np.empty((self.t, 3))
+        gt = g[Q * self.s:].reshape(self.t, 3)
+        nz = np.unique(np.flatnonzero(gt) // 3)             # targets with a non-zero part (few, usually)
+        sparse = nz.size <= self.t // 8        # a few targets (a design row, a downdate's generator)
+        touched = (np.sort(np.concatenate([order[tptr[j]:tptr[j + 1]] for j in nz] + [np.zeros(0, np.int64)]))
+                   .astype(np.int64) if sparse else np.zeros(0, np.int64))
+        K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, g[:Q * self.s].copy(), gt.copy(), og, ot, sparse, touched)
+        return np.concatenate([og, ot.ravel()])
+
+    def design_times(self, x) -> np.ndarray:
+        """The whitened design times a parameter-space vector ``x`` (n,) -> (m,): ``A x``, so that
+        ``design_times(internal_times(g))`` is the hat-matrix row of the combination ``g`` of design
+        rows (:meth:`hat_row` for ``g = a_k``)."""
+        x = np.asarray(x, float)
+        xg = x[:Q * self.s].reshape(self.s, Q)
+        xt = x[Q * self.s:].reshape(self.t, 3)
+        K = _kernels(self.si.shape[0])
+        if K is None:
+            Js_w, Jt_w, _ = self._blocks()
+            return np.einsum("mq,mq->m", Js_w, xg[self.si]) + np.einsum("mi,mi->m", Jt_w, xt[self.ti])
+        _, _, Js, Jt, _, si, ti, _, _ = self._kernel_args()
+        out = np.empty(si.shape[0])
+        K.design_times(Js, Jt, si, ti, np.ascontiguousarray(xg), np.ascontiguousarray(xt), out)
+        return out
+
+    def target_coupling(self) -> np.ndarray:
+        """The Schur coupling of every target to the station parameters, ``L_j = sum_l p_l a_l^T``
+        over target j's observations (``p_l = M_j b_l``, ``a_l`` at station ``si_l``'s columns)
+        -> (t, 3, 5s), internal frame: the internal response of target j to a station-part
+        vector ``g`` is ``-L_j Q_gg g`` (the off-diagonal block of :meth:`_times`)."""
+        s, t = self.s, self.t
+        key = np.asarray(self.ti, np.int64) * s + np.asarray(self.si, np.int64)
+        Js_w, _, P = self._blocks()
+        L = segment_sum(key, P[:, :, None] * Js_w[:, None, :], t * s)      # (t s, 3, Q)
+        return np.ascontiguousarray(L.reshape(t, s, 3, Q).transpose(0, 2, 1, 3)).reshape(t, 3, Q * s)
+
+    def design_row(self, k: int) -> np.ndarray:
+        """Row ``k`` of the whitened design as a parameter-space vector (n,) (station and target parts)."""
+        a = np.zeros(self.n)
+        i, j = int(self.si[k]), int(self.ti[k])
+        Js_w, Jt_w, _ = self._blocks()
+        a[Q * i:Q * i + Q] = Js_w[k]
+        a[Q * self.s + 3 * j:Q * self.s + 3 * j + 3] = Jt_w[k]
+        return a
+
+    def perfectly_correlated(self, k: int, redundancy, tol: float = 1e-6) -> np.ndarray:
+        """Observations ``l`` whose w-test is perfectly correlated with ``k``'s: ``|rho_kl| > 1 - tol``,
+        ``rho_kl = -hat_kl / sqrt(r_k r_l)`` (``k`` itself included when ``r_k > 0``). A zero denominator
+        counts as correlated when ``hat_kl != 0`` (an infinite ``rho``), not when ``hat_kl`` is 0 too."""
+        red = np.asarray(redundancy, float)
+        return correlated_with(self.hat_row(int(k)), red, int(k), tol)
+
+    def hat_diagonal(self, chunk_targets: int = 20000, *, kernels=True):
+        """Diagonal of the whitened hat matrix ``A C A^T`` per observation (m,) (datum-free).
+
+        ``1 - hat`` are the redundancy numbers. ``kernels=False``: the numpy path whatever the size.
+        """
+        K = _kernels(self.si.shape[0]) if kernels else None
+        if K is not None:
+            Qgg, Minv, Js, Jt, P, si, _, order, tptr = self._kernel_args()
+            h = np.empty(si.shape[0])
+            K.hat_diagonal(Qgg, Minv, Js, Jt, P, si, order, tptr, h)
+            return h
+        s, t = self.s, self.t
+        Js_w, Jt_w, P_all = self._blocks()
+        slots = target_slots(self.si, self.ti, s, t)
+        # repeated readings of a pair: the pair's hat as one observation of all their weight, shared
+        # among them by weight (their rows are proportional)
+        gain = slot_gain(slots, self.si, self.ti, Js_w, Jt_w)
+        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        h = np.empty(self.si.shape[0])
+        for lo in range(0, t, chunk_targets):
+            sl = slots[lo:lo + chunk_targets]
+            seen = sl >= 0
+            ix = np.where(seen, sl, 0)
+            sc = seen if gain is None else seen * gain[ix]
+            A = Js_w[ix] * sc[..., None]
+            B = Jt_w[ix] * sc[..., None]
+            P = P_all[ix] * sc[..., None]
+            S = np.einsum("caq,aqbr,cbr->cab", A, Q4, A, optimize=True)      # a Q a
+            BP = np.einsum("cai,cbi->cab", B, P)                             # b_a . p_b
+            diagS = np.einsum("cbb->cb", S)
+            term2 = np.einsum("cba,cab->cb", BP, S)
+            term3 = np.einsum("cbb->cb", BP) + np.einsum("cba,cae,cbe->cb", BP, S, BP, optimize=True)
+            hh = diagS - 2.0 * term2 + term3
+            h[sl[seen]] = hh[seen]
+        if gain is not None:
+            key = self.ti.astype(np.int64) * s + self.si
+            h = h[slots.ravel()[key]] * repeat_share(slots, self.si, self.ti, Js_w, Jt_w)
+        return h
+
+
+class CoupledCovariance(NetworkCovariance):
+    """The covariance when targets are coupled (scale bars, weighted control;
+    :mod:`multilat.network.adjust.solve.coupled`): the same Schur form with the targets' block inverse
+    ``N_tt^-1`` (3t, 3t) dense and ``X = N_tt^-1 N_tg``::
+
+        C V = [u ; N_tt^-1 V_t - X u],   u = Q_gg (V_g - X^T V_t)
+
+    Same interface and datum handling as :class:`NetworkCovariance`; per-target blocks and the hat
+    diagonal from the dense form (small networks).
+    """
+
+    def __init__(self, Qgg, coupled, Minv, Js_w, Jt_w, station_index, target_index, **kw):
+        self.X = coupled.X
+        self.Ntt_full_inv = coupled.Ntt_inv
+        super().__init__(Qgg, Minv, Js_w, Jt_w, station_index, target_index, **kw)
+
+    def _times(self, V):
+        """``C V`` in the internal frame. The eliminated block may hold the stations' orientation
+        unknowns after the targets (angle observations): ``V`` of the coordinate length (5s + 3t) is
+        padded with zeros for them and the product cut back to that length."""
+        V = np.asarray(V, float)
+        g = Q * self.s
+        Vg, Vt = V[:g], V[g:]
+        pad = self.X.shape[0] - Vt.shape[0]
+        if pad:
+            Vt = np.concatenate([Vt, np.zeros((pad,) + Vt.shape[1:])], axis=0)
+        u = self.Qgg @ (Vg - self.X.T @ Vt)
+        out = np.concatenate([u, self.Ntt_full_inv @ Vt - self.X @ u], axis=0) * self.factor
+        return out[:V.shape[0]] if pad else out
+
+    def _target_blocks_internal(self, chunk_targets: int = 20000, *, kernels=True):
+        t = self.t
+        Xt = self.X[:3 * t]
+        Xb = Xt.reshape(t, 3, -1)
+        XQ = (Xt @ self.Qgg).reshape(t, 3, -1)
+        D = self.Ntt_full_inv[:3 * t, :3 * t].reshape(t, 3, t, 3)[np.arange(t), :, np.arange(t), :]
+        return D + np.einsum("tiq,tjq->tij", XQ, Xb)
+
+    def orientation_cov_internal(self) -> np.ndarray:
+        """Covariance (n_o, n_o) of the orientation unknowns in the internal frame (rad²)."""
+        Xo = self.X[3 * self.t:]
+        return (self.Ntt_full_inv[3 * self.t:, 3 * self.t:] + Xo @ self.Qgg @ Xo.T) * self.factor
+
+    def hat_row(self, k: int, **_):
+        """As :meth:`NetworkCovariance.hat_row` through the coupled product (the compiled kernels know
+        only independent targets)."""
+        return super().hat_row(k, kernels=False)
+
+    def hat_diagonal(self, chunk_targets: int = 20000, **_):
+        """``a_k C a_k`` per distance from the blocks it touches: ``Q_gg`` (station), the target's
+        3x3 block and the station-target block ``-(Q_gg X^T)``; O(t s^2)."""
+        s = self.s
+        Ctt = self._target_blocks_internal()
+        QXt = (self.Qgg @ self.X[:3 * self.t].T).reshape(s, Q, self.t, 3)   # (5s, 3t) = -C_gt
+        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        i, j = self.si, self.ti
+        a, b, _ = self._blocks()
+        hs = np.einsum("mq,mqr,mr->m", a, Q4[i, :, i, :], a)
+        ht = np.einsum("mc,mcd,md->m", b, Ctt[j], b)
+        hst = np.einsum("mq,mqc,mc->m", a, QXt[i, :, j, :], b)
+        return hs + ht - 2.0 * hst
+
+    def quadratic(self, rows: np.ndarray) -> np.ndarray:
+        """``diag(E C_int E^T)`` for whitened rows ``E`` (q, n) in the internal frame (datum-free;
+        the redundancy of a coupling observation is ``1 -`` this)."""
+        rows = np.asarray(rows, float)
+        return np.einsum("qi,iq->q", rows, self._times(rows.T) / self.factor)
