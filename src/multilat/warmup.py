@@ -35,6 +35,19 @@ def bytecode() -> bool:
         return False
 
 
+def _propagate_general():
+    """The general layer's compiled chord steps (``montecarlo/general/_frozen_numba``), on the distance-only
+    network of the package generator adjusted by the general layer (the kernels are the same for every kind)."""
+    from multilat.network.adjust.general import adjust_network
+    from multilat.network.adjust.general.from_tables import network_from_tables
+    from multilat.network.montecarlo.general.propagate import propagate as propagate_general
+    from multilat.network.synthetic.generator import synthetic_network
+
+    net, options = network_from_tables(synthetic_network(1, population="well-conditioned").obs, rng=0)
+    adj = adjust_network(net, options=options)
+    propagate_general(adj.system, adj.result, trials=2000, rng=1)
+
+
 def _steps():
     def adjust_large():
         """The sparse solver, multilateration, and the statistics kernels (>= 10 000 distances), on a
@@ -77,18 +90,6 @@ def _steps():
         propagate(problem_from_config(small_volume(), sigma_m=DEFAULT_SIGMA_M), trials=2000, rng=1,
                   noise="model", instrument="seed2020")      # the draws' kernels: named (never a default)
 
-    def propagate_general():
-        """The general layer's compiled chord steps (``general/_frozen_numba``), on the distance-only
-        network of the package generator adjusted by the general layer (the kernels are the same for every kind)."""
-        from multilat.network.adjust.general import adjust_network
-        from multilat.network.adjust.general.from_tables import network_from_tables
-        from multilat.network.montecarlo.general.propagate import propagate as propagate_general
-        from multilat.network.synthetic.generator import synthetic_network
-
-        net, options = network_from_tables(synthetic_network(1, population="well-conditioned").obs, rng=0)
-        adj = adjust_network(net, options=options)
-        propagate_general(adj.system, adj.result, trials=2000, rng=1)
-
     def normals():
         """numba's bit-identical standard normal draws (used past a size threshold)."""
         from multilat import fast_normal as D
@@ -115,7 +116,7 @@ def _steps():
                              np.empty(2), np.empty(2, bool))
 
     return [("bytecode of the modules", bytecode), ("adjust, sparse, 10 400 distances", adjust_large), ("decimal reader", text), ("propagate small-volume", propagate_small),
-            ("propagate, general layer", propagate_general),
+            ("propagate, general layer", _propagate_general),
             ("normal draws", normals), ("heads' budgets of the presets", head_budgets)]
 
 

@@ -83,7 +83,8 @@ class NetworkCovariance:
         self.ti = target_index
         self.s = Qgg.shape[0] // Q
         self.t = Minv.shape[0]
-        self.n = Q * self.s + 3 * self.t
+        self.n_station_params = Q * self.s             # the station block's columns, then 3 per target
+        self.n = self.n_station_params + 3 * self.t
         self.factor = float(factor)
         self.R = np.eye(3) if R is None else np.asarray(R)
         self._jacobian = jacobian

@@ -137,7 +137,7 @@ class LinearRounds:
         downdates, and nothing of length ``m`` kept between rounds."""
         cov = self.cov
         k = int(k)
-        ns = cov.n - 3 * cov.t                         # station parameters, then 3 per target
+        ns = cov.n_station_params                      # station parameters, then 3 per target
         g = cov.design_row(k)
         gt = g[ns:].reshape(cov.t, 3)
         tj = np.array([int(self.ti[k])])
