@@ -16,7 +16,8 @@ Given coordinates are kept. Each pass, in this order, until a pass places nothin
 When a pass places nothing: with no point placed at all, the first set-up with a reading vector is
 the origin with the world's axes; otherwise the distance-only search of self-calibrating
 multilateration places the distance sub-network (:mod:`.search`, once; inside a placed frame its
-stations, its targets only as the last resort, when the passes place nothing more). A point still
+stations, its targets only as the last resort, when the passes place nothing more; with one or two
+placed points of its own, every point, its frame moved onto them). A point still
 not placed is named in one line saying what would reach it.
 
 The kinds' model is not needed: this is a separate step (JAG3D's ``approximation/`` package), and

@@ -13,8 +13,12 @@ cannot tell one from the other), and its stations are placed: the chain places t
 them (multilateration, or trilateration where another observation picks the side) and only the
 targets it still cannot place take the search's values, as the last resort (the search picks their
 side from the whole network jointly). With no point placed anywhere its frame is the network's and
-every point is placed (the distance path's guarantees); otherwise the search is not used (its frame
-would be arbitrary). Where the search left rows out between its points (mutual distances, scale
+every point is placed (the distance path's guarantees); with one or two placed points among the
+searched ones (:data:`FIT_POINTS`) its own frame is moved onto them (:func:`_onto`: the translation,
+and for two the direction of the line between them; the rotation about that line stays the search's)
+and every point is placed too (issue 26: approximate coordinates for some points only). Placed
+points outside the searched ones do not move it: where angles tie them to it, the adjustment starts
+from that frame. Where the search left rows out between its points (mutual distances, scale
 bars), each of up to :data:`SEARCHES` runs is refitted on every distance (:func:`_polish`) and the
 first whose cost the noise explains is kept (else the lowest).
 
