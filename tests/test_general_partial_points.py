@@ -1,6 +1,6 @@
 """Approximate coordinates given for one or two points only (issue 26): the distance-only search of
 the general layer runs in the network's own frame and is brought onto the given points
-(:func:`multilat.network.adjust.approximate.general.search._onto`: one point, the translation; two,
+(:func:`multilat.network.adjust.approximate.general.search.onto_given`: one point, the translation; two,
 the translation of their mid-point and the smallest rotation turning the line between them onto
 the given one).
 
@@ -104,3 +104,48 @@ def test_one_or_two_given_points_adjust_as_none(tmp_path, n):
     assert doc["sigma0"] == pytest.approx(ref.sigma0, rel=TOL) and doc["dof"] == ref.dof and not doc["excluded"]
     x_cli = np.array([doc["points"][p]["xyz_m"] for p in ref.ids])
     assert _rigid_misfit(x_cli, np.asarray(ref.xyz_m)) < TOL
+
+
+def _two_trackers():
+    """Two levelled trackers (κ 0.7, 2.2) reading 8 points with angles and distances: no distance-only
+    search (two stations), so a given T1 alone orients nothing (test_general_approximate's
+    first-set-up-is-origin network)."""
+    from test_general_approximate import Design
+
+    rng = np.random.default_rng(5)
+    tg = {f"P{k}": rng.uniform([-5, 2, -1], [5, 9, 2]).tolist() for k in range(8)}
+    d = Design({"T1": [0.5, -1.0, 0.2], "T2": [7.0, 1.0, 0.4], **tg})
+    for t, kap in (("T1", 0.7), ("T2", 2.2)):
+        d.tracker(t, list(tg), (0.0, 0.0, kap))
+        d.dist([(t, p) for p in tg])
+    return d
+
+
+def _given(net, truth, n):
+    from multilat.network.model.observations import Network
+
+    x = net.points.xyz_m.copy()
+    x[:n] = truth[:n]
+    return Network(net.points.with_xyz(x), net.blocks, net.notes)
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_trackers_with_one_or_two_given_stations(n):
+    """Angles, not the search: the chain run as with no point given and moved onto T1 (the
+    translation: the shape is the truth's, interpoint distances to 1e-9 m) or T1 and T2 (levelled:
+    translation and the bearing of T1-T2, which with the true T1, T2 give the truth itself to 1e-9 m,
+    the closed forms of the chain's module). Noisy, the free adjustment reaches the minimum it
+    reaches from the truth. On main: nothing placed."""
+    from test_general_approximate import _same_minimum
+
+    d = _two_trackers()
+    out = approximate(_given(d.network(), d.truth, n))
+    x = out.points.xyz_m
+    assert np.array_equal(x[:n], d.truth[:n])
+    if n == 1:
+        da, db = (np.linalg.norm(v[:, None] - v[None], axis=-1) for v in (x, d.truth))
+        assert np.abs(da - db).max() < TOL
+    else:
+        assert np.abs(x - d.truth).max() < TOL
+    assert any("moved onto" in s for s in out.notes) and not any(s.startswith("no point has") for s in out.notes)
+    _same_minimum(_given(d.network(np.random.default_rng(6)), d.truth, n), d.truth, datum="free")

@@ -14,7 +14,7 @@ them (multilateration, or trilateration where another observation picks the side
 targets it still cannot place take the search's values, as the last resort (the search picks their
 side from the whole network jointly). With no point placed anywhere its frame is the network's and
 every point is placed (the distance path's guarantees); with one or two placed points among the
-searched ones (:data:`FIT_POINTS`) its own frame is moved onto them (:func:`_onto`: the translation,
+searched ones (:data:`FIT_POINTS`) its own frame is moved onto them (:func:`onto_given`: the translation,
 and for two the direction of the line between them; the rotation about that line stays the search's)
 and every point is placed too (issue 26: approximate coordinates for some points only). Placed
 points outside the searched ones do not move it: where angles tie them to it, the adjustment starts
@@ -36,7 +36,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.model.datum import apply_rigid, rigid_fit
 
-__all__ = ["distance_search", "searched_free", "minimum_search", "NOTE", "FREE_FRAME", "MINIMUM_NOTE"]
+__all__ = ["distance_search", "onto_given", "searched_free", "minimum_search", "NOTE", "FREE_FRAME", "MINIMUM_NOTE"]
 
 #: Levenberg-Marquardt iterations of the refit on every distance when the search left rows out
 POLISH_ITERATIONS = 100
@@ -50,7 +50,7 @@ FREE_FRAME = "in the network's own frame"
 #: the note of :func:`minimum_search` once run (so that it runs once per network, not per snooping round)
 MINIMUM_NOTE = "the distance path's minimum search"
 #: placed points among the searched ones that fix the search's frame by a rigid fit; with fewer (one
-#: or two, :func:`_onto`) the search keeps its own frame, moved onto them, and places every point
+#: or two, :func:`onto_given`) the search keeps its own frame, moved onto them, and places every point
 FIT_POINTS = 3
 
 
@@ -160,7 +160,7 @@ def _search(obs, sub, anchors, xyz, gen):
     got = np.vstack([start.station_xyz_m, start.target_xyz_m])
     if len(anchors):
         try:
-            R, t = _onto(got[_rows(sub, anchors)], xyz[anchors])
+            R, t = onto_given(got[_rows(sub, anchors)], xyz[anchors])
         except MultilatError:
             return None, None
         got = apply_rigid(R, t, got)
@@ -172,14 +172,17 @@ def _rows(sub, anchors):
     return np.array([int(np.flatnonzero(sub == j)[0]) for j in anchors], int)
 
 
-def _onto(src, dst):
+def onto_given(src, dst, about_z: bool = False):
     """(R, t) bringing the search's placed points ``src`` (p, 3) onto their given coordinates ``dst``:
     three or more, the rigid fit (a mirror image allowed: distances cannot tell one from the other);
     one, the translation; two, the translation of their mid-point and the smallest rotation turning
     the line between them onto the given line (its rotation about that line stays the search's:
-    nothing given fixes it). The search's scale is kept (the given points may be rough)."""
+    nothing given fixes it; with ``about_z``, a frame whose vertical is observed, the rotation about
+    z that best turns it). The search's scale is kept (the given points may be rough)."""
     if len(src) >= FIT_POINTS:
         return rigid_fit(src, dst, allow_reflection=True)
+    if about_z and len(src) == 2:
+        return rigid_fit(src, dst, about_z=True)
     R = np.eye(3)
     if len(src) == 2:
         a, b = src[1] - src[0], dst[1] - dst[0]
@@ -267,7 +270,8 @@ def _polish(network, xyz, known, placed, defect: int) -> tuple[float, int]:
     ``placed`` (the others held; instrument constants ignored), from the search's values
     (:func:`multilat.network.adjust.approximate.initial_refine.levenberg_marquardt`, Marquardt-damped: the datum
     defect of a free network is harmless); its cost (sum of squared weighted residuals) and degrees
-    of freedom (rows - 3 x placed + ``defect``: the rigid motions the held points leave free, 6 with none). The search saw
+    of freedom (rows - 3 x placed + ``defect``: the rigid motions the held points leave free, 6 with
+    none). The search saw
     only station-to-target rows; the rows between two stations or two targets (mutual sights,
     scale bars) would otherwise first act in the adjustment, whose Gauss-Newton steps are
     undamped."""
