@@ -16,8 +16,12 @@ Given coordinates are kept. Each pass, in this order, until a pass places nothin
 When a pass places nothing: with no point placed at all, the first set-up with a reading vector is
 the origin with the world's axes; otherwise the distance-only search of self-calibrating
 multilateration places the distance sub-network (:mod:`.search`, once; inside a placed frame its
-stations, its targets only as the last resort, when the passes place nothing more). A point still
-not placed is named in one line saying what would reach it.
+stations, its targets only as the last resort, when the passes place nothing more; with one or two
+placed points of its own, every point, its frame moved onto them). When the chain still stops with
+only one or two points given in the whole network (a given station that reads no other placed
+point orients nothing), it is run again as with none given and moved onto them
+(:func:`.search.onto_given`; two points of a levelled network turn it about the vertical only),
+if that places more. A point still not placed is named in one line saying what would reach it.
 
 The kinds' model is not needed: this is a separate step (JAG3D's ``approximation/`` package), and
 :func:`..adjust.adjust` iterates from its result.
@@ -30,13 +34,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.model.datum import apply_rigid
 from multilat.network.adjust.approximate.general import frames as _frames
 from multilat.network.adjust.approximate.general import place, ranging
-from multilat.network.adjust.approximate.general.search import distance_search
+from multilat.network.adjust.approximate.general.search import (FIT_POINTS, FREE_FRAME, NOTE,
+                                                                   distance_search, onto_given)
 from multilat.network.adjust.approximate.general.sights import Sights, gather
 from multilat.network.model.observations import Network
 
 __all__ = ["approximate", "unreachable", "reasons", "chain", "Chain"]
+
+#: the first words of the note of :func:`_seed`
+ORIGIN_NOTE = "no point has coordinates"
 
 
 @dataclass
@@ -62,11 +71,44 @@ class Chain:
 def chain(network: Network, *, extra=(), rng=0) -> Chain:
     """Runs the chain (module docstring). ``extra``: blocks that serve the approximations only
     (angles read without σ); ``rng``: seed of the distance-only search."""
-    pts = network.points
-    xyz = pts.xyz_m.copy()
-    st = Chain(pts.ids, gather(tuple(network.blocks) + tuple(extra)), xyz, np.all(np.isfinite(xyz), axis=1))
+    sights = gather(tuple(network.blocks) + tuple(extra))
+    st = _run(network, sights, network.points.xyz_m.copy(), rng)
+    given = np.flatnonzero(np.all(np.isfinite(network.points.xyz_m), axis=1))
+    if st.known.all() or not 0 < len(given) < FIT_POINTS:
+        return st
+    free = _run(network, sights, np.full_like(st.xyz, np.nan), rng)
+    if free.known.sum() <= st.known.sum() or not free.known[given].all():
+        return st
+    return _moved(free, given, network.points.xyz_m[given])
+
+
+def _moved(free: Chain, given, given_xyz) -> Chain:
+    """The chain run as with no point given (``free``) moved onto the one or two ``given`` points
+    (:func:`.search.onto_given`; for two, about the vertical only where a levelled set-up observes it);
+    their given coordinates kept."""
+    levelled = any(su.levelled for su in free.sights.setups)
+    R, t = onto_given(free.xyz[given], given_xyz, about_z=levelled)
+    free.xyz[free.known] = apply_rigid(R, t, free.xyz[free.known])
+    free.xyz[given] = given_xyz
+    free.frames = {s: R @ F for s, F in free.frames.items()}
+    for j in given:
+        free.method.pop(int(j), None)
+    free.notes = [n.replace(f"{NOTE} ({FREE_FRAME}", f"{NOTE} (its own frame, moved onto the given point(s)")
+                  for n in free.notes if not n.startswith(ORIGIN_NOTE)]
+    names = " and ".join(repr(free.ids[j]) for j in given)
+    fixed = "translation" if len(given) == 1 else ("translation and the bearing of the line between them" if levelled
+                                                    else "translation and the direction of the line between them")
+    free.notes.append(f"the given point(s) {names} place nothing more on their own: the chain run as with no "
+                      f"point given, moved onto {'it' if len(given) == 1 else 'them'} ({fixed})")
+    return free
+
+
+def _run(network: Network, sights: Sights, xyz, rng) -> Chain:
+    """The chain from the coordinates ``xyz`` (NaN rows: not placed)."""
+    st = Chain(network.points.ids, sights, xyz, np.all(np.isfinite(xyz), axis=1))
     if st.known.all():
         return st
+    pts = network.points
     _index(st, pts.n)
     seeded = searched = False
     last = None                                           # the search's targets, offered last
@@ -104,7 +146,7 @@ def _seed(st: Chain) -> bool:
     st.xyz[su.station], st.known[su.station] = 0.0, True
     st.method[int(su.station)] = "origin"
     st.frames[first] = np.eye(3)
-    st.notes.append(f"no point has coordinates: the {su.key} on {st.ids[su.station]!r} is the origin, its axes "
+    st.notes.append(f"{ORIGIN_NOTE}: the {su.key} on {st.ids[su.station]!r} is the origin, its axes "
                     "the world's")
     return True
 

@@ -13,8 +13,12 @@ cannot tell one from the other), and its stations are placed: the chain places t
 them (multilateration, or trilateration where another observation picks the side) and only the
 targets it still cannot place take the search's values, as the last resort (the search picks their
 side from the whole network jointly). With no point placed anywhere its frame is the network's and
-every point is placed (the distance path's guarantees); otherwise the search is not used (its frame
-would be arbitrary). Where the search left rows out between its points (mutual distances, scale
+every point is placed (the distance path's guarantees); with one or two placed points among the
+searched ones (:data:`FIT_POINTS`) its own frame is moved onto them (:func:`onto_given`: the translation,
+and for two the direction of the line between them; the rotation about that line stays the search's)
+and every point is placed too (issue 26: approximate coordinates for some points only). Placed
+points outside the searched ones do not move it: where angles tie them to it, the adjustment starts
+from that frame. Where the search left rows out between its points (mutual distances, scale
 bars), each of up to :data:`SEARCHES` runs is refitted on every distance (:func:`_polish`) and the
 first whose cost the noise explains is kept (else the lowest).
 
@@ -32,7 +36,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.model.datum import apply_rigid, rigid_fit
 
-__all__ = ["distance_search", "searched_free", "minimum_search", "NOTE", "FREE_FRAME", "MINIMUM_NOTE"]
+__all__ = ["distance_search", "onto_given", "searched_free", "minimum_search", "NOTE", "FREE_FRAME", "MINIMUM_NOTE"]
 
 #: Levenberg-Marquardt iterations of the refit on every distance when the search left rows out
 POLISH_ITERATIONS = 100
@@ -45,6 +49,9 @@ NOTE = "distance-only search"
 FREE_FRAME = "in the network's own frame"
 #: the note of :func:`minimum_search` once run (so that it runs once per network, not per snooping round)
 MINIMUM_NOTE = "the distance path's minimum search"
+#: placed points among the searched ones that fix the search's frame by a rigid fit; with fewer (one
+#: or two, :func:`onto_given`) the search keeps its own frame, moved onto them, and places every point
+FIT_POINTS = 3
 
 
 def _tables(network):
@@ -96,10 +103,10 @@ def distance_search(network, xyz, known, rng):
     obs, sub, dropped = got
     anchors = sub[known[sub]]
     unknown = ~known[sub]
-    if not unknown.any() or (known.any() and len(anchors) < 3):
+    if not unknown.any():
         return none
     new = unknown.copy()
-    if len(anchors):                      # in a placed frame: its stations now, its targets last
+    if len(anchors) >= FIT_POINTS:        # in a placed frame: its stations now, its targets last
         new[obs.n_stations:] = False
     placed = sub[new]
     left_out = bool(len(dropped)) and bool(np.isin(dropped, sub).all(1).any()) and bool(new.any())
@@ -112,7 +119,7 @@ def distance_search(network, xyz, known, rng):
         trial = xyz.copy()
         trial[placed] = got[new]
         cost, dof = _polish(network, trial, known | np.isin(np.arange(len(known)), placed), placed,
-                            free=not len(anchors)) if left_out else (0.0, 0)
+                            defect=_DEFECT.get(len(anchors), 0)) if left_out else (0.0, 0)
         if best is None or cost < best[0]:
             best = (cost, trial[placed], got[unknown & ~new])
         if cost <= dof + 5 * np.sqrt(2 * max(dof, 1)):     # a χ² the noise explains: the minimum
@@ -120,8 +127,19 @@ def distance_search(network, xyz, known, rng):
     if best is None:
         return none[0], none[1], how
     xyz[placed], known[placed] = best[1], True
-    frame = "" if len(anchors) else f" ({FREE_FRAME})"
-    return placed, (sub[unknown & ~new], best[2]), f"{NOTE}{frame}: {how}"
+    return placed, (sub[unknown & ~new], best[2]), f"{NOTE}{_frame_words(anchors, network.points.ids)}: {how}"
+
+
+def _frame_words(anchors, ids) -> str:
+    """The note's words on the search's frame (:data:`FREE_FRAME` only with no point placed: where
+    :func:`searched_free` lets the minimum search replace the sub-network's coordinates)."""
+    if not len(anchors):
+        return f" ({FREE_FRAME})"
+    if len(anchors) >= FIT_POINTS:
+        return ""
+    names = " and ".join(repr(ids[j]) for j in anchors)
+    fixed = "translation" if len(anchors) == 1 else "translation and the direction of the line between them"
+    return f" (its own frame moved onto the given {names}: {fixed}; the rest of its orientation is its own)"
 
 
 def searched_free(notes) -> bool:
@@ -142,11 +160,49 @@ def _search(obs, sub, anchors, xyz, gen):
     got = np.vstack([start.station_xyz_m, start.target_xyz_m])
     if len(anchors):
         try:
-            R, t = rigid_fit(got[np.isin(sub, anchors)], xyz[anchors], allow_reflection=True)
+            R, t = onto_given(got[_rows(sub, anchors)], xyz[anchors])
         except MultilatError:
             return None, None
         got = apply_rigid(R, t, got)
     return got, how.get("method", "?").removeprefix("distances: ")
+
+
+def _rows(sub, anchors):
+    """The rows of ``sub`` holding ``anchors``, in the order of ``anchors``."""
+    return np.array([int(np.flatnonzero(sub == j)[0]) for j in anchors], int)
+
+
+def onto_given(src, dst, about_z: bool = False):
+    """(R, t) bringing the search's placed points ``src`` (p, 3) onto their given coordinates ``dst``:
+    three or more, the rigid fit (a mirror image allowed: distances cannot tell one from the other);
+    one, the translation; two, the translation of their mid-point and the smallest rotation turning
+    the line between them onto the given line (its rotation about that line stays the search's:
+    nothing given fixes it; with ``about_z``, a frame whose vertical is observed, the rotation about
+    z that best turns it). The search's scale is kept (the given points may be rough)."""
+    if len(src) >= FIT_POINTS:
+        return rigid_fit(src, dst, allow_reflection=True)
+    if about_z and len(src) == 2:
+        return rigid_fit(src, dst, about_z=True)
+    R = np.eye(3)
+    if len(src) == 2:
+        a, b = src[1] - src[0], dst[1] - dst[0]
+        na, nb = np.linalg.norm(a), np.linalg.norm(b)
+        if na > 0 and nb > 0:
+            R = _turn(a / na, b / nb)
+    c = src.mean(axis=0)
+    return R, dst.mean(axis=0) - R @ c
+
+
+def _turn(a, b):
+    """The smallest rotation taking the unit vector ``a`` onto the unit vector ``b`` (Rodrigues; half a
+    turn about an axis normal to ``a`` when they are opposite)."""
+    v, c = np.cross(a, b), float(np.dot(a, b))
+    if c < -1.0 + 1e-12:
+        n = np.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
+        n /= np.linalg.norm(n)
+        return 2.0 * np.outer(n, n) - np.eye(3)
+    k = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return np.eye(3) + k + k @ k / (1.0 + c)
 
 
 def minimum_search(network, rng=0):
@@ -205,12 +261,17 @@ def _minimum(obs, start, gen):
         return start
 
 
-def _polish(network, xyz, known, placed, free: bool) -> tuple[float, int]:
+#: the datum defect the placed points leave the searched ones (rigid motions not fixed), by their number
+_DEFECT = {0: 6, 1: 3, 2: 1}
+
+
+def _polish(network, xyz, known, placed, defect: int) -> tuple[float, int]:
     """Least squares of every slope distance between placed points over the coordinates of
     ``placed`` (the others held; instrument constants ignored), from the search's values
     (:func:`multilat.network.adjust.approximate.initial_refine.levenberg_marquardt`, Marquardt-damped: the datum
     defect of a free network is harmless); its cost (sum of squared weighted residuals) and degrees
-    of freedom (rows - 3 x placed, + 6 when ``free``: no placed point outside). The search saw
+    of freedom (rows - 3 x placed + ``defect``: the rigid motions the held points leave free, 6 with
+    none). The search saw
     only station-to-target rows; the rows between two stations or two targets (mutual sights,
     scale bars) would otherwise first act in the adjustment, whose Gauss-Newton steps are
     undamped."""
@@ -253,4 +314,4 @@ def _polish(network, xyz, known, placed, free: bool) -> tuple[float, int]:
 
     x, _ = levenberg_marquardt(fun, jac, xyz[placed].ravel(), max_iter=POLISH_ITERATIONS)
     xyz[placed] = x.reshape(-1, 3)
-    return float(np.sum(fun(x) ** 2)), len(d) - 3 * len(placed) + (6 if free else 0)
+    return float(np.sum(fun(x) ** 2)), len(d) - 3 * len(placed) + defect
