@@ -67,7 +67,7 @@ def test_json_lists_the_rows_that_matter(capsys):
     xml = EX / "two_trackers.xml"
     few = _doc(capsys, xml, "--json")
     every = _doc(capsys, xml, "--json", "--observations")
-    assert few["schema"] == every["schema"] == "multilat.adjust-general/2"
+    assert few["schema"] == every["schema"] == "multilat.adjust-general/3"
     full = every["observations"]
     assert len(full) == every["n_obs"] == 90 and [o["index"] for o in full] == list(range(90))
     expect = [o["index"] for o in full if _matters(o)]
