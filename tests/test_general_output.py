@@ -95,7 +95,7 @@ def test_a_rejected_row_is_listed_and_counted(capsys, tmp_path):
     assert len(rej) == 1 and rej[0]["label"] == out[0]["label"] and rej[0]["residual"] == out[0]["residual"]
     c = doc["observation_counts"]
     assert c["n_rejected"] == 1 and c["n_used"] == doc["n_obs"] and c["n_obs"] == doc["n_obs"] + 1
-    assert rej[0]["index"] == doc["n_obs"]                             # after the adjusted rows in the table
+    assert rej[0]["index"] == doc["n_obs"] == out[0]["index"]          # after the adjusted rows in the table
 
 
 @pytest.mark.parametrize("fmt", ["csv", "parquet"])
