@@ -247,7 +247,7 @@ def test_the_general_path_lists_by_the_same_rule():
     net = Path(__file__).resolve().parents[1] / "examples" / "network" / "mixed" / "obs.csv"
     a = _doc(["adjust", str(net), "--model", "general", "--json"])
     b = _doc(["adjust", str(net), "--model", "general", "--json", "--observations"])
-    assert a["schema"] == b["schema"] == "multilat.adjust-general/2"
+    assert a["schema"] == b["schema"] == "multilat.adjust-general/3"
     assert a["observations"] == [o for o in b["observations"] if o["rejected"] or o["w_failed"]
                                  or o["poorly_controlled"]]
     assert len(b["observations"]) == b["observation_counts"]["n_obs"] == a["observation_counts"]["n_obs"]

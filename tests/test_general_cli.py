@@ -62,7 +62,7 @@ def test_example_cli_json_against_gama(name):
     r = _cli(EX / f"{name}.xml", "--json", "--observations")        # every row (adjust-general/2)
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
-    assert doc["schema"] == "multilat.adjust-general/2" and doc["format"] == "gama-local"
+    assert doc["schema"] == "multilat.adjust-general/3" and doc["format"] == "gama-local"
     coords = _against_gama({p: v["xyz_m"] for p, v in doc["points"].items()}, doc["sigma0"], doc["dof"], name)
     assert set(coords) <= set(doc["points"])
     for p, v in doc["points"].items():

@@ -280,7 +280,7 @@ def test_refused_tracker_networks_against_independent_solution(name, tmp_path):
     r = _cli(*args, "--model", "general", "--json", "--observations")     # every row (adjust-general/2)
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
-    assert doc["schema"] == "multilat.adjust-general/2" and doc["model"] == "general"
+    assert doc["schema"] == "multilat.adjust-general/3" and doc["model"] == "general"
     assert doc["excluded"] == []
     xyz_ind, c_ind, s0_ind, dof_ind = case.independent(hold)
     assert doc["dof"] == dof_ind
@@ -374,7 +374,7 @@ def test_general_documents_follow_the_shipped_schema(args):
     assert r.returncode == 0, r.stderr
     doc = json.loads(r.stdout)
     schema = _schema()
-    assert schema["$id"] == doc["schema"] == "multilat.adjust-general/2"
+    assert schema["$id"] == doc["schema"] == "multilat.adjust-general/3"
     jsonschema.Draft202012Validator.check_schema(schema)
     errors = list(jsonschema.Draft202012Validator(schema).iter_errors(doc))
     assert not errors, errors[0].message[:200]

@@ -67,7 +67,7 @@ def test_json_lists_the_rows_that_matter(capsys):
     xml = EX / "two_trackers.xml"
     few = _doc(capsys, xml, "--json")
     every = _doc(capsys, xml, "--json", "--observations")
-    assert few["schema"] == every["schema"] == "multilat.adjust-general/2"
+    assert few["schema"] == every["schema"] == "multilat.adjust-general/3"
     full = every["observations"]
     assert len(full) == every["n_obs"] == 90 and [o["index"] for o in full] == list(range(90))
     expect = [o["index"] for o in full if _matters(o)]
@@ -95,7 +95,7 @@ def test_a_rejected_row_is_listed_and_counted(capsys, tmp_path):
     assert len(rej) == 1 and rej[0]["label"] == out[0]["label"] and rej[0]["residual"] == out[0]["residual"]
     c = doc["observation_counts"]
     assert c["n_rejected"] == 1 and c["n_used"] == doc["n_obs"] and c["n_obs"] == doc["n_obs"] + 1
-    assert rej[0]["index"] == doc["n_obs"]                             # after the adjusted rows in the table
+    assert rej[0]["index"] == doc["n_obs"] == out[0]["index"]          # after the adjusted rows in the table
 
 
 @pytest.mark.parametrize("fmt", ["csv", "parquet"])

@@ -274,6 +274,7 @@ def test_snooping_rejects_the_blunder_and_says_so(pages):
     assert [o["to"] for o in doc["outliers"]] == ["P05"]
     rows = table(section(dom, "tests"), "outliers")["rows"]
     assert len(rows) == 1 and rows[0][3]["text"] == "T1->P05"
+    assert rows[0][8]["text"] == str(doc["outliers"][0]["index"])    # its row of the observations table
     assert abs(printed(rows[0][4]["text"])[0]) > printed(rows[0][5]["text"])[0]
 
 

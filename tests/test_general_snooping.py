@@ -381,17 +381,23 @@ def _cli(capsys, *args):
     return rc, out, err
 
 
-def test_cli_snooping_and_variance_components(capsys, tmp_path):
+def _blundered(tmp_path, rows=(3,)) -> tuple[Path, list[int]]:
+    """direction_sets.xml with + 20 σ (σ 1.2 mm) on its slope distances ``rows``: the file, their lines."""
     path = DATA / "direction_sets.xml"
     text = path.read_text().splitlines(keepends=True)
-    net = read_gama_input(path)
-    b = net.blocks[1]                                                # slope distances
-    line = int(b.labels[3].rsplit(":", 1)[1])
-    old = text[line - 1]
-    val = old.split('val="')[1].split('"')[0]
-    text[line - 1] = old.replace(f'val="{val}"', f'val="{float(val) + 0.025:.6f}"')   # + 20 σ (σ 1.2 mm)
+    b = read_gama_input(path).blocks[1]                              # slope distances
+    lines = [int(b.labels[k].rsplit(":", 1)[1]) for k in rows]
+    for line in lines:
+        old = text[line - 1]
+        val = old.split('val="')[1].split('"')[0]
+        text[line - 1] = old.replace(f'val="{val}"', f'val="{float(val) + 0.025:.6f}"')
     bad = tmp_path / "bad.xml"
     bad.write_text("".join(text))
+    return bad, lines
+
+
+def test_cli_snooping_and_variance_components(capsys, tmp_path):
+    bad, (line,) = _blundered(tmp_path)
     rc, out, err = _cli(capsys, bad, "--json")
     assert rc == 0, err
     doc = json.loads(out)
@@ -421,3 +427,47 @@ def _valid(doc):
     schema = json.loads((ROOT / "src" / "multilat" / "schemas" / "adjust-general.json").read_text("utf-8"))
     errors = list(jsonschema.Draft202012Validator(schema).iter_errors(doc))
     assert not errors, errors[0].message[:300]
+
+
+def test_outliers_and_steps_join_the_observations_table_by_index(capsys, tmp_path):
+    """adjust-general/3 (issue 27): an outlier's ``index`` is its row of ``observations.csv`` under --out
+    (the same residual and w), and the snooping step that identified it names that row by ``index`` and
+    ``kind``, as the distance path's ``multilat.adjust/3``."""
+    bad, (line,) = _blundered(tmp_path)
+    out = tmp_path / "out"
+    rc, _, err = _cli(capsys, bad, "--out", out, "--tables", "csv")
+    assert rc == 0, err
+    doc = json.loads((out / "result.json").read_text("utf-8"))
+    table = list(csv.DictReader((out / "observations.csv").read_text("utf-8").splitlines()))
+    assert doc["schema"] == "multilat.adjust-general/3" and len(doc["outliers"]) == 1
+    o = doc["outliers"][0]
+    row = table[o["index"]]
+    assert int(row["index"]) == o["index"] and row["rejected"] == "True" and row["label"] == f"{bad}:{line}"
+    assert (row["kind"], float(row["residual"]), float(row["w"])) == (o["kind"], o["residual"], o["w"])
+    step = doc["tests"]["steps"][o["round"] - 1]
+    assert step["action"] == "rejected" and (step["index"], step["kind"]) == (o["index"], "slope_distance")
+    assert "row" not in step and [s.get("index") for s in doc["tests"]["steps"][1:]] == [None]
+    _valid(doc)
+
+
+def test_unlocated_rows_join_the_observations_table_by_index():
+    """The two perfectly correlated distances of a point's one free coordinate: each ``unlocated``
+    record's ``index`` is its row of the table (same label, residual, w), and the last step names it."""
+    from multilat.network.model.points import FIXED, FREE, PointSet
+    from multilat.network.adjust.general.report import list_observations, to_json
+
+    pts = PointSet.build(["A", "B", "P"], [[0, 0, 0], [100, 0, 0], [50, 50, 30.0]],
+                         status=[[FIXED] * 3, [FIXED] * 3, [FIXED, FIXED, FREE]])
+    d = np.sqrt(50 ** 2 + 50 ** 2 + 30 ** 2)
+    blk = Block("slope_distance", np.array([100.0, d + 0.02, d]), np.array([0.001, 0.001, 0.001]),
+                index={"from": np.array([0, 0, 1]), "to": np.array([1, 2, 2])}, labels=("f:1", "f:2", "f:3"))
+    sn = snoop(Network(pts, (blk,), ()), method="fixed", alpha_global=0.05)
+    assert sn.rejected == () and len(sn.unlocated) == 2
+    doc = list_observations(to_json(sn.adjustment, sn.stats, source="f", snooping=sn), "all")
+    rows = doc["observations"]
+    assert sorted(u["index"] for u in doc["unlocated"]) == [1, 2]        # f:1 (A->B, fixed ends) is row 0
+    for u in doc["unlocated"]:
+        r = rows[u["index"]]
+        assert (r["index"], r["label"], r["residual"], r["w"]) == (u["index"], u["label"], u["residual"], u["w"])
+    step = doc["tests"]["steps"][-1]
+    assert (step["index"], step["kind"]) == (doc["unlocated"][0]["index"], "slope_distance")

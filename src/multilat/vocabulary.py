@@ -36,7 +36,7 @@ SCHEMA_VERSION = 1
 SCHEMA_VERSIONS: dict[str, int] = {
     "adjust": 3,                # /2: JSON for summaries, tables for rows (issue 29); /3: outliers' index
     "propagate": 2,             # /2: points an id map, as adjust's targets and propagate-general's
-    "adjust-general": 2,        # /2: the same rule for the general path (observation_counts, tables)
+    "adjust-general": 3,        # /2: the same rule for the general path (observation_counts, tables); /3: index
     "propagate-general": 2,     # /2: n_full_gauss_newton -> n_retried (one Monte Carlo record)
 }
 

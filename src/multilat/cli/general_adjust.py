@@ -36,7 +36,7 @@ __all__ = ["is_general_input", "wants_general", "refusal_hint", "run", "given_op
            "CountRuleRefusal", "polar_left_out", "polar_switch", "APPLIES", "APPLIES_CSV", "WHY_NOT",
            "WHY_NOT_CSV", "SCHEMA", "MODELS", "BACKENDS"]
 
-#: the document's schema name: ``"schema": "multilat.adjust-general/2"`` (not the distance path's
+#: the document's schema name: ``"schema": "multilat.adjust-general/3"`` (not the distance path's
 #: ``multilat.adjust``: the keys differ, so a reader can tell them apart)
 SCHEMA = "adjust-general"
 

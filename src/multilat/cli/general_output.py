@@ -1,4 +1,4 @@
-"""The outputs of ``multilat adjust`` on the general path (schema ``multilat.adjust-general/2``): the
+"""The outputs of ``multilat adjust`` on the general path (schema ``multilat.adjust-general/3``): the
 ``--out`` directory, the JSON's observation listing and the printed summary.
 
 The rule of the distance path's ``multilat.adjust/2`` (:mod:`multilat.cli.adjust_output`): the document

@@ -407,11 +407,12 @@ def tests_section(doc: dict, r: Rows) -> Section:
                 else Verdict("r = 0: not testable", None)) for k in order],
               caption=f"The {len(order)} rows with the largest {_test_name(doc)}", name="largest-tests")
     if doc["outliers"]:
-        sec.table(("order", "row", "kind", "points", "statistic", "critical", "rows", "points left out with it"),
+        sec.table(("order", "row", "kind", "points", "statistic", "critical", "rows", "points left out with it",
+                   "index"),
                   [(o["order"], o["label"] or "-", o["kind"].replace("_", " "), _ends(o),
                     _num(doc, "outliers", i, "statistic", digits=2, sign=True),
                     _num(doc, "outliers", i, "critical", digits=2), o["n_rows"],
-                    ", ".join(o["points_left_out"]) or "-") for i, o in enumerate(doc["outliers"])],
+                    ", ".join(o["points_left_out"]) or "-", o["index"]) for i, o in enumerate(doc["outliers"])],
                   caption="Rows rejected by data snooping, in order", name="outliers")
     elif doc["snooping"]:
         sec.paragraph("No observation row rejected by data snooping.", cls="ok")

@@ -94,8 +94,10 @@ class TableRecord(Strict):
 
 class Outlier(Observation):
     """A row rejected by data snooping (in ``order``, found in ``round``); a correlated block is rejected
-    whole (``block_rows``: its other rows), then ``residual`` holds one number per row of the block."""
+    whole (``block_rows``: its other rows), then ``residual`` holds one number per row of the block.
+    ``index``: its row in the observations table (the key of ``observations[]``; adjust-general/3)."""
 
+    index: int
     residual: Num | list[Num]
     round: int
     order: int
@@ -105,6 +107,13 @@ class Outlier(Observation):
     n_rows: int
     block_rows: list[str]
     points_left_out: list[str]
+
+
+class Unlocated(Observation):
+    """A row that failed its test but was not rejected (``unlocated_reason`` says why); ``index`` its
+    row in the observations table (adjust-general/3)."""
+
+    index: int
 
 
 class LargestShift(RowRef):
@@ -173,7 +182,12 @@ class TestRound(Strict):
 
 
 class SnoopingStep(TestRound):
-    row: str | None = None
+    """A round; ``index`` (the row of the observations table, the key of ``observations[]`` and
+    ``outliers[]``) and ``kind`` (the row's, e.g. ``slope_distance``) name the row identified
+    (adjust-general/3; ``row``, its label, under /2)."""
+
+    index: int | None = None
+    kind: str | None = None
 
 
 class Tests(Strict):
@@ -240,7 +254,7 @@ class AzimuthSense(Strict):
 class AdjustGeneralDocument(Document):
     """``multilat adjust`` on a general network (``--json``, ``--out DIR/result.json``)."""
 
-    schema_: Literal["multilat.adjust-general/2"] = Field(alias="schema")
+    schema_: Literal["multilat.adjust-general/3"] = Field(alias="schema")
     model: Literal["general"]
     input: str
     format: str
@@ -260,7 +274,7 @@ class AdjustGeneralDocument(Document):
     tests: Tests
     snooping: bool
     outliers: list[Outlier]
-    unlocated: list[Observation]
+    unlocated: list[Unlocated]
     unlocated_reason: str
     external_reliability: ExternalReliability
     backend: Literal["dense", "sparse"] = Field(description="the back end that ran (--backend)")

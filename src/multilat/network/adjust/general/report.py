@@ -349,7 +349,7 @@ def constant_words(parameters: dict) -> list[str]:
     return out
 
 
-#: the row keys of the ``observations`` table (schema ``multilat.adjust-general/2``), after ``index``
+#: the row keys of the ``observations`` table (schema ``multilat.adjust-general/3``), after ``index``
 #: and before the flags (:data:`multilat.network.io.result_rows.FLAGS`); absent keys are empty cells
 TABLE_KEYS = ("kind", "from", "to", "bs", "fs", "point", "axis", "component", "set", "label", "unit", "value",
               "sigma", "residual", "redundancy", "w", "statistic", "passed", "mdb", "mdb_sigma", "bias_to_noise",
@@ -389,7 +389,7 @@ def observation_table(doc: dict) -> dict:
 
 
 def list_observations(doc: dict, listing: str = "flagged") -> dict:
-    """``doc`` (:func:`to_json`'s, every row listed) as schema ``multilat.adjust-general/2`` lists it:
+    """``doc`` (:func:`to_json`'s, every row listed) as schema ``multilat.adjust-general/3`` lists it:
     ``observations`` only the rows that matter (``listing="flagged"``: rejected, failing w-tests,
     poorly controlled; the rule and keys of the distance path's ``multilat.adjust/2``) or every row
     (``"all"``), each with its ``index`` in the table and its flags, and ``observation_counts``

@@ -95,12 +95,15 @@ class SnoopingRefused(MultilatError):
 class Snooping:
     """adjustment : the final :class:`~.run.NetworkAdjustment` (without the rejected rows)
     stats : its :class:`~.quality.GeneralStatistics`
-    rejected : tuple of dicts, one per rejection in order (JSON-ready: ``order``, ``round``, ``label``,
+    rejected : tuple of dicts, one per rejection in order (JSON-ready: ``index`` (its row in the
+        observations table: the final system's rows, then the rejections), ``order``, ``round``, ``label``,
         ``kind``, ``from``/``to``/..., ``w``, ``test``, ``statistic``, ``critical``, ``residual``
         (against the final solution), ``residual_rejected`` (when rejected), ``unit``, ``n_rows``,
         ``block_rows`` (the labels of a correlated block rejected with it), ``points_left_out``)
-    unlocated : tuple of dicts (rows not rejected although failing), ``unlocated_reason`` why
-    steps : the detection steps, one per round (:func:`multilat.network.adjust.distance.snooping.detection_step`)
+    unlocated : tuple of dicts (rows not rejected although failing; ``index`` their row in the final
+        system, so in the table), ``unlocated_reason`` why
+    steps : the detection steps, one per round (:func:`multilat.network.adjust.distance.snooping.detection_step`);
+        a step that identified a row names it by ``index`` (in the table) and ``kind``
     snooping : whether data snooping was asked for; ``note``: a bound that stopped it, else ""
     """
 
@@ -147,15 +150,15 @@ def snoop(network: Network, *, options=None, strict: bool = False, alpha: float 
         system = adj.system
         jw = rel.whitened_jacobian(system, res)
         unit = correlated_rows(system, k)
-        step["row"] = _label(system, k)
+        step.update(index=k, kind=system.blocks[_block_of(system, k)].kind)   # a rejection's: _finish
         twins = _twins(jw, res.cofactor_times, stats.redundancy, k, unit)
         if twins.size:
-            unlocated = tuple(row_record(system, stats, int(q)) for q in np.concatenate([[k], twins]))
+            unlocated = tuple(_indexed(system, stats, int(q)) for q in np.concatenate([[k], twins]))
             reason = "perfectly correlated w-tests: the data cannot tell which observation is wrong"
             break
         why = _guard(system, jw, res.cofactor_times, stats.redundancy, unit)
         if why:
-            unlocated, reason = (row_record(system, stats, k),), why
+            unlocated, reason = (_indexed(system, stats, k),), why
             break
         if gate is not None:
             gate.check(system, stats, unit, [r for r, _, _ in rejected])
@@ -169,11 +172,11 @@ def snoop(network: Network, *, options=None, strict: bool = False, alpha: float 
         try:
             new = _adjust_without(adj, unit, options=options, strict=strict)
         except UndeterminedError as e:                     # strict, or a defect no point carries
-            unlocated = (row_record(system, stats, k),)
+            unlocated = (_indexed(system, stats, k),)
             reason = (f"rejecting it would leave {e}" + ("; --strict leaves no point out" if strict else ""))
             break
         except MultilatError as e:
-            unlocated, reason = (row_record(system, stats, k),), f"rejecting it would leave the network unsolvable ({e})"
+            unlocated, reason = (_indexed(system, stats, k),), f"rejecting it would leave the network unsolvable ({e})"
             break
         for e in new.excluded:
             record["points_left_out"].append(e["id"])
@@ -193,11 +196,12 @@ def _finish(adj, stats, rejected, params_then, steps, unlocated, reason, snoopin
     bound's note."""
     if unlocated and steps:
         steps[-1]["action"] = f"not rejected: {reason}"
-    out = []
+    out, n_final = [], adj.system.n_rows
     for (record, removed, pts), then in zip(rejected, params_then):
         record["residual"] = _final_residual(removed, pts, adj.result, then)
+        record = {"index": n_final + len(out), **record}      # its row in the observations table
         out.append(record)
-        steps[record["round"] - 1]["action"] = "rejected"
+        steps[record["round"] - 1].update(action="rejected", index=record["index"])
     note = ""
     if snooping and bound.stopped_by:
         note = (f"data snooping stopped at its bound of {limit} rejection(s); the tests are those of the last "
@@ -289,6 +293,12 @@ def correlated_rows(system: System, k: int) -> np.ndarray:
 
 def _block_of(system: System, k: int) -> int:
     return int(np.searchsorted([sl.stop for sl in system.rows], k, side="right"))
+
+
+def _indexed(system: System, stats, k: int) -> dict:
+    """Row ``k`` of the final ``system`` as an ``unlocated`` record: ``index`` (its row in the
+    observations table, :func:`.report.observation_table`) and :func:`.report.row_record`."""
+    return {"index": k, **row_record(system, stats, k)}
 
 
 def _label(system: System, k: int) -> str:
