@@ -1,4 +1,4 @@
-"""The outputs of ``multilat adjust`` on the distance path (schema ``multilat.adjust/2``): the JSON
+"""The outputs of ``multilat adjust`` on the distance path (schema ``multilat.adjust/3``): the JSON
 document, the ``--out`` directory (tables, figures, ``result.json`` with each table's row count and
 sha256) and the printed summary.
 
@@ -86,7 +86,7 @@ def finish(res, doc: dict, refs, *, out, tables: str, inputs, report, as_json: b
 
 def adjust_document(res, refs, obs, opts, instrument, sigma_note, vc, corrected, averaged, *,
                     listing: str = "flagged") -> dict:
-    """The ``adjust --json`` document (``multilat.adjust/2``): the result's, with the azimuth sense, the
+    """The ``adjust --json`` document (``multilat.adjust/3``): the result's, with the azimuth sense, the
     default-σ warning, variance components, the sensors' correlations and the repeats' scatter where
     they apply. ``listing``: "flagged" (the observations that matter) or "all" (``--observations``);
     ``obs``: the observations adjusted (those of points left out before solving are listed)."""

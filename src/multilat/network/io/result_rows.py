@@ -1,4 +1,4 @@
-"""The per-observation rows of an adjustment (schema ``multilat.adjust/2``): one definition of the
+"""The per-observation rows of an adjustment (schema ``multilat.adjust/3``): one definition of the
 columns, written whole to the ``observations`` table of ``adjust --out`` (Parquet or CSV) and, in the
 ``--json`` document, only for the observations that matter (:func:`flagged`), with their counts.
 

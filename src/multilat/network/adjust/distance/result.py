@@ -399,7 +399,7 @@ def _stations_json(res) -> dict:
 
 
 def _observations_json(res, listing: str, given) -> dict:
-    """The document's observation keys (schema ``multilat.adjust/2``): ``observations`` (the rows that
+    """The document's observation keys (schema ``multilat.adjust/3``): ``observations`` (the rows that
     matter, or every row with ``listing="all"``), ``observation_counts``, ``excluded_observations``,
     ``observation_extremes`` and ``largest_w`` (:mod:`multilat.network.io.result_rows`)."""
     from multilat.network.io import result_rows as rr
@@ -419,7 +419,7 @@ def _observations_json(res, listing: str, given) -> dict:
 
 def result_to_json(res: AdjustmentResult, refs: ReferenceLengths | None = None, *,
                    observations: str = "flagged", given: Observations | None = None) -> dict:
-    """The ``--json`` document of an adjustment (schema ``multilat.adjust/2``), the same keys whichever
+    """The ``--json`` document of an adjustment (schema ``multilat.adjust/3``), the same keys whichever
     back end ran. ``observations``: "flagged" lists only the rows that matter (rejected, failing
     w-tests, poorly controlled; every row is in the ``--out`` table), "all" every row. ``given``: the
     observations passed to the adjustment, to list those of points left out before solving."""
