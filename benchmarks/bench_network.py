@@ -178,7 +178,7 @@ def _sparse_problem(t, seed=SEED):
 # w-tests, MDBs), ``w_groups`` (grouping the failing w-tests by correlation).
 _PARTS = (("multilat.network.adjust.distance.fit", "gauss_newton", "solve"),
           ("multilat.network.adjust.distance.adjust", "initial_for", "initial"),
-          ("multilat.network.model.covariance", "NetworkCovariance.hat_diagonal", "redundancy"),
+          ("multilat.network.adjust.covariance", "NetworkCovariance.hat_diagonal", "redundancy"),
           ("multilat.network.adjust.distance.adjust", "build_result", "result"),
           ("multilat.network.adjust.distance.adjust", "_w_failure_groups", "w_groups"))
 
@@ -354,7 +354,7 @@ def bench_sparse(quick):
 
 
 def _w_crit(alpha):
-    from multilat.network.model.statistics import w_critical
+    from multilat.network.adjust.statistics import w_critical
 
     return w_critical(alpha)
 

@@ -36,7 +36,7 @@ def literal_copies(root: Path = PKG) -> list[str]:
 
 def test_no_literal_copy_of_a_shared_constant():
     bad = literal_copies()
-    assert not bad, "use multilat.network.model.statistics.CHI2_3_95 / sigma_source.DEFAULT_SIGMA_M:\n" + "\n".join(bad)
+    assert not bad, "use multilat.network.adjust.statistics.CHI2_3_95 / sigma_source.DEFAULT_SIGMA_M:\n" + "\n".join(bad)
 
 
 @pytest.mark.parametrize("text", ["K = 7.814727903251178\n", "k = 2.7954834829151074\n",
@@ -55,7 +55,7 @@ def test_the_constants_are_the_published_values():
 
     from multilat.network.montecarlo.propagate import chi2_3_95
     from multilat.network.model.sigma_source import DEFAULT_SIGMA_M
-    from multilat.network.model.statistics import CHI2_3_95
+    from multilat.network.adjust.statistics import CHI2_3_95
 
     assert CHI2_3_95 == pytest.approx(stats.chi2.ppf(0.95, 3), rel=4e-16)
     assert chi2_3_95 == CHI2_3_95

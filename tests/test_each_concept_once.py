@@ -24,7 +24,7 @@ import pytest
 NETWORK = Path(__file__).resolve().parents[1] / "src" / "multilat" / "network"
 
 #: compiled kernels: each @njit function may keep its own inline copy of the Jacobian
-KERNEL_FILES = {"model/_sparse_kernels.py", "montecarlo/_batched_numba.py", "model/_covariance_kernels.py", "montecarlo/general/_frozen_numba.py"}
+KERNEL_FILES = {"adjust/solve/_sparse_kernels.py", "montecarlo/_batched_numba.py", "adjust/_covariance_kernels.py", "montecarlo/general/_frozen_numba.py"}
 
 #: the homes: ``file:function`` holding the one numpy copy of each concept
 HOME = {
@@ -280,8 +280,8 @@ _OWNERS = {"s", "t", "h", "i", "j", "q", "n_stations", "n_targets", "n_heads", "
 #: design/fast, design/blocked: none left) that still compute a column or a count of columns, and why
 #: each stays; this list only shrinks
 LAYOUT_KNOWN = {
-    "model/_sparse_kernels.py:assemble": "compiled: tiles station_system's 4-column blocks in place",
-    "model/_sparse_kernels.py:back_substitute": "compiled: reads station_system's 4-column blocks",
+    "adjust/solve/_sparse_kernels.py:assemble": "compiled: tiles station_system's 4-column blocks in place",
+    "adjust/solve/_sparse_kernels.py:back_substitute": "compiled: reads station_system's 4-column blocks",
     "adjust/distance/adjust_steps.py:coupling_results": "the couplings' prior values per control point (couplings' layout)",
     "adjust/distance/adjust_steps.py:start_as_partial": "a count of unknowns (the redundancy of a start)",
     "model/angle_rows.py:orientation_covariance": "the orientations' rows after the targets (angle_rows)",
@@ -290,19 +290,19 @@ LAYOUT_KNOWN = {
     "adjust/distance/costs.py:_design": "the cost study's own Jacobian (not the adjustment)",
     "adjust/distance/costs.py:compare_costs_linear": "the cost study's own Jacobian (not the adjustment)",
     "model/couplings.py:resolve": "the couplings' columns in the adjustment layout",
-    "model/covariance.py:__init__": "the adjustment's covariance in blocks (issue 27: the memory helper's file)",
-    "model/covariance.py:_times": "the adjustment's covariance in blocks",
-    "model/covariance.py:_rotate_rows": "the adjustment's covariance in blocks",
-    "model/covariance.py:global_block": "the adjustment's covariance in blocks",
-    "model/covariance.py:target_blocks": "the adjustment's covariance in blocks",
-    "model/covariance.py:hat_row": "the adjustment's covariance in blocks",
-    "model/covariance.py:internal_times": "the adjustment's covariance in blocks",
-    "model/covariance.py:design_times": "the adjustment's covariance in blocks",
-    "model/covariance.py:target_coupling": "the adjustment's covariance in blocks",
-    "model/covariance.py:design_row": "the adjustment's covariance in blocks",
-    "model/covariance.py:_target_blocks_internal": "the adjustment's covariance in blocks",
-    "model/covariance.py:orientation_cov_internal": "the adjustment's covariance in blocks",
-    "model/covariance.py:hat_diagonal": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:__init__": "the adjustment's covariance in blocks (issue 27: the memory helper's file)",
+    "adjust/covariance.py:_times": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:_rotate_rows": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:global_block": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:target_blocks": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:hat_row": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:internal_times": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:design_times": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:target_coupling": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:design_row": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:_target_blocks_internal": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:orientation_cov_internal": "the adjustment's covariance in blocks",
+    "adjust/covariance.py:hat_diagonal": "the adjustment's covariance in blocks",
     "model/datum.py:datum_matrices": "the datum's G and E in the adjustment layout",
     "design/config.py:_check_counts": "a count of unknowns (a layout's redundancy)",
     "design/preanalysis.py:covariance": "the dense pre-analysis' own normal matrix",

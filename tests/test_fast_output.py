@@ -20,7 +20,7 @@ import pytest
 from multilat import io as mio
 from multilat.io import JsonRows, dumps_json, to_jsonable
 from multilat.rows_text import column_tokens
-from multilat.network.model import covariance as C
+from multilat.network.adjust import covariance as C
 from multilat.network.adjust.distance.adjust import Start, adjust
 from multilat.network.model.data import Observations
 from multilat.network.synthetic.generator import synthetic_network
@@ -140,7 +140,7 @@ def test_cli_json_equals_the_library_document(capsys, tmp_path):
 # ----------------------------------------------------------------------------- statistics kernels
 @pytest.fixture
 def kernels_always(monkeypatch):
-    from multilat.network.model import _covariance_kernels as K
+    from multilat.network.adjust import _covariance_kernels as K
 
     if not K.HAVE_NUMBA:
         pytest.skip("numba not installed: the numpy path is the only one")
@@ -211,16 +211,16 @@ def test_residual_kernel_equals_numpy(kernels_always):
     with scales and offsets: the same operations in the same order (bit for bit with numpy 2.4 on
     x86-64, whose einsum sums (x0² + x2²) + x1²); the bound allows a platform whose einsum sums in
     another order: 2 ulp of the distance."""
-    from multilat.network.model import distance as model
+    from multilat.network.adjust.solve.system import trial_residuals
 
     rng = np.random.default_rng(4)
     s, t, m = 9, 5000, 40001
     h, tg = rng.normal(size=(s, 3)) * 10, rng.normal(size=(t, 3)) * 10
     off, sc = rng.normal(size=s) * 1e-3, rng.normal(size=s) * 1e-5
     si, ti, d = rng.integers(0, s, m), rng.integers(0, t, m), rng.uniform(1, 30, m)
-    a = model.residuals(d, h, tg, off, sc, si, ti)
+    a = trial_residuals(d, h, tg, off, sc, si, ti)
     C.KERNELS_ABOVE_OBS = 10**12
-    b = model.residuals(d, h, tg, off, sc, si, ti)
+    b = trial_residuals(d, h, tg, off, sc, si, ti)
     assert np.all(np.abs(a - b) <= 2 * np.spacing(d))
 
 
@@ -261,7 +261,7 @@ def test_covariance_product_over_the_touched_targets_only_is_the_full_sum(kernel
     """``cov_times`` summing only over the observations of the targets a vector touches (the snooping
     rounds' design rows and generators) gives the bits of the sum over all observations; a vector
     without target part sums over none."""
-    from multilat.network.model import _covariance_kernels as K
+    from multilat.network.adjust import _covariance_kernels as K
 
     net, obs = _network(t=200, s=8, rng=6)
     res = adjust(obs, initial=Start(net.station_xyz_m, net.target_xyz_m, net.offset_m), snooping=False,
@@ -298,7 +298,7 @@ def test_hat_rows_of_combinations_equal_numpy_and_the_dense_hat_matrix(kernels_a
 def test_quantiles_without_scipy_stats_are_bit_identical():
     from scipy import stats
 
-    from multilat.network.model import statistics as st
+    from multilat.network.adjust import statistics as st
 
     for a in (0.05, 0.001, 1e-6):
         assert st.norm_ppf(1 - a / 2) == float(stats.norm.ppf(1 - a / 2))

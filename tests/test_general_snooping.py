@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.adjust.general import adjust_network, read_gama_input
 from multilat.network.adjust.general.adjust import System, adjust
 from multilat.network.model.observations import Block, Network

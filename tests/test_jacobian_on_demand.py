@@ -1,6 +1,6 @@
 """The covariance without its whitened Jacobian (issue 29, memory at 1.6 M distances).
 
-At :data:`multilat.network.model.covariance.JACOBIAN_ON_DEMAND_OBS` observations and more the adjustment's
+At :data:`multilat.network.adjust.covariance.JACOBIAN_ON_DEMAND_OBS` observations and more the adjustment's
 covariance drops the whitened Jacobian blocks and the gains ``P`` (88 bytes per distance, 135 MiB at
 1.6 M) once the fit's own statistics are computed, and recomputes them per product from the adjusted
 parameters. The recomputation is the same function of the same inputs, so every number must be the
@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from multilat.network.model import covariance as C
+from multilat.network.adjust import covariance as C
 from multilat.network.adjust.distance import snooping
 from multilat.network.adjust.distance.adjust import Start, adjust
 from multilat.network.model.data import Observations
@@ -35,7 +35,7 @@ def _network(t=60, s=8, seed=3, blunders=0):
 
 def _kernels(monkeypatch, on: bool):
     if on:
-        from multilat.network.model import _covariance_kernels as K
+        from multilat.network.adjust import _covariance_kernels as K
 
         if not K.HAVE_NUMBA:
             pytest.skip("numba not installed: the numpy path is the only one")

@@ -1,7 +1,7 @@
 """The kernels' pure-Python fallback (numba absent): the same functions run as plain Python.
 
 It is live code: without numba the sparse back end, multilateration and the blocks' test call
-:mod:`multilat.network.model._sparse_kernels` as Python. ``MULTILAT_PURE_PYTHON=1`` (read by
+:mod:`multilat.network.adjust.solve._sparse_kernels` as Python. ``MULTILAT_PURE_PYTHON=1`` (read by
 :mod:`multilat._numba` at import) makes a process behave as if numba were not installed; a
 subprocess runs a few kernels that way on a small network against independent numpy paths
 (tolerances: rounding of sums of a few hundred terms, 1e-12 relative; coordinates 1e-9 m)."""
@@ -19,7 +19,8 @@ import numpy as np
 
 from multilat import _numba
 assert not _numba.HAVE_NUMBA
-from multilat.network.model import _covariance_kernels as CK, _sparse_kernels as SK
+from multilat.network.adjust import _covariance_kernels as CK
+from multilat.network.adjust.solve import _sparse_kernels as SK
 from multilat.network.adjust.distance.adjust import Start, adjust
 from multilat.network.model.data import Observations
 from multilat.network.adjust.approximate.large import multilaterate_targets

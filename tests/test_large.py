@@ -10,7 +10,7 @@ import pytest
 from scipy import stats
 
 from multilat.io import to_jsonable
-from multilat.network.model import _sparse_kernels as K
+from multilat.network.adjust.solve import _sparse_kernels as K
 from multilat.network.adjust.distance.adjust import adjust
 from multilat.network.model.data import Observations
 from multilat.network.adjust.approximate.initial import rigid_fit

@@ -32,8 +32,10 @@ LAYERS = [
 ]
 
 #: Inside ``multilat.network``, lowest first (written by tools/retree.py; docs/architecture.md):
-#: the model, the readers and generated networks, the adjustments (the general layer above
-#: the distance path's cores it calls), the Monte Carlo on the adjustment's system, the design.
+#: the model (it solves nothing: the normal equations, the covariance and the statistics are
+#: the adjustment's, issue 27), the readers and generated networks, the adjustments (the
+#: general layer above the distance path's cores it calls), the Monte Carlo on the adjustment's
+#: system, the design.
 #: A module of ``network/`` in no package listed here (a new flat module) counts as the model.
 NETWORK_TIERS = [
     ("network model", ["multilat.network", "multilat.network.model"]),
@@ -135,6 +137,7 @@ def test_every_module_is_in_a_layer():
     ("multilat/montecarlo/engine.py", "multilat.network.montecarlo.batched", "probability may not import network"),
     ("multilat/campaign/raw.py", "multilat.lbb", "campaign may not import lbb"),
     ("multilat/network/model/datum.py", "multilat.network.adjust.distance.adjust", "network model may not import network adjust"),
+    ("multilat/network/model/distance.py", "multilat.network.adjust.covariance", "network model may not import network adjust"),
     ("multilat/network/adjust/distance/fit.py", "multilat.network.design.fast", "network adjust may not import network design"),
     ("multilat/network/io/files.py", "multilat.network.adjust.distance.result", "network io may not import network adjust"),
     ("multilat/network/adjust/distance/snooping.py", "multilat.network.adjust.general.quality", "network adjust may not import network adjust general"),

@@ -4,8 +4,8 @@ equations vs the dense normal equations (two independent routes to the same step
 import numpy as np
 import pytest
 
-from multilat.network.model.distance import (Q, back_substitute, dense_jacobian, inv3, predicted_distance_m,
-                                    reduced_normal_equations, residuals_and_jacobian)
+from multilat.network.adjust.solve.normal_equations import back_substitute, reduced_normal_equations
+from multilat.network.model.distance import Q, dense_jacobian, inv3, predicted_distance_m, residuals_and_jacobian
 
 
 def _random_params(rng, s=5, t=7):

@@ -394,7 +394,7 @@ def test_ellipsoid_fraction_is_the_row_sum_formula():
     rows of 3 (slow in numpy): the same bits (numpy sums a row shorter than its pairwise block in
     order), for full and rank-deficient covariances and both memory layouts of the samples."""
     from multilat.network.montecarlo.propagate_summary import _ellipsoid_fraction
-    from multilat.network.model.statistics import chi2_ppf
+    from multilat.network.adjust.statistics import chi2_ppf
 
     def by_row_sums(dev3, center, cov):
         ev, vec = np.linalg.eigh(cov)

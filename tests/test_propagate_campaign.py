@@ -327,7 +327,7 @@ def test_adjust_average_repeats_cli(raw9, capsys):
 
 
 def test_redundancy_of_repeated_readings_against_a_dense_hat_matrix(tmp_path):
-    """The pair table scaled for repeats (model.slot_gain, covariance.hat_diagonal) against the plain
+    """The pair table scaled for repeats (normal_equations.slot_gain, covariance.hat_diagonal) against the plain
     hat matrix ``A (AᵀA)⁺ Aᵀ`` of the whole whitened Jacobian (an independent computation), with
     2-4 readings per pair of unequal sigma: redundancy numbers equal to 1e-8."""
     from multilat.network.adjust.distance.adjust import adjust

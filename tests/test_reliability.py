@@ -7,7 +7,7 @@ import pytest
 from scipy import stats
 
 from multilat.cli import main
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.adjust.distance.adjust import adjust
 from multilat.network.model.data import Observations
 from multilat.network.synthetic.generator import synthetic_network

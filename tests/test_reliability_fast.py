@@ -7,7 +7,7 @@ product of the whole covariance per design row. The largest point shift must agr
 import numpy as np
 import pytest
 
-from multilat.network.model import covariance as cv
+from multilat.network.adjust import covariance as cv
 from multilat.network.adjust.distance import reliability as rl
 from multilat.network.adjust.distance.adjust import adjust
 from multilat.network.model.data import Observations, ReferenceLengths

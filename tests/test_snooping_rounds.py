@@ -132,8 +132,8 @@ def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch
     from types import SimpleNamespace
 
     if kernels:
-        from multilat.network.model import _covariance_kernels as K
-        from multilat.network.model import covariance as C
+        from multilat.network.adjust import _covariance_kernels as K
+        from multilat.network.adjust import covariance as C
 
         if not K.HAVE_NUMBA:
             pytest.skip("numba not installed")
@@ -165,8 +165,8 @@ def test_random_networks_with_weak_targets_agree_with_the_exact_path(monkeypatch
 def test_downdated_rounds_through_the_compiled_kernels(monkeypatch, downdates):
     """The same agreement with the hat rows, covariance products and residuals from the compiled
     kernels (what networks above 10 000 distances run), several downdates between adjustments."""
-    from multilat.network.model import _covariance_kernels as K
-    from multilat.network.model import covariance as C
+    from multilat.network.adjust import _covariance_kernels as K
+    from multilat.network.adjust import covariance as C
 
     if not K.HAVE_NUMBA:
         pytest.skip("numba not installed")

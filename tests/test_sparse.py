@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from multilat.errors import MultilatError
-from multilat.network.model import _sparse_kernels as K
+from multilat.network.adjust.solve import _sparse_kernels as K
 from multilat.network.adjust.distance.adjust import Start, adjust
 from multilat.network.model.data import Observations
 from multilat.network.synthetic.generator import synthetic_network
@@ -129,7 +129,7 @@ def test_compiled_block_test_equals_eigvalsh():
     """The compiled closed-form test of the targets' 3x3 blocks (used from 2 000 free targets) against
     LAPACK's eigenvalues: the same verdict on random, nearly singular (1e-13 and 1e-8 relative) and
     non-finite blocks."""
-    from multilat.network.model._sparse_kernels import degenerate_blocks
+    from multilat.network.adjust.solve._sparse_kernels import degenerate_blocks
 
     r = np.random.default_rng(0)
     A = r.normal(size=(3000, 3, 3))

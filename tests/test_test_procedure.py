@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 import pytest
 
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.adjust.distance.adjust import adjust
 from multilat.network.model.data import Observations
 from multilat.network.synthetic.generator import synthetic_network

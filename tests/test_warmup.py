@@ -44,7 +44,7 @@ import numpy as np
 from numba.core import types
 from numba.core.registry import CPUDispatcher
 
-from multilat.network.model import covariance as C
+from multilat.network.adjust import covariance as C
 from multilat.network.adjust.solve import loop
 
 C.KERNELS_ABOVE_OBS = 0                      # every size gate open: the kernels on a small network
@@ -95,9 +95,9 @@ def test_one_compiled_variant_per_kernel_for_files_and_memory(tmp_path):
     assert p.returncode == 0, p.stderr[-3000:]
     rows = [ln.split(" ", 2) for ln in p.stderr.splitlines() if ln.startswith("multilat.")]
     names = {r[0] for r in rows}
-    for must in ("multilat.network.model._sparse_kernels.assemble", "multilat.network.model._sparse_kernels.multilaterate",
-                 "multilat.network.model._covariance_kernels._hat_diagonal",
-                 "multilat.network.model._sparse_kernels.whitened_distances"):
+    for must in ("multilat.network.adjust.solve._sparse_kernels.assemble", "multilat.network.adjust.solve._sparse_kernels.multilaterate",
+                 "multilat.network.adjust._covariance_kernels._hat_diagonal",
+                 "multilat.network.adjust.solve._sparse_kernels.whitened_distances"):
         assert must in names, sorted(names)
     bad = [r for r in rows if r[1] != "1" or r[2] != "[]"]
     assert not bad, bad

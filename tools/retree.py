@@ -31,10 +31,9 @@ The tree (one idea per package; lowest tier first, a package imports its own tie
     What a network is and how one observation is modelled: the distance path's data, its model
     (``distance``, was ``model.py``), registry of unknowns (``problem``), angle and coupling rows,
     the datum and S-transformation, the σ's record, and the general layer's points, parameter
-    layout, observation blocks and ``kinds/`` (one module per kind). ``covariance``,
-    ``statistics`` and the two kernel modules sit here too, because ``distance.reduced_normal_equations``
-    (normal-equation assembly: a solver's job) imports ``covariance.compiled_for`` and
-    ``_sparse_kernels``; split that function out to ``adjust/solve`` and they can move up.
+    layout, observation blocks and ``kinds/`` (one module per kind). No solving: the normal-equation
+    assembly (``adjust/solve/normal_equations``, split out of ``distance`` after the re-tree, issue 27)
+    and with it ``covariance``, ``statistics`` and the two kernel modules sit in ``adjust/``.
 ``io/``
     Readers and writers: multilat's CSVs (``files``, ``fastio``, ``screening``, ``result_rows``,
     ``general_files``) and ``interop/`` (GNU Gama XML in and out, JAG3D, Star*Net).
@@ -42,7 +41,9 @@ The tree (one idea per package; lowest tier first, a package imports its own tie
     Networks with a known truth: the package's one generator (``generator``, was
     ``synthetic.py``) and the seed's built-in configurations (``configs``). Same tier as ``io/``.
 ``adjust/``
-    The adjustments. ``solve/`` (the distance path's loop and its dense, sparse, coupled back ends),
+    The adjustments. ``solve/`` (the distance path's loop, its normal equations and its dense, sparse,
+    coupled back ends with the solve's kernels ``_sparse_kernels``), ``covariance`` (Schur form, with
+    its kernels) and ``statistics`` (the tests), shared by every path,
     ``approximate/`` (initial values: the distance path's and, in ``approximate/general/``, the
     general layer's), ``distance/`` (the distance path: ``adjust``, ``fit``, snooping,
     reliability, variance components, result, options), ``general/`` (the general layer's
@@ -88,7 +89,7 @@ def _put(new_dir: str, olds: str, rename: dict[str, str] | None = None) -> None:
 
 
 _put("model", "data.py model.py angles.py angle_rows.py couplings.py datum.py scale_datum.py problem.py "
-              "covariance.py _covariance_kernels.py statistics.py _sparse_kernels.py sigma_source.py "
+              "sigma_source.py "
               "repeats.py frame_words.py parameter_layout.py general/points.py general/observations.py general/layout.py "
               "general/determinability.py", {"model.py": "distance.py"})
 _put("model/kinds", " ".join(f"general/kinds/{m}.py" for m in (
@@ -99,7 +100,10 @@ _put("io", "files.py fastio.py screening.py result_rows.py general/files.py",
 _put("io/interop", "interop/__init__.py interop/angles.py interop/common.py interop/gama.py "
                    "interop/gama_adjusted.py interop/jag3d.py interop/starnet.py general/gama_input.py")
 _put("synthetic", "synthetic.py configs.py", {"synthetic.py": "generator.py"})
-_put("adjust/solve", " ".join(f"solve/{m}.py" for m in "__init__ convergence coupled dense loop sparse system".split()))
+_put("adjust/solve", " ".join(f"solve/{m}.py" for m in
+                               "__init__ convergence coupled dense loop normal_equations sparse system".split()))
+_put("adjust/solve", "_sparse_kernels.py")
+_put("adjust", "covariance.py _covariance_kernels.py statistics.py")
 _put("adjust/approximate", "initial.py initial_refine.py large.py starts.py search.py bounds.py")
 _put("adjust/approximate/general", " ".join(f"general/approximate/{m}.py" for m in
                                             "__init__ frames place ranging search sights".split()))
@@ -123,15 +127,18 @@ PACKAGE_DOCS = {
     "model": "The model of a network: what it holds and how one observation is computed from the parameters.\n\n"
              "The distance path's data, model (:mod:`.distance`), registry of unknowns (:mod:`.problem`), angle\n"
              "and coupling rows, datum and S-transformation; the general layer's points, parameter layout,\n"
-             "observation blocks and :mod:`.kinds` (one module per kind). No solving here, except\n"
-             ":func:`.distance.reduced_normal_equations`, which pins :mod:`.covariance` and :mod:`.statistics`\n"
-             "to this package (tools/retree.py).",
+             "observation blocks and :mod:`.kinds` (one module per kind). No solving here: the normal equations,\n"
+             "the covariance and the statistics belong to the adjustment\n"
+             "(:mod:`multilat.network.adjust.solve.normal_equations`, :mod:`multilat.network.adjust.covariance`,\n"
+             ":mod:`multilat.network.adjust.statistics`).",
     "io": "Readers and writers: multilat's CSV files, large-file readers, and :mod:`.interop` (GNU Gama,\n"
           "JAG3D, Star*Net). Built on :mod:`multilat.network.model` only.",
     "synthetic": "Networks with a known truth: the package's one generator (:mod:`.generator`) and the\n"
                  "seed's built-in configurations (:mod:`.configs`).",
     "adjust": "The adjustments: the solver family (:mod:`.solve`), approximate coordinates (:mod:`.approximate`),\n"
-              "the distance path (:mod:`.distance`) and the general layer (:mod:`.general`).",
+              "the distance path (:mod:`.distance`) and the general layer (:mod:`.general`); shared by them, the\n"
+              "covariance in Schur form (:mod:`.covariance`, its kernels :mod:`._covariance_kernels`) and the\n"
+              "statistics of the tests (:mod:`.statistics`).",
     "adjust/approximate": "Approximate coordinates, a step of its own before the adjustment: the distance path's\n"
                           "initial values and minimum search, and the general layer's (:mod:`.general`).",
     "adjust/distance": "The distance path's adjustment: self-calibrating multilateration from distances (and\n"

@@ -8,11 +8,15 @@ from __future__ import annotations
 import re
 
 TIERS_COMMENT = ("#: Inside ``multilat.network``, lowest first (written by tools/retree.py; docs/architecture.md):\n"
-                 "#: the model, the readers and generated networks, the adjustments (the general layer above\n"
-                 "#: the distance path's cores it calls), the Monte Carlo on the adjustment's system, the design.\n"
+                 "#: the model (it solves nothing: the normal equations, the covariance and the statistics are\n"
+                 "#: the adjustment's, issue 27), the readers and generated networks, the adjustments (the\n"
+                 "#: general layer above the distance path's cores it calls), the Monte Carlo on the adjustment's\n"
+                 "#: system, the design.\n"
                  "#: A module of ``network/`` in no package listed here (a new flat module) counts as the model.\n")
 MUTATIONS = [
     ("multilat/network/model/datum.py", "multilat.network.adjust.distance.adjust",
+     "network model may not import network adjust"),
+    ("multilat/network/model/distance.py", "multilat.network.adjust.covariance",
      "network model may not import network adjust"),
     ("multilat/network/adjust/distance/fit.py", "multilat.network.design.fast",
      "network adjust may not import network design"),
@@ -50,14 +54,16 @@ src/multilat/
   network/                             networks of distances, angles and every other kind (tiers, lowest first)
     model/                               what a network is, how one observation is computed: data, distance
                                            (the distance model), problem (registry of unknowns), angles,
-                                           angle_rows, couplings (bars, control), datum (S-transformation),
-                                           covariance, statistics; points, layout, observations, kinds/ (one
-                                           module per observation kind) of the general layer
+                                           angle_rows, couplings (bars, control), datum (S-transformation);
+                                           points, layout, observations, kinds/ (one module per observation
+                                           kind) of the general layer
     io/                                  readers and writers: files (multilat CSV), fastio, general_files,
                                            interop/ (GNU Gama XML, JAG3D, Star*Net)
     synthetic/                           networks with a known truth: generator, configs (seed 000 §4)
-    adjust/                              the adjustments
-      solve/                               one Gauss-Newton loop, dense / sparse / coupled back ends
+    adjust/                              the adjustments; covariance (Schur form, _covariance_kernels) and
+                                           statistics (the tests), shared by every path
+      solve/                               one Gauss-Newton loop, normal_equations, dense / sparse / coupled
+                                             back ends (_sparse_kernels)
       approximate/                         initial values (distance path), general/ (the general layer's)
       distance/                            the distance path: adjust, fit, snooping, reliability, result
       general/                             the general layer: adjust (dense), sparse, run, quality,
@@ -83,10 +89,10 @@ NETWORK_TIERS_TEXT = """The Monte Carlo engine sits below the distance model bec
 old flat modules): `model/`; `io/` and `synthetic/`; `adjust/` (`solve/`, `approximate/`,
 `distance/`); `adjust/general/` (the general layer calls the distance path's snooping, reliability
 and variance cores, never the other way); `montecarlo/`; `design/` (its `confirm` runs
-`propagate`). `model/` also holds `covariance`, `statistics` and the two kernel modules because
-`model.distance.reduced_normal_equations` (normal-equation assembly) imports them. A module of
-`network/` outside these packages counts as the model. A new module must be placed in a layer (the
-test fails on a module in none)."""
+`propagate`). `model/` solves nothing: the normal-equation assembly is
+`adjust.solve.normal_equations`, and `covariance`, `statistics` and the two kernel modules sit in
+`adjust/` and `adjust/solve/` (issue 27). A module of `network/` outside these packages counts as
+the model. A new module must be placed in a layer (the test fails on a module in none)."""
 PATH_TEXT = """## One observation, from file to report
 
 `multilat adjust obs.csv --report r.html` (cli/network_cmd.py):
@@ -102,10 +108,10 @@ PATH_TEXT = """## One observation, from file to report
    `adjust.distance.fit.fit_once` runs the Gauss-Newton loop of `adjust/solve/` on the model of
    `network.model.distance` (residual `d - |H - T| - o`, Jacobian rows `[u, 1, rho]` per distance,
    angle rows from `model/angle_rows`), with the datum of `network.model.datum` (free, 3-2-1,
-   control). Data snooping (`adjust/distance/snooping`, `model/statistics` w-tests,
+   control). Data snooping (`adjust/distance/snooping`, `adjust/statistics` w-tests,
    `adjust/distance/reliability`) repeats the fit without rejected observations.
 3. **Result.** `network.adjust.distance.result.AdjustmentResult` holds coordinates, offsets,
-   covariance (`model/covariance`), σ0 and the tests; `result_to_json` makes the `--json` document
+   covariance (`adjust/covariance`), σ0 and the tests; `result_to_json` makes the `--json` document
    (keys of `vocabulary`, schema in `schemas/adjust.json`); `network.io.files.write_result_tables`
    writes `--out`.
 4. **Report.** `cli/report_opt.write_report` hands the document and the result to
@@ -137,12 +143,12 @@ def architecture_text(text: str) -> str:
 
 README_NETWORK = """  network/      the network, one package per tier (lowest first; docs/architecture.md):
     model/        data, distance (the distance model), problem, datum (S-transformation), angles,
-                  couplings, covariance, statistics; the general layer's points, layout, kinds/
+                  couplings; the general layer's points, layout, kinds/
     io/           files, fastio, general_files, interop/ (GNU Gama, JAG3D, Star*Net files)
     synthetic/    generator (the one random-network generator), configs (seed 000 §4)
-    adjust/       solve/ (one loop; dense, sparse back ends), approximate/ (initial values), distance/
-                  (adjust, fit, snooping, reliability, result), general/ (the general 3D network,
-                  issue 26: `adjust NET.xml`, `adjust --model general`)
+    adjust/       covariance, statistics; solve/ (one loop, normal equations; dense, sparse back ends),
+                  approximate/ (initial values), distance/ (adjust, fit, snooping, reliability, result),
+                  general/ (the general 3D network, issue 26: `adjust NET.xml`, `adjust --model general`)
     montecarlo/   propagate (+ _summary, _result), batched solvers + trial_datum, simulate, general/
     design/       pre-analysis, layout search, confirmation, general_preanalysis
 """

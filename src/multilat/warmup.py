@@ -59,7 +59,7 @@ def _steps():
 
         from multilat.io import dumps_json
         from multilat.network.adjust.distance.adjust import adjust
-        from multilat.network.model.covariance import KERNELS_ABOVE_OBS
+        from multilat.network.adjust.covariance import KERNELS_ABOVE_OBS
         from multilat.network.io.files import read_observations
         from multilat.network.synthetic.generator import synthetic_network
 

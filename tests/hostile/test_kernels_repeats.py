@@ -1,4 +1,4 @@
-"""Hostile inputs for the compiled statistics kernels (:mod:`multilat.network.model._covariance_kernels`):
+"""Hostile inputs for the compiled statistics kernels (:mod:`multilat.network.adjust._covariance_kernels`):
 many readings of one target, and signals while a long kernel runs.
 
 10 000 repeated readings of one pair beside the 56-row example ran for more than 15 minutes in the
@@ -16,14 +16,14 @@ import time
 import numpy as np
 import pytest
 
-from multilat.network.model import covariance as C
+from multilat.network.adjust import covariance as C
 from multilat.network.adjust.distance.adjust import Start, adjust
 from multilat.network.model.data import Observations
 from multilat.network.synthetic.generator import synthetic_network
 
 from conftest import CLI, EX, cli_env
 
-K = pytest.importorskip("multilat.network.model._covariance_kernels")
+K = pytest.importorskip("multilat.network.adjust._covariance_kernels")
 if not K.HAVE_NUMBA:                                      # pragma: no cover
     pytest.skip("numba not installed: the numpy path is the only one", allow_module_level=True)
 
@@ -110,7 +110,7 @@ def test_ten_thousand_readings_of_one_pair_finish(tmp_path):
 _LONG_KERNEL = r"""
 import signal, sys, time
 import numpy as np
-from multilat.network.model import _covariance_kernels as K
+from multilat.network.adjust import _covariance_kernels as K
 
 class Stop(BaseException):
     pass

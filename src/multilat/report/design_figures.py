@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from multilat.network.model.statistics import CHI2_3_95
+from multilat.network.adjust.statistics import CHI2_3_95
 from multilat.report.network_figures import _plt, plot_3d, plot_top_view
 
 __all__ = ["plot_slice_maps", "save_design_figures", "draw_occluders", "draw_occluders_3d", "box_corners",

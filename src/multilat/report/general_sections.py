@@ -150,7 +150,7 @@ def _groups(rows) -> dict:
 def _largest(rows, idx, key, *, controlled_only=False):
     """The index among ``idx`` with the largest finite |row[key]| (rows without redundancy left out
     when ``controlled_only``: their test statistic is 0 by construction), or None."""
-    from multilat.network.model.statistics import R_ZERO
+    from multilat.network.adjust.statistics import R_ZERO
 
     best, at = -1.0, None
     for k in idx:
@@ -395,7 +395,7 @@ def tests_section(doc: dict, r: Rows) -> Section:
     obs = r.obs
     stat = np.array([abs(o["statistic"]) for o in obs], float)
     order = [int(k) for k in np.argsort(-stat, kind="stable")[:LARGEST_ROWS]]
-    from multilat.network.model.statistics import R_ZERO
+    from multilat.network.adjust.statistics import R_ZERO
 
     sec.table(("row", "kind", "points", "σ", "residual", "unit", "redundancy", _test_name(doc).strip("|"),
                "verdict"),

@@ -203,7 +203,7 @@ def warnings_section(ctx: JobContext, doc: dict) -> Section:
 
 
 def uncertainty_note() -> str:
-    from multilat.network.model.statistics import CHI2_3_95   # here: scipy loads only for a report
+    from multilat.network.adjust.statistics import CHI2_3_95   # here: scipy loads only for a report
 
     return (f"Standard uncertainties u are k = 1. Expanded uncertainties U = k u with k = {K_EXPANDED:g} "
             "(coverage probability about 95 % for a normal distribution). 95 % ellipsoids: semi-axes "

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from multilat.network.model.statistics import chi2_ppf
+from multilat.network.adjust.statistics import chi2_ppf
 
 __all__ = ["plot_residuals", "station_label", "plot_top_view", "plot_3d", "save_figures", "auto_magnify",
            "class_magnifications", "place_labels"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat.network.model.statistics import CHI2_3_95
+from multilat.network.adjust.statistics import CHI2_3_95
 from multilat.report.network_figures import class_magnifications
 
 _K95 = float(np.sqrt(CHI2_3_95))     # sqrt(chi2_3(0.95))

@@ -11,7 +11,7 @@ solution (:func:`multilat.network.adjust.distance.fit.fit_once`), with no new al
    per-target 3 x 3 blocks (:mod:`multilat.network.adjust.solve`: ``dense`` numpy or ``sparse`` compiled
    kernels), inverted by :func:`multilat.network.adjust.solve.loop.solve_reduced` (with its conditioning
    check: a degenerate layout raises);
-3. :class:`multilat.network.model.covariance.NetworkCovariance` rotates back to the layout's frame and
+3. :class:`multilat.network.adjust.covariance.NetworkCovariance` rotates back to the layout's frame and
    S-transforms to the datum (``free`` over all points by default): target 3 x 3 blocks, the
    station block and the hat diagonal (redundancy numbers) without the full matrix.
 
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.model.datum import Datum, apply_rigid, datum_matrices, frame_321, parse_datum
 from multilat.network.model.distance import Q, line_of_sight, range_m
 from multilat.network.model.parameter_layout import STATION_FIELDS, XYZ, ParameterLayout
@@ -70,7 +70,7 @@ def blocked_covariance(layout, sigma_m, *, offsets: bool = True, datum="free",
     ------
     MultilatError  a degenerate layout (a target not determined, a singular reduced system)
     """
-    from multilat.network.model.covariance import NetworkCovariance
+    from multilat.network.adjust.covariance import NetworkCovariance
     from multilat.network.model.data import Observations
     from multilat.network.adjust.distance.fit import pick_321_stations
     from multilat.network.model.problem import Params, Problem

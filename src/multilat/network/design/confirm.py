@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 
 __all__ = ["DesignSimulation", "simulate_design"]
 

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.model.datum import parse_datum
 from multilat.network.design.preanalysis import Layout, SigmaModel, preanalyse
 from multilat.network.model.observations import Block, Network

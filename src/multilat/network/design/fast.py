@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.model.datum import Datum, datum_matrices, helmert_basis, parse_datum, s_coefficients
 from multilat.network.model.distance import inv3, line_of_sight
 from multilat.network.model.parameter_layout import ParameterLayout

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.model.data import Observations
 from multilat.network.model.datum import Datum, helmert_basis, parse_datum, s_transform
 from multilat.network.model.distance import Q, line_of_sight, range_m, residuals_and_jacobian

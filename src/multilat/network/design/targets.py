@@ -22,7 +22,7 @@ import numpy as np
 from multilat.errors import MultilatError
 from multilat.network.design.preanalysis import (DENSE_MAX_PARAMS, Layout, covariance,
                                                  probe_cov_m2)
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.model.distance import Q
 
 __all__ = ["TargetSelection", "select_targets", "work_volume_u95_m"]

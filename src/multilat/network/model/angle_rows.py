@@ -219,7 +219,7 @@ def orientation_covariance(cov, rows: AngleRows, orientation_internal, R, G, E, 
                            n_targets: int, rotation_axes=(0, 1, 2)) -> np.ndarray:
     """Covariance (n_o, n_o) of the orientation unknowns in the requested datum.
 
-    ``cov`` is the adjustment's :class:`~multilat.network.model.covariance.CoupledCovariance` (internal frame),
+    ``cov`` is the adjustment's :class:`~multilat.network.adjust.covariance.CoupledCovariance` (internal frame),
     ``R`` the rotation of the move to the datum (``R_i -> R R_i``, coordinates ``X -> R X + t``), ``G``
     and ``E`` (5s + 3t, 6) the datum's rigid motions and constraints in the moved frame (None under a
     control datum: no S-transformation). The orientation rows of the rigid motions, which ``G`` lacks,

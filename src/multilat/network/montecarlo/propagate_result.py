@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from multilat.network.model.statistics import CHI2_3_95
+from multilat.network.adjust.statistics import CHI2_3_95
 from multilat.vocabulary import schema_id
 
 if TYPE_CHECKING:

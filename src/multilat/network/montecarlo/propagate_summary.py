@@ -55,7 +55,7 @@ def _ellipsoid_fraction(dev3, center, cov):
     region is the r-dimensional ellipsoid in its range with the ``chi2_r(0.95)`` quantile; NaN for
     a fixed point (r = 0).
     """
-    from multilat.network.model.statistics import chi2_ppf
+    from multilat.network.adjust.statistics import chi2_ppf
 
     ev, vec = np.linalg.eigh(np.asarray(cov, float))
     if not np.all(np.isfinite(ev)) or ev.max() <= 0:

@@ -154,7 +154,7 @@ class GlobalTest(Strict):
 
 
 class Sigma0Check(Strict):
-    """Is σ0 plausible (:func:`multilat.network.model.statistics.sigma0_check`)."""
+    """Is σ0 plausible (:func:`multilat.network.adjust.statistics.sigma0_check`)."""
 
     sigma0: Num
     dof: int

@@ -214,7 +214,7 @@ def multilaterate_targets(station_xyz_m, offset_m, station_index, target_index, 
     coplanar : ndarray of bool, shape (t,)
         Targets placed with the mirror rule.
     """
-    from multilat.network.model import _sparse_kernels as K
+    from multilat.network.adjust.solve import _sparse_kernels as K
 
     h = np.ascontiguousarray(station_xyz_m, float)
     o = np.ascontiguousarray(offset_m, float)

@@ -126,7 +126,7 @@ def _cost(sol) -> float:
 
 def p_value(cost: float, dof: int) -> float:
     """χ² upper-tail probability of ``cost`` with ``dof`` degrees of freedom (1 when dof <= 0)."""
-    from multilat.network.model.statistics import chi2_sf
+    from multilat.network.adjust.statistics import chi2_sf
 
     return chi2_sf(cost, dof) if dof > 0 else 1.0
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.adjust.distance.ambiguity import check_geometry, side_fixed_targets
 from multilat.network.model.data import Observations, Points, ReferenceLengths
 from multilat.network.model.datum import Datum, parse_datum

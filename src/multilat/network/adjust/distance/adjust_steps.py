@@ -11,7 +11,7 @@ from dataclasses import replace
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.model.data import Observations
 from multilat.network.adjust.distance.fit import raise_unconverged
 from multilat.network.adjust.distance.fit_state import Fit

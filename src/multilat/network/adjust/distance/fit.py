@@ -14,9 +14,9 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.model.couplings import flatten_params
-from multilat.network.model.covariance import JACOBIAN_ON_DEMAND_OBS, CoupledCovariance, NetworkCovariance
+from multilat.network.adjust.covariance import JACOBIAN_ON_DEMAND_OBS, CoupledCovariance, NetworkCovariance
 from multilat.network.model.data import Observations
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.adjust.distance.fit_state import Fit
 from multilat.network.model.datum import ABOUT_Z_COLUMNS, apply_rigid, datum_matrices, frame_321, parse_datum, rigid_fit
 from multilat.network.model.distance import Q

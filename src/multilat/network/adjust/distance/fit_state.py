@@ -29,7 +29,7 @@ class Fit:
     off_free, sc_free : (s,) bool  which offsets and scales were estimated
     residual_w : (m,) whitened distance residuals; redundancy : (m,) redundancy numbers
     sigma0 : a-posteriori σ0; iterations : Gauss-Newton iterations; cond : condition estimate
-    cov : the covariance (:class:`multilat.network.model.covariance.NetworkCovariance` or coupled)
+    cov : the covariance (:class:`multilat.network.adjust.covariance.NetworkCovariance` or coupled)
     solver : back end name; chunk_targets : targets per assembly chunk
     angles : the angle observations' part (dict: rows, residual_rad, redundancy, orientation_rad,
         orientation_cov, station_ids, target_ids, design_w) or None

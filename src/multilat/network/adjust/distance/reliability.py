@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.model.distance import Q
 
 __all__ = ["Reliability", "external_shifts", "largest_point_shift", "reliability", "MAX_EXTERNAL_OBS", "R_MIN",
@@ -74,7 +74,7 @@ def external_shifts(cov, obs, used, sx_ids, tx_ids, bias_m, *, batch: int = 2048
     plus the other targets' shifts, pruned by a bound. Coupled targets (scale bars, angles): the
     dense product in batches (those networks are small; their covariance is dense already).
     """
-    from multilat.network.model.covariance import CoupledCovariance
+    from multilat.network.adjust.covariance import CoupledCovariance
 
     ids = list(sx_ids) + list(tx_ids)
     mu = cov.Js_w.shape[0]

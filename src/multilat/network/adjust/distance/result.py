@@ -11,8 +11,8 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.io import JsonKeyedRows, JsonRows
-from multilat.network.model import statistics as st
-from multilat.network.model.covariance import NetworkCovariance
+from multilat.network.adjust import statistics as st
+from multilat.network.adjust.covariance import NetworkCovariance
 from multilat.network.model.data import Observations, ReferenceLengths
 from multilat.network.model.datum import Datum
 from multilat.network.model.distance import Q

@@ -9,7 +9,7 @@ adjusts the network again each time. On a network of 10⁵ distances the B-metho
 most of the time even without a blunder (``alpha_global`` near 0.8 at that redundancy), and the
 w-tests' own false alarms were then rejected one by one: dozens of rounds, each a full adjustment
 (the default procedure now tests large networks at Šidák's family-wise level,
-:func:`multilat.network.model.statistics.test_levels`; the rounds serve blunders and ``--test-method
+:func:`multilat.network.adjust.statistics.test_levels`; the rounds serve blunders and ``--test-method
 b-method``).
 
 Between two adjustments the rounds here use the Sherman-Morrison downdate of the linearised model
@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.model.angle_rows import KIND_NAMES, angle_rows, angle_w
 from multilat.network.adjust.distance.fit import check_network, control_ids, station_map
 from multilat.network.adjust.distance.fit_state import Fit
@@ -158,7 +158,7 @@ class LinearRounds:
 
     def twins(self, k: int, c: np.ndarray, tol: float = 1e-6) -> np.ndarray:
         """Observations other than ``k`` whose w-test is perfectly correlated with ``k``'s (as
-        :meth:`multilat.network.model.covariance.NetworkCovariance.perfectly_correlated`)."""
+        :meth:`multilat.network.adjust.covariance.NetworkCovariance.perfectly_correlated`)."""
         out = st.correlated_with(np.abs(c), self.red, k, tol)     # c itself is kept for the downdate
         out = out[self.alive[out]]
         return out[out != k]
@@ -203,7 +203,7 @@ class LinearRounds:
 # ---------------------------------------------------------------- one round of the procedure
 def n_tested(obs) -> int:
     """How many observations data snooping tests: the distances and the angles (the n of the
-    family-wise rule, :func:`multilat.network.model.statistics.test_levels`)."""
+    family-wise rule, :func:`multilat.network.adjust.statistics.test_levels`)."""
     return obs.n_obs + sum(int(np.count_nonzero(np.isfinite(a))) for a in (obs.sigma_azimuth_rad,
                                                                          obs.sigma_elevation_rad) if a is not None)
 
@@ -212,7 +212,7 @@ def n_tested(obs) -> int:
 class Procedure:
     """The test procedure of the snooping rounds: whether to snoop, at most ``limit`` rejections, the
     variance factor unknown (τ-test), the w-tests' ``alpha``, the levels ``alpha_g``
-    (:class:`multilat.network.model.statistics.TestLevels`), Baarda's ``lam0`` and the critical value ``crit``."""
+    (:class:`multilat.network.adjust.statistics.TestLevels`), Baarda's ``lam0`` and the critical value ``crit``."""
 
     do_snoop: bool
     limit: int

@@ -57,7 +57,7 @@ _UNITS = ((1e2, "cm"), (1e3, "mm"), (1e6, "µm"), (1e9, "nm"))
 def noise_free(obs, residuals_m) -> bool:
     """Residuals at the numerical floor: RMS below :data:`NOISE_FREE_REL` times the median distance
     (simulated, error-free data). Neither the unit-slip stop nor the σ0 plausibility check
-    (:func:`multilat.network.model.statistics.sigma0_check`) judges such a fit."""
+    (:func:`multilat.network.adjust.statistics.sigma0_check`) judges such a fit."""
     v = np.asarray(residuals_m, float)
     return bool(v.size) and float(np.sqrt(np.mean(v ** 2))) < NOISE_FREE_REL * float(np.median(obs.distance_m))
 

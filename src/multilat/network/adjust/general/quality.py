@@ -3,7 +3,7 @@ standardized residuals and w-tests (or Pope's τ-tests), minimal detectable bias
 confidence ellipsoid of every point.
 
 An adapter, not a second implementation: every statistic is computed by the array functions of
-:mod:`multilat.network.model.statistics` (``global_test``, ``b_method_alpha_global``, ``w_statistics``,
+:mod:`multilat.network.adjust.statistics` (``global_test``, ``b_method_alpha_global``, ``w_statistics``,
 ``w_critical``, ``tau_critical``, ``noncentrality``, ``minimal_detectable_bias_m``,
 ``bias_to_noise_ratio``, ``confidence_ellipsoid``), the functions the distance-only adjustment
 uses; this module only feeds them the general layer's whitened rows.
@@ -15,7 +15,7 @@ numbers, :mod:`.adjust`): its w, r and MDB are those of the decorrelated rows (g
 convention); independent rows are the observations themselves.
 
 Tests, as the distance-only ``multilat adjust`` does them (``docs/reliability.md``), by one rule,
-:func:`multilat.network.model.statistics.test_levels`: ``method="auto"`` (the default) runs Baarda's
+:func:`multilat.network.adjust.statistics.test_levels`: ``method="auto"`` (the default) runs Baarda's
 B-method with ``alpha`` while the rows' family-wise α stays within ``alpha_family``, Šidák's α0
 beyond (the global test then the variance factor's, at ``alpha_family``); ``"b-method"``,
 ``"sidak"`` force one, ``"fixed"`` takes ``alpha_global``. MDBs stay at Baarda's reference
@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.model import kinds as kinds_registry
 from multilat.network.adjust.general import reliability as rel
 
@@ -54,7 +54,7 @@ class GeneralStatistics:
     Per point (n,): ``cov_m2`` (n, 3, 3) (a posteriori with the variance factor unknown),
     ``semi_axes_95_m`` (n, 3) ascending, ``axes_95`` (n, 3, 3). ``shift_max_m`` (R,): the largest point shift caused by the row's MDB (inf
     where r = 0; NaN when not computed), ``shift_point`` its point's id. ``levels``: the test
-    procedure (:class:`~multilat.network.model.statistics.TestLevels`).
+    procedure (:class:`~multilat.network.adjust.statistics.TestLevels`).
     """
 
     sigma0: float
@@ -91,7 +91,7 @@ def statistics(system, result, *, alpha: float = 0.001, variance_factor: str = "
                alpha_family: float = st.ALPHA_FAMILY, levels: st.TestLevels | None = None,
                external: bool = True) -> GeneralStatistics:
     """The statistics of ``result`` (a :class:`~.adjust.GeneralResult` of ``system``); the tests'
-    levels by :func:`~multilat.network.model.statistics.test_levels` (``method`` None: ``"fixed"`` when
+    levels by :func:`~multilat.network.adjust.statistics.test_levels` (``method`` None: ``"fixed"`` when
     ``alpha_global`` is given, else ``"auto"``), or ``levels`` as given (data snooping keeps those of
     its first round)."""
     rw = system.whiten(result.residuals)

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.adjust.distance.reliability import largest_point_shift
 
 __all__ = ["whitened_jacobian", "dense_rows", "point_columns", "external_shifts", "mdb_whitened", "BATCH",
@@ -109,7 +109,7 @@ def external_shifts(result, jw: np.ndarray, bias_w: np.ndarray, *, batch: int = 
 
 def mdb_whitened(redundancy, *, alpha: float, power: float, scale: float = 1.0) -> np.ndarray:
     """Each row's MDB in whitened units, ``sqrt(λ0 / r_k)`` × ``scale`` (σ̂0 with the variance factor
-    unknown); inf where the row is not controlled (:func:`multilat.network.model.statistics.minimal_detectable_bias_m`
+    unknown); inf where the row is not controlled (:func:`multilat.network.adjust.statistics.minimal_detectable_bias_m`
     with σ = 1)."""
     r = np.asarray(redundancy, float)
     return st.minimal_detectable_bias_m(np.full(r.shape, float(scale)), r, alpha=alpha, power=power)

@@ -325,10 +325,10 @@ def _poor_mask(redundancy, mdb_sigma, *, r_min: float | None = None, mdb_limit_s
 
 def zero_redundancy_points(rows, points: dict) -> list[str]:
     """The free points kept without any control: every ``observations`` row that references them has
-    redundancy 0 (:data:`multilat.network.model.statistics.R_ZERO`; e.g. a point placed by one polar
+    redundancy 0 (:data:`multilat.network.adjust.statistics.R_ZERO`; e.g. a point placed by one polar
     reading: distance, azimuth, elevation for its three coordinates). Their coordinates follow the
     observations exactly; a blunder there cannot show. ``points``: the JSON's ``points`` map."""
-    from multilat.network.model.statistics import R_ZERO
+    from multilat.network.adjust.statistics import R_ZERO
 
     seen: dict = {}
     for o in rows:

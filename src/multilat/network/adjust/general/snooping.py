@@ -6,13 +6,13 @@ Each round, on the last adjustment:
 1. **detection** — :func:`multilat.network.adjust.distance.snooping.detection_step`, the distance path's own: the global
    χ² test (B-method, fixed α), the largest |w| against Šidák's critical value (large networks), or
    the largest |τ| (variance factor unknown); the test levels are those of the first round
-   (:func:`multilat.network.model.statistics.test_levels`, as the distance path fixes them once);
+   (:func:`multilat.network.adjust.statistics.test_levels`, as the distance path fixes them once);
 2. **identification** — the row with the largest |w| (|τ|) above its critical value;
 3. **adaptation** — that row is removed and the network adjusted again (:func:`.run.adjust_network`,
    from the last solution), unless:
 
    - another row's w-test is perfectly correlated with it (``|ρ| > 1 - 1e-6``,
-     :func:`multilat.network.model.statistics.correlated_with` on the row of the hat matrix): the data cannot
+     :func:`multilat.network.adjust.statistics.correlated_with` on the row of the hat matrix): the data cannot
      tell which is wrong; snooping stops and names both (``unlocated``);
    - removing it would leave a point it observes without redundancy (every remaining row of the point
      uncontrolled, from the rank-one downdate ``r' = r - c² / r_k``; a point that had none before is not
@@ -55,7 +55,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.adjust.approximate.bounds import Bound, report
 from multilat.network.adjust.general import reliability as rel
 from multilat.network.adjust.general.adjust import System, UndeterminedError

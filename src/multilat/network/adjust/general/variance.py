@@ -29,7 +29,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model import statistics as st
+from multilat.network.adjust import statistics as st
 from multilat.network.adjust.distance import variance_components as vc
 from multilat.network.adjust.general import reliability as rel
 from multilat.network.adjust.general.adjust import System, adjust

@@ -3,7 +3,10 @@
 ends that assemble them:
 
 ``dense``   numpy (:mod:`.dense`): every cost, scales, control points.
-``sparse``  compiled kernels in one pass over targets (:mod:`.sparse`): large networks.
+``sparse``  compiled kernels in one pass over targets (:mod:`.sparse`, :mod:`._sparse_kernels`): large
+            networks.
+
+The dense one assembles with :mod:`.normal_equations` (the Schur reduction over the targets).
 
 Both return the same :class:`~.system.Assembly`; the loop, the stopping rule
 (:mod:`.convergence`), the datum and every statistic above them are the same whichever ran. The

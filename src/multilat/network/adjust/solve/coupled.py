@@ -9,7 +9,7 @@ targets are eliminated at once::
 
 the same reduced system (5s) the loop, the tie of heads and the datum work on. Memory ``O((3t)^2)``:
 for networks of up to a few thousand targets (the sparse back end refuses couplings; ``auto`` picks
-this path). The covariance keeps this Schur form (:class:`multilat.network.model.covariance.CoupledCovariance`).
+this path). The covariance keeps this Schur form (:class:`multilat.network.adjust.covariance.CoupledCovariance`).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ weighted control) the coupled path :mod:`.coupled` eliminates all targets at onc
 
 from __future__ import annotations
 
-from multilat.network.model.distance import back_substitute, reduced_normal_equations
+from multilat.network.adjust.solve.normal_equations import back_substitute, reduced_normal_equations
 from multilat.network.model.problem import Params, Problem
 from multilat.network.adjust.solve.system import Assembly, whitened
 

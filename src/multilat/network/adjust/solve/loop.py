@@ -111,7 +111,7 @@ def check_target_blocks(Ntt, problem: Problem) -> None:
     tf = problem.target_free
     blocks = Ntt[tf]
     if blocks.shape[0] >= KERNEL_MIN_TARGETS:
-        from multilat.network.model._sparse_kernels import degenerate_blocks
+        from multilat.network.adjust.solve._sparse_kernels import degenerate_blocks
 
         bad = np.empty(blocks.shape[0], bool)
         degenerate_blocks(np.ascontiguousarray(blocks, float), 1e-10, bad)

@@ -1,5 +1,5 @@
 """Sparse back end: the Schur-reduced normal equations assembled by compiled kernels in one pass over
-the observations grouped by target (:mod:`multilat.network.model._sparse_kernels`, numba when installed).
+the observations grouped by target (:mod:`multilat.network.adjust.solve._sparse_kernels`, numba when installed).
 
 The same reduced system as :mod:`.dense` (the reduced camera system of bundle adjustment)::
 
@@ -41,7 +41,7 @@ def supports(problem: Problem) -> str | None:
 def _kernels():
     """The compiled kernels (imported when a sparse back end is built: numba takes ~0.2 s to load,
     which a small network's adjustment, on the dense back end, does not pay)."""
-    from multilat.network.model import _sparse_kernels as K
+    from multilat.network.adjust.solve import _sparse_kernels as K
 
     return K
 

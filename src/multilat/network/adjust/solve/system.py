@@ -10,7 +10,7 @@ import numpy as np
 from multilat.network.model.distance import Q, residuals, residuals_and_jacobian
 from multilat.network.model.problem import Params, Problem
 
-__all__ = ["Assembly", "whitened", "weighted_cost"]
+__all__ = ["Assembly", "whitened", "trial_residuals", "weighted_cost"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,10 +39,10 @@ def whitened(problem: Problem, p: Params):
     compiled pass for large networks and the distance cost: the same numbers, tested)."""
     o = problem.obs
     if problem.cost == "distance":
-        from multilat.network.model.covariance import compiled_for
+        from multilat.network.adjust.covariance import compiled_for
 
         if compiled_for(o.n_obs):
-            from multilat.network.model import _sparse_kernels as K
+            from multilat.network.adjust.solve import _sparse_kernels as K
 
             m = o.n_obs
             r_w, Js_w, Jt_w = np.empty(m), np.empty((m, Q)), np.empty((m, 3))
@@ -60,10 +60,29 @@ def whitened(problem: Problem, p: Params):
     return r * w, Js_w, Jt_w
 
 
+def trial_residuals(distance_m, station_xyz_m, target_xyz_m, offset_m, scale, station_index, target_index, *,
+                    cost="distance"):
+    """:func:`multilat.network.model.distance.residuals` (the cost of a trial step), compiled for large
+    networks and the distance cost (the same operations, bit for bit: ``tests/test_fast_output.py``)."""
+    if cost == "distance":
+        from multilat.network.adjust.covariance import compiled_for
+
+        if compiled_for(len(station_index)):
+            from multilat.network.adjust.solve import _sparse_kernels as K
+
+            out = np.empty(len(station_index))
+            K.distance_residuals(np.ascontiguousarray(station_xyz_m, float), np.ascontiguousarray(target_xyz_m, float),
+                                 np.asarray(offset_m, float), np.asarray(scale, float), station_index,
+                                 target_index, np.asarray(distance_m, float), out)
+            return out
+    return residuals(distance_m, station_xyz_m, target_xyz_m, offset_m, scale, station_index, target_index,
+                     cost=cost)
+
+
 def weighted_cost(problem: Problem, p: Params) -> float:
     """``sum (w r)^2`` at ``p`` (inf when not finite)."""
     o = problem.obs
-    r = residuals(o.distance_m, p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale,
+    r = trial_residuals(o.distance_m, p.station_xyz_m, p.target_xyz_m, p.offset_m, p.scale,
                   o.station_index, o.target_index, cost=problem.cost)
     v = float(np.sum((r * problem.weight_sqrt) ** 2))
     if problem.couplings is not None:

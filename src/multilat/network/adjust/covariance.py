@@ -18,13 +18,14 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.network.model.datum import s_coefficients
-from multilat.network.model.distance import Q, repeat_share, segment_sum, slot_gain, target_slots
-from multilat.network.model.statistics import correlated_with
+from multilat.network.adjust.solve.normal_equations import repeat_share, slot_gain, target_slots
+from multilat.network.model.distance import Q, segment_sum
+from multilat.network.adjust.statistics import correlated_with
 
 __all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS", "JACOBIAN_ON_DEMAND_OBS"]
 
 #: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
-#: from the compiled kernels of :mod:`multilat.network.model._covariance_kernels` (numba, when installed); smaller
+#: from the compiled kernels of :mod:`multilat.network.adjust._covariance_kernels` (numba, when installed); smaller
 #: ones from the numpy code below (no compile/load cost; the tests compare the two to 1e-12).
 KERNELS_ABOVE_OBS = 10_000
 
@@ -37,7 +38,7 @@ JACOBIAN_ON_DEMAND_OBS = 1 << 18
 
 def compiled_for(m: int) -> bool:
     """Whether a network of ``m`` observations runs the compiled kernels (its statistics here, its
-    residuals and Jacobian in :mod:`multilat.network.model.distance` and the solve's system): at least
+    residuals and Jacobian in the solve's system, :mod:`multilat.network.adjust.solve.system`): at least
     :data:`KERNELS_ABOVE_OBS` observations and numba installed (not imported below the size)."""
     if m < KERNELS_ABOVE_OBS:
         return False
@@ -50,7 +51,7 @@ def _kernels(m: int):
     """The compiled statistics kernels for a network of ``m`` observations, or None (numpy path)."""
     if not compiled_for(m):
         return None
-    from multilat.network.model import _covariance_kernels as K
+    from multilat.network.adjust import _covariance_kernels as K
 
     return K
 

@@ -1,7 +1,7 @@
-"""Kernels of the statistics at the solution of a large network (:mod:`multilat.network.model.covariance`):
+"""Kernels of the statistics at the solution of a large network (:mod:`multilat.network.adjust.covariance`):
 the hat diagonal and hat rows, the target blocks of the covariance, the covariance and design
 products of the downdated snooping rounds, the targets' gains. One pass over targets, observations
-grouped by target, as in :mod:`multilat.network.model._sparse_kernels` (the solve).
+grouped by target, as in :mod:`multilat.network.adjust.solve._sparse_kernels` (the solve).
 
 Compiled with numba when it is installed; otherwise the same functions run as plain Python (slow,
 but identical arithmetic). The tests compare them with the numpy path of ``covariance`` to 1e-12.
@@ -24,7 +24,7 @@ from multilat._numba import HAVE_NUMBA, njit, prange  # noqa: F401
 from multilat._numba import writable as _writable
 
 
-# The covariance of :class:`multilat.network.model.covariance.NetworkCovariance` in its Schur form: ``Qgg``
+# The covariance of :class:`multilat.network.adjust.covariance.NetworkCovariance` in its Schur form: ``Qgg``
 # (Qs, Qs) station/offset/scale block (Q = 5 parameters per station), ``Minv`` (t, 3, 3) target
 # blocks, whitened Jacobian rows ``A_k = Js_w[k]`` (Q,) and ``B_k = Jt_w[k]`` (3,), ``P_k = Minv_j B_k``.
 # Observations are visited per target through ``order[tptr[j]:tptr[j+1]]`` (any row order).
