@@ -35,6 +35,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.model.datum import apply_rigid, rigid_fit
+from multilat.network.model.distance import line_of_sight
 
 __all__ = ["distance_search", "onto_given", "searched_free", "minimum_search", "NOTE", "FREE_FRAME", "MINIMUM_NOTE"]
 
@@ -185,10 +186,9 @@ def onto_given(src, dst, about_z: bool = False):
         return rigid_fit(src, dst, about_z=True)
     R = np.eye(3)
     if len(src) == 2:
-        a, b = src[1] - src[0], dst[1] - dst[0]
-        na, nb = np.linalg.norm(a), np.linalg.norm(b)
+        (na, nb), (ua, ub) = line_of_sight(np.stack([src[1] - src[0], dst[1] - dst[0]]), floor_m=1.0)
         if na > 0 and nb > 0:
-            R = _turn(a / na, b / nb)
+            R = _turn(ua, ub)
     c = src.mean(axis=0)
     return R, dst.mean(axis=0) - R @ c
 
