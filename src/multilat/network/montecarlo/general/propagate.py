@@ -55,7 +55,7 @@ from multilat.network.adjust.general.adjust import GeneralResult, System, _step
 from multilat.network.montecarlo.general.propagate_result import SCHEMA, GeneralPropagation, default_pairs, summarise
 
 __all__ = ["BLOCK", "DistanceNoise", "Frozen", "GeneralPropagation", "Solution", "default_pairs", "distance_noise",
-           "draw", "freeze", "gauss_newton", "propagate", "solve", "SCHEMA"]
+           "draw", "freeze", "gauss_newton", "iterate_trial", "propagate", "solve", "whitened_residual", "SCHEMA"]
 
 #: Trials per seeded block (the unit of reproducibility; :data:`multilat.network.montecarlo.propagate.BLOCK`).
 BLOCK = 1000
@@ -363,30 +363,46 @@ def _fall_back(frozen, obs, x, done, iters, far, vtpv, tol, fallback) -> Solutio
     return Solution(x, done, iters, far if fallback else np.zeros(len(x), bool), vtpv)
 
 
-def gauss_newton(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int = 50):
-    """One trial by full Gauss-Newton from ``x̂`` (the adjustment's step at every iterate, in the frozen
-    datum ``B``): ``(x, converged, vTPv)``."""
-    s = frozen.system
+def whitened_residual(frozen: Frozen, r: np.ndarray) -> np.ndarray:
+    """The whitened residual of one trial: angles wrapped to (-π, π], then the system's whitening."""
+    r[frozen.angular] = wrap_angle(r[frozen.angular])
+    return frozen.system.whiten(r)
+
+
+def iterate_trial(frozen: Frozen, obs: np.ndarray, step, *, tol: float = 1e-10, max_iter: int = 50):
+    """One trial by full Gauss-Newton from ``x̂`` in the frozen datum: ``step(x, d)`` gives the
+    whitened residual and the step at ``x`` (``d`` = observed minus the adjustment's values, added to
+    the residual at ``x``); the back ends differ only in it (:func:`gauss_newton` dense,
+    :func:`.propagate_blocks.sparse_gauss_newton`). ``(x, converged, vTPv)``; a step that fails
+    (singular, undefined model) ends the trial unconverged."""
     x = frozen.x_hat.copy()
-    det = frozen.determinability
-    value = np.concatenate([np.asarray(b.value, float) for b in s.blocks])
+    d = obs - np.concatenate([np.asarray(b.value, float) for b in frozen.system.blocks])
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         for _ in range(max_iter):
             try:
-                r0, jac = s.evaluate(x)
-            except MultilatError:
+                rw, dx = step(x, d)
+            except (MultilatError, np.linalg.LinAlgError):
                 return x, False, np.nan
-            r = r0 + (obs - value)
-            r[frozen.angular] = wrap_angle(r[frozen.angular])
-            rw = s.whiten(r)
-            dx, _ = _step(s.whiten(jac), rw, det)
             x[frozen.free] += dx
-            step = float(np.abs(dx).max(initial=0.0))
-            if not np.isfinite(step):
+            size = float(np.abs(dx).max(initial=0.0))
+            if not np.isfinite(size):
                 return x, False, np.nan
-            if step < tol:
+            if size < tol:
                 return x, True, float(rw @ rw)
     return x, False, np.nan
+
+
+def gauss_newton(frozen: Frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int = 50):
+    """One trial by full Gauss-Newton from ``x̂`` (the adjustment's dense step at every iterate, in the
+    frozen datum ``B``): ``(x, converged, vTPv)`` (:func:`iterate_trial`)."""
+    s, det = frozen.system, frozen.determinability
+
+    def step(x, d):
+        r0, jac = s.evaluate(x)
+        rw = whitened_residual(frozen, r0 + d)
+        return rw, _step(s.whiten(jac), rw, det)[0]
+
+    return iterate_trial(frozen, obs, step, tol=tol, max_iter=max_iter)
 
 
 # ---------------------------------------------------------------------------------------------- blocks of trials

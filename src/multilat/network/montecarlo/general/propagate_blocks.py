@@ -25,7 +25,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model.angles import wrap_angle
 
 __all__ = ["MAX_SAMPLE_BYTES", "MAX_WORK", "Schur", "check_size", "linear", "schur", "solve_blocks",
            "sparse_gauss_newton"]
@@ -186,31 +185,20 @@ def solve_blocks(frozen, obs: np.ndarray, x: np.ndarray, tol: float, max_iter: i
 def sparse_gauss_newton(frozen, obs: np.ndarray, *, tol: float = 1e-10, max_iter: int = 50):
     """One trial by full Gauss-Newton from x̂ with the sparse back end's step (its elimination at every
     iterate, :func:`.sparse.eliminate` and :func:`.sparse.frozen_step`) in the frozen datum ``B``:
-    ``(x, converged, vTPv)`` (:func:`.propagate.gauss_newton`)."""
+    ``(x, converged, vTPv)`` (:func:`.propagate.iterate_trial`)."""
     from multilat.network.adjust.general import sparse
+    from multilat.network.montecarlo.general.propagate import iterate_trial, whitened_residual
 
     s = frozen.system
-    x = frozen.x_hat.copy()
     det = frozen.determinability
     B = det.constraints if det.defect else None
-    value = np.concatenate([np.asarray(b.value, float) for b in s.blocks])
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        for _ in range(max_iter):
-            try:
-                r0, _, jw = sparse.assemble(s, x)
-                r = r0 + (obs - value)
-                r[frozen.angular] = wrap_angle(r[frozen.angular])
-                rw = s.whiten(r)
-                dx, _ = sparse.frozen_step(sparse.eliminate(s, jw)[0], jw, rw, B)
-            except (MultilatError, np.linalg.LinAlgError):
-                return x, False, np.nan
-            x[frozen.free] += dx
-            step = float(np.abs(dx).max(initial=0.0))
-            if not np.isfinite(step):
-                return x, False, np.nan
-            if step < tol:
-                return x, True, float(rw @ rw)
-    return x, False, np.nan
+
+    def step(x, d):
+        r0, _, jw = sparse.assemble(s, x)
+        rw = whitened_residual(frozen, r0 + d)
+        return rw, sparse.frozen_step(sparse.eliminate(s, jw)[0], jw, rw, B)[0]
+
+    return iterate_trial(frozen, obs, step, tol=tol, max_iter=max_iter)
 
 
 def linear(frozen, pairs: np.ndarray, model=None, batch: int = 256):
