@@ -307,7 +307,7 @@ class Tried(Strict):
 
 
 class Search(Strict):
-    """The search for a false minimum (:meth:`multilat.network.adjust.approximate.search.Search.as_dict`)."""
+    """The search for a false minimum (:meth:`multilat.network.adjust.approximate.search.MinimumSearch.as_dict`)."""
 
     search_triggered: bool
     bounded: str | None = None

@@ -57,10 +57,20 @@ from multilat.network.adjust.approximate.bounds import SEARCH_SECONDS, SEARCH_SO
 from multilat.network.adjust.approximate.initial import distance_matrix, initial_values
 from multilat.network.adjust.approximate.initial_refine import choose_frame, point_fit, refine_unmirrored, to_frame
 
-__all__ = ["Candidate", "MinimumSearch", "find_minimum", "needs_search", "P_MIN"]
+__all__ = ["Candidate", "MinimumSearch", "false_minimum_text", "find_minimum", "needs_search", "P_MIN"]
 
 #: χ² upper-tail probability below which a converged solution is "failing by far"
 P_MIN = 1e-9
+
+
+def false_minimum_text(sigma0: float, p: float, *, searched: bool = True, n_tried: int | None = None) -> str:
+    """The "possible false minimum" warning, one wording on every path (the search's, the distance
+    adjustment's after snooping, the general layer's): σ0, the χ² tail probability ``p``, and whether
+    the minimum search ran (``searched``) and how many starts it tried."""
+    after = " after the minimum search" if searched else ""
+    starts = f", {n_tried} starts tried" if n_tried is not None else ""
+    return (f"possible false minimum: the global test fails by far{after} (sigma0 {sigma0:.3g}, chi-square p "
+            f"{p:.1e}{starts}): check for gross errors, a-priori sigma too small, or give approximate coordinates")
 
 
 @dataclass(frozen=True)
@@ -323,10 +333,5 @@ def find_minimum(obs, solve, first, *, rng=None, p_min: float = P_MIN, n_targets
             break
     bound.warn_if_timed_out()
     p = p_value(best_cost, dof)
-    warning = None
-    if p < p_min:
-        warning = (f"possible false minimum: the global test fails by far after the minimum search "
-                   f"(sigma0 {np.sqrt(best_cost / dof):.3g}, chi-square p {p:.1e}, {len(tried)} "
-                   "starts tried): check for gross errors, a-priori sigma too small, or give "
-                   "approximate coordinates")
+    warning = false_minimum_text(np.sqrt(best_cost / dof), p, n_tried=len(tried)) if p < p_min else None
     return MinimumSearch(best, triggered, first_cost, best_cost, dof, p, tuple(tried), warning, bound.note())

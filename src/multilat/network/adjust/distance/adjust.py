@@ -31,7 +31,7 @@ from multilat.network.adjust.distance.fit_state import Fit
 from multilat.network.adjust.distance.options import NetworkOptions
 from multilat.network.adjust.distance.result import (AdjustmentResult, InterpointDistance, Outlier, Start,
                                      build_result)
-from multilat.network.adjust.approximate.search import P_MIN, p_value
+from multilat.network.adjust.approximate.search import P_MIN, false_minimum_text, p_value
 from multilat.network.model.sigma_source import describe as describe_sigma
 from multilat.network.model.couplings import coupling_spec
 from multilat.network.model.angle_rows import angle_results
@@ -472,10 +472,7 @@ def _finish(core, prep, opts, *, obs_w, used, rounds, proc, search, unlocated, r
     rejected, steps, ang_rejected = rounds.rejected, rounds.steps, rounds.ang_rejected
     if search is not None and p_value(core.vtpv, core.dof) < P_MIN:
         # still failing by far after data snooping: a possible false minimum, never passed as ordinary
-        msg = search.warning or (
-            f"possible false minimum: the global test fails by far (sigma0 "
-            f"{core.sigma0:.3g}, chi-square p {p_value(core.vtpv, core.dof):.1e}): check for gross "
-            "errors, a-priori sigma too small, or give approximate coordinates")
+        msg = search.warning or false_minimum_text(core.sigma0, p_value(core.vtpv, core.dof), searched=False)
         notes.append(msg)
         warnings.warn(msg, UserWarning, stacklevel=3)
     if n_bars and datum.kind != "control" and np.all(sc_free):

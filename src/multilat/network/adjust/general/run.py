@@ -149,15 +149,12 @@ def false_minimum_warning(adj: NetworkAdjustment) -> str | None:
     :func:`_adjusted`): None otherwise. Judged on the final adjustment (after data snooping, as the
     distance path)."""
     from multilat.network.adjust.approximate.general.search import searched_free
-    from multilat.network.adjust.approximate.search import p_value
+    from multilat.network.adjust.approximate.search import false_minimum_text, p_value
 
     res = adj.result
     if not searched_free(adj.network.notes) or not _failing_by_far(res):
         return None
-    p = p_value(float(res.sigma0) ** 2 * res.dof, res.dof)
-    return (f"possible false minimum: the global test fails by far after the minimum search (sigma0 "
-            f"{res.sigma0:.3g}, chi-square p {p:.1e}): check for gross errors, a-priori sigma too small, "
-            "or give approximate coordinates")
+    return false_minimum_text(res.sigma0, p_value(float(res.sigma0) ** 2 * res.dof, res.dof))
 
 
 def leave_out(net: Network, reasons: dict, rnd: int, excluded: list, error: MultilatError | None = None) -> Network:
