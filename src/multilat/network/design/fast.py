@@ -1,10 +1,9 @@
 """The search's evaluator: the criterion of a layout from the Schur complement in (heads x targets) arrays.
 
 A search calls the criterion thousands of times on layouts that differ only in head positions. The
-general paths pay for generality per call (:mod:`.preanalysis`: the dense normal matrix, ``O(t³)``;
-:mod:`.blocked`: the adjustment's own reduced system, observation lists, a 3-2-1 frame, the
-``NetworkCovariance`` object). Here the same algebra runs on fixed-shape arrays, the pairs a head
-does not see weighted zero:
+adjustment's own layer pays for generality per call (:mod:`.blocked`, the dense and blocked back
+ends: observation lists, a 3-2-1 frame, the solve's back end, the ``NetworkCovariance`` object).
+Here the same algebra runs on fixed-shape arrays, the pairs a head does not see weighted zero:
 
 * per observation (head ``i``, target ``j``) the whitened Jacobian ``[u, 1] / σ`` (head ``x, y, z``,
   offset) and ``-u / σ`` (target), ``u`` the unit vector from target to head;

@@ -20,9 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.design.backends import make_backend
+from multilat.network.design.backends import make_backend, u95_max_m
 from multilat.network.design.preanalysis import Layout, probe_cov_m2
-from multilat.network.adjust import statistics as st
 
 __all__ = ["TargetSelection", "select_targets", "work_volume_u95_m"]
 
@@ -65,7 +64,7 @@ def work_volume_u95_m(layout: Layout, sigma_m, probe_xyz_m, probe_visible, *, of
                      visible=probe_visible)
     if not np.all(np.isfinite(c)):
         return float("inf")
-    return float(np.sqrt(st.CHI2_3_95 * max(np.linalg.eigvalsh(c)[:, -1].max(), 0.0)))
+    return float(u95_max_m(c).max())
 
 
 def select_targets(layout: Layout, sigma, wanted_u95_m: float, *, offsets: bool = True,
