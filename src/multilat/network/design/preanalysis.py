@@ -210,8 +210,8 @@ def criterion_value(name: str, layout: Layout, sigma: SigmaModel, *, offsets=Tru
 
     ``method``: a back end of :mod:`.backends`, ``"dense"`` (the adjustment's covariance as the whole
     matrix), ``"blocked"`` (the same in its Schur form), ``"fast"`` (the search's evaluator; not
-    length_u) or ``"auto"`` (fast, and for length_u dense up to :data:`DENSE_MAX_PARAMS` parameters,
-    else blocked). All agree to 1e-9 (tested)."""
+    length_u) or ``"auto"`` (fast, and blocked for length_u: :func:`~.backends.choose_backend`).
+    All agree to 1e-9 (tested)."""
     if name not in CRITERIA:
         raise MultilatError(f"criterion must be one of {', '.join(CRITERIA)}, got {name!r}")
     _, sig = _sigma_per_pair(layout, sigma)
