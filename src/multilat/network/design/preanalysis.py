@@ -233,7 +233,7 @@ class PreAnalysis:
     layout : Layout
     station_index, target_index : ndarray of int (m,)  the observations (visible pairs)
     distance_m, sigma_m : ndarray (m,)  geometric distances and their standard uncertainties
-    cov : ndarray (5s + 3t, 5s + 3t) or None  full covariance, model layout, in the datum, m²
+    cov : ndarray (5s + 3t, 5s + 3t) or None  full covariance, the adjustment's layout, in the datum, m²
         (None from the blocked method: large layouts keep only the blocks below)
     global_cov : ndarray (5s, 5s)  covariance of the station parameters (x, y, z, offset, scale)
     station_cov_m2 : (s, 3, 3) ; target_cov_m2 : (t, 3, 3)
