@@ -42,8 +42,6 @@ KNOWN = {
         "adjust/approximate/large.py:refit_point": "the large-network generator's refit (multilat.synthetic, issue 27 item 4)",
         "montecarlo/propagate_summary.py:linear_std": "the gradient of a reported length (a result, not the model)",
         "montecarlo/simulate.py:linear_prediction": "a bar's direction in the length-error prediction",
-        "adjust/approximate/general/frames.py:orient": "the general layer (issue 26), not in this change",
-        "adjust/approximate/general/search.py:jac": "the general layer (issue 26), not in this change",
     },
     "s_transform": {
         "model/angle_rows.py:orientation_covariance": "the orientations' rows (EᵀG)⁻¹ of an S-transform that "
