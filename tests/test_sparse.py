@@ -12,6 +12,7 @@ from multilat.network.adjust.distance.adjust import Start, adjust
 from multilat.network.model.data import Observations
 from multilat.network.synthetic.generator import synthetic_network
 from multilat.network.model.distance import Q
+from multilat.network.model.parameter_layout import XYZ, ParameterLayout
 from multilat.network.model.problem import Params, Problem
 from multilat.network.adjust.solve.dense import DenseBackend
 from multilat.network.adjust.solve.sparse import SparseBackend
@@ -76,14 +77,16 @@ def test_python_and_numba_kernels_agree():
     tptr = np.zeros(t + 1, np.int64)
     np.cumsum(np.bincount(net.target_index, minlength=t), out=tptr[1:])
     w = 1 / net.sigma_m**2
+    lay = ParameterLayout.adjustment(len(h))
+    cols = np.ascontiguousarray(lay.station_block(XYZ + ("offset",)), np.int64)
     outs = []
     for f in (K.assemble, K.assemble.py_func):
         u = np.empty((len(w), 3))
         nblk = np.empty((t, 3, 3))
         ninv = np.empty((t, 3, 3))
         gt = np.empty((t, 3))
-        sm, gp, vt, dmin = f(h, o, tg, net.distance_m, w, net.station_index, tptr, u, nblk, ninv, gt, 2, 4,
-                             1e-3)
+        sm, gp, vt, dmin = f(h, o, tg, net.distance_m, w, net.station_index, tptr, cols, lay.n, u, nblk, ninv, gt,
+                             2, 4, 1e-3)
         outs.append((sm, gp, vt, nblk, ninv, gt))
     for a, b in zip(*outs):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
