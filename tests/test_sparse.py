@@ -102,6 +102,37 @@ def test_python_and_numba_kernels_agree():
                                atol=1e-9)
 
 
+def test_kernels_write_the_layout_columns_they_are_given():
+    """The kernels place each station's ``x, y, z, offset`` at the columns of the layout passed in: the
+    loop's adjustment layout (5 per station, scale columns left zero) and the station system (4 per
+    station, the old tiles) give the same numbers, bit for bit, on each other's columns."""
+    net = synthetic_network(3, population="rings", n_stations=5, n_targets=12, per_target=4)
+    h, o, tg = start(net, 4)
+    t = len(tg)
+    tptr = np.zeros(t + 1, np.int64)
+    np.cumsum(np.bincount(net.target_index, minlength=t), out=tptr[1:])
+    w = 1 / net.sigma_m**2
+    dg = np.linspace(-1e-6, 1e-6, 5 * len(h))
+    out = {}
+    for name, lay in (("adjustment", ParameterLayout.adjustment(len(h))),
+                      ("station_system", ParameterLayout.station_system(len(h)))):
+        cols = np.ascontiguousarray(lay.station_block(XYZ + ("offset",)), np.int64)
+        u, nblk, ninv, gt = np.empty((len(w), 3)), np.empty((t, 3, 3)), np.empty((t, 3, 3)), np.empty((t, 3))
+        N, b, _, _ = K.assemble(h, o, tg, net.distance_m, w, net.station_index, tptr, cols, lay.n, u, nblk, ninv, gt,
+                                2, 4, 0.0)
+        step = np.zeros(lay.n)
+        step[cols.ravel()] = dg.reshape(-1, 5)[:, :4].ravel()
+        dt = np.empty((t, 3))
+        K.back_substitute(step, cols, gt, ninv, u, w, net.station_index, tptr, dt)
+        out[name] = (cols.ravel(), N, b, dt)
+    ca, Na, ba, dta = out["adjustment"]
+    cs, Ns, bs, dts = out["station_system"]
+    assert Na.shape == (25, 25) and Ns.shape == (20, 20)
+    assert np.array_equal(Na[np.ix_(ca, ca)], Ns) and np.array_equal(ba[ca], bs) and np.array_equal(dta, dts)
+    scale = np.setdiff1d(np.arange(25), ca)                          # the scale columns: untouched
+    assert not Na[scale].any() and not Na[:, scale].any() and not ba[scale].any()
+
+
 def test_fast_reader_matches_the_strict_reader(tmp_path):
     from multilat.network.io.fastio import read_observations_fast
     from multilat.network.io.files import read_observations
