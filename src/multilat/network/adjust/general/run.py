@@ -73,10 +73,31 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
                 raise
             net = leave_out(net, {p: undetermined_reason(c) for p, c in e.points.items()}, rnd, excluded, error=e)
             continue
-        return NetworkAdjustment(ready, System(ready), res, given, tuple(excluded))
+        system = System(ready)
+        weak = _weak(system, res, strict)
+        if weak:
+            net = leave_out(net, weak, rnd, excluded)
+            continue
+        return NetworkAdjustment(ready, system, res, given, tuple(excluded))
     raise MultilatError(f"still undetermined points after {max_rounds} rounds of leaving them out "
                         f"({len(excluded)} left out: {', '.join(e['id'] for e in excluded[:5])}"
                         f"{', ...' if len(excluded) > 5 else ''}); use --strict to see the first")
+
+
+def _weak(system: System, res: GeneralResult, strict: bool) -> dict:
+    """The weak points of the adjusted network (:func:`.weak.weak_points_of`, the distance path's rule):
+    {id: reason}, empty when none or when every point tested is weak (a flat network: not one point
+    weak, as :func:`multilat.network.adjust.distance.exclusion.raise_undetermined`). ``strict``: the
+    first is refused in the distance path's words."""
+    from multilat.network.adjust.general.weak import weak_points_of
+
+    weak, n_tested = weak_points_of(system, res.parameters)
+    if not weak or len(weak) >= n_tested:
+        return {}
+    if strict:
+        pid, why = next(iter(weak.items()))
+        raise MultilatError(f"point {pid!r} {why} (--strict: refused; without it, it would be left out)")
+    return weak
 
 
 def check_sizes(network: Network, options: AdjustOptions | None = None) -> None:
