@@ -8,6 +8,10 @@ point no observation reaches with approximate coordinates) is removed with every
 references it and the rest is adjusted again, for at most ``max_rounds`` rounds; each one is
 recorded in :attr:`NetworkAdjustment.excluded` with its reason and the number of observation rows it
 took with it. ``strict=True`` refuses instead (the one-line error of :func:`.adjust.adjust`).
+A point the rank test finds determined but whose lines of sight are coplanar within their
+uncertainty, its other observations not fixing it, is weak (the distance path's rule, one function:
+:mod:`multilat.network.model.weak_points`, fed by :mod:`.weak`): left out after the adjustment the
+same way, in the distance path's words.
 
 What cannot be left out is still refused in one line: a defect no point carries (an instrument
 scale with no scale in the network), or a network whose every free point is undetermined (a free
