@@ -15,7 +15,8 @@ alone its mirror image through the plane of its 3 stations fits them equally (na
 the adjustment :mod:`multilat.network.adjust.distance.ambiguity` lists it among the mirror-ambiguous points, with the
 stations that see only coplanar targets and the targets seen by coplanar stations).
 A target whose lines of sight are coplanar within their uncertainty is not determined either,
-whatever the size of the network (:func:`undetermined_targets`): it is left out the same way, named
+whatever the size of the network (:func:`undetermined_targets`, the rule of
+:mod:`multilat.network.model.weak_points`, shared with the general layer): it is left out the same way, named
 with its reason. Its coordinates are needed to see it, so it is found on the initial values or the
 first adjustment (a 3x3 target block numerically singular: :class:`UndeterminedTargets`) and the
 adjustment runs again without it (:func:`leaving_out_undetermined`, a bounded number of rounds).
