@@ -167,10 +167,11 @@ def _worker_numba_threads(_):
 
 
 def test_dask_thread_workers_identical_and_single_run_closes_early():
-    """Local clusters of 1 and 2 worker *threads* (``processes=False``) give the propagation's numbers
-    bit for bit (the distance model's draw and the solver are numba parallel kernels, run on one numba
-    thread per worker thread); ``single_run`` closes the client and the cluster once the last result
-    is in, before the summaries, and refuses a second run; without it the map serves several runs."""
+    """Local clusters of 1 and 2 worker *threads* (``map_from_options``'s default; ``dask_map(...,
+    processes=False)``) give the propagation's numbers bit for bit (the distance model's draw and the
+    solver are numba parallel kernels, run on one numba thread per worker thread); ``single_run``
+    closes the client and the cluster once the last result is in, before the summaries, and refuses a
+    second run; without it the map serves several runs."""
     pytest.importorskip("distributed")
     from multilat.network.montecarlo import propagate as pr
     from multilat.network.synthetic.configs import small_volume
@@ -185,7 +186,7 @@ def test_dask_thread_workers_identical_and_single_run_closes_early():
         return summarise(*args, **kw)
 
     for workers in (1, 2):
-        with map_from_options(workers=workers, processes=False, single_run=True) as m:
+        with map_from_options(workers=workers, single_run=True) as m:      # the CLI's: threads
             assert m.threads and m.n_workers == workers
             assert set(m.map(_worker_numba_threads, range(4))) == {1}
             pr.summarise = spy

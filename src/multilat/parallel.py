@@ -392,13 +392,14 @@ def process_map(workers: int):
 
 
 @contextlib.contextmanager
-def map_from_options(workers: int | None = None, scheduler: str | None = None, *, processes: bool = True,
+def map_from_options(workers: int | None = None, scheduler: str | None = None, *, processes: bool = False,
                      single_run: bool = False):
     """The map for CLI options ``--workers N`` / ``--scheduler ADDRESS``.
 
     Yields None (in-process, builtin ``map``, Dask not imported) when neither is given, else a
-    :class:`DaskMap` (a local cluster of ``workers`` processes, or threads with ``processes=False``;
-    or the scheduler at ``scheduler``); ``single_run``: see :func:`dask_map`.
+    :class:`DaskMap`: a local cluster of ``workers`` worker *threads* (the commands' work is numba
+    kernels compiled ``nogil``; ``processes=True`` for worker processes), or the scheduler at
+    ``scheduler``; ``single_run``: see :func:`dask_map`.
     """
     if workers is None and scheduler is None:
         yield None
