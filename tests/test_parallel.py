@@ -188,6 +188,7 @@ def test_dask_thread_workers_identical_and_single_run_closes_early():
     for workers in (1, 2):
         with map_from_options(workers=workers, single_run=True) as m:      # the CLI's: threads
             assert m.threads and m.n_workers == workers
+            assert set(m.client.run(os.getpid).values()) == {os.getpid()}      # in this process
             assert set(m.map(_worker_numba_threads, range(4))) == {1}
             pr.summarise = spy
             try:
@@ -226,3 +227,16 @@ def test_release_of_other_maps_and_close_errors():
     closer.start()
     with pytest.raises(RuntimeError, match="close failed"):
         closer.join()
+
+
+def test_thread_workers_fall_back_to_processes_without_a_thread_safe_layer(monkeypatch):
+    """Where numba's threading layer would abort on kernels launched from two threads (workqueue),
+    ``processes=False`` still starts worker processes (whose kernels run one at a time each)."""
+    pytest.importorskip("distributed")
+    import multilat.parallel as par
+
+    monkeypatch.setattr(par, "_threads_can_launch_parallel_kernels", lambda: False)
+    with dask_map(workers=1, processes=False) as m:
+        assert not m.threads and m.n_workers == 1
+        assert list(m.map(_slow_square, [3, 4])) == [9, 16]
+        assert os.getpid() not in set(m.client.run(os.getpid).values())
