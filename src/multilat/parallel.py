@@ -185,8 +185,7 @@ def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory
             cluster, saved = _process_cluster(distributed, workers, memory_limit)
         if cluster is not None:
             client = distributed.Client(cluster)
-        closer = _Closer(client, None)
-        cluster, closer.cluster = None, cluster        # from here on the closer owns the cluster
+        closer, cluster = _Closer(client, cluster), None      # from here on the closer closes the cluster
         try:
             yield DaskMap(client, threads=threads, release=closer.start if single_run else None)
         finally:
