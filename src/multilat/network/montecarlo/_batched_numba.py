@@ -310,6 +310,39 @@ def apply_inner(pts, idx, x0c, proj, c0, iterations):  # pragma: no cover - jit
                 pts[r, p, a] += c0[a]
 
 
+@njit(cache=True, nogil=True)
+def deviations(h, o, tg, keep, x0, pair_a, pair_b, dist0, dev):  # pragma: no cover - jit
+    """Row ``q`` of ``dev`` (float32): trial ``keep[q]``'s stations, offsets and targets minus ``x0``
+    (the :func:`multilat.network.montecarlo.batched.flatten` layout), then its interpoint distances
+    minus ``dist0``; the points ``pair_a``, ``pair_b`` index the stations then the targets. Each value
+    as numpy computes it (a float64 difference rounded once to float32; a distance as
+    ``np.linalg.norm``: the squares added in order, then the square root)."""
+    s = h.shape[1]
+    t = tg.shape[1]
+    for q in range(keep.shape[0]):
+        r = keep[q]
+        c = 0
+        for i in range(s):
+            for a in range(3):
+                dev[q, c] = h[r, i, a] - x0[c]
+                c += 1
+        for i in range(o.shape[1]):
+            dev[q, c] = o[r, i] - x0[c]
+            c += 1
+        for j in range(t):
+            for a in range(3):
+                dev[q, c] = tg[r, j, a] - x0[c]
+                c += 1
+        for k in range(pair_a.shape[0]):
+            acc = 0.0
+            for a in range(3):
+                pa = h[r, pair_a[k], a] if pair_a[k] < s else tg[r, pair_a[k] - s, a]
+                pb = h[r, pair_b[k], a] if pair_b[k] < s else tg[r, pair_b[k] - s, a]
+                acc += (pa - pb) * (pa - pb)
+            dev[q, c] = np.sqrt(acc) - dist0[k]
+            c += 1
+
+
 # Python entry points: read-only inputs (arrays read from a file) passed as writeable copies, so the
 # warm-up's compiled variant serves them (multilat._numba.boundary)
 _solve_frozen = boundary(_solve_frozen)
@@ -323,3 +356,4 @@ def solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, cols, tol, max_iter):
     tasks = max(1, min(get_num_threads(), d.shape[0] // LANES))
     return _solve_frozen(d, h, o, tg, si, ti, w, u0, ninv0, s0inv, cols, tol, max_iter, tasks)
 apply_inner = boundary(apply_inner)
+deviations = boundary(deviations)
