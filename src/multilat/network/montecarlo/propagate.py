@@ -50,6 +50,7 @@ from multilat.network.montecarlo.propagate_pairs import pairs_and_refs, parse_pa
 from multilat.network.montecarlo.propagate_result import PropagationResult, chi2_3_95
 from multilat.network.montecarlo.propagate_summary import linear_std, summarise
 from multilat.network.model.sigma_source import DEFAULT_SIGMA_M
+from multilat.parallel import release_map, thread_map
 
 __all__ = ["BLOCK", "NOT_PROPAGATED", "Problem", "noise_choice", "parse_pairs", "problem_from_observations",
            "problem_from_truth", "problem_from_config", "propagate", "PropagationResult", "chi2_3_95"]
@@ -571,12 +572,8 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str |
     if limit * k * 4 > max_memory_bytes:   # float32 samples (statistics are computed per column block)
         raise MultilatError(f"{limit} trials x {k} outputs would need {limit * k * 4 / 2**30:.1f} GiB of "
                             "samples; use fewer trials")
-    if map is None:     # in-process: the blocks shared by threads (the kernels release the GIL)
-        from multilat.parallel import thread_map
-
-        mapper, unit = thread_map, BLOCK
-    else:
-        mapper, unit = resolve_map(map), chunk_size
+    # in-process: the blocks shared by threads (the kernels release the GIL)
+    mapper, unit = (thread_map, BLOCK) if map is None else (resolve_map(map), chunk_size)
 
     def items(trials_, first_block=0):
         return [(spec, entropy, key, c0, c1, trials_)
@@ -598,7 +595,5 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str |
                                                     max_trials=max_trials, progress=progress,
                                                     batches_per_round=batches_per_round)
     if map is not None:     # every result is in: a single-run Dask map closes its cluster meanwhile
-        from multilat.parallel import release_map
-
         release_map(map)
     return summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done, obs_cov)
