@@ -18,11 +18,14 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.network.model.datum import s_coefficients
-from multilat.network.adjust.solve.normal_equations import repeat_share, slot_gain, target_slots
-from multilat.network.model.distance import Q, segment_sum
+from multilat.network.adjust.solve.normal_equations import (reduced_normal_equations, repeat_share, slot_gain,
+                                                           target_slots)
+from multilat.network.model.distance import Q, residuals_and_jacobian, segment_sum
+from multilat.network.model.parameter_layout import STATION_FIELDS, ParameterLayout
 from multilat.network.adjust.statistics import correlated_with
 
-__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS", "JACOBIAN_ON_DEMAND_OBS"]
+__all__ = ["NetworkCovariance", "CoupledCovariance", "distance_covariance", "KERNELS_ABOVE_OBS",
+           "JACOBIAN_ON_DEMAND_OBS"]
 
 #: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
 #: from the compiled kernels of :mod:`multilat.network.adjust._covariance_kernels` (numba, when installed); smaller
@@ -86,6 +89,7 @@ class NetworkCovariance:
         self.t = Minv.shape[0]
         self.n_station_params = Q * self.s             # the station block's columns, then 3 per target
         self.n = self.n_station_params + 3 * self.t
+        self.layout = ParameterLayout.adjustment(self.s, self.t)    # the columns of every product
         self.factor = float(factor)
         self.R = np.eye(3) if R is None else np.asarray(R)
         self._jacobian = jacobian
@@ -202,6 +206,61 @@ class NetworkCovariance:
         out = Y - self.G @ (self.H @ Y)
         if self.extra is not None:
             out = out + self.extra @ (self.extra.T @ V)
+        return out
+
+    def linear_covariance(self, cols=None, *, weight_sigma_m=None, sigma_m=None, cov_m2=None,
+                          chunk_elements: int = 1 << 22) -> np.ndarray:
+        """First-order (GUM) covariance (k, k) of the parameters ``cols`` (default all) in the final
+        datum when the distances' covariance is ``C`` rather than the weights' ``diag(weight_sigma_m**2)``
+        (the Monte Carlo's linear propagation, :mod:`multilat.network.montecarlo.batched`): the
+        sandwich ``Q A^T W C W A Q`` of the least-squares estimator, computed as::
+
+            Q + K (W^1/2 C W^1/2 - I) K^T,    K = S R Q_int A_w^T
+
+        with ``A_w`` the whitened distance rows this covariance holds: the correction is zero when ``C``
+        is the weights' (``sigma_m=None, cov_m2=None``: the block of :meth:`full`, the same numbers as
+        :meth:`block`), and only the distances enter it (couplings and angles keep their own variances).
+        ``sigma_m`` (m,): independent distances; ``cov_m2`` (m, m): correlated ones. The identity
+        ``Q N Q = Q`` it rests on holds in the datum for every generalised inverse (:func:`distance_covariance`'s
+        penalty too: ``S Q N Q S^T = S Q S^T``). For the distance cost (``factor`` 1)."""
+        cols = np.arange(self.n) if cols is None else np.asarray(cols, np.intp)
+        k = cols.size
+        V = np.zeros((self.n, k))
+        V[cols, np.arange(k)] = 1.0
+        if self.G is not None:
+            V = V - self.H.T @ (self.G.T @ V)
+        Y = self._times(self._rotate_rows(V, self.R.T))            # Q_int R^T S^T e_cols
+        out = self._rotate_rows(Y, self.R)
+        if self.G is not None:
+            out = out - self.G @ (self.H @ out)
+        out = out[cols]
+        if self.extra is not None:
+            out = out + self.extra[cols] @ self.extra[cols].T
+        D = None
+        if cov_m2 is not None:
+            wsig = np.asarray(weight_sigma_m, float)
+            D = np.asarray(cov_m2, float) / np.outer(wsig, wsig) - np.eye(wsig.size)
+        elif sigma_m is not None:
+            D = (np.asarray(sigma_m, float) / np.asarray(weight_sigma_m, float)) ** 2 - 1.0
+        if D is not None and np.any(D):                            # the weights' own σ: no correction
+            if self.factor != 1.0:
+                raise ValueError("the sandwich covariance needs a-priori weights (factor 1)")
+            B = self._design_times_columns(Y, chunk_elements)      # K^T (m, k)
+            out = out + B.T @ (D @ B if D.ndim == 2 else D[:, None] * B)
+        return 0.5 * (out + out.T)
+
+    def _design_times_columns(self, Y, chunk_elements: int) -> np.ndarray:
+        """``A_w Y`` (m, c) for parameter-space columns ``Y`` (n, c) (internal frame), in column chunks."""
+        lay = self.layout
+        Js_w, Jt_w, _ = self._blocks()
+        Yg, Yt = Y[lay.station_block()], Y[lay.target_block()]           # (s, 5, c), (t, 3, c)
+        m, c = len(self.si), Y.shape[1]
+        out = np.empty((m, c))
+        step = max(1, chunk_elements // max(1, 5 * m))
+        for lo in range(0, c, step):
+            sl = slice(lo, lo + step)
+            out[:, sl] = (np.einsum("mq,mqc->mc", Js_w, Yg[:, :, sl][self.si])
+                          + np.einsum("mi,mic->mc", Jt_w, Yt[:, :, sl][self.ti]))
         return out
 
     def block(self, idx):
@@ -477,3 +536,52 @@ class CoupledCovariance(NetworkCovariance):
         the redundancy of a coupling observation is ``1 -`` this)."""
         rows = np.asarray(rows, float)
         return np.einsum("qi,iq->q", rows, self._times(rows.T) / self.factor)
+
+
+def distance_covariance(station_xyz_m, target_xyz_m, offset_m, scale, station_index, target_index, sigma_m, *,
+                        station_free=None, target_free=None, head_index=None, G=None, E=None) -> NetworkCovariance:
+    """The adjustment's covariance (:class:`NetworkCovariance`, final frame, a-priori weights) of a
+    distance network at a given point, without an adjustment: the Monte Carlo's linear propagation of a
+    known truth (:meth:`multilat.network.montecarlo.batched.BatchedNetwork.linear_covariance`).
+
+    The whitened Jacobian is the model's (:func:`multilat.network.model.distance.residuals_and_jacobian`),
+    the reduced normal equations the adjustment's (:func:`~multilat.network.adjust.solve.normal_equations.
+    reduced_normal_equations`), heads tied as in :func:`~multilat.network.adjust.solve.loop.solve_reduced`
+    (``Q_gg = T Q_r T^T``). The datum defect is lifted by a penalty on the stations' rigid motions
+    (``G``'s station rows; none without ``G``) instead of held coordinates: another generalised inverse,
+    the same covariance once S-transformed onto ``E`` (``S Q S^T``; the two differ by rounding, ~1e-12
+    of the largest element on the small volume).
+
+    station_free (s, 5) bool   free ``x, y, z, offset, scale`` (default: all but the scale)
+    target_free (t,) bool      False for held targets (default: all free)
+    head_index (s,) int        the head of each station (offsets and scales tied; default one each)
+    G, E (5s + 3t, d)          rigid motions and datum conditions in the adjustment layout, or None
+    """
+    h, tg = np.asarray(station_xyz_m, float), np.asarray(target_xyz_m, float)
+    si, ti = np.asarray(station_index, np.int64), np.asarray(target_index, np.int64)
+    s, t, m = len(h), len(tg), len(si)
+    sf = np.ones((s, Q), bool) if station_free is None else np.asarray(station_free, bool)
+    if station_free is None:
+        sf[:, STATION_FIELDS.index("scale")] = False
+    tf = np.ones(t, bool) if target_free is None else np.asarray(target_free, bool)
+    _, Js, Jt = residuals_and_jacobian(np.zeros(m), h, tg, np.asarray(offset_m, float), np.asarray(scale, float),
+                                       si, ti)
+    w = 1.0 / np.asarray(sigma_m, float)
+    Js_w = Js * w[:, None] * sf[si]
+    Jt_w = Jt * w[:, None] * tf[ti][:, None]
+    sys_ = reduced_normal_equations(np.zeros(m), Js_w, Jt_w, si, ti, s, t, target_free=tf)
+    red = sys_.layout
+    src = red.tie_source(np.arange(s) if head_index is None else head_index)
+    T = np.zeros((red.n, red.n))
+    T[np.arange(red.n), src] = 1.0                                     # g = T g_r (the head tie)
+    free = np.zeros(red.n, bool)
+    free[red.station_block()] = sf
+    free &= src == np.arange(red.n)                                    # a head's offset and scale at its lead
+    Nf = (T.T @ sys_.N @ T)[np.ix_(free, free)]
+    if G is not None:                                                  # the defect: penalise rigid motions
+        Gs = np.asarray(G, float)[red.index_in(ParameterLayout.adjustment(s, t))][free]
+        c = np.trace(Nf) / free.sum() / max(np.trace(Gs.T @ Gs) / Gs.shape[1], 1e-300)
+        Nf = Nf + c * (Gs @ Gs.T)
+    Qr = np.zeros((red.n, red.n))
+    Qr[np.ix_(free, free)] = np.linalg.inv(Nf)
+    return NetworkCovariance(T @ Qr @ T.T, sys_.Ntt_inv, Js_w, Jt_w, si, ti, G=G, E=E)
