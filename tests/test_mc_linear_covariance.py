@@ -117,6 +117,17 @@ def test_the_sandwich_against_a_dense_propagation(datum):
         assert np.array_equal(got, got.T)
 
 
+def test_columns_in_chunks_give_the_same_covariance():
+    """One column per product (``chunk_elements`` 1) against all at once: the same sums per column, so
+    equal to rounding (BLAS may block a matrix product differently by its width): 1e-14."""
+    net = pr.problem_from_config(small_volume(), sigma_m=4.7e-6).network
+    cov = net.nominal_covariance
+    ratio = np.random.default_rng(2).uniform(0.7, 1.5, net.n_obs)
+    for kw in ({}, dict(weight_sigma_m=net.sigma_m, sigma_m=net.sigma_m * ratio)):
+        whole, one = cov.linear_covariance(**kw), cov.linear_covariance(chunk_elements=1, **kw)
+        assert np.abs(whole - one).max() <= 1e-14 * np.abs(whole).max()
+
+
 @pytest.mark.parametrize("datum", ["free", "321:A,B,C"])
 def test_a_known_truth_is_the_adjustment_of_its_exact_distances(datum):
     prob = pr.problem_from_config(small_volume(), sigma_m=4.7e-6, datum=datum)

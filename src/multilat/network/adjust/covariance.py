@@ -217,50 +217,51 @@ class NetworkCovariance:
             Q + K (W^1/2 C W^1/2 - I) K^T,    K = S R Q_int A_w^T
 
         with ``A_w`` the whitened distance rows this covariance holds: the correction is zero when ``C``
-        is the weights' (``sigma_m=None, cov_m2=None``: the block of :meth:`full`, the same numbers as
-        :meth:`block`), and only the distances enter it (couplings and angles keep their own variances).
-        ``sigma_m`` (m,): independent distances; ``cov_m2`` (m, m): correlated ones. The identity
+        is the weights' (``sigma_m=None, cov_m2=None``: the block of :meth:`full`), and only the distances
+        enter it (couplings and angles keep their own variances). ``sigma_m`` (m,): independent distances;
+        ``cov_m2`` (m, m): correlated ones. ``chunk_elements`` bounds the ``(m, 5, c)`` temporaries of
+        ``c`` columns at a time (the numbers do not depend on it beyond rounding). The identity
         ``Q N Q = Q`` it rests on holds in the datum for every generalised inverse (:func:`distance_covariance`'s
         penalty too: ``S Q N Q S^T = S Q S^T``). For the distance cost (``factor`` 1)."""
         cols = np.arange(self.n) if cols is None else np.asarray(cols, np.intp)
-        k = cols.size
-        V = np.zeros((self.n, k))
-        V[cols, np.arange(k)] = 1.0
-        if self.G is not None:
-            V = V - self.H.T @ (self.G.T @ V)
-        Y = self._times(self._rotate_rows(V, self.R.T))            # Q_int R^T S^T e_cols
-        out = self._rotate_rows(Y, self.R)
-        if self.G is not None:
-            out = out - self.G @ (self.H @ out)
-        out = out[cols]
-        if self.extra is not None:
-            out = out + self.extra[cols] @ self.extra[cols].T
         D = None
         if cov_m2 is not None:
             wsig = np.asarray(weight_sigma_m, float)
             D = np.asarray(cov_m2, float) / np.outer(wsig, wsig) - np.eye(wsig.size)
         elif sigma_m is not None:
             D = (np.asarray(sigma_m, float) / np.asarray(weight_sigma_m, float)) ** 2 - 1.0
-        if D is not None and np.any(D):                            # the weights' own σ: no correction
-            if self.factor != 1.0:
-                raise ValueError("the sandwich covariance needs a-priori weights (factor 1)")
-            B = self._design_times_columns(Y, chunk_elements)      # K^T (m, k)
+        if D is not None and not np.any(D):                        # the weights' own σ: no correction
+            D = None
+        if D is not None and self.factor != 1.0:
+            raise ValueError("the sandwich covariance needs a-priori weights (factor 1)")
+        k, m = cols.size, len(self.si)
+        out = np.empty((k, k))
+        B = None if D is None else np.empty((m, k))                # K^T (m, k)
+        step = max(1, chunk_elements // max(1, 5 * m))             # columns per product: (m, 5, step) temporaries
+        for lo in range(0, k, step):
+            c = cols[lo:lo + step]
+            V = np.zeros((self.n, c.size))
+            V[c, np.arange(c.size)] = 1.0
+            if self.G is not None:
+                V = V - self.H.T @ (self.G.T @ V)
+            Y = self._times(self._rotate_rows(V, self.R.T))        # Q_int R^T S^T e_c
+            Z = self._rotate_rows(Y, self.R)
+            if self.G is not None:
+                Z = Z - self.G @ (self.H @ Z)
+            out[:, lo:lo + step] = Z[cols]
+            if B is not None:
+                B[:, lo:lo + step] = self._design_times_columns(Y)
+        if self.extra is not None:
+            out = out + self.extra[cols] @ self.extra[cols].T
+        if B is not None:
             out = out + B.T @ (D @ B if D.ndim == 2 else D[:, None] * B)
         return 0.5 * (out + out.T)
 
-    def _design_times_columns(self, Y, chunk_elements: int) -> np.ndarray:
-        """``A_w Y`` (m, c) for parameter-space columns ``Y`` (n, c) (internal frame), in column chunks."""
-        lay = self.layout
+    def _design_times_columns(self, Y) -> np.ndarray:
+        """``A_w Y`` (m, c) for parameter-space columns ``Y`` (n, c) in the internal frame."""
         Js_w, Jt_w, _ = self._blocks()
-        Yg, Yt = Y[lay.station_block()], Y[lay.target_block()]           # (s, 5, c), (t, 3, c)
-        m, c = len(self.si), Y.shape[1]
-        out = np.empty((m, c))
-        step = max(1, chunk_elements // max(1, 5 * m))
-        for lo in range(0, c, step):
-            sl = slice(lo, lo + step)
-            out[:, sl] = (np.einsum("mq,mqc->mc", Js_w, Yg[:, :, sl][self.si])
-                          + np.einsum("mi,mic->mc", Jt_w, Yt[:, :, sl][self.ti]))
-        return out
+        return (np.einsum("mq,mqc->mc", Js_w, Y[self._g][self.si])
+                + np.einsum("mi,mic->mc", Jt_w, Y[self._tg][self.ti]))
 
     def block(self, idx):
         """Dense covariance of the parameters ``idx`` (k,) -> (k, k)."""

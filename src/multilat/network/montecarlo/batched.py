@@ -38,7 +38,9 @@ way by :class:`Datum`: the solved network is moved rigidly so that its datum poi
 the nominal ones — a least-squares (Kabsch) fit over the chosen points for ``TrialDatum.inner`` (to first
 order the inner-constraint, minimum-trace datum of the free-network adjustment), or the 3-2-1
 definition on three stations for ``TrialDatum.three_two_one``. :meth:`BatchedNetwork.linear_covariance`
-returns the first-order covariance in exactly that datum, for the MC-vs-linear validation.
+returns the first-order covariance in exactly that datum, for the MC-vs-linear validation: the
+adjustment's covariance (:class:`multilat.network.adjust.covariance.NetworkCovariance`) of the nominal
+network, never read by the trials.
 
 Parameter vector layout (used by the covariance and by :func:`flatten`):
 ``[station xyz (3s, station-major), station offsets (s), target xyz (3t, target-major)]``, metres
