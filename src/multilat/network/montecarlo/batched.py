@@ -229,6 +229,9 @@ class BatchedNetwork(NetworkSizes):
         Nominal target coordinates.
     datum : Datum
         Applied to every trial (default: inner over all points).
+    covariance : NetworkCovariance, optional
+        The adjustment's covariance of this network (the adjustment it was built from): the linear
+        covariance's source (:attr:`nominal_covariance`); None: built from the nominal values.
     """
 
     station_index: np.ndarray

@@ -73,6 +73,9 @@ class CoupledBatchedNetwork(NetworkSizes):
     control_value_m, control_sigma_m : ndarray, shape (nc,)
     datum : TrialDatum or None
         None under a control datum (the control observations place the network).
+    covariance : NetworkCovariance or None
+        The adjustment's covariance of this network (:attr:`nominal_covariance`, the linear
+        covariance's source); needed with scale bars, control or angles.
     """
 
     station_index: np.ndarray
