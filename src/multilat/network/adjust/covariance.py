@@ -216,13 +216,12 @@ class NetworkCovariance:
 
             Q + K (W^1/2 C W^1/2 - I) K^T,    K = S R Q_int A_w^T
 
-        with ``A_w`` the whitened distance rows this covariance holds: the correction is zero when ``C``
-        is the weights' (``sigma_m=None, cov_m2=None``: the block of :meth:`full`), and only the distances
-        enter it (couplings and angles keep their own variances). ``sigma_m`` (m,): independent distances;
-        ``cov_m2`` (m, m): correlated ones. ``chunk_elements`` bounds the ``(m, 5, c)`` temporaries of
-        ``c`` columns at a time (the numbers do not depend on it beyond rounding). The identity
-        ``Q N Q = Q`` it rests on holds in the datum for every generalised inverse (:func:`distance_covariance`'s
-        penalty too: ``S Q N Q S^T = S Q S^T``). For the distance cost (``factor`` 1)."""
+        with ``A_w`` the whitened distance rows held here: no correction when ``C`` is the weights' (the
+        block of :meth:`full`); couplings and angles keep their own variances. ``sigma_m`` (m,):
+        independent distances; ``cov_m2`` (m, m): correlated ones. ``chunk_elements`` bounds the
+        ``(m, 5, c)`` temporaries of ``c`` columns at a time (the numbers do not depend on it beyond
+        rounding). ``S Q N Q S^T = S Q S^T`` holds for every generalised inverse ``Q`` (the penalty of
+        :func:`distance_covariance` too). For the distance cost (``factor`` 1)."""
         cols = np.arange(self.n) if cols is None else np.asarray(cols, np.intp)
         D = None
         if cov_m2 is not None:
@@ -558,13 +557,12 @@ def distance_covariance(station_xyz_m, target_xyz_m, offset_m, scale, station_in
     distance network at a given point, without an adjustment: the Monte Carlo's linear propagation of a
     known truth (:meth:`multilat.network.montecarlo.batched.BatchedNetwork.linear_covariance`).
 
-    The whitened Jacobian is the model's (:func:`multilat.network.model.distance.residuals_and_jacobian`),
-    the reduced normal equations the adjustment's (:func:`~multilat.network.adjust.solve.normal_equations.
-    reduced_normal_equations`), heads tied as in :func:`~multilat.network.adjust.solve.loop.solve_reduced`
-    (``Q_gg = T Q_r T^T``). The datum defect is lifted by a penalty on the stations' rigid motions
-    (``G``'s station rows; none without ``G``) instead of held coordinates: another generalised inverse,
-    the same covariance once S-transformed onto ``E`` (``S Q S^T``; the two differ by rounding, ~1e-12
-    of the largest element on the small volume).
+    The model's Jacobian (:func:`multilat.network.model.distance.residuals_and_jacobian`), the
+    adjustment's reduced normal equations (:mod:`multilat.network.adjust.solve.normal_equations`), heads
+    tied as :func:`~multilat.network.adjust.solve.loop.solve_reduced` ties them. The datum defect is lifted
+    by a penalty on the stations' rigid motions (``G``'s station rows) instead of held coordinates: the
+    same covariance once S-transformed onto ``E``, to rounding (3.7e-12 of the largest element on the
+    small volume).
 
     station_free (s, 5) bool   free ``x, y, z, offset, scale`` (default: all but the scale)
     target_free (t,) bool      False for held targets (default: all free)
