@@ -42,8 +42,6 @@ KNOWN = {
         "adjust/approximate/large.py:refit_point": "the large-network generator's refit (multilat.synthetic, issue 27 item 4)",
         "montecarlo/propagate_summary.py:linear_std": "the gradient of a reported length (a result, not the model)",
         "montecarlo/simulate.py:linear_prediction": "a bar's direction in the length-error prediction",
-        "adjust/approximate/general/frames.py:orient": "the general layer (issue 26), not in this change",
-        "adjust/approximate/general/search.py:jac": "the general layer (issue 26), not in this change",
     },
     "s_transform": {
         "model/angle_rows.py:orientation_covariance": "the orientations' rows (EᵀG)⁻¹ of an S-transform that "
@@ -272,16 +270,28 @@ LAYOUT_HOME = "model/parameter_layout.py"
 #: a parameter's width: 3 (x, y, z), 4 (with the offset), 5 (and the scale), ``Q``
 _WIDTHS = {3, 4, 5}
 #: what a width multiplies in column arithmetic: a count or an index of stations, targets, heads, points
+#: (the distance path's names, then the general layer's: ``m``/``me`` eliminated points, ``lo``/``hi`` a
+#: range of them, ``pr`` a row's point, ``order`` points in an order, ``n_points``)
 _OWNERS = {"s", "t", "h", "i", "j", "q", "n_stations", "n_targets", "n_heads", "si", "ti", "hs", "il",
            "station_index", "target_index", "head_index", "angle_station", "angle_target", "control_point",
-           "slot", "lead_of_head", "bar_a", "bar_b"}
+           "slot", "lead_of_head", "bar_a", "bar_b",
+           "m", "me", "lo", "hi", "pr", "order", "n_points"}
 
-#: functions outside the distance path's five layouts (model, batched, batched_coupled, solve/,
-#: design/fast, design/blocked: none left) that still compute a column or a count of columns, and why
-#: each stays; this list only shrinks
+#: functions outside the one layout (model, batched, batched_coupled, solve/ and its kernels, design/fast,
+#: design/blocked, the general layer's model/layout.py and kinds: none left) that still compute a column
+#: or a count of columns, and why each stays; this list only shrinks
+_ELIMINATED = "the general sparse back end's elimination: 3 rows per eliminated point in its own E system"
 LAYOUT_KNOWN = {
-    "adjust/solve/_sparse_kernels.py:assemble": "compiled: tiles station_system's 4-column blocks in place",
-    "adjust/solve/_sparse_kernels.py:back_substitute": "compiled: reads station_system's 4-column blocks",
+    "adjust/general/sparse.py:_reduce": _ELIMINATED,
+    "adjust/general/sparse.py:cofactor": _ELIMINATED,
+    "adjust/general/sparse.py:row_parts": _ELIMINATED,
+    "adjust/general/sparse.py:ginv": _ELIMINATED,
+    "adjust/general/reliability.py:__init__": _ELIMINATED + " (external reliability)",
+    "adjust/general/reliability.py:shifts": _ELIMINATED + " (external reliability)",
+    "adjust/general/reliability.py:_others": _ELIMINATED + " (external reliability)",
+    "montecarlo/general/propagate_blocks.py:ginv": _ELIMINATED + " (the Monte Carlo's frozen copy)",
+    "adjust/distance/reliability.py:_others": "external reliability on the adjustment's covariance",
+    "io/interop/gama_adjusted.py:_covariance": "GNU Gama's covariance rows (its layout)",
     "adjust/distance/adjust_steps.py:coupling_results": "the couplings' prior values per control point (couplings' layout)",
     "adjust/distance/adjust_steps.py:start_as_partial": "a count of unknowns (the redundancy of a start)",
     "model/angle_rows.py:orientation_covariance": "the orientations' rows after the targets (angle_rows)",
@@ -343,12 +353,12 @@ def _layout_lines(nodes) -> list[int]:
 
 
 def layout_copies(root: Path = NETWORK) -> dict[str, list[int]]:
-    """``{"file:function": [lines]}`` of column arithmetic under ``root`` (the general layer has its own
-    :class:`multilat.network.model.layout.Layout`)."""
+    """``{"file:function": [lines]}`` of column arithmetic under ``root``, every layer (the general one's
+    :class:`multilat.network.model.layout.Layout` is built on the one layout)."""
     found = {}
     for path in sorted(root.rglob("*.py")):
         rel = path.relative_to(root).as_posix()
-        if rel == LAYOUT_HOME or rel.startswith("general/"):
+        if rel == LAYOUT_HOME:
             continue
         for f, own in _functions(ast.parse(path.read_text("utf-8"), str(path))):
             lines = _layout_lines(own)
@@ -372,6 +382,8 @@ def test_one_parameter_layout():
     "def f(x, s):\n    return x[:, 3 * s:]\n",
     "def f(dg):\n    return dg.reshape(-1, Q)\n",
     "def f(self, x):\n    return x[4 * np.arange(self.n_stations)]\n",
+    "def f(x, lo, hi):\n    return x[3 * lo:3 * hi]\n",                       # the general layer's names
+    "def f(m):\n    return np.arange(3 * m).reshape(m, 3)\n",
 ])
 def test_a_new_layout_copy_is_found(tmp_path, text):
     (tmp_path / "x.py").write_text(text)
@@ -391,7 +403,10 @@ def test_the_layout_against_its_definition():
     adj = ParameterLayout.adjustment(3, 2)
     assert adj.n == 21 and adj.station_block().tolist() == [[0, 1, 2, 3, 4], [5, 6, 7, 8, 9], [10, 11, 12, 13, 14]]
     assert adj.target_block().tolist() == [[15, 16, 17], [18, 19, 20]]
-    assert adj.names(["A", "B", "C"], ["P", "Q"])[8] == "offset of B" and adj.names(["A"] * 3, ["P", "Q"])[19] == "y of Q"
+    assert adj.names(["A", "B", "C"], ["P", "Q"])[8] == "offset:B" and adj.names(["A"] * 3, ["P", "Q"])[19] == "y:Q"
+    # a head's offset and scale are named by the head (the general layer's ``offset:I``)
+    assert ParameterLayout.adjustment(3).names(["A", "B", "C"], head_ids=["H", "H", "C"])[:10] == [
+        "x:A", "y:A", "z:A", "offset:H", "scale:H", "x:B", "y:B", "z:B", "offset:H", "scale:H"]
     bat = ParameterLayout.batched(3, 2)
     assert bat.station_block(XYZ).tolist() == [[0, 1, 2], [3, 4, 5], [6, 7, 8]]
     assert bat.station_columns("offset").tolist() == [9, 10, 11] and bat.target_block()[1].tolist() == [15, 16, 17]
@@ -411,3 +426,40 @@ def test_the_layout_against_its_definition():
     assert (bat.point_rows(rows) == g).all()
     free = cpl.free_mask(head={"scale": [False, True]}, target={"z": [True, False]})
     assert np.flatnonzero(~free).tolist() == [11, 18]
+
+
+def test_the_general_layer_is_scanned(tmp_path):
+    """The scan reads every layer: a copy under ``adjust/general`` or ``model/kinds`` is found (the old
+    scan skipped ``general/``, a path the re-tree emptied)."""
+    for sub in ("adjust/general", "model/kinds", "montecarlo/general"):
+        (tmp_path / sub).mkdir(parents=True)
+        (tmp_path / sub / "x.py").write_text("def f(x, m):\n    return x[:3 * m]\n")
+    assert sorted(layout_copies(tmp_path)) == ["adjust/general/x.py:f", "model/kinds/x.py:f",
+                                               "montecarlo/general/x.py:f"]
+
+
+def test_the_general_layout_is_the_one_layout():
+    """The general layer's :class:`Layout` against its definition written out by hand: 3 points (P2
+    held), then an instrument's offset and scale per registration, a direction set's orientation; its
+    blocks are the one layout's (columns, names, reduced columns from ``ParameterLayout``)."""
+    from multilat.network.model.layout import Layout
+    from multilat.network.model.parameter_layout import ParameterLayout
+    from multilat.network.model.points import FIXED, FREE, PointSet
+
+    pts = PointSet.build(["P1", "P2", "P3"], np.arange(9.0).reshape(3, 3), status=[FREE, FIXED, FREE])
+    lay = Layout(pts)
+    assert lay.point_cols.tolist() == [[0, 1, 2], [3, 4, 5], [6, 7, 8]] and lay.n == 9
+    assert lay.columns("offset", ["I1", "I2", "I1"]).tolist() == [9, 10, 9]
+    assert lay.columns("scale", ["I2"], free=False).tolist() == [11]
+    assert lay.add("orientation:S") == 12 and lay.add("offset:I2") == 10 and lay.column("scale:I2") == 11
+    assert lay.names == ["x:P1", "y:P1", "z:P1", "x:P2", "y:P2", "z:P2", "x:P3", "y:P3", "z:P3",
+                         "offset:I1", "offset:I2", "scale:I2", "orientation:S"]
+    assert lay.reduced.tolist() == [0, 1, 2, -1, -1, -1, 3, 4, 5, 6, 7, -1, 8, -1]
+    assert lay.initial().tolist() == list(range(9)) + [0.0] * 4
+    # the same columns from the one layout's blocks; a held offset registered free is refused
+    pl = ParameterLayout.general(3)
+    assert lay.params.n == lay.n and lay.params.point_columns().tolist() == pl.point_columns().tolist()
+    assert [(b.kind, b.count, b.start) for b in lay.params.blocks] == [("point", 3, 0), ("offset", 2, 9),
+                                                                     ("scale", 1, 11), ("orientation", 1, 12)]
+    with pytest.raises(Exception, match="registered both free and held"):
+        lay.columns("scale", ["I2"])

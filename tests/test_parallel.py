@@ -159,3 +159,84 @@ def test_thread_map_error_stops_the_rest():
     with pytest.raises(ValueError, match="item 1"):
         list(thread_map(work, range(200), threads=2))
     assert len(started) < 200
+
+
+def _worker_numba_threads(_):
+    numba = pytest.importorskip("numba")
+    return numba.get_num_threads()
+
+
+def test_dask_thread_workers_identical_and_single_run_closes_early():
+    """Local clusters of 1 and 2 worker *threads* (``map_from_options``'s default; ``dask_map(...,
+    processes=False)``) give the propagation's numbers bit for bit (the distance model's draw and the
+    solver are numba parallel kernels, run on one numba thread per worker thread); ``single_run``
+    closes the client and the cluster once the last result is in, before the summaries, and refuses a
+    second run; without it the map serves several runs."""
+    pytest.importorskip("distributed")
+    from multilat.network.montecarlo import propagate as pr
+    from multilat.network.synthetic.configs import small_volume
+
+    problem = pr.problem_from_config(small_volume(), sigma_m=4.7e-6, source="small-volume")
+    run = dict(trials=2500, rng=5, noise="model", instrument="seed2020", keep_samples=True)
+    ref = pr.propagate(problem, **run)
+    summarise, states = pr.summarise, []
+
+    def spy(*args, **kw):          # released (its close started) when the driver starts summarising
+        states.append(m.released)
+        return summarise(*args, **kw)
+
+    for workers in (1, 2):
+        with map_from_options(workers=workers, single_run=True) as m:      # the CLI's: threads
+            assert m.threads and m.n_workers == workers
+            assert set(m.client.run(os.getpid).values()) == {os.getpid()}      # in this process
+            assert set(m.map(_worker_numba_threads, range(4))) == {1}
+            pr.summarise = spy
+            try:
+                b = pr.propagate(problem, chunk_size=1000, map=m, **run)
+            finally:
+                pr.summarise = summarise
+            assert m.released
+            with pytest.raises(MultilatError, match="released"):
+                list(m.map(abs, [1]))
+        assert m.client.status == "closed"
+        np.testing.assert_array_equal(b.samples, ref.samples)
+        for name in ("mc_mean", "mc_std", "interval_symmetric", "interval_shortest", "point_cov_mc",
+                     "ellipsoid_coverage_mc", "input_std_m"):
+            np.testing.assert_array_equal(getattr(b, name), getattr(ref, name), err_msg=name)
+    assert states == [True, True]
+    with dask_map(workers=1, processes=False) as m:       # not single-run: release is ignored
+        for _ in range(2):
+            b = pr.propagate(problem, chunk_size=2000, map=m, **run)
+            assert not m.released and m.client.status == "running"
+    np.testing.assert_array_equal(b.samples, ref.samples)
+
+
+def test_release_of_other_maps_and_close_errors():
+    """release_map is a no-op for maps without release (builtin, a pool's map); an error of a background
+    close is raised when the context waits for it, not lost in the thread."""
+    from multilat.parallel import _Closer, release_map
+
+    release_map(None)
+    release_map(map)
+
+    class Failing:
+        def close(self):
+            raise RuntimeError("close failed")
+
+    closer = _Closer(Failing(), None)
+    closer.start()
+    with pytest.raises(RuntimeError, match="close failed"):
+        closer.join()
+
+
+def test_thread_workers_fall_back_to_processes_without_a_thread_safe_layer(monkeypatch):
+    """Where numba's threading layer would abort on kernels launched from two threads (workqueue),
+    ``processes=False`` still starts worker processes (whose kernels run one at a time each)."""
+    pytest.importorskip("distributed")
+    import multilat.parallel as par
+
+    monkeypatch.setattr(par, "_threads_can_launch_parallel_kernels", lambda: False)
+    with dask_map(workers=1, processes=False) as m:
+        assert not m.threads and m.n_workers == 1
+        assert list(m.map(_slow_square, [3, 4])) == [9, 16]
+        assert os.getpid() not in set(m.client.run(os.getpid).values())

@@ -12,6 +12,7 @@ from multilat.network.adjust.distance.adjust import Start, adjust
 from multilat.network.model.data import Observations
 from multilat.network.synthetic.generator import synthetic_network
 from multilat.network.model.distance import Q
+from multilat.network.model.parameter_layout import XYZ, ParameterLayout
 from multilat.network.model.problem import Params, Problem
 from multilat.network.adjust.solve.dense import DenseBackend
 from multilat.network.adjust.solve.sparse import SparseBackend
@@ -76,14 +77,16 @@ def test_python_and_numba_kernels_agree():
     tptr = np.zeros(t + 1, np.int64)
     np.cumsum(np.bincount(net.target_index, minlength=t), out=tptr[1:])
     w = 1 / net.sigma_m**2
+    lay = ParameterLayout.adjustment(len(h))
+    cols = np.ascontiguousarray(lay.station_block(XYZ + ("offset",)), np.int64)
     outs = []
     for f in (K.assemble, K.assemble.py_func):
         u = np.empty((len(w), 3))
         nblk = np.empty((t, 3, 3))
         ninv = np.empty((t, 3, 3))
         gt = np.empty((t, 3))
-        sm, gp, vt, dmin = f(h, o, tg, net.distance_m, w, net.station_index, tptr, u, nblk, ninv, gt, 2, 4,
-                             1e-3)
+        sm, gp, vt, dmin = f(h, o, tg, net.distance_m, w, net.station_index, tptr, cols, lay.n, u, nblk, ninv, gt,
+                             2, 4, 1e-3)
         outs.append((sm, gp, vt, nblk, ninv, gt))
     for a, b in zip(*outs):
         np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max())
@@ -97,6 +100,37 @@ def test_python_and_numba_kernels_agree():
     np.testing.assert_allclose(outs[0][3], want, rtol=1e-12, atol=1e-12 * np.abs(want).max())
     np.testing.assert_allclose(np.einsum("tij,tjk->tik", outs[0][3], outs[0][4]), np.broadcast_to(np.eye(3), (t, 3, 3)),
                                atol=1e-9)
+
+
+def test_kernels_write_the_layout_columns_they_are_given():
+    """The kernels place each station's ``x, y, z, offset`` at the columns of the layout passed in: the
+    loop's adjustment layout (5 per station, scale columns left zero) and the station system (4 per
+    station, the old tiles) give the same numbers, bit for bit, on each other's columns."""
+    net = synthetic_network(3, population="rings", n_stations=5, n_targets=12, per_target=4)
+    h, o, tg = start(net, 4)
+    t = len(tg)
+    tptr = np.zeros(t + 1, np.int64)
+    np.cumsum(np.bincount(net.target_index, minlength=t), out=tptr[1:])
+    w = 1 / net.sigma_m**2
+    dg = np.linspace(-1e-6, 1e-6, 5 * len(h))
+    out = {}
+    for name, lay in (("adjustment", ParameterLayout.adjustment(len(h))),
+                      ("station_system", ParameterLayout.station_system(len(h)))):
+        cols = np.ascontiguousarray(lay.station_block(XYZ + ("offset",)), np.int64)
+        u, nblk, ninv, gt = np.empty((len(w), 3)), np.empty((t, 3, 3)), np.empty((t, 3, 3)), np.empty((t, 3))
+        N, b, _, _ = K.assemble(h, o, tg, net.distance_m, w, net.station_index, tptr, cols, lay.n, u, nblk, ninv, gt,
+                                2, 4, 0.0)
+        step = np.zeros(lay.n)
+        step[cols.ravel()] = dg.reshape(-1, 5)[:, :4].ravel()
+        dt = np.empty((t, 3))
+        K.back_substitute(step, cols, gt, ninv, u, w, net.station_index, tptr, dt)
+        out[name] = (cols.ravel(), N, b, dt)
+    ca, Na, ba, dta = out["adjustment"]
+    cs, Ns, bs, dts = out["station_system"]
+    assert Na.shape == (25, 25) and Ns.shape == (20, 20)
+    assert np.array_equal(Na[np.ix_(ca, ca)], Ns) and np.array_equal(ba[ca], bs) and np.array_equal(dta, dts)
+    scale = np.setdiff1d(np.arange(25), ca)                          # the scale columns: untouched
+    assert not Na[scale].any() and not Na[:, scale].any() and not ba[scale].any()
 
 
 def test_fast_reader_matches_the_strict_reader(tmp_path):

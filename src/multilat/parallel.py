@@ -31,13 +31,15 @@ module-level functions for process pools; Dask also accepts lambdas and closures
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
+import threading
 from collections.abc import Callable, Iterable, Iterator
 
 from multilat.errors import MultilatError
 
 __all__ = ["DaskMap", "dask_map", "process_map", "thread_map", "map_from_options", "parse_scheduler_address",
-           "probe_scheduler"]
+           "probe_scheduler", "release_map"]
 
 #: Seconds to wait for a TCP connection to a scheduler and for its Dask handshake.
 CONNECT_TIMEOUT_S = 5.0
@@ -53,15 +55,24 @@ class DaskMap:
 
     All items are submitted at once (``client.map``, ``pure=False``); results are yielded in
     submission order as they complete, and each future is released once its result is read.
+    On a cluster of thread workers (``threads``) each item runs with one numba thread, as in
+    :func:`thread_map`'s pool. :meth:`release` ends a single-run map early (see :func:`dask_map`).
     """
 
-    def __init__(self, client):
+    def __init__(self, client, *, threads: bool = False, release: Callable[[], None] | None = None):
         self.client = client
+        self.threads = threads
+        self._release = release
+        self.released = False
 
     def map(self, func: Callable, iterable: Iterable) -> Iterator:
+        if self.released:
+            raise MultilatError("this Dask map was released after its run (single_run=True); open another")
         items = list(iterable)
         if not items:
             return
+        if self.threads:
+            func = functools.partial(_call_with_one_numba_thread, func)
         futures = self.client.map(func, items, pure=False)
         try:
             for i, fut in enumerate(futures):
@@ -74,24 +85,82 @@ class DaskMap:
 
     __call__ = map
 
+    def release(self) -> None:
+        """The run's last result is in: a single-run map (``dask_map(..., single_run=True)``) closes
+        its client and local cluster now, in a background thread, while the caller summarises
+        (joined when the context exits); any other map ignores the call."""
+        if self._release is not None and not self.released:
+            self.released = True
+            self._release()
+
     @property
     def n_workers(self) -> int:
         return len(self.client.scheduler_info().get("workers", {}))
 
 
+def release_map(map) -> None:
+    """Tell ``map`` (any map a run was given) that the run has received its last result:
+    :meth:`DaskMap.release`; nothing for other maps."""
+    release = getattr(map, "release", None)
+    if callable(release):
+        release()
+
+
+class _Closer:
+    """Closes a client and its local cluster once: now (:meth:`join`), or in a background thread
+    started by :meth:`start` and waited for by :meth:`join`; an error of the close is raised there."""
+
+    def __init__(self, client, cluster):
+        self.client, self.cluster = client, cluster
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+
+    def _close(self) -> None:
+        try:
+            try:
+                self.client.close()
+            finally:
+                if self.cluster is not None:
+                    self.cluster.close()
+        except BaseException as exc:  # noqa: BLE001  handed to join()
+            self._error = exc
+
+    def start(self) -> None:
+        self._thread = threading.Thread(target=self._close, name="multilat-dask-close")
+        self._thread.start()
+
+    def join(self) -> None:
+        if self._thread is None:
+            self._close()
+        else:
+            self._thread.join()
+        if self._error is not None:
+            raise self._error
+
+
 @contextlib.contextmanager
-def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory_limit: str = "auto"):
+def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory_limit: str = "auto",
+             processes: bool = True, single_run: bool = False):
     """Context manager yielding a :class:`DaskMap`.
 
     Parameters
     ----------
     workers : int, optional
-        Start a ``distributed.LocalCluster`` of this many worker *processes*, one thread each
-        (the numpy work is single-threaded; processes avoid the GIL). Closed on exit.
+        Start a ``distributed.LocalCluster`` of this many workers, one thread each. Closed on exit.
     scheduler : str, optional
         Address of an existing scheduler (``"tcp://host:8786"``); the cluster is left running.
     memory_limit : str
-        Per-worker memory limit of the local cluster (Dask syntax).
+        Per-worker memory limit of a local cluster of processes (Dask syntax).
+    processes : bool
+        Local cluster only: worker *processes* (default; any model, pickled to them), or worker
+        *threads* in this process (``False``): no process to start, import into or close, and no
+        result serialised back, for work that releases the GIL (numba kernels compiled ``nogil``,
+        numpy), each item with one numba thread. Falls back to processes when numba's threading
+        layer cannot launch parallel kernels from several threads at once (workqueue).
+    single_run : bool
+        The map serves one run: :func:`release_map` (which :func:`~multilat.network.montecarlo.
+        propagate.propagate` calls once its last result is in) closes the client and the local
+        cluster in a background thread while the run summarises; exit waits for that close.
 
     Exactly one of ``workers`` and ``scheduler`` must be given.
     """
@@ -103,55 +172,68 @@ def dask_map(workers: int | None = None, *, scheduler: str | None = None, memory
         import distributed
     except ImportError:  # pragma: no cover - dask is installed in the dev environment
         raise MultilatError("Dask is not installed: pip install 'multilat[dask]'") from None
+    threads = workers is not None and not processes and _threads_can_launch_parallel_kernels()
     cluster = None
     saved = None
     try:
         if scheduler is not None:
-            address = probe_scheduler(scheduler)
-            try:
-                client = distributed.Client(address, timeout=f"{CLIENT_TIMEOUT_S}s")
-            except Exception as exc:  # noqa: BLE001  Dask raises many kinds; all are "cannot connect"
-                raise MultilatError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
-                                    f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
-                                    ) from None
+            client = _connect(distributed, scheduler)
+        elif threads:
+            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=False,
+                                               dashboard_address=None, memory_limit=0, silence_logs=40)
         else:
-            import dask
-
-            # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which switches off glibc's
-            # dynamic mmap threshold: every 0.5 MB block temporary is then mmapped and page-faulted
-            # anew, which halves the throughput of this workload. Our workers keep their heap.
-            environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
-            environ.update(MALLOC_TRIM_THRESHOLD_=str(MALLOC_THRESHOLD), MALLOC_MMAP_THRESHOLD_=str(MALLOC_THRESHOLD))
-            # one thread per worker process: numba's parallel kernels (the distance model's draw) and
-            # BLAS would otherwise start a thread per core in every worker, N workers x N threads
-            environ.update(NUMBA_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
-            # the nanny sets these variables in *this* process's os.environ before spawning a worker and
-            # leaves them there: NUMBA_NUM_THREADS=1 would make numba's next compilation here raise
-            # ("cannot set NUMBA_NUM_THREADS ... once the threads have been launched"). Put them back
-            # once the workers are spawned (a respawned worker gets them from the nanny again).
-            saved = {k: os.environ.get(k) for k in (*environ, "PYTHONHASHSEED")}
-            try:
-                with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
-                    cluster = distributed.LocalCluster(
-                        n_workers=workers,
-                        threads_per_worker=1,
-                        processes=True,
-                        dashboard_address=None,
-                        memory_limit=memory_limit,
-                        silence_logs=40,  # logging.ERROR
-                    )
-            finally:
-                _restore_environ(saved)
-            client = distributed.Client(cluster)
-        try:
-            yield DaskMap(client)
-        finally:
-            client.close()
-    finally:
+            cluster, saved = _process_cluster(distributed, workers, memory_limit)
         if cluster is not None:
+            client = distributed.Client(cluster)
+        closer, cluster = _Closer(client, cluster), None      # from here on the closer closes the cluster
+        try:
+            yield DaskMap(client, threads=threads, release=closer.start if single_run else None)
+        finally:
+            closer.join()
+    finally:
+        if cluster is not None:          # the client never connected
             cluster.close()
         if saved is not None:
             _restore_environ(saved)      # again: a worker respawned meanwhile set them once more
+
+
+def _connect(distributed, scheduler: str):
+    """A client of the scheduler at ``scheduler`` (probed first); one line naming ``--scheduler``."""
+    address = probe_scheduler(scheduler)
+    try:
+        return distributed.Client(address, timeout=f"{CLIENT_TIMEOUT_S}s")
+    except Exception as exc:  # noqa: BLE001  Dask raises many kinds; all are "cannot connect"
+        raise MultilatError(f"--scheduler {scheduler}: cannot connect to a Dask scheduler "
+                            f"({type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else ''})"
+                            ) from None
+
+
+def _process_cluster(distributed, workers: int, memory_limit: str):
+    """A LocalCluster of ``workers`` processes, one thread each, and the saved variables of this
+    process that the nanny overwrote (put back here, and again at exit)."""
+    import dask
+
+    # Dask sets MALLOC_TRIM_THRESHOLD_=65536 in its workers, which switches off glibc's
+    # dynamic mmap threshold: every 0.5 MB block temporary is then mmapped and page-faulted
+    # anew, which halves the throughput of this workload. Our workers keep their heap.
+    environ = dict(dask.config.get("distributed.nanny.pre-spawn-environ", {}))
+    environ.update(MALLOC_TRIM_THRESHOLD_=str(MALLOC_THRESHOLD), MALLOC_MMAP_THRESHOLD_=str(MALLOC_THRESHOLD))
+    # one thread per worker process: numba's parallel kernels (the distance model's draw) and
+    # BLAS would otherwise start a thread per core in every worker, N workers x N threads
+    environ.update(NUMBA_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    # the nanny sets these variables in *this* process's os.environ before spawning a worker and
+    # leaves them there: NUMBA_NUM_THREADS=1 would make numba's next compilation here raise
+    # ("cannot set NUMBA_NUM_THREADS ... once the threads have been launched"). Put them back
+    # once the workers are spawned (a respawned worker gets them from the nanny again).
+    saved = {k: os.environ.get(k) for k in (*environ, "PYTHONHASHSEED")}
+    try:
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": environ}):
+            cluster = distributed.LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                               dashboard_address=None, memory_limit=memory_limit,
+                                               silence_logs=40)  # logging.ERROR
+    finally:
+        _restore_environ(saved)
+    return cluster, saved
 
 
 def parse_scheduler_address(text: str) -> tuple[str, str, int]:
@@ -239,6 +321,29 @@ def _one_numba_thread() -> None:
         numba.set_num_threads(1)      # thread-local: this pool thread's parallel kernels run serially
 
 
+def _threads_can_launch_parallel_kernels() -> bool:
+    """Whether worker threads of this process may run numba's parallel kernels at once: True
+    without numba; with numba, its threading layer is chosen now (numba's own start of its thread
+    pool, as the first parallel kernel would) and must be OpenMP or TBB."""
+    from multilat._numba import HAVE_NUMBA
+
+    if not HAVE_NUMBA:
+        return True
+    try:
+        from numba.np.ufunc.parallel import _launch_threads
+
+        _launch_threads()
+    except Exception:          # noqa: BLE001  no threading layer at all: processes then
+        return False
+    return _thread_safe_layer()
+
+
+def _call_with_one_numba_thread(func: Callable, item):
+    """``func(item)`` in a worker thread whose numba parallel kernels run on one thread."""
+    _one_numba_thread()
+    return func(item)
+
+
 def thread_map(func: Callable, iterable: Iterable, threads: int | None = None) -> Iterator:
     """Ordered, lazy ``map`` over a pool of threads, for items whose work releases the GIL (numba
     kernels compiled ``nogil``, numpy's random draws, sorts and reductions).
@@ -286,11 +391,14 @@ def process_map(workers: int):
 
 
 @contextlib.contextmanager
-def map_from_options(workers: int | None = None, scheduler: str | None = None):
+def map_from_options(workers: int | None = None, scheduler: str | None = None, *, processes: bool = False,
+                     single_run: bool = False):
     """The map for CLI options ``--workers N`` / ``--scheduler ADDRESS``.
 
     Yields None (in-process, builtin ``map``, Dask not imported) when neither is given, else a
-    :class:`DaskMap` (a local cluster of ``workers`` processes, or the scheduler at ``scheduler``).
+    :class:`DaskMap`: a local cluster of ``workers`` worker *threads* (the commands' work is numba
+    kernels compiled ``nogil``; ``processes=True`` for worker processes), or the scheduler at
+    ``scheduler``; ``single_run``: see :func:`dask_map`.
     """
     if workers is None and scheduler is None:
         yield None
@@ -299,5 +407,5 @@ def map_from_options(workers: int | None = None, scheduler: str | None = None):
         raise MultilatError("--workers and --scheduler are mutually exclusive")
     if scheduler is not None:
         parse_scheduler_address(scheduler)       # a malformed address is refused before Dask loads
-    with dask_map(workers=workers, scheduler=scheduler) as m:
+    with dask_map(workers=workers, scheduler=scheduler, processes=processes, single_run=single_run) as m:
         yield m

@@ -237,7 +237,7 @@ def propagate_cmd(
                                   average_repeats=average_repeats, sigma_source=src, points=points,
                                   fix_offsets_um=fix_offsets_um, pairs=pairs)
     total = None if adaptive else trials
-    with map_from_options(workers=workers, scheduler=scheduler) as m, progress() as bar:
+    with map_from_options(workers=workers, scheduler=scheduler, single_run=True) as m, progress() as bar:
         task = bar.add_task("Monte Carlo", total=total)
         res = propagate(problem, trials=trials, rng=seed, noise=noise, instrument=instrument,
                         adaptive=adaptive, chunk_size=chunk_size, map=m,

@@ -1,5 +1,7 @@
-"""The one parameter layout of a general network: the name, column, value and free flag of every
-parameter the observations need.
+"""The parameters of a general network: the name, column, value and free flag of every parameter the
+observations need, on the one parameter layout
+(:class:`multilat.network.model.parameter_layout.ParameterLayout`: the points' ``x, y, z`` its first
+block, each registration a block after it; the names, the reduced columns written there once).
 
 Columns ``0 .. n-1`` index the *full* parameter vector ``x`` (fixed parameters included, so a kind
 never needs to know what is held); the adjustment solves for the free ones, whose reduced column is
@@ -22,6 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.model.parameter_layout import ParameterLayout, parameter_name, reduced_columns
 from multilat.network.model.points import FIXED, PointSet
 
 __all__ = ["Layout"]
@@ -32,28 +35,38 @@ class Layout:
 
     def __init__(self, points: PointSet):
         self.points = points
+        self.params = ParameterLayout.general(points.n)
         # the points' coordinates in one pass (what ``add`` does name by name; the ids are unique)
-        self.names: list[str] = [f"{c}:{p}" for p in points.ids for c in "xyz"]
+        self.point_cols = self.params.point_columns()
+        self.names: list[str] = self.params.blocks[0].names(points.ids)
         xyz = np.asarray(points.xyz_m, float).reshape(-1)
         self._values: list[float] = np.where(np.isfinite(xyz), xyz, 0.0).tolist()
         self._free: list[bool] = (np.asarray(points.status).reshape(-1) != FIXED).tolist()
         self._col: dict[str, int] = dict(zip(self.names, range(len(self.names))))
-        self.point_cols = np.arange(3 * points.n).reshape(points.n, 3)
+
+    def _check(self, name: str, col: int, free: bool) -> int:
+        if self._free[col] != free:
+            raise MultilatError(f"parameter {name!r} is registered both free and held")
+        return col
 
     def add(self, name: str, value: float = 0.0, *, free: bool = True) -> int:
-        """The column of parameter ``name``, created with ``value`` and ``free`` on first use.
-        A second registration must agree on the free flag."""
+        """The column of parameter ``name`` (``field:owner``), created with ``value`` and ``free`` on
+        first use. A second registration must agree on the free flag."""
         col = self._col.get(name)
         if col is not None:
-            if self._free[col] != free:
-                raise MultilatError(f"parameter {name!r} is registered both free and held")
-            return col
-        col = len(self.names)
-        self._col[name] = col
-        self.names.append(name)
-        self._values.append(float(value))
-        self._free.append(bool(free))
-        return col
+            return self._check(name, col, free)
+        field, _, owner = name.partition(":")
+        return int(self._append(field, [owner], value, free)[0])
+
+    def _append(self, field: str, owners: list, value: float, free: bool) -> np.ndarray:
+        """A block of ``field`` for new ``owners``: its (len(owners),) columns."""
+        cols = self.params.append(field, (field,), len(owners)).ravel()
+        names = self.params.blocks[-1].names(owners)
+        self._col.update(zip(names, cols.tolist()))
+        self.names.extend(names)
+        self._values.extend([float(value)] * len(owners))
+        self._free.extend([bool(free)] * len(owners))
+        return cols
 
     def column(self, name: str) -> int:
         try:
@@ -62,12 +75,16 @@ class Layout:
             raise MultilatError(f"no parameter {name!r} in the layout") from None
 
     def columns(self, prefix: str, keys, *, value: float = 0.0, free: bool = True) -> np.ndarray:
-        """Columns of ``prefix:key`` for each key (int array), registering them as needed."""
-        return np.array([self.add(f"{prefix}:{k}", value, free=free) for k in keys], int).reshape(-1)
+        """Columns of ``prefix:key`` for each key (int array), the new keys registered as one block."""
+        names = [parameter_name(prefix, k) for k in keys]
+        new = {n: k for n, k in zip(names, keys) if n not in self._col}
+        if new:
+            self._append(prefix, list(new.values()), value, free)
+        return np.array([self._check(n, self._col[n], free) for n in names], int).reshape(-1)
 
     @property
     def n(self) -> int:
-        return len(self.names)
+        return self.params.n
 
     @property
     def free(self) -> np.ndarray:
@@ -76,10 +93,7 @@ class Layout:
     @property
     def reduced(self) -> np.ndarray:
         """Full column -> reduced (free) column, -1 for a held parameter; one extra entry for column -1."""
-        f = self.free
-        red = np.full(self.n + 1, -1, int)
-        red[:-1][f] = np.arange(int(f.sum()))
-        return red
+        return reduced_columns(self.free)
 
     def initial(self) -> np.ndarray:
         """The full parameter vector at its registered (approximate or held) values."""

@@ -1,5 +1,6 @@
-"""The one parameter layout of the distance path: which column holds station i's ``x``, offset or
-scale, head h's offset, target j's ``x`` or an orientation; with names, free flags, head ties and
+"""The one parameter layout: which column holds station i's ``x``, offset or scale, head h's offset,
+target j's ``x``, an orientation, or (the general layer, :class:`multilat.network.model.layout.Layout`)
+point P's ``x`` and instrument I's offset; with names, free flags, reduced columns, head ties and
 datum rows (issue 27).
 
 A layout is an ordered list of blocks. A block holds a group of fields for every owner of one kind
@@ -20,8 +21,17 @@ compiled kernels take the arrays it returns. The layouts in use, one constructor
 ``coupled(s, t, head_index, n_oriented)``  the general Monte Carlo's unknowns ``[station xyz, head
                           offsets, head scales, target xyz, orientations]``
 
+``general(n_points)``      the general layer's vector: ``x, y, z`` per point, then the parameters the
+                          kinds register (:meth:`append`, one block per registration: ``offset``,
+                          ``scale``, ``orientation``, ``omega``, ...) in the order they register
+
 A field held per head in one layout and per station in another is the head tie: station ``i``'s
 offset is its head's column (:meth:`station_columns`, :meth:`index_in`, :meth:`tie_source`).
+
+A parameter's name is ``field:owner`` (:func:`parameter_name`: ``x:P``, ``offset:I``,
+``orientation:S``), the vocabulary of docs/general-network.md; the distance path's offsets and
+scales are named by their head. The adjustment solves for the free parameters; the reduced column
+of full column ``c`` is ``reduced_columns(free)[c]`` (-1 for a held one).
 """
 
 from __future__ import annotations
@@ -30,7 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["ParameterLayout", "STATION_FIELDS", "XYZ", "ORIENTATION_FIELDS", "gather"]
+__all__ = ["ParameterLayout", "STATION_FIELDS", "XYZ", "ORIENTATION_FIELDS", "gather", "parameter_name",
+           "reduced_columns"]
 
 XYZ = ("x", "y", "z")
 STATION_FIELDS = XYZ + ("offset", "scale")
@@ -44,6 +55,20 @@ def gather(v, cols) -> np.ndarray:
     return np.ascontiguousarray(np.asarray(v)[..., cols])
 
 
+def parameter_name(field: str, owner) -> str:
+    """The printed name of ``field`` of ``owner``: ``x:P``, ``offset:I``, ``kappa:T1``."""
+    return f"{field}:{owner}"
+
+
+def reduced_columns(free) -> np.ndarray:
+    """(n + 1,) full column -> reduced (free) column, -1 for a held parameter; the extra last entry
+    (-1) is column -1's ("no parameter" in a kind's Jacobian)."""
+    f = np.asarray(free, bool)
+    red = np.full(f.size + 1, -1, int)
+    red[:-1][f] = np.arange(int(f.sum()))
+    return red
+
+
 @dataclass(frozen=True)
 class _Block:
     kind: str
@@ -55,24 +80,34 @@ class _Block:
         """(count, len(fields)) columns of the block."""
         return self.start + np.arange(self.count * len(self.fields)).reshape(self.count, len(self.fields))
 
+    def names(self, owners) -> list[str]:
+        """Names of the block's columns in column order, owner-major."""
+        return [parameter_name(f, o) for o in owners for f in self.fields]
+
 
 class ParameterLayout:
-    """Columns of one parameter vector of the distance path (see the module docstring)."""
+    """Columns of one parameter vector, the distance path's or the general layer's (see the module docstring)."""
 
-    def __init__(self, blocks, *, n_stations: int, n_targets: int, head_index=None, n_oriented: int = 0):
+    def __init__(self, blocks, *, n_stations: int = 0, n_targets: int = 0, head_index=None, n_oriented: int = 0,
+                 n_points: int = 0):
         self.n_stations, self.n_targets = int(n_stations), int(n_targets)
         self.head_index = (np.arange(self.n_stations) if head_index is None
                            else np.asarray(head_index, np.int64).reshape(-1))
         self.n_heads = int(self.head_index.max()) + 1 if self.head_index.size else 0
         counts = {"station": self.n_stations, "head": self.n_heads, "target": self.n_targets,
-                  "orientation": int(n_oriented)}
-        out, start = [], 0
+                  "orientation": int(n_oriented), "point": int(n_points)}
+        self.blocks: tuple[_Block, ...] = ()
+        self.n = 0
         for kind, fields in blocks:
-            b = _Block(kind, counts[kind], tuple(fields), start)
-            out.append(b)
-            start += b.count * len(b.fields)
-        self.blocks = tuple(out)
-        self.n = start
+            self.append(kind, fields, counts[kind])
+
+    def append(self, kind: str, fields, count: int) -> np.ndarray:
+        """A new block of ``fields`` for ``count`` owners of ``kind`` after the last column; its
+        (count, len(fields)) columns."""
+        b = _Block(kind, int(count), tuple(fields), self.n)
+        self.blocks += (b,)
+        self.n += b.count * len(b.fields)
+        return b.columns()
 
     # -- the layouts in use ---------------------------------------------------------------------
     @classmethod
@@ -90,6 +125,10 @@ class ParameterLayout:
     def batched(cls, n_stations: int, n_targets: int) -> ParameterLayout:
         return cls([("station", XYZ), ("station", ("offset",)), ("target", XYZ)],
                    n_stations=n_stations, n_targets=n_targets)
+
+    @classmethod
+    def general(cls, n_points: int) -> ParameterLayout:
+        return cls([("point", XYZ)], n_points=n_points)
 
     @classmethod
     def coupled(cls, n_stations: int, n_targets: int, head_index, n_oriented: int = 0) -> ParameterLayout:
@@ -138,7 +177,9 @@ class ParameterLayout:
 
     def point_columns(self) -> np.ndarray:
         """(s + t, 3) columns of the stacked points ``[stations; targets]`` (stations only without a
-        target block)."""
+        target block); a general layout's points' (n_points, 3)."""
+        if self._find("point", "x") is not None:
+            return self.block("point", XYZ)
         tb = self.target_block() if self._find("target", "x") is not None else np.zeros((0, 3), np.int64)
         return np.concatenate([self.station_block(XYZ), tb])
 
@@ -174,21 +215,20 @@ class ParameterLayout:
 
     # -- names, free flags, datum rows ----------------------------------------------------------
     def names(self, station_ids, target_ids=(), head_ids=None, oriented_ids=()) -> list[str]:
-        """``"x of H1"``, ``"offset of head A"``, ``"kappa of T1"``, ... in column order."""
+        """``"x:H1"``, ``"offset:A"`` (a station's offset and scale named by its head, default the
+        station), ``"kappa:T1"``, ... in column order (:func:`parameter_name`)."""
         heads = list(station_ids) if head_ids is None else list(head_ids)
-        head_name = {int(h): (f"head {heads[i]}" if heads[i] != station_ids[i] else station_ids[i])
-                     for i, h in enumerate(self.head_index)}
+        head_name = {int(h): heads[i] for i, h in enumerate(self.head_index)}
         owners = {"station": list(station_ids), "target": list(target_ids),
                   "head": [head_name[h] for h in range(self.n_heads)], "orientation": list(oriented_ids)}
+        of_head = [head_name[int(h)] for h in self.head_index]
         out = [""] * self.n
         for b in self.blocks:
             cols = b.columns()
-            for k in range(b.count):
-                for f_i, f in enumerate(b.fields):
-                    of = owners[b.kind][k]
-                    if b.kind == "station" and f in ("offset", "scale"):
-                        of = head_name[int(self.head_index[k])]
-                    out[cols[k, f_i]] = f"{f} of {of}"
+            for f_i, f in enumerate(b.fields):
+                of = of_head if b.kind == "station" and f in ("offset", "scale") else owners[b.kind]
+                for k in range(b.count):
+                    out[cols[k, f_i]] = parameter_name(f, of[k])
         return out
 
     def free_mask(self, **by_kind) -> np.ndarray:

@@ -593,4 +593,8 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str |
         blocks, done, adaptive_info = _run_adaptive(problem, items, mapper, noise_std, obs_cov, ndigits=ndigits,
                                                     max_trials=max_trials, progress=progress,
                                                     batches_per_round=batches_per_round)
+    if map is not None:     # every result is in: a single-run Dask map closes its cluster meanwhile
+        from multilat.parallel import release_map
+
+        release_map(map)
     return summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_samples, done, obs_cov)

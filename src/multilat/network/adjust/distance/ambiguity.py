@@ -39,12 +39,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.network.adjust.approximate.large import refit_point
+from multilat.network.model.weak_points import K_PLANE
 
 __all__ = ["K_PLANE", "Ambiguous", "flat_network", "handedness_ambiguity", "mirror_ambiguities", "plane_spread"]
-
-#: a point set is coplanar within its uncertainty when its RMS out-of-plane spread is below
-#: K_PLANE times the RMS standard uncertainty of its points along the plane's normal
-K_PLANE = 10.0
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,8 @@ alone its mirror image through the plane of its 3 stations fits them equally (na
 the adjustment :mod:`multilat.network.adjust.distance.ambiguity` lists it among the mirror-ambiguous points, with the
 stations that see only coplanar targets and the targets seen by coplanar stations).
 A target whose lines of sight are coplanar within their uncertainty is not determined either,
-whatever the size of the network (:func:`undetermined_targets`): it is left out the same way, named
+whatever the size of the network (:func:`undetermined_targets`, the rule of
+:mod:`multilat.network.model.weak_points`, shared with the general layer): it is left out the same way, named
 with its reason. Its coordinates are needed to see it, so it is found on the initial values or the
 first adjustment (a 3x3 target block numerically singular: :class:`UndeterminedTargets`) and the
 adjustment runs again without it (:func:`leaving_out_undetermined`, a bounded number of rounds).
@@ -32,16 +33,15 @@ from multilat.errors import MultilatError
 from multilat.network.model.data import Observations, distinct_pair_codes
 from multilat.network.adjust.distance.result import Excluded
 from multilat.network.adjust.distance.fit_state import Fit
+from multilat.network.model.weak_points import COPLANAR_REASON, weak_points
 
-__all__ = ["UndeterminedTargets", "exclude_weak_points", "leaving_out_undetermined", "raise_undetermined",
+__all__ = ["COPLANAR_REASON", "UndeterminedTargets", "exclude_weak_points", "leaving_out_undetermined", "raise_undetermined",
            "undetermined_targets",
            "zero_redundancy_warnings"]
 
 #: at most this many rounds of "adjust, find undetermined targets, leave them out" (each round leaves
 #: out every target found in it; a target left out can weaken another only through its stations)
 MAX_UNDETERMINED_ROUNDS = 5
-
-COPLANAR_REASON = "is undetermined: its lines of sight are coplanar (its 3x3 normal block is singular)"
 
 
 class UndeterminedTargets(MultilatError):
@@ -167,50 +167,23 @@ def exclude_weak_points(obs: Observations, *, offset_free: np.ndarray, scale_fre
 def undetermined_targets(obs: Observations, station_xyz_m, target_xyz_m, skip=()) -> dict:
     """Targets whose lines of sight are coplanar within their uncertainty: id -> reason.
 
-    Per free target with distances ``k`` to stations ``H_k`` (σ_k), at position ``T``: the 3x3 normal
-    block ``N = sum u_k u_k^T / σ_k^2`` (``u_k`` the unit sight vectors), its weakest direction ``v``
-    (smallest eigenvalue λ) with the standard uncertainty ``σ_v = λ^-1/2`` along it, and the RMS
-    spread of the sight vectors along ``v``, ``h = rms((T - H_k).v)`` (for stations in one plane: the
+    The rule of :func:`multilat.network.model.weak_points.weak_points` (shared with the general
+    layer) on each free target's distances ``k`` to stations ``H_k`` (σ_k), at position ``T``: the
+    3x3 normal block ``N = sum u_k u_k^T / σ_k^2``, its weakest direction ``v`` with ``σ_v = λ^-1/2``,
+    the RMS spread ``h = rms((T - H_k).v)`` of the sights along it (for stations in one plane: the
     target's height above it; ``σ_v ≈ σ L / (h sqrt(k))``). The target is undetermined when
-    ``h < K_PLANE σ_v`` (:data:`multilat.network.adjust.distance.ambiguity.K_PLANE`, the tolerance for "in one
-    plane" of the mirror test: ``h`` below about ``sqrt(K_PLANE σ L)``, where distances fix the
-    height only to second order) or when ``N`` is singular. A target seen by 3 stations well off
-    their plane is determined (mirror-ambiguous only) and stays. Targets in ``skip`` (control,
-    angles, scale-bar ends: placed otherwise) and targets without finite coordinates are not tested.
+    ``h < K_PLANE σ_v`` (``h`` below about ``sqrt(K_PLANE σ L)``, where distances fix the height only
+    to second order) or when ``N`` is singular. A target seen by 3 stations well off their plane is
+    determined (mirror-ambiguous only) and stays. Targets in ``skip`` (control, angles, scale-bar
+    ends: placed otherwise) and targets without finite coordinates are not tested.
     """
-    from multilat.network.adjust.distance.ambiguity import K_PLANE
-
     H = np.asarray(station_xyz_m, float)
     T = np.asarray(target_xyz_m, float)
     skip = set(skip)
-    si, ti, sig = obs.station_index, obs.target_index, np.asarray(obs.sigma_m, float)
-    d = T[ti] - H[si]
-    L = np.linalg.norm(d, axis=1)
-    ok = np.isfinite(L) & (L > 0) & np.isfinite(sig) & (sig > 0)
-    u = np.where(ok[:, None], d, 0.0) / np.where(ok, L, 1.0)[:, None]
-    w = np.where(ok, 1.0 / np.where(ok, sig, 1.0) ** 2, 0.0)
-    t = obs.n_targets
-    N = np.zeros((t, 9))
-    for k in range(9):          # one column at a time: no (m, 9) products (110 MiB at 1.6 M distances)
-        N[:, k] = np.bincount(ti, weights=w * u[:, k // 3] * u[:, k % 3], minlength=t)
     test = np.all(np.isfinite(T), axis=1) & np.array([tid not in skip for tid in obs.target_ids], bool)
-    ev, V = np.linalg.eigh(N.reshape(t, 3, 3))
-    along = np.einsum("mi,mi->m", np.where(ok[:, None], d, 0.0), V[ti, :, 0])
-    n_ok = np.bincount(ti[ok], minlength=t)
-    h = np.sqrt(np.bincount(ti, weights=along ** 2, minlength=t) / np.maximum(n_ok, 1))
-    singular = ~(ev[:, 0] > 1e-12 * ev[:, 2])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sv = 1.0 / np.sqrt(ev[:, 0])
-    out = {}
-    for j in np.flatnonzero(test & (n_ok > 0) & (singular | (h < K_PLANE * sv))):
-        tid = obs.target_ids[j]
-        if singular[j]:                        # numerically singular: rank < 3
-            out[tid] = COPLANAR_REASON
-        else:
-            out[tid] = (f"is undetermined: its lines of sight are coplanar within their uncertainty "
-                        f"(spread {h[j] * 1e3:.3g} mm along its weakest direction, {h[j] / sv[j]:.2g} times "
-                        f"its standard uncertainty {sv[j] * 1e3:.2g} mm there; {K_PLANE:g} times is needed)")
-    return out
+    found = weak_points(obs.target_index, T[obs.target_index] - H[obs.station_index], obs.sigma_m,
+                        obs.n_targets, tested=test)
+    return {obs.target_ids[j]: why for j, why in found.items()}
 
 
 def raise_undetermined(obs: Observations, core: Fit, skip=()) -> None:

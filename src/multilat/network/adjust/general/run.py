@@ -8,6 +8,10 @@ point no observation reaches with approximate coordinates) is removed with every
 references it and the rest is adjusted again, for at most ``max_rounds`` rounds; each one is
 recorded in :attr:`NetworkAdjustment.excluded` with its reason and the number of observation rows it
 took with it. ``strict=True`` refuses instead (the one-line error of :func:`.adjust.adjust`).
+A point the rank test finds determined but whose lines of sight are coplanar within their
+uncertainty, its other observations not fixing it, is weak (the distance path's rule, one function:
+:mod:`multilat.network.model.weak_points`, fed by :mod:`.weak`): left out after the adjustment the
+same way, in the distance path's words.
 
 What cannot be left out is still refused in one line: a defect no point carries (an instrument
 scale with no scale in the network), or a network whose every free point is undetermined (a free
@@ -73,10 +77,31 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
                 raise
             net = leave_out(net, {p: undetermined_reason(c) for p, c in e.points.items()}, rnd, excluded, error=e)
             continue
-        return NetworkAdjustment(ready, System(ready), res, given, tuple(excluded))
+        system = System(ready)
+        weak = _weak(system, res, strict)
+        if weak:
+            net = leave_out(net, weak, rnd, excluded)
+            continue
+        return NetworkAdjustment(ready, system, res, given, tuple(excluded))
     raise MultilatError(f"still undetermined points after {max_rounds} rounds of leaving them out "
                         f"({len(excluded)} left out: {', '.join(e['id'] for e in excluded[:5])}"
                         f"{', ...' if len(excluded) > 5 else ''}); use --strict to see the first")
+
+
+def _weak(system: System, res: GeneralResult, strict: bool) -> dict:
+    """The weak points of the adjusted network (:func:`.weak.weak_points_of`, the distance path's rule):
+    {id: reason}, empty when none or when every point tested is weak (a flat network: not one point
+    weak, as :func:`multilat.network.adjust.distance.exclusion.raise_undetermined`). ``strict``: the
+    first is refused in the distance path's words."""
+    from multilat.network.adjust.general.weak import weak_points_of
+
+    weak, n_tested = weak_points_of(system, res.parameters)
+    if not weak or len(weak) >= n_tested:
+        return {}
+    if strict:
+        pid, why = next(iter(weak.items()))
+        raise MultilatError(f"point {pid!r} {why} (--strict: refused; without it, it would be left out)")
+    return weak
 
 
 def check_sizes(network: Network, options: AdjustOptions | None = None) -> None:

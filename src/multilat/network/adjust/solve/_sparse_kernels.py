@@ -5,7 +5,10 @@ Compiled with numba when it is installed; otherwise the same functions run as pl
 but identical arithmetic — the tests run a tiny network both ways).
 
 Notation: observation ``k`` of target ``j`` (``tptr[j] <= k < tptr[j+1]``) from station ``i = si[k]``;
-``u_k`` unit vector target -> station; station/offset row ``a_k = [u_k, 1]``; weight ``w_k``.
+``u_k`` unit vector target -> station; station/offset row ``a_k = [u_k, 1]``; weight ``w_k``; station
+``i``'s ``x, y, z, offset`` are columns ``cols[i]`` of the reduced system (the layout's
+``station_block``, :class:`multilat.network.model.parameter_layout.ParameterLayout`: the kernels do
+no column arithmetic of their own).
 
 IEEE division (``multilat._numba.njit``: ``error_model="numpy"``): a zero divisor gives inf or nan, never an
 exception out of a parallel region.
@@ -41,46 +44,48 @@ def _inv3(a00, a01, a02, a11, a12, a22, out):
 
 
 @njit(cache=True, inline="always")
-def _sub_outer(scc, r0, c0, cc, x0, x1, x2, y0, y1, y2):
-    """``scc[r0 + a, c0 + q] -= (cc * x_a) * y_q`` for ``x = (x0, x1, x2, 1)``, ``y = (y0, y1, y2, 1)``: the
+def _sub_outer(scc, r, c, cc, x0, x1, x2, y0, y1, y2):
+    """``scc[r[a], c[q]] -= (cc * x_a) * y_q`` for ``x = (x0, x1, x2, 1)``, ``y = (y0, y1, y2, 1)``: the
     4x4 block of one observation pair, unrolled (the products in the order of the loop it replaces)."""
-    c = cc * x0
-    scc[r0, c0] -= c * y0
-    scc[r0, c0 + 1] -= c * y1
-    scc[r0, c0 + 2] -= c * y2
-    scc[r0, c0 + 3] -= c
-    c = cc * x1
-    scc[r0 + 1, c0] -= c * y0
-    scc[r0 + 1, c0 + 1] -= c * y1
-    scc[r0 + 1, c0 + 2] -= c * y2
-    scc[r0 + 1, c0 + 3] -= c
-    c = cc * x2
-    scc[r0 + 2, c0] -= c * y0
-    scc[r0 + 2, c0 + 1] -= c * y1
-    scc[r0 + 2, c0 + 2] -= c * y2
-    scc[r0 + 2, c0 + 3] -= c
-    c = cc
-    scc[r0 + 3, c0] -= c * y0
-    scc[r0 + 3, c0 + 1] -= c * y1
-    scc[r0 + 3, c0 + 2] -= c * y2
-    scc[r0 + 3, c0 + 3] -= c
+    r0, r1, r2, r3 = r[0], r[1], r[2], r[3]
+    c0, c1, c2, c3 = c[0], c[1], c[2], c[3]
+    e = cc * x0
+    scc[r0, c0] -= e * y0
+    scc[r0, c1] -= e * y1
+    scc[r0, c2] -= e * y2
+    scc[r0, c3] -= e
+    e = cc * x1
+    scc[r1, c0] -= e * y0
+    scc[r1, c1] -= e * y1
+    scc[r1, c2] -= e * y2
+    scc[r1, c3] -= e
+    e = cc * x2
+    scc[r2, c0] -= e * y0
+    scc[r2, c1] -= e * y1
+    scc[r2, c2] -= e * y2
+    scc[r2, c3] -= e
+    e = cc
+    scc[r3, c0] -= e * y0
+    scc[r3, c1] -= e * y1
+    scc[r3, c2] -= e * y2
+    scc[r3, c3] -= e
 
 
 @njit(parallel=True, cache=True)
-def assemble(h, o, tg, d, w, si, tptr, u, nblk, ninv, gt, nchunks, maxk, damping):
+def assemble(h, o, tg, d, w, si, tptr, cols, p, u, nblk, ninv, gt, nchunks, maxk, damping):
     """Full Gauss-Newton assembly at the current point.
 
+    ``cols`` (s, 4): station ``i``'s ``x, y, z, offset`` columns in the reduced system of ``p`` columns.
     ``damping``: Levenberg-Marquardt factor applied to the diagonal of every target block
     (``N_jj[a, a] *= 1 + damping``) before its inverse; the caller damps the station diagonal.
 
     Writes ``u`` (m, 3), the target blocks ``nblk`` (t, 3, 3) (damped) and their inverses ``ninv``,
     ``gt`` (t, 3) = ``-sum w r u`` per target; returns the
-    reduced system ``S`` (4s, 4s) (no datum), the reduced gradient ``gp`` (4s,), ``vtpv``, and the
-    smallest target-block determinant relative to its trace cubed (conditioning check).
+    reduced system ``S`` (p, p) (no datum; zero outside ``cols``), the reduced gradient ``gp`` (p,),
+    ``vtpv``, and the smallest target-block determinant relative to its trace cubed (conditioning check).
     """
     s = h.shape[0]
     t = tg.shape[0]
-    p = 4 * s
     sc = np.zeros((nchunks, p, p))
     gc = np.zeros((nchunks, p))
     vc = np.zeros(nchunks)
@@ -123,11 +128,11 @@ def assemble(h, o, tg, d, w, si, tptr, u, nblk, ninv, gt, nchunks, maxk, damping
                 g0 -= e * ux
                 g1 -= e * uy
                 g2 -= e * uz
-                b = 4 * i
-                gcc[b] += e * ux
-                gcc[b + 1] += e * uy
-                gcc[b + 2] += e * uz
-                gcc[b + 3] += e
+                b = cols[i]
+                gcc[b[0]] += e * ux
+                gcc[b[1]] += e * uy
+                gcc[b[2]] += e * uz
+                gcc[b[3]] += e
                 _sub_outer(scc, b, b, -wk, ux, uy, uz, ux, uy, uz)
             if damping != 0.0:
                 n00 *= 1.0 + damping
@@ -161,14 +166,14 @@ def assemble(h, o, tg, d, w, si, tptr, u, nblk, ninv, gt, nchunks, maxk, damping
                     v[kk, a] = w[k] * (nj[a, 0] * u[k, 0] + nj[a, 1] * u[k, 1] + nj[a, 2] * u[k, 2])
             for k in range(k0, k1):
                 i = si[k]
-                b = 4 * i
+                b = cols[i]
                 wk = w[k]
                 ux = u[k, 0]; uy = u[k, 1]; uz = u[k, 2]
                 sk = wk * (ux * y0 + uy * y1 + uz * y2)
-                gcc[b] += sk * ux
-                gcc[b + 1] += sk * uy
-                gcc[b + 2] += sk * uz
-                gcc[b + 3] += sk
+                gcc[b[0]] += sk * ux
+                gcc[b[1]] += sk * uy
+                gcc[b[2]] += sk * uz
+                gcc[b[3]] += sk
                 for l in range(k, k1):
                     il = si[l]
                     ll = l - k0
@@ -181,11 +186,11 @@ def assemble(h, o, tg, d, w, si, tptr, u, nblk, ninv, gt, nchunks, maxk, damping
                             for q in range(4):
                                 xq = ux if q == 0 else (uy if q == 1 else (uz if q == 2 else 1.0))
                                 yq = lx if q == 0 else (ly if q == 1 else (lz if q == 2 else 1.0))
-                                scc[b + a, b + q] -= cc * (xa * yq + ya * xq)
+                                scc[b[a], b[q]] -= cc * (xa * yq + ya * xq)
                     elif i <= il:
-                        _sub_outer(scc, b, 4 * il, cc, ux, uy, uz, lx, ly, lz)
+                        _sub_outer(scc, b, cols[il], cc, ux, uy, uz, lx, ly, lz)
                     else:
-                        _sub_outer(scc, 4 * il, b, cc, lx, ly, lz, ux, uy, uz)
+                        _sub_outer(scc, cols[il], b, cc, lx, ly, lz, ux, uy, uz)
         vc[c] = vacc
         dc[c] = dmin
     sm = np.zeros((p, p))
@@ -200,23 +205,25 @@ def assemble(h, o, tg, d, w, si, tptr, u, nblk, ninv, gt, nchunks, maxk, damping
     # upper block triangle -> full symmetric matrix (diagonal blocks are complete and symmetric)
     full = sm + sm.T
     for i in range(s):
+        b = cols[i]
         for a in range(4):
             for q in range(4):
-                full[4 * i + a, 4 * i + q] = 0.5 * (sm[4 * i + a, 4 * i + q] + sm[4 * i + q, 4 * i + a])
+                full[b[a], b[q]] = 0.5 * (sm[b[a], b[q]] + sm[b[q], b[a]])
     return full, gp, vt, dmn
 
 
 @njit(parallel=True, cache=True)
-def back_substitute(dxp, gt, ninv, u, w, si, tptr, dt):
-    """Target steps ``dt_j = Ninv_j (gt_j + sum_k w_k u_k (a_k . dxp_i))`` into ``dt`` (t, 3)."""
+def back_substitute(dxp, cols, gt, ninv, u, w, si, tptr, dt):
+    """Target steps ``dt_j = Ninv_j (gt_j + sum_k w_k u_k (a_k . dxp_i))`` into ``dt`` (t, 3); station
+    ``i``'s step is ``dxp[cols[i]]`` (``x, y, z, offset``)."""
     t = gt.shape[0]
     for j in prange(t):
         r0 = gt[j, 0]
         r1 = gt[j, 1]
         r2 = gt[j, 2]
         for k in range(tptr[j], tptr[j + 1]):
-            b = 4 * si[k]
-            q = w[k] * (u[k, 0] * dxp[b] + u[k, 1] * dxp[b + 1] + u[k, 2] * dxp[b + 2] + dxp[b + 3])
+            b = cols[si[k]]
+            q = w[k] * (u[k, 0] * dxp[b[0]] + u[k, 1] * dxp[b[1]] + u[k, 2] * dxp[b[2]] + dxp[b[3]])
             r0 += q * u[k, 0]
             r1 += q * u[k, 1]
             r2 += q * u[k, 2]

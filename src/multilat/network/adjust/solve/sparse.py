@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.network.model.distance import segment_sum
-from multilat.network.model.parameter_layout import ParameterLayout
+from multilat.network.model.parameter_layout import XYZ, ParameterLayout
 from multilat.network.model.problem import Params, Problem
 from multilat.network.adjust.solve.system import Assembly
 
@@ -72,8 +72,7 @@ class SparseBackend:
         self.maxk = int(counts.max())
         s = o.n_stations
         self.layout = ParameterLayout.adjustment(s)                     # the loop's reduced system
-        self.system = ParameterLayout.station_system(s)                 # the kernels': [x, y, z, o]
-        self.cols = self.system.index_in(self.layout)                   # kernel column -> loop column
+        self.cols = np.ascontiguousarray(self.layout.station_block(XYZ + ("offset",)), np.int64)   # (s, 4)
         self.nch = _nchunks()
         self.K = _kernels()
 
@@ -87,23 +86,17 @@ class SparseBackend:
         Ntt = np.empty((t, 3, 3))
         ninv = np.empty((t, 3, 3))
         gt = np.empty((t, 3))
-        sm, gp, vtpv, _ = self.K.assemble(h, off, tg, self.d, self.w, self.si, self.tptr, u, Ntt, ninv, gt,
-                                     self.nch, self.maxk, float(damping))
+        N, b, vtpv, _ = self.K.assemble(h, off, tg, self.d, self.w, self.si, self.tptr, self.cols, self.layout.n,
+                                        u, Ntt, ninv, gt, self.nch, self.maxk, float(damping))
         if damping:
             a2 = np.concatenate([u * u, np.ones((m, 1))], axis=1) * self.w[:, None]
-            per_station = np.zeros(self.system.n)
-            per_station[self.system.station_block()] = segment_sum(self.si, a2, o.n_stations)   # (s, 4)
-            diag = np.arange(self.system.n)
-            sm[diag, diag] += damping * per_station
-        N = np.zeros((self.layout.n, self.layout.n))
-        N[np.ix_(self.cols, self.cols)] = sm
-        b = np.zeros(self.layout.n)
-        b[self.cols] = gp
+            diag = self.cols.ravel()
+            N[diag, diag] += damping * segment_sum(self.si, a2, o.n_stations).ravel()   # (s, 4)
         si, w, tptr, cols = self.si, self.w, self.tptr, self.cols
 
         def back(dg):
             dt = np.empty((t, 3))
-            self.K.back_substitute(np.ascontiguousarray(dg[cols]), gt, ninv, u, w, si, tptr, dt)
+            self.K.back_substitute(np.ascontiguousarray(dg, dtype=float), cols, gt, ninv, u, w, si, tptr, dt)
             return dt
 
         return Assembly(N=N, b=b, Ntt=Ntt, Ntt_inv=ninv, vtpv=float(vtpv), back_substitute=back)

@@ -24,6 +24,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.model.datum import rigid_fit
+from multilat.network.model.distance import line_of_sight
 
 __all__ = ["orient", "resect", "resect_directions", "rz"]
 
@@ -49,10 +50,11 @@ def orient(setup, xyz, known):
         a = np.arctan2(world[h, 1], world[h, 0]) - setup.t[ok][h]
         return rz(float(np.angle(np.mean(np.exp(1j * a)))))
     u = setup.u[ok]
-    use = np.all(np.isfinite(u), 1) & (np.linalg.norm(world, axis=1) > 0)
+    rho, w = line_of_sight(world, floor_m=1.0)
+    use = np.all(np.isfinite(u), 1) & (rho > 0)
     if use.sum() < 2:
         return None
-    w = world[use] / np.linalg.norm(world[use], axis=1)[:, None]
+    w = w[use]
     try:                                                  # rays from one origin: the origin is a point too
         R, _ = rigid_fit(np.vstack([np.zeros(3), u[use]]), np.vstack([np.zeros(3), w]))
     except MultilatError:

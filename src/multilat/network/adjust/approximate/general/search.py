@@ -300,7 +300,7 @@ def _polish(network, xyz, known, placed, defect: int) -> tuple[float, int]:
 
     def jac(x):
         p = at(x)
-        u = (p[t] - p[f]) / np.linalg.norm(p[t] - p[f], axis=1)[:, None]
+        _, u = line_of_sight(p[t] - p[f])
         m = len(d)
         ri, ci, vi = [], [], []
         for end, sign in ((t, -1.0), (f, 1.0)):           # d r / d P = -w d|.|/dP
