@@ -236,7 +236,7 @@ class NetworkCovariance:
         k, m = cols.size, len(self.si)
         out = np.empty((k, k))
         B = None if D is None else np.empty((m, k))                # K^T (m, k)
-        step = max(1, chunk_elements // max(1, 5 * m))             # columns per product: (m, 5, step) temporaries
+        step = max(1, chunk_elements // max(1, m * self._g.shape[1]))   # columns per product: (m, 5, step)
         for lo in range(0, k, step):
             c = cols[lo:lo + step]
             V = np.zeros((self.n, c.size))
