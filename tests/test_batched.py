@@ -267,3 +267,40 @@ def test_numba_frozen_kernel_gives_the_bits_of_the_iteration_written_out():
             assert np.array_equal(h[r], hh) and np.array_equal(o[r], oo) and np.array_equal(tg[r], tt)
             assert (iters[r], last[r], vtpv[r]) == (it, ls, v)
         assert iters.max() > iters.min()
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba not installed")
+def test_numba_frozen_kernel_trial_independent_of_lanes_and_threads():
+    """The kernel iterates LANES trials side by side and refills a lane when its trial is done: each
+    trial gives the bits of its iteration written out whatever its lane, its neighbours (trials taking
+    3 to 10 iterations, one failing with a NaN distance) and the threads (whole batch with numba's
+    threads, one thread, each trial alone)."""
+    import numba
+
+    from multilat.network.montecarlo import _batched_numba as nb
+
+    net = small_network()
+    n = 3 * nb.LANES + 5
+    d = noisy(net, n)
+    rng = np.random.default_rng(11)
+    for r in (1, 40, 41, 77):     # far trials: more iterations, in several lanes
+        d[r] = net.nominal_distance_m() + rng.normal(0, 3e-4, net.n_obs)
+    d[50, 3] = np.nan
+    whole = net._iterate(d, "frozen", "numba", 1e-10, 10)
+    before = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        serial = net._iterate(d, "frozen", "numba", 1e-10, 10)
+    finally:
+        numba.set_num_threads(before)
+    for a, b in zip(whole, serial):
+        assert np.array_equal(a, b, equal_nan=True)
+    assert whole[3].max() == 10 and whole[3].min() <= 4 and not np.isfinite(whole[4][50])
+    for r in range(0, n, 7):
+        alone = net._iterate(d[r:r + 1], "frozen", "numba", 1e-10, 10)
+        for a, b in zip(whole, alone):
+            assert np.array_equal(a[r:r + 1], b, equal_nan=True)
+        if r != 50:
+            hh, oo, tt, it, ls, v = _frozen_by_hand(net, d[r])
+            assert np.array_equal(whole[0][r], hh) and np.array_equal(whole[1][r], oo)
+            assert np.array_equal(whole[2][r], tt) and (whole[3][r], whole[4][r], whole[5][r]) == (it, ls, v)

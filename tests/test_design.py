@@ -330,6 +330,66 @@ def test_blocked_preanalysis_equals_dense(datum, offsets):
     assert _rel(b.probe_cov_m2(p), a.probe_cov_m2(p)) < 1e-9
 
 
+def test_dense_preanalysis_is_the_pseudo_inverse_of_the_normal_matrix():
+    """An independent value for the dense back end (the adjustment's own solve): with the datum free
+    over all points the covariance is the Moore-Penrose pseudo-inverse of the normal matrix (its null
+    space is the rigid motions), built here from the closed-form distance Jacobian ``[u, 1]``, ``-u``
+    and inverted by SVD (np.linalg.pinv). 1e-9 relative: both sides lose ~1e-11 to rounding on this
+    well-conditioned layout (against an 80-bit reference: 7e-12 and 5e-12)."""
+    from multilat.network.model.parameter_layout import XYZ, ParameterLayout
+
+    cfg = configs.small_volume()
+    lay = _layout(cfg)
+    cols = ParameterLayout.adjustment(lay.n_stations, lay.n_targets)
+    si, ti = lay.pairs()
+    v = lay.station_xyz_m[si] - lay.target_xyz_m[ti]
+    u = v / np.linalg.norm(v, axis=1)[:, None]
+    A = np.zeros((si.size, cols.n))
+    rows = np.arange(si.size)
+    A[rows[:, None], cols.station_block(XYZ)[si]] = u / SIG
+    A[rows, cols.station_columns("offset")[si]] = 1.0 / SIG
+    A[rows[:, None], cols.target_block()[ti]] = -u / SIG
+    ref = np.linalg.pinv(A.T @ A, rcond=1e-13, hermitian=True)     # scale columns: zero in A, zero here
+    pa = preanalyse(lay, SIG, method="dense")
+    assert _rel(pa.cov, ref) < 1e-9
+    assert np.allclose(pa.redundancy, 1.0 - np.einsum("ki,ij,kj->k", A, ref, A), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("datum,offsets", [("free", True), ("321:B,D,C", True), ("free:1,2,3,4,5,A", False)])
+def test_the_three_back_ends_agree(datum, offsets):
+    """dense (the adjustment's covariance as the whole matrix), blocked (the same in its Schur form)
+    and fast (the search's own Schur complement in arrays) behind the one criterion: the targets'
+    covariances and the redundancy numbers agree to 1e-9 (relative / absolute; rounding of the
+    two algebras is ~1e-11 here), the criteria to 1e-8 (the MDB's 1/sqrt(r) amplifies rounding where
+    r is small); dense and blocked give the same station block; fast refuses the blocks in one line."""
+    from multilat.network.design.backends import criterion, make_backend
+
+    cfg = configs.large_volume()
+    vis = np.ones((4, len(cfg.target_ids)), bool)
+    vis[0, [2, 9]] = vis[3, 4] = False
+    lay = _layout(cfg, vis)
+    sig = np.full(int(vis.sum()), SIG)
+    be = {n: make_backend(n, lay, sig, offsets=offsets, datum=datum) for n in ("dense", "blocked", "fast")}
+    ref = be["dense"]
+    assert ref.full.shape == (5 * 4 + 3 * len(cfg.target_ids),) * 2
+    for n in ("blocked", "fast"):
+        assert _rel(be[n].target_cov_m2(), ref.target_cov_m2()) < 1e-9, n
+        assert np.allclose(be[n].redundancy(), ref.redundancy(), rtol=0, atol=1e-9), n
+        for name in ("max_u95", "rms_u", "max_mdb"):
+            assert criterion(name, be[n]) == pytest.approx(criterion(name, ref), rel=1e-8), (n, name)
+    assert _rel(be["blocked"].station_cov(), ref.station_cov()) < 1e-9
+    pairs = [("1", "3"), ("A", "7")]
+    assert criterion("length_u", be["blocked"], lengths=pairs) == pytest.approx(
+        criterion("length_u", ref, lengths=pairs), rel=1e-9)
+    # the redundancy numbers sum to the degrees of freedom, m - (4s + 3t - 6) (3s without offsets)
+    assert ref.redundancy().sum() == pytest.approx(sig.size - ((4 if offsets else 3) * 4 + 3 * lay.n_targets - 6),
+                                                   abs=1e-9)
+    with pytest.raises(MultilatError, match="fast back end gives the targets' covariances"):
+        be["fast"].station_cov()
+    with pytest.raises(MultilatError, match="length_u needs lengths"):
+        criterion("length_u", ref)
+
+
 def test_singular_layout_scores_inf_in_every_evaluation():
     g = np.stack(np.meshgrid(np.linspace(0, 1, 5), np.linspace(0, 1, 5), [0.0, 0.5, 1.0], indexing="ij"),
                  -1).reshape(-1, 3)

@@ -173,6 +173,30 @@ def test_failed_trials_are_counted_and_dropped(small_problem, monkeypatch):
     assert r.samples.shape[0] == 1800
 
 
+@pytest.mark.skipif(not bt.numba_available(), reason="numba not installed")
+def test_compiled_deviations_are_numpys_bits(small_problem, monkeypatch):
+    """The deviations of the kept trials (coordinates, offsets, targets minus the nominal, then the
+    interpoint distances, station and target points mixed), as float32, from the compiled pass and
+    from numpy: the same bits; a dropped trial leaves no row."""
+    from multilat.network.montecarlo import propagate as pr
+
+    prob = problem_from_config(small_volume(), sigma_m=4.7e-6, pairs=[("A", "3"), ("1", "2"), ("B", "C")])
+    net = prob.network
+    spec = pr._ChunkSpec(net, prob.distance_m, prob.heads, pr._pair_columns(prob), "gaussian", None,
+                         net.sigma_m, None)
+    sol = net.solve(prob.distance_m + np.random.default_rng(3).normal(0, 1e-4, (50, net.n_obs)))
+    keep = np.flatnonzero(np.arange(50) % 7 != 3)
+    compiled = pr._deviations(spec, sol.station_xyz_m, sol.offset_m, sol.target_xyz_m, keep)
+    monkeypatch.setattr(bt, "numba_available", lambda: False)
+    plain = pr._deviations(spec, sol.station_xyz_m, sol.offset_m, sol.target_xyz_m, keep)
+    assert compiled.dtype == np.float32 and compiled.shape == (len(keep), net.n_params + 3)
+    assert np.array_equal(compiled, plain)
+    r = keep[5]     # one value by hand: the distance A-3 of a kept trial minus the nominal one
+    by_hand = (np.linalg.norm(sol.station_xyz_m[r, 0] - sol.target_xyz_m[r, 2])
+               - np.linalg.norm(net.station_xyz_m[0] - net.target_xyz_m[2]))
+    assert compiled[5, net.n_params] == np.float32(by_hand)
+
+
 @pytest.fixture(scope="module")
 def tetra_problem():
     rng = np.random.default_rng(4)

@@ -1,7 +1,8 @@
 """Network design: pre-analysis of a multilateration layout and optimisation of head positions.
 
 - :mod:`.preanalysis`  predicted covariance, redundancy, MDBs of a layout (no measurements)
-- :mod:`.blocked`      the same on the adjustment's Schur-reduced system (large layouts)
+- :mod:`.backends`     one criterion over three back ends: dense, blocked (:mod:`.blocked`, the
+  adjustment's own covariance) and fast (:mod:`.fast`, the search's evaluator)
 - :mod:`.search`       global search for head positions under a criterion; visibility, occluders
 - :mod:`.targets`      the fewest targets for a wanted work-volume uncertainty (greedy heuristic)
 - :mod:`.confirm`      Monte Carlo confirmation through ``propagate``

@@ -1,51 +1,55 @@
-"""Pre-analysis on the adjustment's own reduced system: the criterion of a layout in ``O(t s^2)``.
+"""The design's covariance on the adjustment's own layer: the ``dense`` and ``blocked`` back ends
+(:mod:`.backends`).
 
-The dense pre-analysis (:func:`multilat.network.design.preanalysis.covariance`) inverts the whole
-``(4s + 3t)`` normal matrix: ``O(t^3)``, ~27 ms for 4 heads x 100 targets, hopeless for 1000 targets.
-This module computes the same numbers the way :func:`multilat.network.adjust.distance.adjust.adjust` does at its
-solution (:func:`multilat.network.adjust.distance.fit.fit_once`), with no new algebra:
+:func:`blocked_covariance` computes the covariance of a layout's parameters for exact distances the
+way :func:`multilat.network.adjust.distance.adjust.adjust` does at its solution
+(:func:`multilat.network.adjust.distance.fit.fit_once`), with no algebra of its own:
 
 1. the exact observations of the layout in the 3-2-1 frame of its three widest heads, the internal
    minimal constraint holding 6 of their coordinates (:func:`multilat.network.adjust.distance.fit.pick_321_stations`);
-2. the back end's Schur-reduced normal equations ``S = N_gg - sum_j N_gj N_jj^-1 N_jg`` over the
-   per-target 3 x 3 blocks (:mod:`multilat.network.adjust.solve`: ``dense`` numpy or ``sparse`` compiled
-   kernels), inverted by :func:`multilat.network.adjust.solve.loop.solve_reduced` (with its conditioning
-   check: a degenerate layout raises);
+2. the solve's back end's Schur-reduced normal equations ``S = N_gg - sum_j N_gj N_jj^-1 N_jg`` over
+   the per-target 3 x 3 blocks (:mod:`multilat.network.adjust.solve`: ``dense`` numpy or ``sparse``
+   compiled kernels), inverted by :func:`multilat.network.adjust.solve.loop.solve_reduced` (with its
+   conditioning check: a degenerate layout raises);
 3. :class:`multilat.network.adjust.covariance.NetworkCovariance` rotates back to the layout's frame and
-   S-transforms to the datum (``free`` over all points by default): target 3 x 3 blocks, the
-   station block and the hat diagonal (redundancy numbers) without the full matrix.
+   S-transforms to the datum (:func:`multilat.network.model.datum.datum_matrices`; ``free`` over all
+   points by default).
 
-Tested equal to the dense pre-analysis (and so to ``adjust``) to 1e-9 relative.
+:class:`BlockedBackend` keeps it so (target 3 x 3 blocks, the station block, the hat diagonal in
+``O(t s^2)``, never the full matrix); :class:`DenseBackend` forms the whole matrix in the adjustment's
+parameter layout (:meth:`~multilat.network.model.parameter_layout.ParameterLayout.adjustment`) and
+reads every number from it. Tested equal to ``adjust``'s covariance of the same exact observations
+(1e-9) and to each other.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import statistics as st
+from multilat.network.design.backends import DesignBackend
 from multilat.network.model.datum import Datum, apply_rigid, datum_matrices, frame_321, parse_datum
-from multilat.network.model.distance import Q, line_of_sight, range_m
+from multilat.network.model.distance import Q, line_of_sight, range_m, residuals_and_jacobian
 from multilat.network.model.parameter_layout import STATION_FIELDS, XYZ, ParameterLayout
 
-__all__ = ["BlockedCovariance", "blocked_covariance", "blocked_criterion"]
+__all__ = ["BlockedBackend", "DenseBackend", "blocked_covariance", "external_reliability_m"]
 
 
-@dataclass(frozen=True, eq=False)
-class BlockedCovariance:
-    """The covariance of a layout's parameters as the adjustment keeps it (never the full matrix).
+class BlockedBackend(DesignBackend):
+    """The ``blocked`` back end: the covariance of a layout's parameters as the adjustment keeps it
+    (never the full matrix).
 
-    cov : NetworkCovariance  in the layout's frame and the datum (m²)
-    sigma_m : (m,) ; station_index, target_index : (m,)  the observations (``Layout.pairs`` order)
+    cov : NetworkCovariance  in the layout's frame and the datum (m²); inner : the same in the inner
+    datum over all points (the external reliability); sigma_m, station_index, target_index : (m,)
+    the observations (``Layout.pairs`` order)
     """
 
-    cov: object
-    inner: object
-    sigma_m: np.ndarray
-    station_index: np.ndarray
-    target_index: np.ndarray
+    name = "blocked"
+
+    def __init__(self, layout, sigma_m, cov, inner, station_index, target_index):
+        super().__init__(layout, sigma_m)
+        self.cov, self.inner = cov, inner
+        self.station_index, self.target_index = station_index, target_index
 
     def target_cov_m2(self) -> np.ndarray:
         return self.cov.target_blocks()
@@ -53,10 +57,75 @@ class BlockedCovariance:
     def redundancy(self) -> np.ndarray:
         return np.clip(1.0 - self.cov.hat_diagonal(), 0.0, 1.0)
 
+    def station_cov(self) -> np.ndarray:
+        return self.cov.global_block()
 
-def blocked_covariance(layout, sigma_m, *, offsets: bool = True, datum="free",
-                       solver: str = "auto") -> BlockedCovariance:
-    """Covariance of a :class:`~multilat.network.design.preanalysis.Layout` for exact distances.
+    def block(self, rows) -> np.ndarray:
+        return self.cov.block(rows)
+
+
+#: columns of the identity per product when the dense back end forms the whole matrix (memory
+#: ``m x 5 x chunk`` floats: 100 MB at 10 000 distances)
+FULL_CHUNK_COLUMNS = 256
+
+
+def _whole(cov) -> np.ndarray:
+    """The whole matrix (n, n) of a :class:`~multilat.network.adjust.covariance.NetworkCovariance`,
+    ``C I`` in chunks of :data:`FULL_CHUNK_COLUMNS` columns, symmetrised."""
+    n = cov.n
+    out = np.empty((n, n))
+    for lo in range(0, n, FULL_CHUNK_COLUMNS):
+        k = np.arange(lo, min(lo + FULL_CHUNK_COLUMNS, n))
+        E = np.zeros((n, k.size))
+        E[k, np.arange(k.size)] = 1.0
+        out[:, k] = cov.times(E)
+    return 0.5 * (out + out.T)
+
+
+class DenseBackend(BlockedBackend):
+    """The ``dense`` back end: the same covariance formed as the whole matrix ``full`` (n, n) in the
+    adjustment's layout and the datum (``C I``, in chunks of columns), every number read from it; the
+    redundancy numbers ``1 - diag(A C Aᵀ)`` from the dense whitened design ``A`` (m, n)."""
+
+    name = "dense"
+
+    def __init__(self, *args):
+        super().__init__(*args)
+        self.full = _whole(self.cov)
+
+    def target_cov_m2(self) -> np.ndarray:
+        tb = self.columns.target_block()
+        return self.full[tb[:, :, None], tb[:, None, :]]
+
+    def station_cov(self) -> np.ndarray:
+        sb = self.columns.station_block().ravel()
+        return self.full[np.ix_(sb, sb)]
+
+    def block(self, rows) -> np.ndarray:
+        rows = np.asarray(rows, np.intp)
+        return self.full[np.ix_(rows, rows)]
+
+    def redundancy(self) -> np.ndarray:
+        """``1 - diag(A C Aᵀ)`` with ``A`` the whitened design at the layout's own coordinates (the
+        model's Jacobian; rows orthogonal to the rigid motions, so the datum does not matter: ``C`` in
+        the inner datum, whose entries are smallest, so that no rounding of large ones cancels)."""
+        lay, si, ti = self.layout, self.station_index, self.target_index
+        sx, tx = lay.station_xyz_m, lay.target_xyz_m
+        zero = np.zeros(lay.n_stations)
+        _, Js, Jt = residuals_and_jacobian(range_m(sx[si] - tx[ti]), sx, tx, zero, zero, si, ti)
+        w = 1.0 / self.sigma_m[:, None]
+        A = np.zeros((si.size, self.columns.n))
+        k = np.arange(si.size)[:, None]
+        A[k, self.columns.station_block()[si]] = Js * w          # held columns: zero rows of C
+        A[k, self.columns.target_block()[ti]] = Jt * w
+        C = self.full if self.inner is self.cov else _whole(self.inner)     # the inner datum: no cancellation
+        return np.clip(1.0 - np.einsum("ki,ki->k", A @ C, A), 0.0, 1.0)
+
+
+def blocked_covariance(layout, sigma_m, *, offsets: bool = True, datum="free", solver: str = "auto",
+                       dense: bool = False) -> BlockedBackend:
+    """Covariance of a :class:`~multilat.network.design.preanalysis.Layout` for exact distances: the
+    ``blocked`` back end, or with ``dense`` the ``dense`` one (the whole matrix formed).
 
     Parameters
     ----------
@@ -113,10 +182,10 @@ def blocked_covariance(layout, sigma_m, *, offsets: bool = True, datum="free",
     cov = NetworkCovariance(Qgg, fin.Ntt_inv, Js_w, Jt_w, si, ti, R=R0.T, G=G, E=E)
     inner = cov if (dat.kind == "free" and dat.points is None) else \
         NetworkCovariance(Qgg, fin.Ntt_inv, Js_w, Jt_w, si, ti, R=R0.T, G=G, E=G)
-    return BlockedCovariance(cov, inner, sig, si, ti)
+    return (DenseBackend if dense else BlockedBackend)(layout, sig, cov, inner, si, ti)
 
 
-def external_reliability_m(bc: BlockedCovariance, layout, mdb_m, *, offsets: bool = True,
+def external_reliability_m(bc: BlockedBackend, layout, mdb_m, *, offsets: bool = True,
                            chunk: int = 256) -> np.ndarray:
     """Largest shift of any target (m) caused by a bias of one MDB in each observation, in the inner
     datum (as the dense pre-analysis): ``N^+ a_k mdb_k / sigma_k`` with ``a_k`` the whitened row."""
@@ -139,22 +208,3 @@ def external_reliability_m(bc: BlockedCovariance, layout, mdb_m, *, offsets: boo
         out[k] = np.sqrt((sh ** 2).sum(axis=1)).max(axis=0)
     out[~np.isfinite(mdb_m)] = np.inf
     return out
-
-
-def blocked_criterion(name: str, layout, sigma_m, *, offsets=True, datum="free", lengths=(),
-                      alpha=0.001, power=0.80, solver: str = "auto") -> float:
-    """The design criterion ``name`` from :func:`blocked_covariance` (metres; inf when degenerate)."""
-    try:
-        bc = blocked_covariance(layout, sigma_m, offsets=offsets, datum=datum, solver=solver)
-    except MultilatError:
-        return float("inf")
-    from multilat.network.design.preanalysis import _length_u, target_criterion
-
-    if name in ("max_u95", "rms_u"):
-        return target_criterion(name, bc.target_cov_m2())
-    if name == "length_u":
-        return float(max(u for _, u in _length_u(layout, bc.cov, lengths)))
-    if name == "max_mdb":
-        return float(st.minimal_detectable_bias_m(bc.sigma_m, bc.redundancy(), alpha=alpha,
-                                                  power=power).max())
-    raise MultilatError(f"unknown criterion {name!r}")

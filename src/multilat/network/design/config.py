@@ -48,6 +48,7 @@ from multilat.network.design.preanalysis import (CRITERIA, Layout, PreAnalysis, 
                                                  preanalyse)
 from multilat.network.design.search import (PENALTY_M, DesignResult, choose_candidates, head_ids, min_heads,
                                             optimise_heads, visibility)
+from multilat.network.model.parameter_layout import ParameterLayout
 
 __all__ = ["DesignConfig", "parse_design_config", "load_design_config", "run_design", "DesignRun",
            "poorly_controlled_targets",
@@ -516,10 +517,10 @@ def _sigma_model(ic: InstrumentCfg, base: Path, rmax: float) -> SigmaModel:
 
 def _check_counts(n_heads: int, n_targets: int, offsets: bool, source: str) -> None:
     """Enough distances for the unknowns (one line naming the fewest targets if not)."""
-    per = 4 if offsets else 3
-    n_unknown = per * n_heads + 3 * n_targets - 6
+    heads = ParameterLayout.station_system(n_heads, offsets=offsets).n          # the heads' unknowns
+    n_unknown = ParameterLayout.station_system(n_heads, n_targets, offsets=offsets).n - 6
     if n_heads * n_targets < n_unknown:
-        t_min = -(-(per * n_heads - 6) // (n_heads - 3))
+        t_min = -(-(heads - 6) // (n_heads - 3))
         raise MultilatError(f"{source}: targets: {n_targets} targets and {n_heads} heads give at most "
                             f"{n_heads * n_targets} distances for {n_unknown} unknowns: need at least "
                             f"{t_min} targets")

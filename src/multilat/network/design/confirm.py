@@ -17,6 +17,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.adjust import statistics as st
+from multilat.network.design.backends import u95_max_m
 
 __all__ = ["DesignSimulation", "simulate_design"]
 
@@ -108,8 +109,7 @@ def simulate_design(pa, *, trials: int = 4000, rng=None, noise: str = "gaussian"
         z = np.where(se > 0, (mc - pred) / se, 0.0)
     pid = {p: k for k, p in enumerate(res.point_ids)}
     Cmc = np.stack([res.point_cov_mc[pid[t]] for t in lay.target_ids])
-    u_mc = np.sqrt(st.CHI2_3_95 * np.clip(np.linalg.eigvalsh(Cmc)[:, -1], 0, None))
-    u_pred = np.sqrt(st.CHI2_3_95 * np.clip(np.linalg.eigvalsh(C)[:, -1], 0, None))
+    u_mc, u_pred = u95_max_m(Cmc), u95_max_m(C)
     # coverage of the predicted ellipsoid: trials whose target deviation has d^T C^-1 d <= chi2(3)
     samples = res.samples                           # (n, k) float32 deviations
     cov_frac = np.full(lay.n_targets, np.nan)

@@ -37,7 +37,8 @@ def preanalyse_coupled(layout, sigma, *, scale_bars=(), control=None, offsets: b
     """
     from multilat.network.adjust.distance.adjust import adjust
     from multilat.network.model.data import Points, ReferenceLengths
-    from multilat.network.design.preanalysis import PreAnalysis, SigmaModel, _u95_max, layout_observations
+    from multilat.network.design.backends import u95_max_m
+    from multilat.network.design.preanalysis import PreAnalysis, SigmaModel, layout_observations
     from multilat.network.model.datum import parse_datum
     from multilat.network.adjust.distance.result import Start
 
@@ -94,6 +95,6 @@ def preanalyse_coupled(layout, sigma, *, scale_bars=(), control=None, offsets: b
     return PreAnalysis(layout=layout, station_index=si, target_index=ti, distance_m=d, sigma_m=sig, cov=None,
                        global_cov=res.covariance.global_block(), station_cov_m2=res.station_cov_m2,
                        target_cov_m2=tcov, offset_std_m=np.asarray(res.offset_std_m, float),
-                       u95_max_m=_u95_max(tcov), redundancy=res.redundancy, mdb_m=res.mdb_m, external_m=ext,
+                       u95_max_m=u95_max_m(tcov), redundancy=res.redundancy, mdb_m=res.mdb_m, external_m=ext,
                        dof=int(res.dof), lengths=tuple(lens_out), datum=dat, offsets=offsets, alpha=alpha,
                        power=power)

@@ -6,8 +6,8 @@ design's evaluators as back ends behind it (as Gama's adjustment algorithms sit 
   angles, vectors, levelling, control), the adjustment's own system, datum and statistics.
 * ``distance``: the distance-only pre-analysis :func:`.preanalysis.preanalyse` (dense or blocked), an
   adapter: the whole distance-only layout, stations and targets, redundancy and MDBs.
-* ``fast``: the search's evaluator :func:`.fast.fast_target_cov_m2` (the Schur complement in heads x
-  targets arrays), an adapter: the targets' covariances only.
+* ``fast``: the search's evaluator (the ``fast`` back end of :mod:`.backends`, the Schur complement in
+  heads x targets arrays), an adapter: the targets' covariances only.
 
 A :class:`Design` holds the designed general network (planned coordinates, σ) and, when it is a
 distance-only layout (:func:`design_from_layout`), that layout too, so the distance-only back ends can
@@ -141,13 +141,11 @@ def _distance(design: Design) -> Prediction:
 
 
 def _fast(design: Design) -> Prediction:
-    from multilat.network.design.fast import fast_target_cov_m2
+    from multilat.network.design.backends import make_backend
 
     lay = _distance_layout(design, "fast")
-    si, ti = lay.pairs()
-    sig_mat = np.ones(lay.visible.shape)
-    sig_mat[si, ti] = design.sigma_m
-    cov = fast_target_cov_m2(lay, sig_mat, offsets=design.offsets, datum=design.distance_datum)
+    cov = make_backend("fast", lay, design.sigma_m, offsets=design.offsets,
+                       datum=design.distance_datum).target_cov_m2()
     return _ellipsoids("fast", lay.target_ids, cov, redundancy=None, mdb=None, weak=None, undetermined=())
 
 

@@ -1,10 +1,9 @@
 """The search's evaluator: the criterion of a layout from the Schur complement in (heads x targets) arrays.
 
 A search calls the criterion thousands of times on layouts that differ only in head positions. The
-general paths pay for generality per call (:mod:`.preanalysis`: the dense normal matrix, ``O(t³)``;
-:mod:`.blocked`: the adjustment's own reduced system, observation lists, a 3-2-1 frame, the
-``NetworkCovariance`` object). Here the same algebra runs on fixed-shape arrays, the pairs a head
-does not see weighted zero:
+adjustment's own layer pays for generality per call (:mod:`.blocked`, the dense and blocked back
+ends: observation lists, a 3-2-1 frame, the solve's back end, the ``NetworkCovariance`` object).
+Here the same algebra runs on fixed-shape arrays, the pairs a head does not see weighted zero:
 
 * per observation (head ``i``, target ``j``) the whitened Jacobian ``[u, 1] / σ`` (head ``x, y, z``,
   offset) and ``-u / σ`` (target), ``u`` the unit vector from target to head;
@@ -17,7 +16,8 @@ does not see weighted zero:
   ``X H`` (6 columns), never the full matrix;
 * redundancy numbers ``1 - a_kᵀ X a_k`` (datum-free: ``a_k`` lies in the range of ``N``).
 
-Tested equal to the dense pre-analysis (1e-9). ``length_u`` is left to :mod:`.blocked`.
+:class:`FastBackend` is the ``fast`` back end of the one criterion (:mod:`.backends`). Tested equal
+to the dense back end (1e-9). ``length_u`` is left to the dense and blocked back ends.
 """
 
 from __future__ import annotations
@@ -25,12 +25,12 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.adjust import statistics as st
+from multilat.network.design.backends import DesignBackend
 from multilat.network.model.datum import Datum, datum_matrices, helmert_basis, parse_datum, s_coefficients
 from multilat.network.model.distance import inv3, line_of_sight
 from multilat.network.model.parameter_layout import ParameterLayout
 
-__all__ = ["fast_criterion", "fast_target_cov_m2"]
+__all__ = ["FastBackend", "fast_target_cov_m2"]
 
 
 def _datum_GH(layout, datum, system: ParameterLayout):
@@ -117,20 +117,21 @@ def _hat(P):
     return w * (h1 + 2.0 * h2 + h3)
 
 
-def fast_criterion(name: str, layout, sig_mat, *, offsets=True, datum="free", alpha=0.001,
-                   power=0.80) -> float:
-    """``max_u95``, ``rms_u`` or ``max_mdb`` of a layout (m; inf when singular)."""
-    dat = datum if isinstance(datum, Datum) else parse_datum(datum)
-    try:
-        P = _parts(layout, sig_mat, offsets, dat)
-    except MultilatError:
-        return float("inf")
-    if name in ("max_u95", "rms_u"):
-        from multilat.network.design.preanalysis import target_criterion
+class FastBackend(DesignBackend):
+    """The ``fast`` back end (:mod:`.backends`): the targets' covariances and the redundancy numbers
+    from :func:`_parts` (computed on construction: raises for a singular layout)."""
 
-        return target_criterion(name, P["cov"])
-    if name == "max_mdb":
-        vis = layout.visible
-        red = np.clip(1.0 - _hat(P).T[vis], 0.0, 1.0)
-        return float(st.minimal_detectable_bias_m(sig_mat[vis], red, alpha=alpha, power=power).max())
-    raise MultilatError(f"fast_criterion: {name!r} is not supported (use the blocked evaluation)")
+    name = "fast"
+
+    def __init__(self, layout, sigma_m, *, offsets=True, datum="free"):
+        super().__init__(layout, sigma_m)
+        si, ti = layout.pairs()
+        sig_mat = np.ones(layout.visible.shape)
+        sig_mat[si, ti] = self.sigma_m
+        self._P = _parts(layout, sig_mat, offsets, datum if isinstance(datum, Datum) else parse_datum(datum))
+
+    def target_cov_m2(self) -> np.ndarray:
+        return self._P["cov"]
+
+    def redundancy(self) -> np.ndarray:
+        return np.clip(1.0 - _hat(self._P).T[self.layout.visible], 0.0, 1.0)

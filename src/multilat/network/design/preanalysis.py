@@ -3,17 +3,15 @@ detectable biases that :func:`multilat.network.adjust.distance.adjust.adjust` wo
 computed from the geometry alone (no measurements).
 
 For exact distances the residuals are zero, so the adjustment's covariance is the (datum-transformed)
-inverse of the normal matrix at the true geometry. Here the normal matrix is built densely from the
-model's Jacobian (:func:`multilat.network.model.distance.residuals_and_jacobian`, parameter layout of
-:mod:`multilat.network.model.distance`: ``[x, y, z, offset, scale]`` per station then ``x, y, z`` per target;
-scales are never estimated, offsets optionally) and inverted in the inner-constraint datum by
-
-    N^+ = (N + c U U^T)^-1 - U U^T / c,
-
-``U`` an orthonormal basis of the 6 rigid motions (:func:`multilat.network.model.datum.helmert_basis`),
-``c = trace(N) / n`` for conditioning. Other datums follow by the S-transform
-``S N^+ S^T``, ``S = I - G (E^T G)^-1 E^T``. Dense algebra: fast for a few hundred targets (a 4 x 14
-layout is a 58 x 58 matrix); see docs/design.md for the sizes.
+inverse of its normal matrix at the true geometry. The pre-analysis asks the adjustment's own layer
+for it (:func:`multilat.network.design.blocked.blocked_covariance`: the model's Jacobian, the solve's
+reduced normal equations, :class:`~multilat.network.adjust.covariance.NetworkCovariance` in the datum of
+:mod:`multilat.network.model.datum`), in the adjustment's parameter layout
+(:meth:`~multilat.network.model.parameter_layout.ParameterLayout.adjustment`: ``[x, y, z, offset,
+scale]`` per station then ``x, y, z`` per target; scales are never estimated, offsets optionally),
+through one of the back ends of :mod:`.backends`: ``dense`` (the whole matrix, up to
+:data:`~.backends.DENSE_MAX_PARAMS` parameters) or ``blocked`` (the Schur form, larger layouts); the
+criteria of a search through :func:`criterion_value` (the ``fast`` back end by default).
 
 Units: metres, m²; ``sigma`` is the standard uncertainty of one distance.
 """
@@ -26,20 +24,16 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.adjust import statistics as st
+from multilat.network.design.backends import (CRITERIA, DENSE_MAX_PARAMS, DesignBackend, choose_backend, criterion,
+                                              make_backend, target_criterion, u95_max_m)
+from multilat.network.design.blocked import external_reliability_m
 from multilat.network.model.data import Observations
-from multilat.network.model.datum import Datum, helmert_basis, parse_datum, s_transform
-from multilat.network.model.distance import Q, line_of_sight, range_m, residuals_and_jacobian
+from multilat.network.model.datum import Datum, parse_datum
+from multilat.network.model.distance import line_of_sight, range_m
+from multilat.network.model.parameter_layout import XYZ, ParameterLayout
 
 __all__ = ["Layout", "SigmaModel", "design_head_names", "PreAnalysis", "preanalyse", "covariance", "CRITERIA",
            "criterion_value", "target_criterion", "layout_observations", "probe_cov_m2", "DENSE_MAX_PARAMS"]
-
-#: optimisation criteria (docs/design.md): name -> description
-CRITERIA = {
-    "max_u95": "largest 95 % ellipsoid semi-axis over the targets (m)",
-    "rms_u": "RMS over targets of the 3-D standard uncertainty sqrt(trace C_j) (m)",
-    "length_u": "largest standard uncertainty of the chosen interpoint lengths (m)",
-    "max_mdb": "largest minimal detectable bias over the distances (m)",
-}
 
 
 # ---------------------------------------------------------------------------------------------
@@ -173,32 +167,19 @@ def design_head_names(instrument) -> tuple[str, ...]:
 
 
 # ---------------------------------------------------------------------------------------------
-def _datum_E(datum: Datum, layout: Layout, G, rows):
-    """The datum's constraint matrix E (n, 6) in the model layout (None for inner constraints over
-    all points, where the pseudo-inverse is already the answer)."""
-    if datum.kind == "free" and datum.points is None:
-        return None
-    ids = layout.station_ids + layout.target_ids
-    pos = {p: k for k, p in enumerate(ids)}
-    for p in datum.points:
-        if p not in pos:
-            raise MultilatError(f"datum point {p!r} is neither a station nor a target")
-    E = np.zeros_like(G)
-    if datum.kind == "321":
-        a, b, c = datum.points
-        for col, (p, comp) in enumerate([(a, 0), (a, 1), (a, 2), (b, 1), (b, 2), (c, 2)]):
-            E[rows[3 * pos[p] + comp], col] = 1.0
-    elif datum.kind == "free":
-        for p in datum.points:
-            r = rows[3 * pos[p]: 3 * pos[p] + 3]
-            E[r] = G[r]
-    else:
-        raise MultilatError("design supports the free and 321 datums (not control)")
-    return E
+def _sigma_per_pair(layout: Layout, sigma) -> tuple:
+    """``(distance_m, sigma_m)`` (m,) of the layout's observations (:meth:`Layout.pairs` order) from a
+    :class:`SigmaModel`, a float or an (m,) array."""
+    si, ti = layout.pairs()
+    d = range_m(layout.station_xyz_m[si] - layout.target_xyz_m[ti])
+    if isinstance(sigma, SigmaModel):
+        return d, sigma(d, si, layout.station_ids)
+    return d, np.broadcast_to(np.asarray(sigma, float), d.shape).copy()
 
 
-def covariance(layout: Layout, sigma_m, *, offsets: bool = True, datum="free"):
-    """Predicted covariance of all parameters for exact distances.
+def covariance(layout: Layout, sigma_m, *, offsets: bool = True, datum="free") -> np.ndarray:
+    """Predicted covariance of all parameters for exact distances: the adjustment's own (the
+    ``dense`` back end of :mod:`.backends`).
 
     Parameters
     ----------
@@ -213,165 +194,33 @@ def covariance(layout: Layout, sigma_m, *, offsets: bool = True, datum="free"):
     Returns
     -------
     cov : ndarray (5s + 3t, 5s + 3t)
-        In the model layout (:mod:`multilat.network.model.distance`), m² (rows of fixed parameters zero).
-    A_w : ndarray (m, n_free)  whitened Jacobian of the free parameters
-    free : ndarray of bool (5s + 3t,)
-    Qplus : ndarray (n_free, n_free)  inner-constraint (pseudo-inverse) covariance of the free ones
+        In the adjustment's layout (:meth:`ParameterLayout.adjustment`), m² (rows of fixed parameters zero).
 
     Raises
     ------
     MultilatError
         A singular layout (a target seen by too few heads, coplanar heads, ...).
     """
-    s, t = layout.n_stations, layout.n_targets
-    si, ti = layout.pairs()
-    sx, tx = layout.station_xyz_m, layout.target_xyz_m
-    zero = np.zeros(s)
-    d = range_m(sx[si] - tx[ti])
-    _, Js, Jt = residuals_and_jacobian(d, sx, tx, zero, zero, si, ti)
-    m = si.size
-    n = Q * s + 3 * t
-    w = 1.0 / np.asarray(sigma_m, float)
-    A = np.zeros((m, n))
-    rows = np.arange(m)
-    for c in range(Q):
-        A[rows, Q * si + c] = Js[:, c] * w
-    for c in range(3):
-        A[rows, Q * s + 3 * ti + c] = Jt[:, c] * w
-    free = np.ones(n, bool)
-    free[Q * np.arange(s) + 4] = False                 # scales: never estimated here
-    if not offsets:
-        free[Q * np.arange(s) + 3] = False
-    A_w = A[:, free]
-    N = A_w.T @ A_w
-    point_rows = np.concatenate([(Q * np.arange(s)[:, None] + np.arange(3)).ravel(), Q * s + np.arange(3 * t)])
-    G = np.zeros((n, 6))
-    G[point_rows] = helmert_basis(np.vstack([sx, tx]))
-    U, _ = np.linalg.qr(G[free])
-    nf = int(free.sum())
-    c = np.trace(N) / nf
-    try:
-        L = np.linalg.cholesky(N + c * (U @ U.T))
-    except np.linalg.LinAlgError:
-        raise MultilatError("layout is singular (a target seen by too few heads, or flat geometry)") from None
-    Linv = np.linalg.inv(L)
-    Qplus = Linv.T @ Linv - (U @ U.T) / c
-    # singular but numerically positive: the smallest non-null eigenvalue relative to the largest
-    if not np.all(np.isfinite(Qplus)) or np.max(np.abs(Qplus)) * c > 1e12:
-        raise MultilatError("layout is (nearly) singular: condition above 1e12")
-    cov = np.zeros((n, n))
-    cov[np.ix_(free, free)] = Qplus
-    E = _datum_E(parse_datum(datum), layout, G, point_rows)
-    if E is not None:
-        S = s_transform(G, E)
-        cov = S @ cov @ S.T
-    return cov, A_w, free, Qplus
-
-
-def _point_blocks(cov, s, t):
-    st_ = np.stack([cov[Q * i:Q * i + 3, Q * i:Q * i + 3] for i in range(s)])
-    o = Q * s
-    idx = o + 3 * np.arange(t)[:, None] + np.arange(3)
-    tt = cov[idx[:, :, None], idx[:, None, :]]
-    return st_, tt
-
-
-def _u95_max(cov3):
-    return np.sqrt(st.CHI2_3_95 * np.clip(np.linalg.eigvalsh(cov3)[..., -1], 0.0, None))
-
-
-def target_criterion(name: str, target_cov_m2) -> float:
-    """``max_u95`` or ``rms_u`` (:data:`CRITERIA`, m) from the targets' covariances (t, 3, 3): the one
-    evaluation of both behind every method (dense, blocked, fast) and :meth:`PreAnalysis.criterion`."""
-    if name == "max_u95":
-        return float(_u95_max(target_cov_m2).max())
-    if name == "rms_u":
-        return float(np.sqrt(np.trace(target_cov_m2, axis1=1, axis2=2).mean()))
-    raise MultilatError(f"target_criterion: {name!r} is not a criterion of the targets' covariances alone")
-
-
-def _length_u(layout: Layout, cov, pairs):
-    """``(length_m, standard uncertainty_m)`` of the distances between point pairs (ids); ``cov`` the
-    full covariance matrix, or an object whose ``block(rows)`` gives the block of those rows (the
-    blocked pre-analysis' covariance)."""
-    s = layout.n_stations
-    ids = layout.station_ids + layout.target_ids
-    pos = {p: k for k, p in enumerate(ids)}
-    xyz = np.vstack([layout.station_xyz_m, layout.target_xyz_m])
-    out = []
-    for a, b in pairs:
-        ra, rb = (Q * pos[p] + np.arange(3) if pos[p] < s else Q * s + 3 * (pos[p] - s) + np.arange(3)
-                  for p in (a, b))
-        L, u = line_of_sight(xyz[pos[a]] - xyz[pos[b]])
-        g = np.concatenate([u, -u])
-        r = np.concatenate([ra, rb])
-        C = cov.block(r) if hasattr(cov, "block") else cov[np.ix_(r, r)]
-        out.append((float(L), float(np.sqrt(max(g @ C @ g, 0.0)))))
-    return out
-
-
-def _redundancy(A_w, Qplus):
-    h = np.einsum("ij,jk,ik->i", A_w, Qplus, A_w)
-    return np.clip(1.0 - h, 0.0, 1.0)
-
-
-#: above this many free parameters the pre-analysis works on the adjustment's reduced system
-#: (:mod:`.blocked`, O(t s^2)) instead of the dense normal matrix (O(t^3))
-DENSE_MAX_PARAMS = 120
-
-
-def _method(method: str, layout: Layout, name: str | None = None) -> str:
-    """The evaluation to use: ``fast`` (:mod:`.fast`, a criterion other than length_u), else dense
-    up to :data:`DENSE_MAX_PARAMS` parameters and blocked above."""
-    if method not in ("auto", "dense", "blocked", "fast"):
-        raise MultilatError(f"method must be auto, dense, blocked or fast, got {method!r}")
-    if method == "fast" and name in (None, "length_u"):
-        method = "auto"
-    if method == "auto":
-        if name is not None and name != "length_u":
-            return "fast"
-        n = 4 * layout.n_stations + 3 * layout.n_targets
-        return "dense" if n <= DENSE_MAX_PARAMS else "blocked"
-    return method
+    return make_backend("dense", layout, sigma_m, offsets=offsets, datum=datum).full
 
 
 def criterion_value(name: str, layout: Layout, sigma: SigmaModel, *, offsets=True, datum="free",
                     lengths=(), alpha=0.001, power=0.80, method: str = "auto") -> float:
     """The design criterion ``name`` (:data:`CRITERIA`) of a layout, metres; ``inf`` when singular.
 
-    ``method``: ``"dense"`` (the whole normal matrix), ``"blocked"`` (the adjustment's Schur-reduced
-    system, :mod:`.blocked`), ``"fast"`` (the search's evaluator, :mod:`.fast`; not length_u) or
-    ``"auto"`` (fast, and for length_u dense up to :data:`DENSE_MAX_PARAMS` parameters, else
-    blocked). All four agree to 1e-9 (tested)."""
+    ``method``: a back end of :mod:`.backends`, ``"dense"`` (the adjustment's covariance as the whole
+    matrix), ``"blocked"`` (the same in its Schur form), ``"fast"`` (the search's evaluator; not
+    length_u) or ``"auto"`` (fast, and blocked for length_u: :func:`~.backends.choose_backend`).
+    All agree to 1e-9 (tested)."""
     if name not in CRITERIA:
         raise MultilatError(f"criterion must be one of {', '.join(CRITERIA)}, got {name!r}")
-    si, ti = layout.pairs()
-    d = range_m(layout.station_xyz_m[si] - layout.target_xyz_m[ti])
-    sig = sigma(d, si, layout.station_ids)
-    how = _method(method, layout, name)
-    if how == "fast":
-        from multilat.network.design.fast import fast_criterion
-
-        sig_mat = np.ones(layout.visible.shape)
-        sig_mat[si, ti] = sig
-        return fast_criterion(name, layout, sig_mat, offsets=offsets, datum=datum, alpha=alpha, power=power)
-    if how == "blocked":
-        from multilat.network.design.blocked import blocked_criterion
-
-        return blocked_criterion(name, layout, sig, offsets=offsets, datum=datum, lengths=lengths,
-                                 alpha=alpha, power=power)
+    _, sig = _sigma_per_pair(layout, sigma)
+    how = choose_backend(method, layout, name)
     try:
-        cov, A_w, _, Qplus = covariance(layout, sig, offsets=offsets, datum=datum)
+        be = make_backend(how, layout, sig, offsets=offsets, datum=datum)
     except MultilatError:
         return float("inf")
-    if name in ("max_u95", "rms_u"):
-        return target_criterion(name, _point_blocks(cov, layout.n_stations, layout.n_targets)[1])
-    if name == "length_u":
-        return float(max(u for _, u in _length_u(layout, cov, lengths)))
-    if name == "max_mdb":
-        return float(st.minimal_detectable_bias_m(sig, _redundancy(A_w, Qplus), alpha=alpha,
-                                                  power=power).max())
-    raise MultilatError(f"criterion must be one of {', '.join(CRITERIA)}, got {name!r}")
+    return criterion(name, be, lengths=lengths, alpha=alpha, power=power)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -384,7 +233,7 @@ class PreAnalysis:
     layout : Layout
     station_index, target_index : ndarray of int (m,)  the observations (visible pairs)
     distance_m, sigma_m : ndarray (m,)  geometric distances and their standard uncertainties
-    cov : ndarray (5s + 3t, 5s + 3t) or None  full covariance, model layout, in the datum, m²
+    cov : ndarray (5s + 3t, 5s + 3t) or None  full covariance, the adjustment's layout, in the datum, m²
         (None from the blocked method: large layouts keep only the blocks below)
     global_cov : ndarray (5s, 5s)  covariance of the station parameters (x, y, z, offset, scale)
     station_cov_m2 : (s, 3, 3) ; target_cov_m2 : (t, 3, 3)
@@ -451,16 +300,31 @@ class PreAnalysis:
                             max_range_m=max_range_m, visible=visible)
 
     def criterion(self, name: str) -> float:
-        """The value of criterion ``name`` for this layout (metres)."""
-        if name in ("max_u95", "rms_u"):
-            return target_criterion(name, self.target_cov_m2)
-        if name == "length_u":
-            if not self.lengths:
-                raise MultilatError("criterion length_u needs lengths (pairs of point ids)")
-            return float(max(x[3] for x in self.lengths))
-        if name == "max_mdb":
-            return float(self.mdb_m.max())
-        raise MultilatError(f"criterion must be one of {', '.join(CRITERIA)}, got {name!r}")
+        """The value of criterion ``name`` for this layout (metres): :func:`~.backends.criterion` on
+        this result's numbers."""
+        if name == "length_u" and not self.lengths:
+            raise MultilatError("criterion length_u needs lengths (pairs of point ids)")
+        return criterion(name, _Predicted(self), lengths=[x[:2] for x in self.lengths], alpha=self.alpha,
+                         power=self.power)
+
+
+class _Predicted(DesignBackend):
+    """A :class:`PreAnalysis`'s numbers as a back end (for :meth:`PreAnalysis.criterion`)."""
+
+    name = "pre-analysis"
+
+    def __init__(self, pa: PreAnalysis):
+        super().__init__(pa.layout, pa.sigma_m)
+        self.pa = pa
+
+    def target_cov_m2(self):
+        return self.pa.target_cov_m2
+
+    def redundancy(self):
+        return self.pa.redundancy
+
+    def length_u(self, pairs):
+        return [x[2:] for x in self.pa.lengths]
 
 
 def layout_observations(layout: Layout, sigma_m, offset_m=None) -> Observations:
@@ -491,13 +355,7 @@ def preanalyse(layout: Layout, sigma, *, offsets: bool = True, datum="free", len
     -------
     PreAnalysis
     """
-    si, ti = layout.pairs()
-    s, t = layout.n_stations, layout.n_targets
-    d = range_m(layout.station_xyz_m[si] - layout.target_xyz_m[ti])
-    if isinstance(sigma, SigmaModel):
-        sig = sigma(d, si, layout.station_ids)
-    else:
-        sig = np.broadcast_to(np.asarray(sigma, float), d.shape).copy()
+    d, sig = _sigma_per_pair(layout, sigma)
     if not np.all(np.isfinite(sig) & (sig > 0)):
         raise MultilatError("sigma must be finite and > 0")
     ids = set(layout.station_ids + layout.target_ids)
@@ -506,57 +364,24 @@ def preanalyse(layout: Layout, sigma, *, offsets: bool = True, datum="free", len
             if p not in ids:
                 raise MultilatError(f"lengths: unknown point id {p!r}")
     dat = parse_datum(datum)
-    if _method(method, layout) == "blocked":
-        return _preanalyse_blocked(layout, sig, d, si, ti, offsets=offsets, datum=dat, lengths=lengths,
-                                   alpha=alpha, power=power)
-    cov, A_w, free, Qplus = covariance(layout, sig, offsets=offsets, datum=dat)
-    scov, tcov = _point_blocks(cov, s, t)
-    red = _redundancy(A_w, Qplus)
-    mdb = st.minimal_detectable_bias_m(sig, red, alpha=alpha, power=power)
-    # external reliability: parameter shift of a bias of one MDB in observation k (inner datum)
-    with np.errstate(invalid="ignore"):
-        shift = (Qplus @ A_w.T) * np.where(np.isfinite(mdb), mdb, 0.0) / sig      # (n_free, m)
-    full = np.zeros((free.size, si.size))
-    full[free] = shift
-    tshift = full[Q * s:].reshape(t, 3, -1)
-    ext = np.sqrt((tshift ** 2).sum(axis=1)).max(axis=0)
-    ext[~np.isfinite(mdb)] = np.inf
-    lens = tuple((a, b, L, u) for (a, b), (L, u) in zip(lengths, _length_u(layout, cov, lengths)))
-    return PreAnalysis(layout=layout, station_index=si, target_index=ti, distance_m=d, sigma_m=sig,
-                       cov=cov, global_cov=cov[:Q * s, :Q * s], station_cov_m2=scov, target_cov_m2=tcov,
-                       offset_std_m=np.sqrt(np.clip(np.diag(cov)[Q * np.arange(s) + 3], 0, None)),
-                       u95_max_m=_u95_max(tcov), redundancy=red, mdb_m=mdb, external_m=ext,
-                       dof=int(si.size - free.sum() + 6), lengths=lens, datum=dat, offsets=offsets,
-                       alpha=alpha, power=power)
-
-
-def _preanalyse_blocked(layout, sig, d, si, ti, *, offsets, datum, lengths, alpha, power):
-    """:func:`preanalyse` on the reduced system (:mod:`.blocked`): the same numbers, no full matrix."""
-    from multilat.network.design.blocked import blocked_covariance, external_reliability_m
-
+    how = choose_backend(method, layout)
+    be = make_backend(how, layout, sig, offsets=offsets, datum=dat)
     s, t = layout.n_stations, layout.n_targets
-    bc = blocked_covariance(layout, sig, offsets=offsets, datum=datum)
-    gcov = bc.cov.global_block()
-    tcov = bc.target_cov_m2()
-    red = bc.redundancy()
+    cols = ParameterLayout.adjustment(s)
+    gcov = be.station_cov()
+    sb = cols.station_block(XYZ)
+    tcov = be.target_cov_m2()
+    red = be.redundancy()
     mdb = st.minimal_detectable_bias_m(sig, red, alpha=alpha, power=power)
-    ext = external_reliability_m(bc, layout, mdb, offsets=offsets)
-    scov = np.stack([gcov[Q * i:Q * i + 3, Q * i:Q * i + 3] for i in range(s)])
-    lens = tuple((a, b, L, u) for (a, b), (L, u) in zip(lengths, _length_u(layout, bc.cov, lengths)))
-    nfree = (4 if offsets else 3) * s + 3 * t
-    return PreAnalysis(layout=layout, station_index=si, target_index=ti, distance_m=d, sigma_m=sig,
-                       cov=None, global_cov=gcov, station_cov_m2=scov, target_cov_m2=tcov,
-                       offset_std_m=np.sqrt(np.clip(np.diag(gcov)[Q * np.arange(s) + 3], 0, None)),
-                       u95_max_m=_u95_max(tcov), redundancy=red, mdb_m=mdb, external_m=ext,
-                       dof=int(si.size - nfree + 6), lengths=lens, datum=datum, offsets=offsets,
-                       alpha=alpha, power=power)
-
-
-def _xyz(layout, pid):
-    ids = layout.station_ids + layout.target_ids
-    k = ids.index(pid)
-    s = layout.n_stations
-    return layout.station_xyz_m[k] if k < s else layout.target_xyz_m[k - s]
+    off = cols.station_columns("offset")
+    lens = tuple((a, b, L, u) for (a, b), (L, u) in zip(lengths, be.length_u(lengths)))
+    return PreAnalysis(layout=layout, station_index=be.station_index, target_index=be.target_index,
+                       distance_m=d, sigma_m=sig, cov=be.full if how == "dense" else None, global_cov=gcov,
+                       station_cov_m2=gcov[sb[:, :, None], sb[:, None, :]], target_cov_m2=tcov,
+                       offset_std_m=np.sqrt(np.clip(gcov[off, off], 0, None)), u95_max_m=u95_max_m(tcov),
+                       redundancy=red, mdb_m=mdb, external_m=external_reliability_m(be, layout, mdb, offsets=offsets),
+                       dof=int(d.size - ParameterLayout.station_system(s, t, offsets=offsets).n + 6),
+                       lengths=lens, datum=dat, offsets=offsets, alpha=alpha, power=power)
 
 
 def probe_cov_m2(station_xyz_m, global_cov, sigma_m: float, points_xyz_m, *, offsets: bool = True,
@@ -578,10 +403,11 @@ def probe_cov_m2(station_xyz_m, global_cov, sigma_m: float, points_xyz_m, *, off
         seen &= np.asarray(visible, bool)
     w = seen / float(sigma_m) ** 2                                    # (p, s)
     Jp = -u                                                           # d dist / d point
-    Jg = np.zeros((p.shape[0], s, Q * s))                             # d dist / d [x,y,z,o,k]
-    for i in range(s):
-        Jg[:, i, Q * i:Q * i + 3] = u[:, i]
-        Jg[:, i, Q * i + 3] = 1.0 if offsets else 0.0
+    cols = ParameterLayout.adjustment(s)                              # global_cov's columns
+    Jg = np.zeros((p.shape[0], s, cols.n))                            # d dist / d [x,y,z,o,k]
+    own = np.arange(s)
+    Jg[:, own[:, None], cols.station_block(XYZ)] = u
+    Jg[:, own, cols.station_columns("offset")] = 1.0 if offsets else 0.0
     M = np.einsum("psa,ps,psb->pab", Jp, w, Jp)
     ok = seen.sum(axis=1) >= 3
     Minv = np.full_like(M, np.nan)

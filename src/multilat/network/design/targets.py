@@ -20,10 +20,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.design.preanalysis import (DENSE_MAX_PARAMS, Layout, covariance,
-                                                 probe_cov_m2)
-from multilat.network.adjust import statistics as st
-from multilat.network.model.distance import Q
+from multilat.network.design.backends import make_backend, u95_max_m
+from multilat.network.design.preanalysis import Layout, probe_cov_m2
 
 __all__ = ["TargetSelection", "select_targets", "work_volume_u95_m"]
 
@@ -58,21 +56,15 @@ def work_volume_u95_m(layout: Layout, sigma_m, probe_xyz_m, probe_visible, *, of
     calibrated on ``layout``'s targets (inf when the layout is singular or a probe point is seen by
     fewer than 3 heads). ``sigma_m``: per observation of the layout (``layout.pairs()`` order)."""
     sig = np.asarray(sigma_m, float)
-    s = layout.n_stations
-    try:
-        if 4 * s + 3 * layout.n_targets <= DENSE_MAX_PARAMS:
-            gcov = covariance(layout, sig, offsets=offsets, datum=datum)[0][:Q * s, :Q * s]
-        else:
-            from multilat.network.design.blocked import blocked_covariance
-
-            gcov = blocked_covariance(layout, sig, offsets=offsets, datum=datum).cov.global_block()
+    try:        # the heads' block only: the blocked back end (the adjustment's Schur form) at any size
+        gcov = make_backend("blocked", layout, sig, offsets=offsets, datum=datum).station_cov()
     except MultilatError:
         return float("inf")
     c = probe_cov_m2(layout.station_xyz_m, gcov, float(np.mean(sig)), probe_xyz_m, offsets=offsets,
                      visible=probe_visible)
     if not np.all(np.isfinite(c)):
         return float("inf")
-    return float(np.sqrt(st.CHI2_3_95 * max(np.linalg.eigvalsh(c)[:, -1].max(), 0.0)))
+    return float(u95_max_m(c).max())
 
 
 def select_targets(layout: Layout, sigma, wanted_u95_m: float, *, offsets: bool = True,

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.fast_normal import _fast_std_normal
 from multilat.montecarlo import (AdaptiveRule, resolve_map, block_generator, block_trials, chunk_ranges,
                                  resolve_seed)
 from multilat.network.montecarlo import batched as bt
@@ -340,8 +341,8 @@ def _draw_errors(spec: _ChunkSpec, n: int, rng: np.random.Generator) -> np.ndarr
     (shared sensors, repeats) through :meth:`multilat.network.montecarlo.readings.Readings.draw`."""
     if spec.readings is not None:
         return spec.readings.draw(n, rng, noise=spec.noise, error_model=spec.error_model)
-    if spec.noise == "gaussian":
-        return rng.standard_normal((n, len(spec.distance_m))) * spec.noise_sigma_m
+    if spec.noise == "gaussian":    # numpy's draws, faster through numba (multilat.fast_normal)
+        return _fast_std_normal(rng, (n, len(spec.distance_m))) * spec.noise_sigma_m
     from multilat.distance_errors import draw_errors
 
     head_row = spec.network.station_index     # one model row per station, in station order
@@ -360,30 +361,34 @@ def _solve_block(spec: _ChunkSpec, entropy, spawn_key: tuple, b: int, n: int) ->
     else:
         sol = net.solve(d)
     ok = sol.converged
-    h, o, t = sol.station_xyz_m, sol.offset_m, sol.target_xyz_m
-    if not ok.all():
-        h, o, t = h[ok], o[ok], t[ok]
-    # deviations from the nominal (flatten layout, then the pairs), each written once as float32
-    x0 = bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m)
-    nk, c1, c2 = len(h), 3 * h.shape[1], 3 * h.shape[1] + o.shape[1]
-    c3 = c2 + 3 * t.shape[1]
-    dev = np.empty((nk, c3 + len(spec.pair_index)), np.float32)
-    dev[:, :c1] = h.reshape(nk, c1) - x0[:c1]
-    dev[:, c1:c2] = o - x0[c1:c2]
-    dev[:, c2:c3] = t.reshape(nk, c3 - c2) - x0[c2:c3]
-    if len(spec.pair_index):
-        pts = np.concatenate([h, t], axis=1)
-        p0 = np.concatenate([net.station_xyz_m, net.target_xyz_m])
-        pa, pb = spec.pair_index[:, 0], spec.pair_index[:, 1]
-        dist = np.linalg.norm(pts[:, pa] - pts[:, pb], axis=2)
-        dist0 = np.linalg.norm(p0[pa] - p0[pb], axis=1)
-        dev[:, c3:] = dist - dist0
+    dev = _deviations(spec, sol.station_xyz_m, sol.offset_m, sol.target_xyz_m, np.flatnonzero(ok))
     # the drawn errors' sums: the empirical input std of the linear comparison (model noise, readings)
     sums = spec.noise == "model" or spec.readings is not None
     return dict(dev=dev, n=n, n_failed=int((~ok).sum()),
                 n_retried=int(sol.retried.sum()) if sol.retried is not None else 0,
                 sigma0=sol.sigma0[ok], e_sum=e.sum(axis=0) if sums else None,
                 e2_sum=(e * e).sum(axis=0) if sums else None)
+
+
+def _deviations(spec: _ChunkSpec, h, o, t, keep) -> np.ndarray:
+    """The kept trials' deviations from the nominal (float32): the :func:`batched.flatten` layout, then
+    the pairs' distances; one compiled pass when numba is installed, else numpy (the same bits)."""
+    net = spec.network
+    x0 = bt.flatten(net.station_xyz_m, net.offset_m, net.target_xyz_m)
+    p0 = np.concatenate([net.station_xyz_m, net.target_xyz_m])
+    pa, pb = (np.ascontiguousarray(spec.pair_index[:, c]) for c in (0, 1))
+    dist0 = np.linalg.norm(p0[pa] - p0[pb], axis=1)
+    dev = np.empty((len(keep), len(x0) + len(pa)), np.float32)
+    if bt.numba_available():
+        from multilat.network.montecarlo import _batched_numba as nb
+
+        nb.deviations(*(np.ascontiguousarray(a) for a in (h, o, t)), keep, x0, pa, pb, dist0, dev)
+        return dev
+    h, o, t = h[keep], o[keep], t[keep]
+    pts = np.concatenate([h, t], axis=1)
+    dev[:, :len(x0)] = np.concatenate([h.reshape(len(h), -1), o, t.reshape(len(t), -1)], axis=1) - x0
+    dev[:, len(x0):] = np.linalg.norm(pts[:, pa] - pts[:, pb], axis=2) - dist0
+    return dev
 
 
 def _run_chunk(args) -> list:
@@ -558,7 +563,6 @@ def propagate(problem: Problem, *, trials: int = 100_000, rng=None, noise: str |
     model = None
     if noise == "model":
         from multilat.distance_errors import error_model
-
 
         model = error_model(inst, problem.heads)
     spec = _ChunkSpec(net, problem.distance_m, problem.heads, pidx, noise, model, net.sigma_m, problem.readings)

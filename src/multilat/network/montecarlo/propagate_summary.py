@@ -62,11 +62,16 @@ def _ellipsoid_fraction(dev3, center, cov):
         return float("nan")
     keep = ev > 1e-9 * ev.max()
     r = int(keep.sum())
-    z = (dev3 - center) @ vec[:, keep]
-    evk = ev[keep]
-    d2 = z[:, 0] * z[:, 0] / evk[0]      # np.sum(z * z / ev, axis=1) column by column: the same bits
-    for c in range(1, r):                # (numpy adds rows this short in order) without numpy's slow
-        d2 += z[:, c] * z[:, c] / evk[c]   # reduction over rows of 3 (tests/test_propagate.py)
+    vk, evk = vec[:, keep], ev[keep]
+    y = [dev3[:, a] - center[a] for a in range(3)]
+    d2 = None
+    for c in range(r):       # z = y @ vk column by column, in elementwise numpy (no BLAS: the tasks of
+        z = y[0] * vk[0, c]  # summarise run in two threads, BLAS has threads of its own); np.sum(z * z /
+        z += y[1] * vk[1, c]  # ev, axis=1) column by column: numpy adds rows this short in order, without
+        z += y[2] * vk[2, c]  # its slow reduction over rows of 3 (tests/test_propagate.py)
+        z *= z
+        z /= evk[c]
+        d2 = z if d2 is None else d2 + z
     q = chi2_3_95 if r == 3 else chi2_ppf(0.95, r)
     return np.count_nonzero(d2 <= q) / len(d2)     # = np.mean(d2 <= q): an exact count over n
 
@@ -150,15 +155,13 @@ def summarise(problem, blocks, k, noise, noise_std, ss, adaptive_info, t0, keep_
 
     def point(q):
         rows = problem.param_rows(pids[q])
-        pc_mc[q] = put(rows, dev[:, rows].astype(np.float64)).cov   # one float64 copy per point
+        d3 = dev[:, rows].astype(np.float64)                  # one float64 copy per point (not written to)
+        pc_mc[q] = put(rows, d3).cov
+        cov_mc_frac[q] = _ellipsoid_fraction(d3, mean_dev[rows], pc_mc[q])
+        cov_lin_frac[q] = _ellipsoid_fraction(d3, np.zeros(3), pc_lin[q])
 
     _in_two_threads([lambda c=rest[c0:c0 + 8]: put(c, dev[:, c].astype(np.float64))
                      for c0 in range(0, len(rest), 8)] + [lambda q=q: point(q) for q in range(len(pids))], n)
-    for q, pid in enumerate(pids):          # the ellipsoids (a BLAS product each) here, one at a time
-        rows = problem.param_rows(pid)
-        d3 = dev[:, rows].astype(np.float64)
-        cov_mc_frac[q] = _ellipsoid_fraction(d3, mean_dev[rows], pc_mc[q])
-        cov_lin_frac[q] = _ellipsoid_fraction(d3, np.zeros(3), pc_lin[q])
     iv_sym += x0[:, None]
     iv_short += x0[:, None]
     se = std * np.sqrt(np.maximum(kurt - 1.0, 0.0) / (4.0 * n))
