@@ -4,11 +4,10 @@ batched solver (:mod:`multilat.network.montecarlo.batched_coupled`).
 
 Independent values:
 
-* the linear covariance of the general solver (its own Jacobian, g-inverse and S-transformation) against
-  ``adjust``'s covariance (the reduced normal equations, the tie of heads, the coupled Schur path):
-  a second implementation of the same first-order propagation, equal to 1e-8 relative (both float64;
-  the datum's rigid fit and the S-transformation agree to first order only at the nominal solution,
-  which is where both are evaluated);
+* the linear covariance of the general solver, which is ``adjust``'s covariance object since issue 27
+  (before, a second implementation: its own Jacobian, g-inverse and S-transformation), against the
+  per-point blocks ``adjust`` reports (another code path of that object), 1e-8 relative here (the
+  exact comparisons are ``tests/test_mc_linear_covariance.py``'s, 1e-13);
 * the Monte Carlo standard deviations against that linear covariance within the Monte Carlo standard
   error: gaussian inputs, so the relative standard error of a standard deviation from n trials is
   ``sqrt(1/(2(n-1)))`` (kurtosis 3); the bound is 5 standard errors on the largest of ~100 correlated

@@ -18,11 +18,14 @@ from __future__ import annotations
 import numpy as np
 
 from multilat.network.model.datum import s_coefficients
-from multilat.network.adjust.solve.normal_equations import repeat_share, slot_gain, target_slots
-from multilat.network.model.distance import Q, segment_sum
+from multilat.network.adjust.solve.normal_equations import (reduced_normal_equations, repeat_share, slot_gain,
+                                                           target_slots)
+from multilat.network.model.distance import Q, residuals_and_jacobian, segment_sum
+from multilat.network.model.parameter_layout import STATION_FIELDS, ParameterLayout
 from multilat.network.adjust.statistics import correlated_with
 
-__all__ = ["NetworkCovariance", "CoupledCovariance", "KERNELS_ABOVE_OBS", "JACOBIAN_ON_DEMAND_OBS"]
+__all__ = ["NetworkCovariance", "CoupledCovariance", "distance_covariance", "KERNELS_ABOVE_OBS",
+           "JACOBIAN_ON_DEMAND_OBS"]
 
 #: Networks with at least this many observations get their hat diagonal, hat rows and target blocks
 #: from the compiled kernels of :mod:`multilat.network.adjust._covariance_kernels` (numba, when installed); smaller
@@ -84,8 +87,12 @@ class NetworkCovariance:
         self.ti = target_index
         self.s = Qgg.shape[0] // Q
         self.t = Minv.shape[0]
-        self.n_station_params = Q * self.s             # the station block's columns, then 3 per target
-        self.n = self.n_station_params + 3 * self.t
+        self.layout = ParameterLayout.adjustment(self.s, self.t)    # the columns of every product
+        # (s, 5) the stations' columns, which are Q_gg's rows and columns too (the station block comes
+        # first), and (t, 3) the targets'
+        self._g, self._tg = self.layout.station_block(), self.layout.target_block()
+        self.n_station_params = self._g.size
+        self.n = self.layout.n
         self.factor = float(factor)
         self.R = np.eye(3) if R is None else np.asarray(R)
         self._jacobian = jacobian
@@ -149,41 +156,37 @@ class NetworkCovariance:
     # ------------------------------------------------------------ internal (solving frame)
     def _times(self, V):
         """Internal covariance times V (n, c) -> (n, c)."""
-        s, Qn = self.s, Q
+        g, tg = self._g, self._tg
         V = np.asarray(V, float)
+        out = np.empty((self.n, V.shape[1]))
         K = _kernels(self.si.shape[0])
         if K is not None:       # one column at a time: no (m, 5, c) temporaries
             Qgg, Minv, Js, _, P, si, ti, order, tptr = self._kernel_args()
-            out = np.empty((self.n, V.shape[1]))
-            og, ot = np.empty(Qn * s), np.empty((self.t, 3))
+            og, ot = np.empty(g.size), np.empty(tg.shape)
             for c in range(V.shape[1]):
                 col = np.ascontiguousarray(V[:, c])
-                K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, col[:Qn * s].copy(),
-                            col[Qn * s:].reshape(self.t, 3).copy(), og, ot, False, np.zeros(0, np.int64))
-                out[:Qn * s, c] = og
-                out[Qn * s:, c] = ot.ravel()
+                K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, col[g.ravel()], col[tg], og, ot, False,
+                            np.zeros(0, np.int64))
+                out[g.ravel(), c] = og
+                out[tg.ravel(), c] = ot.ravel()
             return out * self.factor
-        Vg = V[:Qn * s].reshape(s, Qn, -1)
-        VT = V[Qn * s:].reshape(self.t, 3, -1)
+        Vg, VT = V[g], V[tg]                               # (s, 5, c), (t, 3, c)
         # Vg - K^T VT : per obs a_k (p_k . VT_j)
         Js_w, _, P = self._blocks()
         pv = np.einsum("mi,mic->mc", P, VT[self.ti])
-        acc = Vg - segment_sum(self.si, Js_w[:, :, None] * pv[:, None, :], s)
-        u = (self.Qgg @ acc.reshape(Qn * s, -1))          # (5s, c)
+        acc = Vg - segment_sum(self.si, Js_w[:, :, None] * pv[:, None, :], self.s)
+        out[g.ravel()] = self.Qgg @ acc.reshape(g.size, -1)      # u (5s, c)
         # M VT - K u : per obs p_k (a_k . u_station)
-        au = np.einsum("mq,mqc->mc", Js_w, u.reshape(s, Qn, -1)[self.si])
-        outT = (np.einsum("tij,tjc->tic", self.Minv, VT)
-                - segment_sum(self.ti, P[:, :, None] * au[:, None, :], self.t))
-        return np.concatenate([u, outT.reshape(3 * self.t, -1)], axis=0) * self.factor
+        au = np.einsum("mq,mqc->mc", Js_w, out[g][self.si])
+        out[tg] = (np.einsum("tij,tjc->tic", self.Minv, VT)
+                   - segment_sum(self.ti, P[:, :, None] * au[:, None, :], self.t))
+        return out * self.factor
 
     def _rotate_rows(self, V, R):
         """Apply the 3x3 ``R`` to every coordinate triple of V's rows (n, c)."""
-        s = self.s
         out = V.copy()
-        g = out[:Q * s].reshape(s, Q, -1)
-        g[:, :3] = np.einsum("ij,sjc->sic", R, g[:, :3])
-        T = out[Q * s:].reshape(self.t, 3, -1)
-        out[Q * s:] = np.einsum("ij,tjc->tic", R, T).reshape(3 * self.t, -1)
+        for cols in (self._g[:, :3], self._tg):            # the stations' x, y, z, then the targets'
+            out[cols] = np.einsum("ij,sjc->sic", R, V[cols])
         return out
 
     def _rot_times(self, V):
@@ -204,6 +207,61 @@ class NetworkCovariance:
             out = out + self.extra @ (self.extra.T @ V)
         return out
 
+    def linear_covariance(self, cols=None, *, weight_sigma_m=None, sigma_m=None, cov_m2=None,
+                          chunk_elements: int = 1 << 22) -> np.ndarray:
+        """First-order (GUM) covariance (k, k) of the parameters ``cols`` (default all) in the final
+        datum when the distances' covariance is ``C`` rather than the weights' ``diag(weight_sigma_m**2)``
+        (the Monte Carlo's linear propagation, :mod:`multilat.network.montecarlo.batched`): the
+        sandwich ``Q A^T W C W A Q`` of the least-squares estimator, computed as::
+
+            Q + K (W^1/2 C W^1/2 - I) K^T,    K = S R Q_int A_w^T
+
+        with ``A_w`` the whitened distance rows held here: no correction when ``C`` is the weights' (the
+        block of :meth:`full`); couplings and angles keep their own variances. ``sigma_m`` (m,):
+        independent distances; ``cov_m2`` (m, m): correlated ones. ``chunk_elements`` bounds the
+        ``(m, 5, c)`` temporaries of ``c`` columns at a time (the numbers do not depend on it beyond
+        rounding). ``S Q N Q S^T = S Q S^T`` holds for every generalised inverse ``Q`` (the penalty of
+        :func:`distance_covariance` too). For the distance cost (``factor`` 1)."""
+        cols = np.arange(self.n) if cols is None else np.asarray(cols, np.intp)
+        D = None
+        if cov_m2 is not None:
+            wsig = np.asarray(weight_sigma_m, float)
+            D = np.asarray(cov_m2, float) / np.outer(wsig, wsig) - np.eye(wsig.size)
+        elif sigma_m is not None:
+            D = (np.asarray(sigma_m, float) / np.asarray(weight_sigma_m, float)) ** 2 - 1.0
+        if D is not None and not np.any(D):                        # the weights' own σ: no correction
+            D = None
+        if D is not None and self.factor != 1.0:
+            raise ValueError("the sandwich covariance needs a-priori weights (factor 1)")
+        k, m = cols.size, len(self.si)
+        out = np.empty((k, k))
+        B = None if D is None else np.empty((m, k))                # K^T (m, k)
+        step = max(1, chunk_elements // max(1, m * self._g.shape[1]))   # columns per product: (m, 5, step)
+        for lo in range(0, k, step):
+            c = cols[lo:lo + step]
+            V = np.zeros((self.n, c.size))
+            V[c, np.arange(c.size)] = 1.0
+            if self.G is not None:
+                V = V - self.H.T @ (self.G.T @ V)
+            Y = self._times(self._rotate_rows(V, self.R.T))        # Q_int R^T S^T e_c
+            Z = self._rotate_rows(Y, self.R)
+            if self.G is not None:
+                Z = Z - self.G @ (self.H @ Z)
+            out[:, lo:lo + step] = Z[cols]
+            if B is not None:
+                B[:, lo:lo + step] = self._design_times_columns(Y)
+        if self.extra is not None:
+            out = out + self.extra[cols] @ self.extra[cols].T
+        if B is not None:
+            out = out + B.T @ (D @ B if D.ndim == 2 else D[:, None] * B)
+        return 0.5 * (out + out.T)
+
+    def _design_times_columns(self, Y) -> np.ndarray:
+        """``A_w Y`` (m, c) for parameter-space columns ``Y`` (n, c) in the internal frame."""
+        Js_w, Jt_w, _ = self._blocks()
+        return (np.einsum("mq,mqc->mc", Js_w, Y[self._g][self.si])
+                + np.einsum("mi,mic->mc", Jt_w, Y[self._tg][self.ti]))
+
     def block(self, idx):
         """Dense covariance of the parameters ``idx`` (k,) -> (k, k)."""
         idx = np.asarray(idx, dtype=np.intp)
@@ -217,17 +275,16 @@ class NetworkCovariance:
 
     def global_block(self):
         """Covariance of the station parameters (5s, 5s): x, y, z, offset, scale per station."""
-        s = self.s
-        Rb = np.eye(Q * s)
-        for i in range(s):
-            Rb[Q * i:Q * i + 3, Q * i:Q * i + 3] = self.R
+        g = self._g.ravel()                                # Q_gg's rows: the station block's columns
+        Rb = np.eye(g.size)
+        for xyz in self._g[:, :3]:
+            Rb[np.ix_(xyz, xyz)] = self.R
         out = Rb @ (self.Qgg * self.factor) @ Rb.T
         if self.G is not None:
-            g = slice(0, Q * s)
             Gg, Cg = self.G[g], self.CHt[g]
             out = out - Gg @ Cg.T - Cg @ Gg.T + Gg @ self.HCHt @ Gg.T
         if self.extra is not None:
-            Xg = self.extra[:Q * s]
+            Xg = self.extra[g]
             out = out + Xg @ Xg.T
         return 0.5 * (out + out.T)
 
@@ -249,6 +306,10 @@ class NetworkCovariance:
                 c(Jt_w, dtype=float), c(P, dtype=float), c(self.si, dtype=np.int64),
                 c(self.ti, dtype=np.int64), order, tptr)
 
+    def _qgg_blocks(self) -> np.ndarray:
+        """``Q_gg`` as (s, 5, s, 5) station blocks."""
+        return self.Qgg[self._g[:, :, None, None], self._g[None, None]]
+
     def _target_blocks_internal(self, chunk_targets: int = 20000, *, kernels=True):
         """Per-target 3x3 blocks of the internal covariance (solving frame, without ``factor``)."""
         K = _kernels(self.si.shape[0]) if kernels else None
@@ -261,7 +322,7 @@ class NetworkCovariance:
         Js_w, Jt_w, P_all = self._blocks()
         slots = target_slots(self.si, self.ti, s, t)
         gain = slot_gain(slots, self.si, self.ti, Js_w, Jt_w)     # repeated readings
-        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        Q4 = self._qgg_blocks()
         out = np.empty((t, 3, 3))
         for lo in range(0, t, chunk_targets):
             sl = slots[lo:lo + chunk_targets]
@@ -277,19 +338,15 @@ class NetworkCovariance:
 
     def target_blocks(self, chunk_targets: int = 20000, *, kernels=True):
         """3x3 covariance of every target (t, 3, 3) in the final datum, O(t s^2)."""
-        s, t = self.s, self.t
         out = self._target_blocks_internal(chunk_targets, kernels=kernels)
         out *= self.factor
         out = np.einsum("ij,tjk,lk->til", self.R, out, self.R)
         if self.G is not None:
-            rows = Q * s + np.arange(3 * t)
-            dcol = self.G.shape[1]
-            Gp = self.G[rows].reshape(t, 3, dcol)
-            Cp = self.CHt[rows].reshape(t, 3, dcol)
+            Gp, Cp = self.G[self._tg], self.CHt[self._tg]          # (t, 3, d)
             out = (out - np.einsum("tia,tja->tij", Gp, Cp) - np.einsum("tia,tja->tij", Cp, Gp)
                    + np.einsum("tia,ab,tjb->tij", Gp, self.HCHt, Gp))
         if self.extra is not None:
-            Xp = self.extra[Q * s:].reshape(t, 3, -1)
+            Xp = self.extra[self._tg]
             out = out + np.einsum("tia,tja->tij", Xp, Xp)
         return 0.5 * (out + np.swapaxes(out, 1, 2))
 
@@ -303,8 +360,7 @@ class NetworkCovariance:
             K.hat_row(int(k), Qgg, Minv, Js, Jt, P, si, ti, order, tptr, out)
             return out
         v = self._times(self.design_row(k)[:, None])[:, 0] / self.factor
-        vg = v[:Q * self.s].reshape(self.s, Q)
-        vt = v[Q * self.s:].reshape(self.t, 3)
+        vg, vt = v[self._g], v[self._tg]
         Js_w, Jt_w, _ = self._blocks()
         return (np.einsum("mq,mq->m", Js_w, vg[self.si])
                 + np.einsum("mi,mi->m", Jt_w, vt[self.ti]))
@@ -318,22 +374,23 @@ class NetworkCovariance:
         if K is None:
             return self._times(g[:, None])[:, 0] / self.factor
         Qgg, Minv, Js, _, P, si, ti, order, tptr = self._kernel_args()
-        og, ot = np.empty(Q * self.s), np.empty((self.t, 3))
-        gt = g[Q * self.s:].reshape(self.t, 3)
+        og, ot = np.empty(self._g.size), np.empty(self._tg.shape)
+        gt = g[self._tg]
         nz = np.unique(np.flatnonzero(gt) // 3)             # targets with a non-zero part (few, usually)
         sparse = nz.size <= self.t // 8        # a few targets (a design row, a downdate's generator)
         touched = (np.sort(np.concatenate([order[tptr[j]:tptr[j + 1]] for j in nz] + [np.zeros(0, np.int64)]))
                    .astype(np.int64) if sparse else np.zeros(0, np.int64))
-        K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, g[:Q * self.s].copy(), gt.copy(), og, ot, sparse, touched)
-        return np.concatenate([og, ot.ravel()])
+        K.cov_times(Qgg, Minv, Js, P, si, ti, order, tptr, g[self._g.ravel()], gt, og, ot, sparse, touched)
+        out = np.empty(self.n)
+        out[self._g.ravel()], out[self._tg.ravel()] = og, ot.ravel()
+        return out
 
     def design_times(self, x) -> np.ndarray:
         """The whitened design times a parameter-space vector ``x`` (n,) -> (m,): ``A x``, so that
         ``design_times(internal_times(g))`` is the hat-matrix row of the combination ``g`` of design
         rows (:meth:`hat_row` for ``g = a_k``)."""
         x = np.asarray(x, float)
-        xg = x[:Q * self.s].reshape(self.s, Q)
-        xt = x[Q * self.s:].reshape(self.t, 3)
+        xg, xt = x[self._g], x[self._tg]
         K = _kernels(self.si.shape[0])
         if K is None:
             Js_w, Jt_w, _ = self._blocks()
@@ -351,16 +408,17 @@ class NetworkCovariance:
         s, t = self.s, self.t
         key = np.asarray(self.ti, np.int64) * s + np.asarray(self.si, np.int64)
         Js_w, _, P = self._blocks()
-        L = segment_sum(key, P[:, :, None] * Js_w[:, None, :], t * s)      # (t s, 3, Q)
-        return np.ascontiguousarray(L.reshape(t, s, 3, Q).transpose(0, 2, 1, 3)).reshape(t, 3, Q * s)
+        L = segment_sum(key, P[:, :, None] * Js_w[:, None, :], t * s)      # (t s, 3, 5)
+        out = np.empty((t, 3, self._g.size))
+        out[:, :, self._g] = L.reshape(t, s, 3, -1).transpose(0, 2, 1, 3)
+        return out
 
     def design_row(self, k: int) -> np.ndarray:
         """Row ``k`` of the whitened design as a parameter-space vector (n,) (station and target parts)."""
         a = np.zeros(self.n)
-        i, j = int(self.si[k]), int(self.ti[k])
         Js_w, Jt_w, _ = self._blocks()
-        a[Q * i:Q * i + Q] = Js_w[k]
-        a[Q * self.s + 3 * j:Q * self.s + 3 * j + 3] = Jt_w[k]
+        a[self._g[self.si[k]]] = Js_w[k]
+        a[self._tg[self.ti[k]]] = Jt_w[k]
         return a
 
     def perfectly_correlated(self, k: int, redundancy, tol: float = 1e-6) -> np.ndarray:
@@ -387,7 +445,7 @@ class NetworkCovariance:
         # repeated readings of a pair: the pair's hat as one observation of all their weight, shared
         # among them by weight (their rows are proportional)
         gain = slot_gain(slots, self.si, self.ti, Js_w, Jt_w)
-        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        Q4 = self._qgg_blocks()
         h = np.empty(self.si.shape[0])
         for lo in range(0, t, chunk_targets):
             sl = slots[lo:lo + chunk_targets]
@@ -417,8 +475,11 @@ class CoupledCovariance(NetworkCovariance):
 
         C V = [u ; N_tt^-1 V_t - X u],   u = Q_gg (V_g - X^T V_t)
 
-    Same interface and datum handling as :class:`NetworkCovariance`; per-target blocks and the hat
-    diagonal from the dense form (small networks).
+    Same interface and datum handling as :class:`NetworkCovariance` (a parameterisation of it: only
+    the eliminated block's product differs); per-target blocks and the hat diagonal from the dense form
+    (small networks). The eliminated rows of ``X`` and ``N_tt^-1`` are the targets' (in the layout's
+    order, the first ``3t``), then the orientations' (:func:`multilat.network.adjust.solve.coupled.
+    assemble_coupled`).
     """
 
     def __init__(self, Qgg, coupled, Minv, Js_w, Jt_w, station_index, target_index, **kw):
@@ -426,32 +487,43 @@ class CoupledCovariance(NetworkCovariance):
         self.Ntt_full_inv = coupled.Ntt_inv
         super().__init__(Qgg, Minv, Js_w, Jt_w, station_index, target_index, **kw)
 
+    @property
+    def _xt(self) -> np.ndarray:
+        """(t, 3) the targets' rows of ``X`` and ``N_tt^-1`` (their columns counted from the first)."""
+        return self._tg - self._tg.min()
+
+    @property
+    def _xo(self) -> slice:
+        """The orientations' rows of ``X`` and ``N_tt^-1`` (after the targets')."""
+        return slice(self._tg.size, None)
+
     def _times(self, V):
         """``C V`` in the internal frame. The eliminated block may hold the stations' orientation
-        unknowns after the targets (angle observations): ``V`` of the coordinate length (5s + 3t) is
-        padded with zeros for them and the product cut back to that length."""
+        unknowns after the targets (angle observations): ``V`` (n, c) of the coordinate length
+        (5s + 3t) has zeros for them and the product is cut to that length; ``V`` (n + n_o, c) holds
+        them in its last rows (:func:`multilat.network.model.angle_rows.orientation_covariance`)."""
         V = np.asarray(V, float)
-        g = Q * self.s
-        Vg, Vt = V[:g], V[g:]
-        pad = self.X.shape[0] - Vt.shape[0]
-        if pad:
-            Vt = np.concatenate([Vt, np.zeros((pad,) + Vt.shape[1:])], axis=0)
-        u = self.Qgg @ (Vg - self.X.T @ Vt)
-        out = np.concatenate([u, self.Ntt_full_inv @ Vt - self.X @ u], axis=0) * self.factor
-        return out[:V.shape[0]] if pad else out
+        g, tg, xt = self._g.ravel(), self._tg.ravel(), self._xt.ravel()
+        Vt = np.zeros((self.X.shape[0],) + V.shape[1:])
+        Vt[xt] = V[tg]
+        if V.shape[0] > self.n:
+            Vt[self._xo] = V[self.n:]
+        u = self.Qgg @ (V[g] - self.X.T @ Vt)
+        el = self.Ntt_full_inv @ Vt - self.X @ u
+        out = np.empty(V.shape)
+        out[g], out[tg], out[self.n:] = u, el[xt], el[self._xo][:V.shape[0] - self.n]
+        return out * self.factor
 
     def _target_blocks_internal(self, chunk_targets: int = 20000, *, kernels=True):
-        t = self.t
-        Xt = self.X[:3 * t]
-        Xb = Xt.reshape(t, 3, -1)
-        XQ = (Xt @ self.Qgg).reshape(t, 3, -1)
-        D = self.Ntt_full_inv[:3 * t, :3 * t].reshape(t, 3, t, 3)[np.arange(t), :, np.arange(t), :]
+        Xb = self.X[self._xt]                                         # (t, 3, 5s)
+        XQ = (self.X[self._xt.ravel()] @ self.Qgg)[self._xt]
+        D = self.Ntt_full_inv[self._xt[:, :, None], self._xt[:, None, :]]      # the 3x3 diagonal blocks
         return D + np.einsum("tiq,tjq->tij", XQ, Xb)
 
     def orientation_cov_internal(self) -> np.ndarray:
         """Covariance (n_o, n_o) of the orientation unknowns in the internal frame (rad²)."""
-        Xo = self.X[3 * self.t:]
-        return (self.Ntt_full_inv[3 * self.t:, 3 * self.t:] + Xo @ self.Qgg @ Xo.T) * self.factor
+        Xo = self.X[self._xo]
+        return (self.Ntt_full_inv[self._xo, self._xo] + Xo @ self.Qgg @ Xo.T) * self.factor
 
     def hat_row(self, k: int, **_):
         """As :meth:`NetworkCovariance.hat_row` through the coupled product (the compiled kernels know
@@ -461,10 +533,10 @@ class CoupledCovariance(NetworkCovariance):
     def hat_diagonal(self, chunk_targets: int = 20000, **_):
         """``a_k C a_k`` per distance from the blocks it touches: ``Q_gg`` (station), the target's
         3x3 block and the station-target block ``-(Q_gg X^T)``; O(t s^2)."""
-        s = self.s
         Ctt = self._target_blocks_internal()
-        QXt = (self.Qgg @ self.X[:3 * self.t].T).reshape(s, Q, self.t, 3)   # (5s, 3t) = -C_gt
-        Q4 = self.Qgg.reshape(s, Q, s, Q)
+        QX = self.Qgg @ self.X[self._xt.ravel()].T                          # (5s, 3t) = -C_gt
+        QXt = QX[self._g[:, :, None, None], self._xt.reshape(1, 1, *self._xt.shape)]     # (s, 5, t, 3)
+        Q4 = self._qgg_blocks()
         i, j = self.si, self.ti
         a, b, _ = self._blocks()
         hs = np.einsum("mq,mqr,mr->m", a, Q4[i, :, i, :], a)
@@ -477,3 +549,51 @@ class CoupledCovariance(NetworkCovariance):
         the redundancy of a coupling observation is ``1 -`` this)."""
         rows = np.asarray(rows, float)
         return np.einsum("qi,iq->q", rows, self._times(rows.T) / self.factor)
+
+
+def distance_covariance(station_xyz_m, target_xyz_m, offset_m, scale, station_index, target_index, sigma_m, *,
+                        station_free=None, target_free=None, head_index=None, G=None, E=None) -> NetworkCovariance:
+    """The adjustment's covariance (:class:`NetworkCovariance`, final frame, a-priori weights) of a
+    distance network at a given point, without an adjustment: the Monte Carlo's linear propagation of a
+    known truth (:meth:`multilat.network.montecarlo.batched.BatchedNetwork.linear_covariance`).
+
+    The model's Jacobian (:func:`multilat.network.model.distance.residuals_and_jacobian`), the
+    adjustment's reduced normal equations (:mod:`multilat.network.adjust.solve.normal_equations`), heads
+    tied as :func:`~multilat.network.adjust.solve.loop.solve_reduced` ties them. The datum defect is lifted
+    by a penalty on the stations' rigid motions (``G``'s station rows) instead of held coordinates: the
+    same covariance once S-transformed onto ``E``, to rounding (3.7e-12 of the largest element on the
+    small volume).
+
+    station_free (s, 5) bool   free ``x, y, z, offset, scale`` (default: all but the scale)
+    target_free (t,) bool      False for held targets (default: all free)
+    head_index (s,) int        the head of each station (offsets and scales tied; default one each)
+    G, E (5s + 3t, d)          rigid motions and datum conditions in the adjustment layout, or None
+    """
+    h, tg = np.asarray(station_xyz_m, float), np.asarray(target_xyz_m, float)
+    si, ti = np.asarray(station_index, np.int64), np.asarray(target_index, np.int64)
+    s, t, m = len(h), len(tg), len(si)
+    sf = np.ones((s, Q), bool) if station_free is None else np.asarray(station_free, bool)
+    if station_free is None:
+        sf[:, STATION_FIELDS.index("scale")] = False
+    tf = np.ones(t, bool) if target_free is None else np.asarray(target_free, bool)
+    _, Js, Jt = residuals_and_jacobian(np.zeros(m), h, tg, np.asarray(offset_m, float), np.asarray(scale, float),
+                                       si, ti)
+    w = 1.0 / np.asarray(sigma_m, float)
+    Js_w = Js * w[:, None] * sf[si]
+    Jt_w = Jt * w[:, None] * tf[ti][:, None]
+    sys_ = reduced_normal_equations(np.zeros(m), Js_w, Jt_w, si, ti, s, t, target_free=tf)
+    red = sys_.layout
+    src = red.tie_source(np.arange(s) if head_index is None else head_index)
+    T = np.zeros((red.n, red.n))
+    T[np.arange(red.n), src] = 1.0                                     # g = T g_r (the head tie)
+    free = np.zeros(red.n, bool)
+    free[red.station_block()] = sf
+    free &= src == np.arange(red.n)                                    # a head's offset and scale at its lead
+    Nf = (T.T @ sys_.N @ T)[np.ix_(free, free)]
+    if G is not None:                                                  # the defect: penalise rigid motions
+        Gs = np.asarray(G, float)[red.index_in(ParameterLayout.adjustment(s, t))][free]
+        c = np.trace(Nf) / free.sum() / max(np.trace(Gs.T @ Gs) / Gs.shape[1], 1e-300)
+        Nf = Nf + c * (Gs @ Gs.T)
+    Qr = np.zeros((red.n, red.n))
+    Qr[np.ix_(free, free)] = np.linalg.inv(Nf)
+    return NetworkCovariance(T @ Qr @ T.T, sys_.Ntt_inv, Js_w, Jt_w, si, ti, G=G, E=E)

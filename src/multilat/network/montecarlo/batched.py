@@ -38,7 +38,9 @@ way by :class:`Datum`: the solved network is moved rigidly so that its datum poi
 the nominal ones — a least-squares (Kabsch) fit over the chosen points for ``TrialDatum.inner`` (to first
 order the inner-constraint, minimum-trace datum of the free-network adjustment), or the 3-2-1
 definition on three stations for ``TrialDatum.three_two_one``. :meth:`BatchedNetwork.linear_covariance`
-returns the first-order covariance in exactly that datum, for the MC-vs-linear validation.
+returns the first-order covariance in exactly that datum, for the MC-vs-linear validation: the
+adjustment's covariance (:class:`multilat.network.adjust.covariance.NetworkCovariance`) of the nominal
+network, never read by the trials.
 
 Parameter vector layout (used by the covariance and by :func:`flatten`):
 ``[station xyz (3s, station-major), station offsets (s), target xyz (3t, target-major)]``, metres
@@ -49,11 +51,12 @@ Parameter vector layout (used by the covariance and by :func:`flatten`):
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
 from multilat.errors import MultilatError
-from multilat.network.model.datum import helmert_basis, s_transform
+from multilat.network.model.datum import ABOUT_Z_COLUMNS, helmert_basis
 from multilat.network.montecarlo.trial_datum import TrialDatum
 from multilat.network.model.distance import inv3, line_of_sight, range_m
 from multilat.network.model.parameter_layout import XYZ, ParameterLayout, gather
@@ -164,6 +167,49 @@ class NetworkSizes:
         """The reported parameter vector's columns ``[3s, s, 3t]`` (:func:`flatten`, the linear covariance)."""
         return ParameterLayout.batched(self.n_stations, self.n_targets)
 
+    # -- linear propagation: the adjustment's covariance --------------------------------------
+    def datum_rows(self):
+        """``(G, E)`` of this network's datum in the adjustment layout (rigid motions of all points and
+        the trials' datum conditions, :meth:`TrialDatum.constraint_matrix`), or ``(None, None)`` when the
+        network has none (a control datum)."""
+        if self.datum is None:
+            return None, None
+        adj = ParameterLayout.adjustment(self.n_stations, self.n_targets)
+        e = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)
+        g = helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m]))
+        if self.datum.about_z:
+            g = g[:, ABOUT_Z_COLUMNS]
+        etg = e.T @ self.reported_layout.datum_rows(g)
+        if abs(np.linalg.det(etg)) < 1e-14 * np.linalg.norm(etg) ** etg.shape[0]:
+            raise MultilatError("the datum does not fix translation and rotation (degenerate points)")
+        return adj.datum_rows(g), adj.datum_rows(self.reported_layout.point_rows(e))
+
+    @cached_property
+    def nominal_covariance(self):
+        """The adjustment's covariance (:class:`multilat.network.adjust.covariance.NetworkCovariance`) of
+        this network at its nominal solution: the one given (``covariance=``, the adjustment the
+        network was built from), else :meth:`_build_covariance`."""
+        cov = self.covariance
+        if cov is None:
+            return self._build_covariance()
+        if (cov.s, cov.t) != (self.n_stations, self.n_targets) or not (
+                np.array_equal(cov.si, self.station_index) and np.array_equal(cov.ti, self.target_index)):
+            raise MultilatError("covariance: not this network's (its stations, targets or observations differ)")
+        return cov
+
+    def linear_covariance(self, *, sigma_m: np.ndarray | None = None,
+                          cov_m2: np.ndarray | None = None) -> np.ndarray:
+        """First-order (GUM) covariance of the reported parameters (:func:`flatten`'s layout) in this
+        network's datum, (p, p), m²: the adjustment's covariance of the nominal network
+        (:attr:`nominal_covariance`), through the one sandwich of
+        :meth:`multilat.network.adjust.covariance.NetworkCovariance.linear_covariance` when the distances'
+        actual uncertainties ``sigma_m`` (or their full covariance ``cov_m2``, correlated readings)
+        differ from the weights' (``self.sigma_m``). Scale bars, control and angles keep their own
+        variances (each trial draws them with them)."""
+        cols = self.reported_layout.index_in(ParameterLayout.adjustment(self.n_stations, self.n_targets))
+        return self.nominal_covariance.linear_covariance(cols, weight_sigma_m=self.sigma_m, sigma_m=sigma_m,
+                                                         cov_m2=cov_m2)
+
 
 @dataclass(frozen=True)
 class BatchedNetwork(NetworkSizes):
@@ -183,6 +229,9 @@ class BatchedNetwork(NetworkSizes):
         Nominal target coordinates.
     datum : Datum
         Applied to every trial (default: inner over all points).
+    covariance : NetworkCovariance, optional
+        The adjustment's covariance of this network (the adjustment it was built from): the linear
+        covariance's source (:attr:`nominal_covariance`); None: built from the nominal values.
     """
 
     station_index: np.ndarray
@@ -192,6 +241,8 @@ class BatchedNetwork(NetworkSizes):
     offset_m: np.ndarray
     target_xyz_m: np.ndarray
     datum: "TrialDatum" = field(default_factory=lambda: TrialDatum.inner())
+    #: the adjustment's covariance of this network (:attr:`nominal_covariance`), or None: built here
+    covariance: object = field(default=None, repr=False, compare=False)
     # precomputed (filled in __post_init__)
     _pre: dict = field(default=None, repr=False, compare=False)
 
@@ -275,47 +326,14 @@ class BatchedNetwork(NetworkSizes):
         s0inv = np.linalg.inv(s0 + pen)
         return dict(w=w, u0=u0, a_s=a_s, a_t=a_t, ninv0=ninv0, s0inv=s0inv, pen=pen, chol=chol, cols=cols)
 
-    # -- linear propagation ------------------------------------------------------------------
-    def jacobian(self) -> np.ndarray:
-        """Jacobian of the model distances at the nominal solution, shape (m, 4s + 3t), m/m."""
-        m, lay = self.n_obs, self.reported_layout
-        u0 = self._pre["u0"]
-        k = np.arange(m)
-        j = np.zeros((m, lay.n))
-        j[k[:, None], lay.station_block(XYZ)[self.station_index]] = u0
-        j[k[:, None], lay.target_block()[self.target_index]] = -u0
-        j[k, lay.station_columns("offset")[self.station_index]] = 1.0
-        return j
+    # -- linear propagation (NetworkSizes.linear_covariance) ---------------------------------
+    def _build_covariance(self):
+        """The adjustment's covariance of this network at its nominal solution (no adjustment given)."""
+        from multilat.network.adjust.covariance import distance_covariance
 
-    def linear_covariance(self, *, sigma_m: np.ndarray | None = None,
-                          cov_m2: np.ndarray | None = None) -> np.ndarray:
-        """First-order covariance of the parameters in this network's datum, shape (p, p), m².
-
-        ``Q = S (J^T W J)^+ S^T`` where ``W = diag(1/sigma**2)`` are the solver's weights and ``S`` the
-        S-transformation onto the datum (``E^T dx = 0``, ``E`` = :meth:`TrialDatum.constraint_matrix`).
-        With ``sigma_m`` (the distances' actual standard uncertainties, if they differ from the
-        weighting sigmas) the sandwich ``N^+ J^T W C W J N^+`` is returned instead; ``cov_m2`` (m, m)
-        gives a full ``C`` (correlated distances, e.g. shared environment sensors).
-        """
-        j = self.jacobian()
-        w = self._pre["w"]
-        n = j.T @ (w[:, None] * j)
-        e = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)
-        g = self.reported_layout.datum_rows(helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m])))
-        etg = e.T @ g
-        if abs(np.linalg.det(etg)) < 1e-14 * np.linalg.norm(etg) ** 6:
-            raise MultilatError("the datum does not fix translation and rotation (degenerate points)")
-        c_pen = np.trace(n) / self.n_params / max(np.trace(e.T @ e) / 6, 1e-300)
-        q = np.linalg.inv(n + c_pen * (e @ e.T))     # a generalised inverse of N, well conditioned
-        if cov_m2 is not None:
-            jw = j.T * w
-            q = q @ (jw @ np.asarray(cov_m2, float) @ jw.T) @ q
-        elif sigma_m is not None:
-            c = np.asarray(sigma_m, float) ** 2
-            jw = j.T * w
-            q = q @ (jw @ (c[:, None] * jw.T)) @ q
-        strans = s_transform(g, e)
-        return strans @ q @ strans.T
+        G, E = self.datum_rows()
+        return distance_covariance(self.station_xyz_m, self.target_xyz_m, self.offset_m, np.zeros(self.n_stations),
+                                   self.station_index, self.target_index, self.sigma_m, G=G, E=E)
 
     # -- batched solving -------------------------------------------------------------------
     def solve(self, distance_m: np.ndarray, *, method: str = "frozen", engine: str = "auto",

@@ -42,7 +42,6 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.montecarlo.batched import BatchSolution, NetworkSizes
-from multilat.network.model.datum import ABOUT_Z_COLUMNS, helmert_basis, s_transform
 from multilat.network.model.distance import line_of_sight, range_m
 from multilat.network.model.parameter_layout import XYZ, ParameterLayout, gather
 
@@ -74,6 +73,9 @@ class CoupledBatchedNetwork(NetworkSizes):
     control_value_m, control_sigma_m : ndarray, shape (nc,)
     datum : TrialDatum or None
         None under a control datum (the control observations place the network).
+    covariance : NetworkCovariance or None
+        The adjustment's covariance of this network (:attr:`nominal_covariance`, the linear
+        covariance's source); needed with scale bars, control or angles.
     """
 
     station_index: np.ndarray
@@ -104,6 +106,8 @@ class CoupledBatchedNetwork(NetworkSizes):
     orientation_rad: np.ndarray = None      # (s, 3) nominal orientations (rows of oriented stations used)
     orientation_levelled: np.ndarray = None  # (s,) bool: levelled stations (ω, φ held at 0, κ estimated)
     datum: object = None
+    #: the adjustment's covariance of this network (:attr:`nominal_covariance`), or None: built here
+    covariance: object = field(default=None, repr=False)
     _pre: dict = field(default=None, repr=False)
 
     def __post_init__(self):
@@ -220,13 +224,6 @@ class CoupledBatchedNetwork(NetworkSizes):
         x0[L.block("orientation")] = self.orientation_rad[self.oriented]
         return x0
 
-    def _layout_map(self) -> np.ndarray:
-        """``M`` (4s + 3t, P): the reported layout from the P space (a head's offset on each station)."""
-        R = self.reported_layout
-        M = np.zeros((R.n, self.unknown_layout.n))
-        M[np.arange(R.n), R.index_in(self.unknown_layout)] = 1.0
-        return M
-
     # -- model -----------------------------------------------------------------------------------
     def _model(self, x):
         H, o, k, T = self._split(x)
@@ -316,17 +313,11 @@ class CoupledBatchedNetwork(NetworkSizes):
         w_all = 1.0 / np.concatenate([self.sigma_m, self.extra_sigma]) ** 2
         J0 = self._jacobian(x0)
         N = J0.T @ (w_all[:, None] * J0)
-        E = G = None
         pen = np.zeros((P, P))
-        if self.datum is not None:
+        if self.datum is not None:      # the chord matrix's datum: a penalty on the trials' conditions
             EL = self.datum.constraint_matrix(self.station_xyz_m, self.target_xyz_m)   # reported layout
-            # no orientation rows: the coordinates' block of the S-transformation needs none
             nd = EL.shape[1]
             E = L.datum_rows(self.reported_layout.point_rows(EL))
-            gp = helmert_basis(np.concatenate([self.station_xyz_m, self.target_xyz_m]))
-            if nd == 4:
-                gp = gp[:, ABOUT_Z_COLUMNS]
-            G = L.datum_rows(gp)
             ef = E[free]
             c = np.trace(N[np.ix_(free, free)]) / free.sum() / max(np.trace(ef.T @ ef) / nd, 1e-300)
             pen = c * (E @ E.T)
@@ -357,7 +348,7 @@ class CoupledBatchedNetwork(NetworkSizes):
         ang_slot[np.arange(a), (np.cumsum(self.oriented) - 1)[self.angle_station]] = 1.0
         c_in = np.zeros((len(self.control_point), s + t, 3))      # control row -> its point's coordinate
         c_in[np.arange(len(self.control_point)), self.control_point, self.control_axis] = 1.0
-        return dict(x0=x0, free=free, w_all=w_all, J0=J0, N=N, pen=pen, Ninv=Ninv, E=E, G=G,
+        return dict(x0=x0, free=free, w_all=w_all, pen=pen, Ninv=Ninv,
                     a_s=a_s, a_t=a_t, a_h=a_h, b_pm=b_pm, c_in=c_in, ang_s=ang_s, ang_t=ang_t, ang_slot=ang_slot,
                     scale_len=float(np.max(np.abs(self.nominal_distance_m_raw(x0)))))
 
@@ -488,32 +479,24 @@ class CoupledBatchedNetwork(NetworkSizes):
                 return x, step, it
         return x, step, max_iter
 
-    # -- linear propagation ------------------------------------------------------------------------
-    def linear_covariance(self, *, sigma_m: np.ndarray | None = None,
-                          cov_m2: np.ndarray | None = None) -> np.ndarray:
-        """First-order covariance in the reported layout (4s + 3t, 4s + 3t), m², in this datum.
+    # -- linear propagation (NetworkSizes.linear_covariance) ---------------------------------------
+    def _build_covariance(self):
+        """The adjustment's covariance of this network at its nominal solution when no adjustment was
+        given: distances only (heads tied, held offsets, scales and points); the couplings' and angles'
+        rows are the adjustment's own (:func:`multilat.network.montecarlo.propagate.problem_from_observations`
+        passes its covariance)."""
+        if self.n_extra:
+            raise MultilatError("the linear covariance of a network with scale bars, weighted control or angles "
+                                "is its adjustment's: build it with covariance=the adjustment's covariance "
+                                "(propagate.problem_from_observations does)")
+        from multilat.network.adjust.covariance import distance_covariance
+        from multilat.network.model.parameter_layout import STATION_FIELDS
 
-        ``Q = S N^+ J^T W C W J N^+ S^T`` with the distances' covariance ``C`` (``sigma_m`` or the
-        full ``cov_m2``; default the weights' sigmas) beside the couplings' own variances (each trial
-        draws them with their uncertainties), ``S`` the S-transformation onto the datum (none under
-        control), mapped to the per-station offsets of the layout.
-        """
-        p = self._pre
-        J, w = p["J0"], p["w_all"]
-        q = p["Ninv"]
-        if sigma_m is not None or cov_m2 is not None:
-            m = self.n_obs
-            C = np.zeros((len(w), len(w)))
-            if cov_m2 is not None:
-                C[:m, :m] = np.asarray(cov_m2, float)
-            else:
-                C[np.arange(m), np.arange(m)] = np.asarray(sigma_m, float) ** 2
-            C[np.arange(m, len(w)), np.arange(m, len(w))] = self.extra_sigma ** 2
-            jw = (J * w[:, None]).T
-            q = q @ (jw @ C @ jw.T) @ q
-        if self.datum is not None:
-            E, G = p["E"], p["G"]
-            S = s_transform(G, E)
-            q = S @ q @ S.T
-        M = self._layout_map()
-        return M @ q @ M.T
+        sf = np.ones((self.n_stations, len(STATION_FIELDS)), bool)
+        sf[:, :3] = ~self.station_held[:, None]
+        sf[:, STATION_FIELDS.index("offset")] = self.offset_free[self.head_index]
+        sf[:, STATION_FIELDS.index("scale")] = self.scale_free[self.head_index]
+        G, E = self.datum_rows()
+        return distance_covariance(self.station_xyz_m, self.target_xyz_m, self.offset_m, self.scale,
+                                   self.station_index, self.target_index, self.sigma_m, station_free=sf,
+                                   target_free=~self.target_held, head_index=self.head_index, G=G, E=E)

@@ -239,7 +239,7 @@ def problem_from_observations(obs, options=None, *, pairs=None, references=None,
     else:
         dt = bt.TrialDatum.from_datum(opts.datum, station_ids, target_ids)
         net = bt.BatchedNetwork(obs.station_index, obs.target_index, obs.sigma_m, res.station_xyz_m,
-                                res.offset_m, res.target_xyz_m, datum=dt)
+                                res.offset_m, res.target_xyz_m, datum=dt, covariance=res.covariance)
     return Problem(station_ids, target_ids, net, np.asarray(obs.distance_m, float), heads, pairs_, ref,
                    source, sigma0_nominal=float(res.sigma0), instrument=instrument)
 
@@ -285,7 +285,7 @@ def _coupled_network(obs, res, dat, scale_bars, points):
         control_point=[pos[c[0]] for c in ctrl for _ in range(3)],
         control_axis=[a for _ in ctrl for a in range(3)],
         control_value_m=[c[1][a] for c in ctrl for a in range(3)],
-        control_sigma_m=[c[2][a] for c in ctrl for a in range(3)], datum=dt, **ang)
+        control_sigma_m=[c[2][a] for c in ctrl for a in range(3)], datum=dt, covariance=res.covariance, **ang)
 
 
 def problem_from_config(cfg, *, sigma_m=None, instrument=None, datum="free", pairs=None,
