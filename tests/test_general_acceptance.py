@@ -78,14 +78,17 @@ def test_network_87_reaches_the_minimum_on_the_general_layer():
 @pytest.mark.slow
 def test_network_616_diverging_is_refused_in_one_line():
     """Network 616: the general layer's Gauss-Newton diverged from the chain's start (the distance path
-    refuses it too) and ended in scipy's "array must not contain infs or NaNs" traceback. Now one line."""
+    refuses it too) and ended in scipy's "array must not contain infs or NaNs" traceback. Now one line:
+    since the one loop (``solve.loop.iterate``) damps the rising steps, it no longer diverges but does
+    not converge in 50 iterations either (vTPv 3.0e4 at the end, measured)."""
     from multilat.errors import MultilatError
     from multilat.network.adjust.general import adjust_network
     from multilat.network.adjust.general.from_tables import network_from_tables
 
     obs = _study().network(616).obs
     net, opts = network_from_tables(obs, rng=0)
-    with pytest.raises(MultilatError, match=r"diverged at iteration \d+ .*--points") as e:
+    with pytest.raises(MultilatError, match=r"(diverged at iteration \d+|did not converge in \d+ iterations) "
+                                            r".*--points") as e:
         adjust_network(net, options=opts)
     assert "\n" not in str(e.value)
 

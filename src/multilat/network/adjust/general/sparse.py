@@ -192,7 +192,8 @@ class Reduced:
         be = np.where(valid[:, None], b[np.where(valid, flat, 0)], 0.0)
         yk = self.qk @ (b[self.ck] - self.x.T @ be)
         m = self.slots.shape[0]
-        ye = np.einsum("pab,pbc->pac", self.binv, be.reshape(m, 3, -1)).reshape(3 * m, -1) - self.x @ yk
+        c = b.shape[1]                          # explicit: no point eliminated leaves m = 0
+        ye = np.einsum("pab,pbc->pac", self.binv, be.reshape(m, 3, c)).reshape(3 * m, c) - self.x @ yk
         out = np.zeros_like(b, dtype=float)
         out[self.ck] = yk
         out[flat[valid]] = ye[valid]
