@@ -325,7 +325,8 @@ def adjust(network: Network, *, options: AdjustOptions | None = None) -> General
     x = system.layout.initial()
     mask = system.datum_mask(opt.datum)
     record = []
-    x, cost, conv = iterate(_Steps(system, mask, sparse), x, max_iter=opt.max_iterations,
+    steps = _Steps(system, mask, sparse)
+    x, cost, conv = iterate(steps, x, max_iter=opt.max_iterations,
                             on_accept=lambda x0, dx, c: record.append((float(np.abs(dx).max(initial=0.0)), c)))
     if not conv.converged:
         hint = ("give approximate coordinates of the points (--points) or check the observations for gross "
@@ -337,8 +338,11 @@ def adjust(network: Network, *, options: AdjustOptions | None = None) -> General
             f"the adjustment diverged at iteration {conv.iterations} (no step lowers vTPv {cost:.6g}, even "
             f"damped; last step {conv.last_step_sigma:.3g} sigma): the approximate coordinates are too far "
             f"from a solution; {hint}")
+    # the result at the point the converged step started from, whose linearisation the loop made: that
+    # step is below the stopping rule's tolerance (rounding), and one linearisation is spared
+    at, lin = steps.linearisation()
     build = _sparse_result if sparse else _result
-    return dataclasses.replace(build(system, x, mask, tuple(record)), convergence=conv)
+    return dataclasses.replace(build(system, at, mask, tuple(record), lin=lin), convergence=conv)
 
 
 class _Steps:
@@ -354,7 +358,7 @@ class _Steps:
         self.free = system.layout.free
         self.n_rows = system.n_rows
         self.rounding = 0.0
-        self._at = self._lin = None
+        self._at = self._lin = self._full = None
 
     def cost(self, x: np.ndarray) -> float:
         if not np.all(np.isfinite(x)):
@@ -370,15 +374,21 @@ class _Steps:
         if self._at is not x:
             with np.errstate(over="ignore", invalid="ignore"):
                 if self.sparse:
-                    lin = _sparse_linearise(self.system, x, self.mask)
+                    self._full = lin = _sparse_linearise(self.system, x, self.mask)
                     self._lin = (lin.jw, lin.rw, lin.det, lin.dx, lin)
                 else:
-                    _, rw, jw, det, dx, _ = self.system.linearise(x, self.mask)
+                    self._full = self.system.linearise(x, self.mask)
+                    _, rw, jw, det, dx, _ = self._full
                     self._lin = (jw, rw, det, dx, None)
             if self._at is None:
                 self.rounding = self._rounding(self._lin[0], x)
             self._at = x
         return self._lin
+
+    def linearisation(self) -> tuple:
+        """``(x, linearisation)``: the last point linearised and :meth:`System.linearise`'s tuple (dense)
+        or :func:`.sparse.linearise`'s ``Linearised`` there."""
+        return self._at, self._full
 
     def _rounding(self, jw, x) -> float:
         obs = np.concatenate([np.abs(b.value) / b.sigma for b in self.system.blocks]) if self.n_rows else np.zeros(0)
@@ -412,10 +422,11 @@ def _sparse_linearise(system: System, x, mask):
     return sparse_backend.linearise(system, x, mask, undetermined)
 
 
-def _sparse_result(system: System, x, mask, record) -> GeneralResult:
+def _sparse_result(system: System, x, mask, record, *, lin=None) -> GeneralResult:
+    """The result at ``x`` (``lin``: its linearisation, made here if None)."""
     from multilat.network.adjust.general import sparse as sparse_backend
 
-    lin = _sparse_linearise(system, x, mask)
+    lin = lin if lin is not None else _sparse_linearise(system, x, mask)
     det = lin.det
     blocks = sparse_backend.cofactor(system, lin)
     n = system.n_free                        # the dense Q its consumers read, only where it is small
@@ -434,8 +445,9 @@ def _sparse_result(system: System, x, mask, record) -> GeneralResult:
         not_computed=("external reliability",) if heavy else ())
 
 
-def _result(system: System, x, mask, record) -> GeneralResult:
-    r, rw, jw, det, _, Q = system.linearise(x, mask)
+def _result(system: System, x, mask, record, *, lin=None) -> GeneralResult:
+    """The result at ``x`` (``lin``: its :meth:`System.linearise` tuple, made here if None)."""
+    r, rw, jw, det, _, Q = lin if lin is not None else system.linearise(x, mask)
     dof = system.n_rows - system.n_free + det.defect
     vtpv = float(rw @ rw)
     sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")
