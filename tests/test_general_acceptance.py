@@ -78,22 +78,27 @@ def test_network_87_reaches_the_minimum_on_the_general_layer():
 @pytest.mark.slow
 def test_network_616_diverging_is_refused_in_one_line():
     """Network 616: the general layer's Gauss-Newton diverged from the chain's start (the distance path
-    refuses it too) and ended in scipy's "array must not contain infs or NaNs" traceback. Now one line."""
+    refuses it too) and ended in scipy's "array must not contain infs or NaNs" traceback. Now one line:
+    since the one loop (``solve.loop.iterate``) damps the rising steps, it no longer diverges but does
+    not converge in 50 iterations either (vTPv 3.0e4 at the end, measured)."""
     from multilat.errors import MultilatError
     from multilat.network.adjust.general import adjust_network
     from multilat.network.adjust.general.from_tables import network_from_tables
 
     obs = _study().network(616).obs
     net, opts = network_from_tables(obs, rng=0)
-    with pytest.raises(MultilatError, match=r"diverged at iteration \d+ .*--points") as e:
+    with pytest.raises(MultilatError, match=r"(diverged at iteration \d+|did not converge in \d+ iterations) "
+                                            r".*--points") as e:
         adjust_network(net, options=opts)
     assert "\n" not in str(e.value)
 
 
 @pytest.mark.parametrize("backend", ["dense", "sparse"])
 def test_a_diverging_step_is_refused_in_one_line(monkeypatch, backend):
-    """The guard behind network 616 (slow above), fast: a Gauss-Newton step that overflows is refused in one
-    line naming the iteration, never carried into the next linearisation (scipy's NaN traceback)."""
+    """The guard behind network 616 (slow above), fast: a Gauss-Newton step that overflows is never
+    carried into the next linearisation (scipy's NaN traceback). Since the one loop
+    (``solve.loop.iterate``) such a step is rejected like any step that raises vTPv and damped; when
+    every step, damped too, overflows, the adjustment is refused in one line naming the iteration."""
     from multilat.errors import MultilatError
     general_adjust = importlib.import_module("multilat.network.adjust.general.adjust")     # the package's `adjust` is
     sparse_backend = importlib.import_module("multilat.network.adjust.general.sparse")     # the function
@@ -102,22 +107,13 @@ def test_a_diverging_step_is_refused_in_one_line(monkeypatch, backend):
 
     net = approximate(read_gama_input(Path(__file__).parent / "data" / "gama3d" / "two_trackers.xml"))
     if backend == "dense":
-        real = general_adjust.System.linearise
-
-        def inf_step(self, x, mask):
-            r, rw, jw, det, dx, q = real(self, x, mask)
-            return r, rw, jw, det, np.full_like(dx, np.inf), q
-        monkeypatch.setattr(general_adjust.System, "linearise", inf_step)
+        real = general_adjust._step
+        monkeypatch.setattr(general_adjust, "_step", lambda *a: (np.full_like(real(*a)[0], np.inf), None))
     else:
-        real = sparse_backend.linearise
-
-        def inf_step(*a, **k):
-            lin = real(*a, **k)
-            object.__setattr__(lin, "dx", np.full_like(lin.dx, np.inf)) if hasattr(lin, "dx") else None
-            return lin
-        monkeypatch.setattr(sparse_backend, "linearise", inf_step)
+        real = sparse_backend.frozen_step
+        monkeypatch.setattr(sparse_backend, "frozen_step", lambda *a: (np.full_like(real(*a)[0], np.inf), None))
     opts = general_adjust.AdjustOptions(backend=backend)
-    with pytest.raises(MultilatError, match=r"diverged at iteration 1 .*--points") as e:
+    with pytest.raises(MultilatError, match=r"diverged at iteration 1 \(no step lowers vTPv .*--points") as e:
         general_adjust.adjust(net, options=opts)
     assert "\n" not in str(e.value)
 

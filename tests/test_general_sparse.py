@@ -219,8 +219,12 @@ def _same_shifts(net, datum="auto"):
     assert b.blocks is not None and not b.not_computed
     fin = np.isfinite(sa)
     assert np.array_equal(fin, np.isfinite(sb)) and (fin.any() or a.dof == 0)   # dof 0: every row inf
-    assert np.all(np.abs(sb[fin] - sa[fin]) <= 1e-9 * np.abs(sa[fin]))
-    assert pa == pb
+    # plus 1e-15 of the largest: a row whose shift is zero (by structure) is 0.0 in one back end and
+    # rounding (4e-22 m, seed 11) in the other, and its point is then any (compared where shifts are not 0)
+    floor = 1e-15 * np.abs(sa[fin]).max(initial=0.0)
+    assert np.all(np.abs(sb[fin] - sa[fin]) <= 1e-9 * np.abs(sa[fin]) + floor)
+    moved = ~(np.abs(sa) <= floor)
+    assert [p for p, k in zip(pa, moved) if k] == [p for p, k in zip(pb, moved) if k]
     return b, [b.ids.index(p) if p else -1 for p in pb]
 
 

@@ -21,16 +21,24 @@ posteriori), σ0 = sqrt(vᵀPv / dof), dof = observations - free parameters + de
 row (observed - adjusted, SI), redundancy numbers ``r_i = 1 - (J_w Q J_w^T)_ii`` of the whitened rows
 (for a correlated block: its rows decorrelated by the Cholesky factor in the block's row order, as
 gama-local does; they sum to dof), and the record of iterations. Non-convergence is a one-line :class:`~multilat.errors.MultilatError`.
+
+**Iteration** by the one loop of the adjustments (:func:`multilat.network.adjust.solve.loop.iterate`):
+Levenberg-Marquardt damping when a step raises vᵀPv, the stopping rule in units of σ
+(:mod:`multilat.network.adjust.solve.convergence`: the step's largest predicted change of an
+observation, ``max |J_w dx|``); this module and :mod:`.sparse` give the step (:class:`_Steps`).
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg
 
 from multilat.errors import MultilatError
+from multilat.network.adjust.solve.convergence import Convergence
+from multilat.network.adjust.solve.loop import iterate
 from multilat.network.model import kinds as kinds_registry
 from multilat.network.model.determinability import Determinability, analyse
 from multilat.network.model.layout import Layout
@@ -53,8 +61,8 @@ class UndeterminedError(MultilatError):
 
 @dataclass(frozen=True)
 class AdjustOptions:
-    """max_iterations : int  Gauss-Newton iterations before giving up (one-line error)
-    step_tolerance : float  convergence when the largest step is below it (metres and radians)
+    """max_iterations : int  accepted Gauss-Newton (Levenberg-Marquardt) steps before giving up (one-line
+        error); the loop stops by the rule of :mod:`multilat.network.adjust.solve.convergence`
     datum : "auto" | "free" | "fixed"  ``auto``: inner constraints on the points flagged
         ``constrained`` if any, else the fixed points alone; ``free``: on every point's free
         coordinates; ``fixed``: no inner constraints (a defect is an error)
@@ -63,7 +71,6 @@ class AdjustOptions:
     """
 
     max_iterations: int = 50
-    step_tolerance: float = 1e-10
     datum: str = "auto"
     backend: str = "auto"
 
@@ -72,8 +79,8 @@ class AdjustOptions:
             raise MultilatError(f"datum={self.datum!r} must be 'auto', 'free' or 'fixed'")
         if self.backend not in ("auto", "dense", "sparse"):
             raise MultilatError(f"backend={self.backend!r} must be 'auto', 'dense' or 'sparse'")
-        if self.max_iterations < 1 or not self.step_tolerance > 0:
-            raise MultilatError("max_iterations must be >= 1 and step_tolerance > 0")
+        if self.max_iterations < 1:
+            raise MultilatError("max_iterations must be >= 1")
 
 
 @dataclass(frozen=True, eq=False)
@@ -91,6 +98,7 @@ class GeneralResult:
     backend : "dense" or "sparse";  blocks : the sparse back end's :class:`.sparse.SparseCofactor` (None if dense)
     not_computed : names of the statistics this result cannot serve (the sparse back end: the
         external reliability, which needs ``Q`` times every row)
+    convergence : how the loop ended (:class:`~multilat.network.adjust.solve.convergence.Convergence`)
     """
 
     ids: tuple
@@ -110,6 +118,7 @@ class GeneralResult:
     backend: str = "dense"
     blocks: object = None
     not_computed: tuple = ()
+    convergence: Convergence | None = None
 
     def cofactor_diagonal(self) -> np.ndarray:
         """(n_free,) the cofactors of the free parameters (variances with σ0 a priori = 1)."""
@@ -177,6 +186,14 @@ class System:
             np.add.at(jac, (rows[keep], red[keep]), values[keep])
         return r, jac
 
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """Residuals (R,) observed - computed at ``x``, without the Jacobian (the loop's cost)."""
+        r = np.empty(self.n_rows)
+        for b, cols, sl in zip(self.blocks, self.cols, self.rows):
+            computed, _, _ = kinds_registry.kind(b.kind).evaluate(b, self.layout, cols, x, jacobian=False)
+            r[sl] = kinds_registry.residual(b, computed)
+        return r
+
     def whiten(self, a: np.ndarray) -> np.ndarray:
         """``L^-1 a`` block by block (rows of ``a``)."""
         out = np.empty_like(a)
@@ -239,10 +256,14 @@ def _undetermined_line(system: System, det: Determinability) -> str:
             f"{'not removed by the datum points' if det.constraints is not None else 'no datum points to remove it'})")
 
 
-def _step(jw, rw, det: Determinability):
-    """Gauss-Newton step and the cofactor matrix, under the datum constraints ``B^T dx = 0``."""
+def _step(jw, rw, det: Determinability, lam: float = 0.0):
+    """Gauss-Newton step and the cofactor matrix, under the datum constraints ``B^T dx = 0``; with
+    ``lam`` > 0 the Levenberg-Marquardt step (``N_ii`` times ``1 + lam``; the matrix returned is then
+    not the cofactor matrix)."""
     n = jw.shape[1]
     N = jw.T @ jw
+    if lam:
+        N[np.diag_indices(n)] *= 1.0 + lam
     b = det.constraints
     k = 0 if b is None else b.shape[1]
     M = np.zeros((n + k, n + k))
@@ -303,28 +324,93 @@ def adjust(network: Network, *, options: AdjustOptions | None = None) -> General
                             "approximate())")
     x = system.layout.initial()
     mask = system.datum_mask(opt.datum)
-    free = system.layout.free
     record = []
-    for _ in range(opt.max_iterations):
-        with np.errstate(over="ignore", invalid="ignore"):      # a diverging run is named below
-            if sparse:
-                lin = _sparse_linearise(system, x, mask)
-                rw, dx = lin.rw, lin.dx
-            else:
-                _, rw, _, _, dx, _ = system.linearise(x, mask)
-            x[free] += dx
-            record.append((float(np.abs(dx).max(initial=0.0)), float(rw @ rw)))
-        if not (np.isfinite(record[-1][1]) and np.all(np.isfinite(x))):
-            raise MultilatError(
-                f"the adjustment diverged at iteration {len(record)} (step {record[-1][0]:.3g}, vTPv "
-                f"{record[-1][1]:.6g}): the approximate coordinates are too far from a solution; give "
-                "approximate coordinates of the points (--points) or check the observations for gross errors")
-        if record[-1][0] < opt.step_tolerance:
-            break
-    else:
-        raise MultilatError(f"the adjustment did not converge in {opt.max_iterations} iterations (last step "
-                            f"{record[-1][0]:.3g}, vTPv {record[-1][1]:.6g})")
-    return _sparse_result(system, x, mask, tuple(record)) if sparse else _result(system, x, mask, tuple(record))
+    steps = _Steps(system, mask, sparse)
+    x, cost, conv = iterate(steps, x, max_iter=opt.max_iterations,
+                            on_accept=lambda x0, dx, c: record.append((float(np.abs(dx).max(initial=0.0)), c)))
+    if not conv.converged:
+        hint = ("give approximate coordinates of the points (--points) or check the observations for gross "
+                "errors")
+        if conv.reason == "iteration limit":
+            raise MultilatError(f"the adjustment did not converge in {opt.max_iterations} iterations (last step "
+                                f"{record[-1][0]:.3g}, vTPv {record[-1][1]:.6g}): {hint}")
+        raise MultilatError(
+            f"the adjustment diverged at iteration {conv.iterations} (no step lowers vTPv {cost:.6g}, even "
+            f"damped; last step {conv.last_step_sigma:.3g} sigma): the approximate coordinates are too far "
+            f"from a solution; {hint}")
+    # the result at the point the converged step started from, whose linearisation the loop made: that
+    # step is below the stopping rule's tolerance (rounding), and one linearisation is spared
+    at, lin = steps.linearisation()
+    build = _sparse_result if sparse else _result
+    return dataclasses.replace(build(system, at, mask, tuple(record), lin=lin), convergence=conv)
+
+
+class _Steps:
+    """The general layer's step for :func:`~multilat.network.adjust.solve.loop.iterate`: the
+    linearisation at ``x`` (dense: :meth:`System.linearise`; sparse: :func:`.sparse.linearise`), kept
+    while the loop damps; the damped step by :func:`_step` or :func:`.sparse.damped_step`; its length
+    ``max |J_w dx|`` (the largest change of an observation it predicts, in units of its sigma). The
+    rounding of a whitened residual: 4 eps times the sum of its parameters' magnitudes weighted by
+    ``|J_w|``, plus the observed value over its sigma."""
+
+    def __init__(self, system: System, mask: np.ndarray, sparse: bool):
+        self.system, self.mask, self.sparse = system, mask, sparse
+        self.free = system.layout.free
+        self.n_rows = system.n_rows
+        self.rounding = 0.0
+        self._at = self._lin = self._full = None
+
+    def cost(self, x: np.ndarray) -> float:
+        if not np.all(np.isfinite(x)):
+            return np.inf
+        with np.errstate(over="ignore", invalid="ignore"):
+            r = self.system.residuals(x)
+            rw = self.system.whiten(r) if np.all(np.isfinite(r)) else None
+            c = float(rw @ rw) if rw is not None else np.inf
+        return c if np.isfinite(c) else np.inf
+
+    def _linearised(self, x: np.ndarray):
+        """(jw, rw, det, dx, the sparse back end's Linearised or None) at ``x``, once per point."""
+        if self._at is not x:
+            with np.errstate(over="ignore", invalid="ignore"):
+                if self.sparse:
+                    self._full = lin = _sparse_linearise(self.system, x, self.mask)
+                    self._lin = (lin.jw, lin.rw, lin.det, lin.dx, lin)
+                else:
+                    self._full = self.system.linearise(x, self.mask)
+                    _, rw, jw, det, dx, _ = self._full
+                    self._lin = (jw, rw, det, dx, None)
+            if self._at is None:
+                self.rounding = self._rounding(self._lin[0], x)
+            self._at = x
+        return self._lin
+
+    def linearisation(self) -> tuple:
+        """``(x, linearisation)``: the last point linearised and :meth:`System.linearise`'s tuple (dense)
+        or :func:`.sparse.linearise`'s ``Linearised`` there."""
+        return self._at, self._full
+
+    def _rounding(self, jw, x) -> float:
+        obs = np.concatenate([np.abs(b.value) / b.sigma for b in self.system.blocks]) if self.n_rows else np.zeros(0)
+        delta = 4 * np.finfo(float).eps * (abs(jw) @ np.abs(x[self.free]) + obs)
+        return float(np.sqrt(np.mean(delta ** 2))) if delta.size else 0.0
+
+    def step(self, x: np.ndarray, lam: float):
+        jw, rw, det, dx, lin = self._linearised(x)
+        with np.errstate(over="ignore", invalid="ignore"):
+            if lam:
+                if self.sparse:
+                    from multilat.network.adjust.general import sparse as sparse_backend
+
+                    dx = sparse_backend.damped_step(self.system, lin, lam)
+                else:
+                    dx = _step(jw, rw, det, lam)[0]
+            return dx, float(np.max(np.abs(jw @ dx), initial=0.0))
+
+    def apply(self, x: np.ndarray, dx: np.ndarray) -> np.ndarray:
+        y = x.copy()
+        y[self.free] += dx
+        return y
 
 
 def _sparse_linearise(system: System, x, mask):
@@ -336,10 +422,11 @@ def _sparse_linearise(system: System, x, mask):
     return sparse_backend.linearise(system, x, mask, undetermined)
 
 
-def _sparse_result(system: System, x, mask, record) -> GeneralResult:
+def _sparse_result(system: System, x, mask, record, *, lin=None) -> GeneralResult:
+    """The result at ``x`` (``lin``: its linearisation, made here if None)."""
     from multilat.network.adjust.general import sparse as sparse_backend
 
-    lin = _sparse_linearise(system, x, mask)
+    lin = lin if lin is not None else _sparse_linearise(system, x, mask)
     det = lin.det
     blocks = sparse_backend.cofactor(system, lin)
     n = system.n_free                        # the dense Q its consumers read, only where it is small
@@ -358,8 +445,9 @@ def _sparse_result(system: System, x, mask, record) -> GeneralResult:
         not_computed=("external reliability",) if heavy else ())
 
 
-def _result(system: System, x, mask, record) -> GeneralResult:
-    r, rw, jw, det, _, Q = system.linearise(x, mask)
+def _result(system: System, x, mask, record, *, lin=None) -> GeneralResult:
+    """The result at ``x`` (``lin``: its :meth:`System.linearise` tuple, made here if None)."""
+    r, rw, jw, det, _, Q = lin if lin is not None else system.linearise(x, mask)
     dof = system.n_rows - system.n_free + det.defect
     vtpv = float(rw @ rw)
     sigma0 = float(np.sqrt(vtpv / dof)) if dof > 0 else float("nan")

@@ -60,7 +60,7 @@ from multilat.network.model import kinds as kinds_registry
 from multilat.network.model.determinability import Determinability, classify, schur_null_space
 
 __all__ = ["RCOND_BLOCK", "MAX_REDUCED", "SparseCofactor", "Reduced", "RowParts", "assemble", "eliminate",
-           "frozen_step", "Linearised", "linearise", "row_parts", "check_reduced_size"]
+           "frozen_step", "damped_step", "Linearised", "linearise", "row_parts", "check_reduced_size"]
 
 #: an eliminated point's block, scaled to a unit diagonal, has its smallest eigenvalue at least this
 #: fraction of its largest (condition <= 1e6: its explicit inverse is exact to ~1e-10 relative); a
@@ -192,7 +192,8 @@ class Reduced:
         be = np.where(valid[:, None], b[np.where(valid, flat, 0)], 0.0)
         yk = self.qk @ (b[self.ck] - self.x.T @ be)
         m = self.slots.shape[0]
-        ye = np.einsum("pab,pbc->pac", self.binv, be.reshape(m, 3, -1)).reshape(3 * m, -1) - self.x @ yk
+        c = b.shape[1]                          # explicit: no point eliminated leaves m = 0
+        ye = np.einsum("pab,pbc->pac", self.binv, be.reshape(m, 3, c)).reshape(3 * m, c) - self.x @ yk
         out = np.zeros_like(b, dtype=float)
         out[self.ck] = yk
         out[flat[valid]] = ye[valid]
@@ -251,12 +252,15 @@ def _g_inverse(S, col_norms, slots, ck, binv, x, n, points) -> tuple[Reduced, np
     return Reduced(slots, ck, binv, x, 0.5 * (qk + qk.T), g, n, points), sv
 
 
-def eliminate(system, jw: sp.csr_matrix) -> tuple[Reduced, np.ndarray]:
+def eliminate(system, jw: sp.csr_matrix, damping: float = 0.0) -> tuple[Reduced, np.ndarray]:
     """The elimination of one linearisation (module docstring): ``N = J_wᵀ J_w``, the points
     eliminated (:func:`partition`), the reduced system and its generalised inverse under minimal
     constraints. Returns the :class:`Reduced` and the singular values of the rank decision on ``S``
-    (for :func:`..determinability.classify`)."""
+    (for :func:`..determinability.classify`). ``damping`` > 0: of ``N`` with each ``N_ii`` times
+    ``1 + damping`` (Levenberg-Marquardt, :func:`damped_step`)."""
     N = (jw.T @ jw).tocsr()
+    if damping:
+        N = (N + sp.diags(damping * N.diagonal())).tocsr()
     slots_all = _point_slots(system)
     e = np.zeros(slots_all.shape[0], bool)
     e[partition(system, jw, N, slots_all)] = True
@@ -311,6 +315,20 @@ def linearise(system, x_full: np.ndarray, mask: np.ndarray, undetermined) -> Lin
         m = B.T @ w
     x0, h = frozen_step(red, jw, rw, B)
     return Linearised(r, rw, jw, red, det, h, w, m, x0)
+
+
+def damped_step(system, lin: Linearised, lam: float) -> np.ndarray:
+    """The Levenberg-Marquardt step at ``lin``: ``(N + lam diag N) dx = J_wᵀ r_w`` under the datum's
+    inner constraints ``Bᵀ dx = 0``, as the dense back end's damped bordered system. The damped ``N``
+    is regular (every free column has a positive diagonal, or ``lin`` named it undetermined), so with
+    ``y = N_λ⁻¹ b`` and ``W = N_λ⁻¹ B``: ``dx = y - W (BᵀW)⁻¹ Bᵀ y``."""
+    red, _ = eliminate(system, lin.jw, damping=lam)
+    dx, _ = frozen_step(red, lin.jw, lin.rw)
+    if not lin.det.defect:
+        return dx
+    B = lin.det.constraints
+    w = red.ginv(B)
+    return dx - w @ np.linalg.solve(B.T @ w, B.T @ dx)
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,8 +1,10 @@
 """The convergence record every network solver returns, and the one stopping rule they share.
 
-A step is measured in units of the observations' a-priori standard uncertainty: the largest change of
-a length parameter (station or target coordinate, offset; a scale times the largest distance) divided
-by the smallest ``sigma_m``. Gauss-Newton contracts quickly near a small-residual minimum; once the
+A step is measured in units of the observations' a-priori standard uncertainty. The distance path:
+the largest change of a length parameter (station or target coordinate, offset; a scale times the
+largest distance) divided by the smallest ``sigma_m``. The general layer, whose parameters are
+lengths, angles and scales: the largest change of a modelled observation it predicts, in units of
+that observation's sigma (``max |J_w dx|``, the whitened Jacobian times the step). Gauss-Newton contracts quickly near a small-residual minimum; once the
 step is a tiny fraction of sigma it is rounding noise amplified by the condition number, and chasing
 it further changes nothing. The rule:
 
@@ -33,7 +35,8 @@ class Convergence:
     iterations : int
         Gauss-Newton iterations (each with one normal-equation assembly).
     last_step_sigma : float
-        Largest parameter change of the last step, in units of the smallest a-priori sigma.
+        Length of the last step in units of sigma (module docstring: the distance path's largest
+        parameter change over the smallest a-priori sigma; the general layer's ``max |J_w dx|``).
     reason : str
         One phrase: ``"step below 1e-09 sigma"``, ``"rounding floor"``, ``"iteration limit"``,
         ``"no decrease of the cost"``.

@@ -1,15 +1,23 @@
-"""The one Gauss-Newton / Levenberg-Marquardt loop of the network adjustment.
+"""The one Gauss-Newton / Levenberg-Marquardt loop of the network adjustments.
 
-Each iteration asks the back end for the reduced normal equations at the current point (damped by
-``lambda`` on the diagonal of station and target blocks), solves the station system by a scaled
-eigen-decomposition (with a conditioning check that names the weak parameters), back-substitutes the
-targets, and accepts the step when the cost decreases (``lambda`` then shrinks) or retries with more
-damping. It stops by :func:`.convergence.step_verdict` and returns the parameters with a
-:class:`.convergence.Convergence` record; no non-finite value leaves it (a step that produces one is
-rejected like any step that does not decrease the cost).
+:func:`iterate` owns the iteration: it asks a problem (:class:`Steps`) for a step at the current
+point, damped by ``lambda`` (Levenberg-Marquardt: every diagonal element ``N_ii`` of the normal
+equations becomes ``(1 + lambda) N_ii``), accepts it when the weighted cost decreases (``lambda``
+then shrinks) or retries with more damping, tells a rise of the cost from its rounding noise, stops by
+:func:`.convergence.step_verdict` and returns the point with a :class:`.convergence.Convergence`
+record. No non-finite value leaves it: a step that produces one is rejected like any step that does
+not decrease the cost. The problems give only their step:
+
+* the distance path (:func:`gauss_newton`): the reduced normal equations from a back end
+  (:mod:`.dense`, :mod:`.sparse`), the station system solved by a scaled eigen-decomposition (with a
+  conditioning check that names the weak parameters), the targets back-substituted;
+* the general layer (:mod:`multilat.network.adjust.general.adjust`): its dense bordered system or its
+  sparse Schur elimination (:mod:`multilat.network.adjust.general.sparse`).
 """
 
 from __future__ import annotations
+
+from typing import Callable, Protocol
 
 import numpy as np
 
@@ -20,8 +28,8 @@ from multilat.network.adjust.distance.solvability import CONDITION_LIMIT, diagno
 from multilat.network.adjust.solve.convergence import Convergence, step_verdict
 from multilat.network.adjust.solve.system import weighted_cost
 
-__all__ = ["BACKENDS", "make_backend", "choose_backend", "gauss_newton", "solve_reduced",
-           "check_target_blocks", "SPARSE_ABOVE_OBS"]
+__all__ = ["BACKENDS", "make_backend", "choose_backend", "gauss_newton", "iterate", "Steps", "solve_reduced",
+           "check_target_blocks", "SPARSE_ABOVE_OBS", "LAMBDA_START", "LAMBDA_MAX"]
 
 BACKENDS = ("auto", "dense", "sparse")
 SPARSE_ABOVE_OBS = 20_000   # ``auto``: the compiled back end above this many observations
@@ -134,46 +142,111 @@ def _step_length_m(dg, dt, scale_len, layout: ParameterLayout, do=None):
                float(np.max(np.abs(dg[k]))) * scale_len, rot)
 
 
+#: the first damping factor after a step that raised the cost; x10 per further rise, /10 per accepted step
+LAMBDA_START = 1e-4
+#: damping beyond this without a decrease of the cost: "no decrease of the cost" (not converged)
+LAMBDA_MAX = 1e8
+#: accepted steps damped below this go back to undamped Gauss-Newton
+LAMBDA_MIN = 1e-6
+
+
+class Steps(Protocol):
+    """What :func:`iterate` asks of a problem (``x`` and ``dx`` are the problem's own objects).
+
+    ``n_rows`` : the number of whitened residuals; ``rounding`` : the rounding error of one whitened
+    residual (read after the first :meth:`step`, so a problem may set it from its first linearisation);
+    together they bound the rounding noise of the cost (:func:`iterate`).
+    """
+
+    n_rows: int
+    rounding: float
+
+    def cost(self, x) -> float:
+        """The weighted cost ``vᵀPv`` at ``x``; ``inf`` where ``x`` or the cost is not finite."""
+
+    def step(self, x, lam: float) -> tuple:
+        """``(dx, step length in sigma)``: the step at ``x`` damped by ``lam`` (0: Gauss-Newton)."""
+
+    def apply(self, x, dx):
+        """``x + dx`` as a new object (``x`` is kept: a rejected step leaves it)."""
+
+
+def iterate(steps: Steps, x, *, max_iter: int, on_accept: Callable | None = None):
+    """Minimise the weighted cost of ``steps`` from ``x``.
+
+    Returns ``(x, cost, convergence)``: the lowest-cost point reached (finite), its cost, the
+    :class:`Convergence`. ``on_accept(x, dx, cost)`` is called for each accepted step with the point
+    it starts from and that point's cost (an iteration record). A rise of the cost is accepted when
+    the step is below one sigma and the rise within the rounding noise of the cost: each whitened
+    residual is known to about ``delta`` = ``steps.rounding``, so over ``m`` rows the cost to
+    ``2 sqrt(cost m) delta + m delta^2`` (Cauchy-Schwarz), plus 1e-12 of the cost for its sum.
+    """
+    lam = 0.0
+    cost = steps.cost(x)
+    prev = np.inf
+    step_sigma = np.inf
+    for it in range(1, max_iter + 1):
+        while True:
+            dx, step_sigma = steps.step(x, lam)
+            q = steps.apply(x, dx)
+            new_cost = steps.cost(q)
+            m, delta = steps.n_rows, steps.rounding
+            noise = 2.0 * np.sqrt(cost * m) * delta + m * delta * delta + 1e-12 * cost
+            if new_cost <= cost or (step_sigma < 1.0 and new_cost <= cost + noise):
+                break
+            lam = LAMBDA_START if lam == 0.0 else lam * 10.0
+            if lam > LAMBDA_MAX:
+                return x, cost, Convergence(False, it, float(step_sigma), "no decrease of the cost")
+        if on_accept is not None:
+            on_accept(x, dx, cost)
+        x, cost = q, new_cost
+        undamped = lam == 0.0
+        lam = 0.0 if lam < LAMBDA_MIN else lam / 10.0
+        why = step_verdict(step_sigma, prev) if undamped else None
+        if why:
+            return x, cost, Convergence(True, it, float(step_sigma), why)
+        prev = step_sigma
+    return x, cost, Convergence(False, max_iter, float(step_sigma), "iteration limit")
+
+
+class _DistanceSteps:
+    """The distance path's step: the reduced normal equations of a back end, damped, solved for the
+    stations, the targets (and orientations) back-substituted; its length the largest change of a
+    length parameter (scales times the largest distance) in units of the smallest sigma."""
+
+    def __init__(self, problem: Problem, backend):
+        self.problem, self.backend = problem, backend
+        self.free = problem.station_free.ravel()
+        self.layout = ParameterLayout.adjustment(problem.obs.n_stations)
+        self.sig = problem.sigma_ref_m
+        self.scale_len = float(np.max(np.abs(problem.obs.distance_m)))
+        # each whitened residual is known to about delta = 4 eps L / sigma (distance cost) or
+        # 4 eps L^2 (squared cost, unweighted)
+        self.n_rows = problem.obs.n_obs
+        self.rounding = 4 * np.finfo(float).eps * (self.scale_len / self.sig if problem.cost == "distance"
+                                                   else self.scale_len ** 2)
+
+    def cost(self, p: Params) -> float:
+        return weighted_cost(self.problem, p) if p.is_finite() else np.inf
+
+    def step(self, p: Params, lam: float):
+        a = self.backend.assemble(p, lam)
+        check_target_blocks(a.Ntt, self.problem)
+        dg, _, _ = solve_reduced(a.N, a.b, self.free, self.problem, p)
+        dt = a.back_substitute(dg)
+        do = None if a.back_orientation is None else a.back_orientation(dg)
+        return (dg, dt, do), _step_length_m(dg, dt, self.scale_len, self.layout, do) / self.sig
+
+    def apply(self, p: Params, dx) -> Params:
+        return p.step(*dx)
+
+
 def gauss_newton(problem: Problem, start: Params, backend, *, max_iter: int = 100):
-    """Minimise the weighted cost of ``problem`` from ``start``.
+    """Minimise the weighted cost of ``problem`` from ``start`` (:func:`iterate` with the distance
+    path's step).
 
     Returns ``(params, convergence)``; ``params`` is the lowest-cost point reached (finite).
     Raises :class:`MultilatError` only for degenerate geometry (named).
     """
-    free = problem.station_free.ravel()
-    layout = ParameterLayout.adjustment(problem.obs.n_stations)
-    sig = problem.sigma_ref_m
-    scale_len = float(np.max(np.abs(problem.obs.distance_m)))
-    p = start
-    lam = 0.0
-    cost = weighted_cost(problem, p)
-    prev = np.inf
-    step_sigma = np.inf
-    # rounding noise of the cost: each whitened residual is known to about delta = 4 eps L / sigma
-    # (distance cost) or 4 eps L^2 (squared cost, unweighted)
-    m = problem.obs.n_obs
-    delta = 4 * np.finfo(float).eps * (scale_len / sig if problem.cost == "distance" else scale_len ** 2)
-    for it in range(1, max_iter + 1):
-        while True:
-            a = backend.assemble(p, lam)
-            check_target_blocks(a.Ntt, problem)
-            dg, _, _ = solve_reduced(a.N, a.b, free, problem, p)
-            dt = a.back_substitute(dg)
-            do = None if a.back_orientation is None else a.back_orientation(dg)
-            q = p.step(dg, dt, do)
-            new_cost = weighted_cost(problem, q) if q.is_finite() else np.inf
-            step_sigma = _step_length_m(dg, dt, scale_len, layout, do) / sig
-            noise = 2.0 * np.sqrt(cost * m) * delta + m * delta * delta + 1e-12 * cost
-            if new_cost <= cost or (step_sigma < 1.0 and new_cost <= cost + noise):
-                break
-            lam = 1e-4 if lam == 0.0 else lam * 10.0
-            if lam > 1e8:
-                return p, Convergence(False, it, float(step_sigma), "no decrease of the cost")
-        p, cost = q, new_cost
-        undamped = lam == 0.0
-        lam = 0.0 if lam < 1e-6 else lam / 10.0
-        why = step_verdict(step_sigma, prev) if undamped else None
-        if why:
-            return p, Convergence(True, it, float(step_sigma), why)
-        prev = step_sigma
-    return p, Convergence(False, max_iter, float(step_sigma), "iteration limit")
+    p, _, conv = iterate(_DistanceSteps(problem, backend), start, max_iter=max_iter)
+    return p, conv
