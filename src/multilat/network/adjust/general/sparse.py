@@ -328,7 +328,7 @@ def damped_step(system, lin: Linearised, lam: float) -> np.ndarray:
         return dx
     B = lin.det.constraints
     w = red.ginv(B)
-    return dx - w @ np.linalg.solve(B.T @ w, B.T @ dx)
+    return dx - s_factor(w, B) @ (B.T @ dx)       # the S-transformation onto Bᵀ dx = 0 (model.datum)
 
 
 @dataclass(frozen=True, eq=False)
