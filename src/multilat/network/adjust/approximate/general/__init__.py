@@ -270,7 +270,8 @@ def approximate(network: Network, *, extra=(), rng=0, partial: bool = False) -> 
     missing = np.flatnonzero(~st.known)
     if missing.size and not partial:
         more = f" (and {missing.size - 1} more)" if missing.size > 1 else ""
-        raise MultilatError(f"point {st.ids[missing[0]]!r}{more}: {_why(st, missing[0])}")
+        sep = " " if int(missing[0]) in st.undetermined else ": "     # "point 'P' is undetermined: ..."
+        raise MultilatError(f"point {st.ids[missing[0]]!r}{more}{sep}{_why(st, missing[0])}")
     given = np.all(np.isfinite(pts.xyz_m), 1)
     placed = int((st.known & ~given).sum())
     xyz = np.where(np.isfinite(pts.xyz_m), pts.xyz_m, st.xyz)
