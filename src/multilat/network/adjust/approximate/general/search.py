@@ -163,6 +163,10 @@ def _search(obs, sub, anchors, xyz, gen, weak):
     got = np.full((len(sub), 3), np.nan)
     got[_sub_rows(obs, part)] = np.vstack([start.station_xyz_m, start.target_xyz_m])
     if len(anchors):
+        if not np.isfinite(got[_rows(sub, anchors)]).all():     # a placed point among those it cannot place
+            left = ", ".join(repr(i) for i in _ids(obs, weak))
+            return None, (f"the distance-only search failed: without {left} (lines of sight coplanar) it "
+                          "cannot place a point placed already, to fit its frame"), {}
         try:
             R, t = onto_given(got[_rows(sub, anchors)], xyz[anchors])
         except MultilatError:
@@ -196,6 +200,12 @@ def _initial(obs, gen, weak=None):
             continue
         return start, how, weak, part
     raise MultilatError(f"targets still undetermined after {MAX_UNDETERMINED_ROUNDS} rounds of leaving them out")
+
+
+def _ids(obs, rows):
+    """The ids of the sub-network's ``rows`` (stations first)."""
+    ids = tuple(obs.station_ids) + tuple(obs.target_ids)
+    return [ids[r] for r in rows]
 
 
 def _sub_rows(obs, part):
