@@ -10,7 +10,8 @@ station 1, a tracker, reads its angles (the general layer kept it: two answers t
 Independent value: the other path on the same network (the distance path's own initial values,
 exclusion rule and solver against the general layer's chain, kinds and solver). Both are converged
 Gauss-Newton solutions of the same least-squares problem: σ0 equal to 1e-9 relative (both stop at
-steps ~1e-12 of the coordinates; seen: 1.2e-12 and 2.2e-12), dof equal exactly."""
+steps ~1e-12 of the coordinates; seen: 1.2e-12 and 2.2e-12), dof equal exactly. And the truth
+where angles keep P403 (the position it was put at)."""
 
 from __future__ import annotations
 
@@ -27,7 +28,9 @@ from multilat.network.adjust.distance.adjust import adjust
 from multilat.network.adjust.general.from_tables import network_from_tables
 from multilat.network.adjust.general.run import adjust_network
 from multilat.network.model.angles import predicted_angles
+from multilat.network.adjust.approximate.starts import LARGE_TARGETS
 from multilat.network.model.data import Observations
+from multilat.network.model.datum import apply_rigid, rigid_fit
 from multilat.network.model.weak_points import COPLANAR_REASON
 from multilat.network.synthetic.generator import synthetic_network
 
@@ -43,10 +46,11 @@ def _quiet(f, *a, **kw):
         return f(*a, **kw)
 
 
-def _coplanar(angles: bool) -> Observations:
+def _coplanar(angles: bool, n_targets: int = 40, truth: bool = False):
     """The network (module docstring); ``angles``: station 1 is a tracker reading azimuth and
-    elevation (σ 1 arcsecond) of every target it sees, P403 too."""
-    tr = synthetic_network(1, population="shell", n_stations=6, n_targets=40, sigma_m=SIGMA)
+    elevation (σ 1 arcsecond) of every target it sees, P403 too; ``truth``: also the true stations
+    (6, 3) and P403 (3,)."""
+    tr = synthetic_network(1, population="shell", n_stations=6, n_targets=n_targets, sigma_m=SIGMA)
     o, H = tr.obs, tr.station_xyz_m
     P = H[list(ON)].mean(axis=0)
     rng = np.random.default_rng(2)
@@ -61,8 +65,17 @@ def _coplanar(angles: bool) -> Observations:
                   elevation_rad=np.where(tracker, el + noise[1], np.nan),
                   sigma_azimuth_rad=np.where(tracker, SIGMA_ANGLE, np.nan),
                   sigma_elevation_rad=np.where(tracker, SIGMA_ANGLE, np.nan))
-    return Observations(o.station_ids, list(o.target_ids) + ["P403"], si, ti,
-                        np.r_[o.distance_m, rho], np.r_[o.sigma_m, [SIGMA] * 3], **kw)
+    obs = Observations(o.station_ids, list(o.target_ids) + ["P403"], si, ti,
+                       np.r_[o.distance_m, rho], np.r_[o.sigma_m, [SIGMA] * 3], **kw)
+    return (obs, H, P) if truth else obs
+
+
+def _p403_error_m(res, H_true, P_true) -> float:
+    """|P403 - truth| after the adjusted stations are fitted rigidly onto the true ones (the
+    adjustment's frame is its datum's)."""
+    R, t = rigid_fit(res.station_xyz_m, H_true)
+    j = res.obs.target_ids.index("P403")
+    return float(np.linalg.norm(apply_rigid(R, t, res.target_xyz_m[j:j + 1])[0] - P_true))
 
 
 def test_chain_places_every_point_but_the_coplanar_one_and_names_it():
@@ -89,8 +102,11 @@ def test_general_leaves_it_out_as_the_distance_path_does():
 
 
 def test_a_tracker_reading_it_keeps_it_on_both_paths():
-    obs = _coplanar(angles=True)
+    obs, H, P = _coplanar(angles=True, truth=True)
     d = _quiet(adjust, obs, rng=0, snooping=False)
+    # independent value, the truth: P403 where it was put, within 1e-4 m (about 5 times its σ of
+    # 10-20 µm, below; seen 8 µm), not in the mirror image or anywhere along the plane's normal
+    assert _p403_error_m(d, H, P) < 1e-4
     net, opts = network_from_tables(obs, rng=0)
     g = _quiet(adjust_network, net, options=opts)
     assert [e.id for e in d.excluded] == [] and g.excluded == ()
@@ -121,3 +137,15 @@ def test_cli_general_adjusts_the_rest_and_lists_it(tmp_path, capsys):
     rc = main(["adjust", str(path), "--model", "general", "--strict"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "'P403'" in err[0] and "coplanar" in err[0], err
+
+
+def test_large_distance_path_places_it_by_the_tracker_too():
+    """Above 500 targets the initial values come from a seed network and multilateration
+    (``approximate/large.py``); P403 read by the tracker is placed by its angles there too and kept,
+    where it lies (truth, 1e-4 m as above; seen 8.4 µm); without the angles it is left out."""
+    obs, H, P = _coplanar(angles=True, n_targets=LARGE_TARGETS + 10, truth=True)
+    d = _quiet(adjust, obs, rng=0, snooping=False)
+    assert [e.id for e in d.excluded] == []
+    assert _p403_error_m(d, H, P) < 1e-4
+    d = _quiet(adjust, _coplanar(angles=False, n_targets=LARGE_TARGETS + 10), rng=0, snooping=False)
+    assert [(e.id, e.reason) for e in d.excluded] == [("P403", COPLANAR_REASON)]

@@ -148,9 +148,10 @@ def _weak_targets(obs: Observations, raw, weak, how: dict) -> np.ndarray:
     """Every target's coordinates (t, 3): those seen by 4+ stations from ``raw``, the ``weak`` ones
     (seen by 3) multilaterated from its stations on the side of the rest; a weak target whose sights
     are exactly coplanar (:class:`~multilat.network.adjust.distance.exclusion.UndeterminedTargets`)
-    placed by a tracker's angles where read (:func:`_polar_targets`), else refused as undetermined
+    placed by a tracker's angles where read
+    (:func:`~multilat.network.adjust.approximate.large.polar_targets`), else refused as undetermined
     (the distance path leaves it out). ``how["method"]`` says which."""
-    from multilat.network.adjust.approximate.large import multilaterate_targets
+    from multilat.network.adjust.approximate.large import multilaterate_targets, polar_targets
     from multilat.network.adjust.distance.exclusion import UndeterminedTargets
 
     tx = np.empty((obs.n_targets, 3))
@@ -175,7 +176,8 @@ def _weak_targets(obs: Observations, raw, weak, how: dict) -> np.ndarray:
     try:
         multilaterated(np.ones(obs.n_targets, bool))
     except UndeterminedTargets as e:        # coplanar sights: placed by a tracker's angles, if read
-        polar = _polar_targets(obs, raw, tx, ~weak, [obs.target_ids.index(t) for t in e.reasons])
+        polar = polar_targets(obs, raw.station_xyz_m, raw.offset_m, tx, ~weak,
+                              [obs.target_ids.index(t) for t in e.reasons])
         left = {t: why for t, why in e.reasons.items() if obs.target_ids.index(t) not in polar}
         if left:
             raise UndeterminedTargets(left) from None
@@ -189,37 +191,3 @@ def _weak_targets(obs: Observations, raw, weak, how: dict) -> np.ndarray:
         how["method"] += f" + multilateration of {wk.size - len(polar)} target(s) seen by 3"
     return tx
 
-
-#: largest RMS misfit (of unit vectors, about radians) of a station's angle frame fitted to its placed
-#: targets for it to place a target by angles (:func:`_polar_targets`): a wrong hand or a bad start
-#: misfits by order 1, a sound one by the start's error over the range (~1e-3)
-POLAR_MISFIT = 0.05
-
-
-def _polar_targets(obs: Observations, raw, tx, placed, targets) -> dict:
-    """{target: position} of the ``targets`` (indices) a station reading azimuth and elevation places
-    as a polar point ``H + (d - o) R u(az, el)``, ``R`` that station's frame fitted (Kabsch) to its
-    readings of the ``placed`` targets (positions ``tx``), at least 3 not on one line; only where
-    the fit misfits by less than :data:`POLAR_MISFIT`. The distance path's initial values place a
-    target whose distance sights are exactly coplanar this way instead of leaving it out."""
-    az, el = obs.azimuth_rad, obs.elevation_rad
-    if az is None or el is None:
-        return {}
-    read = np.isfinite(az) & np.isfinite(el)
-    u = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-    H, o = raw.station_xyz_m, raw.offset_m
-    out = {}
-    for j in targets:
-        for k in np.flatnonzero(read & (obs.target_index == j)):
-            i = obs.station_index[k]
-            ref = np.flatnonzero(read & (obs.station_index == i) & placed[obs.target_index])
-            w = tx[obs.target_index[ref]] - H[i]
-            w /= np.linalg.norm(w, axis=1)[:, None]
-            if len(ref) < 3 or np.linalg.svd(w - w.mean(0), compute_uv=False)[1] <= 1e-6:
-                continue
-            U, _, Vt = np.linalg.svd(w.T @ u[ref])
-            R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
-            if np.sqrt(np.mean(np.sum((u[ref] @ R.T - w) ** 2, axis=1))) < POLAR_MISFIT:
-                out[int(j)] = H[i] + (obs.distance_m[k] - o[i]) * (R @ u[k])
-                break
-    return out
