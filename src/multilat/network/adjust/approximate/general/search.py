@@ -118,7 +118,7 @@ def distance_search(network, xyz, known, rng):
     left_out = bool(len(dropped)) and bool(np.isin(dropped, sub).all(1).any()) and bool(new.any())
     best = None
     for k in range(SEARCHES if left_out else 1):
-        got = first if k == 0 else _search(obs, sub, anchors, xyz, gen, weak)[0]
+        got, how = (first, how) if k == 0 else _search(obs, sub, anchors, xyz, gen, weak)[:2]
         if got is None:
             break
         trial = xyz.copy()
@@ -210,8 +210,10 @@ def _ids(obs, rows):
 
 def _sub_rows(obs, part):
     """The rows of the sub-network of ``obs`` (stations first) holding the points of ``part`` (its subset)."""
-    return np.r_[[obs.station_ids.index(i) for i in part.station_ids],
-                 [obs.n_stations + obs.target_ids.index(i) for i in part.target_ids]].astype(int)
+    if part is obs:
+        return np.arange(obs.n_stations + obs.n_targets)
+    row = {p: r for r, p in enumerate(tuple(obs.station_ids) + tuple(obs.target_ids))}
+    return np.array([row[p] for p in tuple(part.station_ids) + tuple(part.target_ids)], int)
 
 
 def _rows(sub, anchors):
