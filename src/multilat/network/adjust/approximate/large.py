@@ -28,7 +28,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 
-__all__ = ["LargeStart", "large_initial_values", "multilaterate_targets", "select_seed_targets"]
+__all__ = ["LargeStart", "large_initial_values", "multilaterate_targets", "polar_targets", "select_seed_targets"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -240,6 +240,76 @@ def multilaterate_targets(station_xyz_m, offset_m, station_index, target_index, 
     return x, rms, status == 1
 
 
+#: largest RMS misfit (of unit vectors, about radians) of a station's angle frame fitted to its placed
+#: targets for it to place a target by angles (:func:`polar_targets`): a wrong hand or a bad start
+#: misfits by order 1, a sound one by the start's error over the range (~1e-3)
+POLAR_MISFIT = 0.05
+
+
+def polar_targets(obs, station_xyz_m, offset_m, tx, placed, targets) -> dict:
+    """{target: position} of the ``targets`` (indices) a station reading azimuth and elevation places
+    as a polar point ``H + (d - o) R u(az, el)`` (stations ``station_xyz_m``, ``offset_m``), ``R`` that
+    station's frame fitted (Kabsch) to its readings of the ``placed`` targets (positions ``tx``), at
+    least 3 not on one line; only where the fit misfits by less than :data:`POLAR_MISFIT`. The distance path's initial values (small:
+    :mod:`.starts`; large: :func:`large_initial_values`) place a target whose distance sights are
+    exactly coplanar this way instead of leaving it out."""
+    az, el = obs.azimuth_rad, obs.elevation_rad
+    if az is None or el is None:
+        return {}
+    read = np.isfinite(az) & np.isfinite(el)
+    u = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    H, o = station_xyz_m, offset_m
+    out = {}
+    for j in targets:
+        for k in np.flatnonzero(read & (obs.target_index == j)):
+            i = obs.station_index[k]
+            ref = np.flatnonzero(read & (obs.station_index == i) & placed[obs.target_index])
+            w = tx[obs.target_index[ref]] - H[i]
+            w /= np.linalg.norm(w, axis=1)[:, None]
+            if len(ref) < 3 or np.linalg.svd(w - w.mean(0), compute_uv=False)[1] <= 1e-6:
+                continue
+            U, _, Vt = np.linalg.svd(w.T @ u[ref])
+            R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+            if np.sqrt(np.mean(np.sum((u[ref] @ R.T - w) ** 2, axis=1))) < POLAR_MISFIT:
+                out[int(j)] = H[i] + (obs.distance_m[k] - o[i]) * (R @ u[k])
+                break
+    return out
+
+
+def _multilaterated_or_polar(obs, iv, si, ti, d, sig):
+    """:func:`multilaterate_targets` of every target of ``obs`` from the seed's stations ``iv`` (rows
+    ``si``, ``ti``, ``d``, ``sig`` grouped by target); a target whose sights are exactly coplanar
+    (:class:`~multilat.network.adjust.distance.exclusion.UndeterminedTargets`) placed by a tracker's
+    angles where read (:func:`polar_targets`, from the others), else refused as undetermined."""
+    from multilat.network.adjust.distance.exclusion import UndeterminedTargets
+
+    t, tids = obs.n_targets, tuple(obs.target_ids)
+    H, o, side = iv.station_xyz_m, iv.offset_m, iv.target_xyz_m.mean(axis=0)
+    try:
+        return multilaterate_targets(H, o, si, ti, d, sig, t, side_point_m=side, target_ids=tids)
+    except UndeterminedTargets as e:
+        why = e.reasons
+    bad = np.array([tids.index(k) for k in why], np.int64)
+    ok = np.ones(t, bool)
+    ok[bad] = False
+    keep = np.flatnonzero(ok)
+    remap = np.full(t, -1, np.int64)
+    remap[keep] = np.arange(keep.size)
+    r = ok[ti]
+    tg, trms, flat = np.full((t, 3), np.nan), np.zeros(t), np.zeros(t, bool)
+    tg[keep], trms[keep], flat[keep] = multilaterate_targets(H, o, si[r], remap[ti[r]], d[r], sig[r], keep.size,
+                                                             side_point_m=side, target_ids=[tids[j] for j in keep])
+    polar = polar_targets(obs, H, o, tg, ok, bad)
+    left = {tids[j]: why[tids[j]] for j in bad if int(j) not in polar}
+    if left:
+        raise UndeterminedTargets(left)
+    for j, p in polar.items():
+        k = ti == j
+        tg[j] = p
+        trms[j] = float(np.sqrt(np.mean((d[k] - o[si[k]] - np.linalg.norm(p - H[si[k]], axis=1)) ** 2)))
+    return tg, trms, flat
+
+
 def _refit_ambiguous(x, rms, flagged, station_xyz_m, offset_m, station_index, tptr, distance_m, sigma_m,
                      *, iterations: int = 8) -> tuple[np.ndarray, np.ndarray]:
     """Re-place the targets whose multilateration is doubtful, choosing between mirror positions.
@@ -348,8 +418,7 @@ def large_initial_values(obs, *, rng=None, seed_size: int = 48) -> LargeStart:
     t1 = time.perf_counter()
     # 2. every target from the stations
     si, ti, _, (d, sig) = _group_by_target(si, ti, t, d, sig)
-    tg, trms, flat = multilaterate_targets(iv.station_xyz_m, iv.offset_m, si, ti, d, sig, t,
-                                           side_point_m=iv.target_xyz_m.mean(axis=0), target_ids=tids)
+    tg, trms, flat = _multilaterated_or_polar(obs, iv, si, ti, d, sig)
     tptr = np.zeros(t + 1, np.int64)
     np.cumsum(counts, out=tptr[1:])
     tg, trms = _refit_ambiguous(tg, trms, flat, iv.station_xyz_m, iv.offset_m, si, tptr, d, sig)

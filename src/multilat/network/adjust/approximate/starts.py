@@ -99,13 +99,13 @@ def onto_points(iv: Start, obs: Observations, points: Points, how: dict) -> Star
 
 def initial_from_distances(obs: Observations, rng):
     """:func:`initial_values` on the targets seen by 4+ stations, then the others (3 stations:
-    two mirror positions) by multilateration from those stations, on the side of the rest.
+    two mirror positions) by multilateration from those stations, on the side of the rest
+    (:func:`_weak_targets`; one with exactly coplanar sights by a tracker's angles where read).
 
     Initial values that come out flat (stations on one plane, targets on one line, where the
     distances say otherwise: a collapsed solution of a weak network) are retried from other random
     starts, up to ``PARTIAL_RESTARTS`` times."""
     from multilat.network.adjust.approximate.initial import initial_values
-    from multilat.network.adjust.approximate.large import multilaterate_targets
 
     gen = np.random.default_rng(rng)
     weak = np.bincount(obs.target_index, minlength=obs.n_targets) < 4
@@ -141,16 +141,53 @@ def initial_from_distances(obs: Observations, rng):
         how["flat_restarts"] = attempt
     if not weak.any():
         return raw, how
+    return Start(raw.station_xyz_m, _weak_targets(obs, raw, weak, how), raw.offset_m), how
+
+
+def _weak_targets(obs: Observations, raw, weak, how: dict) -> np.ndarray:
+    """Every target's coordinates (t, 3): those seen by 4+ stations from ``raw``, the ``weak`` ones
+    (seen by 3) multilaterated from its stations on the side of the rest; a weak target whose sights
+    are exactly coplanar (:class:`~multilat.network.adjust.distance.exclusion.UndeterminedTargets`)
+    placed by a tracker's angles where read
+    (:func:`~multilat.network.adjust.approximate.large.polar_targets`), else refused as undetermined
+    (the distance path leaves it out). ``how["method"]`` says which."""
+    from multilat.network.adjust.approximate.large import multilaterate_targets, polar_targets
+    from multilat.network.adjust.distance.exclusion import UndeterminedTargets
+
     tx = np.empty((obs.n_targets, 3))
     tx[~weak] = raw.target_xyz_m
     wk = np.flatnonzero(weak)
-    remap = np.full(obs.n_targets, -1)
-    remap[wk] = np.arange(wk.size)
-    rows = ~strong_obs
-    x, _, _ = multilaterate_targets(raw.station_xyz_m, raw.offset_m, obs.station_index[rows],
-                                    remap[obs.target_index[rows]], obs.distance_m[rows], obs.sigma_m[rows],
-                                    wk.size, side_point_m=raw.target_xyz_m.mean(axis=0),
-                                    target_ids=[obs.target_ids[j] for j in wk])
-    tx[wk] = x
-    how["method"] += f" + multilateration of {wk.size} target(s) seen by 3"
-    return Start(raw.station_xyz_m, tx, raw.offset_m), how
+    rows = weak[obs.target_index]
+
+    def multilaterated(ok):
+        r = rows & ok[obs.target_index]
+        sel = wk[ok[wk]]
+        if not sel.size:
+            return
+        re = np.full(obs.n_targets, -1)
+        re[sel] = np.arange(sel.size)
+        x, _, _ = multilaterate_targets(raw.station_xyz_m, raw.offset_m, obs.station_index[r],
+                                        re[obs.target_index[r]], obs.distance_m[r], obs.sigma_m[r],
+                                        sel.size, side_point_m=raw.target_xyz_m.mean(axis=0),
+                                        target_ids=[obs.target_ids[j] for j in sel])
+        tx[sel] = x
+
+    polar = {}
+    try:
+        multilaterated(np.ones(obs.n_targets, bool))
+    except UndeterminedTargets as e:        # coplanar sights: placed by a tracker's angles, if read
+        polar = polar_targets(obs, raw.station_xyz_m, raw.offset_m, tx, ~weak,
+                              [obs.target_ids.index(t) for t in e.reasons])
+        left = {t: why for t, why in e.reasons.items() if obs.target_ids.index(t) not in polar}
+        if left:
+            raise UndeterminedTargets(left) from None
+        ok = np.ones(obs.n_targets, bool)
+        ok[list(polar)] = False
+        multilaterated(ok)
+        for j, p in polar.items():
+            tx[j] = p
+        how["method"] += f" + {len(polar)} target(s) with coplanar sights placed by angles"
+    if wk.size > len(polar):
+        how["method"] += f" + multilateration of {wk.size - len(polar)} target(s) seen by 3"
+    return tx
+

@@ -17,7 +17,10 @@ When a pass places nothing: with no point placed at all, the first set-up with a
 the origin with the world's axes; otherwise the distance-only search of self-calibrating
 multilateration places the distance sub-network (:mod:`.search`, once; inside a placed frame its
 stations, its targets only as the last resort, when the passes place nothing more; with one or two
-placed points of its own, every point, its frame moved onto them). When the chain still stops with
+placed points of its own, every point, its frame moved onto them). A target it finds undetermined
+(lines of sight exactly coplanar) does not sink it: it is left out of the search, as the distance
+path leaves it out, and stays unplaced unless other observations place it (a tracker's angles: a
+polar point), named with the distance path's reason. When the chain still stops with
 only one or two points given in the whole network (a given station that reads no other placed
 point orients nothing), it is run again as with none given and moved onto them
 (:func:`.search.onto_given`; two points of a levelled network turn it about the vertical only),
@@ -53,7 +56,9 @@ class Chain:
     """The chain's state: xyz (n, 3), known (n,), frames {set-up index: R}, notes, and per point the
     sights ``reads`` [(set-up, reading)], its own set-ups ``own``, its distance rows (``drows``: CSR
     order and pointers), ``rises``;
-    ``method`` {point index: how it was placed}."""
+    ``method`` {point index: how it was placed}; ``undetermined`` {point index: reason} of the targets
+    the distance-only search cannot place (lines of sight exactly coplanar: the distance path's words,
+    :mod:`multilat.network.model.weak_points`), named so if nothing else places them."""
 
     ids: tuple
     sights: Sights
@@ -66,6 +71,7 @@ class Chain:
     drows: tuple = ()
     rises: dict = field(default_factory=dict)
     method: dict = field(default_factory=dict)
+    undetermined: dict = field(default_factory=dict)
 
 
 def chain(network: Network, *, extra=(), rng=0) -> Chain:
@@ -121,7 +127,7 @@ def _run(network: Network, sights: Sights, xyz, rng) -> Chain:
                 continue
         if not searched:
             searched = True
-            placed, last, note = distance_search(network, st.xyz, st.known, rng)
+            placed, last, note, st.undetermined = distance_search(network, st.xyz, st.known, rng)
             st.notes += [note] if note else []
             st.method.update({int(j): "distance-only search" for j in placed})
             if len(placed):
@@ -264,7 +270,8 @@ def approximate(network: Network, *, extra=(), rng=0, partial: bool = False) -> 
     missing = np.flatnonzero(~st.known)
     if missing.size and not partial:
         more = f" (and {missing.size - 1} more)" if missing.size > 1 else ""
-        raise MultilatError(f"point {st.ids[missing[0]]!r}{more}: {_why(st, missing[0])}")
+        sep = " " if int(missing[0]) in st.undetermined else ": "     # "point 'P' is undetermined: ..."
+        raise MultilatError(f"point {st.ids[missing[0]]!r}{more}{sep}{_why(st, missing[0])}")
     given = np.all(np.isfinite(pts.xyz_m), 1)
     placed = int((st.known & ~given).sum())
     xyz = np.where(np.isfinite(pts.xyz_m), pts.xyz_m, st.xyz)
@@ -277,7 +284,10 @@ def approximate(network: Network, *, extra=(), rng=0, partial: bool = False) -> 
 
 
 def _why(st: Chain, j) -> str:
-    """What the observations give point ``j`` and what would place it, one line."""
+    """What the observations give point ``j`` and what would place it, one line; for a target the
+    distance-only search found undetermined, its reason in the distance path's words."""
+    if int(j) in st.undetermined:
+        return st.undetermined[int(j)]
     known, setups = st.known, st.sights.setups
     have = []
     if len(_rows_of(st, j)):

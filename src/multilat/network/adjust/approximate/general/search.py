@@ -95,9 +95,9 @@ def _tables(network):
 
 def distance_search(network, xyz, known, rng):
     """The distance-only search on the unplaced points of the distance sub-network: (points placed,
-    (points, coordinates) offered as the last resort, note or None). ``xyz``, ``known`` are updated
-    in place for the points placed."""
-    none = (np.zeros(0, int), (np.zeros(0, int), np.zeros((0, 3))), None)
+    (points, coordinates) offered as the last resort, note or None, {point: reason} of the targets
+    it cannot place: :func:`_initial`). ``xyz``, ``known`` are updated in place for the points placed."""
+    none = (np.zeros(0, int), (np.zeros(0, int), np.zeros((0, 3))), None, {})
     got = _tables(network)
     if got is None:
         return none
@@ -106,15 +106,19 @@ def distance_search(network, xyz, known, rng):
     unknown = ~known[sub]
     if not unknown.any():
         return none
+    gen = np.random.default_rng(rng)
+    first, how, weak = _search(obs, sub, anchors, xyz, gen, {})
+    if first is None:
+        return none[0], none[1], how, {}
+    unknown &= np.all(np.isfinite(first), axis=1)           # the targets it cannot place stay unplaced
     new = unknown.copy()
     if len(anchors) >= FIT_POINTS:        # in a placed frame: its stations now, its targets last
         new[obs.n_stations:] = False
     placed = sub[new]
     left_out = bool(len(dropped)) and bool(np.isin(dropped, sub).all(1).any()) and bool(new.any())
-    gen = np.random.default_rng(rng)
-    best, how = None, None
-    for _ in range(SEARCHES if left_out else 1):
-        got, how = _search(obs, sub, anchors, xyz, gen)
+    best = None
+    for k in range(SEARCHES if left_out else 1):
+        got, how = (first, how) if k == 0 else _search(obs, sub, anchors, xyz, gen, weak)[:2]
         if got is None:
             break
         trial = xyz.copy()
@@ -125,10 +129,9 @@ def distance_search(network, xyz, known, rng):
             best = (cost, trial[placed], got[unknown & ~new])
         if cost <= dof + 5 * np.sqrt(2 * max(dof, 1)):     # a χ² the noise explains: the minimum
             break
-    if best is None:
-        return none[0], none[1], how
     xyz[placed], known[placed] = best[1], True
-    return placed, (sub[unknown & ~new], best[2]), f"{NOTE}{_frame_words(anchors, network.points.ids)}: {how}"
+    note = f"{NOTE}{_frame_words(anchors, network.points.ids)}: {how}"
+    return placed, (sub[unknown & ~new], best[2]), note, {int(sub[r]): why for r, why in weak.items()}
 
 
 def _frame_words(anchors, ids) -> str:
@@ -149,23 +152,68 @@ def searched_free(notes) -> bool:
     return any(n.startswith(f"{NOTE} ({FREE_FRAME}") for n in notes)
 
 
-def _search(obs, sub, anchors, xyz, gen):
-    """One run of the distance path's search: (coordinates of ``sub`` in the placed frame, method),
-    or (None, why not)."""
-    from multilat.network.adjust.approximate.starts import initial_for
-
+def _search(obs, sub, anchors, xyz, gen, weak):
+    """One run of the distance path's search: (coordinates of ``sub`` in the placed frame, NaN for
+    the targets it cannot place, method, {row of ``sub``: reason} of those: :func:`_initial`; the
+    rows of ``weak`` left out from the start), or (None, why not, {})."""
     try:
-        start, how = initial_for(obs, None, None, gen)
+        start, how, weak, part = _initial(obs, gen, weak)
     except MultilatError as e:
-        return None, f"the distance-only search failed: {e}"
-    got = np.vstack([start.station_xyz_m, start.target_xyz_m])
+        return None, f"the distance-only search failed: {e}", {}
+    got = np.full((len(sub), 3), np.nan)
+    got[_sub_rows(obs, part)] = np.vstack([start.station_xyz_m, start.target_xyz_m])
     if len(anchors):
+        if not np.isfinite(got[_rows(sub, anchors)]).all():     # a placed point among those it cannot place
+            left = ", ".join(repr(i) for i in _ids(obs, weak))
+            return None, (f"the distance-only search failed: without {left} (lines of sight coplanar) it "
+                          "cannot place a point placed already, to fit its frame"), {}
         try:
             R, t = onto_given(got[_rows(sub, anchors)], xyz[anchors])
         except MultilatError:
-            return None, None
+            return None, None, {}
         got = apply_rigid(R, t, got)
-    return got, how.get("method", "?").removeprefix("distances: ")
+    return got, how.get("method", "?").removeprefix("distances: "), weak
+
+
+def _initial(obs, gen, weak=None):
+    """The distance path's initial values (:func:`multilat.network.adjust.approximate.starts.initial_for`)
+    without the targets it finds undetermined (:class:`multilat.network.adjust.distance.exclusion.UndeterminedTargets`:
+    lines of sight exactly coplanar or collinear; the reason words of
+    :mod:`multilat.network.model.weak_points`), as the distance path leaves them out, at most
+    ``MAX_UNDETERMINED_ROUNDS`` rounds: (start, how, {row of the sub-network (stations first): reason},
+    the observations it was computed from). ``weak``: rows already known undetermined."""
+    from multilat.network.adjust.approximate.starts import initial_for
+    from multilat.network.adjust.distance.exclusion import MAX_UNDETERMINED_ROUNDS, UndeterminedTargets
+
+    weak = dict(weak or {})
+    for _ in range(MAX_UNDETERMINED_ROUNDS):
+        out = np.isin(obs.target_index, [r - obs.n_stations for r in weak])
+        part = obs.subset(~out) if out.any() else obs
+        try:
+            start, how = initial_for(part, None, None, gen)
+        except UndeterminedTargets as e:
+            new = {obs.n_stations + obs.target_ids.index(t): why for t, why in e.reasons.items()
+                   if t in obs.target_ids}
+            if not new or set(new) <= set(weak):
+                raise
+            weak.update(new)
+            continue
+        return start, how, weak, part
+    raise MultilatError(f"targets still undetermined after {MAX_UNDETERMINED_ROUNDS} rounds of leaving them out")
+
+
+def _ids(obs, rows):
+    """The ids of the sub-network's ``rows`` (stations first)."""
+    ids = tuple(obs.station_ids) + tuple(obs.target_ids)
+    return [ids[r] for r in rows]
+
+
+def _sub_rows(obs, part):
+    """The rows of the sub-network of ``obs`` (stations first) holding the points of ``part`` (its subset)."""
+    if part is obs:
+        return np.arange(obs.n_stations + obs.n_targets)
+    row = {p: r for r, p in enumerate(tuple(obs.station_ids) + tuple(obs.target_ids))}
+    return np.array([row[p] for p in tuple(part.station_ids) + tuple(part.target_ids)], int)
 
 
 def _rows(sub, anchors):
@@ -212,8 +260,6 @@ def minimum_search(network, rng=0):
     the default seed, what the search did when it ran inside the chain); (n, 3) coordinates with the
     sub-network's points at the solution and the others NaN (to be placed again by the chain), or
     None when it found nothing else."""
-    from multilat.network.adjust.approximate.starts import initial_for
-
     got = _tables(network)
     if got is None:
         return None
@@ -221,14 +267,14 @@ def minimum_search(network, rng=0):
     xyz = network.points.xyz_m
     gen = np.random.default_rng(rng)
     try:
-        start, _ = initial_for(obs, None, None, gen)
+        start, _, _, part = _initial(obs, gen)
     except MultilatError:
         return None
-    sol = _minimum(obs, start, gen)
+    sol = _minimum(part, start, gen)
     if sol is start:
         return None
     out = np.full_like(xyz, np.nan)
-    out[sub] = np.vstack([sol.station_xyz_m, sol.target_xyz_m])
+    out[sub[_sub_rows(obs, part)]] = np.vstack([sol.station_xyz_m, sol.target_xyz_m])
     return out
 
 
