@@ -37,11 +37,6 @@ KNOWN = {
     "jacobian": {
         "model/datum.py:frame_axes": "the 3-2-1 frame's x axis: a frame, not a distance",
         "model/angle_rows.py:initial_orientations": "an angle's starting direction (angles, not distances)",
-        "adjust/distance/costs.py:compare_costs_linear": "a scale bar's direction in the cost study (not the adjustment)",
-        "model/couplings.py:whitened": "the scale bars' rows of the adjustment: a point-to-point length",
-        "adjust/approximate/large.py:refit_point": "the large-network generator's refit (multilat.synthetic, issue 27 item 4)",
-        "montecarlo/propagate_summary.py:linear_std": "the gradient of a reported length (a result, not the model)",
-        "montecarlo/simulate.py:linear_prediction": "a bar's direction in the length-error prediction",
     },
     "s_transform": {
         "model/angle_rows.py:orientation_covariance": "the orientations' rows (EᵀG)⁻¹ of an S-transform that "

@@ -22,7 +22,7 @@ import numpy as np
 
 from multilat.errors import MultilatError
 from multilat.network.model.data import Observations, Points, ReferenceLengths
-from multilat.network.model.distance import Q
+from multilat.network.model.distance import Q, line_of_sight
 
 __all__ = ["CouplingSpec", "Couplings", "coupling_spec", "flatten_params"]
 
@@ -94,8 +94,7 @@ class Couplings:
         k = self.bar_a.size
         J = np.zeros((self.n_rows, n))
         ia, ib = self.bar_a[:, None] + np.arange(3), self.bar_b[:, None] + np.arange(3)
-        d = x[ia] - x[ib]
-        u = d / np.linalg.norm(d, axis=1)[:, None]
+        _, u = line_of_sight(x[ia] - x[ib])
         rk = np.arange(k)[:, None]
         J[rk, ia] = u
         J[rk, ib] = -u

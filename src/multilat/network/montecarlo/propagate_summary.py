@@ -15,6 +15,7 @@ from multilat.errors import MultilatError
 from multilat.montecarlo import summarize
 from multilat.network.montecarlo import batched as bt
 from multilat.network.montecarlo.propagate_result import PropagationResult, chi2_3_95
+from multilat.network.model.distance import line_of_sight
 
 __all__ = ["summarise", "linear_std"]
 
@@ -37,8 +38,7 @@ def linear_std(problem, noise_std, obs_cov=None):
     std = list(np.sqrt(np.clip(np.diag(q), 0, None)))
     for a, b in problem.pairs:
         ra, rb = problem.param_rows(a), problem.param_rows(b)
-        dv = problem.point_xyz(a) - problem.point_xyz(b)
-        g = dv / np.linalg.norm(dv)
+        _, g = line_of_sight(problem.point_xyz(a) - problem.point_xyz(b))
         rows = np.concatenate([ra, rb])
         c = q[np.ix_(rows, rows)]
         gg = np.concatenate([g, -g])

@@ -33,6 +33,7 @@ from multilat.errors import MultilatError
 from multilat.network.synthetic.configs import BUILTIN, NetworkConfig, get_config
 from multilat.network.model.data import Observations, ReferenceLengths
 from multilat.network.model.sigma_source import DEFAULT_SIGMA_M
+from multilat.network.model.distance import line_of_sight
 
 __all__ = ["PaperStudy", "PAPER_STUDY", "SimulationResult", "simulate", "interpoint_error_std",
            "linear_prediction", "load_config", "load_config_file", "NOISES", "perturbed_config"]
@@ -171,8 +172,7 @@ def linear_prediction(cfg: NetworkConfig, sigma_m, *, pairs=None, cost: str = "d
     T = res.target_xyz_m
     G = np.zeros((len(pairs), 3 * len(ids)))
     for r, (a, b) in enumerate(pairs):
-        d = T[cfg.target_ids.index(a)] - T[cfg.target_ids.index(b)]
-        u = d / np.linalg.norm(d)
+        _, u = line_of_sight(T[cfg.target_ids.index(a)] - T[cfg.target_ids.index(b)])
         G[r, 3 * pos[a]:3 * pos[a] + 3] = u
         G[r, 3 * pos[b]:3 * pos[b] + 3] = -u
     SL = G @ C @ G.T

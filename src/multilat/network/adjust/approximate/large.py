@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.model.distance import line_of_sight
 
 __all__ = ["LargeStart", "large_initial_values", "multilaterate_targets", "polar_targets", "select_seed_targets"]
 
@@ -358,9 +359,7 @@ def refit_point(p0, nb, r, w, iterations: int = 20):
     mirror test of :mod:`multilat.network.adjust.distance.ambiguity`."""
     p = np.array(p0, float)
     for _ in range(iterations):
-        v = p - nb
-        g = np.linalg.norm(v, axis=1)
-        a = v / g[:, None]
+        g, a = line_of_sight(p - nb)
         e = r - g
         try:
             step = np.linalg.solve((a * w[:, None]).T @ a, (a * w[:, None]).T @ e)

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from multilat.network.model.distance import Q, dense_jacobian, residuals_and_jacobian
+from multilat.network.model.distance import Q, dense_jacobian, line_of_sight, residuals_and_jacobian
 
 __all__ = ["CostComparison", "compare_costs_linear", "compare_costs_mc"]
 
@@ -72,7 +72,7 @@ def compare_costs_linear(station_xyz_m, target_xyz_m, offset_m, sigma_m: float, 
     tpos = 4 * s + 3 * np.arange(t)
     G = np.zeros((len(pairs), keep.sum()))
     for r, (j, k) in enumerate(pairs):
-        u = (T[j] - T[k]) / np.linalg.norm(T[j] - T[k])
+        _, u = line_of_sight(T[j] - T[k])
         G[r, tpos[j]:tpos[j] + 3] = u
         G[r, tpos[k]:tpos[k] + 3] = -u
     opos = 4 * np.arange(s) + 3
