@@ -20,8 +20,9 @@ for _name in BLAS_THREAD_VARIABLES:
 
 #: numba's parallel kernels keep their 2 threads (the threaded paths stay under test), but its OpenMP
 #: layer (libgomp) spin-waits after every parallel region by default, and two xdist workers' spinning
-#: threads on 2 cores take each other's CPU: tests/test_jacobian_on_demand.py alone, load ~5, back
-#: to back: user CPU 32.5 / 36.1 s spinning against 8.9 / 10.5 s passive (issue 29, make test).
+#: threads on 2 cores take each other's CPU. Four numba-heavy modules (jacobian_on_demand, solver_family,
+#: large, network_adjust) with -n 2, load 4-6, alternating: user CPU 50.9 / 137.3 s spinning against
+#: 23.4 / 25.4 s passive, wall 59 / 187 s against 26 / 27 s (issue 29, make test).
 os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 import pytest  # noqa: E402
