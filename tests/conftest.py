@@ -1,7 +1,7 @@
 """Test-session settings: the distance budget's on-disk cache (``multilat.budget``) goes to a
 directory of this session, so the tests neither read a user's cache nor write to it; BLAS runs one
-thread per process; under CI (``CI=true``) a browser test that would skip for want of Chromium or
-playwright fails."""
+thread per process and numba's OpenMP threads wait passively; under CI (``CI=true``) a browser test
+that would skip for want of Chromium or playwright fails."""
 
 import os
 import tempfile
@@ -17,6 +17,13 @@ os.environ.setdefault("MULTILAT_CACHE_DIR", _CACHE)
 BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS", "OMP_NUM_THREADS")
 for _name in BLAS_THREAD_VARIABLES:
     os.environ.setdefault(_name, "1")
+
+#: numba's parallel kernels keep their 2 threads (the threaded paths stay under test), but its OpenMP
+#: layer (libgomp) spin-waits after every parallel region by default, and two xdist workers' spinning
+#: threads on 2 cores take each other's CPU. Four numba-heavy modules (jacobian_on_demand, solver_family,
+#: large, network_adjust) with -n 2, load 4-6, alternating: user CPU 50.9 / 137.3 s spinning against
+#: 23.4 / 25.4 s passive, wall 59 / 187 s against 26 / 27 s (issue 29, make test).
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 import pytest  # noqa: E402
 

@@ -73,11 +73,16 @@ def pages(tmp_path_factory):
             "failing": ["adjust", str(tight)],
             "propagate": ["propagate", str(SEQ), "--trials", "100", "--seed", "5"]}
     docs = {}
-    for name, args in runs.items():
-        every = ["--observations"] if args[0] == "adjust" else []     # adjust/2: every row in the JSON
-        rc, out, err = _run([*args, "--json", *every, "--report", str(tmp / f"{name}.html")])
-        assert rc == 0, (name, err)
-        docs[name] = json.loads(out)
+    with pytest.MonkeyPatch.context() as mp:
+        # A stub for the interactive 3-D view, which no test here reads: plotly.js inline (4.6 MB a page)
+        # and its WebGL scene were most of this fixture's Chromium time (issue 29). The live view is
+        # rendered in Chromium by test_job_report.py::test_reports_render_in_headless_chromium.
+        mp.setattr("multilat.report.view3d.html_fragment", lambda *a, **k: '<div class="view3d-stub"></div>')
+        for name, args in runs.items():
+            every = ["--observations"] if args[0] == "adjust" else []     # adjust/2: every row in the JSON
+            rc, out, err = _run([*args, "--json", *every, "--report", str(tmp / f"{name}.html")])
+            assert rc == 0, (name, err)
+            docs[name] = json.loads(out)
     sync_playwright = _browser()
     got = {}
     with sync_playwright() as pw:
