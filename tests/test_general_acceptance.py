@@ -65,11 +65,15 @@ def test_general_acceptance_50_networks():
     assert all(r["g_out"] == r["d_out"] for r in rows)
 
 
+@pytest.mark.slow
 def test_network_87_reaches_the_minimum_on_the_general_layer():
     """Network 87 (7-station flat ring, 17 floor targets): the distance path's search reaches σ0
     1.047 (the truth-start minimum, mirrored); the general layer converges at σ0 132 from the
     search's start, and now (``run._adjusted``) runs the distance path's minimum search only then,
-    from its approximations (``approximate/search.py`` ``minimum_search``): the same minimum."""
+    from its approximations (``approximate/search.py`` ``minimum_search``): the same minimum.
+    Slow (21 s of ``make test``'s 300): both paths' searches run in full. The fast run keeps the two
+    halves: the trigger (a fit failing by far, :func:`test_sigma_too_small_is_warned`) and the search
+    run from the general layer (:func:`test_start_with_a_mirrored_target_is_rescued_by_the_minimum_search`)."""
     row = _study().study_one(87)
     assert row["outcome"] == "same", row
     assert row["g_vs_truth"] in ("same", "mirrored"), row
