@@ -27,16 +27,11 @@ from multilat.network.adjust.approximate.general import approximate, reasons
 from multilat.network.adjust.distance.adjust import adjust
 from multilat.network.adjust.general.from_tables import network_from_tables
 from multilat.network.adjust.general.run import adjust_network
-from multilat.network.model.angles import predicted_angles
 from multilat.network.adjust.approximate.starts import LARGE_TARGETS
-from multilat.network.model.data import Observations
 from multilat.network.model.datum import apply_rigid, rigid_fit
 from multilat.network.model.weak_points import COPLANAR_REASON
-from multilat.network.synthetic.generator import synthetic_network
+from p403_network import p403_network
 
-SIGMA = 5e-6
-SIGMA_ANGLE = 5e-6          # rad, about 1 arcsecond: a laser tracker's angle encoders
-ON = (1, 2, 3)              # the stations that see P403; it lies exactly in their plane
 SIGMA0_REL = 1e-9           # two converged solvers of one problem (module docstring)
 
 
@@ -50,24 +45,7 @@ def _coplanar(angles: bool, n_targets: int = 40, truth: bool = False):
     """The network (module docstring); ``angles``: station 1 is a tracker reading azimuth and
     elevation (σ 1 arcsecond) of every target it sees, P403 too; ``truth``: also the true stations
     (6, 3) and P403 (3,)."""
-    tr = synthetic_network(1, population="shell", n_stations=6, n_targets=n_targets, sigma_m=SIGMA)
-    o, H = tr.obs, tr.station_xyz_m
-    P = H[list(ON)].mean(axis=0)
-    rng = np.random.default_rng(2)
-    rho = np.linalg.norm(H[list(ON)] - P, axis=1) + tr.offset_m[list(ON)] + rng.normal(0, SIGMA, 3)
-    si, ti = np.r_[o.station_index, ON], np.r_[o.target_index, [o.n_targets] * 3]
-    kw = {}
-    if angles:
-        az, el = predicted_angles(H, np.zeros((len(H), 3)), np.vstack([tr.target_xyz_m, P]), si, ti)
-        tracker = si == 1
-        noise = rng.normal(0, SIGMA_ANGLE, (2, si.size))
-        kw = dict(azimuth_rad=np.where(tracker, az + noise[0], np.nan),
-                  elevation_rad=np.where(tracker, el + noise[1], np.nan),
-                  sigma_azimuth_rad=np.where(tracker, SIGMA_ANGLE, np.nan),
-                  sigma_elevation_rad=np.where(tracker, SIGMA_ANGLE, np.nan))
-    obs = Observations(o.station_ids, list(o.target_ids) + ["P403"], si, ti,
-                       np.r_[o.distance_m, rho], np.r_[o.sigma_m, [SIGMA] * 3], **kw)
-    return (obs, H, P) if truth else obs
+    return p403_network(angles, n_targets=n_targets, truth=truth)
 
 
 def _p403_error_m(res, H_true, P_true) -> float:

@@ -23,14 +23,9 @@ from multilat.network.adjust.general.adjust import System
 from multilat.network.adjust.general.from_tables import network_from_tables
 from multilat.network.adjust.general.run import adjust_network
 from multilat.network.adjust.general.weak import _other_information, weak_points_of
-from multilat.network.model.angles import predicted_angles
-from multilat.network.model.data import Observations
 from multilat.network.model.weak_points import K_PLANE, weak_points
-from multilat.network.synthetic.generator import synthetic_network
+from p403_network import SIGMA, SIGMA_ANGLE, p403_network
 
-SIGMA = 5e-6
-SIGMA_ANGLE = 5e-6          # rad, about 1 arcsecond: a laser tracker's angle encoders
-ON = (1, 2, 3)              # the stations that see the weak target; it lies in their plane
 
 
 def _quiet(f, *a, **kw):
@@ -97,25 +92,7 @@ def _weak_network(angles: bool):
     weak: adjusted, spread 1.7 mm, σ along the normal ≈ σ L / (h sqrt 3) ≈ 2.9 mm. ``angles``:
     station 1 is a tracker reading azimuth and elevation (σ 1 arcsecond) of every target it sees,
     P403 too."""
-    tr = synthetic_network(1, population="shell", n_stations=6, n_targets=40, sigma_m=SIGMA)
-    o, H = tr.obs, tr.station_xyz_m
-    n = np.cross(H[2] - H[1], H[3] - H[1])
-    P = H[list(ON)].mean(axis=0) + 2e-3 * n / np.linalg.norm(n)
-    rng = np.random.default_rng(2)
-    rho = np.linalg.norm(H[list(ON)] - P, axis=1) + tr.offset_m[list(ON)] + rng.normal(0, SIGMA, 3)
-    si, ti = np.r_[o.station_index, ON], np.r_[o.target_index, [o.n_targets] * 3]
-    kw = {}
-    if angles:
-        T = np.vstack([tr.target_xyz_m, P])
-        az, el = predicted_angles(H, np.zeros((len(H), 3)), T, si, ti)
-        tracker = si == 1
-        noise = rng.normal(0, SIGMA_ANGLE, (2, si.size))
-        kw = dict(azimuth_rad=np.where(tracker, az + noise[0], np.nan),
-                  elevation_rad=np.where(tracker, el + noise[1], np.nan),
-                  sigma_azimuth_rad=np.where(tracker, SIGMA_ANGLE, np.nan),
-                  sigma_elevation_rad=np.where(tracker, SIGMA_ANGLE, np.nan))
-    return Observations(o.station_ids, list(o.target_ids) + ["P403"], si, ti,
-                        np.r_[o.distance_m, rho], np.r_[o.sigma_m, [SIGMA] * 3], **kw)
+    return p403_network(angles, lift_m=2e-3)
 
 
 def test_other_information_equals_the_dense_whitened_jacobian():
