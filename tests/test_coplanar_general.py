@@ -115,6 +115,7 @@ def test_cli_general_adjusts_the_rest_and_lists_it(tmp_path, capsys):
     rc = main(["adjust", str(path), "--model", "general", "--strict"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "'P403'" in err[0] and "coplanar" in err[0], err
+    assert err[0].endswith("(--strict: refused; without it, it would be left out)"), err
 
 
 def test_large_distance_path_places_it_by_the_tracker_too():

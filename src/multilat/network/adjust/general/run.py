@@ -68,7 +68,11 @@ def adjust_network(network: Network, *, options: AdjustOptions | None = None, st
     check_sizes(network, options)                   # the chosen back end's limit, before the approximations
     for rnd in range(1, max_rounds + 1):
         missing = reasons(net)                      # {id: what would reach it}
-        if missing and not strict:
+        if missing and strict:                      # the distance path's words (exclusion.raise_undetermined)
+            pid, why = next(iter(missing.items()))
+            sep = " " if why.startswith("is ") else ": "     # "point 'P' is undetermined: ..."
+            raise MultilatError(f"point {pid!r}{sep}{why} (--strict: refused; without it, it would be left out)")
+        if missing:
             net = leave_out(net, missing, rnd, excluded)
         try:
             ready, res = _adjusted(net, options)
