@@ -33,6 +33,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from multilat.network.model.distance import line_of_sight, range_m
+
 __all__ = ["K_PLANE", "COPLANAR_REASON", "weak_points", "weak_reason"]
 
 #: a point set is coplanar within its uncertainty when its RMS out-of-plane spread is below
@@ -72,9 +74,9 @@ def weak_points(point_index, sight_m, sigma_m, n_points: int, *, tested, other=N
     pi = np.asarray(point_index, int)
     d = np.asarray(sight_m, float)
     sig = np.asarray(sigma_m, float)
-    L = np.linalg.norm(d, axis=1)
+    L = range_m(d)
     ok = np.isfinite(L) & (L > 0) & np.isfinite(sig) & (sig > 0)
-    u = np.where(ok[:, None], d, 0.0) / np.where(ok, L, 1.0)[:, None]
+    _, u = line_of_sight(np.where(ok[:, None], d, 0.0), floor_m=1.0)     # 0 on the rows left out
     w = np.where(ok, 1.0 / np.where(ok, sig, 1.0) ** 2, 0.0)
     t = int(n_points)
     nd = np.zeros((t, 9))

@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from multilat.errors import MultilatError
+from multilat.network.model.angles import polar_to_xyz
+from multilat.network.model.datum import rigid_fit
 from multilat.network.model.distance import line_of_sight
 
 __all__ = ["LargeStart", "large_initial_values", "multilaterate_targets", "polar_targets", "select_seed_targets"]
@@ -258,19 +260,21 @@ def polar_targets(obs, station_xyz_m, offset_m, tx, placed, targets) -> dict:
     if az is None or el is None:
         return {}
     read = np.isfinite(az) & np.isfinite(el)
-    u = np.column_stack([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    u = polar_to_xyz(np.zeros(3), np.zeros(3), 1.0, az, el)     # unit sights in each station's frame
     H, o = station_xyz_m, offset_m
     out = {}
     for j in targets:
         for k in np.flatnonzero(read & (obs.target_index == j)):
             i = obs.station_index[k]
             ref = np.flatnonzero(read & (obs.station_index == i) & placed[obs.target_index])
-            w = tx[obs.target_index[ref]] - H[i]
-            w /= np.linalg.norm(w, axis=1)[:, None]
+            _, w = line_of_sight(tx[obs.target_index[ref]] - H[i])
             if len(ref) < 3 or np.linalg.svd(w - w.mean(0), compute_uv=False)[1] <= 1e-6:
                 continue
-            U, _, Vt = np.linalg.svd(w.T @ u[ref])
-            R = U @ np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))]) @ Vt
+            # rays from one origin: the origin is a point too (as the general chain's frames.orient)
+            try:
+                R, _ = rigid_fit(np.vstack([np.zeros(3), u[ref]]), np.vstack([np.zeros(3), w]))
+            except MultilatError:                   # its readings on one line: no frame
+                continue
             if np.sqrt(np.mean(np.sum((u[ref] @ R.T - w) ** 2, axis=1))) < POLAR_MISFIT:
                 out[int(j)] = H[i] + (obs.distance_m[k] - o[i]) * (R @ u[k])
                 break
