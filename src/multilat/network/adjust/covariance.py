@@ -72,15 +72,13 @@ class NetworkCovariance:
     R : ndarray (3, 3)   rotation from the solving frame to the final frame
     G, E : ndarray (n, d) or None   S-transformation (None: no datum transformation); d = 6 for the
         rigid datum, 7 when the network's scale is a datum defect too (scales of every station)
-    extra : ndarray (n, r) or None   a low-rank term ``V V^T`` added in the final datum (e.g. the
-        uncertainty of the reference length that fixes the scale)
     jacobian : callable () -> (Js_w, Jt_w), or None   recomputes the blocks (the same numbers), so
         that :meth:`release_jacobian` can drop them (the adjustment does at
         :data:`JACOBIAN_ON_DEMAND_OBS` observations and more)
     """
 
     def __init__(self, Qgg, Minv, Js_w, Jt_w, station_index, target_index, *, factor=1.0,
-                 R=None, G=None, E=None, extra=None, jacobian=None):
+                 R=None, G=None, E=None, jacobian=None):
         self.Qgg = Qgg
         self.Minv = Minv
         self.si = station_index
@@ -105,7 +103,6 @@ class NetworkCovariance:
             self.CHt = self._rot_times(H.T)               # (n, 6)  C_rot H^T
             self.HCHt = H @ self.CHt
         self._point_rows = None
-        self.extra = None if extra is None else np.asarray(extra, float).reshape(self.n, -1)
 
     # ------------------------------------------------------------ the whitened Jacobian blocks
     def _gains(self, Jt_w):
@@ -203,8 +200,6 @@ class NetworkCovariance:
         W = V - self.H.T @ (self.G.T @ V)
         Y = self._rot_times(W)
         out = Y - self.G @ (self.H @ Y)
-        if self.extra is not None:
-            out = out + self.extra @ (self.extra.T @ V)
         return out
 
     def linear_covariance(self, cols=None, *, weight_sigma_m=None, sigma_m=None, cov_m2=None,
@@ -250,8 +245,6 @@ class NetworkCovariance:
             out[:, lo:lo + step] = Z[cols]
             if B is not None:
                 B[:, lo:lo + step] = self._design_times_columns(Y)
-        if self.extra is not None:
-            out = out + self.extra[cols] @ self.extra[cols].T
         if B is not None:
             out = out + B.T @ (D @ B if D.ndim == 2 else D[:, None] * B)
         return 0.5 * (out + out.T)
@@ -283,9 +276,6 @@ class NetworkCovariance:
         if self.G is not None:
             Gg, Cg = self.G[g], self.CHt[g]
             out = out - Gg @ Cg.T - Cg @ Gg.T + Gg @ self.HCHt @ Gg.T
-        if self.extra is not None:
-            Xg = self.extra[g]
-            out = out + Xg @ Xg.T
         return 0.5 * (out + out.T)
 
     def _by_target(self):
@@ -345,9 +335,6 @@ class NetworkCovariance:
             Gp, Cp = self.G[self._tg], self.CHt[self._tg]          # (t, 3, d)
             out = (out - np.einsum("tia,tja->tij", Gp, Cp) - np.einsum("tia,tja->tij", Cp, Gp)
                    + np.einsum("tia,ab,tjb->tij", Gp, self.HCHt, Gp))
-        if self.extra is not None:
-            Xp = self.extra[self._tg]
-            out = out + np.einsum("tia,tja->tij", Xp, Xp)
         return 0.5 * (out + np.swapaxes(out, 1, 2))
 
     def hat_row(self, k: int, *, kernels=True):
